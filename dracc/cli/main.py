@@ -1,0 +1,59 @@
+"""Entry point: ``dracc``.  Catches :class:`DraccError` once and maps it to an exit code."""
+
+from __future__ import annotations
+
+import sys
+import traceback
+
+import click
+
+from ..errors import DraccError, ExitCode
+from .app import VERBOSE, app, err
+
+# Commands register themselves on ``app`` when imported.
+from . import inspect_cmd  # noqa: F401,E402  isort: skip
+from . import simulate_cmd  # noqa: F401,E402  isort: skip
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the CLI; return (and exit with) a documented :class:`ExitCode`."""
+    args = sys.argv[1:] if argv is None else list(argv)
+    VERBOSE["on"] = "--verbose" in args or "-v" in args
+    code = _run(args)
+    if argv is None:
+        sys.exit(int(code))
+    return int(code)
+
+
+def _run(args: list[str]) -> int:
+    try:
+        result = app(args=args, prog_name="dracc", standalone_mode=False)
+        return int(result) if isinstance(result, int) else ExitCode.OK
+    except click.exceptions.Exit as e:
+        return e.exit_code
+    except click.exceptions.Abort:
+        err.print("error: interrupted", style="red", highlight=False)
+        return ExitCode.INTERRUPTED
+    except click.ClickException as e:
+        e.show()
+        return ExitCode.USAGE
+    except DraccError as e:
+        if VERBOSE["on"]:
+            traceback.print_exc()
+        err.print(f"error: {e}", style="red", highlight=False, markup=False)
+        return e.exit_code
+    except KeyboardInterrupt:
+        err.print("error: interrupted; nothing partial was written", style="red", highlight=False)
+        return ExitCode.INTERRUPTED
+    except BrokenPipeError:
+        return ExitCode.OK
+    except Exception as e:  # a bug: one line unless --verbose
+        if VERBOSE["on"]:
+            traceback.print_exc()
+        err.print(f"error: internal error ({type(e).__name__}: {e}); run with --verbose and report it",
+                  style="red", highlight=False, markup=False)
+        return ExitCode.INTERNAL
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

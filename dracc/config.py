@@ -1,0 +1,188 @@
+"""Configuration: a TOML file read as data (never executed) into frozen dataclasses.
+
+Every section is optional; defaults are documented in the README and in
+``docs/dracc.example.toml``.  Unknown keys are an error (a typo must not be
+silently ignored).  Angles and speeds are given in the units navigators use
+(degrees, knots) with the unit in the key name, and converted here.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field, fields, is_dataclass, replace
+from pathlib import Path
+from typing import Any
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+from .errors import ConfigError
+from .ingest.frames import ROLES
+
+
+@dataclass(frozen=True)
+class ErrorSource:
+    """One sensor error process: first-order Gauss-Markov with standard deviation
+    ``sigma`` (in the unit named by the field that holds it) and correlation time
+    ``tau_s``; ``tau_s = inf`` is a bias (constant over the voyage), ``tau_s = 0`` white noise."""
+
+    sigma: float
+    tau_s: float = math.inf
+
+
+@dataclass(frozen=True)
+class IngestConfig:
+    strict: bool = False  #: fail on the first rejected line
+    ignore_checksum: bool = False  #: accept lines whose checksum is wrong (counted still)
+    date: str | None = None  #: YYYY-MM-DD for logs that carry no date at all
+    gap_s: float = 60.0  #: a time gap longer than this (per source and kind) is reported
+    backstep_tolerance_s: float = 1.0  #: backward steps up to this are jitter, not events
+    #: source key -> role, e.g. {"INS2": "ins2", "HE": "compass"}
+    sources: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class DeadReckoningConfig:
+    reset: str = "1h"  #: restart from a fix: a duration ("1h", "4h", "30min"), "watch" (4 h) or "never"
+    fix_role: str = "gnss"  #: where restart fixes come from: "gnss", "ins_mean"
+    max_gap_s: float = 30.0  #: bridge heading/speed gaps up to this long; longer ones break the track
+    epoch_interval_s: float = 600.0  #: spacing of reported DR epochs
+    variation_deg: float | None = None  #: magnetic variation (east +) where the log has none
+    deviation_table: dict[str, float] = field(default_factory=dict)  #: heading_deg -> deviation_deg (east +)
+    # Error sources (METHODS §2, §6).  Defaults from IMO performance standards,
+    # treating the standards' limits as 95 % bounds (sigma = limit / 1.96).
+    compass_bias_deg: ErrorSource = ErrorSource(0.75 / 1.96, math.inf)
+    compass_noise_deg: ErrorSource = ErrorSource(0.2, 120.0)
+    log_scale: ErrorSource = ErrorSource(0.02 / 1.96, math.inf)  #: fraction of speed
+    log_bias_kn: ErrorSource = ErrorSource(0.2 / 1.96, math.inf)
+    log_noise_kn: ErrorSource = ErrorSource(0.1, 300.0)
+    current_kn: ErrorSource = ErrorSource(0.3, 3600.0)  #: per axis, north and east
+    leeway_deg: ErrorSource = ErrorSource(0.5, 1800.0)
+    fix_sigma_m: float = 10.0  #: 1-sigma per axis of a restart fix when the source gives none
+
+
+@dataclass(frozen=True)
+class DeviationConfig:
+    interval_s: float = 3600.0  #: sampling interval (K: 1 h, 2 h allowed)
+    offset_s: float = 0.0  #: sampling instants at offset + k*interval from 00:00 UTC
+    window_s: float = 86400.0  #: statistics windows (per day by default)
+    kurtosis_windows_s: tuple[float, ...] = (86400.0, 172800.0, 259200.0)
+    max_interp_gap_s: float = 120.0  #: a unit with no reading this close to an instant is missing there
+    factor_lat: float = 1.32  #: (K5b) second approximation
+    factor_lon: float = 1.49  #: empirical, Table 1
+    factor_course: float = 1.49
+    probability: float = 0.95  #: for limiting errors (K8)
+    #: a priori RMS per unit and channel, e.g. {"ins1": {"lat_m": 300, "lon_m": 400, "course_deg": 0.1}}
+    apriori: dict[str, dict[str, float]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Config:
+    ingest: IngestConfig = IngestConfig()
+    dead_reckoning: DeadReckoningConfig = DeadReckoningConfig()
+    deviation: DeviationConfig = DeviationConfig()
+    #: further sections (audit, fleet, report) as plain tables, validated by their owners
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+_KNOWN_EXTRA = {"audit", "fleet", "report", "vessel"}
+
+
+def _build(cls, table: dict, where: str):
+    """Build dataclass ``cls`` from a TOML table, rejecting unknown keys."""
+    if not isinstance(table, dict):
+        raise ConfigError(f"[{where}] must be a table, got {type(table).__name__}")
+    known = {f.name: f for f in fields(cls)}
+    unknown = set(table) - set(known)
+    if unknown:
+        raise ConfigError(f"[{where}] unknown key(s): {', '.join(sorted(unknown))}; known: {', '.join(sorted(known))}")
+    kwargs = {}
+    for name, value in table.items():
+        default = getattr(cls(), name) if _has_defaults(cls) else None
+        if isinstance(default, ErrorSource):
+            kwargs[name] = _error_source(value, f"{where}.{name}")
+        elif isinstance(default, tuple):
+            kwargs[name] = tuple(float(v) for v in value)
+        elif is_dataclass(default):
+            kwargs[name] = _build(type(default), value, f"{where}.{name}")
+        else:
+            kwargs[name] = value
+    try:
+        return cls(**kwargs)
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"[{where}] {err}") from err
+
+
+def _has_defaults(cls) -> bool:
+    try:
+        cls()
+        return True
+    except TypeError:
+        return False
+
+
+def _error_source(value, where: str) -> ErrorSource:
+    if isinstance(value, (int, float)):
+        return ErrorSource(float(value), math.inf)
+    if isinstance(value, dict) and set(value) <= {"sigma", "tau_s"} and "sigma" in value:
+        tau = value.get("tau_s", "inf")
+        tau_s = math.inf if tau in ("inf", "infinity", None) else float(tau)
+        return ErrorSource(float(value["sigma"]), tau_s)
+    raise ConfigError(f"[{where}] must be a number (a bias) or {{sigma = …, tau_s = … | \"inf\"}}")
+
+
+def validate(cfg: Config) -> Config:
+    """Check cross-field rules; raise ConfigError naming the offending key."""
+    for key, role in cfg.ingest.sources.items():
+        if role not in ROLES:
+            raise ConfigError(f"[ingest.sources] {key!r} = {role!r}: role must be one of {', '.join(ROLES)}")
+    d = cfg.deviation
+    if d.interval_s <= 0 or d.window_s <= 0:
+        raise ConfigError("[deviation] interval_s and window_s must be positive")
+    if not 0.5 <= d.probability < 1.0:
+        raise ConfigError(f"[deviation] probability must be in [0.5, 1), got {d.probability}")
+    for f in ("factor_lat", "factor_lon", "factor_course"):
+        if getattr(d, f) <= 0:
+            raise ConfigError(f"[deviation] {f} must be positive")
+    return cfg
+
+
+def load_config(path: str | Path | None = None) -> Config:
+    """Read a TOML config file (or return the defaults when ``path`` is None)."""
+    if path is None:
+        return Config()
+    p = Path(path)
+    try:
+        with p.open("rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError as err:
+        raise ConfigError(f"config file not found: {p}") from err
+    except IsADirectoryError as err:
+        raise ConfigError(f"config path is a directory: {p}") from err
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{p}: invalid TOML: {err}") from err
+    except (OSError, UnicodeDecodeError) as err:
+        raise ConfigError(f"{p}: cannot read config: {err}") from err
+    return config_from_dict(data, str(p))
+
+
+def config_from_dict(data: dict, where: str = "config") -> Config:
+    """Build a validated Config from a parsed TOML document."""
+    sections = {"ingest": IngestConfig, "dead_reckoning": DeadReckoningConfig, "deviation": DeviationConfig}
+    unknown = set(data) - set(sections) - _KNOWN_EXTRA
+    if unknown:
+        raise ConfigError(f"{where}: unknown section(s): {', '.join(sorted(unknown))}")
+    kwargs: dict[str, Any] = {name: _build(cls, data[name], name) for name, cls in sections.items() if name in data}
+    kwargs["extra"] = {k: v for k, v in data.items() if k in _KNOWN_EXTRA}
+    return validate(Config(**kwargs))
+
+
+def with_overrides(cfg: Config, section: str, **values) -> Config:
+    """A copy of ``cfg`` with some keys of one section replaced (CLI options); None values are skipped."""
+    values = {k: v for k, v in values.items() if v is not None}
+    if not values:
+        return cfg
+    return validate(replace(cfg, **{section: replace(getattr(cfg, section), **values)}))

@@ -1,0 +1,49 @@
+"""The error tree and the documented exit codes.
+
+Every error a user can cause is a :class:`DraccError`; the CLI catches it once,
+prints ``error: <message>`` on stderr and exits with the error's code.
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+
+
+class ExitCode(IntEnum):
+    """Process exit codes; stable, documented in the README."""
+
+    OK = 0  #: done, and (audit) everything within limits
+    FINDINGS = 1  #: the audit found values outside the configured limits
+    USAGE = 2  #: bad command line (unknown option, missing argument)
+    INPUT = 3  #: input unreadable or holding no usable data
+    CONFIG = 4  #: configuration file invalid
+    INTERNAL = 5  #: a bug in dracc: please report it, with --verbose output
+    INTERRUPTED = 130  #: stopped by Ctrl-C / SIGINT / SIGTERM; nothing partial written
+
+
+class DraccError(Exception):
+    """Root of every error dracc raises on purpose."""
+
+    exit_code: ExitCode = ExitCode.INPUT
+
+
+class IngestError(DraccError):
+    """A log cannot be read (missing, not a log, damaged beyond use, --strict)."""
+
+    exit_code = ExitCode.INPUT
+
+
+class ConfigError(DraccError):
+    """The configuration is invalid or contradicts the data."""
+
+    exit_code = ExitCode.CONFIG
+
+
+class InsufficientDataError(DraccError):
+    """The log is readable but lacks what a computation needs."""
+
+    exit_code = ExitCode.INPUT
+
+
+class AmbiguousSourceError(ConfigError):
+    """Roles cannot be assigned automatically; the message names the candidates."""

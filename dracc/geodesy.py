@@ -1,0 +1,106 @@
+"""WGS-84 ellipsoid, radii of curvature (B18, B19) and the one home for angle wrapping.
+
+All functions are pure, take and return numpy arrays (or scalars) and broadcast.
+Glossary: ``phi`` latitude, ``lam`` longitude (radians); ``R_M`` meridional radius
+of curvature, ``R_N`` prime-vertical radius of curvature (metres).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+A_M = 6378137.0  #: WGS-84 semi-major axis a
+F = 1.0 / 298.257223563  #: WGS-84 flattening f
+E2 = F * (2.0 - F)  #: first eccentricity squared e^2 = f(2 - f)
+
+TWO_PI = 2.0 * np.pi
+
+
+def radius_meridian_m(lat_rad):
+    """Meridional radius of curvature R_M = a(1 - e^2) / (1 - e^2 sin^2 phi)^(3/2)."""
+    s2 = np.sin(lat_rad) ** 2
+    return A_M * (1.0 - E2) / (1.0 - E2 * s2) ** 1.5
+
+
+def radius_prime_vertical_m(lat_rad):
+    """Prime-vertical radius of curvature R_N = a / (1 - e^2 sin^2 phi)^(1/2)."""
+    s2 = np.sin(lat_rad) ** 2
+    return A_M / np.sqrt(1.0 - E2 * s2)
+
+
+def k_phi(lat_rad):
+    """k_phi = 1/R_M, radians of latitude per metre north (B18)."""
+    return 1.0 / radius_meridian_m(lat_rad)
+
+
+def k_lambda(lat_rad):
+    """k_lambda = 1/(R_N cos phi), radians of longitude per metre east (B19)."""
+    return 1.0 / (radius_prime_vertical_m(lat_rad) * np.cos(lat_rad))
+
+
+def wrap_pi(angle_rad):
+    """Wrap an angle into (-pi, pi]."""
+    a = np.mod(np.asarray(angle_rad, dtype=float) + np.pi, TWO_PI) - np.pi
+    # np.mod maps +pi to -pi; move it to the closed end of (-pi, pi].
+    a = np.where(a == -np.pi, np.pi, a)
+    return a if a.ndim else float(a)
+
+
+def wrap_2pi(angle_rad):
+    """Wrap an angle into [0, 2*pi)."""
+    a = np.mod(np.asarray(angle_rad, dtype=float), TWO_PI)
+    a = np.where(a >= TWO_PI, 0.0, a)  # mod of tiny negatives can round up to 2*pi
+    return a if a.ndim else float(a)
+
+
+def angdiff(a_rad, b_rad):
+    """The difference a - b on the circle, in (-pi, pi]. The one place angles are subtracted."""
+    return wrap_pi(np.asarray(a_rad, dtype=float) - np.asarray(b_rad, dtype=float))
+
+
+def circmean(angles_rad, axis=None, weights=None):
+    """Mean direction on the circle, in [0, 2*pi); NaN where the resultant is zero or all NaN.
+
+    NaNs are ignored (the mean of the valid angles along ``axis``).
+    """
+    a = np.asarray(angles_rad, dtype=float)
+    w = np.ones_like(a) if weights is None else np.broadcast_to(np.asarray(weights, float), a.shape)
+    valid = ~np.isnan(a)
+    s = np.sum(np.where(valid, w * np.sin(np.where(valid, a, 0.0)), 0.0), axis=axis)
+    c = np.sum(np.where(valid, w * np.cos(np.where(valid, a, 0.0)), 0.0), axis=axis)
+    total = np.sum(np.where(valid, np.abs(w), 0.0), axis=axis)
+    # A resultant that vanishes to rounding (e.g. 0 and 180 degrees) has no direction.
+    with np.errstate(invalid="ignore"):
+        m = np.where(np.hypot(s, c) <= 1e-12 * total, np.nan, np.arctan2(s, c))
+    return wrap_2pi(m)
+
+
+def offset_ne_m(lat_rad, lon_rad, lat0_rad, lon0_rad):
+    """North and east offsets in metres of (lat, lon) from (lat0, lon0).
+
+    Local linearisation with the radii of curvature at the mid latitude (B18, B19
+    inverted): accurate to < 1e-5 relative for offsets of tens of kilometres.
+    Longitude differences go through :func:`angdiff` (antimeridian safe).
+    """
+    lat_mid = 0.5 * (np.asarray(lat_rad, float) + np.asarray(lat0_rad, float))
+    north_m = (np.asarray(lat_rad, float) - lat0_rad) / k_phi(lat_mid)
+    east_m = angdiff(lon_rad, lon0_rad) / k_lambda(lat_mid)
+    return north_m, east_m
+
+
+def add_offset_ne(lat0_rad, lon0_rad, north_m, east_m):
+    """Position reached from (lat0, lon0) by a small north/east offset in metres (inverse of :func:`offset_ne_m`)."""
+    lat0 = np.asarray(lat0_rad, float)
+    # One fixed-point step on the mid latitude is enough for offsets of tens of km.
+    lat1 = lat0 + north_m * k_phi(lat0)
+    lat_mid = 0.5 * (lat0 + lat1)
+    lat1 = lat0 + north_m * k_phi(lat_mid)
+    lat_mid = 0.5 * (lat0 + lat1)
+    lon1 = wrap_pi(np.asarray(lon0_rad, float) + east_m * k_lambda(lat_mid))
+    return lat1, lon1
+
+
+def distance_m(lat1_rad, lon1_rad, lat2_rad, lon2_rad):
+    """Distance in metres between nearby points (local-tangent approximation, see offset_ne_m)."""
+    n, e = offset_ne_m(lat2_rad, lon2_rad, lat1_rad, lon1_rad)
+    return np.hypot(n, e)

@@ -1,0 +1,161 @@
+"""Canonical frames: what every reader (NMEA text, CSV, MCAP) produces.
+
+A voyage is a handful of long tables, one per kind of measurement, each a pandas
+DataFrame sorted by ``time_ns`` with these columns (and no others needed downstream):
+
+``position``  (GGA, GLL, RMC, GNS; NavSatFix; LocationFix)
+    time_ns:int64, source:str, lat_rad, lon_rad, alt_m, quality:int8 (GGA fix
+    quality; 1 where only "valid" is known, 0 invalid), hdop
+``heading``   (HDT, THS, HDG, HDM)
+    time_ns, source, heading_rad, reference:str ('T' true, 'M' magnetic),
+    deviation_rad, variation_rad (east positive; NaN where absent)
+``ground``    (VTG, RMC: course and speed over ground)
+    time_ns, source, cog_rad, sog_mps
+``water``     (VHW, VBW: the speed log)
+    time_ns, source, stw_mps (longitudinal through water), stw_transverse_mps,
+    sog_long_mps, sog_transverse_mps (VBW ground components; starboard positive)
+``distance``  (VLW)
+    time_ns, source, total_water_m, trip_water_m
+``rot``       (ROT)
+    time_ns, source, rot_radps
+
+Every table also carries ``sentence`` (str, e.g. 'GGA', or the message type for
+MCAP/CSV) and ``line`` (int64, 1-based line or message number in its file, for
+tracing a value back to the input). Missing fields are NaN, never zero.
+
+``source`` is the source key: the TAG block ``s:`` value, the talker ID, an MCAP
+topic, a CSV source column, or a file-derived key. Roles (``compass``, ``log``,
+``ins1``..``ins3``, ``gnss``) are assigned to source keys afterwards
+(:mod:`dracc.ingest.sources`).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+ROLES = ("compass", "log", "ins1", "ins2", "ins3", "gnss")
+INS_ROLES = ("ins1", "ins2", "ins3")
+
+COMMON_COLUMNS = {"time_ns": "int64", "source": "object", "sentence": "object", "line": "int64"}
+
+KIND_COLUMNS: dict[str, dict[str, str]] = {
+    "position": {"lat_rad": "float64", "lon_rad": "float64", "alt_m": "float64",
+                 "quality": "int8", "hdop": "float64"},
+    "heading": {"heading_rad": "float64", "reference": "object",
+                "deviation_rad": "float64", "variation_rad": "float64"},
+    "ground": {"cog_rad": "float64", "sog_mps": "float64"},
+    "water": {"stw_mps": "float64", "stw_transverse_mps": "float64",
+              "sog_long_mps": "float64", "sog_transverse_mps": "float64"},
+    "distance": {"total_water_m": "float64", "trip_water_m": "float64"},
+    "rot": {"rot_radps": "float64"},
+}
+KINDS = tuple(KIND_COLUMNS)
+
+
+def empty_frame(kind: str) -> pd.DataFrame:
+    """An empty canonical frame of ``kind`` with the right dtypes."""
+    cols = {**COMMON_COLUMNS, **KIND_COLUMNS[kind]}
+    return pd.DataFrame({c: pd.Series(dtype=t) for c, t in cols.items()})
+
+
+def make_frame(kind: str, data: dict[str, np.ndarray]) -> pd.DataFrame:
+    """Build a canonical frame from column arrays; absent value columns become NaN.
+
+    ``time_ns``, ``source``, ``sentence`` and ``line`` are required.
+    """
+    n = len(data["time_ns"])
+    cols = {**COMMON_COLUMNS, **KIND_COLUMNS[kind]}
+    out = {}
+    for c, t in cols.items():
+        if c in data:
+            out[c] = np.asarray(data[c]).astype(t, copy=False) if t != "object" else np.asarray(data[c], dtype=object)
+        elif t == "float64":
+            out[c] = np.full(n, np.nan)
+        elif t == "int8":
+            out[c] = np.zeros(n, dtype=np.int8)
+        elif t == "object":
+            out[c] = np.full(n, None, dtype=object)
+        else:
+            raise KeyError(f"{kind} frame needs column {c!r}")
+    return pd.DataFrame(out)
+
+
+@dataclass
+class Rejects:
+    """Rejected lines, counted by reason, with the first few examples of each."""
+
+    counts: Counter = field(default_factory=Counter)
+    #: reason -> list of (file, line number, text excerpt); at most ``max_examples`` each
+    examples: dict[str, list[tuple[str, int, str]]] = field(default_factory=dict)
+    max_examples: int = 5
+
+    def add(self, reason: str, file: str, line: int, text: str, count: int = 1) -> None:
+        self.counts[reason] += count
+        ex = self.examples.setdefault(reason, [])
+        if len(ex) < self.max_examples:
+            ex.append((file, int(line), text[:120]))
+
+    def merge(self, other: "Rejects") -> None:
+        self.counts.update(other.counts)
+        for reason, ex in other.examples.items():
+            mine = self.examples.setdefault(reason, [])
+            mine.extend(ex[: max(0, self.max_examples - len(mine))])
+
+    @property
+    def total(self) -> int:
+        return sum(self.counts.values())
+
+
+@dataclass
+class TimeEvents:
+    """What the time base found and decided; counted, never silently applied."""
+
+    duplicates: int = 0  #: records repeating the previous time of the same source and kind
+    backsteps: int = 0  #: times going backwards by more than the tolerance
+    gaps: int = 0  #: gaps longer than the configured threshold
+    rollovers: int = 0  #: midnight rollovers resolved from time-of-day fields
+    implausible_dates: int = 0  #: e.g. GPS week rollover (date ~19.6 years early)
+    decisions: list[str] = field(default_factory=list)  #: human-readable notes
+    #: (file, line, what) for the first few of each event
+    examples: list[tuple[str, int, str]] = field(default_factory=list)
+
+
+@dataclass
+class SourceInfo:
+    """What one source key contributed."""
+
+    key: str
+    role: str | None = None
+    talkers: Counter = field(default_factory=Counter)
+    sentences: Counter = field(default_factory=Counter)
+    records: int = 0
+    first_ns: int | None = None
+    last_ns: int | None = None
+    files: set[str] = field(default_factory=set)
+
+
+@dataclass
+class Voyage:
+    """Everything ingested from one or more logs of one voyage."""
+
+    frames: dict[str, pd.DataFrame]  #: kind -> canonical frame (every kind present, maybe empty)
+    sources: dict[str, SourceInfo]
+    rejects: Rejects
+    time_events: TimeEvents
+    inputs: list[dict]  #: per file: {"path", "format", "lines", "records", "rejected": {reason: n}}
+    lines: int = 0  #: lines (or messages) read in all files
+
+    def role_sources(self, role: str) -> list[str]:
+        """Source keys assigned to ``role``."""
+        return [k for k, s in self.sources.items() if s.role == role]
+
+    def frame(self, kind: str, role: str | None = None) -> pd.DataFrame:
+        """The frame of ``kind``, restricted to the sources of ``role`` if given."""
+        df = self.frames[kind]
+        if role is None:
+            return df
+        return df[df["source"].isin(self.role_sources(role))]

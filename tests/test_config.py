@@ -1,0 +1,48 @@
+import math
+
+import pytest
+
+from dracc.config import Config, config_from_dict, load_config, with_overrides
+from dracc.errors import ConfigError
+
+
+def test_defaults_from_imo_standards():
+    c = Config()
+    assert c.dead_reckoning.compass_bias_deg.sigma == pytest.approx(0.75 / 1.96)
+    assert c.dead_reckoning.compass_bias_deg.tau_s == math.inf
+    assert c.deviation.factor_lat == 1.32 and c.deviation.factor_lon == 1.49
+
+
+def test_error_source_forms():
+    c = config_from_dict({"dead_reckoning": {"log_scale": 0.01, "compass_noise_deg": {"sigma": 0.3, "tau_s": 200}}})
+    assert c.dead_reckoning.log_scale.sigma == 0.01 and c.dead_reckoning.log_scale.tau_s == math.inf
+    assert c.dead_reckoning.compass_noise_deg.tau_s == 200
+
+
+@pytest.mark.parametrize("doc,msg", [
+    ({"ingest": {"strikt": True}}, "unknown key"),
+    ({"nonsense": {}}, "unknown section"),
+    ({"ingest": {"sources": {"IN": "ins4"}}}, "role must be one of"),
+    ({"deviation": {"probability": 1.5}}, "probability"),
+    ({"dead_reckoning": {"compass_bias_deg": "big"}}, "sigma"),
+])
+def test_invalid_config_is_named(doc, msg):
+    with pytest.raises(ConfigError, match=msg):
+        config_from_dict(doc)
+
+
+def test_load_config_errors(tmp_path):
+    with pytest.raises(ConfigError, match="not found"):
+        load_config(tmp_path / "missing.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[ingest\nstrict = true")
+    with pytest.raises(ConfigError, match="invalid TOML"):
+        load_config(bad)
+    good = tmp_path / "good.toml"
+    good.write_text('[ingest]\nstrict = true\n[ingest.sources]\nINS2 = "ins2"\n')
+    assert load_config(good).ingest.sources == {"INS2": "ins2"}
+
+
+def test_overrides():
+    c = with_overrides(Config(), "deviation", interval_s=7200.0, window_s=None)
+    assert c.deviation.interval_s == 7200.0 and c.deviation.window_s == 86400.0
