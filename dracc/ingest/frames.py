@@ -19,9 +19,11 @@ DataFrame sorted by ``time_ns`` with these columns (and no others needed downstr
 ``rot``       (ROT)
     time_ns, source, rot_radps
 
-Every table also carries ``sentence`` (str, e.g. 'GGA', or the message type for
-MCAP/CSV) and ``line`` (int64, 1-based line or message number in its file, for
-tracing a value back to the input). Missing fields are NaN, never zero.
+Every table also carries ``talker`` (str: the NMEA talker ID, '' where none),
+``sentence`` (str, e.g. 'GGA', or the message type for MCAP/CSV) and ``line``
+(int64, 1-based line or message number in its file, for tracing a value back to
+the input). The string columns may be pandas Categoricals (they repeat a few
+values millions of times). Missing fields are NaN, never zero.
 
 ``source`` is the source key: the TAG block ``s:`` value, the talker ID, an MCAP
 topic, a CSV source column, or a file-derived key. Roles (``compass``, ``log``,
@@ -40,7 +42,8 @@ import pandas as pd
 ROLES = ("compass", "log", "ins1", "ins2", "ins3", "gnss")
 INS_ROLES = ("ins1", "ins2", "ins3")
 
-COMMON_COLUMNS = {"time_ns": "int64", "source": "object", "sentence": "object", "line": "int64"}
+COMMON_COLUMNS = {"time_ns": "int64", "source": "category", "talker": "category",
+                  "sentence": "category", "line": "int64"}
 
 KIND_COLUMNS: dict[str, dict[str, str]] = {
     "position": {"lat_rad": "float64", "lon_rad": "float64", "alt_m": "float64",
@@ -65,14 +68,23 @@ def empty_frame(kind: str) -> pd.DataFrame:
 def make_frame(kind: str, data: dict[str, np.ndarray]) -> pd.DataFrame:
     """Build a canonical frame from column arrays; absent value columns become NaN.
 
-    ``time_ns``, ``source``, ``sentence`` and ``line`` are required.
+    ``time_ns``, ``source``, ``sentence`` and ``line`` are required; ``talker``
+    defaults to ''.
     """
     n = len(data["time_ns"])
     cols = {**COMMON_COLUMNS, **KIND_COLUMNS[kind]}
     out = {}
     for c, t in cols.items():
         if c in data:
-            out[c] = np.asarray(data[c]).astype(t, copy=False) if t != "object" else np.asarray(data[c], dtype=object)
+            v = data[c]
+            if t == "category":
+                out[c] = v if isinstance(v, pd.Categorical) else pd.Categorical(np.asarray(v, dtype=object))
+            elif t == "object":
+                out[c] = np.asarray(v, dtype=object)
+            else:
+                out[c] = np.asarray(v).astype(t, copy=False)
+        elif c == "talker":
+            out[c] = pd.Categorical(np.full(n, "", dtype=object))
         elif t == "float64":
             out[c] = np.full(n, np.nan)
         elif t == "int8":
@@ -136,6 +148,27 @@ class SourceInfo:
     first_ns: int | None = None
     last_ns: int | None = None
     files: set[str] = field(default_factory=set)
+
+
+@dataclass
+class FileResult:
+    """What one reader (NMEA text, CSV, MCAP) returns for one file, times already resolved.
+
+    ``read_logs`` merges several of these (sorting by time), assigns roles and
+    builds the :class:`Voyage`.
+    """
+
+    path: str
+    format: str  #: e.g. "nmea", "csv-long", "csv-wide", "csv-raw", "mcap"
+    frames: dict[str, pd.DataFrame]  #: kind -> canonical frame (kinds absent from the file may be missing)
+    lines: int  #: lines (or messages) read
+    rejects: Rejects = field(default_factory=Rejects)
+    time_events: TimeEvents = field(default_factory=TimeEvents)
+    notes: list[str] = field(default_factory=list)  #: what the reader decided or could not use
+
+    @property
+    def records(self) -> int:
+        return sum(len(f) for f in self.frames.values())
 
 
 @dataclass
