@@ -141,13 +141,20 @@ class SourceInfo:
     """What one source key contributed."""
 
     key: str
-    role: str | None = None
+    #: roles this source serves; one source may serve several in different kinds
+    #: (e.g. an instrument bus 'II' giving both the compass heading and the log speed)
+    roles: list[str] = field(default_factory=list)
     talkers: Counter = field(default_factory=Counter)
     sentences: Counter = field(default_factory=Counter)
     records: int = 0
     first_ns: int | None = None
     last_ns: int | None = None
     files: set[str] = field(default_factory=set)
+
+    @property
+    def role(self) -> str | None:
+        """The roles joined with '+' (e.g. 'compass+log'), or None if unassigned."""
+        return "+".join(self.roles) if self.roles else None
 
 
 @dataclass
@@ -184,7 +191,7 @@ class Voyage:
 
     def role_sources(self, role: str) -> list[str]:
         """Source keys assigned to ``role``."""
-        return [k for k, s in self.sources.items() if s.role == role]
+        return [k for k, s in self.sources.items() if role in s.roles]
 
     def frame(self, kind: str, role: str | None = None) -> pd.DataFrame:
         """The frame of ``kind``, restricted to the sources of ``role`` if given."""
