@@ -46,3 +46,16 @@ def test_load_config_errors(tmp_path):
 def test_overrides():
     c = with_overrides(Config(), "deviation", interval_s=7200.0, window_s=None)
     assert c.deviation.interval_s == 7200.0 and c.deviation.window_s == 86400.0
+
+
+def test_example_config_loads_and_states_the_defaults():
+    from pathlib import Path
+
+    example = load_config(Path(__file__).parents[1] / "docs" / "dracc.example.toml")
+    d, e = Config().dead_reckoning, example.dead_reckoning
+    for name in ("compass_bias_deg", "compass_noise_deg", "log_scale", "log_bias_kn", "log_noise_kn",
+                 "current_kn", "leeway_deg"):
+        assert getattr(e, name).sigma == pytest.approx(getattr(d, name).sigma, rel=2e-3), name
+        assert getattr(e, name).tau_s == getattr(d, name).tau_s, name
+    assert example.deviation == Config().deviation
+    assert example.ingest == Config().ingest

@@ -1,0 +1,59 @@
+"""Every command has help; --version; documented exit codes; errors as one line on stderr."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from dracc import __version__
+from dracc.cli.app import app
+from dracc.errors import ExitCode
+
+
+def _commands():
+    import typer.main
+
+    group = typer.main.get_command(app)
+    return sorted(group.commands)
+
+
+def test_version(run_cli):
+    code, out, _ = run_cli("--version")
+    assert code == ExitCode.OK and out.strip() == f"dracc {__version__}"
+
+
+def test_root_help_lists_commands(run_cli):
+    code, out, _ = run_cli("--help")
+    assert code == ExitCode.OK
+    for name in _commands():
+        assert name in out
+
+
+@pytest.mark.parametrize("name", _commands())
+def test_every_command_has_help(run_cli, name):
+    code, out, _ = run_cli(name, "--help")
+    assert code == ExitCode.OK
+    assert "Usage" in out and len(out.splitlines()) > 3
+
+
+def test_unknown_command_is_usage_error(run_cli):
+    code, _, err = run_cli("no-such-command")
+    assert code == ExitCode.USAGE and "no-such-command" in err
+
+
+def test_missing_input_is_one_line_error(run_cli, tmp_path):
+    code, out, err = run_cli("inspect", tmp_path / "missing.nmea")
+    assert code == ExitCode.INPUT
+    assert err.startswith("error:") and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+def test_console_script_runs_as_module():
+    r = subprocess.run([sys.executable, "-m", "dracc", "--version"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and __version__ in r.stdout
+
+
+def test_exit_codes_are_stable():
+    # Documented in the README; scripts and cron depend on these numbers.
+    assert [int(c) for c in ExitCode] == [0, 1, 2, 3, 4, 5, 130]
