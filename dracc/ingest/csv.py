@@ -1,0 +1,418 @@
+"""CSV voyage logs: long form, wide form, and loggers' CSV of raw sentences.
+
+Three forms, told apart by the header (first line; a UTF-8 BOM is skipped; comma-separated,
+fields with commas quoted as usual):
+
+long (``csv-long``)
+    ``time_utc,source,quantity,value`` -- one value per row; ``quantity`` is a name from
+    :mod:`dracc.ingest.csv_quantities` with its unit in the name (``lat_deg``, ``stw_kn``,
+    ``sog_mps``, ``reference`` ...).  Rows of one time and source make one record.
+wide (``csv-wide``)
+    ``time_utc,source,<quantity>,<quantity>,...`` -- one row per time and source; every
+    column named by a quantity (or declared in ``[ingest] quantities``) is read, others are
+    listed in the notes as ignored.  ``source`` is optional (the file stem is used).
+raw (``csv-raw``)
+    a time column (``received_at``, ``time_utc``, ``timestamp`` ...) and a column of raw
+    NMEA 0183 sentences (``raw_data``, ``raw``, ``nmea``, ``raw_sentence``); an optional
+    ``source`` column gives the source key; rows whose ``protocol`` names NMEA 2000 are
+    counted, not decoded.  Sentences go through :func:`dracc.ingest.nmea.parse_sentences`.
+
+Times: a ``time_ns`` column holds integer nanoseconds since the Unix epoch; any other
+time column holds ISO 8601 text (a zone-less time is UTC, as the column name says) or
+numbers since the Unix epoch whose unit follows from their size (below 1e11 seconds,
+below 1e14 milliseconds, below 1e17 microseconds, else nanoseconds: unambiguous for dates
+between 1973 and 5138).
+
+Reading streams the file in blocks (pyarrow's incremental CSV reader), so memory holds
+one block of text plus the compact numeric columns.  Bad rows are counted by reason with
+their line numbers (line 1 is the header): wrong number of fields, blank line, bad time,
+unknown quantity, value not a number, empty value, implausible value.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..config import IngestConfig
+from ..errors import IngestError
+from .csv_quantities import (
+    QUANTITIES,
+    UNITLESS_HINTS,
+    add_rejects,
+    build_frames,
+    check_declared,
+    lookup,
+)
+from .frames import FileResult, Rejects
+
+TIME_COLUMNS = ("time_utc", "time_ns", "received_at", "timestamp", "time", "datetime", "date_time",
+                "utc", "log_time")
+RAW_COLUMNS = ("raw_data", "raw", "nmea", "raw_sentence", "sentence_raw")
+_BLOCK_BYTES = 4 << 20
+
+
+def _split_header(head: bytes) -> list[str] | None:
+    if head.startswith(b"\xef\xbb\xbf"):
+        head = head[3:]
+    first = head.split(b"\n", 1)[0].rstrip(b"\r")
+    try:
+        text = first.decode("utf-8")
+    except UnicodeDecodeError:
+        return None
+    if not text or text[0] in "$!\\" or "," not in text:
+        return None
+    return [c.strip().strip('"').strip() for c in text.split(",")]
+
+
+def _find(cols: list[str], names: tuple[str, ...]) -> str | None:
+    low = {c.lower(): c for c in cols}
+    for n in names:
+        if n in low:
+            return low[n]
+    return None
+
+
+def looks_like_csv(head: bytes) -> bool:
+    """True when the first line of ``head`` is a header dracc reads: a time column and
+    either ``quantity,value``, a raw-sentence column, or at least one other column."""
+    cols = _split_header(head)
+    if not cols or len(cols) < 2:
+        return False
+    if _find(cols, TIME_COLUMNS) is None:
+        return False
+    return True
+
+
+def _form(cols: list[str]) -> str:
+    low = {c.lower() for c in cols}
+    if {"quantity", "value"} <= low:
+        return "csv-long"
+    if _find(cols, RAW_COLUMNS) is not None:
+        return "csv-raw"
+    return "csv-wide"
+
+
+def parse_times(text: np.ndarray, column: str) -> tuple[np.ndarray, np.ndarray]:
+    """(time_ns int64, ok bool) from a column of strings; see the module docstring."""
+    s = pd.Series(text, dtype=object)
+    n = len(s)
+    out = np.zeros(n, dtype=np.int64)
+    if column.lower() == "time_ns":
+        num = pd.to_numeric(s, errors="coerce")
+        ok = num.notna().to_numpy()
+        out[ok] = s[ok].astype(np.int64).to_numpy()
+        return out, ok
+    num = pd.to_numeric(s, errors="coerce").to_numpy(dtype=np.float64)
+    isnum = ~np.isnan(num)
+    if isnum.any():
+        mag = np.abs(num[isnum])
+        scale = np.where(mag < 1e11, 1e9, np.where(mag < 1e14, 1e6, np.where(mag < 1e17, 1e3, 1.0)))
+        out[isnum] = np.round(num[isnum] * scale).astype(np.int64)
+    rest = ~isnum
+    ok = isnum.copy()
+    if rest.any():
+        dt = pd.to_datetime(s[rest], utc=True, format="ISO8601", errors="coerce")
+        good = dt.notna().to_numpy()
+        vals = dt[good].dt.as_unit("ns").astype("int64").to_numpy() if good.any() else np.zeros(0, np.int64)
+        idx = np.flatnonzero(rest)
+        out[idx[good]] = vals
+        ok[idx[good]] = True
+    return out, ok
+
+
+def _line_numbers(k0: int, n: int, invalid_lines: list[int]) -> np.ndarray:
+    """File line numbers of valid data rows k0..k0+n-1, given the skipped rows' lines.
+
+    Valid row k (0-based) is on line ``k + 2 + j``, j the number of skipped rows before
+    it; skipped row i (sorted) has ``L_i - 2 - i`` valid rows before it.
+    """
+    k = np.arange(k0, k0 + n, dtype=np.int64)
+    if not invalid_lines:
+        return k + 2
+    inv = np.sort(np.asarray(invalid_lines, dtype=np.int64))
+    before = inv - 2 - np.arange(len(inv))
+    return k + 2 + np.searchsorted(before, k, side="right")
+
+
+def _iter_blocks(path: Path, cols: list[str], rejects: Rejects, file: str):
+    """Yield (dict column -> object array, line numbers) per block of the CSV."""
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    invalid: list[int] = []
+
+    def on_invalid(row) -> str:
+        line = int(row.number) if row.number is not None else -1
+        invalid.append(line)
+        reason = f"wrong number of fields ({row.actual_columns}, header has {row.expected_columns})"
+        rejects.add(reason, file, line, row.text or "")
+        return "skip"
+
+    try:
+        reader = pcsv.open_csv(
+            str(path),
+            read_options=pcsv.ReadOptions(block_size=_BLOCK_BYTES, use_threads=False),
+            parse_options=pcsv.ParseOptions(invalid_row_handler=on_invalid, ignore_empty_lines=False,
+                                            newlines_in_values=False),
+            convert_options=pcsv.ConvertOptions(column_types={c: pa.string() for c in cols},
+                                                strings_can_be_null=False, quoted_strings_can_be_null=False),
+        )
+    except (pa.ArrowInvalid, OSError) as err:
+        raise IngestError(f"{file}: cannot read as CSV: {err}") from err
+    k0 = 0
+    try:
+        for batch in reader:
+            n = batch.num_rows
+            if n == 0:
+                continue
+            lines = _line_numbers(k0, n, invalid)
+            k0 += n
+            data = {name: batch.column(i).to_numpy(zero_copy_only=False).astype(object)
+                    for i, name in enumerate(batch.schema.names)}
+            yield data, lines
+    except pa.ArrowInvalid as err:
+        raise IngestError(f"{file}: CSV damaged after line {k0 + 1 + len(invalid)}: {err}") from err
+
+
+def _drop_blank(data: dict, lines: np.ndarray, rejects: Rejects, file: str) -> tuple[dict, np.ndarray]:
+    blank = np.ones(len(lines), dtype=bool)
+    for v in data.values():
+        blank &= v == ""
+    if blank.any():
+        add_rejects(rejects, "blank line", file, lines[blank], [""] * 5)
+        keep = ~blank
+        data = {k: v[keep] for k, v in data.items()}
+        lines = lines[keep]
+    return data, lines
+
+
+def _times(data: dict, lines: np.ndarray, tcol: str, rejects: Rejects, file: str):
+    t_ns, ok = parse_times(data[tcol], tcol)
+    if not ok.all():
+        bad = ~ok
+        add_rejects(rejects, "bad time", file, lines[bad], [str(x) for x in data[tcol][bad][:5]])
+    return t_ns, ok
+
+
+def _numbers(text: np.ndarray, lines: np.ndarray, name: str, rejects: Rejects, file: str) -> np.ndarray:
+    """Floats from strings: '' is absent (NaN); anything else non-numeric is counted."""
+    v = pd.to_numeric(pd.Series(text, dtype=object), errors="coerce").to_numpy(dtype=np.float64)
+    bad = np.isnan(v) & (text != "") & (np.char.lower(text.astype(str)) != "nan")
+    if bad.any():
+        add_rejects(rejects, "value not a number", file, lines[bad],
+                    [f"{name}={x}" for x in text[bad][:5]])
+    return v
+
+
+def read_csv(path, cfg: IngestConfig) -> FileResult:
+    """Read a CSV voyage log (long, wide or raw form) into canonical frames.
+
+    Raises IngestError when the file is missing or its header is not one dracc reads,
+    and (``cfg.strict``) on the first rejected row.
+    """
+    p = Path(path)
+    file = str(p)
+    declared = dict(getattr(cfg, "quantities", {}) or {})
+    check_declared(declared, file)
+    try:
+        with p.open("rb") as fh:
+            head = fh.read(65536)
+    except OSError as err:
+        raise IngestError(f"{file}: cannot read: {err}") from err
+    cols = _split_header(head)
+    if not cols or _find(cols, TIME_COLUMNS) is None:
+        first = head.split(b"\n", 1)[0][:80].decode("utf-8", "replace")
+        raise IngestError(f"{file}:1: not a dracc CSV header (needs a time column such as "
+                          f"time_utc, and quantity,value or quantity columns): {first!r}")
+    if len(set(cols)) != len(cols):
+        raise IngestError(f"{file}:1: repeated column name in header")
+    form = _form(cols)
+    rejects = Rejects()
+    notes: list[str] = []
+    if form == "csv-long":
+        frames, rows = _read_long(p, cols, declared, rejects, file)
+    elif form == "csv-wide":
+        frames, rows = _read_wide(p, cols, declared, rejects, notes, file)
+    else:
+        return _read_raw(p, cols, cfg, rejects, notes, file)
+    if cfg.strict and rejects.total:
+        reason, ex = next(iter(rejects.examples.items()))
+        f, line, text = ex[0]
+        raise IngestError(f"{f}:{line}: {reason}: {text!r} (--strict)")
+    if not frames:
+        notes.append(f"{file}: no navigation records ({rows} rows read)")
+    return FileResult(path=file, format=form, frames=frames, lines=rows, rejects=rejects, notes=notes)
+
+
+def _read_long(p: Path, cols: list[str], declared: dict, rejects: Rejects, file: str):
+    tcol = _find(cols, TIME_COLUMNS)
+    scol = _find(cols, ("source",))
+    qcol = _find(cols, ("quantity",))
+    vcol = _find(cols, ("value",))
+    parts: list[tuple] = []
+    rows = 0
+    stem = p.stem
+    for data, lines in _iter_blocks(p, cols, rejects, file):
+        rows += len(lines)
+        data, lines = _drop_blank(data, lines, rejects, file)
+        t_ns, ok = _times(data, lines, tcol, rejects, file)
+        qname = data[qcol]
+        qmapped = np.array([declared.get(q, q) for q in qname], dtype=object) if declared else qname
+        known = np.isin(qmapped, list(QUANTITIES))
+        unk = ok & ~known
+        if unk.any():
+            add_rejects(rejects, "unknown quantity", file, lines[unk], [str(q) for q in qname[unk][:5]])
+        val = data[vcol]
+        empty = ok & known & (val == "")
+        if empty.any():
+            add_rejects(rejects, "empty value", file, lines[empty], [str(q) for q in qname[empty][:5]])
+        keep = ok & known & ~empty
+        isref = qmapped == "reference"
+        num = np.full(len(val), np.nan)
+        nr = keep & ~isref
+        if nr.any():
+            num[nr] = _numbers(val[nr], lines[nr], "value", rejects, file)
+            keep &= ~(nr & np.isnan(num) & (np.char.lower(val.astype(str)) != "nan"))
+        src = data[scol] if scol else np.full(len(val), stem, dtype=object)
+        parts.append((t_ns[keep], src[keep], qmapped[keep], num[keep], val[keep], lines[keep]))
+    if not parts:
+        return {}, rows
+    t_ns = np.concatenate([x[0] for x in parts])
+    src = np.concatenate([x[1] for x in parts])
+    qn = np.concatenate([x[2] for x in parts])
+    num = np.concatenate([x[3] for x in parts])
+    raw = np.concatenate([x[4] for x in parts])
+    lines = np.concatenate([x[5] for x in parts])
+    if len(t_ns) == 0:
+        return {}, rows
+    # one record per (time, source): factorise the key
+    key = pd.MultiIndex.from_arrays([t_ns, src])
+    rec, uniq = pd.factorize(key, sort=False)
+    nrec = len(uniq)
+    first_line = np.full(nrec, np.iinfo(np.int64).max)
+    np.minimum.at(first_line, rec, lines)
+    values: dict[str, np.ndarray] = {}
+    for q in pd.unique(qn):
+        m = qn == q
+        r = rec[m]
+        dup = pd.Series(r).duplicated().to_numpy()
+        if dup.any():
+            add_rejects(rejects, "quantity repeated at one time and source", file, lines[m][dup],
+                        [str(q)] * 5)
+        if q == "reference":
+            arr = np.full(nrec, None, dtype=object)
+            arr[r[~dup]] = raw[m][~dup]
+        else:
+            arr = np.full(nrec, np.nan)
+            arr[r[~dup]] = num[m][~dup]
+        values[str(q)] = arr
+    t_rec = uniq.get_level_values(0).to_numpy(dtype=np.int64)
+    s_rec = uniq.get_level_values(1).to_numpy(dtype=object)
+    frames = build_frames(t_rec, s_rec, first_line, "csv", values, file, rejects)
+    return _sorted(frames), rows
+
+
+def _sorted(frames: dict[str, pd.DataFrame]) -> dict[str, pd.DataFrame]:
+    return {k: f.sort_values(["time_ns", "line"], kind="stable").reset_index(drop=True)
+            for k, f in frames.items()}
+
+
+def _read_wide(p: Path, cols: list[str], declared: dict, rejects: Rejects, notes: list[str], file: str):
+    tcol = _find(cols, TIME_COLUMNS)
+    scol = _find(cols, ("source",))
+    qcols: dict[str, str] = {}
+    ignored = []
+    for c in cols:
+        if c in (tcol, scol):
+            continue
+        q = lookup(c, declared)
+        if q is None:
+            ignored.append(c)
+        else:
+            qcols[c] = q.name
+    for c in ignored:
+        hint = (" (a quantity without its unit: name the column e.g. sog_kn, or declare it in "
+                "[ingest] quantities)") if c.lower() in UNITLESS_HINTS else ""
+        notes.append(f"{file}: column {c!r} ignored: not a quantity name{hint}")
+    if not qcols:
+        raise IngestError(f"{file}:1: no column names a quantity (e.g. lat_deg, heading_deg, stw_kn); "
+                          f"columns: {', '.join(cols)}")
+    parts: list[tuple] = []
+    rows = 0
+    for data, lines in _iter_blocks(p, cols, rejects, file):
+        rows += len(lines)
+        data, lines = _drop_blank(data, lines, rejects, file)
+        t_ns, ok = _times(data, lines, tcol, rejects, file)
+        vals = {}
+        for c, qname in qcols.items():
+            text = data[c][ok]
+            if qname == "reference":
+                vals[qname] = np.where(text == "", None, text)
+            else:
+                vals[qname] = _numbers(text, lines[ok], c, rejects, file)
+        src = data[scol][ok] if scol else np.full(int(ok.sum()), p.stem, dtype=object)
+        parts.append((t_ns[ok], src, lines[ok], vals))
+    if not parts:
+        return {}, rows
+    t_ns = np.concatenate([x[0] for x in parts])
+    src = np.concatenate([x[1] for x in parts])
+    lines = np.concatenate([x[2] for x in parts])
+    values = {q: np.concatenate([x[3][q] for x in parts]) for q in parts[0][3]}
+    frames = build_frames(t_ns, src, lines, "csv", values, file, rejects)
+    return _sorted(frames), rows
+
+
+def _read_raw(p: Path, cols: list[str], cfg: IngestConfig, rejects: Rejects, notes: list[str],
+              file: str) -> FileResult:
+    from .nmea import parse_sentences
+
+    tcol = _find(cols, TIME_COLUMNS)
+    rcol = _find(cols, RAW_COLUMNS)
+    scol = _find(cols, ("source",))
+    pcol = _find(cols, ("protocol",))
+    all_lines: list[bytes] = []
+    times: list[np.ndarray] = []
+    sources: list[np.ndarray] = []
+    file_lines: list[np.ndarray] = []
+    rows = 0
+    for data, lines in _iter_blocks(p, cols, rejects, file):
+        rows += len(lines)
+        data, lines = _drop_blank(data, lines, rejects, file)
+        keep = np.ones(len(lines), dtype=bool)
+        if pcol:
+            n2k = np.char.find(np.char.lower(data[pcol].astype(str)), "2000") >= 0
+            if n2k.any():
+                add_rejects(rejects, "NMEA 2000 row (not decoded)", file, lines[n2k],
+                            [str(x) for x in data[rcol][n2k][:5]])
+            keep &= ~n2k
+        empty = keep & (data[rcol] == "")
+        if empty.any():
+            add_rejects(rejects, "empty raw sentence", file, lines[empty], [""] * 5)
+        keep &= ~empty
+        t_ns, ok = parse_times(data[tcol], tcol)
+        bad = keep & ~ok
+        if bad.any():
+            add_rejects(rejects, "bad time", file, lines[bad], [str(x) for x in data[tcol][bad][:5]])
+        keep &= ok
+        all_lines.extend(s.encode("utf-8", "replace") for s in data[rcol][keep])
+        times.append(t_ns[keep])
+        sources.append(data[scol][keep] if scol else np.full(int(keep.sum()), "", dtype=object))
+        file_lines.append(lines[keep])
+    t = np.concatenate(times) if times else np.zeros(0, np.int64)
+    src = np.concatenate(sources) if sources else np.zeros(0, object)
+    where = np.concatenate(file_lines) if file_lines else np.zeros(0, np.int64)
+    res = parse_sentences(all_lines, t, list(src), file, cfg)
+    # parse_sentences numbers lines by their position (1-based): map back to CSV lines
+    for kind, f in res.frames.items():
+        if len(f):
+            f = f.copy()
+            f["line"] = where[f["line"].to_numpy(dtype=np.int64) - 1]
+            res.frames[kind] = f
+    res.rejects.merge(rejects)
+    res.format = "csv-raw"
+    res.lines = rows
+    res.notes = notes + res.notes
+    return res

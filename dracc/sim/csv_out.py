@@ -1,0 +1,95 @@
+"""Write canonical frames as a CSV voyage log (long or wide form), read back by
+:func:`dracc.ingest.csv.read_csv`.
+
+Values are written in the units a navigator reads, with the unit in the name
+(``lat_deg``, ``heading_deg``, ``stw_kn``, ``total_water_nmi``, ``rot_degpmin``; see
+:func:`dracc.ingest.csv_quantities.frame_quantities`), each with 17 significant digits so
+that reading back reproduces the value to the last bit in those units.  Times are ISO
+8601 UTC with nanoseconds (``2024-05-01T12:00:00.000000000Z``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..atomic import atomic_path
+from ..ingest.csv_quantities import frame_quantities
+from ..ingest.frames import KINDS
+
+
+def iso_utc(time_ns: np.ndarray) -> np.ndarray:
+    """ISO 8601 UTC strings with nanoseconds for int64 Unix nanoseconds."""
+    return np.char.add(np.datetime_as_string(np.asarray(time_ns, dtype="datetime64[ns]"), unit="ns"), "Z")
+
+
+def _fmt(v: np.ndarray) -> np.ndarray:
+    """Floats as shortest round-trip text ('' for NaN); integers without '.0'."""
+    s = pd.Series(v, dtype=np.float64)
+    out = np.array([repr(float(x)) for x in s.to_numpy()], dtype=object)
+    out[s.isna().to_numpy()] = ""
+    whole = s.notna().to_numpy() & (s.to_numpy() == np.round(s.to_numpy())) & (np.abs(s.to_numpy()) < 1e15)
+    out[whole] = np.array([str(int(x)) for x in s.to_numpy()[whole]], dtype=object)
+    return out
+
+
+def _tables(frames: dict[str, pd.DataFrame]):
+    for kind in KINDS:
+        df = frames.get(kind)
+        if df is None or len(df) == 0:
+            continue
+        yield kind, df, frame_quantities(kind, df)
+
+
+def write_csv(frames: dict[str, pd.DataFrame], path, form: str = "long") -> Path:
+    """Write ``frames`` (kind -> canonical frame) to ``path`` atomically; return the path.
+
+    ``form='long'``: ``time_utc,source,quantity,value``, one present value per row, rows in
+    time order.  ``form='wide'``: ``time_utc,source,<quantities...>``, one row per time and
+    source (records of several kinds at the same time and source share a row).
+    """
+    if form not in ("long", "wide"):
+        raise ValueError(f"form must be 'long' or 'wide', got {form!r}")
+    path = Path(path)
+    parts = []
+    if form == "long":
+        for kind, df, qs in _tables(frames):
+            t = df["time_ns"].to_numpy(dtype=np.int64)
+            src = df["source"].astype(str).to_numpy(dtype=object)
+            for q, v in qs.items():
+                if q == "reference":
+                    mask = pd.notna(v) & (v != "")
+                    txt = np.asarray(v, dtype=object)
+                else:
+                    mask = ~np.isnan(v)
+                    txt = _fmt(v)
+                if not mask.any():
+                    continue
+                parts.append(pd.DataFrame({"time_ns": t[mask], "source": src[mask],
+                                           "quantity": q, "value": txt[mask]}))
+        if parts:
+            out = pd.concat(parts, ignore_index=True).sort_values("time_ns", kind="stable")
+        else:
+            out = pd.DataFrame({"time_ns": np.zeros(0, np.int64), "source": [], "quantity": [], "value": []})
+        out.insert(0, "time_utc", iso_utc(out["time_ns"].to_numpy()))
+        out = out.drop(columns="time_ns")
+    else:
+        merged = None
+        for kind, df, qs in _tables(frames):
+            t = pd.DataFrame({"time_ns": df["time_ns"].to_numpy(dtype=np.int64),
+                              "source": df["source"].astype(str).to_numpy(dtype=object)})
+            t["occ"] = t.groupby(["time_ns", "source"]).cumcount().to_numpy()
+            for q, v in qs.items():
+                t[q] = v if q == "reference" else _fmt(v)
+            merged = t if merged is None else merged.merge(t, on=["time_ns", "source", "occ"], how="outer")
+        if merged is None:
+            out = pd.DataFrame({"time_utc": [], "source": []})
+        else:
+            merged = merged.sort_values(["time_ns", "source", "occ"], kind="stable")
+            merged.insert(0, "time_utc", iso_utc(merged["time_ns"].to_numpy()))
+            out = merged.drop(columns=["time_ns", "occ"]).fillna("")
+    with atomic_path(path) as tmp:
+        out.to_csv(tmp, index=False, lineterminator="\n")
+    return path
