@@ -1,0 +1,364 @@
+"""The audit's state between nights: one SQLite file per ship (or shared by several).
+
+What is kept
+------------
+``nights``
+    One row per vessel and night (``UNIQUE(vessel, night)``), with the SHA-256 of the
+    night's log content and of the analysis settings, the period, the DR consistency,
+    the calibration, the rejected-line rate, the sources and the findings.
+``unit_stats``
+    Per night, unit (``ins1``..``ins3``) and channel (``lat``, ``lon``, ``course``):
+    ``n``, ``m_u``, ``m_y``, kurtosis and limiting error in the channel's unit
+    (``measure``: ``m`` for latitude/longitude, ``deg`` for course), the a priori RMS
+    before and after the night and the verdict of the monitoring rule.
+``apriori``
+    The history of the a priori RMS per vessel, unit and channel: every night on which
+    the value was established or raised, with the previous value and the evidence.
+
+Concurrency and crashes
+-----------------------
+The database runs in WAL mode with a busy timeout; every change is one
+``BEGIN IMMEDIATE`` transaction (:meth:`StateStore.transaction`), so two audits on one
+file queue up instead of failing, readers never block the writer, and a process killed
+half-way leaves the previous state intact (SQLite rolls the open transaction back).
+
+This module stores and reads; the rules (what the a priori becomes, what is a finding)
+live in :mod:`dracc.audit`.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+from .errors import ConfigError, DraccError
+
+SCHEMA_VERSION = 1
+
+#: the unit of the statistics of each channel
+CHANNEL_MEASURE = {"lat": "m", "lon": "m", "course": "deg"}
+
+_DDL = """
+CREATE TABLE IF NOT EXISTS meta (
+    key   TEXT PRIMARY KEY,
+    value TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS nights (
+    id                INTEGER PRIMARY KEY,
+    vessel            TEXT NOT NULL,
+    night             TEXT NOT NULL,           -- YYYY-MM-DD (UTC)
+    content_sha256    TEXT NOT NULL,           -- the night's log bytes
+    settings_sha256   TEXT NOT NULL,           -- the analysis settings
+    audited_utc       TEXT NOT NULL,
+    period_start_utc  TEXT,
+    period_end_utc    TEXT,
+    inputs_json       TEXT NOT NULL,
+    sources_json      TEXT NOT NULL,
+    lines             INTEGER,
+    rejected          INTEGER,
+    rejected_rate     REAL,
+    dr_containment_2m REAL,
+    dr_n_scored       INTEGER,
+    compass_error_deg       REAL,
+    compass_error_sigma_deg REAL,
+    log_scale               REAL,
+    log_scale_sigma         REAL,
+    findings_json     TEXT NOT NULL,
+    missing_json      TEXT NOT NULL,
+    UNIQUE (vessel, night)
+);
+CREATE TABLE IF NOT EXISTS unit_stats (
+    night_id       INTEGER NOT NULL REFERENCES nights(id) ON DELETE CASCADE,
+    unit           TEXT NOT NULL,
+    channel        TEXT NOT NULL,
+    measure        TEXT NOT NULL,              -- 'm' or 'deg'
+    n              INTEGER NOT NULL,
+    m_u            REAL,
+    m_y            REAL,
+    kurtosis       REAL,
+    limit_error    REAL,
+    apriori_before REAL,
+    apriori_after  REAL,
+    verdict        TEXT,
+    PRIMARY KEY (night_id, unit, channel)
+);
+CREATE TABLE IF NOT EXISTS apriori (
+    vessel        TEXT NOT NULL,
+    unit          TEXT NOT NULL,
+    channel       TEXT NOT NULL,
+    night         TEXT NOT NULL,
+    value         REAL NOT NULL,
+    previous      REAL,
+    reason        TEXT NOT NULL,               -- 'established' or 'raised'
+    evidence_json TEXT NOT NULL,
+    PRIMARY KEY (vessel, unit, channel, night)
+);
+CREATE INDEX IF NOT EXISTS nights_vessel_night ON nights (vessel, night);
+"""
+
+
+class StateError(DraccError):
+    """The state database cannot be opened or is not a dracc audit database."""
+
+
+@dataclass(frozen=True)
+class ChannelRow:
+    """One unit and channel of one night, in the channel's unit (``measure``)."""
+
+    unit: str
+    channel: str
+    n: int
+    m_u: float | None
+    m_y: float | None
+    kurtosis: float | None
+    limit_error: float | None
+    apriori_before: float | None = None
+    apriori_after: float | None = None
+    verdict: str | None = None
+
+    @property
+    def measure(self) -> str:
+        return CHANNEL_MEASURE.get(self.channel, "")
+
+
+@dataclass(frozen=True)
+class NightRecord:
+    """Everything kept about one audited night."""
+
+    vessel: str
+    night: str
+    content_sha256: str
+    settings_sha256: str
+    audited_utc: str
+    period_start_utc: str | None
+    period_end_utc: str | None
+    inputs: tuple[str, ...]
+    sources: dict[str, str]
+    lines: int | None
+    rejected: int | None
+    rejected_rate: float | None
+    dr_containment_2m: float | None
+    dr_n_scored: int | None
+    compass_error_deg: float | None
+    compass_error_sigma_deg: float | None
+    log_scale: float | None
+    log_scale_sigma: float | None
+    findings: tuple[dict, ...]
+    missing: tuple[str, ...]
+    channels: tuple[ChannelRow, ...]
+
+
+@dataclass(frozen=True)
+class AprioriEvent:
+    """The a priori RMS of one unit and channel was established or raised on ``night``."""
+
+    vessel: str
+    unit: str
+    channel: str
+    night: str
+    value: float
+    previous: float | None
+    reason: str
+    evidence: dict
+
+
+def _none_if_nan(x):
+    if x is None:
+        return None
+    try:
+        xf = float(x)
+    except (TypeError, ValueError):
+        return None
+    return None if xf != xf else xf
+
+
+class StateStore:
+    """A connection to the audit database; use as a context manager.
+
+    ``busy_timeout_s`` is how long a writer waits for another audit's transaction.
+    """
+
+    def __init__(self, path: str | Path, busy_timeout_s: float = 60.0):
+        self.path = Path(path)
+        if self.path.is_dir():
+            raise ConfigError(f"audit database path is a directory: {self.path}")
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self.conn = sqlite3.connect(self.path, timeout=busy_timeout_s, isolation_level=None)
+            self.conn.row_factory = sqlite3.Row
+            self.conn.execute(f"PRAGMA busy_timeout = {int(busy_timeout_s * 1000)}")
+            mode = self.conn.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+            self.conn.execute("PRAGMA synchronous = FULL")
+            self.conn.execute("PRAGMA foreign_keys = ON")
+            self._init_schema()
+        except sqlite3.DatabaseError as err:
+            raise StateError(f"{self.path}: cannot open the audit database: {err}") from err
+        except OSError as err:
+            raise StateError(f"{self.path}: cannot create the audit database: {err}") from err
+        self.journal_mode = str(mode).lower()
+
+    # -- plumbing ------------------------------------------------------------------
+
+    def close(self) -> None:
+        self.conn.close()
+
+    def __enter__(self) -> StateStore:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @contextmanager
+    def transaction(self) -> Iterator[sqlite3.Connection]:
+        """``BEGIN IMMEDIATE`` … ``COMMIT``; rolled back on any exception.
+
+        IMMEDIATE takes the write lock up front, so two audits never both read the old
+        state and then race to write (they wait for each other up to the busy timeout).
+        """
+        try:
+            self.conn.execute("BEGIN IMMEDIATE")
+        except sqlite3.OperationalError as err:
+            raise StateError(f"{self.path}: database busy or locked: {err}") from err
+        try:
+            yield self.conn
+        except BaseException:
+            self.conn.execute("ROLLBACK")
+            raise
+        else:
+            self.conn.execute("COMMIT")
+
+    def _init_schema(self) -> None:
+        with self.transaction() as c:
+            # statement by statement: executescript() would COMMIT the open transaction
+            for stmt in _DDL.split(";"):
+                if stmt.strip():
+                    c.execute(stmt)
+            row = c.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()
+            if row is None:
+                c.execute("INSERT INTO meta (key, value) VALUES ('schema', ?)", (str(SCHEMA_VERSION),))
+            elif int(row[0]) != SCHEMA_VERSION:
+                raise StateError(f"{self.path}: audit database schema {row[0]} is not the supported "
+                                 f"{SCHEMA_VERSION}")
+
+    # -- reads ---------------------------------------------------------------------
+
+    def night(self, vessel: str, night: str) -> NightRecord | None:
+        """The stored record of one night, or None."""
+        row = self.conn.execute("SELECT * FROM nights WHERE vessel = ? AND night = ?",
+                                (vessel, night)).fetchone()
+        return None if row is None else self._record(row)
+
+    def nights(self, vessel: str | None = None) -> list[NightRecord]:
+        """All stored nights (of one vessel), in order of vessel and night."""
+        if vessel is None:
+            rows = self.conn.execute("SELECT * FROM nights ORDER BY vessel, night").fetchall()
+        else:
+            rows = self.conn.execute("SELECT * FROM nights WHERE vessel = ? ORDER BY night",
+                                     (vessel,)).fetchall()
+        return [self._record(r) for r in rows]
+
+    def vessels(self) -> list[str]:
+        return [r[0] for r in self.conn.execute("SELECT DISTINCT vessel FROM nights ORDER BY vessel")]
+
+    def history(self, vessel: str | None = None, unit: str | None = None,
+                channel: str | None = None) -> list[dict]:
+        """Per-night statistics, one dict per vessel, night, unit and channel, in time order."""
+        sql = ("SELECT n.vessel, n.night, s.unit, s.channel, s.measure, s.n, s.m_u, s.m_y, "
+               "s.kurtosis, s.limit_error, s.apriori_before, s.apriori_after, s.verdict, "
+               "n.dr_containment_2m, n.compass_error_deg, n.log_scale "
+               "FROM unit_stats s JOIN nights n ON n.id = s.night_id WHERE 1 = 1")
+        args: list = []
+        for col, val in (("n.vessel", vessel), ("s.unit", unit), ("s.channel", channel)):
+            if val is not None:
+                sql += f" AND {col} = ?"
+                args.append(val)
+        sql += " ORDER BY n.vessel, s.unit, s.channel, n.night"
+        return [dict(r) for r in self.conn.execute(sql, args)]
+
+    def apriori_events(self, vessel: str | None = None) -> list[AprioriEvent]:
+        sql = "SELECT * FROM apriori"
+        args: tuple = ()
+        if vessel is not None:
+            sql += " WHERE vessel = ?"
+            args = (vessel,)
+        sql += " ORDER BY vessel, unit, channel, night"
+        return [AprioriEvent(r["vessel"], r["unit"], r["channel"], r["night"], r["value"],
+                             r["previous"], r["reason"], json.loads(r["evidence_json"]))
+                for r in self.conn.execute(sql, args)]
+
+    def _channels(self, night_id: int) -> tuple[ChannelRow, ...]:
+        rows = self.conn.execute("SELECT * FROM unit_stats WHERE night_id = ? ORDER BY unit, channel",
+                                 (night_id,)).fetchall()
+        return tuple(ChannelRow(r["unit"], r["channel"], r["n"], r["m_u"], r["m_y"], r["kurtosis"],
+                                r["limit_error"], r["apriori_before"], r["apriori_after"],
+                                r["verdict"]) for r in rows)
+
+    def _record(self, r: sqlite3.Row) -> NightRecord:
+        return NightRecord(
+            vessel=r["vessel"], night=r["night"], content_sha256=r["content_sha256"],
+            settings_sha256=r["settings_sha256"], audited_utc=r["audited_utc"],
+            period_start_utc=r["period_start_utc"], period_end_utc=r["period_end_utc"],
+            inputs=tuple(json.loads(r["inputs_json"])), sources=json.loads(r["sources_json"]),
+            lines=r["lines"], rejected=r["rejected"], rejected_rate=r["rejected_rate"],
+            dr_containment_2m=r["dr_containment_2m"], dr_n_scored=r["dr_n_scored"],
+            compass_error_deg=r["compass_error_deg"],
+            compass_error_sigma_deg=r["compass_error_sigma_deg"],
+            log_scale=r["log_scale"], log_scale_sigma=r["log_scale_sigma"],
+            findings=tuple(json.loads(r["findings_json"])), missing=tuple(json.loads(r["missing_json"])),
+            channels=self._channels(r["id"]),
+        )
+
+    # -- writes (call inside :meth:`transaction`) ------------------------------------
+
+    def delete_night(self, vessel: str, night: str) -> bool:
+        """Remove one night (its statistics go with it); True if there was one."""
+        cur = self.conn.execute("DELETE FROM nights WHERE vessel = ? AND night = ?", (vessel, night))
+        return cur.rowcount > 0
+
+    def insert_night(self, rec: NightRecord) -> int:
+        """Insert one night and its statistics; returns the row id."""
+        cur = self.conn.execute(
+            "INSERT INTO nights (vessel, night, content_sha256, settings_sha256, audited_utc, "
+            "period_start_utc, period_end_utc, inputs_json, sources_json, lines, rejected, "
+            "rejected_rate, dr_containment_2m, dr_n_scored, compass_error_deg, "
+            "compass_error_sigma_deg, log_scale, log_scale_sigma, findings_json, missing_json) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            (rec.vessel, rec.night, rec.content_sha256, rec.settings_sha256, rec.audited_utc,
+             rec.period_start_utc, rec.period_end_utc, json.dumps(list(rec.inputs)),
+             json.dumps(rec.sources, sort_keys=True), rec.lines, rec.rejected,
+             _none_if_nan(rec.rejected_rate), _none_if_nan(rec.dr_containment_2m), rec.dr_n_scored,
+             _none_if_nan(rec.compass_error_deg), _none_if_nan(rec.compass_error_sigma_deg),
+             _none_if_nan(rec.log_scale), _none_if_nan(rec.log_scale_sigma),
+             json.dumps(list(rec.findings), sort_keys=True), json.dumps(list(rec.missing))))
+        night_id = int(cur.lastrowid)
+        self.conn.executemany(
+            "INSERT INTO unit_stats (night_id, unit, channel, measure, n, m_u, m_y, kurtosis, "
+            "limit_error, apriori_before, apriori_after, verdict) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            [(night_id, c.unit, c.channel, c.measure, int(c.n), _none_if_nan(c.m_u),
+              _none_if_nan(c.m_y), _none_if_nan(c.kurtosis), _none_if_nan(c.limit_error),
+              _none_if_nan(c.apriori_before), _none_if_nan(c.apriori_after), c.verdict)
+             for c in rec.channels])
+        return night_id
+
+    def set_channel_apriori(self, vessel: str, night: str, unit: str, channel: str,
+                            before: float | None, after: float | None, verdict: str) -> None:
+        """Store the outcome of the monitoring rule for one night, unit and channel."""
+        self.conn.execute(
+            "UPDATE unit_stats SET apriori_before = ?, apriori_after = ?, verdict = ? "
+            "WHERE unit = ? AND channel = ? AND night_id = "
+            "(SELECT id FROM nights WHERE vessel = ? AND night = ?)",
+            (_none_if_nan(before), _none_if_nan(after), verdict, unit, channel, vessel, night))
+
+    def replace_apriori_events(self, vessel: str, events: Sequence[AprioriEvent]) -> None:
+        """Replace the a priori history of one vessel (it is recomputed from all its nights)."""
+        self.conn.execute("DELETE FROM apriori WHERE vessel = ?", (vessel,))
+        self.conn.executemany(
+            "INSERT INTO apriori (vessel, unit, channel, night, value, previous, reason, evidence_json) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+            [(e.vessel, e.unit, e.channel, e.night, float(e.value), _none_if_nan(e.previous),
+              e.reason, json.dumps(e.evidence, sort_keys=True)) for e in events])

@@ -1,0 +1,284 @@
+"""The audit's logic: the a priori rule, thresholds, idempotence, config validation."""
+
+from __future__ import annotations
+
+import datetime as dt
+import math
+
+import pytest
+from test_audit_helpers import make_doc
+
+from dracc.audit import (
+    AuditConfig,
+    apriori_chain,
+    apriori_seeds,
+    audit_config,
+    audit_document,
+    content_sha256,
+    evaluate,
+    facts_from_analysis,
+    night_of,
+    select_logs,
+    yesterday_utc,
+)
+from dracc.config import config_from_dict
+from dracc.errors import ConfigError, ExitCode, IngestError, InsufficientDataError
+from dracc.state import StateStore
+
+# ------------------------------------------------------------------ the a priori rule
+
+
+def test_apriori_chain_by_hand():
+    # conclusions of the INS-deviation paper: the larger of a priori and estimate becomes
+    # the new a priori.  Seed 100; nights 80, 120, 110, NaN, 130 -> 100, 120, 120, 120, 130
+    steps = apriori_chain(100.0, [("d1", 80.0), ("d2", 120.0), ("d3", 110.0), ("d4", math.nan),
+                                  ("d5", 130.0)])
+    assert [s.before for s in steps] == [100.0, 100.0, 120.0, 120.0, 120.0]
+    assert [s.after for s in steps] == [100.0, 120.0, 120.0, 120.0, 130.0]
+    assert [s.verdict for s in steps] == ["within", "raised", "within", "no data", "raised"]
+
+
+def test_apriori_chain_without_seed_is_established_by_deviation():
+    # "In the absence of a priori values ... their definition by deviation becomes mandatory"
+    steps = apriori_chain(None, [("d1", None), ("d2", 50.0), ("d3", 40.0)])
+    assert [s.verdict for s in steps] == ["no data", "established", "within"]
+    assert [s.after for s in steps] == [None, 50.0, 50.0]
+
+
+def test_apriori_chain_never_decreases():
+    import numpy as np
+
+    rng = np.random.default_rng(7)
+    values = rng.lognormal(4.0, 0.5, 200)
+    steps = apriori_chain(60.0, [(f"d{i}", float(v)) for i, v in enumerate(values)])
+    after = np.array([s.after for s in steps])
+    assert np.all(np.diff(after) >= 0)
+    np.testing.assert_allclose(after, np.maximum.accumulate(np.maximum(values, 60.0)))
+
+
+# --------------------------------------------------------------------------- config
+
+
+def test_audit_config_defaults_and_overrides():
+    cfg = config_from_dict({"audit": {"db": "x.sqlite", "limits": {"ins2": {"lon_m": 2500.0}},
+                                      "dr_containment_min": 0.8, "required_sources": ["gnss"]}})
+    a = audit_config(cfg)
+    assert a.db == "x.sqlite" and a.dr_containment_min == 0.8 and a.required_sources == ("gnss",)
+    assert a.limit_for("ins2", "lon") == 2500.0
+    assert a.limit_for("ins2", "lat") == 1852.0 and a.limit_for("ins1", "lon") == 1852.0
+    assert a.limit_for("ins3", "course") == 0.75
+
+
+@pytest.mark.parametrize("table, words", [
+    ({"dbb": "x"}, ["unknown key", "dbb"]),
+    ({"limits": {"ins4": {"lat_m": 1.0}}}, ["audit.limits", "ins4"]),
+    ({"limits": {"all": {"lat_deg": 1.0}}}, ["audit.limits.all", "lat_deg"]),
+    ({"limits": {"all": {"lat_m": -1.0}}}, ["audit.limits.all.lat_m", "positive"]),
+    ({"dr_containment_min": 1.5}, ["dr_containment_min", "fraction"]),
+    ({"required_sources": ["radar"]}, ["required_sources", "radar"]),
+    ({"compass_error_max_deg": "one"}, ["compass_error_max_deg", "number"]),
+    ({"apriori_raise_is_finding": 1}, ["apriori_raise_is_finding"]),
+])
+def test_audit_config_errors_name_the_key(table, words):
+    with pytest.raises(ConfigError) as e:
+        audit_config(config_from_dict({"audit": table}))
+    assert all(w in str(e.value) for w in words)
+
+
+def test_apriori_seeds_from_deviation_section():
+    cfg = config_from_dict({"deviation": {"apriori": {"ins1": {"lat_m": 300.0, "course_deg": 0.1}}}})
+    assert apriori_seeds(cfg) == {("ins1", "lat"): 300.0, ("ins1", "course"): 0.1}
+    with pytest.raises(ConfigError, match=r"deviation.apriori.ins1\] unknown key\(s\): lat;"):
+        apriori_seeds(config_from_dict({"deviation": {"apriori": {"ins1": {"lat": 3.0}}}}))
+
+
+# ------------------------------------------------------------------------ findings
+
+
+def _kinds(findings):
+    return sorted(f.kind for f in findings)
+
+
+def test_no_findings_within_limits():
+    found, skipped = evaluate(facts_from_analysis(make_doc()), AuditConfig())
+    assert found == () and skipped == ()
+
+
+def test_each_threshold_triggers_just_above_not_at():
+    a = AuditConfig(limits={"all": {"lat_m": 200.0, "lon_m": 300.0, "course_deg": 0.2}},
+                    dr_containment_min=0.9, compass_error_max_deg=1.0, log_scale_max_pct=2.0,
+                    rejected_rate_max_pct=1.0)
+    at = make_doc(m_y={"ins1": {"lat": 100.0, "lon": 150.0, "course": 0.1}}, limit_factor=2.0,
+                  containment=0.9, compass_deg=-1.0, log_scale=-0.02, lines=10000, rejected=100,
+                  roles=("ins1", "ins2", "ins3"))
+    assert evaluate(facts_from_analysis(at), a)[0] == ()
+    above = make_doc(m_y={"ins1": {"lat": 100.1, "lon": 150.0, "course": 0.1001}}, limit_factor=2.0,
+                     containment=0.8999, compass_deg=-1.01, log_scale=0.0201, lines=10000,
+                     rejected=101, roles=("ins1", "ins3"))
+    found, _ = evaluate(facts_from_analysis(above), a)
+    assert _kinds(found) == ["compass_error", "dr_containment", "limit", "limit", "log_scale",
+                             "missing_source", "rejected_rate"]
+    by = {f.subject: f for f in found}
+    assert by["ins1 lat"].value == pytest.approx(200.2) and by["ins1 lat"].limit == 200.0
+    assert by["ins1 course"].measure == "deg" and by["ins2"].kind == "missing_source"
+    assert by["log"].value == pytest.approx(2.01) and by["log"].measure == "%"
+    assert "101 of 10000 lines" in by["inputs"].message
+
+
+def test_missing_figures_are_not_checked_and_said_so():
+    doc = make_doc(containment=None, compass_deg=None, log_scale=None,
+                   m_y={"ins1": {"lat": math.nan}})
+    found, skipped = evaluate(facts_from_analysis(doc), AuditConfig())
+    assert found == ()
+    text = " | ".join(skipped)
+    assert "DR consistency" in text and "compass" in text and "log scale" in text
+    assert "ins1 lat" in text
+
+
+def test_not_an_analysis_document():
+    with pytest.raises(InsufficientDataError, match="not a dracc analysis"):
+        facts_from_analysis({"schema": "something/1"})
+
+
+def test_night_of_period_middle_and_missing_period():
+    f = facts_from_analysis(make_doc("2026-11-20"))
+    assert night_of(f) == "2026-11-20"
+    doc = make_doc()
+    doc["period"] = {"start_utc": "2026-11-20T20:00:00Z", "end_utc": "2026-11-21T10:00:00Z"}
+    assert night_of(facts_from_analysis(doc)) == "2026-11-21"
+    doc["period"] = {"start_utc": None, "end_utc": None}
+    with pytest.raises(InsufficientDataError, match="--date"):
+        night_of(facts_from_analysis(doc))
+
+
+# -------------------------------------------------------- nights in the state store
+
+
+def _audit(store, doc, *, seeds=None, acfg=None, night=None, content=None, settings="s"):
+    return audit_document(doc, store=store, acfg=acfg or AuditConfig(), seeds=seeds or {},
+                          vessel="Aurora", night=night,
+                          content_hash=content or doc["period"]["start_utc"], settings_hash=settings)
+
+
+def test_apriori_rule_over_several_nights(tmp_path):
+    seeds = {("ins1", "lat"): 120.0}
+    lat = {"2026-11-17": 100.0, "2026-11-18": 140.0, "2026-11-19": 130.0, "2026-11-20": 150.0}
+    with StateStore(tmp_path / "s.sqlite") as store:
+        outs = []
+        for night, v in lat.items():
+            doc = make_doc(night, m_y={"ins1": {"lat": v, "lon": 10.0 * len(outs) + 5.0}})
+            outs.append(_audit(store, doc, seeds=seeds))
+        assert [o.status for o in outs] == ["recorded"] * 4
+        hist = store.history(vessel="Aurora", unit="ins1", channel="lat")
+        assert [h["apriori_before"] for h in hist] == [120.0, 120.0, 140.0, 140.0]
+        assert [h["apriori_after"] for h in hist] == [120.0, 140.0, 140.0, 150.0]
+        assert [h["verdict"] for h in hist] == ["within", "raised", "within", "raised"]
+        # no seed for longitude: the first night's deviation estimate establishes it
+        lon = store.history(vessel="Aurora", unit="ins1", channel="lon")
+        assert [h["verdict"] for h in lon] == ["established", "raised", "raised", "raised"]
+        ev = [e for e in store.apriori_events("Aurora") if e.channel == "lat"]
+        assert [(e.night, e.previous, e.value, e.reason) for e in ev] == [
+            ("2026-11-18", 120.0, 140.0, "raised"), ("2026-11-20", 140.0, 150.0, "raised")]
+        assert ev[0].evidence["m_y"] == 140.0 and ev[0].evidence["n"] == 24
+        assert ev[0].evidence["m_u"] == pytest.approx(140.0 / 1.32)
+        # the outcome of the last night carries its own events
+        assert [(e.unit, e.channel) for e in outs[-1].apriori_events] == [("ins1", "lat"), ("ins1", "lon")]
+
+
+def test_night_audited_late_recomputes_the_chain(tmp_path):
+    with StateStore(tmp_path / "s.sqlite") as store:
+        _audit(store, make_doc("2026-11-18", m_y={"ins1": {"lat": 100.0}}))
+        _audit(store, make_doc("2026-11-20", m_y={"ins1": {"lat": 120.0}}))
+        _audit(store, make_doc("2026-11-19", m_y={"ins1": {"lat": 150.0}}))  # arrives late
+        hist = store.history(unit="ins1", channel="lat")
+        assert [h["night"] for h in hist] == ["2026-11-18", "2026-11-19", "2026-11-20"]
+        assert [h["apriori_after"] for h in hist] == [100.0, 150.0, 150.0]
+        assert [h["verdict"] for h in hist] == ["established", "raised", "within"]
+
+
+def test_same_night_twice_is_recorded_once(tmp_path):
+    with StateStore(tmp_path / "s.sqlite") as store:
+        doc = make_doc("2026-11-20")
+        first = _audit(store, doc, content="abc")
+        before = store.conn.execute("SELECT audited_utc FROM nights").fetchall()
+        second = _audit(store, doc, content="abc",)
+        assert (first.status, second.status) == ("recorded", "unchanged")
+        assert store.conn.execute("SELECT COUNT(*) FROM nights").fetchone()[0] == 1
+        assert store.conn.execute("SELECT COUNT(*) FROM unit_stats").fetchone()[0] == 9
+        assert store.conn.execute("SELECT audited_utc FROM nights").fetchall() == before
+        assert second.record.channels == first.record.channels
+
+
+def test_changed_log_replaces_the_night(tmp_path):
+    with StateStore(tmp_path / "s.sqlite") as store:
+        _audit(store, make_doc("2026-11-20", m_y={"ins1": {"lat": 100.0}}), content="v1")
+        out = _audit(store, make_doc("2026-11-20", m_y={"ins1": {"lat": 90.0}}), content="v2")
+        assert out.status == "replaced"
+        (row,) = store.history()
+        assert row["m_y"] == 90.0 and row["apriori_after"] == 90.0
+        assert store.night("Aurora", "2026-11-20").content_sha256 == "v2"
+        # other settings with the same content also replace it (the statistics depend on them)
+        assert _audit(store, make_doc("2026-11-20"), content="v2", settings="other").status == "replaced"
+
+
+def test_exit_code_follows_findings(tmp_path):
+    with StateStore(tmp_path / "s.sqlite") as store:
+        ok = _audit(store, make_doc("2026-11-19"))
+        bad = _audit(store, make_doc("2026-11-20", containment=0.5))
+        assert ok.exit_code == ExitCode.OK and bad.exit_code == ExitCode.FINDINGS
+        assert [f["kind"] for f in store.night("Aurora", "2026-11-20").findings] == ["dr_containment"]
+
+
+def test_apriori_raise_as_finding_when_configured(tmp_path):
+    a = AuditConfig(apriori_raise_is_finding=True)
+    with StateStore(tmp_path / "s.sqlite") as store:
+        out = _audit(store, make_doc("2026-11-20", m_y={"ins2": {"lon": 300.0}}),
+                     seeds={("ins2", "lon"): 250.0}, acfg=a)
+        (f,) = out.findings
+        assert f.kind == "apriori_raised" and (f.value, f.limit) == (300.0, 250.0) and f.measure == "m"
+
+
+def test_rollback_leaves_state_untouched(tmp_path):
+    with StateStore(tmp_path / "s.sqlite") as store:
+        _audit(store, make_doc("2026-11-19"))
+        with pytest.raises(RuntimeError):
+            with store.transaction():
+                store.delete_night("Aurora", "2026-11-19")
+                raise RuntimeError("killed")
+        assert [r.night for r in store.nights()] == ["2026-11-19"]
+        assert store.journal_mode == "wal"
+
+
+# ------------------------------------------------------------------ choosing the logs
+
+
+def test_select_logs_by_date_in_name(tmp_path):
+    for name in ("nav-2026-11-20.nmea", "nav-20261120-b.nmea", "nav_2026_11_20.log",
+                 "nav-2026-11-19.nmea", ".nav-2026-11-20.nmea.part"):
+        (tmp_path / name).write_text("x")
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "ins-2026-11-20.nmea").write_text("y")
+    got = select_logs([tmp_path], "2026-11-20", "*")
+    assert [p.name for p in got] == ["nav-2026-11-20.nmea", "nav-20261120-b.nmea", "nav_2026_11_20.log"]
+    got = select_logs([tmp_path], "2026-11-20", "**/*.nmea")
+    assert [p.name for p in got] == ["nav-2026-11-20.nmea", "nav-20261120-b.nmea", "ins-2026-11-20.nmea"]
+    with pytest.raises(IngestError, match="no log files for 2026-11-18"):
+        select_logs([tmp_path], "2026-11-18", "*")
+    with pytest.raises(IngestError, match="no such file"):
+        select_logs([tmp_path / "nope"], None, "*")
+
+
+def test_content_hash_ignores_names_and_order(tmp_path):
+    a, b, c = tmp_path / "a", tmp_path / "b", tmp_path / "c"
+    a.write_bytes(b"one")
+    b.write_bytes(b"two")
+    c.write_bytes(b"one")
+    assert content_sha256([a, b]) == content_sha256([b, a])
+    assert content_sha256([c, b]) == content_sha256([a, b])
+    before = content_sha256([a, b])
+    b.write_bytes(b"two!")
+    assert content_sha256([a, b]) != before
+
+
+def test_yesterday_utc():
+    assert yesterday_utc(dt.datetime(2026, 3, 1, 0, 30, tzinfo=dt.timezone.utc)) == "2026-02-28"
