@@ -1,0 +1,242 @@
+"""One self-contained HTML report that opens offline (a bridge PC has no network).
+
+Everything is inline: CSS in a ``<style>`` element, plots as base64 PNG ``data:``
+URIs.  A Content-Security-Policy forbids fetching anything and running scripts, so
+even a hostile string in a log cannot make the page load a URL; every text taken
+from the logs goes through :func:`html.escape` as well.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+from pathlib import Path
+
+from .. import atomic
+from ..pipeline import CHANNEL_UNITS, CHANNELS, Analysis, Estimate
+from . import fmt, fmt_duration, fmt_pct, iso_utc, plots, short_utc
+
+CSP = "default-src 'none'; img-src data:; style-src 'unsafe-inline'; base-uri 'none'; form-action 'none'"
+
+_CSS = """
+body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; margin: 1.5em auto;
+       max-width: 1100px; color: #1b1b1b; line-height: 1.4; padding: 0 1em; }
+h1 { font-size: 1.5em; margin-bottom: 0.2em; }
+h2 { font-size: 1.2em; border-bottom: 1px solid #ccc; margin-top: 1.6em; }
+table { border-collapse: collapse; font-size: 0.9em; margin: 0.5em 0; }
+th, td { padding: 0.2em 0.6em; border-bottom: 1px solid #e4e4e4; text-align: right; }
+th { background: #f3f3f3; }
+td.l, th.l { text-align: left; }
+.bad { color: #b00020; font-weight: 600; }
+.ok { color: #1b6e20; font-weight: 600; }
+.missing { background: #fff4e5; border-left: 4px solid #ff9800; padding: 0.5em 1em; }
+figure { margin: 1em 0; }
+figure img { max-width: 100%; height: auto; border: 1px solid #ddd; }
+figcaption { font-size: 0.9em; color: #555; }
+.kv td:first-child { text-align: left; color: #555; }
+.kv td { text-align: left; }
+"""
+
+
+def _e(text) -> str:
+    return html.escape(str(text), quote=True)
+
+
+def _table(headers: list[str], rows: list[list[str]], left: int = 1) -> str:
+    """An HTML table; cells are already escaped; the first ``left`` columns align left."""
+    head = "".join(f'<th class="l">{h}</th>' if i < left else f"<th>{h}</th>"
+                   for i, h in enumerate(headers))
+    body = "".join("<tr>" + "".join(f'<td class="l">{c}</td>' if i < left else f"<td>{c}</td>"
+                                    for i, c in enumerate(r)) + "</tr>" for r in rows)
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def _figure(png: bytes | None, alt: str, caption: str, fig_id: str) -> str:
+    if png is None:
+        return f'<p class="missing">{_e(caption)}: nothing to plot (see Missing).</p>'
+    b64 = base64.b64encode(png).decode("ascii")
+    return (f'<figure id="{fig_id}"><img alt="{_e(alt)}" src="data:image/png;base64,{b64}">'
+            f"<figcaption>{_e(caption)}</figcaption></figure>")
+
+
+def _est(e: Estimate | None, unit: str, digits: int = 2, scale: float = 1.0) -> str:
+    if e is None:
+        return "-"
+    return f"{fmt(scale * e.value, digits)} ± {fmt(scale * e.sigma, digits)} {unit}"
+
+
+def _summary(a: Analysis) -> str:
+    rows = [
+        ("period", f"{short_utc(a.start_ns)} → {short_utc(a.end_ns)} ({fmt_duration(a.duration_s)})"),
+        ("inputs", "<br>".join(f"{_e(f.path)} ({_e(f.format)}, {f.lines:,} lines, "
+                               f"{f.records:,} records)" for f in a.inputs)),
+        ("rejected lines", ", ".join(f"{_e(k)}: {v:,}" for k, v in sorted(a.rejected.items()))
+         or "none"),
+    ]
+    te = a.time
+    rows.append(("time events", f"{te.duplicates} duplicates, {te.backsteps} back-steps, "
+                 f"{te.gaps} gaps, {te.rollovers} midnight rollovers, "
+                 f"{te.implausible_dates} implausible dates"))
+    dr = a.dead_reckoning
+    if dr is not None:
+        cls = "ok" if dr.consistent else ("bad" if dr.consistent is False else "")
+        rows.append(("dead reckoning", f'<span class="{cls}">{_e(dr.verdict)}</span>'))
+    kv = "".join(f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in rows)
+    src = _table(["source", "roles", "records", "sentences", "first", "last"],
+                 [[_e(s.key), _e("+".join(s.roles) or "(none)"), f"{s.records:,}",
+                   _e(" ".join(f"{k}:{v}" for k, v in sorted(s.sentences.items()))),
+                   short_utc(s.first_ns), short_utc(s.last_ns)] for s in a.sources], left=2)
+    return f'<table class="kv">{kv}</table><h3>Sources</h3>{src}'
+
+
+def _units(a: Analysis) -> str:
+    d = a.deviation
+    if d is None:
+        return '<p class="missing">INS deviation statistics not computed (see Missing).</p>'
+    p = f"{100 * d.probability:g} %"
+    rows = []
+    for name in d.units:
+        u = d.whole.units.get(name)
+        if u is None:
+            continue
+        for ch in CHANNELS:
+            c = u.channels.get(ch)
+            if c is None:
+                continue
+            unit = CHANNEL_UNITS[ch]
+            digits = 3 if unit == "deg" else 1
+            if c.exceeds_apriori is None:
+                verdict = "no a priori"
+            elif c.exceeds_apriori:
+                verdict = f'<span class="bad">exceeds; new {fmt(c.new_apriori, digits)}</span>'
+            else:
+                verdict = '<span class="ok">within</span>'
+            h = u.hat.get(ch)
+            hat = "-" if h is None else ('<span class="bad">negative variance</span>' if h.negative
+                                         else f"{fmt(h.sigma, digits)} [{fmt(h.lower, digits)}, "
+                                              f"{fmt(h.upper, digits)}]")
+            r = u.reference.get(ch)
+            rows.append([_e(name), f"{ch} [{unit}]", str(c.n), fmt(c.m_u, digits), fmt(c.m_y, digits),
+                         fmt(c.kurtosis, 2), fmt(c.limit, digits), fmt(c.apriori, digits), verdict,
+                         hat, "-" if r is None else fmt(r.rmse, digits),
+                         "-" if r is None else f"{fmt(r.k_star, 2)} {_e(r.mark)}"])
+    fac = ", ".join(f"{ch} {fmt(d.factors[ch], 3)}" for ch in CHANNELS)
+    intro = (f"<p>{len(d.units)} units sampled every {fmt_duration(d.interval_s)} at "
+             f"{len(d.time_ns)} instants; m<sub>y</sub> = k·m<sub>u</sub> with k: {fac}; kurtosis is "
+             f"<em>excess</em> kurtosis (0 for a normal distribution); limits at P = {p}.</p>")
+    notes = "".join(f"<p>{_e(n)}</p>" for n in d.notes)
+    table = _table(["unit", "channel", "n", "m_u", "m_y", "excess kurtosis", f"limit {p}",
+                    "a priori", "a priori verdict", "hat σ [bounds]", "ref RMS", "k*"], rows, left=2)
+    windows = ""
+    if d.windows:
+        wrows = []
+        for w in d.windows:
+            for name, u in w.units.items():
+                for ch in CHANNELS:
+                    c = u.channels.get(ch)
+                    if c is None:
+                        continue
+                    digits = 3 if CHANNEL_UNITS[ch] == "deg" else 1
+                    r = u.reference.get(ch)
+                    wrows.append([_e(w.label), _e(name), ch, str(c.n), fmt(c.m_u, digits),
+                                  fmt(c.m_y, digits), fmt(c.kurtosis, 2),
+                                  "-" if r is None else f"{fmt(r.k_star, 2)} {_e(r.mark)}"])
+        windows = ("<h3>Per window</h3>" + _table(["window", "unit", "channel", "n", "m_u", "m_y",
+                                                   "excess kurtosis", "k*"], wrows, left=3))
+    return intro + table + notes + windows
+
+
+def _dr(a: Analysis) -> str:
+    dr = a.dead_reckoning
+    if dr is None:
+        return '<p class="missing">Dead reckoning not computed (see Missing).</p>'
+    rows = [("heading", _e(dr.heading_source)), ("speed", _e(dr.speed_source)),
+            ("restart", _e(dr.reset)), ("legs", str(len(dr.legs))),
+            ("reference", _e(dr.reference_role or "none")),
+            ("2M containment", f"{fmt_pct(dr.containment_2m)} of {dr.n_scored} epochs after a fix"),
+            ("RMS error / M", fmt(dr.error_over_m_rms, 2)), ("verdict", _e(dr.verdict))]
+    kv = "".join(f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in rows)
+    legs = _table(["leg", "start", "end", "fix", "inside 2M", "scored", "max error [m]"],
+                  [[str(leg.index), _e(iso_utc(leg.start_ns)), _e(iso_utc(leg.end_ns)),
+                    _e(leg.fix_source), fmt_pct(leg.containment_2m), str(leg.n_scored),
+                    fmt(leg.max_error_m, 0)] for leg in dr.legs], left=4)
+    notes = "".join(f"<p>{_e(n)}</p>" for n in dr.notes)
+    return f'<table class="kv">{kv}</table>{notes}<details><summary>Legs</summary>{legs}</details>'
+
+
+def _calibration_current(a: Analysis) -> str:
+    out = []
+    c = a.calibration
+    if c is None:
+        out.append('<p class="missing">Calibration not computed (see Missing).</p>')
+    else:
+        rows = [("against", f"{_e(c.reference_role)} ({c.n:,} samples)"),
+                ("compass error", _est(c.compass_error_deg, "°")),
+                ("log scale error", _est(c.log_scale, "%", scale=100.0)),
+                ("log offset", _est(c.log_offset_kn, "kn"))]
+        out.append('<table class="kv">' + "".join(f"<tr><td>{k}</td><td>{v}</td></tr>"
+                                                   for k, v in rows) + "</table>")
+        out.extend(f"<p>{_e(n)}</p>" for n in c.notes)
+    cur = a.current
+    if cur is None:
+        out.append('<p class="missing">Current not estimated (see Missing).</p>')
+    else:
+        out.append(f"<p>Current: set {_est(cur.set_deg, '°', 0)} (towards), drift "
+                   f"{_est(cur.drift_kn, 'kn')}, from {cur.n_updates} fix updates.</p>")
+        out.extend(f"<p>{_e(n)}</p>" for n in cur.notes)
+    return "".join(out)
+
+
+def render_html(a: Analysis) -> str:
+    """The whole report as one HTML document (a string)."""
+    title = "dracc voyage analysis"
+    if a.start_ns is not None:
+        title += f" {short_utc(a.start_ns)}"
+    missing = ""
+    if a.missing:
+        missing = ('<section id="missing"><h2>Missing</h2><div class="missing"><ul>'
+                   + "".join(f"<li>{_e(m)}</li>" for m in a.missing) + "</ul></div></section>")
+    notes = ""
+    if a.notes:
+        notes = ("<section id=\"notes\"><h2>Notes</h2><ul>"
+                 + "".join(f"<li>{_e(n)}</li>" for n in a.notes) + "</ul></section>")
+    figures = "".join([
+        _figure(plots.track_plot(a), "track plot",
+                "Track of every source, the dead-reckoning track and its 2M circle at each hour",
+                "fig-track"),
+        _figure(plots.deviation_plot(a), "deviation plot",
+                "Hourly deviations from the mean per unit and channel (the paper's Figure 1)",
+                "fig-deviations"),
+        _figure(plots.growth_plot(a), "2M growth plot",
+                "2M since the last fix against the actual DR error", "fig-growth"),
+        _figure(plots.current_plot(a), "current plot", "Estimated current (set and drift)",
+                "fig-current"),
+    ])
+    return f"""<!DOCTYPE html>
+<html lang="en">
+<head>
+<meta charset="utf-8">
+<meta http-equiv="Content-Security-Policy" content="{CSP}">
+<meta name="viewport" content="width=device-width, initial-scale=1">
+<meta name="generator" content="dracc {_e(a.dracc_version)}">
+<title>{_e(title)}</title>
+<style>{_CSS}</style>
+</head>
+<body>
+<h1>{_e(title)}</h1>
+<p>Report schema {_e(a.schema)}, dracc {_e(a.dracc_version)}.</p>
+<section id="summary"><h2>Summary</h2>{_summary(a)}</section>
+{missing}
+<section id="dead-reckoning"><h2>Dead reckoning</h2>{_dr(a)}</section>
+<section id="units"><h2>INS accuracy per unit</h2>{_units(a)}</section>
+<section id="calibration"><h2>Calibration and current</h2>{_calibration_current(a)}</section>
+<section id="plots"><h2>Plots</h2>{figures}</section>
+{notes}
+</body>
+</html>
+"""
+
+
+def write_html(a: Analysis, path: str | Path) -> None:
+    """Write the report atomically to ``path``."""
+    atomic.write_text(path, render_html(a))

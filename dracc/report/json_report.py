@@ -1,0 +1,240 @@
+"""The JSON report, schema ``dracc.analysis/1`` (``analysis.schema.json`` beside this file).
+
+:func:`to_dict` turns an :class:`~dracc.pipeline.Analysis` into plain JSON types; NaN
+and infinities become ``null``; times are ISO 8601 UTC strings (``*_utc``); angles in
+degrees and speeds in knots appear only here, with the unit in the key.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import atomic
+from ..pipeline import (
+    CHANNEL_UNITS,
+    CHANNELS,
+    SAMPLE_KEYS,
+    Analysis,
+    CalibrationSection,
+    ChannelStats,
+    CurrentSection,
+    DeviationSection,
+    DeviationWindow,
+    DRSection,
+    DRTrack,
+    Estimate,
+    HatStats,
+    ReferenceStats,
+)
+from ..units import mps_to_kn
+from . import iso_utc
+
+SCHEMA_PATH = Path(__file__).with_name("analysis.schema.json")
+
+
+def load_schema() -> dict:
+    """The JSON Schema (draft 2020-12) of the report."""
+    return json.loads(SCHEMA_PATH.read_text(encoding="utf-8"))
+
+
+def _num(x) -> float | None:
+    """A finite float, or None for None/NaN/inf (JSON has no NaN)."""
+    if x is None:
+        return None
+    v = float(x)
+    return v if math.isfinite(v) else None
+
+
+def _deg(x_rad) -> float | None:
+    v = _num(x_rad)
+    return None if v is None else math.degrees(v)
+
+
+def _estimate(e: Estimate | None) -> dict | None:
+    return None if e is None else {"value": _num(e.value), "sigma": _num(e.sigma)}
+
+
+def _channel(c: ChannelStats, unit: str) -> dict:
+    return {"n": int(c.n), "unit": unit, "m_u": _num(c.m_u), "m_y": _num(c.m_y),
+            "kurtosis": _num(c.kurtosis), "limit": _num(c.limit), "apriori": _num(c.apriori),
+            "exceeds_apriori": c.exceeds_apriori, "new_apriori": _num(c.new_apriori)}
+
+
+def _hat(h: HatStats) -> dict:
+    return {"variance": _num(h.variance), "sigma": _num(h.sigma), "lower": _num(h.lower),
+            "upper": _num(h.upper), "negative": bool(h.negative)}
+
+
+def _ref(r: ReferenceStats) -> dict:
+    return {"n": int(r.n), "rmse": _num(r.rmse), "k_star": _num(r.k_star), "mark": r.mark,
+            "kurtosis": _num(r.kurtosis), "kurtosis_mark": r.kurtosis_mark}
+
+
+def _window(w: DeviationWindow) -> dict:
+    units: dict[str, Any] = {}
+    hat: dict[str, Any] = {}
+    ref: dict[str, Any] = {}
+    for name, u in w.units.items():
+        units[name] = {ch: _channel(u.channels[ch], CHANNEL_UNITS[ch]) for ch in CHANNELS
+                       if ch in u.channels}
+        units[name]["r_lat_lon"] = _num(u.r_lat_lon)
+        if u.hat:
+            hat[name] = {ch: _hat(h) for ch, h in u.hat.items()}
+        if u.reference:
+            ref[name] = {ch: _ref(r) for ch, r in u.reference.items()}
+    return {"label": w.label, "start_utc": iso_utc(w.start_ns), "end_utc": iso_utc(w.end_ns),
+            "units": units, "hat": hat, "reference": ref or None}
+
+
+def _deviation(d: DeviationSection) -> dict:
+    samples = []
+    for i, t in enumerate(d.time_ns):
+        row: dict[str, Any] = {"time_utc": iso_utc(int(t))}
+        for unit in d.units:
+            row[unit] = {SAMPLE_KEYS[ch]: _num(d.samples[unit][ch][i])
+                         for ch in CHANNELS if ch in d.samples[unit]}
+        samples.append(row)
+    whole = _window(d.whole)
+    return {
+        "interval_s": float(d.interval_s),
+        "factors": {ch: _num(d.factors[ch]) for ch in CHANNELS},
+        "probability": float(d.probability),
+        "kurtosis_is_excess": True,
+        "units_present": list(d.units),
+        "reference_source": d.reference_role,
+        "samples": samples,
+        "units": whole["units"],
+        "hat": whole["hat"],
+        "reference": whole["reference"],
+        "windows": [_window(w) for w in d.windows],
+        "notes": list(d.notes),
+    }
+
+
+def _epochs(t: DRTrack) -> list[dict]:
+    lat_deg = np.degrees(t.lat_rad)
+    lon_deg = np.degrees(t.lon_rad)
+    orient_deg = np.degrees(t.orientation_rad)
+    out = []
+    for i in range(len(t.time_ns)):
+        out.append({
+            "time_utc": iso_utc(int(t.time_ns[i])),
+            "lat_deg": _num(lat_deg[i]),
+            "lon_deg": _num(lon_deg[i]),
+            "since_fix_s": _num(t.since_fix_s[i]),
+            "radius_2m_m": _num(t.radius_2m_m[i]),
+            "ellipse": {"semi_major_m": _num(t.semi_major_m[i]),
+                        "semi_minor_m": _num(t.semi_minor_m[i]),
+                        "orientation_deg": _num(orient_deg[i])},
+            "ref_error_m": _num(t.ref_error_m[i]),
+            "leg": int(t.leg[i]),
+        })
+    return out
+
+
+def _dead_reckoning(dr: DRSection) -> dict:
+    return {
+        "heading_source": dr.heading_source,
+        "speed_source": dr.speed_source,
+        "reset": dr.reset,
+        "epoch_interval_s": float(dr.epoch_interval_s),
+        "reference_source": dr.reference_role,
+        "epochs": _epochs(dr.epochs),
+        "containment_2m": _num(dr.containment_2m),
+        "n_scored": int(dr.n_scored),
+        "error_over_m_rms": _num(dr.error_over_m_rms),
+        "consistent": dr.consistent,
+        "verdict": dr.verdict,
+        "legs": [{"index": leg.index, "start_utc": iso_utc(leg.start_ns),
+                  "end_utc": iso_utc(leg.end_ns), "fix_source": leg.fix_source,
+                  "containment_2m": _num(leg.containment_2m), "n_scored": int(leg.n_scored),
+                  "max_error_m": _num(leg.max_error_m)} for leg in dr.legs],
+        "notes": list(dr.notes),
+    }
+
+
+def _calibration(c: CalibrationSection) -> dict:
+    return {"reference_source": c.reference_role,
+            "compass_error_deg": _estimate(c.compass_error_deg),
+            "log_scale": _estimate(c.log_scale),
+            "log_offset_kn": _estimate(c.log_offset_kn),
+            "n": int(c.n), "notes": list(c.notes)}
+
+
+def _current(c: CurrentSection) -> dict:
+    return {"set_deg": _estimate(c.set_deg), "drift_kn": _estimate(c.drift_kn),
+            "n_updates": int(c.n_updates),
+            "series": [{"time_utc": iso_utc(int(t)), "set_deg": _deg(s),
+                        "drift_kn": _num(mps_to_kn(v)), "drift_sigma_kn": _num(mps_to_kn(sv))}
+                       for t, s, v, sv in zip(c.time_ns, c.set_rad, c.drift_mps,
+                                              c.drift_sigma_mps, strict=True)],
+            "notes": list(c.notes)}
+
+
+def _plain(x):
+    """Settings may hold numpy scalars, tuples or paths: make them JSON types."""
+    if isinstance(x, dict):
+        return {str(k): _plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
+    if isinstance(x, (bool, str)) or x is None:
+        return x
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return _num(x)
+    return str(x)
+
+
+def to_dict(a: Analysis) -> dict:
+    """The report as plain JSON types (validates against ``analysis.schema.json``)."""
+    by_role: dict[str, dict[str, Any]] = {}
+    for s in a.sources:
+        for role in s.roles:
+            entry = by_role.setdefault(role, {"keys": [], "records": 0})
+            entry["keys"].append(s.key)
+            entry["records"] += int(s.records)
+    return {
+        "schema": a.schema,
+        "dracc_version": a.dracc_version,
+        "settings": _plain(a.settings),
+        "inputs": [{"path": f.path, "format": f.format, "lines": int(f.lines),
+                    "records": int(f.records), "rejected": {k: int(v) for k, v in f.rejected.items()}}
+                   for f in a.inputs],
+        "lines": int(a.lines),
+        "rejected": {k: int(v) for k, v in a.rejected.items()},
+        "reject_examples": {k: [{"file": f, "line": int(n), "text": t} for f, n, t in v]
+                            for k, v in a.reject_examples.items()},
+        "time_events": {"duplicates": a.time.duplicates, "backsteps": a.time.backsteps,
+                        "gaps": a.time.gaps, "rollovers": a.time.rollovers,
+                        "implausible_dates": a.time.implausible_dates,
+                        "decisions": list(a.time.decisions)},
+        "sources": by_role,
+        "source_keys": {s.key: {"roles": list(s.roles), "records": int(s.records),
+                                "sentences": {k: int(v) for k, v in s.sentences.items()},
+                                "first_utc": iso_utc(s.first_ns), "last_utc": iso_utc(s.last_ns)}
+                        for s in a.sources},
+        "period": {"start_utc": iso_utc(a.start_ns), "end_utc": iso_utc(a.end_ns),
+                   "duration_s": _num(a.duration_s)},
+        "deviation": None if a.deviation is None else _deviation(a.deviation),
+        "dead_reckoning": None if a.dead_reckoning is None else _dead_reckoning(a.dead_reckoning),
+        "calibration": None if a.calibration is None else _calibration(a.calibration),
+        "current": None if a.current is None else _current(a.current),
+        "missing": list(a.missing),
+        "notes": list(a.notes),
+    }
+
+
+def dumps(a: Analysis, indent: int | None = 1) -> str:
+    """The report as JSON text (strict: no NaN literals)."""
+    return json.dumps(to_dict(a), indent=indent, allow_nan=False, ensure_ascii=False) + "\n"
+
+
+def write_json(a: Analysis, path: str | Path) -> None:
+    """Write the report atomically to ``path``."""
+    atomic.write_text(path, dumps(a))

@@ -1,0 +1,161 @@
+"""The report's plots, drawn with matplotlib (Agg) and returned as PNG bytes.
+
+Each function takes a part of an :class:`~dracc.pipeline.Analysis` and draws it;
+nothing is estimated here.  The only arithmetic is the plotting projection: positions
+are shown as kilometres north/east of the first DR fix (or the first position), where
+the 2M circles are true circles (local tangent plane, :func:`dracc.geodesy.offset_ne_m`).
+"""
+
+from __future__ import annotations
+
+import io
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.dates as mdates  # noqa: E402
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.patches import Circle  # noqa: E402
+
+from ..geodesy import offset_ne_m  # noqa: E402
+from ..pipeline import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS, Analysis  # noqa: E402
+
+_DPI = 96
+_UNIT_COLOURS = {"ins1": "#1f77b4", "ins2": "#d62728", "ins3": "#2ca02c"}
+_ROLE_COLOURS = {"gnss": "#555555", "ins1": "#1f77b4", "ins2": "#d62728", "ins3": "#2ca02c"}
+
+
+def _png(fig) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=_DPI, bbox_inches="tight", metadata={"Software": None})
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def _dt(time_ns) -> np.ndarray:
+    """int64 ns -> numpy datetime64 for matplotlib's date axis."""
+    return np.asarray(time_ns, dtype="int64").astype("datetime64[ns]")
+
+
+def _origin(a: Analysis) -> tuple[float, float] | None:
+    dr = a.dead_reckoning
+    if dr is not None and len(dr.track.time_ns):
+        return float(dr.track.lat_rad[0]), float(dr.track.lon_rad[0])
+    for t in a.tracks:
+        if len(t.time_ns):
+            return float(t.lat_rad[0]), float(t.lon_rad[0])
+    return None
+
+
+def track_plot(a: Analysis) -> bytes | None:
+    """Every source's track, the DR track and its 2M circles at each hour (km from the start)."""
+    origin = _origin(a)
+    if origin is None:
+        return None
+    lat0, lon0 = origin
+    fig, ax = plt.subplots(figsize=(9, 7))
+    for t in a.tracks:
+        n, e = offset_ne_m(t.lat_rad, t.lon_rad, lat0, lon0)
+        colour = _ROLE_COLOURS.get(t.role or "", None)
+        label = f"{t.source} ({t.role})" if t.role else t.source
+        ax.plot(e / 1e3, n / 1e3, lw=0.9, alpha=0.8, color=colour, label=label)
+    dr = a.dead_reckoning
+    if dr is not None and len(dr.track.time_ns):
+        tr = dr.track
+        n, e = offset_ne_m(tr.lat_rad, tr.lon_rad, lat0, lon0)
+        # break the line between legs so restarts do not draw jumps
+        jumps = np.flatnonzero(np.diff(tr.leg) != 0) + 1
+        e_km = np.insert(e / 1e3, jumps, np.nan)
+        n_km = np.insert(n / 1e3, jumps, np.nan)
+        ax.plot(e_km, n_km, lw=1.4, color="black", label="DR")
+        ep = dr.epochs
+        hourly = (ep.time_ns % 3_600_000_000_000) == 0
+        en, ee = offset_ne_m(ep.lat_rad[hourly], ep.lon_rad[hourly], lat0, lon0)
+        first = True
+        for x, y, r in zip(ee / 1e3, en / 1e3, ep.radius_2m_m[hourly] / 1e3, strict=True):
+            if np.isfinite(r) and np.isfinite(x):
+                ax.add_patch(Circle((x, y), r, fill=False, color="#ff7f0e", lw=1.0,
+                                    label="2M at each hour" if first else None))
+                first = False
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("east of start [km]")
+    ax.set_ylabel("north of start [km]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title("Tracks, dead reckoning and 2M circles")
+    return _png(fig)
+
+
+def deviation_plot(a: Analysis) -> bytes | None:
+    """Deviations from the mean per unit and channel at each instant (the paper's Figure 1)."""
+    d = a.deviation
+    if d is None or not len(d.time_ns):
+        return None
+    fig, axes = plt.subplots(3, 1, figsize=(10, 8), sharex=True)
+    when = _dt(d.time_ns)
+    for ax, ch in zip(axes, CHANNELS, strict=True):
+        for unit in d.units:
+            y = d.samples[unit].get(ch)
+            if y is None:
+                continue
+            ax.plot(when, y, marker="o", ms=3, lw=1.0, color=_UNIT_COLOURS.get(unit), label=unit)
+        ax.axhline(0.0, color="black", lw=0.6)
+        ax.set_ylabel(f"{SAMPLE_KEYS[ch]} [{CHANNEL_UNITS[ch]}]")
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(loc="upper right", fontsize=8, ncol=3)
+    axes[0].set_title(f"Deviations from the mean of {len(d.units)} units, "
+                      f"every {d.interval_s / 3600:g} h")
+    axes[-1].xaxis.set_major_formatter(mdates.DateFormatter("%d %H:%M"))
+    axes[-1].set_xlabel("UTC")
+    fig.autofmt_xdate()
+    return _png(fig)
+
+
+def growth_plot(a: Analysis) -> bytes | None:
+    """2M since the last fix against the actual DR error (where a reference exists)."""
+    dr = a.dead_reckoning
+    if dr is None or not len(dr.track.time_ns):
+        return None
+    tr = dr.track
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    hours = tr.since_fix_s / 3600.0
+    jumps = np.flatnonzero(np.diff(tr.leg) != 0) + 1
+    ax.plot(np.insert(hours, jumps, np.nan), np.insert(tr.radius_2m_m, jumps, np.nan),
+            color="#ff7f0e", lw=1.2, label="2M (2 drms)")
+    if np.isfinite(tr.ref_error_m).any():
+        ax.plot(np.insert(hours, jumps, np.nan), np.insert(tr.ref_error_m, jumps, np.nan),
+                color="black", lw=0.8, label=f"actual error vs {dr.reference_role}")
+    ax.set_xlabel("time since the last fix [h]")
+    ax.set_ylabel("metres")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title("Growth of 2M since the fix against the actual DR error")
+    return _png(fig)
+
+
+def current_plot(a: Analysis) -> bytes | None:
+    """Drift (with 1-sigma band) and set of the estimated current over time."""
+    c = a.current
+    if c is None or not len(c.time_ns):
+        return None
+    when = _dt(c.time_ns)
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
+    drift_kn = c.drift_mps / (1852.0 / 3600.0)
+    sig_kn = c.drift_sigma_mps / (1852.0 / 3600.0)
+    ax1.plot(when, drift_kn, color="#1f77b4", lw=1.2, label="drift")
+    ax1.fill_between(when, drift_kn - sig_kn, drift_kn + sig_kn, color="#1f77b4", alpha=0.2,
+                     label="± 1σ")
+    ax1.set_ylabel("drift [kn]")
+    ax1.grid(True, alpha=0.3)
+    ax1.legend(loc="upper right", fontsize=8)
+    ax2.plot(when, np.degrees(c.set_rad), ".", ms=2, color="#d62728")
+    ax2.set_ylim(0, 360)
+    ax2.set_yticks([0, 90, 180, 270, 360])
+    ax2.set_ylabel("set (towards) [°]")
+    ax2.grid(True, alpha=0.3)
+    ax2.xaxis.set_major_formatter(mdates.DateFormatter("%d %H:%M"))
+    ax2.set_xlabel("UTC")
+    ax1.set_title("Estimated current")
+    fig.autofmt_xdate()
+    return _png(fig)

@@ -1,0 +1,133 @@
+"""Tables for spreadsheets and databases: CSV and Parquet, written atomically.
+
+``--out DIR`` writes, each as ``.csv`` and ``.parquet``:
+
+``dr_track``         the full-rate DR track (time_utc, lat_deg, lon_deg, since_fix_s,
+                     radius_2m_m, semi_major_m, semi_minor_m, orientation_deg, ref_error_m, leg)
+``dr_epochs``        the same columns at the reporting epochs
+``deviation_samples`` one row per instant: time_utc and ``<unit>_lat_m``, ``<unit>_lon_m``,
+                     ``<unit>_course_deg``
+``unit_stats``       one row per window, unit and channel: n, m_u, m_y, kurtosis (excess),
+                     limit, unit (m or deg), a priori, hat and reference figures
+
+Times are timezone-aware UTC timestamps in Parquet and ISO 8601 in CSV.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .. import atomic
+from ..pipeline import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS, Analysis, DeviationWindow, DRTrack
+
+
+def _times(time_ns) -> pd.DatetimeIndex:
+    return pd.to_datetime(np.asarray(time_ns, dtype="int64"), unit="ns", utc=True)
+
+
+def dr_frame(t: DRTrack) -> pd.DataFrame:
+    """A DR track as a table."""
+    return pd.DataFrame({
+        "time_utc": _times(t.time_ns),
+        "lat_deg": np.degrees(t.lat_rad),
+        "lon_deg": np.degrees(t.lon_rad),
+        "since_fix_s": t.since_fix_s,
+        "radius_2m_m": t.radius_2m_m,
+        "semi_major_m": t.semi_major_m,
+        "semi_minor_m": t.semi_minor_m,
+        "orientation_deg": np.degrees(t.orientation_rad),
+        "ref_error_m": t.ref_error_m,
+        "leg": np.asarray(t.leg, dtype="int64"),
+    })
+
+
+def samples_frame(a: Analysis) -> pd.DataFrame | None:
+    """Deviation samples, one row per instant."""
+    d = a.deviation
+    if d is None:
+        return None
+    cols: dict[str, object] = {"time_utc": _times(d.time_ns)}
+    for unit in d.units:
+        for ch in CHANNELS:
+            if ch in d.samples[unit]:
+                cols[f"{unit}_{SAMPLE_KEYS[ch]}"] = np.asarray(d.samples[unit][ch], dtype=float)
+    return pd.DataFrame(cols)
+
+
+def _window_rows(w: DeviationWindow) -> list[dict]:
+    rows = []
+    for name, u in w.units.items():
+        for ch in CHANNELS:
+            c = u.channels.get(ch)
+            if c is None:
+                continue
+            h = u.hat.get(ch)
+            r = u.reference.get(ch)
+            rows.append({
+                "window": w.label, "window_start_utc": pd.Timestamp(w.start_ns, unit="ns", tz="UTC"),
+                "unit_name": name, "channel": ch, "unit": CHANNEL_UNITS[ch], "n": c.n,
+                "m_u": c.m_u, "m_y": c.m_y, "kurtosis_excess": c.kurtosis, "limit": c.limit,
+                "apriori": np.nan if c.apriori is None else c.apriori,
+                "exceeds_apriori": c.exceeds_apriori,
+                "r_lat_lon": u.r_lat_lon,
+                "hat_variance": np.nan if h is None else h.variance,
+                "hat_sigma": np.nan if h is None else h.sigma,
+                "hat_negative": None if h is None else h.negative,
+                "ref_rmse": np.nan if r is None else r.rmse,
+                "k_star": np.nan if r is None else r.k_star,
+                "mark": None if r is None else r.mark,
+            })
+    return rows
+
+
+def stats_frame(a: Analysis) -> pd.DataFrame | None:
+    """Per-unit statistics: the whole log first (window 'all'), then each window."""
+    d = a.deviation
+    if d is None:
+        return None
+    rows = _window_rows(d.whole)
+    for w in d.windows:
+        rows.extend(_window_rows(w))
+    df = pd.DataFrame(rows)
+    for c in ("exceeds_apriori", "hat_negative"):
+        if c in df:
+            df[c] = df[c].astype("boolean")
+    return df
+
+
+def frames(a: Analysis) -> dict[str, pd.DataFrame]:
+    """Every table this analysis has, by name."""
+    out: dict[str, pd.DataFrame] = {}
+    if a.dead_reckoning is not None:
+        out["dr_track"] = dr_frame(a.dead_reckoning.track)
+        out["dr_epochs"] = dr_frame(a.dead_reckoning.epochs)
+    s = samples_frame(a)
+    if s is not None:
+        out["deviation_samples"] = s
+    st = stats_frame(a)
+    if st is not None:
+        out["unit_stats"] = st
+    return out
+
+
+def write_tables(a: Analysis, out_dir: str | Path) -> list[Path]:
+    """Write every table as CSV and Parquet into ``out_dir``; return the paths written."""
+    out_dir = Path(out_dir)
+    written = []
+    for name, df in frames(a).items():
+        csv_path = out_dir / f"{name}.csv"
+        with atomic.atomic_path(csv_path) as tmp:
+            csv = df.copy()
+            for col in csv.columns:
+                if isinstance(csv[col].dtype, pd.DatetimeTZDtype):
+                    csv[col] = csv[col].dt.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+            csv.to_csv(tmp, index=False)
+        written.append(csv_path)
+        pq_path = out_dir / f"{name}.parquet"
+        with atomic.atomic_path(pq_path) as tmp:
+            df.to_parquet(tmp, index=False, engine="pyarrow")
+        written.append(pq_path)
+    return written

@@ -1,0 +1,196 @@
+"""The short rich summary ``dracc analyze`` prints on the terminal.
+
+Sections, in the order a navigator reads them: period and inputs, sources and
+rejects, dead-reckoning consistency, the per-unit table, calibration, current, and
+what is missing.  Text from the logs (source keys, file names) is printed with
+rich markup disabled, so a log cannot style the terminal.
+"""
+
+from __future__ import annotations
+
+from rich.console import Console, Group
+from rich.table import Table
+from rich.text import Text
+
+from ..pipeline import CHANNEL_UNITS, CHANNELS, Analysis, DeviationSection, Estimate
+from . import fmt, fmt_duration, fmt_pct, short_utc
+
+_CHANNEL_LABEL = {"lat": "lat", "lon": "lon", "course": "course"}
+
+
+def _est(e: Estimate | None, unit: str, digits: int = 2) -> str:
+    if e is None:
+        return "-"
+    return f"{fmt(e.value, digits)} ± {fmt(e.sigma, digits)} {unit}"
+
+
+def _heading(text: str) -> Text:
+    return Text(text, style="bold")
+
+
+def _sources_table(a: Analysis) -> Table:
+    t = Table(box=None, pad_edge=False, show_edge=False, header_style="bold")
+    for col, just in (("source", "left"), ("role", "left"), ("records", "right"),
+                      ("sentences", "left"), ("first", "left"), ("last", "left")):
+        t.add_column(col, justify=just)  # type: ignore[arg-type]
+    for s in a.sources:
+        top = sorted(s.sentences.items(), key=lambda kv: (-kv[1], kv[0]))[:4]
+        sent = " ".join(f"{k}:{v}" for k, v in top) + (" …" if len(s.sentences) > 4 else "")
+        t.add_row(Text(s.key), Text("+".join(s.roles) or "(none)"), f"{s.records:,}", Text(sent),
+                  short_utc(s.first_ns), short_utc(s.last_ns))
+    return t
+
+
+def _unit_table(d: DeviationSection) -> Table:
+    p = f"{100 * d.probability:g} %"
+    t = Table(box=None, pad_edge=False, show_edge=False, header_style="bold")
+    for col in ("unit", "channel", "n", "m_u", "m_y", "excess kurt.", f"limit {p}", "a priori",
+                "verdict", "hat σ", "ref RMS", "k*"):
+        t.add_column(col, justify="left" if col in ("unit", "channel", "verdict") else "right",
+                     no_wrap=True)
+    for name in d.units:
+        u = d.whole.units.get(name)
+        if u is None:
+            t.add_row(name, "-", "0", *["-"] * 9)
+            continue
+        for ch in CHANNELS:
+            c = u.channels.get(ch)
+            if c is None:
+                continue
+            unit = CHANNEL_UNITS[ch]
+            digits = 3 if unit == "deg" else 1
+            if c.exceeds_apriori is None:
+                verdict = "no a priori"
+            elif c.exceeds_apriori:
+                verdict = f"exceeds→{fmt(c.new_apriori, digits)}"
+            else:
+                verdict = "within"
+            h = u.hat.get(ch)
+            if h is None:
+                hat = "-"
+            elif h.negative:
+                hat = "neg. var."
+            else:
+                hat = fmt(h.sigma, digits)
+            r = u.reference.get(ch)
+            t.add_row(name, f"{_CHANNEL_LABEL[ch]} [{unit}]", str(c.n), fmt(c.m_u, digits),
+                      fmt(c.m_y, digits), fmt(c.kurtosis, 2), fmt(c.limit, digits),
+                      fmt(c.apriori, digits), verdict, hat,
+                      "-" if r is None else fmt(r.rmse, digits),
+                      "-" if r is None else f"{fmt(r.k_star, 2)} {r.mark}")
+    return t
+
+
+def summary(a: Analysis) -> Group:
+    """The summary as a rich renderable."""
+    parts: list = []
+    files = len(a.inputs)
+    parts.append(_heading("dracc analyze"))
+    parts.append(Text(f"period   {short_utc(a.start_ns)} → {short_utc(a.end_ns)} "
+                      f"({fmt_duration(a.duration_s)})"))
+    parts.append(Text(f"inputs   {files} file{'s' if files != 1 else ''}, {a.lines:,} lines, "
+                      f"{sum(f.records for f in a.inputs):,} records"))
+    for f in a.inputs:
+        parts.append(Text(f"         {f.path} ({f.format}, {f.lines:,} lines)"))
+    rej = sum(a.rejected.values())
+    if rej:
+        by = ", ".join(f"{k} {v:,}" for k, v in sorted(a.rejected.items(), key=lambda kv: -kv[1]))
+        parts.append(Text(f"rejected {rej:,} lines: {by}"))
+    else:
+        parts.append(Text("rejected none"))
+    te = a.time
+    events = [f"{n} {what}" for n, what in ((te.duplicates, "duplicates"), (te.backsteps, "back-steps"),
+                                             (te.gaps, "gaps"), (te.rollovers, "midnight rollovers"),
+                                             (te.implausible_dates, "implausible dates")) if n]
+    parts.append(Text("time     " + (", ".join(events) if events else "no time events")))
+    parts.append(Text(""))
+    parts.append(_heading("Sources"))
+    parts.append(_sources_table(a))
+
+    parts.append(Text(""))
+    parts.append(_heading("Dead reckoning"))
+    dr = a.dead_reckoning
+    if dr is None:
+        parts.append(Text("not computed (see Missing)"))
+    else:
+        parts.append(Text(f"heading  {dr.heading_source}; speed {dr.speed_source}; "
+                          f"restart {dr.reset}; {len(dr.legs)} leg{'s' if len(dr.legs) != 1 else ''}"))
+        if dr.reference_role is None:
+            parts.append(Text("no reference: consistency not scored"))
+        else:
+            final = dr.epochs.radius_2m_m
+            max2m = fmt(float(max(final)) if len(final) else None, 0)
+            parts.append(Text(f"2M       reference ({dr.reference_role}) inside 2M at "
+                              f"{fmt_pct(dr.containment_2m)} of {dr.n_scored} epochs after a fix; "
+                              f"RMS error/M {fmt(dr.error_over_m_rms, 2)}; largest 2M {max2m} m"))
+        parts.append(Text(f"verdict  {dr.verdict}"))
+
+    parts.append(Text(""))
+    parts.append(_heading("INS deviations from the mean"))
+    d = a.deviation
+    if d is None:
+        parts.append(Text("not computed (see Missing)"))
+    else:
+        fac = ", ".join(f"{ch} {fmt(d.factors[ch], 3)}" for ch in CHANNELS)
+        parts.append(Text(f"{len(d.units)} units, every {fmt_duration(d.interval_s)}, "
+                          f"{len(d.time_ns)} instants; k: {fac}; excess kurtosis (normal 0)"))
+        parts.append(_unit_table(d))
+        for note in d.notes:
+            parts.append(Text(f"note: {note}"))
+
+    parts.append(Text(""))
+    parts.append(_heading("Calibration"))
+    c = a.calibration
+    if c is None:
+        parts.append(Text("not computed (see Missing)"))
+    else:
+        parts.append(Text(f"against {c.reference_role} ({c.n:,} samples): compass error "
+                          f"{_est(c.compass_error_deg, '°')}; log scale "
+                          f"{_est(c.log_scale and Estimate(100 * c.log_scale.value, 100 * c.log_scale.sigma), '%')}; "
+                          f"log offset {_est(c.log_offset_kn, 'kn')}"))
+        for note in c.notes:
+            parts.append(Text(f"note: {note}"))
+
+    parts.append(Text(""))
+    parts.append(_heading("Current"))
+    cur = a.current
+    if cur is None:
+        parts.append(Text("not computed (see Missing)"))
+    else:
+        parts.append(Text(f"set {_est(cur.set_deg, '°', 0)} (towards), drift {_est(cur.drift_kn, 'kn')}"
+                          f" ({cur.n_updates} fix updates)"))
+        for note in cur.notes:
+            parts.append(Text(f"note: {note}"))
+
+    if a.missing:
+        parts.append(Text(""))
+        parts.append(_heading("Missing"))
+        for m in a.missing:
+            parts.append(Text(f"- {m}"))
+    if a.notes:
+        parts.append(Text(""))
+        parts.append(_heading("Notes"))
+        for n in a.notes:
+            parts.append(Text(f"- {n}"))
+    return Group(*parts)
+
+
+def render_text(a: Analysis, width: int = 120) -> str:
+    """The summary as plain text (no colour), for golden files and pipes."""
+    console = Console(width=width, record=True, color_system=None, force_terminal=False,
+                      file=_NullFile(), soft_wrap=False)
+    console.print(summary(a))
+    return console.export_text()
+
+
+def print_summary(a: Analysis, console: Console) -> None:
+    """Print the summary on ``console`` (stdout in the CLI)."""
+    console.print(summary(a))
+
+
+class _NullFile:
+    def write(self, _s: str) -> int:
+        return 0
+
+    def flush(self) -> None:
+        pass

@@ -1,0 +1,299 @@
+"""Report layer: JSON against its schema, the terminal summary against golden files, tables.
+
+The Analysis objects here are built by hand (``make_analysis``) so the renderers are
+tested on their own; the pipeline tests feed them real computations.
+Regenerate the golden files with ``DRACC_UPDATE_GOLDEN=1 python -m pytest tests/test_report.py``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import jsonschema
+import numpy as np
+import pandas as pd
+import pytest
+
+from dracc.pipeline import (
+    SCHEMA,
+    Analysis,
+    CalibrationSection,
+    ChannelStats,
+    CurrentSection,
+    DeviationSection,
+    DeviationWindow,
+    DRLeg,
+    DRSection,
+    DRTrack,
+    Estimate,
+    HatStats,
+    InputFile,
+    ReferenceStats,
+    SourceRow,
+    TimeSummary,
+    Track,
+    UnitStats,
+)
+from dracc.report import iso_utc, json_report, tables, terminal
+
+GOLDEN = Path(__file__).parent / "golden"
+T0_NS = 1_772_323_200 * 10**9  # 2026-03-01T00:00:00Z
+H_NS = 3600 * 10**9
+HOSTILE = '<script>alert("x")</script><img src="http://example.com/x.png">'
+
+
+def _unit_stats(name: str, scale: float, with_ref: bool, negative_hat: bool = False) -> UnitStats:
+    ch = {
+        "lat": ChannelStats(n=25, m_u=100.0 * scale, m_y=132.0 * scale, kurtosis=-0.4,
+                            limit=280.0 * scale, apriori=150.0, exceeds_apriori=132.0 * scale > 150.0,
+                            new_apriori=max(150.0, 132.0 * scale)),
+        "lon": ChannelStats(n=25, m_u=120.0 * scale, m_y=178.8 * scale, kurtosis=0.35,
+                            limit=390.0 * scale),
+        "course": ChannelStats(n=24, m_u=0.05 * scale, m_y=0.0745 * scale, kurtosis=math.nan,
+                               limit=0.16 * scale),
+    }
+    hat = {"lat": HatStats(variance=-20.0 if negative_hat else 9000.0 * scale**2,
+                           sigma=math.nan if negative_hat else 94.9 * scale,
+                           lower=math.nan if negative_hat else 70.0 * scale,
+                           upper=math.nan if negative_hat else 140.0 * scale, negative=negative_hat)}
+    ref = {}
+    if with_ref:
+        ref = {"lat": ReferenceStats(n=25, rmse=127.0 * scale, k_star=1.27, mark="+", kurtosis=-0.2,
+                                     kurtosis_mark=">"),
+               "lon": ReferenceStats(n=25, rmse=190.0 * scale, k_star=1.58, mark="-", kurtosis=0.1,
+                                     kurtosis_mark="<")}
+    return UnitStats(unit=name, channels=ch, r_lat_lon=0.12 * scale, hat=hat, reference=ref)
+
+
+def _dr_track(n: int, step_s: float, with_ref: bool) -> DRTrack:
+    t = T0_NS + (np.arange(n) * step_s * 1e9).astype("int64")
+    since = np.mod(np.arange(n) * step_s, 3600.0)
+    leg = (np.arange(n) * step_s // 3600.0).astype("int64")
+    lat = np.radians(54.0) + np.arange(n) * step_s * 5.0 / 6_371_000.0
+    lon = np.radians(10.0) + np.arange(n) * step_s * 3.0 / 3_750_000.0
+    r2m = 20.0 + 0.02 * since
+    return DRTrack(time_ns=t, lat_rad=lat, lon_rad=lon, since_fix_s=since, radius_2m_m=r2m,
+                   semi_major_m=0.6 * r2m, semi_minor_m=0.3 * r2m,
+                   orientation_rad=np.full(n, np.radians(30.0)),
+                   ref_error_m=0.5 * r2m if with_ref else np.full(n, np.nan), leg=leg)
+
+
+def make_analysis(kind: str = "full") -> Analysis:
+    """A hand-built Analysis: 'full' (every section), 'bare' (positions only), 'hostile'."""
+    hostile = kind == "hostile"
+    key1 = HOSTILE if hostile else "INS1"
+    sources = (
+        SourceRow(key=key1, roles=("ins1",), records=90_000, sentences={"GGA": 30_000, "HDT": 30_000, "VTG": 30_000},
+                  first_ns=T0_NS, last_ns=T0_NS + 25 * H_NS),
+        SourceRow(key="INS2", roles=("ins2",), records=90_000, sentences={"GGA": 30_000, "HDT": 30_000},
+                  first_ns=T0_NS, last_ns=T0_NS + 25 * H_NS),
+        SourceRow(key="INS3", roles=("ins3",), records=90_000, sentences={"GGA": 30_000},
+                  first_ns=T0_NS, last_ns=T0_NS + 25 * H_NS),
+        SourceRow(key="GP", roles=("gnss",), records=270_000, sentences={"GGA": 90_000, "RMC": 90_000, "ZDA": 90_000},
+                  first_ns=T0_NS, last_ns=T0_NS + 25 * H_NS),
+        SourceRow(key="HE", roles=("compass",), records=900_000, sentences={"HDT": 900_000},
+                  first_ns=T0_NS, last_ns=T0_NS + 25 * H_NS),
+        SourceRow(key="VW", roles=("log",), records=90_000, sentences={"VHW": 90_000},
+                  first_ns=T0_NS, last_ns=T0_NS + 25 * H_NS),
+    )
+    n_pos = 200
+    tt = T0_NS + np.linspace(0, 25 * H_NS, n_pos).astype("int64")
+    lat = np.radians(54.0) + np.linspace(0, 0.01, n_pos)
+    lon = np.radians(10.0) + np.linspace(0, 0.02, n_pos)
+    tracks = tuple(Track(source=s.key, role=s.roles[0], time_ns=tt, lat_rad=lat + 1e-6 * i,
+                         lon_rad=lon - 1e-6 * i)
+                   for i, s in enumerate(sources) if s.roles[0] in ("ins1", "ins2", "ins3", "gnss"))
+    a_common = dict(
+        schema=SCHEMA, dracc_version="0.1.0",
+        inputs=(InputFile(path=f"/logs/{HOSTILE if hostile else 'voyage'}.nmea", format="nmea",
+                          lines=1_530_012, records=1_530_000, rejected={"checksum": 10, "truncated": 2}),),
+        sources=sources, rejected={"checksum": 10, "truncated": 2},
+        reject_examples={"checksum": (("/logs/voyage.nmea", 17, "$INGGA,bad*00"),)},
+        time=TimeSummary(duplicates=0, backsteps=1, gaps=2, rollovers=1, implausible_dates=0,
+                         decisions=("date from RMC",)),
+        start_ns=T0_NS, end_ns=T0_NS + 25 * H_NS, lines=1_530_012, tracks=tracks,
+        settings={"interval_s": 3600.0, "reset": "1h"},
+    )
+    if kind == "bare":
+        return Analysis(**a_common, deviation=None, dead_reckoning=None, calibration=None, current=None,
+                        missing=("no INS triple: only 1 INS unit (ins1) found; deviation statistics need "
+                                 "at least two", "no heading: no HDT/THS/HDG/HDM sentence with a value; "
+                                 "dead reckoning not computed"),
+                        notes=("role ins1 assigned by --role",))
+    n_inst = 26
+    inst = T0_NS + np.arange(n_inst, dtype="int64") * H_NS
+    phase = np.arange(n_inst) / 6.0
+    samples = {u: {"lat": 100.0 * np.sin(phase + k), "lon": 120.0 * np.cos(phase + k),
+                   "course": 0.05 * np.sin(2 * phase + k)} for k, u in enumerate(("ins1", "ins2", "ins3"))}
+    samples["ins3"]["course"][3] = np.nan
+    units = {u: _unit_stats(u, 1.0 + 0.3 * k, with_ref=True, negative_hat=(u == "ins3"))
+             for k, u in enumerate(("ins1", "ins2", "ins3"))}
+    whole = DeviationWindow(label="all", start_ns=T0_NS, end_ns=T0_NS + 25 * H_NS, units=units)
+    day1 = DeviationWindow(label="2026-03-01", start_ns=T0_NS, end_ns=T0_NS + 24 * H_NS, units=units)
+    dev = DeviationSection(interval_s=3600.0, factors={"lat": 1.32, "lon": 1.49, "course": 1.49},
+                           probability=0.95, units=("ins1", "ins2", "ins3"), time_ns=inst,
+                           samples=samples, whole=whole, windows=(day1,), reference_role="gnss",
+                           notes=("course channel from each unit's HDT heading",))
+    track = _dr_track(25 * 360, 10.0, with_ref=True)
+    pick = np.arange(0, len(track.time_ns), 60)
+    epochs = DRTrack(**{f: getattr(track, f)[pick] for f in track.__dataclass_fields__})
+    legs = tuple(DRLeg(index=i, start_ns=T0_NS + i * H_NS, end_ns=T0_NS + (i + 1) * H_NS,
+                       fix_source="gnss", containment_2m=1.0 if i % 5 else 0.8, n_scored=5,
+                       max_error_m=45.0) for i in range(25))
+    dr = DRSection(heading_source="compass HE (HDT, true)", speed_source="log VW (VHW, through water)",
+                   reset="1h", epoch_interval_s=600.0, track=track, epochs=epochs, legs=legs,
+                   reference_role="gnss", containment_2m=0.96, n_scored=125, error_over_m_rms=0.71,
+                   consistent=True, verdict="consistent: 96.0 % inside 2M (expected 95-98 %)")
+    cal = CalibrationSection(reference_role="gnss", compass_error_deg=Estimate(0.31, 0.04),
+                             log_scale=Estimate(0.029, 0.002), log_offset_kn=Estimate(0.05, 0.02), n=9000)
+    ct = T0_NS + np.arange(0, 25 * 3600, 600, dtype="int64") * 10**9
+    cur = CurrentSection(set_deg=Estimate(168.0, 12.0), drift_kn=Estimate(0.4, 0.1), time_ns=ct,
+                         set_rad=np.full(len(ct), np.radians(168.0)),
+                         drift_mps=np.full(len(ct), 0.2), drift_sigma_mps=np.full(len(ct), 0.05),
+                         n_updates=25)
+    missing = ("no magnetic compass: deviation curve not estimated",) if not hostile else (HOSTILE,)
+    return Analysis(**a_common, deviation=dev, dead_reckoning=dr, calibration=cal, current=cur,
+                    missing=missing, notes=(HOSTILE,) if hostile else ())
+
+
+@pytest.fixture(scope="module")
+def validator():
+    schema = json_report.load_schema()
+    jsonschema.Draft202012Validator.check_schema(schema)
+    return jsonschema.Draft202012Validator(schema, format_checker=jsonschema.FormatChecker())
+
+
+@pytest.mark.parametrize("kind", ["full", "bare", "hostile"])
+def test_json_validates_against_schema(validator, kind):
+    doc = json.loads(json_report.dumps(make_analysis(kind)))
+    errors = sorted(validator.iter_errors(doc), key=str)
+    assert not errors, errors[0]
+    assert doc["schema"] == "dracc.analysis/1"
+
+
+def test_schema_rejects_a_broken_report(validator):
+    """The schema is not vacuous: a missing key or a wrong type fails."""
+    doc = json_report.to_dict(make_analysis("full"))
+    bad = json.loads(json.dumps(doc))
+    del bad["deviation"]["units"]["ins1"]["lat"]["m_u"]
+    assert list(validator.iter_errors(bad))
+    bad = json.loads(json.dumps(doc))
+    bad["dead_reckoning"]["epochs"][0]["radius_2m_m"] = "12 m"
+    assert list(validator.iter_errors(bad))
+    bad = json.loads(json.dumps(doc))
+    bad["deviation"]["units"]["ins4"] = bad["deviation"]["units"]["ins1"]
+    assert list(validator.iter_errors(bad))
+
+
+def test_json_content_and_units():
+    a = make_analysis("full")
+    doc = json.loads(json_report.dumps(a))
+    assert doc["period"] == {"start_utc": "2026-03-01T00:00:00Z", "end_utc": "2026-03-02T01:00:00Z",
+                             "duration_s": 90000.0}
+    assert doc["sources"]["gnss"] == {"keys": ["GP"], "records": 270_000}
+    assert doc["inputs"][0]["rejected"] == {"checksum": 10, "truncated": 2}
+    dev = doc["deviation"]
+    assert dev["interval_s"] == 3600.0 and dev["factors"] == {"lat": 1.32, "lon": 1.49, "course": 1.49}
+    assert len(dev["samples"]) == 26
+    s3 = dev["samples"][3]
+    assert s3["time_utc"] == "2026-03-01T03:00:00Z"
+    assert s3["ins1"]["lat_m"] == pytest.approx(100.0 * math.sin(0.5))
+    assert s3["ins3"]["course_deg"] is None  # NaN -> null
+    u = dev["units"]["ins2"]
+    assert u["lat"]["m_u"] == pytest.approx(130.0) and u["lat"]["unit"] == "m"
+    assert u["course"]["unit"] == "deg" and u["course"]["kurtosis"] is None
+    assert u["r_lat_lon"] == pytest.approx(0.156)
+    assert dev["hat"]["ins3"]["lat"]["negative"] is True and dev["hat"]["ins3"]["lat"]["sigma"] is None
+    assert dev["hat"]["ins3"]["lat"]["variance"] == -20.0  # reported, never clamped
+    assert dev["reference"]["ins1"]["lon"] == {"n": 25, "rmse": 190.0, "k_star": 1.58, "mark": "-",
+                                               "kurtosis": 0.1, "kurtosis_mark": "<"}
+    assert dev["windows"][0]["label"] == "2026-03-01"
+    dr = doc["dead_reckoning"]
+    assert len(dr["epochs"]) == 25 * 6
+    e1 = dr["epochs"][1]
+    assert e1["time_utc"] == "2026-03-01T00:10:00Z" and e1["since_fix_s"] == 600.0
+    assert e1["radius_2m_m"] == pytest.approx(32.0)
+    assert e1["ellipse"]["orientation_deg"] == pytest.approx(30.0)
+    assert e1["lat_deg"] == pytest.approx(math.degrees(math.radians(54.0) + 600.0 * 5 / 6_371_000))
+    assert dr["containment_2m"] == 0.96
+    assert doc["calibration"]["compass_error_deg"] == {"value": 0.31, "sigma": 0.04}
+    cur = doc["current"]
+    assert cur["set_deg"]["value"] == 168.0
+    assert cur["series"][0]["drift_kn"] == pytest.approx(0.2 * 3600 / 1852)
+    assert cur["series"][0]["set_deg"] == pytest.approx(168.0)
+
+
+def test_json_bare_says_what_is_missing():
+    doc = json.loads(json_report.dumps(make_analysis("bare")))
+    assert doc["deviation"] is None and doc["dead_reckoning"] is None
+    assert any(m.startswith("no INS triple") for m in doc["missing"])
+    assert any(m.startswith("no heading") for m in doc["missing"])
+
+
+def test_iso_utc():
+    assert iso_utc(T0_NS) == "2026-03-01T00:00:00Z"
+    assert iso_utc(T0_NS + 1_500_000_000) == "2026-03-01T00:00:01.500Z"
+    assert iso_utc(None) is None
+
+
+@pytest.mark.parametrize("kind", ["full", "bare", "hostile"])
+def test_terminal_summary_golden(kind):
+    text = terminal.render_text(make_analysis(kind))
+    path = GOLDEN / f"summary_{kind}.txt"
+    if os.environ.get("DRACC_UPDATE_GOLDEN"):
+        path.parent.mkdir(exist_ok=True)
+        path.write_text(text, encoding="utf-8")
+    assert text == path.read_text(encoding="utf-8")
+
+
+def test_terminal_summary_content():
+    text = terminal.render_text(make_analysis("full"))
+    for needle in ("2026-03-01 00:00Z → 2026-03-02 01:00Z (25 h 00 min)", "rejected 12 lines: checksum 10",
+                   "inside 2M at 96.0 % of 125 epochs", "excess", "neg. var.", "1.58 -",
+                   "exceeds→171.6", "compass error 0.31 ± 0.04 °", "log scale 2.90 ± 0.20 %",
+                   "set 168 ± 12 ° (towards), drift 0.40 ± 0.10 kn"):
+        assert needle in text, needle
+    bare = terminal.render_text(make_analysis("bare"))
+    assert "no INS triple" in bare and "no heading" in bare and bare.count("not computed (see Missing)") == 4
+
+
+def test_terminal_does_not_interpret_markup():
+    text = terminal.render_text(make_analysis("hostile"))
+    assert HOSTILE in text
+
+
+def test_tables_roundtrip(tmp_path):
+    a = make_analysis("full")
+    written = tables.write_tables(a, tmp_path)
+    names = sorted(p.name for p in written)
+    assert names == sorted(f"{n}.{ext}" for n in ("dr_track", "dr_epochs", "deviation_samples", "unit_stats")
+                           for ext in ("csv", "parquet"))
+    track = pd.read_parquet(tmp_path / "dr_track.parquet")
+    assert len(track) == len(a.dead_reckoning.track.time_ns)
+    assert str(track["time_utc"].dt.tz) == "UTC"
+    assert track["time_utc"].iloc[1] == pd.Timestamp("2026-03-01T00:00:10Z")
+    np.testing.assert_allclose(track["lat_deg"], np.degrees(a.dead_reckoning.track.lat_rad))
+    csv = pd.read_csv(tmp_path / "dr_track.csv")
+    assert csv["time_utc"].iloc[1] == "2026-03-01T00:00:10.000000Z"
+    np.testing.assert_allclose(csv["radius_2m_m"], a.dead_reckoning.track.radius_2m_m)
+    samples = pd.read_parquet(tmp_path / "deviation_samples.parquet")
+    assert list(samples.columns)[:4] == ["time_utc", "ins1_lat_m", "ins1_lon_m", "ins1_course_deg"]
+    assert np.isnan(samples["ins3_course_deg"].iloc[3])
+    stats = pd.read_csv(tmp_path / "unit_stats.csv")
+    row = stats[(stats.window == "all") & (stats.unit_name == "ins2") & (stats.channel == "lat")].iloc[0]
+    assert row["m_u"] == pytest.approx(130.0) and row["unit"] == "m" and row["k_star"] == 1.27
+    assert set(stats["window"]) == {"all", "2026-03-01"}
+
+
+def test_tables_bare_writes_nothing(tmp_path):
+    assert tables.write_tables(make_analysis("bare"), tmp_path) == []
+
+
+def test_tables_readable_by_duckdb(tmp_path):
+    duckdb = pytest.importorskip("duckdb")
+    tables.write_tables(make_analysis("full"), tmp_path)
+    n = duckdb.sql(f"select count(*) from '{tmp_path / 'dr_track.parquet'}'").fetchone()[0]
+    assert n == 25 * 360
