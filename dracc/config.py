@@ -77,6 +77,14 @@ class DeviationConfig:
     probability: float = 0.95  #: for limiting errors (K8)
     #: a priori RMS per unit and channel, e.g. {"ins1": {"lat_m": 300, "lon_m": 400, "course_deg": 0.1}}
     apriori: dict[str, dict[str, float]] = field(default_factory=dict)
+    first_approximation: bool = False  #: (K5a) use sqrt(3/2) = 1.2247 for every channel instead
+    confidence: float = 0.95  #: of the upper bound K_hm of an RMS (K8)
+    correlation_time_s: float = 18000.0  #: INS error correlation time (paper: 4-6 h) -> N_eff, blocks
+    min_kurtosis_samples: int = 12  #: a kurtosis window with fewer samples gives no upper bound
+    kurtosis_tol: float = 0.05  #: kurtosis marks of Table 1: '=' within this
+    hat_confidence: float = 0.90  #: three-cornered-hat bootstrap interval
+    hat_draws: int = 1000  #: bootstrap draws
+    seed: int = 0  #: bootstrap seed (reproducible reports)
 
 
 @dataclass(frozen=True)

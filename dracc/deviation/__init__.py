@@ -1,0 +1,36 @@
+"""INS accuracy from deviations from the mean of three (METHODS section 4; paper seeds/001).
+
+- :mod:`.sampling`  readings of each unit at the sampling instants (interpolated, never filled)
+- :mod:`.stats`     (K1)-(K8): deviations, m_u, m_y, excess kurtosis, covariance, limiting errors
+- :mod:`.hat`       the three-cornered hat (each unit's own variance), bootstrap bounds
+- :mod:`.reference` the paper's Table 1 check against a reference, and its marks
+- :mod:`.analysis`  :func:`analyse_deviations`, the single entry point, and the result types
+
+Pure numpy/scipy; no I/O.
+"""
+
+from __future__ import annotations
+
+from .analysis import (
+    CHANNELS,
+    ChannelMode,
+    ChannelStats,
+    DeviationResult,
+    HatStats,
+    KurtosisWindow,
+    ReferenceAverage,
+    ReferenceStats,
+    UnitStats,
+    WindowStats,
+    analyse_deviations,
+    check_config,
+)
+from .hat import HatEstimate, three_cornered_hat
+from .sampling import UnitSeries, sample_unit, sampling_instants, unit_series_from_voyage
+
+__all__ = [
+    "CHANNELS", "ChannelMode", "ChannelStats", "DeviationResult", "HatEstimate", "HatStats",
+    "KurtosisWindow", "ReferenceAverage", "ReferenceStats", "UnitSeries", "UnitStats",
+    "WindowStats", "analyse_deviations", "check_config", "sample_unit", "sampling_instants",
+    "three_cornered_hat", "unit_series_from_voyage",
+]

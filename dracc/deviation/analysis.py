@@ -1,0 +1,540 @@
+"""``analyse_deviations``: the whole method of METHODS section 4 in one call.
+
+Sampling, deviations (K1), per unit and channel m_u (K3b), m_y (K5), excess kurtosis
+(K6), latitude/longitude covariance and correlation (K7), limiting errors (K8) per
+window (a day by default) and over the whole log, kurtosis over 24-72 h windows, the
+a priori monitoring rule, the reference check of Table 1 and the three-cornered hat.
+
+Every result is a frozen dataclass whose ``to_dict()`` gives the JSON-ready structure
+of the ``deviation`` section of the analysis report (floats, None for NaN), so the
+report layer only serialises.
+
+Units: statistics of latitude and longitude are in metres (north, east); of course in
+degrees (the paper's channels).  Time is int64 UTC ns inside, ISO 8601 in ``to_dict``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..config import DeviationConfig
+from ..errors import ConfigError
+from ..ingest.frames import INS_ROLES
+from . import stats
+from .hat import three_cornered_hat
+from .reference import course_errors_rad, k_star_mark, kurtosis_mark, position_errors_m
+from .sampling import DAY_NS, UnitSeries, sample_unit, sampling_instants
+
+CHANNELS = ("lat", "lon", "course")
+#: the sample key of each channel (JSON ``deviation.samples``) and the a priori config key
+SAMPLE_KEYS = {"lat": "lat_m", "lon": "lon_m", "course": "course_deg"}
+CHANNEL_UNITS = {"lat": "m", "lon": "m", "course": "deg"}
+
+
+def _f(x) -> float | None:
+    """A JSON-ready float: None for NaN/inf/None."""
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def iso_utc(time_ns) -> str:
+    """ISO 8601 UTC with a Z ('2026-11-21T13:00:00Z'); milliseconds only when needed."""
+    t = np.asarray(time_ns, dtype=np.int64)
+    unit = "s" if np.all(t % 1_000_000_000 == 0) else "ms"
+    out = np.datetime_as_string(t.astype("datetime64[ns]"), unit=unit, timezone="UTC")
+    return str(out) if out.ndim == 0 else out
+
+
+# ------------------------------------------------------------------------- results
+
+
+@dataclass(frozen=True)
+class ChannelStats:
+    """(K3b)-(K8) for one unit and channel in one window, in the channel's unit (m or deg)."""
+
+    n: int  #: deviations used
+    m_u: float  #: RMS of the deviations (K3b)
+    k: float  #: factor used: m_y = k m_u (K5)
+    m_y: float  #: RMS error estimate (K5)
+    kurtosis: float  #: *excess* kurtosis of the deviations (K6); 0 for a normal law
+    kurtosis_for_limit: float  #: the kurtosis K_PIE used (the window's own, or the upper bound)
+    n_eff: float  #: effective number of independent samples (correlation time)
+    k_pie: float  #: (K8) conversion RMS -> limiting error at the probability
+    k_hm: float  #: (K8) upper confidence factor of the RMS
+    limit: float  #: (K8) limiting error y^(P) = K_PIE K_hm m_y
+    apriori: float | None  #: configured a priori RMS, None where none is configured
+    exceeds_apriori: bool | None  #: m_y > a priori (None without one)
+    new_apriori: float  #: the monitoring rule: max(a priori, m_y); m_y where there is none
+    verdict: str  #: 'exceeds', 'within', or 'no a priori: the deviation estimate is mandatory'
+
+    def to_dict(self) -> dict:
+        return {"n": int(self.n), "m_u": _f(self.m_u), "k": _f(self.k), "m_y": _f(self.m_y),
+                "kurtosis": _f(self.kurtosis), "kurtosis_kind": "excess",
+                "kurtosis_for_limit": _f(self.kurtosis_for_limit), "n_eff": _f(self.n_eff),
+                "k_pie": _f(self.k_pie), "k_hm": _f(self.k_hm), "limit": _f(self.limit),
+                "apriori": _f(self.apriori), "exceeds_apriori": self.exceeds_apriori,
+                "new_apriori": _f(self.new_apriori), "verdict": self.verdict}
+
+
+@dataclass(frozen=True)
+class HatStats:
+    """Three-cornered hat for one unit and channel, beside the factor method's m_y.
+
+    ``variance`` may be negative (``negative``): reported, never clamped; ``sigma`` is
+    then NaN.  ``var_lower``/``var_upper``: bootstrap bounds of the variance.
+    ``disagree``: the factor method's m_y^2 lies outside those bounds (None without bounds).
+    """
+
+    n: int
+    variance: float
+    sigma: float
+    var_lower: float
+    var_upper: float
+    negative: bool
+    m_y_factor: float
+    disagree: bool | None
+
+    def to_dict(self) -> dict:
+        return {"n": int(self.n), "variance": _f(self.variance), "sigma": _f(self.sigma),
+                "var_lower": _f(self.var_lower), "var_upper": _f(self.var_upper),
+                "negative": bool(self.negative), "m_y_factor": _f(self.m_y_factor),
+                "disagree": self.disagree}
+
+
+@dataclass(frozen=True)
+class ReferenceStats:
+    """Table 1 for one unit and channel in one window (errors against the reference)."""
+
+    n: int  #: instants with both a deviation and a reference
+    rmse: float  #: plain RMS of the true errors sqrt(sum x^2 / n)
+    m_x: float  #: RMS of the errors by (K3b), as the paper's Table 1
+    m_u: float  #: RMS of the deviations by (K3b) over the same instants
+    k_star: float  #: k* = m_x / m_u
+    k: float  #: the factor in use
+    mark: str  #: '+' where k* <= k, '-' otherwise
+    kurtosis_error: float  #: excess kurtosis of the errors (K6)
+    kurtosis_deviation: float  #: excess kurtosis of the deviations (K6), same instants
+    kurtosis_mark: str  #: '<', '>', '=': E_dev against E_err
+
+    def to_dict(self) -> dict:
+        return {"n": int(self.n), "rmse": _f(self.rmse), "m_x": _f(self.m_x), "m_u": _f(self.m_u),
+                "k_star": _f(self.k_star), "k": _f(self.k), "mark": self.mark,
+                "kurtosis_error": _f(self.kurtosis_error),
+                "kurtosis_deviation": _f(self.kurtosis_deviation),
+                "kurtosis_mark": self.kurtosis_mark}
+
+
+@dataclass(frozen=True)
+class ReferenceAverage:
+    """The last row of Table 1: RMS averaged over the windows (days), weights n per day."""
+
+    days: int
+    m_x: float  #: weighted RMS of the errors
+    m_u: float  #: weighted RMS of the deviations
+    k_star: float  #: m_x / m_u
+
+    def to_dict(self) -> dict:
+        return {"days": self.days, "m_x": _f(self.m_x), "m_u": _f(self.m_u),
+                "k_star": _f(self.k_star)}
+
+
+@dataclass(frozen=True)
+class UnitStats:
+    """Everything for one unit in one window; channels absent where the unit is not analysed."""
+
+    channels: dict[str, ChannelStats]
+    cov_lat_lon_m2: float  #: (K7a)
+    r_lat_lon: float  #: (K7b)
+    hat: dict[str, HatStats]  #: empty unless three units in the channel
+    reference: dict[str, ReferenceStats]  #: empty without a reference
+
+    def to_dict(self) -> dict:
+        d: dict = {c: s.to_dict() for c, s in self.channels.items()}
+        d["cov_lat_lon_m2"] = _f(self.cov_lat_lon_m2)
+        d["r_lat_lon"] = _f(self.r_lat_lon)
+        return d
+
+
+@dataclass(frozen=True)
+class WindowStats:
+    """Statistics over one window (``label`` the start date, or 'all' for the whole log)."""
+
+    label: str
+    start_ns: int
+    end_ns: int  #: exclusive
+    units: dict[str, UnitStats]
+
+    def to_dict(self) -> dict:
+        return {"label": self.label, "start_utc": iso_utc(self.start_ns),
+                "end_utc": iso_utc(self.end_ns),
+                "units": {u: s.to_dict() for u, s in self.units.items()},
+                "hat": {u: {c: h.to_dict() for c, h in s.hat.items()}
+                        for u, s in self.units.items() if s.hat},
+                "reference": {u: {c: r.to_dict() for c, r in s.reference.items()}
+                              for u, s in self.units.items() if s.reference}}
+
+
+@dataclass(frozen=True)
+class KurtosisWindow:
+    """Excess kurtosis (K6) of one unit and channel over one long window (24-72 h)."""
+
+    length_s: float
+    start_ns: int
+    n: int
+    kurtosis: float
+
+    def to_dict(self) -> dict:
+        return {"length_s": self.length_s, "start_utc": iso_utc(self.start_ns), "n": self.n,
+                "kurtosis": _f(self.kurtosis)}
+
+
+@dataclass(frozen=True)
+class ChannelMode:
+    """How a channel was analysed: which units, the factor, and what a reader must know."""
+
+    units: tuple[str, ...]
+    mode: str  #: 'three', 'two', 'one' or 'none'
+    factor: float  #: k of (K5); NaN where no statistics
+    message: str | None
+
+    def to_dict(self) -> dict:
+        return {"units": list(self.units), "mode": self.mode, "factor": _f(self.factor),
+                "message": self.message}
+
+
+@dataclass(frozen=True)
+class DeviationResult:
+    """The ``deviation`` section: samples, per-window and whole-log statistics."""
+
+    interval_s: float
+    offset_s: float
+    probability: float
+    confidence: float
+    units: tuple[str, ...]  #: INS roles with any data
+    channels: dict[str, ChannelMode]
+    time_ns: np.ndarray  #: sampling instants (n,)
+    #: unit -> channel -> deviations at the instants (m, m, deg); NaN where not available
+    samples: dict[str, dict[str, np.ndarray]]
+    #: unit -> channel -> instants where the unit itself had no reading near the instant
+    missing: dict[str, dict[str, int]]
+    whole: WindowStats
+    windows: tuple[WindowStats, ...]
+    #: unit -> channel -> the long kurtosis windows (24-72 h)
+    kurtosis_windows: dict[str, dict[str, tuple[KurtosisWindow, ...]]]
+    #: unit -> channel -> the upper bound: the largest kurtosis over the long windows
+    kurtosis_upper: dict[str, dict[str, float]]
+    #: unit -> channel -> weighted average over the windows (Table 1, last row)
+    reference_average: dict[str, dict[str, ReferenceAverage]]
+    messages: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def factors(self) -> dict[str, float]:
+        return {c: m.factor for c, m in self.channels.items()}
+
+    def to_dict(self) -> dict:
+        """The JSON-ready ``deviation`` section (keys as settled in the reports issue)."""
+        samples = []
+        for i, t in enumerate(self.time_ns):
+            row: dict = {"time_utc": iso_utc(t)}
+            for u in self.units:
+                row[u] = {SAMPLE_KEYS[c]: _f(self.samples[u][c][i]) for c in CHANNELS}
+            samples.append(row)
+        units: dict = {u: s.to_dict() for u, s in self.whole.units.items()}
+        for u, chans in self.kurtosis_upper.items():
+            for c, e in chans.items():
+                if u in units and c in units[u]:
+                    units[u][c]["kurtosis_upper"] = _f(e)
+                    units[u][c]["kurtosis_windows"] = [
+                        w.to_dict() for w in self.kurtosis_windows[u][c]]
+        reference = {u: {c: r.to_dict() for c, r in s.reference.items()}
+                     for u, s in self.whole.units.items() if s.reference}
+        for u, chans in self.reference_average.items():
+            for c, avg in chans.items():
+                reference.setdefault(u, {}).setdefault(c, {})["weighted"] = avg.to_dict()
+        return {
+            "interval_s": self.interval_s, "offset_s": self.offset_s,
+            "probability": self.probability, "confidence": self.confidence,
+            "factors": {c: _f(k) for c, k in self.factors.items()},
+            "channels": {c: m.to_dict() for c, m in self.channels.items()},
+            "units_present": list(self.units),
+            "missing": self.missing,
+            "samples": samples,
+            "units": units,
+            "hat": {u: {c: h.to_dict() for c, h in s.hat.items()}
+                    for u, s in self.whole.units.items() if s.hat},
+            "reference": reference,
+            "windows": [w.to_dict() for w in self.windows],
+            "messages": list(self.messages),
+        }
+
+
+# ---------------------------------------------------------------------- the method
+
+
+def check_config(cfg: DeviationConfig) -> None:
+    """Raise ConfigError naming the key for values the method cannot use."""
+    if cfg.interval_s <= 0 or cfg.window_s <= 0:
+        raise ConfigError("[deviation] interval_s and window_s must be positive")
+    if cfg.max_interp_gap_s < 0:
+        raise ConfigError(f"[deviation] max_interp_gap_s must be >= 0, got {cfg.max_interp_gap_s}")
+    for name in ("confidence", "hat_confidence"):
+        v = getattr(cfg, name)
+        if not 0.5 <= v < 1.0:
+            raise ConfigError(f"[deviation] {name} must be in [0.5, 1), got {v}")
+    if cfg.correlation_time_s < 0:
+        raise ConfigError(f"[deviation] correlation_time_s must be >= 0, got {cfg.correlation_time_s}")
+    if any(w <= 0 for w in cfg.kurtosis_windows_s):
+        raise ConfigError("[deviation] kurtosis_windows_s must all be positive")
+    if cfg.hat_draws < 100:
+        raise ConfigError(f"[deviation] hat_draws must be >= 100, got {cfg.hat_draws}")
+    keys = set(SAMPLE_KEYS.values())
+    for unit, table in cfg.apriori.items():
+        if unit not in INS_ROLES:
+            raise ConfigError(f"[deviation.apriori] {unit!r}: unit must be one of {', '.join(INS_ROLES)}")
+        if not isinstance(table, dict):
+            raise ConfigError(f"[deviation.apriori] {unit} must be a table of {', '.join(sorted(keys))}")
+        for key, value in table.items():
+            if key not in keys:
+                raise ConfigError(f"[deviation.apriori.{unit}] unknown key {key!r}; known: "
+                                  f"{', '.join(sorted(keys))}")
+            if not isinstance(value, (int, float)) or not value > 0:
+                raise ConfigError(f"[deviation.apriori.{unit}] {key} = {value!r}: must be a positive number")
+
+
+def _factors(cfg: DeviationConfig) -> dict[str, float]:
+    if cfg.first_approximation:
+        return dict.fromkeys(CHANNELS, stats.K_FIRST_APPROX_THREE)
+    return {"lat": cfg.factor_lat, "lon": cfg.factor_lon, "course": cfg.factor_course}
+
+
+def _channel_stats(u, factor, kurt_limit, unit, channel, cfg: DeviationConfig) -> ChannelStats:
+    """(K3b)-(K8) and the a priori rule for one unit/channel/window; ``kurt_limit`` NaN means
+    'use this window's own kurtosis'."""
+    n = int(stats.count_valid(u))
+    m_u = float(stats.rms_k3b(u))  # (K3b)
+    m_y = factor * m_u  # (K5)
+    e = float(stats.excess_kurtosis_k6(u))  # (K6)
+    e_lim = e if math.isnan(kurt_limit) else kurt_limit
+    n_eff = float(stats.effective_samples(n, cfg.interval_s, cfg.correlation_time_s))
+    limit, kp, kh = stats.limiting_error(m_y, cfg.probability, e_lim, cfg.confidence, n_eff)  # (K8)
+    apriori = cfg.apriori.get(unit, {}).get(SAMPLE_KEYS[channel])
+    if apriori is None:
+        exceeds, new, verdict = None, m_y, "no a priori: the deviation estimate is mandatory"
+    elif math.isnan(m_y):
+        exceeds, new, verdict = None, float(apriori), "no estimate"
+    else:
+        exceeds = bool(m_y > apriori)
+        new = max(float(apriori), m_y)  # conclusions: the larger becomes the new a priori
+        verdict = "exceeds" if exceeds else "within"
+    return ChannelStats(n=n, m_u=m_u, k=factor, m_y=m_y, kurtosis=e, kurtosis_for_limit=e_lim,
+                        n_eff=n_eff, k_pie=float(kp), k_hm=float(kh), limit=float(limit),
+                        apriori=None if apriori is None else float(apriori),
+                        exceeds_apriori=exceeds, new_apriori=float(new), verdict=verdict)
+
+
+def _mode(units: list[str], channel: str, factor: float) -> ChannelMode:
+    names = ", ".join(units)
+    if len(units) >= 3:
+        return ChannelMode(tuple(units), "three", factor, None)
+    if len(units) == 2:
+        return ChannelMode(tuple(units), "two", stats.K_FIRST_APPROX_TWO,
+                           f"{channel}: only two units ({names}): deviations from their mean are "
+                           "half their difference; m_y uses the first-approximation factor "
+                           "sqrt(2) = 1.414, and no three-cornered hat is possible")
+    if len(units) == 1:
+        return ChannelMode(tuple(units), "one", math.nan,
+                           f"{channel}: only one unit ({names}): no deviation statistics "
+                           "(the method needs at least two units, three for its factors)")
+    return ChannelMode((), "none", math.nan, f"{channel}: no INS data")
+
+
+def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None = None,
+                       reference: UnitSeries | None = None) -> DeviationResult:
+    """INS accuracy from deviations from the mean of three (METHODS section 4, K1-K8).
+
+    ``units``: role ('ins1'..'ins3') -> readings; ``reference``: GNSS (or berth)
+    readings for the Table 1 check, or None.  Fewer than three units is not an error:
+    two units give first-approximation statistics (sqrt 2), one or none gives no
+    statistics; :attr:`DeviationResult.channels` says which, with a message.
+    Raises ConfigError for configuration values the method cannot use.
+    """
+    cfg = cfg or DeviationConfig()
+    check_config(cfg)
+    for name in units:
+        if name not in INS_ROLES:
+            raise ValueError(f"unit {name!r} is not one of {INS_ROLES}")
+    names = [u for u in INS_ROLES if u in units]
+    spans = [s for s in (units[u].span_ns() for u in names) if s is not None]
+    if spans:
+        instants = sampling_instants(min(s[0] for s in spans), max(s[1] for s in spans),
+                                     cfg.interval_s, cfg.offset_s)
+    else:
+        instants = np.empty(0, np.int64)
+    sampled = {u: sample_unit(units[u], instants, cfg.max_interp_gap_s) for u in names}
+    n_inst = len(instants)
+    nan = np.full(n_inst, np.nan)
+
+    pos_units = [u for u in names if np.any(~np.isnan(sampled[u].lat_rad))]
+    crs_units = [u for u in names if np.any(~np.isnan(sampled[u].heading_rad))]
+    present = tuple(u for u in names if u in pos_units or u in crs_units)
+    factors = _factors(cfg)
+    modes = {c: _mode(pos_units if c != "course" else crs_units, c, factors[c]) for c in CHANNELS}
+    for c in CHANNELS:  # two units: sqrt(2) whatever the configured factors
+        if modes[c].mode == "three":
+            modes[c] = ChannelMode(modes[c].units, "three", factors[c], None)
+
+    # (K1) deviations per channel, units along axis 0
+    dev: dict[str, dict[str, np.ndarray]] = {u: dict.fromkeys(CHANNELS, nan) for u in present}
+    if len(pos_units) >= 2:
+        lat = np.vstack([sampled[u].lat_rad for u in pos_units])
+        lon = np.vstack([sampled[u].lon_rad for u in pos_units])
+        north, east, _ = stats.deviations_position_m(lat, lon)  # (K1), metres
+        for j, u in enumerate(pos_units):
+            dev[u]["lat"], dev[u]["lon"] = north[j], east[j]
+    if len(crs_units) >= 2:
+        hdg = np.vstack([sampled[u].heading_rad for u in crs_units])
+        crs = np.degrees(stats.deviations_course_rad(hdg))  # (K1) on the circle, degrees
+        for j, u in enumerate(crs_units):
+            dev[u]["course"] = crs[j]
+    missing = {u: {"lat": int(np.sum(np.isnan(sampled[u].lat_rad))),
+                   "lon": int(np.sum(np.isnan(sampled[u].lon_rad))),
+                   "course": int(np.sum(np.isnan(sampled[u].heading_rad)))} for u in present}
+
+    # reference errors at the instants (Table 1)
+    err: dict[str, dict[str, np.ndarray]] = {}
+    if reference is not None and n_inst:
+        ref = sample_unit(reference, instants, cfg.max_interp_gap_s)
+        for u in present:
+            xn, xe = position_errors_m(sampled[u].lat_rad, sampled[u].lon_rad,
+                                       ref.lat_rad, ref.lon_rad)
+            xc = np.degrees(course_errors_rad(sampled[u].heading_rad, ref.heading_rad))
+            err[u] = {"lat": xn, "lon": xe, "course": xc}
+
+    # kurtosis over the long windows (24-72 h) and its upper bound (conclusions)
+    origin = int(instants[0] - instants[0] % DAY_NS) if n_inst else 0
+    kwin: dict[str, dict[str, tuple[KurtosisWindow, ...]]] = {}
+    kup: dict[str, dict[str, float]] = {}
+    for u in present:
+        kwin[u], kup[u] = {}, {}
+        for c in CHANNELS:
+            if u not in modes[c].units or modes[c].mode == "one":
+                continue
+            wins = []
+            for length_s in cfg.kurtosis_windows_s:
+                idx = stats.window_index(instants, length_s, origin)
+                for k in np.unique(idx):
+                    sel = dev[u][c][idx == k]
+                    wins.append(KurtosisWindow(float(length_s),
+                                               origin + int(k) * int(round(length_s * 1e9)),
+                                               int(stats.count_valid(sel)),
+                                               float(stats.excess_kurtosis_k6(sel))))
+            kwin[u][c] = tuple(wins)
+            good = [w.kurtosis for w in wins
+                    if w.n >= cfg.min_kurtosis_samples and not math.isnan(w.kurtosis)]
+            kup[u][c] = max(good) if good else math.nan
+
+    def window(label: str, sel: np.ndarray, start_ns: int, end_ns: int, whole: bool) -> WindowStats:
+        out: dict[str, UnitStats] = {}
+        for u in present:
+            chans: dict[str, ChannelStats] = {}
+            refs: dict[str, ReferenceStats] = {}
+            for c in CHANNELS:
+                m = modes[c]
+                if u not in m.units or m.mode == "one":
+                    continue
+                uu = dev[u][c][sel]
+                e_lim = kup[u].get(c, math.nan) if whole else math.nan
+                if whole and math.isnan(e_lim):
+                    e_lim = math.nan  # no long window qualifies: the whole log's own kurtosis
+                chans[c] = _channel_stats(uu, m.factor, e_lim, u, c, cfg)
+                if u in err:
+                    x = err[u][c][sel]
+                    both = ~np.isnan(x) & ~np.isnan(uu)
+                    if np.any(both):
+                        xb, ub = x[both], uu[both]
+                        m_x, m_uu = float(stats.rms_k3b(xb)), float(stats.rms_k3b(ub))
+                        ks = m_x / m_uu if m_uu > 0 else math.nan
+                        e_x = float(stats.excess_kurtosis_k6(xb))
+                        e_u = float(stats.excess_kurtosis_k6(ub))
+                        refs[c] = ReferenceStats(
+                            n=int(both.sum()), rmse=float(stats.rms_plain(xb)), m_x=m_x, m_u=m_uu,
+                            k_star=ks, k=m.factor, mark=k_star_mark(ks, m.factor),
+                            kurtosis_error=e_x, kurtosis_deviation=e_u,
+                            kurtosis_mark=kurtosis_mark(e_x, e_u, cfg.kurtosis_tol))
+            cov, r = (stats.lat_lon_covariance(dev[u]["lat"][sel], dev[u]["lon"][sel])
+                      if "lat" in chans else (math.nan, math.nan))  # (K7)
+            out[u] = UnitStats(channels=chans, cov_lat_lon_m2=float(cov), r_lat_lon=float(r),
+                               hat={}, reference=refs)
+        # three-cornered hat per channel with three units
+        block = max(1, math.ceil(cfg.correlation_time_s / cfg.interval_s))
+        for c in CHANNELS:
+            m = modes[c]
+            if m.mode != "three":
+                continue
+            y = np.vstack([dev[u][c][sel] for u in m.units])
+            h = three_cornered_hat(y, circular=False, confidence=cfg.hat_confidence, block=block,
+                                   draws=cfg.hat_draws, seed=cfg.seed)
+            for j, u in enumerate(m.units):
+                m_y = out[u].channels[c].m_y
+                lo, hi = h.var_lower[j], h.var_upper[j]
+                disagree = None if (np.isnan(lo) or np.isnan(m_y)) else bool(
+                    not lo <= m_y * m_y <= hi)
+                out[u].hat[c] = HatStats(n=h.n, variance=float(h.variance[j]),
+                                         sigma=float(h.sigma[j]), var_lower=float(lo),
+                                         var_upper=float(hi), negative=bool(h.negative[j]),
+                                         m_y_factor=m_y, disagree=disagree)
+        return WindowStats(label, start_ns, end_ns, out)
+
+    if n_inst:
+        whole = window("all", np.ones(n_inst, bool), int(instants[0]),
+                       int(instants[-1]) + int(round(cfg.interval_s * 1e9)), True)
+        idx = stats.window_index(instants, cfg.window_s, origin)
+        w_ns = int(round(cfg.window_s * 1e9))
+        windows = tuple(
+            window(str(iso_utc(origin + int(k) * w_ns))[:10] if cfg.window_s == 86400.0
+                   else str(iso_utc(origin + int(k) * w_ns)),
+                   idx == k, origin + int(k) * w_ns, origin + (int(k) + 1) * w_ns, False)
+            for k in np.unique(idx))
+    else:
+        whole = WindowStats("all", 0, 0, {})
+        windows = ()
+
+    # Table 1, last row: weighted over the windows
+    ref_avg: dict[str, dict[str, ReferenceAverage]] = {}
+    for u in present:
+        for c in CHANNELS:
+            rows = [w.units[u].reference[c] for w in windows
+                    if u in w.units and c in w.units[u].reference]
+            if rows:
+                n = [r.n for r in rows]
+                mx = stats.weighted_rms([r.m_x for r in rows], n)
+                mu = stats.weighted_rms([r.m_u for r in rows], n)
+                ref_avg.setdefault(u, {})[c] = ReferenceAverage(
+                    len(rows), mx, mu, mx / mu if mu > 0 else math.nan)
+
+    messages = [m.message for m in modes.values() if m.message]
+    if reference is not None and not err:
+        messages.append("reference given but no sampling instants: no Table 1 check")
+    if not n_inst:
+        messages.append("no sampling instants: the INS readings span no sampling instant")
+    for u in present:
+        for c, k in missing[u].items():
+            if k and u in modes[c].units:
+                messages.append(f"{u} {c}: missing at {k} of {n_inst} instants "
+                                f"(no reading within {cfg.max_interp_gap_s:g} s)")
+    return DeviationResult(
+        interval_s=cfg.interval_s, offset_s=cfg.offset_s, probability=cfg.probability,
+        confidence=cfg.confidence, units=present, channels=modes, time_ns=instants,
+        samples=dev, missing=missing, whole=whole, windows=windows, kurtosis_windows=kwin,
+        kurtosis_upper=kup, reference_average=ref_avg, messages=tuple(dedupe(messages)))
+
+
+def dedupe(items):
+    """Items in order, each once."""
+    seen: set = set()
+    return [x for x in items if not (x in seen or seen.add(x))]

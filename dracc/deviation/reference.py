@@ -1,0 +1,60 @@
+"""Validation against a reference: the paper's Table 1 and its marks.
+
+Where a reference exists (GNSS, or a berth), each unit's true error is measurable at
+the sampling instants, x_ji = y_ji - y_ref,i, and so is the empirical factor
+
+    k* = m_x / m_u,   both RMS by (K3b) over the same instants
+
+which the paper tabulates day by day (Table 1) with two marks:
+
+- ``+`` where k* <= k (using k the limiting error is not understated), ``-`` otherwise;
+- ``<``, ``>``, ``=`` comparing the kurtosis of the deviations with that of the errors:
+  ``<`` where E_dev < E_err (the limiting error from the deviations is understated),
+  ``>`` where E_dev > E_err, ``=`` where they agree to ``tol``.
+
+The last row of Table 1 averages over days: see :func:`dracc.deviation.stats.weighted_rms`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..geodesy import angdiff, k_lambda, k_phi
+
+
+def position_errors_m(lat_rad, lon_rad, ref_lat_rad, ref_lon_rad):
+    """North and east errors in metres of positions against the reference position.
+
+    x_north = (phi - phi_ref) / k_phi(phi_ref)          (B18)
+    x_east  = (lam - lam_ref) / k_lambda(phi_ref)       (B19), difference on the circle
+    Broadcasts (units along a leading axis against a reference of shape (n,)).
+    """
+    ref_lat = np.asarray(ref_lat_rad, dtype=float)
+    north = (np.asarray(lat_rad, dtype=float) - ref_lat) / k_phi(ref_lat)  # (B18)
+    east = angdiff(lon_rad, ref_lon_rad) / k_lambda(ref_lat)  # (B19)
+    return north, east
+
+
+def course_errors_rad(heading_rad, ref_heading_rad):
+    """Heading errors against the reference heading, on the circle, in (-pi, pi]."""
+    return angdiff(heading_rad, ref_heading_rad)
+
+
+def k_star_mark(k_star, k):
+    """Table 1 mark: '+' where k* <= k, '-' where k* > k, '' where k* is NaN."""
+    if np.isnan(k_star):
+        return ""
+    return "+" if k_star <= k else "-"
+
+
+def kurtosis_mark(kurtosis_error, kurtosis_deviation, tol: float = 0.05):
+    """Table 1 mark for the kurtosis of deviations against that of errors:
+    '<' where E_dev < E_err - tol, '>' where E_dev > E_err + tol, '=' otherwise,
+    '' where either is NaN."""
+    if np.isnan(kurtosis_error) or np.isnan(kurtosis_deviation):
+        return ""
+    if kurtosis_deviation < kurtosis_error - tol:
+        return "<"
+    if kurtosis_deviation > kurtosis_error + tol:
+        return ">"
+    return "="

@@ -1,0 +1,262 @@
+"""The paper's statistics (K1)-(K8) over deviations from the mean of three INS.
+
+Pure functions over numpy arrays, no I/O.  Equation labels ``(Kn)`` refer to the
+INS-deviation paper (Boykov, Mikhalskiy, Ivantsov; ``seeds/001``) as restated in
+``METHODS.md`` section 4.
+
+Glossary
+--------
+``y``      readings of the units at the sampling instants, shape (J, n) (J units)
+``u``      deviations from the mean of the units, same shape (K1a)
+``m_u``    RMS of the deviations with the (n - 1.45) denominator (K3b)
+``m_y``    RMS error estimate ``k * m_u`` (K5a, K5b)
+``E``      *excess* kurtosis (normal = 0) of the deviations (K6)
+``R, r``   latitude/longitude covariance and correlation of the deviations (K7)
+``K_PIE``  conversion from RMS to the limiting error at probability P for a symmetric
+           distribution of excess kurtosis E (K8)
+``K_hm``   upper confidence factor of an RMS estimated from few independent samples (K8)
+
+Missing values are NaN and are ignored by every statistic (``n`` counts the valid
+ones); nothing is filled.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import stats as sps
+
+from ..geodesy import angdiff, circmean, k_lambda, k_phi
+
+#: (K3b) the paper's Student-corrected number of deviations is n - 1.45
+N_CORRECTION = 1.45
+#: (K5a) first approximation, independent equal errors of three units: sqrt(1/(1 - 1/3))
+K_FIRST_APPROX_THREE = math.sqrt(3.0 / 2.0)
+#: two units: u = (y1 - y2)/2 has variance sigma^2/2 for equal independent errors
+K_FIRST_APPROX_TWO = math.sqrt(2.0)
+#: (K5b) the paper's second approximation (latitude), and its empirical longitude/course factor
+K_SECOND_APPROX = 1.32
+K_EMPIRICAL_LON = 1.49
+#: lowest excess kurtosis of any distribution (the symmetric two-point law)
+KURTOSIS_MIN = -2.0
+
+
+# ----------------------------------------------------------------- deviations (K1)
+
+
+def deviations_linear(y):
+    """Deviations from the mean of the units for a linear channel.
+
+    ``y`` has shape (J, ...) with the units along axis 0; instants where any unit is
+    NaN give NaN deviations for every unit (the mean of three needs all three).
+
+    y*_i = (1/J) sum_j y_ji                                  (K1b)
+    u_ji = y_ji - y*_i                                       (K1a)
+    """
+    y = np.asarray(y, dtype=float)
+    mean = np.mean(y, axis=0)  # (K1b); NaN propagates: incomplete instants stay NaN
+    return y - mean  # (K1a)
+
+
+def deviations_position_m(lat_rad, lon_rad):
+    """North and east deviations in metres of each unit's position from the mean position.
+
+    ``lat_rad``, ``lon_rad``: shape (J, n).  The mean latitude is the arithmetic mean;
+    the mean longitude is taken through :func:`angdiff` relative to the first unit, so
+    the antimeridian does no harm.  Radians become metres with the radii of curvature at
+    the mean latitude:
+
+    phi*_i = (1/J) sum_j phi_ji,  lam*_i likewise on the circle   (K1b)
+    u_north_ji = (phi_ji - phi*_i) / k_phi(phi*_i)                (K1a), (B18)
+    u_east_ji  = (lam_ji - lam*_i) / k_lambda(phi*_i)             (K1a), (B19)
+
+    Returns (north_m, east_m, lat_mean_rad); NaN where any unit is missing.
+    """
+    lat = np.asarray(lat_rad, dtype=float)
+    lon = np.asarray(lon_rad, dtype=float)
+    lat_mean = np.mean(lat, axis=0)  # (K1b)
+    dlon = angdiff(lon, lon[0])
+    lon_mean = lon[0] + np.mean(dlon, axis=0)  # (K1b) on the circle
+    north_m = (lat - lat_mean) / k_phi(lat_mean)  # (K1a), (B18)
+    east_m = angdiff(lon, lon_mean) / k_lambda(lat_mean)  # (K1a), (B19)
+    return north_m, east_m, lat_mean
+
+
+def deviations_course_rad(heading_rad):
+    """Course deviations on the circle: u_ji = angdiff(y_ji, circmean_j y_ji)  (K1a, K1b).
+
+    ``heading_rad``: shape (J, n); an instant with any unit missing gives NaN for all.
+    """
+    h = np.asarray(heading_rad, dtype=float)
+    complete = ~np.any(np.isnan(h), axis=0)
+    mean = np.where(complete, circmean(h, axis=0), np.nan)  # (K1b) on the circle
+    return np.where(complete, angdiff(h, mean), np.nan)  # (K1a)
+
+
+# ------------------------------------------------------------------- (K3b)-(K7)
+
+
+def count_valid(u, axis=-1):
+    """Number of non-NaN values along ``axis``."""
+    return np.sum(~np.isnan(np.asarray(u, dtype=float)), axis=axis)
+
+
+def rms_k3b(u, axis=-1):
+    """RMS with the paper's denominator: m = sqrt( sum u^2 / (n - 1.45) )   (K3b).
+
+    NaNs ignored; NaN where n < 2 (the denominator must stay positive).
+    """
+    u = np.asarray(u, dtype=float)
+    n = count_valid(u, axis)
+    s2 = np.nansum(u * u, axis=axis)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        m = np.sqrt(s2 / (n - N_CORRECTION))  # (K3b)
+    return np.where(n >= 2, m, np.nan)
+
+
+def rms_plain(x, axis=-1):
+    """Plain RMS sqrt( sum x^2 / n ), NaNs ignored; NaN where n = 0."""
+    x = np.asarray(x, dtype=float)
+    n = count_valid(x, axis)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(n > 0, np.sqrt(np.nansum(x * x, axis=axis) / n), np.nan)
+
+
+def excess_kurtosis_k6(u, axis=-1):
+    """Excess kurtosis of deviations, with the (K3b) RMS in the denominator  (K6).
+
+    E = (1/n) sum u^4 / m_u^4 - 3,   m_u^2 = sum u^2 / (n - 1.45)
+
+    0 for a normal law; it can fall slightly below -2 for small n because of the
+    (n - 1.45) denominator.  NaN where n < 4.
+    """
+    u = np.asarray(u, dtype=float)
+    n = count_valid(u, axis)
+    m = rms_k3b(u, axis)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        e = np.nansum(u**4, axis=axis) / n / m**4 - 3.0  # (K6)
+    return np.where(n >= 4, e, np.nan)
+
+
+def lat_lon_covariance(u_lat, u_lon, axis=-1):
+    """Covariance and correlation of latitude and longitude deviations  (K7).
+
+    R = (1/n) sum u_lat,i u_lon,i               (K7a)
+    r = R / (m_lat m_lon), m from (K3b)         (K7b)
+
+    Only instants where both channels are valid count.  Returns (R, r); NaN where
+    n < 2 or an RMS is zero.
+    """
+    a = np.asarray(u_lat, dtype=float)
+    b = np.asarray(u_lon, dtype=float)
+    both = ~(np.isnan(a) | np.isnan(b))
+    a = np.where(both, a, np.nan)
+    b = np.where(both, b, np.nan)
+    n = np.sum(both, axis=axis)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cov = np.nansum(a * b, axis=axis) / n  # (K7a)
+        r = cov / (rms_k3b(a, axis) * rms_k3b(b, axis))  # (K7b)
+    return np.where(n >= 2, cov, np.nan), np.where(n >= 2, r, np.nan)
+
+
+# --------------------------------------------------------------------------- (K8)
+
+
+def k_pie(probability, kurtosis):
+    """K_PIE(P, E): two-sided quantile at probability P of a unit-variance symmetric law
+    with excess kurtosis E  (K8).
+
+    The paper ties the conversion to the law's kurtosis but names no family; dracc uses
+    one continuous family spanning every possible kurtosis:
+
+    - E > 0: Student's t with nu = 4 + 6/E degrees of freedom (excess kurtosis 6/(nu-4)),
+      scaled to unit variance by sqrt((nu-2)/nu);
+    - E = 0: the normal law (K_PIE(0.95, 0) = 1.95996);
+    - -2 < E < 0: the symmetric beta law on [-1, 1], X = 2B - 1 with B ~ Beta(a, a),
+      a = (-6/E - 3)/2 (excess kurtosis -6/(2a + 3)), scaled by sqrt(2a + 1).  a = 1 is the
+      uniform law (E = -1.2, K_PIE(0.95) = 0.95 sqrt 3), a -> 0 the two-point law (K -> 1).
+
+    Both branches tend to the normal law as E -> 0.  E <= -2 is no distribution's
+    kurtosis: NaN is returned (the caller reports it).  Broadcasts.
+    """
+    p = np.asarray(probability, dtype=float)
+    e = np.asarray(kurtosis, dtype=float)
+    p, e = np.broadcast_arrays(p, e)
+    q = (1.0 + p) / 2.0  # two-sided: P(|X| <= K) = P
+    out = np.full(e.shape, np.nan)
+    pos = e > 0
+    zero = e == 0
+    neg = (e < 0) & (e > KURTOSIS_MIN)
+    if np.any(pos):
+        nu = 4.0 + 6.0 / e[pos]
+        out[pos] = sps.t.ppf(q[pos], nu) * np.sqrt((nu - 2.0) / nu)
+    if np.any(zero):
+        out[zero] = sps.norm.ppf(q[zero])
+    if np.any(neg):
+        a = (-6.0 / e[neg] - 3.0) / 2.0
+        out[neg] = (2.0 * sps.beta.ppf(q[neg], a, a) - 1.0) * np.sqrt(2.0 * a + 1.0)
+    return out if out.ndim else float(out)
+
+
+def effective_samples(n, interval_s, correlation_time_s):
+    """Effective number of independent samples among n taken every ``interval_s``.
+
+    INS errors are correlated over 4-6 h (the paper's conclusions), so samples closer
+    than the correlation time are not independent:  N_eff = min(n, n * dt / tau).
+    The paper's eight days at 1 h with tau = 4.8 h give N_eff = 40, its figure.
+    """
+    n = np.asarray(n, dtype=float)
+    if correlation_time_s <= 0:
+        return n
+    return np.minimum(n, n * interval_s / correlation_time_s)
+
+
+def k_hm(confidence, n_eff):
+    """K_hm: upper confidence factor of an RMS estimated from N_eff independent samples (K8).
+
+    With m^2 ~ sigma^2 chi^2(N_eff) / N_eff, the one-sided upper bound of sigma at
+    ``confidence`` is  sigma <= m sqrt( N_eff / chi2_{1-confidence}(N_eff) ),  so
+    K_hm = sqrt( N_eff / chi2.ppf(1 - confidence, N_eff) ).
+    N_eff need not be an integer; NaN where N_eff <= 0.
+    """
+    nu = np.asarray(n_eff, dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = np.where(nu > 0, np.sqrt(nu / sps.chi2.ppf(1.0 - confidence, np.where(nu > 0, nu, 1.0))),
+                       np.nan)
+    return out if out.ndim else float(out)
+
+
+def limiting_error(m_y, probability, kurtosis, confidence, n_eff):
+    """Limiting error y^(P) = K_PIE(P, E) * K_hm * m_y   (K8).
+
+    Returns (limit, k_pie, k_hm), each NaN where its input does not allow it.
+    """
+    kp = k_pie(probability, kurtosis)
+    kh = k_hm(confidence, n_eff)
+    return kp * kh * np.asarray(m_y, dtype=float), kp, kh  # (K8)
+
+
+# ------------------------------------------------------------ windows and averages
+
+
+def weighted_rms(rms, n):
+    """Weighted average of RMS values over windows (the last row of the paper's Table 1):
+
+    m_w = sqrt( sum_d n_d m_d^2 / sum_d n_d )
+
+    The paper does not state its weights; dracc weighs each day by its number of
+    samples, which makes m_w the RMS over all the days together.  NaN entries are skipped.
+    """
+    m = np.asarray(rms, dtype=float)
+    w = np.asarray(n, dtype=float)
+    ok = ~np.isnan(m) & (w > 0)
+    if not np.any(ok):
+        return math.nan
+    return float(np.sqrt(np.sum(w[ok] * m[ok] ** 2) / np.sum(w[ok])))
+
+
+def window_index(time_ns, window_s, origin_ns):
+    """Index of the window [origin + k W, origin + (k+1) W) holding each instant."""
+    w_ns = int(round(window_s * 1e9))
+    return (np.asarray(time_ns, dtype=np.int64) - np.int64(origin_ns)) // w_ns
