@@ -317,7 +317,8 @@ def ins_errors(p: InsErrorParams, t_s: np.ndarray, dt_s: float, rng: np.random.G
     """One INS unit's errors (north_m, east_m, heading_rad, vn_mps, ve_mps) at times ``t_s``.
 
     The velocity errors are the time derivative of the smooth part of the position error
-    (oscillations, drift, Gauss-Markov), as an INS's velocity and position errors are tied.
+    (oscillations, drift, the GM's mean reversion), as an INS's velocity and position
+    errors are tied.
     """
     n = len(t_s)
     ph = rng.uniform(0.0, 2 * np.pi, 6)
@@ -335,11 +336,13 @@ def ins_errors(p: InsErrorParams, t_s: np.ndarray, dt_s: float, rng: np.random.G
     heading = DEG_RAD * (p.heading_bias_deg + p.heading_schuler_deg * np.sin(ws * t_s + ph[4])
                          + p.heading_day_deg * np.sin(wd * t_s + ph[5]) + hb
                          + p.heading_white_deg * rng.standard_normal(n))
-    if n > 1:
-        vn = np.gradient(smooth_n, dt_s)
-        ve = np.gradient(smooth_e, dt_s)
-    else:
-        vn = ve = np.zeros(n)
+    # d/dt of the oscillations and the drift, and the mean-reverting part -x/tau of the GM
+    # (its white driving term is not a velocity an INS would show)
+    gm_rate = 0.0 if not np.isfinite(p.gm_m.tau_s) or p.gm_m.tau_s == 0 else 1.0 / p.gm_m.tau_s
+    vn = (p.schuler_n_m * ws * np.cos(ws * t_s + ph[0]) + p.day_n_m * wd * np.cos(wd * t_s + ph[1])
+          + p.drift_n_mps - gm_rate * gm_n)
+    ve = (p.schuler_e_m * ws * np.cos(ws * t_s + ph[2]) + p.day_e_m * wd * np.cos(wd * t_s + ph[3])
+          + p.drift_e_mps - gm_rate * gm_e)
     return north, east, heading, vn, ve
 
 
