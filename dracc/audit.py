@@ -252,13 +252,15 @@ class NightFacts:
 
 
 def _sources_by_role(sources) -> dict[str, str]:
-    """role -> source key, from either ``{role: {key, records}}`` / ``{role: key}`` or a list of
-    ``{key, roles|role, records}`` rows."""
+    """role -> source key(s), from ``{role: {"keys": [...], "records": n}}`` (dracc.analysis/1);
+    ``{role: key}`` and lists of ``{key, roles}`` rows are read too."""
     out: dict[str, str] = {}
     if isinstance(sources, Mapping):
         for role, v in sources.items():
-            if isinstance(v, Mapping):
-                out[str(role)] = str(v.get("key", v.get("source", "")))
+            if isinstance(v, Mapping) and isinstance(v.get("keys"), list):
+                out[str(role)] = ",".join(str(k) for k in v["keys"])
+            elif isinstance(v, Mapping):
+                out[str(role)] = str(v.get("key", ""))
             else:
                 out[str(role)] = str(v)
     elif isinstance(sources, list):

@@ -1,4 +1,4 @@
-"""Helper for the audit tests: analysis documents (schema dracc.analysis/1, issue 5 keys) built by hand for audit tests."""
+"""Helper for the audit tests: analysis documents (dracc.analysis/1 keys) built by hand."""
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ def make_doc(night: str = "2026-11-20", m_y: dict | None = None, *, limit_factor
         "schema": "dracc.analysis/1",
         "inputs": [{"path": f"/logs/{night}.nmea", "format": "nmea", "lines": lines,
                     "records": lines - rejected, "rejected": {"checksum": rejected}}],
-        "sources": {r: {"key": r.upper(), "records": 100} for r in roles},
+        "sources": {r: {"keys": [r.upper()], "records": 100} for r in roles},
         "period": {"start_utc": f"{night}T00:00:00Z", "end_utc": f"{night}T23:59:59Z"},
         "deviation": {"interval_s": 3600.0, "factors": k, "units": units},
         "dead_reckoning": {"containment_2m": containment, "n_scored": 120},

@@ -1,0 +1,500 @@
+"""Batch fleet reports: many vessels' logs analysed in parallel, resumable.
+
+Each log file is one task.  Workers run :func:`analyse_log` (the pipeline plus the JSON
+serialiser) and send back a small summary of the analysis document (no samples, no DR
+epochs).  The parent caches every summary under ``OUT/cache/`` keyed by the SHA-256 of
+the log's bytes and of the analysis settings (written atomically), so a re-run skips
+what was done unless ``force``; a failing log becomes a row with ``status='failed'`` and
+an entry in ``failures``, never the end of the batch.
+
+Engines: a local :class:`concurrent.futures.ProcessPoolExecutor` (``workers``), or an
+existing Dask distributed scheduler (``scheduler='tcp://host:port'``, through
+:class:`distributed.Client`).  The workers must see the log paths (a shared disk).
+
+The fleet table has one row per log, unit and channel (a log without INS statistics has
+one row with empty unit and channel).  The a priori verdict applies the monitoring rule
+(:func:`dracc.audit.apriori_chain`) per vessel, unit and channel in time order, seeded
+with ``[deviation.apriori]``.  The per-day trend pools the RMS of the day's logs::
+
+    m_y,day = sqrt( sum_i n_i m_y,i^2 / sum_i n_i )        (pooled RMS, weights n_i)
+"""
+
+from __future__ import annotations
+
+import glob
+import hashlib
+import json
+import math
+import os
+import unicodedata
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from . import __version__, atomic
+from .audit import (
+    CHANNELS,
+    apriori_chain,
+    apriori_seeds,
+    facts_from_analysis,
+    file_sha256,
+    settings_sha256,
+)
+from .config import Config
+from .errors import ConfigError, DraccError, IngestError
+
+CACHE_SCHEMA = "dracc.fleet.cache/1"
+
+#: columns of the fleet table, in order (units in the names or in ``measure``)
+TABLE_COLUMNS = (
+    "vessel", "log", "sha256", "status", "error", "period_start_utc", "period_end_utc", "day",
+    "unit", "channel", "measure", "n", "m_u", "m_y", "kurtosis", "limit", "apriori_before",
+    "apriori_after", "apriori_verdict", "dr_containment_2m", "dr_n_scored", "dr_consistent",
+    "compass_error_deg", "compass_error_sigma_deg", "log_scale_pct", "log_scale_sigma_pct",
+    "rejected_rate_pct", "lines",
+)
+TREND_COLUMNS = ("vessel", "day", "unit", "channel", "measure", "logs", "n", "m_y", "apriori_after",
+                 "dr_containment_2m")
+
+
+class FleetError(DraccError):
+    """The batch cannot run (no logs found, scheduler unreachable, output unusable)."""
+
+
+# ------------------------------------------------------------------------ config
+
+
+@dataclass(frozen=True)
+class FleetConfig:
+    """The ``[fleet]`` table."""
+
+    workers: int | None = None  #: local processes (default: the machine's CPU count)
+    pattern: str = "**/*"  #: glob for log files inside a vessel folder (hidden files skipped)
+    out: str | None = None  #: output folder (default "fleet-report")
+    scheduler: str | None = None  #: Dask scheduler address, e.g. "tcp://10.0.0.5:8786"
+    connect_timeout_s: float = 30.0  #: how long to wait for the Dask scheduler
+
+
+def fleet_config(cfg: Config) -> FleetConfig:
+    """Validate ``cfg.extra['fleet']`` into a :class:`FleetConfig`."""
+    table = cfg.extra.get("fleet", {})
+    if not isinstance(table, dict):
+        raise ConfigError(f"[fleet] must be a table, got {type(table).__name__}")
+    known = list(asdict(FleetConfig()))
+    unknown = set(table) - set(known)
+    if unknown:
+        raise ConfigError(f"[fleet] unknown key(s): {', '.join(sorted(unknown))}; "
+                          f"known: {', '.join(sorted(known))}")
+    kw: dict = {}
+    if "workers" in table:
+        w = table["workers"]
+        if isinstance(w, bool) or not isinstance(w, int) or w < 1:
+            raise ConfigError(f"[fleet] workers must be a positive integer, got {w!r}")
+        kw["workers"] = w
+    for key in ("pattern", "out", "scheduler"):
+        if key in table:
+            if not isinstance(table[key], str) or not table[key].strip():
+                raise ConfigError(f"[fleet] {key} must be a non-empty string, got {table[key]!r}")
+            kw[key] = table[key]
+    if "connect_timeout_s" in table:
+        v = table["connect_timeout_s"]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+            raise ConfigError(f"[fleet] connect_timeout_s must be a positive number, got {v!r}")
+        kw["connect_timeout_s"] = float(v)
+    return FleetConfig(**kw)
+
+
+# ------------------------------------------------------------------ names and paths
+
+
+_UNSAFE = set('/\\:*?"<>|')
+_RESERVED = {"CON", "PRN", "AUX", "NUL"} | {f"COM{i}" for i in range(1, 10)} | {
+    f"LPT{i}" for i in range(1, 10)}
+
+
+def safe_name(name: str, max_len: int = 100) -> str:
+    """A single path component for ``name``: separators and control characters become
+    ``_``, leading/trailing dots and spaces go, Unicode letters stay (NFC).  When the
+    result differs from ``name``, a short hash of ``name`` is appended so that two
+    different names never share a folder."""
+    nfc = unicodedata.normalize("NFC", name)
+    s = "".join("_" if (c in _UNSAFE or unicodedata.category(c).startswith("C")) else c for c in nfc)
+    s = s.strip(" .")[:max_len]
+    if not s or s.split(".")[0].upper() in _RESERVED:
+        s = "_" + s
+    if s != name:
+        s = f"{s}-{hashlib.sha256(name.encode('utf-8', 'surrogatepass')).hexdigest()[:8]}"
+    return s
+
+
+def inside(root: Path, *parts: str) -> Path:
+    """``root/part/...`` after :func:`safe_name` on each part, checked to stay inside ``root``."""
+    base = root.resolve()
+    p = base.joinpath(*(safe_name(x) for x in parts)).resolve()
+    if p != base and base not in p.parents:
+        raise FleetError(f"output path {p} would escape {base}")
+    return p
+
+
+# --------------------------------------------------------------------- the tasks
+
+
+@dataclass(frozen=True)
+class LogTask:
+    """One log file of one vessel."""
+
+    vessel: str
+    path: str  #: absolute
+    log: str  #: as shown in tables: path relative to the vessel folder (or the file name)
+    sha256: str
+
+
+_GLOB_CHARS = set("*?[")
+
+
+def _expand(item: str) -> list[Path]:
+    p = Path(item)
+    if p.exists():
+        return [p]
+    if _GLOB_CHARS & set(item):
+        return [Path(x) for x in sorted(glob.glob(item, recursive=True))]
+    raise IngestError(f"{item}: no such file or folder")
+
+
+def discover(inputs: Iterable[str | Path], pattern: str = "**/*") -> list[LogTask]:
+    """The tasks for ``inputs``: a folder is one vessel (its name), holding log files
+    matching ``pattern``; a file (or a glob's files) belongs to the vessel named by its
+    parent folder.  Hidden files and folders are skipped; a file listed twice counts once."""
+    tasks: dict[str, LogTask] = {}
+    for item in inputs:
+        matches = _expand(str(item))
+        if not matches:
+            raise IngestError(f"{item}: the pattern matches nothing")
+        for m in matches:
+            if m.is_dir():
+                vessel = m.resolve().name
+                found = [f for f in sorted(m.glob(pattern))
+                         if f.is_file() and not any(x.startswith(".") for x in f.relative_to(m).parts)]
+                for f in found:
+                    r = str(f.resolve())
+                    tasks.setdefault(r, LogTask(vessel, r, f.relative_to(m).as_posix(), file_sha256(f)))
+            elif m.is_file():
+                r = str(m.resolve())
+                tasks.setdefault(r, LogTask(m.resolve().parent.name, r, m.name, file_sha256(m)))
+    if not tasks:
+        raise IngestError("no log files found in the inputs")
+    return sorted(tasks.values(), key=lambda t: (t.vessel, t.log, t.path))
+
+
+# ------------------------------------------------------------------- the workers
+
+
+def summarise(doc: Mapping) -> dict:
+    """The part of an analysis document the fleet keeps (small: no samples, no epochs)."""
+    facts = facts_from_analysis(doc)
+    dr = doc.get("dead_reckoning") or {}
+    return {
+        "schema": doc.get("schema"),
+        "period": {"start_utc": facts.period_start_utc, "end_utc": facts.period_end_utc},
+        "lines": facts.lines, "rejected": facts.rejected,
+        "sources": facts.sources,
+        "channels": [asdict(c) for c in facts.channels],
+        "dr": {"containment_2m": facts.dr_containment_2m, "n_scored": facts.dr_n_scored,
+               "consistent": dr.get("consistent")},
+        "calibration": {"compass_error_deg": facts.compass_error_deg,
+                        "compass_error_sigma_deg": facts.compass_error_sigma_deg,
+                        "log_scale": facts.log_scale, "log_scale_sigma": facts.log_scale_sigma},
+        "missing": list(facts.missing),
+    }
+
+
+def analyse_log(path: str, cfg: Config) -> dict:
+    """Worker: analyse one log; ``{"ok": True, "summary": …}`` or ``{"ok": False, "error": …}``.
+
+    Never raises for a bad log: the batch goes on.
+    """
+    from .audit import analysis_document
+
+    try:
+        return {"ok": True, "summary": summarise(analysis_document([Path(path)], cfg))}
+    except DraccError as err:
+        return {"ok": False, "error": str(err)}
+    except Exception as err:  # a dracc bug on one log must not stop the fleet
+        return {"ok": False, "error": f"internal error ({type(err).__name__}: {err})"}
+
+
+# ------------------------------------------------------------------- the batch
+
+
+@dataclass(frozen=True)
+class FleetResult:
+    """The fleet table, the per-day trends, and what happened to each log."""
+
+    table: pd.DataFrame
+    trends: pd.DataFrame
+    failures: tuple[dict, ...]  #: {"vessel", "log", "path", "error"}
+    analysed: int  #: logs analysed in this run
+    cached: int  #: logs taken from the cache
+
+
+def cache_path(out: Path, task: LogTask, settings: str) -> Path:
+    return out / "cache" / task.sha256[:2] / f"{task.sha256}-{settings[:16]}.json"
+
+
+def _read_cache(p: Path) -> dict | None:
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None  # absent or unreadable: analysed again (and rewritten)
+    if doc.get("schema") != CACHE_SCHEMA or not isinstance(doc.get("summary"), dict):
+        return None
+    return doc["summary"]
+
+
+def run_fleet(tasks: Sequence[LogTask], cfg: Config, out: Path, *, workers: int | None = None,
+              scheduler: str | None = None, force: bool = False, connect_timeout_s: float = 30.0,
+              progress: Callable[[int], None] | None = None,
+              analyser: Callable[[str, Config], dict] = analyse_log) -> FleetResult:
+    """Analyse every task (or take it from the cache) and build the fleet tables.
+
+    ``analyser`` must be a picklable module-level function (tests replace it).
+    """
+    out = Path(out)
+    settings = settings_sha256(cfg)
+    seeds = apriori_seeds(cfg)
+    summaries: dict[str, dict] = {}
+    failures: dict[str, str] = {}
+    todo: list[LogTask] = []
+    for t in tasks:
+        s = None if force else _read_cache(cache_path(out, t, settings))
+        if s is None:
+            todo.append(t)
+        else:
+            summaries[t.path] = s
+            if progress:
+                progress(1)
+    cached = len(summaries)
+
+    def done(task: LogTask, result: dict) -> None:
+        if result.get("ok"):
+            summaries[task.path] = result["summary"]
+            atomic.write_text(cache_path(out, task, settings), json.dumps(
+                {"schema": CACHE_SCHEMA, "dracc_version": __version__, "sha256": task.sha256,
+                 "settings_sha256": settings, "vessel": task.vessel, "log": task.log,
+                 "summary": result["summary"]}, ensure_ascii=False, allow_nan=False))
+        else:
+            failures[task.path] = str(result.get("error"))
+        if progress:
+            progress(1)
+
+    if todo:
+        if scheduler:
+            _run_dask(todo, cfg, scheduler, connect_timeout_s, analyser, done)
+        else:
+            _run_local(todo, cfg, workers or os.cpu_count() or 1, analyser, done)
+    table = fleet_table(tasks, summaries, failures, seeds)
+    failed = tuple({"vessel": t.vessel, "log": t.log, "path": t.path, "error": failures[t.path]}
+                   for t in tasks if t.path in failures)
+    return FleetResult(table, fleet_trends(table), failed, len(todo), cached)
+
+
+def _run_local(todo, cfg, workers, analyser, done) -> None:
+    with ProcessPoolExecutor(max_workers=max(1, min(workers, len(todo)))) as pool:
+        pending = {pool.submit(analyser, t.path, cfg): t for t in todo}
+        try:
+            while pending:
+                finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in finished:
+                    task = pending.pop(fut)
+                    try:
+                        result = fut.result()
+                    except BrokenProcessPool as err:
+                        result = {"ok": False, "error": f"worker process died ({err})"}
+                    done(task, result)
+        except BaseException:
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+
+
+def _run_dask(todo, cfg, scheduler, timeout_s, analyser, done) -> None:
+    try:
+        from distributed import Client, as_completed
+    except ImportError as err:
+        raise FleetError("--scheduler needs Dask distributed: pip install 'dracc[dask]'") from err
+    try:
+        client = Client(scheduler, timeout=timeout_s, set_as_default=False)
+    except (OSError, TimeoutError) as err:
+        raise FleetError(f"cannot reach the Dask scheduler at {scheduler}: {err}") from err
+    try:
+        try:
+            client.wait_for_workers(1, timeout=timeout_s)
+        except TimeoutError as err:
+            raise FleetError(f"the Dask scheduler at {scheduler} has no workers "
+                             f"(waited {timeout_s:g} s)") from err
+        futures = client.map(analyser, [t.path for t in todo], cfg=cfg, pure=False)
+        by_key = {f.key: t for f, t in zip(futures, todo, strict=True)}
+        for fut in as_completed(futures):
+            task = by_key[fut.key]
+            try:
+                result = fut.result()
+            except Exception as err:  # a worker lost or killed: that log failed, the batch goes on
+                result = {"ok": False, "error": f"dask task failed ({type(err).__name__}: {err})"}
+            done(task, result)
+    finally:
+        client.close()
+
+
+# ------------------------------------------------------------------- the tables
+
+
+def _day(start: str | None, end: str | None) -> str | None:
+    if not start or not end:
+        return None
+    t0 = pd.Timestamp(start)
+    t1 = pd.Timestamp(end)
+    return (t0 + (t1 - t0) / 2).date().isoformat()
+
+
+def _pct(x):
+    return None if x is None else 100.0 * x
+
+
+def fleet_table(tasks: Sequence[LogTask], summaries: Mapping[str, dict], failures: Mapping[str, str],
+                seeds: Mapping[tuple[str, str], float]) -> pd.DataFrame:
+    """One row per log, unit and channel, sorted by vessel, time, log, unit, channel."""
+    rows: list[dict] = []
+    for t in tasks:
+        base = {"vessel": t.vessel, "log": t.log, "sha256": t.sha256}
+        if t.path in failures:
+            rows.append({**base, "status": "failed", "error": failures[t.path]})
+            continue
+        s = summaries.get(t.path)
+        if s is None:
+            continue
+        per = s["period"]
+        cal = s["calibration"]
+        rate = (s["rejected"] / s["lines"]) if s.get("lines") else None
+        common = {**base, "status": "ok", "error": None, "period_start_utc": per["start_utc"],
+                  "period_end_utc": per["end_utc"], "day": _day(per["start_utc"], per["end_utc"]),
+                  "dr_containment_2m": s["dr"]["containment_2m"], "dr_n_scored": s["dr"]["n_scored"],
+                  "dr_consistent": s["dr"]["consistent"],
+                  "compass_error_deg": cal["compass_error_deg"],
+                  "compass_error_sigma_deg": cal["compass_error_sigma_deg"],
+                  "log_scale_pct": _pct(cal["log_scale"]),
+                  "log_scale_sigma_pct": _pct(cal["log_scale_sigma"]),
+                  "rejected_rate_pct": _pct(rate), "lines": s.get("lines")}
+        if not s["channels"]:
+            rows.append(common)
+        for c in s["channels"]:
+            rows.append({**common, "unit": c["unit"], "channel": c["channel"],
+                         "measure": {"lat": "m", "lon": "m", "course": "deg"}.get(c["channel"]),
+                         "n": c["n"], "m_u": c["m_u"], "m_y": c["m_y"], "kurtosis": c["kurtosis"],
+                         "limit": c["limit_error"]})
+    df = pd.DataFrame(rows, columns=list(TABLE_COLUMNS))
+    df = _typed(df)
+    df = df.sort_values(["vessel", "period_start_utc", "log", "unit", "channel"],
+                        na_position="last", kind="mergesort").reset_index(drop=True)
+    _apply_rule(df, seeds)
+    return df
+
+
+def _typed(df: pd.DataFrame) -> pd.DataFrame:
+    floats = ["m_u", "m_y", "kurtosis", "limit", "apriori_before", "apriori_after",
+              "dr_containment_2m", "compass_error_deg", "compass_error_sigma_deg", "log_scale_pct",
+              "log_scale_sigma_pct", "rejected_rate_pct"]
+    ints = ["n", "dr_n_scored", "lines"]
+    strings = [c for c in TABLE_COLUMNS if c not in floats + ints + ["dr_consistent"]]
+    for c in floats:
+        df[c] = pd.to_numeric(df[c], errors="coerce").astype("float64")
+    for c in ints:
+        df[c] = pd.to_numeric(df[c], errors="coerce").astype("Int64")
+    for c in strings:
+        df[c] = df[c].astype("string")
+    df["dr_consistent"] = df["dr_consistent"].astype("boolean")
+    return df
+
+
+def _apply_rule(df: pd.DataFrame, seeds: Mapping[tuple[str, str], float]) -> None:
+    """The monitoring rule per vessel, unit and channel, log after log in time order."""
+    ok = (df["status"] == "ok") & df["unit"].notna()
+    for (_vessel, unit, channel), idx in df[ok].groupby(["vessel", "unit", "channel"]).groups.items():
+        sub = df.loc[idx]
+        steps = apriori_chain(seeds.get((unit, channel)),
+                              [(str(lg), None if pd.isna(m) else float(m))
+                               for lg, m in zip(sub["log"], sub["m_y"], strict=True)])
+        df.loc[idx, "apriori_before"] = [np.nan if s.before is None else s.before for s in steps]
+        df.loc[idx, "apriori_after"] = [np.nan if s.after is None else s.after for s in steps]
+        df.loc[idx, "apriori_verdict"] = [s.verdict for s in steps]
+
+
+def fleet_trends(table: pd.DataFrame) -> pd.DataFrame:
+    """Per vessel, day, unit and channel: pooled RMS m_y (weights n), the a priori at the
+    day's end, and the DR containment pooled over scored epochs."""
+    ok = table[(table["status"] == "ok") & table["unit"].notna() & table["day"].notna()]
+    rows = []
+    for (vessel, day, unit, channel), g in ok.groupby(["vessel", "day", "unit", "channel"], sort=True):
+        n = g["n"].astype("float64").to_numpy()
+        m_y = g["m_y"].to_numpy(dtype="float64")
+        good = np.isfinite(m_y) & (n > 0)
+        pooled = math.sqrt(float(np.sum(n[good] * m_y[good] ** 2) / np.sum(n[good]))) if good.any() \
+            else math.nan  # pooled RMS, weights n_i
+        dr = g.drop_duplicates("log")
+        w = dr["dr_n_scored"].astype("float64").to_numpy()
+        c = dr["dr_containment_2m"].to_numpy(dtype="float64")
+        okc = np.isfinite(c) & np.isfinite(w) & (w > 0)
+        contain = float(np.sum(w[okc] * c[okc]) / np.sum(w[okc])) if okc.any() else math.nan
+        rows.append({"vessel": vessel, "day": day, "unit": unit, "channel": channel,
+                     "measure": g["measure"].iloc[0], "logs": int(g["log"].nunique()),
+                     "n": int(np.sum(n[good])), "m_y": pooled,
+                     "apriori_after": float(g["apriori_after"].iloc[-1]),
+                     "dr_containment_2m": contain})
+    df = pd.DataFrame(rows, columns=list(TREND_COLUMNS))
+    for c in ("vessel", "day", "unit", "channel", "measure"):
+        df[c] = df[c].astype("string")
+    for c in ("logs", "n"):
+        df[c] = df[c].astype("Int64")
+    for c in ("m_y", "apriori_after", "dr_containment_2m"):
+        df[c] = df[c].astype("float64")
+    return df
+
+
+def write_tables(result: FleetResult, out: Path) -> list[Path]:
+    """fleet.parquet/.csv, trends.parquet/.csv, failures in fleet.json, and per vessel
+    ``vessels/<safe name>/fleet.csv`` and ``trends.csv``; all written atomically."""
+    out = Path(out)
+    written = []
+
+    def put_df(df: pd.DataFrame, path: Path) -> None:
+        if path.suffix == ".parquet":
+            with atomic.atomic_path(path) as tmp:
+                df.to_parquet(tmp, index=False)
+        else:
+            atomic.write_text(path, df.to_csv(index=False))
+        written.append(path)
+
+    for name, df in (("fleet", result.table), ("trends", result.trends)):
+        put_df(df, inside(out, f"{name}.parquet"))
+        put_df(df, inside(out, f"{name}.csv"))
+    for vessel in sorted(result.table["vessel"].dropna().unique()):
+        put_df(result.table[result.table["vessel"] == vessel], inside(out, "vessels", vessel, "fleet.csv"))
+        put_df(result.trends[result.trends["vessel"] == vessel],
+               inside(out, "vessels", vessel, "trends.csv"))
+    summary = {"schema": "dracc.fleet/1", "dracc_version": __version__,
+               "logs": int(result.table["log"].nunique()) if len(result.table) else 0,
+               "vessels": sorted(result.table["vessel"].dropna().unique().tolist()),
+               "analysed": result.analysed, "cached": result.cached,
+               "failures": list(result.failures)}
+    p = inside(out, "fleet.json")
+    atomic.write_text(p, json.dumps(summary, indent=1, ensure_ascii=False) + "\n")
+    written.append(p)
+    return written
+
+
+__all__ = ["CHANNELS", "FleetConfig", "FleetError", "FleetResult", "LogTask", "analyse_log",
+           "discover", "fleet_config", "fleet_table", "fleet_trends", "inside", "run_fleet",
+           "safe_name", "summarise", "write_tables"]
