@@ -242,8 +242,10 @@ class BearingLOP:
             raise GeometryError("BearingLOP: the ship is on the mark; a bearing is undefined there")
         if self.observed_at == "ship":
             predicted = az_sm
-            # d(az ship->mark)/d(N, E) = (sin az, -cos az) / d
-            g = np.stack([np.sin(az_sm), -np.cos(az_sm)], axis=-1) / dist[..., None]
+            # d(az ship->mark)/d(N, E) = (sin az, -cos az) / d, plus the meridian
+            # convergence: moving east turns the ship's north by sin(phi) d(lambda)
+            conv = np.sin(np.asarray(lat_rad, float)) * k_lambda(np.asarray(lat_rad, float))
+            g = np.stack([np.sin(az_sm) / dist, -np.cos(az_sm) / dist + conv], axis=-1)
         else:
             _, predicted = range_azimuth(self.mark_lat_rad, self.mark_lon_rad, lat_rad, lon_rad)
             away = az_sm + np.pi  # direction from the mark through the ship, at the ship
@@ -256,8 +258,10 @@ class LineLOP:
     """A straight line of position through A and B (WGS-84).
 
     The ship lies ``offset_m`` to the right of the directed line A->B (negative: to the
-    left), with standard deviation ``sigma_m`` across the line.  The line is straight
-    in the local north/east plane at its midpoint (valid for lines of a few km).
+    left), with standard deviation ``sigma_m`` across the line.  The line is the section
+    of the ellipsoid by the plane through the Earth's centre, A and B (within a
+    millimetre of the geodesic for lines of a few km); the distance is measured from
+    that plane (equal to the distance on the surface within d^3/6R^2).
     """
 
     a_lat_rad: float
@@ -288,13 +292,15 @@ class LineLOP:
         return float(wrap_2pi(np.arctan2(e, n)))
 
     def linearise(self, lat_rad, lon_rad) -> Rows:
-        lat0, lon0 = self._mid()
-        an, ae = offset_ne_m(self.a_lat_rad, self.a_lon_rad, lat0, lon0)
-        sn, se = offset_ne_m(lat_rad, lon_rad, lat0, lon0)
-        alpha = self.azimuth_rad
-        right = np.array([-np.sin(alpha), np.cos(alpha)])  # right-hand normal of A->B
-        distance = (sn - an) * right[0] + (se - ae) * right[1]  # signed distance, right +
-        g = np.broadcast_to(right, np.shape(distance) + (2,))
+        # right-hand unit normal of the plane through the Earth's centre, A and B
+        normal = np.cross(ecef_m(self.b_lat_rad, self.b_lon_rad), ecef_m(self.a_lat_rad, self.a_lon_rad))
+        normal = normal / np.linalg.norm(normal)
+        distance = ecef_m(lat_rad, lon_rad) @ normal  # signed distance from the plane, right +
+        lat = np.asarray(lat_rad, float)
+        lon = np.asarray(lon_rad, float)
+        north = np.stack([-np.sin(lat) * np.cos(lon), -np.sin(lat) * np.sin(lon), np.cos(lat)], axis=-1)
+        east = np.stack([-np.sin(lon), np.cos(lon), np.zeros_like(lon)], axis=-1)
+        g = np.stack([north @ normal, east @ normal], axis=-1)
         return _rows(g, self.offset_m - distance, self.sigma_m**2, "line")
 
 
