@@ -160,7 +160,8 @@ class SimParams:
     aux_hz: float = 1.0
     compass: str = "gyro"
     # gyro compass (measured - true)
-    gyro_bias_deg: GM = GM(0.3, math.inf)
+    gyro_offset_deg: float = 0.3  #: constant gyro error (reads high +), known exactly
+    gyro_bias_deg: GM = GM(0.0, math.inf)  #: a further random bias, drawn from the seed
     gyro_noise_deg: GM = GM(0.1, 300.0)
     gyro_white_deg: float = 0.02
     rot_white_dpm: float = 0.5  #: white noise of the ROT sentence, deg/min
@@ -197,7 +198,7 @@ class SimParams:
         sentence reads the truth (to its written precision).  ``overrides`` apply last."""
         zero = GM(0.0, math.inf)
         base = dict(
-            gyro_bias_deg=zero, gyro_noise_deg=zero, gyro_white_deg=0.0, rot_white_dpm=0.0,
+            gyro_offset_deg=0.0, gyro_bias_deg=zero, gyro_noise_deg=zero, gyro_white_deg=0.0, rot_white_dpm=0.0,
             mag_noise_deg=zero, mag_white_deg=0.0, log_scale=0.0, log_bias_kn=0.0,
             log_noise_kn=zero, log_white_kn=0.0, leeway_deg=0.0, leeway_noise_deg=zero,
             current_drift_kn=0.0, current_noise_kn=zero, yaw_amp_deg=0.0,
@@ -482,6 +483,7 @@ def simulate(params: SimParams) -> SimVoyage:
 
     # ---- truth
     legs = p.legs if p.legs is not None else _generated_legs(p)
+    p = replace(p, legs=tuple((float(a), float(b)) for a, b in legs))  # explicit in the result
     psi_steer, rot_steer = _heading_profile(t_s, legs, p.initial_heading_deg,
                                             p.turn_rate_deg_s * DEG_RAD)
     wy = 2 * np.pi / p.yaw_period_s if p.yaw_period_s > 0 else 0.0
@@ -529,7 +531,7 @@ def simulate(params: SimParams) -> SimVoyage:
     errors: dict[str, np.ndarray] = {"time_ns": time_ns}
     r = _rng(p.seed, 3)
     errors["gyro_err_rad"] = DEG_RAD * (
-        gauss_markov(n, dt, p.gyro_bias_deg.sigma, p.gyro_bias_deg.tau_s, r)
+        p.gyro_offset_deg + gauss_markov(n, dt, p.gyro_bias_deg.sigma, p.gyro_bias_deg.tau_s, r)
         + gauss_markov(n, dt, p.gyro_noise_deg.sigma, p.gyro_noise_deg.tau_s, r)
         + p.gyro_white_deg * r.standard_normal(n))
     rot_noise = p.rot_white_dpm * DEG_RAD / 60.0 * r.standard_normal(n)
