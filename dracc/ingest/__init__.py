@@ -1,0 +1,130 @@
+"""Ingest: logs (NMEA 0183 text, CSV, MCAP) -> canonical frames with sources and roles.
+
+Public API::
+
+    read_logs(paths, cfg, progress=None) -> Voyage
+    detect_format(path) -> "nmea" | "csv" | "mcap"
+    read_file(path, cfg, progress=None) -> FileResult
+    nmea.read_nmea(path, cfg) -> FileResult
+    nmea.parse_sentences(lines, time_ns, source, file, cfg) -> FileResult
+    nmea.iter_nmea_blocks(path, cfg, state=None) -> Iterator[Block]   (streaming, bounded memory)
+    sources.assign_roles(sources, mapping) -> list[str]
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pandas as pd
+
+from ..errors import IngestError
+from .frames import KINDS, FileResult, Rejects, TimeEvents, Voyage, empty_frame
+from .nmea import check_readable
+from .sources import assign_roles, summarize
+
+if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
+    from ..config import IngestConfig
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+_BINARY_MAGIC = {b"\xff\xd8\xff": "a JPEG image", b"\x89PNG": "a PNG image", b"PK\x03\x04": "a ZIP archive",
+                 b"%PDF": "a PDF document", b"\x1f\x8b": "a gzip file (decompress it first)",
+                 b"\x28\xb5\x2f\xfd": "a zstd file (decompress it first)"}
+
+__all__ = ["read_logs", "read_file", "detect_format", "assign_roles", "MCAP_MAGIC"]
+
+
+def detect_format(path: str | Path) -> str:
+    """'mcap', 'csv' or 'nmea' from the first bytes; IngestError for known non-logs."""
+    p = Path(path)
+    check_readable(p)
+    with p.open("rb") as fh:
+        head = fh.read(65536)
+    if not head:
+        raise IngestError(f"{p}: empty file")
+    if head.startswith(MCAP_MAGIC):
+        return "mcap"
+    for magic, what in _BINARY_MAGIC.items():
+        if head.startswith(magic):
+            raise IngestError(f"{p}: not a log file: looks like {what}")
+    try:
+        from .csv import looks_like_csv
+    except ImportError:  # pragma: no cover - the CSV reader is part of the package
+        looks_like_csv = None
+    if looks_like_csv is not None and looks_like_csv(head):
+        return "csv"
+    return "nmea"
+
+
+def read_file(path: str | Path, cfg: IngestConfig, progress=None) -> FileResult:
+    """Read one log with the reader its format needs."""
+    fmt = detect_format(path)
+    if fmt == "mcap":
+        from .mcap import read_mcap
+
+        return read_mcap(Path(path), cfg)
+    if fmt == "csv":
+        from .csv import read_csv
+
+        return read_csv(Path(path), cfg)
+    from .nmea import read_nmea
+
+    return read_nmea(path, cfg, progress=progress)
+
+
+def _merge_frames(results: list[FileResult]) -> dict[str, pd.DataFrame]:
+    out = {}
+    for kind in KINDS:
+        parts = [r.frames[kind] for r in results if kind in r.frames and len(r.frames[kind])]
+        if not parts:
+            out[kind] = empty_frame(kind)
+            continue
+        if len(parts) == 1:
+            df = parts[0]
+        else:
+            for p in parts:
+                for c in ("source", "talker", "sentence"):
+                    p[c] = p[c].astype(str)
+            df = pd.concat(parts, ignore_index=True)
+        for c in ("source", "talker", "sentence"):
+            df[c] = df[c].astype("category")
+        order = np.argsort(df["time_ns"].to_numpy(), kind="stable")
+        out[kind] = df.iloc[order].reset_index(drop=True)
+    return out
+
+
+def read_logs(paths: list[Path], cfg: IngestConfig, progress=None) -> Voyage:
+    """Read several logs of one voyage, merge them by time, build sources and roles.
+
+    ``progress(n_bytes)`` is called as bytes are read (NMEA text files).  A missing
+    file, a directory, an empty file or a known non-log raises :class:`IngestError`;
+    bad lines inside a log are counted in ``Voyage.rejects``.
+    """
+    if not paths:
+        raise IngestError("no log files given")
+    results = [read_file(p, cfg, progress=progress) for p in paths]
+    frames = _merge_frames(results)
+    sources: dict = {}
+    for r in results:
+        summarize(r.frames, r.path, into=sources)
+    rejects = Rejects()
+    te = TimeEvents()
+    inputs = []
+    for r in results:
+        rejects.merge(r.rejects)
+        e = r.time_events
+        te.duplicates += e.duplicates
+        te.backsteps += e.backsteps
+        te.gaps += e.gaps
+        te.rollovers += e.rollovers
+        te.implausible_dates += e.implausible_dates
+        te.decisions.extend(f"{Path(r.path).name}: {d}" for d in e.decisions)
+        te.decisions.extend(f"{Path(r.path).name}: {n}" for n in r.notes)
+        te.examples.extend(e.examples[:10])
+        inputs.append({"path": r.path, "format": r.format, "lines": r.lines, "records": r.records,
+                       "rejected": dict(Counter(r.rejects.counts))})
+    te.decisions.extend(assign_roles(sources, dict(cfg.sources)))
+    return Voyage(frames=frames, sources=sources, rejects=rejects, time_events=te, inputs=inputs,
+                  lines=sum(r.lines for r in results))

@@ -1,0 +1,913 @@
+"""NMEA 0183 text ingest, vectorised over blocks of bytes.
+
+A block (tens of MB, cut at a newline) is read as one ``uint8`` array; line ends,
+sentence starts (``$``/``!``), commas and ``*`` are found with ``np.flatnonzero``;
+checksums are XORs of ranges taken from one cumulative XOR; sentences are grouped by
+type and their fields gathered into fixed-width byte matrices converted with
+``astype(float)``.  There is no Python loop over lines; loops run over sentence types
+and fields only.  Large files are parsed by two worker processes, block by block, with
+bounded look-ahead, so memory does not grow with the file (``iter_nmea_blocks``).
+
+Field conversions (edges of the SI world, units per ``dracc.units``):
+
+* ``ddmm.mmmm`` / ``dddmm.mmmm`` + hemisphere -> radians:
+  ``deg = floor(v/100) + (v - 100 floor(v/100))/60``, S and W negative.
+* knots -> m/s: ``* 1852/3600`` (exact); km/h -> m/s: ``/ 3.6`` (used only where the
+  knots field is empty); nautical miles -> metres ``* 1852``.
+* degrees -> radians; ROT degrees/minute -> rad/s: ``* pi/180/60``.
+* ``hhmmss.sss`` -> ns of the day; ``ddmmyy`` -> date (years 80-99 -> 19yy, else 20yy,
+  as gpsd does); ZDA ``hhmmss.ss,dd,mm,yyyy``.
+* Empty fields are NaN, never zero.
+
+Sentences read: HDT, HDG, HDM, THS, ROT (heading/rot); VHW, VBW (water), VLW
+(distance); GGA, GLL, RMC, GNS (position; RMC also ground), VTG (ground); ZDA (time
+only).  Other well-formed sentences are counted as ``unsupported`` (not an error).
+"""
+
+from __future__ import annotations
+
+import os
+from collections import Counter
+from collections.abc import Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pandas as pd
+
+from ..errors import IngestError
+from ..units import KN_MPS, NMI_M
+from .frames import KINDS, FileResult, Rejects, TimeEvents, empty_frame, make_frame
+from .tagblock import HEX, parse_prefixes
+from .timebase import MISSING_NS, EventCounter, TimeBase, days_from_civil, valid_civil
+
+if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
+    from ..config import IngestConfig
+
+DEG = np.pi / 180.0
+BLOCK_BYTES = 16 * 1024 * 1024  #: block size for streaming
+PARALLEL_MIN_BYTES = 2 * BLOCK_BYTES  #: files at least this large use two processes
+
+#: sentence type -> (min, max) number of data fields after the address
+FIELD_COUNTS = {
+    "HDT": (2, 3), "HDM": (2, 3), "HDG": (5, 6), "THS": (2, 3), "ROT": (2, 3),
+    "VHW": (8, 9), "VBW": (6, 11), "VLW": (4, 9),
+    "GGA": (12, 15), "GLL": (4, 8), "RMC": (10, 14), "GNS": (12, 14),
+    "VTG": (8, 10), "ZDA": (4, 7),
+}
+SENTENCES = tuple(FIELD_COUNTS)
+#: talkers of satellite receivers: they cannot measure magnetic heading nor water speed
+GNSS_TALKERS = frozenset({"GP", "GN", "GL", "GA", "GB", "GI", "GQ", "BD"})
+NO_GNSS = frozenset({"HDG", "HDM", "VHW", "VBW", "VLW"})
+#: reasons that do not make --strict fail (the line is fine, dracc just does not use it)
+NON_FATAL = frozenset({"unsupported", "comment"})
+
+REASONS = {
+    "checksum": "checksum does not match",
+    "truncated": "sentence cut short (no checksum before the next sentence or end of file)",
+    "binary": "non-printable bytes",
+    "bad_address": "address field is not 2-character talker + 3-letter type",
+    "implausible_talker": "satellite talker on a heading/log sentence (spliced address)",
+    "field_count": "wrong number of fields for the sentence type",
+    "malformed_field": "a field is not a number / out of range / bad hemisphere",
+    "bad_tag": "TAG block unreadable or with a wrong checksum",
+    "not_nmea": "no sentence on the line",
+    "comment": "comment line ('#')",
+    "unsupported": "valid sentence of a type dracc does not use",
+    "no_date": "time of day with no date anywhere in the log (use --date)",
+}
+
+
+# ----------------------------------------------------------------------------- helpers
+def _ranges_any(cum: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """True where the count array ``cum`` (cumsum with leading 0) has events in [a, b)."""
+    return cum[b] - cum[a] > 0
+
+
+class _Fields:
+    """Field boundaries of a group of sentences (rows) in ``buf``."""
+
+    def __init__(self, buf, commas, addr_end, body_end):
+        self.buf = buf
+        c0 = np.searchsorted(commas, addr_end)  # first comma is at addr_end
+        c1 = np.searchsorted(commas, body_end)
+        self.nf = (c1 - c0).astype(np.int64)  # data fields = number of commas
+        self.c0 = c0
+        self.commas = commas
+        self.body_end = body_end
+        self.bad = np.zeros(len(addr_end), dtype=bool)
+
+    def bounds(self, k: int):
+        """[start, end) of data field k (1-based); empty where the field is absent."""
+        present = self.nf >= k
+        ci = np.minimum(self.c0 + k - 1, len(self.commas) - 1)
+        s = np.where(present, self.commas[ci] + 1, 0)
+        cn = np.minimum(self.c0 + k, len(self.commas) - 1)
+        e = np.where(self.nf > k, self.commas[cn], self.body_end)
+        e = np.where(present, e, 0)
+        return s, e
+
+    def num(self, k: int, width: int = 20):
+        """Field k as float64, NaN where empty; rows with a non-number are marked bad.
+
+        Returns (value, decimals) where decimals = digits after the '.' (-1 if none).
+        """
+        s, e = self.bounds(k)
+        ln = e - s
+        n = len(s)
+        val = np.full(n, np.nan)
+        dec = np.full(n, -1, dtype=np.int8)
+        has = ln > 0
+        too_long = ln > width
+        self.bad |= too_long
+        has &= ~too_long
+        if not has.any():
+            return val, dec
+        hi = np.flatnonzero(has)
+        w = int(ln[hi].max())
+        cols = np.arange(w)
+        idx = s[hi, None] + cols
+        inside = cols < ln[hi, None]
+        mat = np.where(inside, self.buf[np.minimum(idx, len(self.buf) - 1)], 0).astype(np.uint8)
+        digit = (mat >= 48) & (mat <= 57)
+        dot = mat == 46
+        sign = (mat == 45) | (mat == 43)
+        ok = (np.all(digit | dot | sign | ~inside, axis=1) & digit.any(axis=1)
+              & (dot.sum(axis=1) <= 1) & ~sign[:, 1:].any(axis=1))
+        mat[~ok] = 0
+        mat[~ok, 0] = 48
+        v = np.ascontiguousarray(mat).view(f"S{w}").ravel().astype(np.float64)
+        v[~ok] = np.nan
+        val[hi] = v
+        self.bad[hi[~ok]] = True
+        dpos = np.where(dot.any(axis=1), dot.argmax(axis=1), -1)
+        dec[hi] = np.where(dpos >= 0, ln[hi] - dpos - 1, -1)
+        return val, dec
+
+    def char(self, k: int) -> np.ndarray:
+        """Field k as one byte (uint8); 0 where empty; rows with longer text marked bad."""
+        s, e = self.bounds(k)
+        ln = e - s
+        self.bad |= ln > 1
+        return np.where(ln == 1, self.buf[np.minimum(s, len(self.buf) - 1)], 0).astype(np.uint8)
+
+    def first_char(self, k: int) -> np.ndarray:
+        s, e = self.bounds(k)
+        return np.where(e - s >= 1, self.buf[np.minimum(s, len(self.buf) - 1)], 0).astype(np.uint8)
+
+
+def _latlon(F: _Fields, k: int, kh: int, pos: int, neg: int, limit_deg: float):
+    """ddmm.mmmm + hemisphere -> radians; malformed rows marked bad."""
+    v, dec = F.num(k)
+    h = F.char(kh)
+    deg = np.floor(v / 100.0)
+    minutes = v - 100.0 * deg
+    ang = deg + minutes / 60.0  # ddmm.mmmm -> degrees
+    sign = np.where(h == neg, -1.0, 1.0)
+    has = ~np.isnan(v)
+    bad = has & ((h != pos) & (h != neg) | (minutes >= 60.0) | (ang > limit_deg) | (v < 0))
+    F.bad |= bad
+    return np.where(bad, np.nan, sign * ang * DEG), dec
+
+
+def _tod(F: _Fields, k: int) -> np.ndarray:
+    """hhmmss.sss -> ns of the day (-1 where empty); malformed rows marked bad."""
+    v, _ = F.num(k)
+    has = ~np.isnan(v)
+    hh = np.floor(v / 10000.0)
+    mm = np.floor(v / 100.0) - 100.0 * hh
+    ss = v - 10000.0 * hh - 100.0 * mm
+    bad = has & ((hh >= 24) | (mm >= 60) | (ss >= 61) | (v < 0))
+    F.bad |= bad
+    ok = has & ~bad
+    ns = np.full(len(v), -1, dtype=np.int64)
+    us = np.round(ss[ok] * 1e6).astype(np.int64)  # seconds to whole microseconds
+    ns[ok] = ((hh[ok] * 3600 + mm[ok] * 60).astype(np.int64) * 1_000_000 + us) * 1000
+    return ns
+
+
+def _ymd_days(F: _Fields, y, m, d) -> np.ndarray:
+    has = ~(np.isnan(y) | np.isnan(m) | np.isnan(d))
+    yi = np.where(has, y, 2000).astype(np.int64)
+    mi = np.where(has, m, 1).astype(np.int64)
+    di = np.where(has, d, 1).astype(np.int64)
+    ok = has & valid_civil(yi, mi, di)
+    F.bad |= has & ~ok
+    return np.where(ok, days_from_civil(yi, mi, di), -1)
+
+
+def _angle(F: _Fields, k: int) -> np.ndarray:
+    """Degrees 0..360 -> radians; out of range marked bad."""
+    v, _ = F.num(k)
+    bad = ~np.isnan(v) & ((v < 0) | (v > 360))
+    F.bad |= bad
+    v = np.where(bad, np.nan, v)
+    return np.where(v >= 360.0, v - 360.0, v) * DEG
+
+
+def _signed(F: _Fields, k: int, kh: int) -> np.ndarray:
+    """Angle with E/W letter (east positive), radians."""
+    v, _ = F.num(k)
+    h = F.char(kh)
+    bad = ~np.isnan(v) & (h != 69) & (h != 87) & (h != 0)
+    F.bad |= bad
+    return np.where(h == 87, -v, v) * DEG
+
+
+def _speed(F: _Fields, k_kn: int, k_kmh: int | None = None) -> np.ndarray:
+    kn, _ = F.num(k_kn)
+    v = kn * KN_MPS  # knots -> m/s (exact 1852/3600)
+    if k_kmh is not None:
+        kmh, _ = F.num(k_kmh)
+        v = np.where(np.isnan(v), kmh / 3.6, v)  # km/h -> m/s where knots are empty
+    return v
+
+
+# ------------------------------------------------------------------- per-type decoders
+def _decode(stype: str, F: _Fields) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, np.ndarray]]:
+    """Decode rows of one sentence type.
+
+    Returns ({kind: columns}, timing) with timing = {"tod_ns", "date_days", "dec"}.
+    """
+    n = len(F.nf)
+    tod = np.full(n, -1, dtype=np.int64)
+    date = np.full(n, -1, dtype=np.int64)
+    dec = np.full(n, -1, dtype=np.int8)
+    out: dict[str, dict[str, np.ndarray]] = {}
+    nanv = np.full(n, np.nan)
+    if stype in ("HDT", "HDM", "THS"):
+        h = _angle(F, 1)
+        ref = F.char(2)
+        if stype == "THS":
+            h = np.where(ref == 86, np.nan, h)  # mode V: not valid
+            refs = np.full(n, "T", dtype=object)
+        else:
+            refs = np.full(n, "T" if stype == "HDT" else "M", dtype=object)
+        out["heading"] = {"heading_rad": h, "reference": refs,
+                          "deviation_rad": nanv, "variation_rad": nanv}
+    elif stype == "HDG":
+        out["heading"] = {"heading_rad": _angle(F, 1), "reference": np.full(n, "M", dtype=object),
+                          "deviation_rad": _signed(F, 2, 3), "variation_rad": _signed(F, 4, 5)}
+    elif stype == "ROT":
+        v, _ = F.num(1)
+        st = F.char(2)
+        v = np.where(st == 86, np.nan, v)  # status V: not valid
+        out["rot"] = {"rot_radps": v * DEG / 60.0}  # deg/min -> rad/s
+    elif stype == "VHW":
+        out["water"] = {"stw_mps": _speed(F, 5, 7)}
+    elif stype == "VBW":
+        lw, _ = F.num(1)
+        tw, _ = F.num(2)
+        sw = F.char(3)
+        lg, _ = F.num(4)
+        tg, _ = F.num(5)
+        sg = F.char(6)
+        vw = sw != 86
+        vg = sg != 86
+        out["water"] = {"stw_mps": np.where(vw, lw * KN_MPS, np.nan),
+                        "stw_transverse_mps": np.where(vw, tw * KN_MPS, np.nan),
+                        "sog_long_mps": np.where(vg, lg * KN_MPS, np.nan),
+                        "sog_transverse_mps": np.where(vg, tg * KN_MPS, np.nan)}
+    elif stype == "VLW":
+        tot, _ = F.num(1)
+        trip, _ = F.num(3)
+        out["distance"] = {"total_water_m": tot * NMI_M, "trip_water_m": trip * NMI_M}
+    elif stype == "GGA":
+        tod = _tod(F, 1)
+        lat, dec = _latlon(F, 2, 3, 78, 83, 90.0)
+        lon, _ = _latlon(F, 4, 5, 69, 87, 180.0)
+        q, _ = F.num(6)
+        hdop, _ = F.num(8)
+        alt, _ = F.num(9)
+        out["position"] = {"lat_rad": lat, "lon_rad": lon, "alt_m": alt, "hdop": hdop,
+                           "quality": np.where(np.isnan(q), -1, q).astype(np.int8)}
+    elif stype == "GNS":
+        tod = _tod(F, 1)
+        lat, dec = _latlon(F, 2, 3, 78, 83, 90.0)
+        lon, _ = _latlon(F, 4, 5, 69, 87, 180.0)
+        mode = F.first_char(6)
+        qmap = np.full(256, -1, dtype=np.int8)
+        for ch, qv in zip(b"NAPDRFEMS", (0, 1, 3, 2, 4, 5, 6, 7, 8), strict=True):
+            qmap[ch] = qv
+        hdop, _ = F.num(8)
+        alt, _ = F.num(9)
+        out["position"] = {"lat_rad": lat, "lon_rad": lon, "alt_m": alt, "hdop": hdop,
+                           "quality": qmap[mode]}
+    elif stype == "GLL":
+        lat, dec = _latlon(F, 1, 2, 78, 83, 90.0)
+        lon, _ = _latlon(F, 3, 4, 69, 87, 180.0)
+        tod = _tod(F, 5)
+        st = F.char(6)
+        mode = F.char(7)
+        q = np.where((st == 65) & (mode != 78), 1, np.where(st == 0, -1, 0)).astype(np.int8)
+        out["position"] = {"lat_rad": lat, "lon_rad": lon, "alt_m": nanv, "hdop": nanv, "quality": q}
+    elif stype == "RMC":
+        tod = _tod(F, 1)
+        st = F.char(2)
+        lat, dec = _latlon(F, 3, 4, 78, 83, 90.0)
+        lon, _ = _latlon(F, 5, 6, 69, 87, 180.0)
+        sog = _speed(F, 7)
+        cog = _angle(F, 8)
+        dv, _ = F.num(9)
+        dd = np.floor(dv / 10000.0)
+        mo = np.floor(dv / 100.0) - 100.0 * dd
+        yy = dv - 10000.0 * dd - 100.0 * mo
+        yyyy = np.where(yy >= 80, 1900.0 + yy, 2000.0 + yy)
+        date = _ymd_days(F, yyyy, mo, dd)
+        mode = F.char(12)
+        q = np.where((st == 65) & (mode != 78), 1, np.where(st == 0, -1, 0)).astype(np.int8)
+        out["position"] = {"lat_rad": lat, "lon_rad": lon, "alt_m": nanv, "hdop": nanv, "quality": q}
+        out["ground"] = {"cog_rad": cog, "sog_mps": sog}
+    elif stype == "VTG":
+        out["ground"] = {"cog_rad": _angle(F, 1), "sog_mps": _speed(F, 5, 7)}
+    elif stype == "ZDA":
+        tod = _tod(F, 1)
+        d, _ = F.num(2)
+        m, _ = F.num(3)
+        y, _ = F.num(4)
+        date = _ymd_days(F, y, m, d)
+    return out, {"tod_ns": tod, "date_days": date, "dec": dec}
+
+
+# ---------------------------------------------------------------------- block parsing
+@dataclass
+class ParsedBlock:
+    """What a worker returns for one block (line numbers relative to the block, 1-based)."""
+
+    n_lines: int
+    n_blank: int
+    #: kind -> columns incl. 'line', 'seq', 'talker', 'sentence', 'tag_source', 'dec', 'tod_ns', 'date_days', 'ext_ns'
+    kinds: dict[str, dict[str, np.ndarray]]
+    #: the ZDA records (time only): seq, tod_ns, date_days, ext_ns, line
+    clock: dict[str, np.ndarray]
+    reject_counts: Counter
+    reject_examples: dict[str, list[tuple[int, str]]]
+    first_fatal: tuple[int, str, str] | None  #: (line, reason, text) of the first fatal rejection
+    stats: Counter = field(default_factory=Counter)
+
+
+def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True,
+                 ext_line_ns: np.ndarray | None = None,
+                 ext_line_source: np.ndarray | None = None) -> ParsedBlock:
+    """Parse a buffer of whole lines (the vectorised core).
+
+    ``ext_line_ns``/``ext_line_source`` give a receive time / source key per line (for
+    :func:`parse_sentences`); otherwise they come from TAG blocks and prefixes.
+    """
+    buf = np.frombuffer(data, dtype=np.uint8)
+    if len(buf) == 0:
+        return ParsedBlock(0, 0, {}, {}, Counter(), {}, None)
+    ends_nl = buf[-1] == 10
+    nl = np.flatnonzero(buf == 10)
+    line_end = nl if ends_nl else np.concatenate((nl, [len(buf)]))
+    n_lines = len(line_end)
+    line_start = np.concatenate(([0], line_end[:-1] + 1))
+    last = np.maximum(line_end - 1, 0)
+    cr = (line_end > line_start) & (buf[last] == 13)
+    line_end = line_end - cr
+    blank = line_end == line_start
+    stats: Counter = Counter()
+    stats["blank"] = int(blank.sum())
+    counts: Counter = Counter()
+    examples: dict[str, list[tuple[int, str]]] = {}
+    fatal: list[tuple[int, str, str]] = []
+
+    def reject(reason: str, lines_idx: np.ndarray, starts: np.ndarray, ends: np.ndarray):
+        if len(lines_idx) == 0:
+            return
+        counts[reason] += len(lines_idx)
+        ex = examples.setdefault(reason, [])
+        for j in range(min(5 - len(ex), len(lines_idx))):
+            ex.append((int(lines_idx[j]) + 1, bytes(buf[starts[j]:min(ends[j], starts[j] + 120)])
+                       .decode("ascii", "replace")))
+        if reason not in NON_FATAL:
+            j = 0
+            fatal.append((int(lines_idx[j]) + 1, reason, bytes(buf[starts[j]:min(ends[j], starts[j] + 120)])
+                          .decode("ascii", "replace")))
+
+    # sentence starts: '$' or '!' not immediately followed by another start ('$$GPGGA')
+    isstart = (buf == 36) | (buf == 33)
+    st = np.flatnonzero(isstart)
+    nxt_is = np.zeros(len(st), dtype=bool)
+    nxt_is[:-1] = (st[1:] == st[:-1] + 1)
+    stats["doubled_start"] = int(nxt_is.sum())
+    st = st[~nxt_is]
+    seg_line = np.searchsorted(line_start, st, side="right") - 1
+    # drop starts that sit in the CR/LF or in comment lines
+    keep = st < line_end[seg_line]
+    comment_line = ~blank & (buf[np.minimum(line_start, len(buf) - 1)] == 35)
+    keep &= ~comment_line[seg_line]
+    st, seg_line = st[keep], seg_line[keep]
+    nseg = len(st)
+    seg_end = np.empty(nseg, dtype=np.int64)
+    if nseg:
+        seg_end[:-1] = np.where(seg_line[:-1] == seg_line[1:], st[1:], line_end[seg_line[:-1]])
+        seg_end[-1] = line_end[seg_line[-1]]
+    # trailing spaces/tabs after the checksum are ignored
+    # lines without sentences
+    has_seg = np.zeros(n_lines, dtype=bool)
+    has_seg[seg_line] = True
+    badbyte = ((buf < 32) & (buf != 9) & (buf != 10) & (buf != 13)) | (buf > 126)
+    cum_bad = np.concatenate(([0], np.cumsum(badbyte)))
+    noseg = np.flatnonzero(~has_seg & ~blank)
+    if len(noseg):
+        isbin = _ranges_any(cum_bad, line_start[noseg], line_end[noseg])
+        iscom = comment_line[noseg]
+        for reason, m in (("binary", isbin & ~iscom), ("comment", iscom),
+                          ("not_nmea", ~isbin & ~iscom)):
+            sel = noseg[m]
+            reject(reason, sel, line_start[sel], line_end[sel])
+    if nseg == 0:
+        return ParsedBlock(n_lines, int(blank.sum()), {}, {}, counts, examples,
+                           min(fatal) if fatal else None, stats)
+
+    cum_xor = np.bitwise_xor.accumulate(buf)
+    # prefixes: text before the first sentence of a line
+    first_of_line = np.ones(nseg, dtype=bool)
+    first_of_line[1:] = seg_line[1:] != seg_line[:-1]
+    line_ext = np.full(n_lines, MISSING_NS, dtype=np.int64)
+    line_src = np.full(n_lines, "", dtype=object)
+    line_bad = np.zeros(n_lines, dtype=bool)
+    pre_seg = np.flatnonzero(first_of_line & (st > line_start[seg_line]))
+    if len(pre_seg):
+        pl = seg_line[pre_seg]
+        pr = parse_prefixes(buf, line_start[pl], st[pre_seg], cum_xor)
+        line_ext[pl] = pr.ext_ns
+        line_src[pl] = pr.source
+        badt = pr.bad_tag | (pr.bad_tag_checksum & (not ignore_checksum))
+        line_bad[pl[badt]] = True
+        stats["tag_checksum_ignored"] += int((pr.bad_tag_checksum & ignore_checksum).sum())
+        for f, c in zip(*np.unique(pr.form.astype(str), return_counts=True), strict=True):
+            stats[f"prefix_{f}"] += int(c)
+    if ext_line_ns is not None:
+        line_ext = np.asarray(ext_line_ns, dtype=np.int64)
+    if ext_line_source is not None:
+        line_src = np.asarray(ext_line_source, dtype=object)
+
+    alive = np.ones(nseg, dtype=bool)
+
+    def drop(reason, mask):
+        idx = np.flatnonzero(mask & alive)
+        reject(reason, seg_line[idx], st[idx], seg_end[idx])
+        alive[idx] = False
+
+    drop("bad_tag", line_bad[seg_line])
+    # trim trailing blanks after the checksum
+    drop("binary", _ranges_any(cum_bad, st, seg_end))
+    seglen = seg_end - st
+    star_ok = (seglen >= 4) & (buf[np.maximum(seg_end - 3, 0)] == 42)
+    h1 = HEX[buf[np.maximum(seg_end - 2, 0)]]
+    h2 = HEX[buf[np.maximum(seg_end - 1, 0)]]
+    has_cs2 = star_ok & (h1 >= 0) & (h2 >= 0)
+    # some loggers drop the leading zero of the checksum ('*5' for '*05')
+    has_cs1 = ~has_cs2 & (seglen >= 3) & (buf[np.maximum(seg_end - 2, 0)] == 42) & (h2 >= 0)
+    has_cs = has_cs2 | has_cs1
+    body_end = np.where(has_cs2, seg_end - 3, np.where(has_cs1, seg_end - 2, seg_end))
+    h1 = np.where(has_cs1, 0, h1)
+    # a '*' elsewhere without two hex digits after it: cut short
+    stars = np.concatenate(([0], np.cumsum(buf == 42)))
+    stray_star = ~has_cs & _ranges_any(stars, st, seg_end)
+    followed = np.zeros(nseg, dtype=bool)
+    followed[:-1] = seg_line[1:] == seg_line[:-1]
+    eof_cut = np.zeros(nseg, dtype=bool)
+    if at_eof and not ends_nl:
+        eof_cut[-1] = seg_line[-1] == n_lines - 1
+    drop("truncated", ~has_cs & (followed | stray_star | eof_cut))
+    x = cum_xor[np.maximum(body_end - 1, 0)] ^ cum_xor[st]  # XOR over (start, body_end)
+    given = (h1.astype(np.int64) * 16 + h2)
+    wrong = has_cs & (x.astype(np.int64) != given)
+    if ignore_checksum:
+        stats["checksum_ignored"] += int((wrong & alive).sum())
+    else:
+        drop("checksum", wrong)
+    stats["no_checksum"] += int((~has_cs & alive).sum())
+    stats["one_digit_checksum"] += int((has_cs1 & alive).sum())
+    # address
+    commas = np.flatnonzero(buf == 44)
+    ci = np.searchsorted(commas, st)
+    first_comma = np.where(ci < len(commas), commas[np.minimum(ci, len(commas) - 1)], len(buf))
+    addr_len = np.where(first_comma < body_end, first_comma - st - 1, body_end - st - 1)
+    a5 = st[:, None] + 1 + np.arange(5)
+    amat = buf[np.minimum(a5, len(buf) - 1)]
+    alnum = ((amat >= 65) & (amat <= 90)) | ((amat >= 48) & (amat <= 57))
+    proprietary = amat[:, 0] == 80  # 'P'
+    good_addr = (addr_len == 5) & alnum.all(axis=1) & np.all((amat[:, 2:] >= 65) & (amat[:, 2:] <= 90), axis=1)
+    ais = buf[st] == 33
+    drop("unsupported", (proprietary & (addr_len >= 2)) | ais)
+    drop("bad_address", ~good_addr)
+    addr = np.ascontiguousarray(amat).view("S5").ravel()
+    stype_b = np.ascontiguousarray(amat[:, 2:]).view("S3").ravel()
+    talker_b = np.ascontiguousarray(amat[:, :2]).view("S2").ravel()
+    known_types = np.array([s.encode() for s in SENTENCES], dtype="S3")
+    is_known = np.isin(stype_b, known_types)
+    drop("unsupported", ~is_known)
+    gnss_t = np.isin(talker_b, np.array([t.encode() for t in GNSS_TALKERS], dtype="S2"))
+    no_gnss = np.isin(stype_b, np.array([t.encode() for t in NO_GNSS], dtype="S3"))
+    drop("implausible_talker", gnss_t & no_gnss)
+    del addr
+
+    kinds: dict[str, dict[str, list]] = {}
+    clock: dict[str, list] = {}
+    for stype in SENTENCES:
+        rows = np.flatnonzero(alive & (stype_b == stype.encode()))
+        if len(rows) == 0:
+            continue
+        F = _Fields(buf, commas, st[rows] + 6, body_end[rows])
+        lo, hi = FIELD_COUNTS[stype]
+        badn = (F.nf < lo) | (F.nf > hi)
+        if badn.any():
+            drop("field_count", np.isin(np.arange(nseg), rows[badn]))
+            rows = rows[~badn]
+            if len(rows) == 0:
+                continue
+            F = _Fields(buf, commas, st[rows] + 6, body_end[rows])
+        cols, timing = _decode(stype, F)
+        if F.bad.any():
+            drop("malformed_field", np.isin(np.arange(nseg), rows[F.bad]))
+            okr = ~F.bad
+            rows = rows[okr]
+            cols = {k: {c: v[okr] for c, v in d.items()} for k, d in cols.items()}
+            timing = {k: v[okr] for k, v in timing.items()}
+            if len(rows) == 0:
+                continue
+        common = {"line": seg_line[rows] + 1, "seq": rows,
+                  "talker": talker_b[rows], "sentence": np.full(len(rows), stype, dtype=object),
+                  "tag_source": line_src[seg_line[rows]], "ext_ns": line_ext[seg_line[rows]],
+                  **timing}
+        if stype == "ZDA":
+            for c, v in common.items():
+                clock.setdefault(c, []).append(v)
+        for kind, d in cols.items():
+            tgt = kinds.setdefault(kind, {})
+            for c, v in {**common, **d}.items():
+                tgt.setdefault(c, []).append(v)
+    kinds_np = {}
+    for k, d in kinds.items():
+        cat = {c: np.concatenate(v) for c, v in d.items()}
+        order = np.argsort(cat["seq"], kind="stable")  # back to stream order
+        kinds_np[k] = {c: v[order] for c, v in cat.items()}
+    clock_np = {c: np.concatenate(v) for c, v in clock.items()}
+    return ParsedBlock(n_lines, int(blank.sum()), kinds_np, clock_np, counts, examples,
+                       min(fatal) if fatal else None, stats)
+
+
+# ------------------------------------------------------------------ streaming reader
+def _block_ranges(path: Path, block_bytes: int) -> Iterator[tuple[int, int]]:
+    """(offset, length) of blocks of whole lines."""
+    size = path.stat().st_size
+    with path.open("rb") as fh:
+        off = 0
+        while off < size:
+            end = off + block_bytes
+            if end >= size:
+                yield off, size - off
+                return
+            fh.seek(end)
+            while True:
+                chunk = fh.read(65536)
+                if not chunk:
+                    end = size
+                    break
+                j = chunk.find(b"\n")
+                if j >= 0:
+                    end += j + 1
+                    break
+                end += len(chunk)
+            yield off, end - off
+            off = end
+
+
+def _parse_range(path: str, off: int, length: int, ignore_checksum: bool, at_eof: bool) -> ParsedBlock:
+    with open(path, "rb") as fh:
+        fh.seek(off)
+        data = fh.read(length)
+    return parse_buffer(data, ignore_checksum=ignore_checksum, at_eof=at_eof)
+
+
+@dataclass
+class Block:
+    """One resolved block from :func:`iter_nmea_blocks`: canonical frames (times resolved,
+    in stream order, not yet sorted) and the block's bookkeeping."""
+
+    frames: dict[str, pd.DataFrame]
+    lines: int  #: lines in this block
+    first_line: int  #: 1-based number of the block's first line in the file
+    bytes: int
+
+
+@dataclass
+class StreamState:
+    """Running totals of a stream (filled while iterating)."""
+
+    path: str
+    lines: int = 0
+    blank: int = 0
+    bytes: int = 0
+    rejects: Rejects = field(default_factory=Rejects)
+    stats: Counter = field(default_factory=Counter)
+    timebase: TimeBase = field(default_factory=TimeBase)
+    events: EventCounter = field(default_factory=EventCounter)
+    sentences: Counter = field(default_factory=Counter)
+    split_talkers: dict = field(default_factory=dict)  #: talker -> decimals seen (fingerprint split)
+
+    def time_events(self) -> TimeEvents:
+        tb = self.timebase
+        tot = self.events.totals()
+        te = TimeEvents(duplicates=tot["duplicates"], backsteps=tot["backsteps"], gaps=tot["gaps"],
+                        rollovers=tb.rollovers, implausible_dates=tb.week_rollovers + tb.implausible)
+        te.decisions = list(dict.fromkeys(tb.decisions))
+        if tb.derived:
+            te.decisions.append(f"{tb.derived} records without a time field took the time of the "
+                                "preceding timed record (or the logger/TAG time)")
+        if tb.backward_midnight:
+            te.decisions.append(f"{tb.backward_midnight} steps back over midnight between interleaved clocks")
+        if tb.week_rollovers:
+            te.decisions.append(f"{tb.week_rollovers} dates corrected for the GPS week rollover (+1024 weeks)")
+        if tb.implausible:
+            te.decisions.append(f"{tb.implausible} implausible dates (before 2000 or in the future) not used")
+        if tb.date_changes:
+            te.decisions.append(f"the date changed {tb.date_changes} times other than at midnight")
+        te.examples = list(self.events.examples)
+        return te
+
+    def notes(self) -> list[str]:
+        s = self.stats
+        out = []
+        if s["no_checksum"]:
+            out.append(f"{s['no_checksum']} sentences without checksum accepted (field checks only)")
+        if s["checksum_ignored"]:
+            out.append(f"{s['checksum_ignored']} wrong checksums accepted (--ignore-checksum)")
+        if s["tag_checksum_ignored"]:
+            out.append(f"{s['tag_checksum_ignored']} wrong TAG checksums accepted (--ignore-checksum)")
+        if s["one_digit_checksum"]:
+            out.append(f"{s['one_digit_checksum']} one-digit checksums ('*5' for '*05') accepted")
+        if s["doubled_start"]:
+            out.append(f"{s['doubled_start']} doubled sentence starts ('$$') read as one")
+        if s["prefix_other"]:
+            out.append(f"{s['prefix_other']} line prefixes without a recognisable time ignored")
+        for k, v in sorted(s.items()):
+            if k.startswith("prefix_") and k != "prefix_other" and v:
+                out.append(f"{v} lines with {k[7:]} prefix")
+        for t, decs in self.split_talkers.items():
+            out.append(f"talker {t}: position sentences with {sorted(decs)} decimals of minutes "
+                       f"come from different receivers: source keys {t}/<n>dp")
+        return out
+
+
+def _pool_ok() -> bool:
+    return (os.cpu_count() or 1) >= 2
+
+
+def _assemble(pb: ParsedBlock, times: list[np.ndarray], state: StreamState, file: str,
+              line0: int, cfg: IngestConfig) -> dict[str, pd.DataFrame]:
+    """Turn a parsed block plus resolved times into canonical frames; count events."""
+    frames = {}
+    order_kinds = [k for k in KINDS if k in pb.kinds]
+    t_all = times
+    for kind, t in zip(order_kinds, t_all, strict=True):
+        cols = pb.kinds[kind]
+        talker = cols["talker"].astype("U2")
+        tag = cols["tag_source"].astype(str)
+        src = np.where(tag != "", tag, talker).astype(object)
+        if kind in ("position", "ground"):
+            split = np.zeros(len(src), dtype=bool)
+            for tk in state.split_talkers:
+                split |= (talker == tk) & (tag == "")
+            if split.any():
+                dec = cols["dec"]
+                src[split] = np.char.add(np.char.add(talker[split], "/"),
+                                         np.char.add(dec[split].astype(str), "dp"))
+        line = cols["line"] + line0 - 1
+        missing = t == MISSING_NS
+        if missing.any():
+            idx = np.flatnonzero(missing)
+            state.rejects.counts["no_date"] += len(idx)
+            ex = state.rejects.examples.setdefault("no_date", [])
+            for j in idx[: max(0, 5 - len(ex))]:
+                ex.append((file, int(line[j]), f"{cols['sentence'][j]} time of day without date"))
+            keep = ~missing
+        else:
+            keep = slice(None)
+        own = ((cols["tod_ns"] >= 0) | (cols["ext_ns"] != MISSING_NS))[keep]
+        if kind == "ground":  # an RMC is counted once, in its position record
+            own = own & (cols["sentence"][keep] != "RMC")
+        data = {c: v[keep] for c, v in cols.items()
+                if c not in ("seq", "tag_source", "dec", "tod_ns", "date_days", "ext_ns", "talker")}
+        data["talker"] = talker[keep]
+        data["source"] = src[keep]
+        data["time_ns"] = t[keep]
+        data["line"] = line[keep]
+        df = make_frame(kind, data)
+        state.events.add(kind, df["source"].to_numpy(dtype=object), df["time_ns"].to_numpy(),
+                         own, df["line"].to_numpy(), file, data["sentence"])
+        frames[kind] = df
+    return frames
+
+
+def _time_arrays(pb: ParsedBlock):
+    """All records of a block in stream order: (tod, date, ext, splitter)."""
+    parts = [pb.kinds[k] for k in KINDS if k in pb.kinds]
+    if pb.clock:
+        parts.append(pb.clock)
+    if not parts:
+        e = np.zeros(0, dtype=np.int64)
+        return e, e, e, lambda t: []
+    seq = np.concatenate([p["seq"] for p in parts])
+    order = np.argsort(seq, kind="stable")
+    tod = np.concatenate([p["tod_ns"] for p in parts])[order]
+    date = np.concatenate([p["date_days"] for p in parts])[order]
+    ext = np.concatenate([p["ext_ns"] for p in parts])[order]
+    sizes = [len(p["seq"]) for p in parts]
+    n_frames = len(parts) - (1 if pb.clock else 0)
+
+    def split(t_sorted):
+        t = np.empty_like(t_sorted)
+        t[order] = t_sorted
+        out = np.split(t, np.cumsum(sizes)[:-1])
+        return out[:n_frames]
+
+    return tod, date, ext, split
+
+
+def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | None = None,
+                     block_bytes: int = BLOCK_BYTES, workers: int | None = None,
+                     progress=None) -> Iterator[Block]:
+    """Stream an NMEA text file as resolved blocks with bounded memory.
+
+    ``state`` (a :class:`StreamState`, created if None) accumulates rejections, time
+    events and statistics while iterating; read it after the loop.  Blocks are parsed
+    in up to two worker processes (files >= ``PARALLEL_MIN_BYTES``), at most 2 blocks
+    ahead.  ``progress(n_bytes)`` is called as blocks finish.  Raises IngestError in
+    ``cfg.strict`` mode at the first rejected line.
+    """
+    path = Path(path)
+    file = str(path)
+    st = state if state is not None else StreamState(file)
+    st.path = file
+    if cfg.date is not None:
+        try:
+            y, m, d = (int(x) for x in cfg.date.split("-"))
+            if not valid_civil(y, m, d):
+                raise ValueError
+            st.timebase.cfg_date_days = int(days_from_civil(y, m, d))
+        except ValueError as err:
+            raise IngestError(f"--date {cfg.date!r}: expected YYYY-MM-DD") from err
+    st.events.gap_s = cfg.gap_s
+    st.events.tolerance_s = cfg.backstep_tolerance_s
+    ranges = list(_block_ranges(path, block_bytes))
+    size = path.stat().st_size
+    nworkers = workers if workers is not None else (2 if size >= PARALLEL_MIN_BYTES and _pool_ok() else 1)
+    held: list = []
+
+    def handle(pb: ParsedBlock, nbytes: int):
+        line0 = st.lines + 1
+        st.lines += pb.n_lines
+        st.blank += pb.n_blank
+        st.bytes += nbytes
+        st.stats.update(pb.stats)
+        for reason, c in pb.reject_counts.items():
+            st.rejects.counts[reason] += c
+            ex = st.rejects.examples.setdefault(reason, [])
+            for ln, text in pb.reject_examples.get(reason, [])[: max(0, 5 - len(ex))]:
+                ex.append((file, ln + line0 - 1, text))
+        if cfg.strict and pb.first_fatal is not None:
+            ln, reason, text = pb.first_fatal
+            raise IngestError(f"{file}:{ln + line0 - 1}: rejected ({REASONS[reason]}): {text!r} "
+                              "(--strict)")
+        for kind, cols in pb.kinds.items():
+            u, c = np.unique(cols["sentence"].astype(str), return_counts=True)
+            st.sentences.update(dict(zip(u.tolist(), c.tolist(), strict=True)))
+            if kind == "position" and not st.split_talkers and line0 == 1:
+                _fingerprint(cols, st)
+        if pb.clock:
+            st.sentences["ZDA"] += len(pb.clock["seq"])
+        tod, date, ext, split = _time_arrays(pb)
+        held.append((pb, split, line0, nbytes))
+        done = st.timebase.feed(tod, date, ext)
+        yield from _release(done)
+
+    def _release(done):
+        for t in done:
+            pb, split, line0, nbytes = held.pop(0)
+            frames = _assemble(pb, split(t), st, file, line0, cfg)
+            if progress is not None:
+                progress(nbytes)
+            yield Block(frames, pb.n_lines, line0, nbytes)
+
+    at_eof = [i == len(ranges) - 1 for i in range(len(ranges))]
+    if nworkers <= 1 or len(ranges) <= 1:
+        for i, (off, ln) in enumerate(ranges):
+            pb = _parse_range(file, off, ln, cfg.ignore_checksum, at_eof[i])
+            yield from handle(pb, ln)
+    else:
+        with ProcessPoolExecutor(max_workers=nworkers) as ex:
+            futures = []
+            it = iter(enumerate(ranges))
+            for i, (off, ln) in it:
+                futures.append((ex.submit(_parse_range, file, off, ln, cfg.ignore_checksum,
+                                          at_eof[i]), ln))
+                if len(futures) >= nworkers + 1:
+                    break
+            while futures:
+                fut, ln = futures.pop(0)
+                pb = fut.result()
+                nxt = next(it, None)
+                if nxt is not None:
+                    i, (off, ln2) = nxt
+                    futures.append((ex.submit(_parse_range, file, off, ln2, cfg.ignore_checksum,
+                                              at_eof[i]), ln2))
+                yield from handle(pb, ln)
+    yield from _release(st.timebase.finish())
+
+
+def _fingerprint(cols: dict[str, np.ndarray], st: StreamState) -> None:
+    """Split a talker whose position sentences come with different numbers of decimals
+    of minutes (two receivers behind one talker, e.g. Hakefjord.txt): each decimal
+    count seen in at least 10 % of that talker's positions (and >= 10 of them) in the
+    file's first block becomes its own source key ``<talker>/<n>dp``."""
+    talker = cols["talker"].astype("U2")
+    tag = cols["tag_source"].astype(str)
+    dec = cols["dec"]
+    for tk in np.unique(talker[tag == ""]):
+        sel = (talker == tk) & (tag == "") & (dec >= 0)
+        u, c = np.unique(dec[sel], return_counts=True)
+        big = u[(c >= 10) & (c >= 0.1 * sel.sum())]
+        if len(big) >= 2:
+            st.split_talkers[str(tk)] = set(int(x) for x in u)
+
+
+# ------------------------------------------------------------------------ file reader
+def _concat(frames_list: list[dict[str, pd.DataFrame]]) -> dict[str, pd.DataFrame]:
+    out = {}
+    for kind in KINDS:
+        parts = [f[kind] for f in frames_list if kind in f and len(f[kind])]
+        if not parts:
+            out[kind] = empty_frame(kind)
+            continue
+        df = pd.concat(parts, ignore_index=True) if len(parts) > 1 else parts[0]
+        for c in ("source", "talker", "sentence"):
+            df[c] = df[c].astype("category")
+        order = np.argsort(df["time_ns"].to_numpy(), kind="stable")
+        out[kind] = df.iloc[order].reset_index(drop=True)
+    return out
+
+
+def check_readable(path: Path) -> None:
+    """Raise IngestError for a path that is not a readable file."""
+    if not path.exists():
+        raise IngestError(f"{path}: no such file")
+    if path.is_dir():
+        raise IngestError(f"{path}: is a directory, not a log file")
+    try:
+        with path.open("rb") as fh:
+            fh.read(1)
+    except OSError as err:
+        raise IngestError(f"{path}: cannot read: {err.strerror or err}") from err
+
+
+def read_nmea(path: str | Path, cfg: IngestConfig, progress=None, workers: int | None = None) -> FileResult:
+    """Read a whole NMEA 0183 text file into a :class:`FileResult` (frames sorted by time)."""
+    path = Path(path)
+    check_readable(path)
+    st = StreamState(str(path))
+    blocks = [b.frames for b in iter_nmea_blocks(path, cfg, st, progress=progress, workers=workers)]
+    frames = _concat(blocks)
+    res = FileResult(path=str(path), format="nmea", frames=frames, lines=st.lines,
+                     rejects=st.rejects, time_events=st.time_events(), notes=st.notes())
+    res.notes.extend(f"{k}: {v}" for k, v in st.events.per_source.items() if v["backsteps"] or v["gaps"])
+    return res
+
+
+def parse_sentences(lines: Sequence[bytes], time_ns: np.ndarray, source: Sequence[str], file: str,
+                    cfg: IngestConfig) -> FileResult:
+    """Parse sentences that arrive with an external receive time and source key each
+    (MCAP raw NMEA messages: topic as source key).  Time-of-fix fields are anchored to
+    the date of the given time (rule 1 of :mod:`dracc.ingest.timebase`)."""
+    clean = [bytes(x).replace(b"\r", b"").replace(b"\n", b" ") for x in lines]
+    data = b"\n".join(clean) + (b"\n" if clean else b"")
+    t = np.asarray(time_ns, dtype=np.int64)
+    src = np.asarray(list(source), dtype=object)
+    st = StreamState(file)
+    st.events.gap_s = cfg.gap_s
+    st.events.tolerance_s = cfg.backstep_tolerance_s
+    if not clean:
+        return FileResult(path=file, format="nmea", frames={k: empty_frame(k) for k in KINDS}, lines=0)
+    pb = parse_buffer(data, ignore_checksum=cfg.ignore_checksum, at_eof=False,
+                      ext_line_ns=t, ext_line_source=src)
+    st.lines = pb.n_lines
+    st.stats.update(pb.stats)
+    for reason, c in pb.reject_counts.items():
+        st.rejects.counts[reason] += c
+        st.rejects.examples[reason] = [(file, ln, tx) for ln, tx in pb.reject_examples.get(reason, [])]
+    if cfg.strict and pb.first_fatal is not None:
+        ln, reason, text = pb.first_fatal
+        raise IngestError(f"{file}: message {ln}: rejected ({REASONS[reason]}): {text!r} (--strict)")
+    tod, date, ext, split = _time_arrays(pb)
+    done = st.timebase.feed(tod, date, ext) + st.timebase.finish()
+    frames = _assemble(pb, split(np.concatenate(done) if done else np.zeros(0, np.int64)),
+                       st, file, 1, cfg) if done else {}
+    return FileResult(path=file, format="nmea", frames=_concat([frames]), lines=st.lines,
+                      rejects=st.rejects, time_events=st.time_events(), notes=st.notes())
+
