@@ -1,0 +1,286 @@
+"""EP and current filter (seeds/003): known geometry, single-LOP updates, consistency
+(NEES/NIS over a vectorised Monte Carlo), open loop vs blended."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import stats
+from scipy.linalg import expm
+
+from dracc.current import (
+    CurrentModel,
+    estimate_current,
+    nees,
+    open_loop_vs_blended,
+    process_noise,
+    simulate_voyage,
+    transition,
+)
+from dracc.errors import InsufficientDataError
+from dracc.fusion import LineLOP, PositionFix, RangeLOP
+from dracc.geodesy import add_offset_ne, offset_ne_m
+from dracc.units import DEG_RAD, KN_MPS
+
+LAT0, LON0 = np.deg2rad(54.52), np.deg2rad(18.55)
+
+
+def _noisy_fixes(rng, voyage, idx, sigma_m):
+    """Full fixes (runs,) at epochs idx: truth plus N(0, sigma^2) per axis."""
+    runs = voyage.lat_rad.shape[0]
+    out = []
+    for i in idx:
+        lat, lon = add_offset_ne(voyage.lat_rad[:, i], voyage.lon_rad[:, i], *rng.normal(0, sigma_m, (2, runs)))
+        out.append((voyage.t_s[i], PositionFix.from_sigma(lat, lon, sigma_m)))
+    return out
+
+
+# --------------------------------------------------------------- the model
+
+
+def test_process_noise_matches_van_loan():
+    """Exact discretisation against Van Loan's matrix exponential (independent)."""
+    model = CurrentModel(current_sigma_mps=0.4, current_tau_s=900.0, speed_sigma_mps=0.1, speed_tau_s=200.0,
+                         heading_sigma_rad=0.01, heading_tau_s=100.0)
+    course, speed, dt = 1.1, 5.0, 600.0
+    a = np.zeros((4, 4))
+    a[0, 2] = a[1, 3] = 1.0
+    a[2, 2] = a[3, 3] = -1.0 / model.current_tau_s
+    psd_al = 2 * model.speed_sigma_mps**2 * model.speed_tau_s
+    psd_ac = 2 * (speed * model.heading_sigma_rad) ** 2 * model.heading_tau_s
+    rot = np.array([[np.cos(course), -np.sin(course)], [np.sin(course), np.cos(course)]])
+    qc = np.zeros((4, 4))
+    qc[:2, :2] = rot @ np.diag([psd_al, psd_ac]) @ rot.T
+    qc[2, 2] = qc[3, 3] = 2 * model.current_sigma_mps**2 / model.current_tau_s
+    m = np.block([[-a, qc], [np.zeros((4, 4)), a.T]]) * dt
+    b = expm(m)
+    f = b[4:, 4:].T
+    q = f @ b[:4, 4:]
+    f_pc, phi = transition(dt, model.current_tau_s)
+    assert f[0, 2] == pytest.approx(f_pc) and f[2, 2] == pytest.approx(phi)
+    assert np.allclose(process_noise(dt, course, speed, model), q, rtol=1e-9, atol=1e-12)
+
+
+def test_covariance_growth_does_not_depend_on_the_step():
+    model = CurrentModel()
+    start = PositionFix.from_sigma(LAT0, LON0, 10.0)
+    ends = []
+    for dt in (1.0, 60.0, 3600.0):
+        t = np.arange(0.0, 3600.0 + dt / 2, dt)
+        tr = estimate_current(t, np.full(t.size, 0.7), np.full(t.size, 6.0), start, (), model)
+        ends.append(tr.cov[-1])
+    assert np.allclose(ends[0], ends[1], rtol=1e-6) and np.allclose(ends[0], ends[2], rtol=1e-6)
+
+
+def test_no_current_no_noise_dr_matches_geodesic():
+    geo = pytest.importorskip("geographiclib.geodesic").Geodesic.WGS84
+    t = np.arange(0.0, 3600.0 + 1, 10.0)
+    tr = estimate_current(t, np.zeros(t.size), np.full(t.size, 10 * KN_MPS), PositionFix.from_sigma(LAT0, LON0, 5.0))
+    end = geo.Inverse(*np.rad2deg([LAT0, LON0]), *np.rad2deg([tr.lat_rad[-1], tr.lon_rad[-1]]))
+    assert end["s12"] == pytest.approx(10 * 1852.0, abs=0.5)  # 10 kn for 1 h due north
+    assert end["azi1"] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_from_config_converts_units():
+    from dracc.config import DeadReckoningConfig
+
+    m = CurrentModel.from_config(DeadReckoningConfig())
+    assert m.current_sigma_mps == pytest.approx(0.3 * 1852 / 3600)
+    assert m.current_tau_s == 3600.0
+    assert m.heading_sigma_rad == pytest.approx(np.deg2rad(0.2))
+    assert m.speed_sigma_mps == pytest.approx(0.1 * 0.514444, rel=1e-5)
+
+
+# -------------------------------------------------------------- known geometry
+
+
+def test_set_168_while_heading_034_is_not_mirrored():
+    """A current setting 168 deg (towards SSE) at 0.8 kn, the ship heading 034 deg at 10 kn."""
+    rng = np.random.default_rng(168)
+    truth_model = CurrentModel(current_sigma_mps=1e-4, current_tau_s=1e7, speed_sigma_mps=1e-4,
+                               heading_sigma_rad=1e-6)
+    set_true, drift_true = 168 * DEG_RAD, 0.8 * KN_MPS
+    c0 = drift_true * np.array([np.cos(set_true), np.sin(set_true)])
+    t = np.arange(0.0, 2 * 3600.0 + 1, 30.0)
+    course = np.full(t.size, 34 * DEG_RAD)
+    voyage = simulate_voyage(rng, t, course, np.full(t.size, 10 * KN_MPS), LAT0, LON0, truth_model, 1,
+                             current0_ne_mps=c0)
+    fixes = _noisy_fixes(rng, voyage, range(20, t.size, 20), 10.0)
+    model = CurrentModel(current_sigma_mps=0.5, current_tau_s=4 * 3600.0)
+    tr = estimate_current(t, course, voyage.speed_mps, PositionFix.from_sigma(LAT0, LON0, 10.0),
+                          [(tf, PositionFix(f.lat_rad[0], f.lon_rad[0], f.cov_m2)) for tf, f in fixes], model)
+    err_set = np.angle(np.exp(1j * (tr.set_rad[-1] - set_true)))
+    assert abs(err_set) < 3 * tr.set_sigma_rad[-1] and abs(err_set) < 5 * DEG_RAD
+    assert abs(tr.drift_mps[-1] - drift_true) < 3 * tr.drift_sigma_mps[-1]
+    assert tr.drift_kn[-1] == pytest.approx(0.8, abs=0.1)
+    assert tr.set_deg[-1] == pytest.approx(168.0, abs=5.0)  # not 282 (N/E swapped) nor 348 (reversed)
+
+
+def test_set_and_drift_recovered_within_sigma_over_many_voyages():
+    rng = np.random.default_rng(21)
+    model = CurrentModel(current_sigma_mps=0.5, current_tau_s=3 * 3600.0)
+    t = np.arange(0.0, 3 * 3600.0 + 1, 60.0)
+    course = np.where(t < 5400, 80 * DEG_RAD, 200 * DEG_RAD)  # two legs
+    runs = 400
+    voyage = simulate_voyage(rng, t, course, np.full(t.size, 6.0), LAT0, LON0, model, runs, start_sigma_m=15.0)
+    fixes = _noisy_fixes(rng, voyage, range(10, t.size, 10), 15.0)
+    tr = estimate_current(t, course, voyage.speed_mps, PositionFix.from_sigma(np.full(runs, LAT0), LON0, 15.0),
+                          fixes, model)
+    err = voyage.current_ne_mps[:, -1] - np.stack([tr.current_north_mps[:, -1], tr.current_east_mps[:, -1]], -1)
+    z = err / np.sqrt(np.stack([tr.cov[:, -1, 2, 2], tr.cov[:, -1, 3, 3]], -1))
+    inside = np.mean(np.abs(z) < 1.0)
+    assert 0.68 - 0.05 < inside < 0.68 + 0.05  # 1-sigma coverage over 800 components
+    assert np.sqrt(np.mean(z**2)) == pytest.approx(1.0, abs=0.1)
+
+
+# ------------------------------------------------------------ single LOP update
+
+
+def test_single_line_shrinks_the_ellipse_only_across_the_line():
+    model = CurrentModel(current_sigma_mps=0.3, current_tau_s=3600.0, speed_sigma_mps=0.05, heading_sigma_rad=0.0)
+    t = np.arange(0.0, 1800.0 + 1, 60.0)
+    course = np.zeros(t.size)
+    start = PositionFix.from_sigma(LAT0, LON0, 50.0)
+    # a line running 030 deg through a point ahead
+    a = add_offset_ne(LAT0, LON0, 2000.0, 0.0)
+    b = add_offset_ne(*a, 1000 * np.cos(np.pi / 6), 1000 * np.sin(np.pi / 6))
+    line = LineLOP(float(a[0]), float(a[1]), float(b[0]), float(b[1]), 5.0, offset_m=0.0)
+    open_ = estimate_current(t, course, np.full(t.size, 3.0), start, (), model)
+    k = 10
+    before = open_.cov[k, :2, :2]
+    # make the prior isotropic so that "along" and "across" are cleanly separated
+    iso = PositionFix(LAT0, LON0, np.eye(2) * 2500.0)
+    tr = estimate_current(t[: k + 1] - t[0], course[: k + 1], np.zeros(k + 1), iso, [(t[k], line)],
+                          CurrentModel(current_sigma_mps=1e-6, current_tau_s=3600.0, speed_sigma_mps=0.0,
+                                       heading_sigma_rad=0.0, initial_current_sigma_mps=1e-6))
+    up = tr.updates[0]
+    along = np.array([np.cos(np.pi / 6), np.sin(np.pi / 6)])
+    across = np.array([-np.sin(np.pi / 6), np.cos(np.pi / 6)])
+    assert along @ up.cov_after_m2 @ along == pytest.approx(along @ up.cov_before_m2 @ along, rel=1e-6)
+    assert across @ up.cov_after_m2 @ across == pytest.approx(1.0 / (1 / 2500.0 + 1 / 25.0), rel=1e-4)
+    assert up.dof == 1 and up.kinds == ("line",)
+    # and the ellipse of the open loop grows monotonically between updates
+    assert np.all(np.diff(np.linalg.eigvalsh(open_.cov[:, :2, :2])[:, 1]) > 0)
+    assert before[0, 0] > 2500.0
+
+
+def test_ellipse_grows_between_updates_and_shrinks_at_each_range():
+    model = CurrentModel(current_sigma_mps=0.4, current_tau_s=1800.0)
+    t = np.arange(0.0, 3600.0 + 1, 15.0)
+    course = np.full(t.size, 1.2)
+    start = PositionFix.from_sigma(LAT0, LON0, 30.0)
+    marks = [add_offset_ne(LAT0, LON0, 8000.0, 2000.0), add_offset_ne(LAT0, LON0, -3000.0, 9000.0)]
+    rng = np.random.default_rng(4)
+    voyage = simulate_voyage(rng, t, course, np.full(t.size, 5.0), LAT0, LON0, model, 1)
+    fixes = []
+    for j, i in enumerate(range(40, t.size, 40)):  # alternate between the two marks (sequential DME)
+        m = marks[j % 2]
+        r, _ = np.asarray(offset_ne_m(voyage.lat_rad[0, i], voyage.lon_rad[0, i], *m))
+        rng_m = float(np.hypot(*offset_ne_m(voyage.lat_rad[0, i], voyage.lon_rad[0, i], *m)))
+        fixes.append((t[i], RangeLOP(float(m[0]), float(m[1]), rng_m + rng.normal(0, 10.0), 10.0)))
+    tr = estimate_current(t, course, voyage.speed_mps, start, fixes, model)
+    for u in tr.updates:
+        assert np.trace(u.cov_after_m2) < np.trace(u.cov_before_m2)
+        w_b = np.linalg.eigvalsh(u.cov_before_m2)
+        w_a = np.linalg.eigvalsh(u.cov_after_m2)
+        assert w_a[1] <= w_b[1] + 1e-9 and w_a[0] <= w_b[0] + 1e-9
+    update_epochs = {int(round(tf / 15.0)) for tf, _ in fixes}
+    tr_ = np.trace(tr.position_cov_m2, axis1=-2, axis2=-1)
+    grows = [tr_[k + 1] > tr_[k] for k in range(t.size - 1) if k + 1 not in update_epochs]
+    assert all(grows)
+    assert tr.ellipse.semi_major_m.shape == t.shape and np.all(tr.two_drms_m > 0)
+
+
+# ----------------------------------------------------------------- consistency
+
+
+def test_nees_and_nis_within_chi_square_bounds():
+    """navlie-style consistency: the average NEES over runs stays in its chi-square band."""
+    rng = np.random.default_rng(2024)
+    model = CurrentModel(current_sigma_mps=0.4, current_tau_s=2400.0, speed_sigma_mps=0.1, heading_sigma_rad=0.01)
+    t = np.arange(0.0, 3 * 3600.0 + 1, 60.0)
+    course = np.where(t < 5000, 0.3, 2.4)
+    runs = 300
+    voyage = simulate_voyage(rng, t, course, np.full(t.size, 5.0), LAT0, LON0, model, runs, start_sigma_m=20.0)
+    fixes = _noisy_fixes(rng, voyage, range(15, t.size, 15), 25.0)
+    # every other fix becomes a single line of position through the true position (a range)
+    mark = add_offset_ne(LAT0, LON0, 20000.0, -15000.0)
+    mixed = []
+    for j, (tf, f) in enumerate(fixes):
+        if j % 2:
+            i = int(round(tf / 60.0))
+            r = np.hypot(*offset_ne_m(voyage.lat_rad[:, i], voyage.lon_rad[:, i], *mark))
+            mixed.append((tf, RangeLOP(float(mark[0]), float(mark[1]), r + rng.normal(0, 20.0, runs), 20.0)))
+        else:
+            mixed.append((tf, f))
+    start = PositionFix.from_sigma(np.full(runs, LAT0), np.full(runs, LON0), 20.0)
+    tr = estimate_current(t, course, voyage.speed_mps, start, mixed, model)
+    e = nees(tr, voyage)  # (runs, n)
+    mean_nees = e.mean(axis=0)
+    lo, hi = stats.chi2.ppf([0.025, 0.975], 4 * runs) / runs
+    inside = np.mean((mean_nees > lo) & (mean_nees < hi))
+    assert inside > 0.85  # 95 % band, epochs are correlated
+    assert e.mean() == pytest.approx(4.0, rel=0.05)
+    nis = np.concatenate([u.nis for u in tr.updates])
+    dof = np.concatenate([np.full(runs, u.dof) for u in tr.updates])
+    assert nis.mean() == pytest.approx(dof.mean(), rel=0.05)
+
+
+def test_filter_with_too_small_a_model_is_flagged_inconsistent():
+    rng = np.random.default_rng(8)
+    truth = CurrentModel(current_sigma_mps=0.6, current_tau_s=2400.0)
+    t = np.arange(0.0, 2 * 3600.0 + 1, 60.0)
+    course = np.full(t.size, 0.3)
+    runs = 200
+    voyage = simulate_voyage(rng, t, course, np.full(t.size, 5.0), LAT0, LON0, truth, runs)
+    fixes = _noisy_fixes(rng, voyage, range(30, t.size, 30), 25.0)
+    start = PositionFix.from_sigma(np.full(runs, LAT0), np.full(runs, LON0), 1.0)
+    tr = estimate_current(t, course, voyage.speed_mps, start, fixes, CurrentModel(current_sigma_mps=0.15,
+                                                                                  current_tau_s=2400.0))
+    lo, hi = stats.chi2.ppf([0.025, 0.975], 4 * runs) / runs
+    assert nees(tr, voyage).mean(axis=0)[1:].mean() > hi
+
+
+# ------------------------------------------------------------ open vs blended
+
+
+def test_open_loop_drifts_away_blended_stays_bounded():
+    """seeds/003 Figure 6 in spirit: 0.3 m/s Gauss-Markov current, fixes every 15 min."""
+    rng = np.random.default_rng(3)
+    model = CurrentModel(current_sigma_mps=0.3, current_tau_s=3 * 3600.0)
+    t = np.arange(0.0, 4 * 3600.0 + 1, 60.0)
+    course = np.full(t.size, 1.0)
+    voyage = simulate_voyage(rng, t, course, np.full(t.size, 6.0), LAT0, LON0, model, 1,
+                             current0_ne_mps=(0.4, -0.3))
+    fixes = [(tf, PositionFix(f.lat_rad[0], f.lon_rad[0], f.cov_m2))
+             for tf, f in _noisy_fixes(rng, voyage, range(15, t.size, 15), 20.0)]
+    cmp = open_loop_vs_blended(t, course, voyage.speed_mps, PositionFix.from_sigma(LAT0, LON0, 20.0), fixes, model)
+    truth = (voyage.lat_rad[0], voyage.lon_rad[0])
+    err_open = np.hypot(*offset_ne_m(cmp.open_loop.lat_rad, cmp.open_loop.lon_rad, *truth))
+    err_blend = np.hypot(*offset_ne_m(cmp.blended.lat_rad, cmp.blended.lon_rad, *truth))
+    assert err_open[-1] > 3000.0  # about 0.3-0.5 m/s of current for 4 h
+    assert err_blend[30:].max() < 0.1 * err_open[-1]  # after two fixes the current is known
+    half = t.size // 2
+    assert cmp.blended.two_drms_m[half:].max() < 1.1 * cmp.blended.two_drms_m[30:half].max()  # bounded
+    assert np.all(np.diff(cmp.open_loop.two_drms_m) > 0)  # open loop: unbounded growth
+    assert cmp.open_loop.two_drms_m[-1] > 10 * cmp.blended.two_drms_m[-1]
+    assert np.mean(err_blend[30:] < cmp.blended.two_drms_m[30:]) > 0.9
+
+
+# ------------------------------------------------------------------ errors
+
+
+def test_bad_inputs_raise_dracc_errors():
+    t = np.arange(0.0, 600.0 + 1, 60.0)
+    start = PositionFix.from_sigma(LAT0, LON0, 10.0)
+    fix = PositionFix.from_sigma(LAT0, LON0, 10.0)
+    with pytest.raises(InsufficientDataError, match="fix times"):
+        estimate_current(t, np.zeros(t.size), np.ones(t.size), start, [(900.0, fix)])
+    speed = np.ones(t.size)
+    speed[3] = np.nan
+    with pytest.raises(InsufficientDataError, match="epoch 3"):
+        estimate_current(t, np.zeros(t.size), speed, start)
+    with pytest.raises(InsufficientDataError, match="non-decreasing"):
+        estimate_current(t[::-1], np.zeros(t.size), np.ones(t.size), start)
+    with pytest.raises(InsufficientDataError, match="current_tau_s"):
+        CurrentModel(current_tau_s=np.inf)
