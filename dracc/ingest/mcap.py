@@ -1,0 +1,828 @@
+"""MCAP voyage logs into canonical frames: streamed, channel-wise decoding, damage recovered.
+
+Reading
+    The file is read front to back as a stream of MCAP records (spec:
+    https://mcap.dev/spec), one record at a time, with the record parsers, opcodes and
+    compression of the official ``mcap`` package; the summary and the indexes are not
+    needed, so indexed and non-indexed files read alike.  A chunk is never held whole:
+    its compressed bytes are read in 1 MiB pieces and decompressed incrementally (zstd,
+    lz4, none), and complete records are decoded in windows of about 8 MiB.  Memory is
+    that window plus the decoded columns.
+Decoding
+    Messages are grouped by channel within each window and decoded together:
+    ROS 2 CDR onto numpy structured arrays (:mod:`dracc.ingest.mcap_cdr`), JSON with one
+    pyarrow parse per channel and window, protobuf with the classes generated from the
+    FileDescriptorSet embedded in the schema (``mcap-protobuf-support``).
+Message types understood (field -> quantity; see ``docs/mcap-csv.md``)
+    - ``sensor_msgs/msg/NavSatFix`` (CDR) and ``foxglove.LocationFix`` (JSON, protobuf):
+      latitude/longitude in degrees, altitude in metres; NavSatFix ``status.status``
+      -1/0/1/2 -> fix quality 0/1/2/4.
+    - ``geometry_msgs/msg/QuaternionStamped``, ``sensor_msgs/msg/Imu`` (CDR): true
+      heading from the ENU orientation (REP 103): ``heading = pi/2 - yaw``,
+      ``yaw = atan2(2(wz + xy), 1 - 2(y^2 + z^2))``.
+    - any message (CDR, JSON, protobuf) whose fields are quantity names with units
+      (``heading_deg``, ``stw_kn``, ``sog_mps`` ...; :mod:`dracc.ingest.csv_quantities`),
+      e.g. the documented ``dracc_msgs/msg/*`` and ``dracc.*`` types dracc writes.
+    - raw NMEA 0183: ``nmea_msgs/msg/Sentence`` (CDR), ``std_msgs/msg/String`` holding
+      sentences, JSON ``{"sentence": ...}``, protobuf messages with a bytes/string field
+      holding sentences (keelson ``TimestampedBytes``), and schema-less text channels;
+      these go through :func:`dracc.ingest.nmea.parse_sentences`.
+Times
+    The message's own stamp where it has one (``header.stamp``, ``timestamp``,
+    ``time_ns``) and it is not zero, else the MCAP log time; both int64 ns UTC.
+Source keys
+    The topic without its leading '/' and without a trailing standard leaf (``fix``,
+    ``position``, ``heading``, ``velocity``, ``water``, ``distance``, ``rot``, ``nmea``,
+    ``sentence``): ``/ins2/fix`` and ``/ins2/heading`` are both source ``ins2``.
+    :func:`topic_role` suggests a role from the key (``ins2`` -> ins2, ``gyro`` ->
+    compass, ``log`` -> log, ``gps``/``gnss`` -> gnss).
+Damage
+    A file that ends early yields every complete message before the cut, and a note
+    says at which byte it ended; a damaged chunk keeps its messages before the damage;
+    unusable channels (unknown encoding, no navigation fields) are listed in the notes
+    with their message counts.  A valid file without navigation data returns empty
+    frames and a note saying so (the caller raises InsufficientDataError when no input
+    at all holds data); a file that is not MCAP raises IngestError.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+from dataclasses import dataclass, field
+from io import BytesIO
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..config import IngestConfig
+from ..errors import IngestError
+from .csv_quantities import add_rejects, build_frames, check_declared, lookup
+from .frames import FileResult, Rejects
+from .mcap_cdr import CdrError, compile_schema, decode_channel, scalar_paths, string_paths
+
+MAGIC = b"\x89MCAP0\r\n"
+_PIECE = 1 << 20
+_WINDOW = 8 << 20
+_TOPLEVEL_FLUSH = 20000
+
+_OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 1, 2, 3, 4, 5, 6
+_OP_DATA_END = 0x0F
+_OP_NAMES = {1: "Header", 2: "Footer", 3: "Schema", 4: "Channel", 5: "Message", 6: "Chunk",
+             7: "MessageIndex", 8: "ChunkIndex", 9: "Attachment", 10: "AttachmentIndex",
+             11: "Statistics", 12: "Metadata", 13: "MetadataIndex", 14: "SummaryOffset",
+             15: "DataEnd"}
+_MSG_HEAD = struct.Struct("<HIQQ")
+_REC_HEAD = struct.Struct("<BQ")
+
+LEAVES = ("fix", "position", "heading", "velocity", "water", "distance", "rot", "nmea", "sentence")
+_NMEA_START = (b"$", b"!", b"\\")
+
+
+def topic_source(topic: str) -> str:
+    """Source key of a topic: no leading '/', no trailing standard leaf (see module doc)."""
+    parts = [p for p in topic.strip("/").split("/") if p]
+    if len(parts) > 1 and parts[-1] in LEAVES:
+        parts = parts[:-1]
+    return "/".join(parts) if parts else topic
+
+
+def topic_role(key: str) -> str | None:
+    """The role a source key's first component names, or None (ambiguous or silent)."""
+    head = key.split("/")[0].lower()
+    if head in ("ins1", "ins2", "ins3"):
+        return head
+    if head in ("gyro", "compass"):
+        return "compass"
+    if head in ("log", "speedlog"):
+        return "log"
+    if head in ("gps", "gnss"):
+        return "gnss"
+    return None
+
+
+@dataclass
+class _Schema:
+    id: int
+    name: str
+    encoding: str
+    data: bytes
+
+
+@dataclass
+class _Channel:
+    """One channel: how its messages decode, and what it yielded."""
+
+    id: int
+    topic: str
+    encoding: str
+    schema: _Schema | None
+    key: str
+    mode: str = "pending"  #: json, cdr, protobuf, text, skip
+    why: str = ""
+    messages: int = 0
+    bad: int = 0
+    #: decoded parts: (time_ns, line, {quantity: values})
+    parts: list = field(default_factory=list)
+    state: dict = field(default_factory=dict)
+
+    @property
+    def type_name(self) -> str:
+        return self.schema.name if self.schema else self.encoding or "schemaless"
+
+
+class _Reader:
+    def __init__(self, path: Path, cfg: IngestConfig):
+        self.path = path
+        self.file = str(path)
+        self.cfg = cfg
+        self.declared = dict(getattr(cfg, "quantities", {}) or {})
+        self.schemas: dict[int, _Schema] = {}
+        self.channels: dict[int, _Channel] = {}
+        self.rejects = Rejects()
+        self.notes: list[str] = []
+        self.msg_no = 0
+        self.nmea_lines: list[bytes] = []
+        self.nmea_time: list[int] = []
+        self.nmea_src: list[str] = []
+        self.nmea_no: list[int] = []
+        self.orphans = 0
+        self.top_msgs: list[tuple[int, int, bytes, int]] = []
+
+    # ---------------------------------------------------------------- records
+    def run(self) -> None:
+        p = self.path
+        try:
+            size = p.stat().st_size
+            fh = p.open("rb")
+        except OSError as err:
+            raise IngestError(f"{self.file}: cannot read: {err}") from err
+        with fh:
+            head = fh.read(8)
+            if size == 0:
+                raise IngestError(f"{self.file}: empty file (0 bytes), not an MCAP log")
+            if head != MAGIC:
+                raise IngestError(f"{self.file}: not an MCAP file (no MCAP magic at byte 0)")
+            pos = 8
+            ended = False
+            while True:
+                if pos + 9 > size:
+                    if pos < size:
+                        self.notes.append(f"{self.file}: file ends at byte {size} inside a record "
+                                          f"header at byte {pos} (recording cut short); every "
+                                          f"complete message before it was read")
+                    else:
+                        self.notes.append(f"{self.file}: file ends at byte {size} without a footer "
+                                          f"(recording cut short); every message before it was read")
+                    break
+                fh.seek(pos)
+                op, ln = _REC_HEAD.unpack(fh.read(9))
+                body_at = pos + 9
+                if op == 0 or (op > 0x0F and op < 0x80):
+                    self.notes.append(f"{self.file}: damaged at byte {pos}: invalid record opcode "
+                                      f"0x{op:02x}; reading stopped, messages before it kept")
+                    break
+                cut = body_at + ln > size
+                if cut and op != _OP_CHUNK:
+                    self.notes.append(f"{self.file}: file ends at byte {size} inside a "
+                                      f"{_OP_NAMES.get(op, 'record')} record starting at byte {pos} "
+                                      f"(needs {ln} bytes); every complete message before it was read")
+                    break
+                if op == _OP_CHUNK:
+                    self._chunk(fh, body_at, ln, size)
+                    if cut:
+                        self.notes.append(f"{self.file}: file ends at byte {size} inside a Chunk record "
+                                          f"starting at byte {pos} (it would end at byte "
+                                          f"{body_at + ln}); the complete messages in it before the "
+                                          f"cut were read")
+                        break
+                elif op in (_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE):
+                    self._small_record(op, fh.read(ln), pos)
+                elif op in (_OP_DATA_END, _OP_FOOTER):
+                    ended = True
+                    break
+                pos = body_at + ln
+            self._flush_top()
+        if not ended and not any("ends" in n or "damaged" in n for n in self.notes):
+            self.notes.append(f"{self.file}: no data-end record")
+
+    def _small_record(self, op: int, body: bytes, pos: int) -> None:
+        from mcap.data_stream import ReadDataStream
+        from mcap.exceptions import McapError
+        from mcap.records import Channel, Schema
+
+        try:
+            if op == _OP_SCHEMA:
+                s = Schema.read(ReadDataStream(BytesIO(body)))
+                self.schemas[s.id] = _Schema(s.id, s.name, s.encoding, s.data)
+            elif op == _OP_CHANNEL:
+                c = Channel.read(ReadDataStream(BytesIO(body)))
+                if c.id not in self.channels:
+                    sch = self.schemas.get(c.schema_id) if c.schema_id else None
+                    self.channels[c.id] = _Channel(c.id, c.topic, c.message_encoding, sch,
+                                                   topic_source(c.topic))
+            else:
+                cid, _seq, log_time, _pub = _MSG_HEAD.unpack_from(body, 0)
+                self.msg_no += 1
+                self.top_msgs.append((cid, log_time, body[22:], self.msg_no))
+                if len(self.top_msgs) >= _TOPLEVEL_FLUSH:
+                    self._flush_top()
+        except (McapError, struct.error, UnicodeDecodeError, ValueError) as err:
+            self.notes.append(f"{self.file}: damaged {_OP_NAMES[op]} record at byte {pos} skipped ({err})")
+
+    def _flush_top(self) -> None:
+        if not self.top_msgs:
+            return
+        msgs, self.top_msgs = self.top_msgs, []
+        buf = b"".join(m[2] for m in msgs)
+        lens = np.fromiter((len(m[2]) for m in msgs), dtype=np.int64, count=len(msgs))
+        ends = np.cumsum(lens)
+        starts = ends - lens
+        groups: dict[int, list[int]] = {}
+        for i, m in enumerate(msgs):
+            groups.setdefault(m[0], []).append(i)
+        for cid, idx in groups.items():
+            ix = np.asarray(idx)
+            times = np.fromiter((msgs[i][1] for i in idx), dtype=np.int64, count=len(idx))
+            nums = np.fromiter((msgs[i][3] for i in idx), dtype=np.int64, count=len(idx))
+            self._decode(cid, buf, starts[ix], ends[ix], times, nums)
+
+    def _chunk(self, fh, body_at: int, ln: int, size: int) -> None:
+        """Stream one chunk: decompress piecewise, decode complete records in windows."""
+        avail = min(ln, size - body_at)
+        head = fh.read(min(avail, 4096))
+        try:
+            (_s, _e, _usize, _crc, clen) = struct.unpack_from("<QQQII", head, 0)
+            comp = head[32:32 + clen].decode("ascii")
+            (rlen,) = struct.unpack_from("<Q", head, 32 + clen)
+        except (struct.error, UnicodeDecodeError):
+            self.notes.append(f"{self.file}: Chunk at byte {body_at - 9} cut or damaged in its header; skipped")
+            return
+        data_at = body_at + 32 + clen + 8
+        fh.seek(data_at)
+        left = min(rlen, size - data_at)
+        if comp == "zstd":
+            import zstandard
+
+            dec = zstandard.ZstdDecompressor().decompressobj()
+            step = dec.decompress
+        elif comp == "lz4":
+            import lz4.frame
+
+            dec = lz4.frame.LZ4FrameDecompressor()
+            step = dec.decompress
+        elif comp == "":
+            def step(b):
+                return b
+        else:
+            self.notes.append(f"{self.file}: Chunk at byte {body_at - 9}: unsupported compression "
+                              f"{comp!r}; its messages skipped")
+            return
+        buf = b""
+        while left > 0:
+            piece = fh.read(min(_PIECE, left))
+            if not piece:
+                break
+            left -= len(piece)
+            try:
+                out = step(piece)
+            except Exception as err:  # zstd/lz4 raise their own error types on damaged data
+                self.notes.append(f"{self.file}: Chunk at byte {body_at - 9}: compressed data damaged "
+                                  f"({type(err).__name__}: {err}); its messages before the damage kept")
+                break
+            buf = buf + out if buf else out
+            if len(buf) >= _WINDOW:
+                buf = self._walk(buf)
+        if buf:
+            rest = self._walk(buf)
+            if rest:
+                self.notes.append(f"{self.file}: Chunk at byte {body_at - 9}: {len(rest)} bytes of an "
+                                  f"incomplete record at its end not read")
+
+    def _walk(self, buf: bytes) -> bytes:
+        """Decode the complete records at the start of ``buf``; return the incomplete rest."""
+        n = len(buf)
+        pos = 0
+        per: dict[int, tuple[list, list, list, list]] = {}
+        unpack_rec = _REC_HEAD.unpack_from
+        unpack_msg = _MSG_HEAD.unpack_from
+        no = self.msg_no
+        while pos + 9 <= n:
+            op, ln = unpack_rec(buf, pos)
+            end = pos + 9 + ln
+            if end > n:
+                break
+            if op == _OP_MESSAGE:
+                cid, _seq, log_time, _pub = unpack_msg(buf, pos + 9)
+                lst = per.get(cid)
+                if lst is None:
+                    lst = per[cid] = ([], [], [], [])
+                no += 1
+                lst[0].append(pos + 31)
+                lst[1].append(end)
+                lst[2].append(log_time)
+                lst[3].append(no)
+            elif op in (_OP_SCHEMA, _OP_CHANNEL):
+                self._small_record(op, buf[pos + 9:end], pos)
+            pos = end
+        self.msg_no = no
+        for cid, (s, e, t, k) in per.items():
+            self._decode(cid, buf, np.asarray(s, np.int64), np.asarray(e, np.int64),
+                         np.asarray(t, np.int64), np.asarray(k, np.int64))
+        return buf[pos:]
+
+    # ---------------------------------------------------------------- decoding
+    def _decode(self, cid: int, buf: bytes, starts, ends, times, nums) -> None:
+        ch = self.channels.get(cid)
+        if ch is None:
+            self.orphans += len(starts)
+            return
+        ch.messages += len(starts)
+        if ch.mode == "pending":
+            self._setup(ch, buf, int(starts[0]), int(ends[0]))
+        if ch.mode == "skip":
+            return
+        try:
+            if ch.mode == "cdr":
+                self._cdr(ch, buf, starts, ends, times, nums)
+            elif ch.mode == "json":
+                self._json(ch, [buf[s:e] for s, e in zip(starts.tolist(), ends.tolist(), strict=False)], times, nums)
+            elif ch.mode == "protobuf":
+                self._protobuf(ch, buf, starts, ends, times, nums)
+            elif ch.mode == "text":
+                for s, e, t, k in zip(starts.tolist(), ends.tolist(), times.tolist(), nums.tolist(), strict=False):
+                    self._nmea_text(ch, buf[s:e], t, k)
+        except (CdrError, ValueError, TypeError, KeyError) as err:
+            ch.bad += len(starts)
+            add_rejects(self.rejects, f"message does not decode ({ch.type_name})", self.file, nums,
+                        [f"{ch.topic}: {err}"] * 5)
+
+    def _setup(self, ch: _Channel, buf: bytes, s: int, e: int) -> None:
+        enc = ch.encoding
+        sch = ch.schema
+        if enc == "cdr":
+            if sch is None or sch.encoding != "ros2msg":
+                ch.mode, ch.why = "skip", "CDR without a ros2msg schema"
+                return
+            try:
+                fields = compile_schema(sch.name, sch.data.decode("utf-8"))
+            except (CdrError, UnicodeDecodeError, Exception) as err:  # the IDL parser raises its own
+                ch.mode, ch.why = "skip", f"schema not understood ({type(err).__name__}: {err})"
+                return
+            self._setup_cdr(ch, fields, buf, s, e)
+        elif enc == "json":
+            ch.mode = "json"
+        elif enc == "protobuf":
+            if sch is None or sch.encoding != "protobuf":
+                ch.mode, ch.why = "skip", "protobuf without a schema"
+                return
+            from mcap.records import Schema
+            from mcap_protobuf.decoder import DecoderFactory
+
+            try:
+                fn = DecoderFactory().decoder_for(
+                    "protobuf", Schema(id=sch.id, name=sch.name, encoding=sch.encoding, data=sch.data))
+            except Exception as err:  # protobuf raises several types on bad descriptors
+                ch.mode, ch.why = "skip", f"protobuf schema not usable ({type(err).__name__}: {err})"
+                return
+            ch.state["decode"] = fn
+            ch.mode = "protobuf"
+        elif sch is None and bytes(buf[s:s + 1]) in _NMEA_START:
+            ch.mode = "text"
+        else:
+            ch.mode = "skip"
+            ch.why = f"message encoding {enc!r} not supported" if enc else "schemaless, not NMEA text"
+
+    def _setup_cdr(self, ch: _Channel, fields, buf: bytes, s: int, e: int) -> None:
+        paths = scalar_paths(fields)
+        strs = string_paths(fields)
+        short = ch.schema.name.split("/")[-1]
+        want: dict[str, str] = {}  # path -> quantity name (or a special)
+        if "latitude" in paths and "longitude" in paths:
+            want.update({"latitude": "lat_deg", "longitude": "lon_deg"})
+            if "altitude" in paths:
+                want["altitude"] = "alt_m"
+            if "status.status" in paths:
+                want["status.status"] = "_navsat_status"
+        for prefix in ("orientation", "quaternion"):
+            if all(f"{prefix}.{c}" in paths for c in "xyzw") and short in ("Imu", "QuaternionStamped"):
+                for c in "xyzw":
+                    want[f"{prefix}.{c}"] = f"_q{c}"
+        for p in paths:
+            if "." not in p:
+                q = lookup(p, self.declared)
+                if q is not None:
+                    want[p] = q.name
+        if "reference" in paths:
+            want["reference"] = "_reference_code"
+        text_path = None
+        if short == "Sentence" and "sentence" in strs:
+            text_path = "sentence"
+        elif short == "String" and "data" in strs:
+            text_path = "data"
+        if text_path:
+            ch.state["text_path"] = text_path
+        elif not any(not v.startswith("_") or v.startswith(("_q", "_navsat")) for v in want.values()):
+            ch.mode, ch.why = "skip", "no navigation fields"
+            return
+        if "header.stamp.sec" in paths and "header.stamp.nanosec" in paths:
+            want["header.stamp.sec"] = "_sec"
+            want["header.stamp.nanosec"] = "_nsec"
+        ch.state["fields"] = fields
+        ch.state["want"] = want
+        ch.mode = "cdr"
+
+    def _stamp(self, sec: np.ndarray, nsec: np.ndarray, log_time: np.ndarray) -> np.ndarray:
+        have = ~np.isnan(sec) & ~np.isnan(nsec) & ((sec != 0) | (nsec != 0))
+        t = np.asarray(log_time, dtype=np.int64).copy()
+        if have.any():
+            t[have] = sec[have].astype(np.int64) * 1_000_000_000 + nsec[have].astype(np.int64)
+        return t
+
+    def _cdr(self, ch: _Channel, buf, starts, ends, times, nums) -> None:
+        fields = ch.state["fields"]
+        want = ch.state["want"]
+        tp = ch.state.get("text_path")
+        vals, strs, ok = decode_channel(fields, buf, starts, ends, list(want), [tp] if tp else [])
+        if not ok.all():
+            ch.bad += int((~ok).sum())
+            add_rejects(self.rejects, f"message does not match its schema ({ch.type_name})", self.file,
+                        nums[~ok], [ch.topic] * 5)
+        if "header.stamp.sec" in want:
+            t = self._stamp(vals["header.stamp.sec"], vals["header.stamp.nanosec"], times)
+        else:
+            t = np.asarray(times, dtype=np.int64)
+        if tp:
+            if "nmea" not in ch.state:
+                first = next((strs[tp][i] for i in np.flatnonzero(ok) if strs[tp][i]), "")
+                if first[:1] not in ("$", "!", "\\"):
+                    ch.mode, ch.why = "skip", f"text that is not NMEA ({first[:30]!r})"
+                    return
+            for i in np.flatnonzero(ok):
+                text = strs[tp][i]
+                if text is not None:
+                    self._nmea_text(ch, text.encode("utf-8", "replace"), int(t[i]), int(nums[i]))
+            return
+        out: dict[str, np.ndarray] = {}
+        for path, q in want.items():
+            v = np.where(ok, vals[path], np.nan)
+            if q == "_navsat_status":
+                # NavSatStatus -1 no fix, 0 fix, 1 SBAS, 2 GBAS -> GGA-style quality 0, 1, 2, 4
+                out["quality"] = np.select([v == -1, v == 0, v == 1, v == 2], [0.0, 1.0, 2.0, 4.0], np.nan)
+            elif q == "_reference_code":
+                out["reference"] = np.where(v == 77, "M", np.where(v == 84, "T", None)).astype(object)
+            elif not q.startswith("_"):
+                out[q] = v
+        if "_qw" in want.values():
+            inv = {q: p for p, q in want.items()}
+            x, y, z, w = (np.where(ok, vals[inv[f"_q{c}"]], np.nan) for c in "xyzw")
+            yaw_rad = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))  # ENU yaw (REP 103)
+            out["heading_rad"] = np.mod(math.pi / 2 - yaw_rad, 2 * math.pi)  # from north, clockwise
+        keep = ok
+        ch.parts.append((t[keep], nums[keep], {k: v[keep] for k, v in out.items()}))
+
+    def _json(self, ch: _Channel, payloads: list[bytes], times, nums) -> None:
+        if "plan" not in ch.state:
+            try:
+                first = json.loads(payloads[0])
+            except ValueError:
+                first = None
+            plan = self._json_plan(first)
+            if plan is None:
+                ch.mode = "skip"
+                keys = ", ".join(list(first)[:8]) if isinstance(first, dict) else type(first).__name__
+                ch.why = "JSON without navigation fields (no quantity names, no latitude/longitude)"
+                ch.state["keys"] = keys
+                return
+            ch.state["plan"] = plan
+        plan = ch.state["plan"]
+        if plan["nmea"]:
+            for p, t, k in zip(payloads, times.tolist(), nums.tolist(), strict=False):
+                try:
+                    obj = json.loads(p)
+                    self._nmea_text(ch, str(obj["sentence"]).encode("utf-8", "replace"), t, k)
+                except (ValueError, KeyError, TypeError):
+                    ch.bad += 1
+                    add_rejects(self.rejects, "bad JSON message", self.file, np.array([k]), [ch.topic])
+            return
+        cols = _json_columns(payloads, plan)
+        if cols is None:  # pyarrow could not: message by message, counting the bad ones
+            cols = _json_columns_slow(payloads, plan)
+        good = cols.pop("_ok")
+        if not good.all():
+            ch.bad += int((~good).sum())
+            add_rejects(self.rejects, "bad JSON message", self.file, nums[~good],
+                        [bytes(payloads[i][:100]).decode("utf-8", "replace") for i in np.flatnonzero(~good)[:5]])
+        sec, nsec = cols.pop("_sec", None), cols.pop("_nsec", None)
+        tns = cols.pop("_time_ns", None)
+        t = np.asarray(times, dtype=np.int64)
+        if sec is not None:
+            t = self._stamp(sec, nsec, t)
+        elif tns is not None:
+            have = tns >= 0
+            t = t.copy()
+            t[have] = tns[have]
+        ch.parts.append((t[good], nums[good], {k: v[good] for k, v in cols.items()}))
+
+    def _json_plan(self, obj) -> dict | None:
+        if not isinstance(obj, dict):
+            return None
+        if isinstance(obj.get("sentence"), str):
+            return {"nmea": True}
+        fields: dict[str, str] = {}
+        if "latitude" in obj and "longitude" in obj:
+            fields.update({"latitude": "lat_deg", "longitude": "lon_deg"})
+            if "altitude" in obj:
+                fields["altitude"] = "alt_m"
+        for k in obj:
+            q = lookup(k, self.declared)
+            if q is not None:
+                fields[k] = q.name
+        if not fields:
+            return None
+        stamp = None
+        ts = obj.get("timestamp")
+        hd = obj.get("header")
+        if isinstance(ts, dict) and "sec" in ts:
+            stamp = ("timestamp", "sec", "nsec")
+        elif isinstance(hd, dict) and isinstance(hd.get("stamp"), dict):
+            stamp = ("header.stamp", "sec", "nanosec")
+        return {"nmea": False, "fields": fields, "stamp": stamp, "time_ns": "time_ns" in obj}
+
+    def _protobuf(self, ch: _Channel, buf, starts, ends, times, nums) -> None:
+        decode = ch.state["decode"]
+        msgs = []
+        good = np.ones(len(starts), dtype=bool)
+        for i, (s, e) in enumerate(zip(starts.tolist(), ends.tolist(), strict=False)):
+            try:
+                msgs.append(decode(buf[s:e]))
+            except Exception:  # protobuf's DecodeError and friends
+                msgs.append(None)
+                good[i] = False
+        if not good.all():
+            ch.bad += int((~good).sum())
+            add_rejects(self.rejects, f"message does not decode ({ch.type_name})", self.file,
+                        nums[~good], [ch.topic] * 5)
+        live = [m for m in msgs if m is not None]
+        if not live:
+            return
+        if "pplan" not in ch.state:
+            ch.state["pplan"] = self._proto_plan(ch, live[0])
+        plan = ch.state["pplan"]
+        if plan is None:
+            return
+        t = np.asarray(times, dtype=np.int64).copy()
+        if plan["stamp"]:
+            for i, m in enumerate(msgs):
+                if m is not None and m.HasField(plan["stamp"]):
+                    ts = getattr(m, plan["stamp"])
+                    if ts.seconds or ts.nanos:
+                        t[i] = ts.seconds * 1_000_000_000 + ts.nanos
+        if plan["bytes"]:
+            fld = plan["bytes"]
+            payloads, tt, kk = [], [], []
+            for i, m in enumerate(msgs):
+                if m is None:
+                    continue
+                v = getattr(m, fld)
+                v = v.encode("utf-8") if isinstance(v, str) else bytes(v)
+                payloads.append(v)
+                tt.append(t[i])
+                kk.append(nums[i])
+            if not payloads:
+                return
+            if payloads[0][:1] in _NMEA_START:
+                for p, ti, k in zip(payloads, tt, kk, strict=False):
+                    self._nmea_text(ch, p, int(ti), int(k))
+            else:
+                sub_t = np.asarray(tt, np.int64)
+                self._json(ch, payloads, sub_t, np.asarray(kk, np.int64))
+            return
+        out = {q: np.array([getattr(m, f) if m is not None else np.nan for m in msgs], dtype=np.float64)
+               for f, q in plan["fields"].items() if q != "reference"}
+        if "reference" in plan["fields"].values():
+            f = next(k for k, q in plan["fields"].items() if q == "reference")
+            out["reference"] = np.array([(getattr(m, f) or None) if m is not None else None for m in msgs],
+                                        dtype=object)
+        ch.parts.append((t[good], nums[good], {k: v[good] for k, v in out.items()}))
+
+    def _proto_plan(self, ch: _Channel, msg) -> dict | None:
+        desc = msg.DESCRIPTOR
+        names = {f.name: f for f in desc.fields}
+        stamp = None
+        ts = names.get("timestamp")
+        if ts is not None and ts.message_type is not None and ts.message_type.full_name == "google.protobuf.Timestamp":
+            stamp = "timestamp"
+        fields: dict[str, str] = {}
+        if "latitude" in names and "longitude" in names:
+            fields.update({"latitude": "lat_deg", "longitude": "lon_deg"})
+            if "altitude" in names:
+                fields["altitude"] = "alt_m"
+        for n_ in names:
+            q = lookup(n_, self.declared)
+            if q is not None:
+                fields[n_] = q.name
+        if fields:
+            return {"stamp": stamp, "fields": fields, "bytes": None}
+        # a wrapper of raw text (keelson TimestampedBytes: timestamp + value)
+        from google.protobuf.descriptor import FieldDescriptor
+
+        texts = [f.name for f in desc.fields if f.type in (FieldDescriptor.TYPE_BYTES, FieldDescriptor.TYPE_STRING)
+                 and not _repeated(f)]
+        if len(texts) == 1:
+            ch.state["plan_note"] = f"text in field {texts[0]!r}"
+            return {"stamp": stamp, "fields": {}, "bytes": texts[0]}
+        ch.mode, ch.why = "skip", "protobuf message without navigation fields"
+        return None
+
+    def _nmea_text(self, ch: _Channel, text: bytes, t: int, k: int) -> None:
+        for line in text.splitlines():
+            line = line.strip()
+            if not line:
+                continue
+            self.nmea_lines.append(line)
+            self.nmea_time.append(t)
+            self.nmea_src.append(ch.key)
+            self.nmea_no.append(k)
+        ch.state["nmea"] = ch.state.get("nmea", 0) + 1
+
+    # ---------------------------------------------------------------- result
+    def result(self) -> FileResult:
+        per_kind: dict[str, list[pd.DataFrame]] = {}
+        for ch in self.channels.values():
+            if not ch.parts:
+                continue
+            t = np.concatenate([p[0] for p in ch.parts])
+            k = np.concatenate([p[1] for p in ch.parts])
+            qs = {q: np.concatenate([p[2][q] for p in ch.parts]) for q in ch.parts[0][2]}
+            ch.parts = []
+            sentence = ch.type_name.split("/")[-1].split(".")[-1]
+            frames = build_frames(t, ch.key, k, sentence, qs, self.file, self.rejects)
+            ch.state["records"] = sum(len(f) for f in frames.values())
+            for kind, f in frames.items():
+                per_kind.setdefault(kind, []).append(f)
+        out = {kind: pd.concat(fs, ignore_index=True).sort_values(["time_ns", "line"], kind="stable")
+               .reset_index(drop=True) for kind, fs in per_kind.items()}
+        res = FileResult(path=self.file, format="mcap", frames=out, lines=self.msg_no, rejects=self.rejects,
+                         notes=[])
+        if self.nmea_lines:
+            from .nmea import parse_sentences
+
+            nres = parse_sentences(self.nmea_lines, np.asarray(self.nmea_time, dtype=np.int64),
+                                   self.nmea_src, self.file, self.cfg)
+            nos = np.asarray(self.nmea_no, dtype=np.int64)
+            for kind, f in nres.frames.items():
+                if len(f) == 0:
+                    continue
+                f = f.copy()
+                f["line"] = nos[f["line"].to_numpy(dtype=np.int64) - 1]  # sentence index -> message number
+                res.frames[kind] = (pd.concat([res.frames[kind], f], ignore_index=True)
+                                    .sort_values(["time_ns", "line"], kind="stable").reset_index(drop=True)
+                                    if kind in res.frames else f)
+            res.rejects.merge(nres.rejects)
+            res.time_events = nres.time_events
+            res.notes.extend(nres.notes)
+        res.notes[:0] = self.notes + self._channel_notes()
+        if self.orphans:
+            add_rejects(res.rejects, "message on an undeclared channel", self.file, np.zeros(1, np.int64),
+                        [f"{self.orphans} messages"])
+            res.rejects.counts["message on an undeclared channel"] += self.orphans - 1
+        if not res.frames or res.records == 0:
+            if not self.channels:
+                res.notes.append(f"{self.file}: valid MCAP with no channels and {self.msg_no} messages: "
+                                 f"nothing to read")
+            else:
+                res.notes.append(f"{self.file}: no navigation data in {len(self.channels)} channel(s), "
+                                 f"{self.msg_no} message(s)")
+        if self.cfg.strict and res.rejects.total:
+            reason, ex = next(iter(res.rejects.examples.items()))
+            raise IngestError(f"{ex[0][0]}: message {ex[0][1]}: {reason}: {ex[0][2]!r} (--strict)")
+        return res
+
+    def _channel_notes(self) -> list[str]:
+        from collections import Counter
+
+        notes = []
+        unused: Counter = Counter()
+        for ch in self.channels.values():
+            what = f"{ch.topic} [{ch.type_name}, {ch.encoding or 'no encoding'}]: {ch.messages} message(s)"
+            if ch.mode == "skip" or ch.mode == "pending":
+                why = ch.why or "no messages"
+                unused[why] += 1
+                notes.append(f"channel {what}: not used ({why})")
+            elif ch.state.get("nmea"):
+                notes.append(f"channel {what}: raw NMEA, source {ch.key!r}")
+            elif ch.state.get("records"):
+                notes.append(f"channel {what}: {ch.state['records']} record(s), source {ch.key!r}")
+            else:
+                notes.append(f"channel {what}: no navigation records")
+        if len(notes) > 40:  # hundreds of channels (e.g. one per AIS target): summarise the unused
+            used = [n for n in notes if "not used" not in n]
+            notes = used + [f"{k} further channel(s) not used ({why})" for why, k in unused.most_common()]
+        return notes
+
+
+def _repeated(f) -> bool:
+    """A repeated protobuf field (protobuf >= 6 has ``is_repeated``; older ones ``label``)."""
+    rep = getattr(f, "is_repeated", None)
+    if rep is not None:
+        return bool(rep)
+    return f.label == f.LABEL_REPEATED
+
+
+def _json_columns(payloads: list[bytes], plan: dict) -> dict[str, np.ndarray] | None:
+    """Columns of one channel's JSON messages in one pyarrow parse, or None if it cannot."""
+    import pyarrow as pa
+    import pyarrow.json as pj
+
+    n = len(payloads)
+    joined = b"\n".join(payloads)
+    if joined.count(b"\n") != n - 1 or any(len(p) == 0 for p in payloads):
+        return None
+    fields = [pa.field(k, pa.string() if q == "reference" else pa.float64()) for k, q in plan["fields"].items()]
+    st = plan["stamp"]
+    if st:
+        inner = pa.struct([pa.field(st[1], pa.float64()), pa.field(st[2], pa.float64())])
+        if st[0] == "timestamp":
+            fields.append(pa.field("timestamp", inner))
+        else:
+            fields.append(pa.field("header", pa.struct([pa.field("stamp", inner)])))
+    if plan["time_ns"]:
+        fields.append(pa.field("time_ns", pa.int64()))
+    try:
+        table = pj.read_json(BytesIO(joined),
+                             read_options=pj.ReadOptions(use_threads=False, block_size=max(len(joined) + 1, 1 << 16)),
+                             parse_options=pj.ParseOptions(explicit_schema=pa.schema(fields),
+                                                           unexpected_field_behavior="ignore"))
+    except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
+        return None
+    if table.num_rows != n:
+        return None
+    cols: dict[str, np.ndarray] = {"_ok": np.ones(n, dtype=bool)}
+    for k, q in plan["fields"].items():
+        c = table.column(k)
+        if q == "reference":
+            cols[q] = np.asarray(c.to_pylist(), dtype=object)
+        else:
+            cols[q] = c.to_numpy(zero_copy_only=False).astype(np.float64)
+    if st:
+        s = table.column(st[0]).combine_chunks()
+        if st[0] == "header":
+            s = s.field("stamp")
+        sec = s.field(st[1]).to_numpy(zero_copy_only=False).astype(np.float64)
+        nsec = s.field(st[2]).to_numpy(zero_copy_only=False).astype(np.float64)
+        cols["_sec"], cols["_nsec"] = sec, nsec
+    if plan["time_ns"]:
+        c = table.column("time_ns").combine_chunks()
+        cols["_time_ns"] = c.fill_null(-1).to_numpy(zero_copy_only=False).astype(np.int64)
+    return cols
+
+
+def _num(v) -> float:
+    if v is None:
+        return math.nan
+    if isinstance(v, bool):
+        raise ValueError("boolean where a number is expected")
+    return float(v)
+
+
+def _json_columns_slow(payloads: list[bytes], plan: dict) -> dict[str, np.ndarray]:
+    n = len(payloads)
+    cols: dict[str, np.ndarray] = {q: (np.full(n, None, dtype=object) if q == "reference" else np.full(n, np.nan))
+                                   for q in plan["fields"].values()}
+    ok = np.ones(n, dtype=bool)
+    st = plan["stamp"]
+    if st:
+        cols["_sec"], cols["_nsec"] = np.full(n, np.nan), np.full(n, np.nan)
+    if plan["time_ns"]:
+        cols["_time_ns"] = np.full(n, -1, dtype=np.int64)
+    for i, p in enumerate(payloads):
+        try:
+            obj = json.loads(p)
+            for k, q in plan["fields"].items():
+                v = obj.get(k)
+                if q == "reference":
+                    cols[q][i] = v
+                else:
+                    cols[q][i] = _num(v)
+            if st:
+                s = obj.get("timestamp") if st[0] == "timestamp" else (obj.get("header") or {}).get("stamp")
+                if s:
+                    cols["_sec"][i], cols["_nsec"][i] = _num(s.get(st[1])), _num(s.get(st[2]))
+            if plan["time_ns"] and obj.get("time_ns") is not None:
+                cols["_time_ns"][i] = int(obj["time_ns"])
+        except (ValueError, TypeError, AttributeError):
+            ok[i] = False
+    cols["_ok"] = ok
+    return cols
+
+
+def read_mcap(path, cfg: IngestConfig) -> FileResult:
+    """Read an MCAP log into canonical frames (see the module docstring)."""
+    declared = dict(getattr(cfg, "quantities", {}) or {})
+    check_declared(declared, str(path))
+    r = _Reader(Path(path), cfg)
+    r.run()
+    return r.result()
