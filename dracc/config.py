@@ -42,6 +42,9 @@ class IngestConfig:
     backstep_tolerance_s: float = 1.0  #: backward steps up to this are jitter, not events
     #: source key -> role, e.g. {"INS2": "ins2", "HE": "compass"}
     sources: dict[str, str] = field(default_factory=dict)
+    #: CSV column / JSON field name -> quantity with unit (e.g. {"Speed (kn)": "stw_kn"}), for
+    #: logs whose names do not carry the unit; see dracc.ingest.csv_quantities
+    quantities: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
