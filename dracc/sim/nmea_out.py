@@ -180,6 +180,13 @@ def _col(df: pd.DataFrame, name: str) -> np.ndarray:
     return np.full(len(df), np.nan)
 
 
+def _angle_deg(a_rad) -> np.ndarray:
+    """A heading or course in degrees [0, 360) as written: 359.9996 rounds to 0.000, not 360."""
+    a = np.asarray(a_rad, float)
+    deg = np.rint(np.mod(a / DEG_RAD, 360.0) * 10 ** ANGLE_DEC) / 10 ** ANGLE_DEC
+    return np.where(deg >= 360.0, deg - 360.0, deg)
+
+
 def _gga(r, d):
     _hms(r, d["time_ns"])
     r.lit(b",")
@@ -203,7 +210,7 @@ def _rmc(r, d):
     r.lit(b",")
     _latlon(r, d["lon_rad"], 3, b"E", b"W")
     r.lit(b",").num(d["sog_mps"] / KN_MPS, SPEED_DEC).lit(b",")
-    r.num(d["cog_rad"] / DEG_RAD, ANGLE_DEC).lit(b",")
+    r.num(_angle_deg(d["cog_rad"]), ANGLE_DEC).lit(b",")
     dd, mm, yy = _date(cs)
     r.uint(dd, 2).uint(mm, 2).uint(yy % 100, 2).lit(b",,,").choice(ok, b"A", b"N")
 
@@ -216,12 +223,12 @@ def _zda(r, d):
 
 def _hdt_like(code: bytes):
     def f(r, d):
-        r.num(d["heading_rad"] / DEG_RAD, ANGLE_DEC).lit(b"," + code)
+        r.num(_angle_deg(d["heading_rad"]), ANGLE_DEC).lit(b"," + code)
     return f
 
 
 def _hdg(r, d):
-    r.num(d["heading_rad"] / DEG_RAD, ANGLE_DEC)
+    r.num(_angle_deg(d["heading_rad"]), ANGLE_DEC)
     for name in ("deviation_rad", "variation_rad"):
         v = d[name] / DEG_RAD
         r.lit(b",").num(np.abs(v), ANGLE_DEC).lit(b",").choice(v >= 0, b"E", b"W",
@@ -253,7 +260,7 @@ def _vlw(r, d):
 
 
 def _vtg(r, d):
-    r.num(d["cog_rad"] / DEG_RAD, ANGLE_DEC).lit(b",T,,M,")
+    r.num(_angle_deg(d["cog_rad"]), ANGLE_DEC).lit(b",T,,M,")
     r.num(d["sog_mps"] / KN_MPS, SPEED_DEC).lit(b",N,").num(d["sog_mps"] / KMH_MPS, SPEED_DEC)
     r.lit(b",K,A")
 
