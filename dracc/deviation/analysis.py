@@ -133,7 +133,7 @@ class ReferenceStats:
 class ReferenceAverage:
     """The last row of Table 1: RMS averaged over the windows (days), weights n per day."""
 
-    days: int
+    days: int  #: windows that entered the average (n >= 2)
     m_x: float  #: weighted RMS of the errors
     m_u: float  #: weighted RMS of the deviations
     k_star: float  #: m_x / m_u
@@ -514,8 +514,9 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
                 n = [r.n for r in rows]
                 mx = stats.weighted_rms([r.m_x for r in rows], n)
                 mu = stats.weighted_rms([r.m_u for r in rows], n)
+                used = sum(1 for r in rows if r.n >= 2 and not math.isnan(r.m_x))
                 ref_avg.setdefault(u, {})[c] = ReferenceAverage(
-                    len(rows), mx, mu, mx / mu if mu > 0 else math.nan)
+                    used, mx, mu, mx / mu if mu > 0 else math.nan)
 
     messages = [m.message for m in modes.values() if m.message]
     if reference is not None and not err:

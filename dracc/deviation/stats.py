@@ -84,13 +84,22 @@ def deviations_position_m(lat_rad, lon_rad):
 
 
 def deviations_course_rad(heading_rad):
-    """Course deviations on the circle: u_ji = angdiff(y_ji, circmean_j y_ji)  (K1a, K1b).
+    """Course deviations on the circle  (K1a, K1b).
 
-    ``heading_rad``: shape (J, n); an instant with any unit missing gives NaN for all.
+    ``heading_rad``: shape (J, n).  The headings are unwrapped around their circular
+    mean c_i (:func:`circmean`), and (K1b) is applied to the unwrapped values:
+
+    y*_i = c_i + (1/J) sum_j angdiff(y_ji, c_i)                 (K1b) on the circle
+    u_ji = angdiff(y_ji, y*_i)                                  (K1a)
+
+    so 359 deg and 1 deg average to 0 deg, and the deviations sum to zero exactly as in
+    the paper (the circular mean itself differs from (K1b) by O(spread^3), which would
+    break sum_j u_ji = 0).  An instant with any unit missing gives NaN for all.
     """
     h = np.asarray(heading_rad, dtype=float)
     complete = ~np.any(np.isnan(h), axis=0)
-    mean = np.where(complete, circmean(h, axis=0), np.nan)  # (K1b) on the circle
+    c = np.where(complete, circmean(h, axis=0), np.nan)
+    mean = c + np.mean(angdiff(h, c), axis=0)  # (K1b) on the circle
     return np.where(complete, angdiff(h, mean), np.nan)  # (K1a)
 
 
@@ -142,21 +151,25 @@ def excess_kurtosis_k6(u, axis=-1):
 def lat_lon_covariance(u_lat, u_lon, axis=-1):
     """Covariance and correlation of latitude and longitude deviations  (K7).
 
-    R = (1/n) sum u_lat,i u_lon,i               (K7a)
-    r = R / (m_lat m_lon), m from (K3b)         (K7b)
+    R = (1/n) sum u_lat,i u_lon,i                                   (K7a)
+    r = R / (m_lat m_lon)                                           (K7b), corrected:
+        with m_lat, m_lon the RMS over the same n, i.e. m^2 = (1/n) sum u^2
 
-    Only instants where both channels are valid count.  Returns (R, r); NaN where
-    n < 2 or an RMS is zero.
+    The paper takes m from (K3b), with n - 1.45: then perfectly correlated channels give
+    r = (n - 1.45)/n (0.71 at n = 5, 0.94 at n = 24), not 1.  dracc uses the same
+    normalisation in R and in m, so that |r| <= 1; the paper's literal value is
+    r * (n - 1.45)/n.  Only instants where both channels are valid count.  Returns
+    (R, r); NaN where n < 2 or an RMS is zero.
     """
     a = np.asarray(u_lat, dtype=float)
     b = np.asarray(u_lon, dtype=float)
     both = ~(np.isnan(a) | np.isnan(b))
-    a = np.where(both, a, np.nan)
-    b = np.where(both, b, np.nan)
+    a = np.where(both, a, 0.0)
+    b = np.where(both, b, 0.0)
     n = np.sum(both, axis=axis)
     with np.errstate(invalid="ignore", divide="ignore"):
-        cov = np.nansum(a * b, axis=axis) / n  # (K7a)
-        r = cov / (rms_k3b(a, axis) * rms_k3b(b, axis))  # (K7b)
+        cov = np.sum(a * b, axis=axis) / n  # (K7a)
+        r = cov / np.sqrt(np.sum(a * a, axis=axis) / n * np.sum(b * b, axis=axis) / n)  # (K7b)
     return np.where(n >= 2, cov, np.nan), np.where(n >= 2, r, np.nan)
 
 
@@ -241,15 +254,16 @@ def limiting_error(m_y, probability, kurtosis, confidence, n_eff):
 
 
 def weighted_rms(rms, n):
-    """Weighted average of RMS values over windows (the last row of the paper's Table 1):
+    """Weighted average of (K3b) RMS values over windows (the last row of the paper's Table 1):
 
-    m_w = sqrt( sum_d n_d m_d^2 / sum_d n_d )
+    m_w = sqrt( sum_d (n_d - 1.45) m_d^2 / sum_d (n_d - 1.45) )
 
-    The paper does not state its weights; dracc weighs each day by its number of
-    samples, which makes m_w the RMS over all the days together.  NaN entries are skipped.
+    The paper does not state its weights; dracc weighs each day by the denominator of its
+    (K3b) RMS, so m_w pools the days' sums of squares over their pooled (n - 1.45) (days
+    of equal n get equal weights).  Windows with n < 2 or NaN RMS are skipped.
     """
     m = np.asarray(rms, dtype=float)
-    w = np.asarray(n, dtype=float)
+    w = np.asarray(n, dtype=float) - N_CORRECTION
     ok = ~np.isnan(m) & (w > 0)
     if not np.any(ok):
         return math.nan
