@@ -26,11 +26,17 @@ from .analysis import (
     check_config,
 )
 from .hat import HatEstimate, three_cornered_hat
-from .sampling import UnitSeries, sample_unit, sampling_instants, unit_series_from_voyage
+from .sampling import (
+    UnitSeries,
+    sample_unit,
+    sampling_instants,
+    unit_series_from_frames,
+    unit_series_from_voyage,
+)
 
 __all__ = [
     "CHANNELS", "ChannelMode", "ChannelStats", "DeviationResult", "HatEstimate", "HatStats",
     "KurtosisWindow", "ReferenceAverage", "ReferenceStats", "UnitSeries", "UnitStats",
     "WindowStats", "analyse_deviations", "check_config", "sample_unit", "sampling_instants",
-    "three_cornered_hat", "unit_series_from_voyage",
+    "three_cornered_hat", "unit_series_from_frames", "unit_series_from_voyage",
 ]

@@ -371,7 +371,11 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
     names = [u for u in INS_ROLES if u in units]
     spans = [s for s in (units[u].span_ns() for u in names) if s is not None]
     if spans:
-        instants = sampling_instants(min(s[0] for s in spans), max(s[1] for s in spans),
+        # an instant up to max_interp_gap_s before the first (after the last) reading can
+        # still take that reading (a log started at 00:00:00.3 has its 00:00 sample)
+        gap_ns = int(round(cfg.max_interp_gap_s * 1e9))
+        instants = sampling_instants(min(s[0] for s in spans) - gap_ns,
+                                     max(s[1] for s in spans) + gap_ns,
                                      cfg.interval_s, cfg.offset_s)
     else:
         instants = np.empty(0, np.int64)

@@ -143,20 +143,25 @@ def sample_unit(unit: UnitSeries, instants_ns, max_gap_s: float) -> SampledUnit:
     return SampledUnit(lat_rad=pos[0], lon_rad=pos[1], heading_rad=wrap_2pi(hdg))
 
 
-def unit_series_from_voyage(voyage, role: str) -> UnitSeries:
-    """Readings of ``role`` from a :class:`dracc.ingest.frames.Voyage`.
+def unit_series_from_frames(position, heading) -> UnitSeries:
+    """Readings of one unit from canonical ``position`` and ``heading`` frames (either None).
 
     Positions with GGA fix quality 0 (invalid) are left out; headings only where the
     reference is true ('T': HDT, THS) — a magnetic heading is not an INS course.
     """
-    pos = voyage.frame("position", role)
-    pos = pos[pos["quality"] != 0]
-    hdg = voyage.frame("heading", role)
-    hdg = hdg[hdg["reference"] == "T"]
-    return UnitSeries(
-        pos_time_ns=pos["time_ns"].to_numpy(np.int64),
-        lat_rad=pos["lat_rad"].to_numpy(float),
-        lon_rad=pos["lon_rad"].to_numpy(float),
-        hdg_time_ns=hdg["time_ns"].to_numpy(np.int64),
-        heading_rad=hdg["heading_rad"].to_numpy(float),
-    )
+    kw: dict = {}
+    if position is not None and len(position):
+        pos = position[position["quality"] != 0]
+        kw.update(pos_time_ns=pos["time_ns"].to_numpy(np.int64),
+                  lat_rad=pos["lat_rad"].to_numpy(float), lon_rad=pos["lon_rad"].to_numpy(float))
+    if heading is not None and len(heading):
+        hdg = heading[heading["reference"] == "T"]
+        kw.update(hdg_time_ns=hdg["time_ns"].to_numpy(np.int64),
+                  heading_rad=hdg["heading_rad"].to_numpy(float))
+    return UnitSeries(**kw)
+
+
+def unit_series_from_voyage(voyage, role: str) -> UnitSeries:
+    """Readings of ``role`` from a :class:`dracc.ingest.frames.Voyage`
+    (see :func:`unit_series_from_frames` for what is left out)."""
+    return unit_series_from_frames(voyage.frame("position", role), voyage.frame("heading", role))

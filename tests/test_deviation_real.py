@@ -1,0 +1,64 @@
+"""INS-deviation statistics on real logs (../shared/data/real/openrvdas, RVIB N. B. Palmer).
+
+No real log holds an INS triple; the Palmer's two GNSS receivers (gp02: GLL, seap: Seapath
+GGA + HDT) and its gyro (gyr1: HEHDT) recorded the same 10 minutes in separate files.
+Taken as two "units" they exercise the two-unit case, sampling of real, irregular
+readings, missing instants (gp02 runs on after seap stops), and heading on the circle;
+the deviations are checked against an independent GeographicLib distance.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import dracc.ingest as ingest
+from dracc.config import DeviationConfig, IngestConfig
+from dracc.deviation import analyse_deviations, sample_unit, unit_series_from_frames
+
+geographiclib = pytest.importorskip("geographiclib.geodesic")
+
+
+@pytest.fixture(scope="module")
+def palmer(real_dir):
+    d = real_dir / "openrvdas"
+    frames = {name: ingest.read_file(d / f"NBP1406_{name}-2014-08-01", IngestConfig()).frames
+              for name in ("gp02", "seap", "gyr1")}
+    ins1 = unit_series_from_frames(frames["gp02"].get("position"), frames["gyr1"].get("heading"))
+    ins2 = unit_series_from_frames(frames["seap"].get("position"), frames["seap"].get("heading"))
+    return {"ins1": ins1, "ins2": ins2}
+
+
+def test_two_real_receivers_as_two_units(palmer):
+    cfg = DeviationConfig(interval_s=60.0, window_s=3600.0, max_interp_gap_s=5.0)
+    res = analyse_deviations(palmer, cfg)
+    assert res.channels["lat"].mode == "two" and res.factors["lat"] == pytest.approx(math.sqrt(2))
+    assert any("only two units (ins1, ins2)" in m for m in res.messages)
+    # gp02 runs 00:00:00.3-00:27:46, seap 00:00:00.7-00:11:54: instants 00:00..00:11
+    # have both (00:00 from the first readings, within max_interp_gap_s)
+    assert res.time_ns[0] == 1406851200 * 10**9
+    lat1 = res.samples["ins1"]["lat"]
+    both = ~np.isnan(lat1)
+    assert both.sum() == 12 and np.all(both[:12])
+    assert res.missing["ins2"]["lat"] == len(res.time_ns) - 12
+    # deviations from the mean of two are half the difference: opposite and equal
+    np.testing.assert_allclose(res.samples["ins2"]["lat"][both], -lat1[both], atol=1e-9)
+    # independent check: GeographicLib distance between the two receivers' positions at
+    # the instants (interpolated the same way) is twice the deviation vector's length
+    geod = geographiclib.Geodesic.WGS84
+    s1 = sample_unit(palmer["ins1"], res.time_ns, cfg.max_interp_gap_s)
+    s2 = sample_unit(palmer["ins2"], res.time_ns, cfg.max_interp_gap_s)
+    for i in np.flatnonzero(both):
+        dist = geod.Inverse(*np.degrees([s1.lat_rad[i], s1.lon_rad[i], s2.lat_rad[i],
+                                         s2.lon_rad[i]]))["s12"]
+        dev = math.hypot(lat1[i], res.samples["ins1"]["lon"][i])
+        assert 2 * dev == pytest.approx(dist, rel=1e-3, abs=0.01)
+    # two receivers on one ship: metres to tens of metres apart, not kilometres
+    stats = res.whole.units["ins1"].channels
+    assert 0.1 < stats["lat"].m_u < 100 and 0.1 < stats["lon"].m_u < 100
+    # heading: the gyro against the Seapath, on the circle, within a few degrees
+    crs = res.samples["ins1"]["course"]
+    assert np.sum(~np.isnan(crs)) >= 12 and np.nanmax(np.abs(crs)) < 5.0
+    assert res.whole.units["ins1"].hat == {}
