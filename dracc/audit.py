@@ -40,7 +40,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from .config import Config
-from .errors import ConfigError, DraccError, ExitCode, IngestError, InsufficientDataError
+from .errors import ConfigError, ExitCode, IngestError, InsufficientDataError
 from .state import AprioriEvent, ChannelRow, NightRecord, StateStore
 
 UNITS = ("ins1", "ins2", "ins3")
@@ -311,15 +311,18 @@ def facts_from_analysis(doc: Mapping) -> NightFacts:
         missing=tuple(str(m) for m in missing) if isinstance(missing, list) else (str(missing),))
 
 
+def analyse_voyage(paths: Sequence[Path], cfg: Config, progress=None):
+    """Run the pipeline (:func:`dracc.pipeline.analyse`) over one voyage's logs."""
+    from . import pipeline
+
+    return pipeline.analyse([Path(p) for p in paths], cfg, progress=progress)
+
+
 def analysis_document(paths: Sequence[Path], cfg: Config, progress=None) -> dict:
     """Analyse one voyage's logs and return the JSON-ready analysis document."""
-    try:
-        from . import pipeline
-        from .report import json_report
-    except ImportError as err:  # pragma: no cover - the pipeline ships with dracc
-        raise DraccError(f"the analysis pipeline is not available: {err}") from err
-    analysis = pipeline.analyse([Path(p) for p in paths], cfg, progress=progress)
-    return json_report.to_dict(analysis)
+    from .report import json_report
+
+    return json_report.to_dict(analyse_voyage(paths, cfg, progress=progress))
 
 
 # ---------------------------------------------------------------------- findings
@@ -578,12 +581,14 @@ def vessel_name(cfg: Config, acfg: AuditConfig, option: str | None) -> str:
 
 def run_audit(inputs: Sequence[Path], cfg: Config, *, db: str | Path | None = None,
               vessel: str | None = None, night: str | None = None, pattern: str | None = None,
-              progress=None) -> tuple[AuditOutcome, dict]:
+              progress=None, now: dt.datetime | None = None):
     """The whole nightly audit: choose the logs, analyse them, check, record.
 
-    Returns the outcome and the analysis document (for the JSON and HTML reports).
+    Returns ``(outcome, analysis)``, the analysis for the JSON and HTML reports.
     Raises IngestError/InsufficientDataError (exit 3) when no usable logs are found and
-    ConfigError (exit 4) for a bad ``[audit]`` section or no database path.
+    ConfigError (exit 4) for a bad ``[audit]`` section or no database path.  Without
+    ``night`` and with a folder among the inputs (and no ``pattern``), the night is
+    yesterday (UTC): cron runs the audit after midnight.
     """
     acfg = audit_config(cfg)
     seeds = apriori_seeds(cfg)
@@ -594,12 +599,15 @@ def run_audit(inputs: Sequence[Path], cfg: Config, *, db: str | Path | None = No
     if night is not None:
         night = parse_night(night)
     elif has_dir and pattern is None:
-        night = yesterday_utc()  # cron after midnight: the last day's logs
+        night = yesterday_utc(now)
     paths = select_logs(inputs, night, pattern or acfg.pattern)
     content_hash = content_sha256(paths)
-    doc = analysis_document(paths, cfg, progress=progress)
+    analysis = analyse_voyage(paths, cfg, progress=progress)
+    from .report import json_report
+
+    doc = json_report.to_dict(analysis)
     with StateStore(db_path, busy_timeout_s=acfg.busy_timeout_s) as store:
         outcome = audit_document(doc, store=store, acfg=acfg, seeds=seeds,
                                  vessel=vessel_name(cfg, acfg, vessel), night=night,
                                  content_hash=content_hash, settings_hash=settings_sha256(cfg))
-    return outcome, doc
+    return outcome, analysis

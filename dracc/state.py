@@ -39,6 +39,9 @@ from .errors import ConfigError, DraccError
 
 SCHEMA_VERSION = 1
 
+#: channels in the paper's order (latitude, longitude, course), for ORDER BY
+_CHANNEL_ORDER = "CASE channel WHEN 'lat' THEN 0 WHEN 'lon' THEN 1 WHEN 'course' THEN 2 ELSE 3 END"
+
 #: the unit of the statistics of each channel
 CHANNEL_MEASURE = {"lat": "m", "lon": "m", "course": "deg"}
 
@@ -276,7 +279,7 @@ class StateStore:
             if val is not None:
                 sql += f" AND {col} = ?"
                 args.append(val)
-        sql += " ORDER BY n.vessel, s.unit, s.channel, n.night"
+        sql += f" ORDER BY n.vessel, s.unit, {_CHANNEL_ORDER.replace('channel', 's.channel')}, n.night"
         return [dict(r) for r in self.conn.execute(sql, args)]
 
     def apriori_events(self, vessel: str | None = None) -> list[AprioriEvent]:
@@ -285,13 +288,13 @@ class StateStore:
         if vessel is not None:
             sql += " WHERE vessel = ?"
             args = (vessel,)
-        sql += " ORDER BY vessel, unit, channel, night"
+        sql += f" ORDER BY vessel, unit, {_CHANNEL_ORDER}, night"
         return [AprioriEvent(r["vessel"], r["unit"], r["channel"], r["night"], r["value"],
                              r["previous"], r["reason"], json.loads(r["evidence_json"]))
                 for r in self.conn.execute(sql, args)]
 
     def _channels(self, night_id: int) -> tuple[ChannelRow, ...]:
-        rows = self.conn.execute("SELECT * FROM unit_stats WHERE night_id = ? ORDER BY unit, channel",
+        rows = self.conn.execute(f"SELECT * FROM unit_stats WHERE night_id = ? ORDER BY unit, {_CHANNEL_ORDER}",
                                  (night_id,)).fetchall()
         return tuple(ChannelRow(r["unit"], r["channel"], r["n"], r["m_u"], r["m_y"], r["kurtosis"],
                                 r["limit_error"], r["apriori_before"], r["apriori_after"],

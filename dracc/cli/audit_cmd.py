@@ -1,0 +1,320 @@
+"""``dracc audit``: the nightly shipboard audit, and ``dracc audit history``.
+
+``dracc audit LOG…|DIR`` (same as ``dracc audit run …``) analyses the last day's logs,
+checks them against the ``[audit]`` limits, records the night in the SQLite state and
+exits 0 (all within limits), 1 (findings), 3 (no usable logs) or 4 (config error).
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import math
+from pathlib import Path
+
+import typer
+from rich.table import Table
+from typer.core import TyperGroup
+
+from .. import atomic
+from ..audit import CHANNEL_KEYS, AuditOutcome, audit_config, run_audit
+from ..config import load_config
+from ..errors import ConfigError, ExitCode
+from ..state import StateError, StateStore
+from .app import ConfigOption, app, out, progress
+
+
+class _DefaultRun(TyperGroup):
+    """``dracc audit ARGS`` runs ``dracc audit run ARGS`` unless ARGS start with a subcommand."""
+
+    def parse_args(self, ctx, args):
+        if args and args[0] not in self.commands and args[0] not in ("-h", "--help"):
+            args = ["run", *args]
+        return super().parse_args(ctx, args)
+
+
+audit_app = typer.Typer(
+    cls=_DefaultRun, no_args_is_help=True,
+    help="Nightly audit on board: analyse the last day's logs, check the limits, keep the "
+         "state in SQLite (dracc audit LOG…|DIR), and show the trend (dracc audit history). "
+         "Exit codes: 0 within limits, 1 findings, 3 no usable logs, 4 configuration error.")
+app.add_typer(audit_app, name="audit")
+
+
+# --------------------------------------------------------------------- the summary
+
+
+def _f(x, digits: int = 1, unit: str = "") -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "-"
+    return f"{x:,.{digits}f}{(' ' + unit) if unit else ''}"
+
+
+def _digits(measure: str) -> int:
+    return 3 if measure == "deg" else 1
+
+
+_STATUS = {
+    "recorded": "recorded (a new night)",
+    "unchanged": "unchanged: this night was already audited with the same logs and settings; "
+                 "nothing written",
+    "replaced": "replaced: the logs (or settings) changed since this night was last audited; "
+                "the stored night was replaced in one transaction",
+}
+
+
+def format_summary(o: AuditOutcome, probability: float | None = None) -> str:
+    """The plain-text summary (e-mail or log): verdict first, then the evidence."""
+    r = o.record
+    n = len(o.findings)
+    head = "all within limits" if n == 0 else f"{n} finding{'s' if n > 1 else ''}"
+    lines = [f"dracc audit: {r.vessel}, night {r.night}: {head}",
+             f"state: {_STATUS[o.status]}"]
+    rate = "-" if r.rejected_rate is None else f"{100 * r.rejected_rate:.2f} %"
+    lines.append(f"logs: {len(r.inputs)} file(s), {_f(r.lines, 0)} lines, {_f(r.rejected, 0)} "
+                 f"rejected ({rate}); period {r.period_start_utc or '-'} to {r.period_end_utc or '-'}")
+    if r.sources:
+        lines.append("sources: " + ", ".join(f"{k}={v}" for k, v in sorted(r.sources.items())))
+    if o.findings:
+        lines.append("findings:")
+        lines += [f"  - {f.message}" for f in o.findings]
+    if r.channels:
+        p = f" at P = {probability:g}" if probability else ""
+        lines.append(f"INS (m_y = k m_u; limiting error{p}; the larger of a priori and m_y "
+                     "becomes the a priori):")
+        lines.append(f"  {'unit':<5} {'chan':<6} {'n':>4} {'m_y':>12} {'limit':>12} "
+                     f"{'a priori':>12}  verdict")
+        for c in r.channels:
+            d = _digits(c.measure)
+            lines.append(f"  {c.unit:<5} {c.channel:<6} {c.n:>4} {_f(c.m_y, d, c.measure):>12} "
+                         f"{_f(c.limit_error, d, c.measure):>12} "
+                         f"{_f(c.apriori_after, d, c.measure):>12}  {c.verdict or '-'}")
+    for e in o.apriori_events:
+        measure = CHANNEL_KEYS[e.channel].rsplit("_", 1)[1]
+        d = _digits(measure)
+        was = "none" if e.previous is None else _f(e.previous, d, measure)
+        lines.append(f"a priori {e.reason}: {e.unit} {e.channel} {was} -> {_f(e.value, d, measure)}")
+    if r.dr_containment_2m is not None:
+        lines.append(f"DR: reference inside 2M at {100 * r.dr_containment_2m:.1f} % of "
+                     f"{_f(r.dr_n_scored, 0)} epochs")
+    cal = []
+    if r.compass_error_deg is not None:
+        cal.append(f"compass error {r.compass_error_deg:+.2f} ± {_f(r.compass_error_sigma_deg, 2)} deg")
+    if r.log_scale is not None:
+        sig = "-" if r.log_scale_sigma is None else f"{100 * r.log_scale_sigma:.2f}"
+        cal.append(f"log scale {100 * r.log_scale:+.2f} ± {sig} %")
+    if cal:
+        lines.append("calibration: " + "; ".join(cal))
+    for s in o.not_checked:
+        lines.append(f"not checked: {s}")
+    for m in r.missing:
+        lines.append(f"missing: {m}")
+    code = o.exit_code
+    lines.append(f"exit {int(code)} ({'findings' if code == ExitCode.FINDINGS else 'ok'})")
+    return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------- run
+
+
+@audit_app.command("run")
+def audit_run(
+    logs: list[Path] = typer.Argument(..., help="Log files, or folders holding the night's logs."),
+    date: str | None = typer.Option(None, "--date", help="The night to audit, YYYY-MM-DD (files "
+                                       "in folders must carry it in their name). Default for "
+                                       "folders: yesterday (UTC)."),
+    pattern: str | None = typer.Option(None, "--pattern", help="Glob for the log files inside "
+                                          "folders, e.g. '*.nmea' or '**/*.nmea' ([audit] pattern)."),
+    vessel: str | None = typer.Option(None, "--vessel", help="Vessel name in the state "
+                                         "([audit] vessel, else [vessel] name, else 'default')."),
+    db: Path | None = typer.Option(None, "--db", help="SQLite state file ([audit] db)."),
+    config: Path | None = ConfigOption,
+    json_out: Path | None = typer.Option(None, "--json", help="Write the analysis JSON report."),
+    html_out: Path | None = typer.Option(None, "--html", help="Write the analysis HTML report."),
+    summary_out: Path | None = typer.Option(None, "--summary", help="Write the plain-text "
+                                               "summary to this file instead of stdout."),
+) -> int:
+    """Audit one night: analyse, check the limits, record the night; exit 0/1/3/4.
+
+    Same as 'dracc audit LOG…'.  Auditing the same night again with the same logs records
+    it once; with changed logs the night is replaced.
+    """
+    cfg = load_config(config)
+    with progress("audit: analysing", total=100.0) as advance:
+        last = [0.0]
+
+        def report(stage: str, fraction: float) -> None:
+            step = max(0.0, 100.0 * fraction - last[0])
+            last[0] += step
+            advance(step)
+
+        outcome, analysis = run_audit(logs, cfg, db=db, vessel=vessel, night=date, pattern=pattern,
+                                      progress=report)
+    if json_out is not None:
+        from ..report import json_report
+
+        json_report.write_json(analysis, json_out)
+    if html_out is not None:
+        from ..report import html as html_report
+
+        html_report.write_html(analysis, html_out)
+    text = format_summary(outcome, cfg.deviation.probability)
+    if summary_out is not None:
+        atomic.write_text(summary_out, text)
+    else:
+        out.print(text, end="", markup=False, highlight=False)
+    return int(outcome.exit_code)
+
+
+# ----------------------------------------------------------------------- history
+
+
+def _open_existing(db: Path | None, config: Path | None) -> StateStore:
+    cfg = load_config(config)
+    acfg = audit_config(cfg)
+    path = db or (Path(acfg.db) if acfg.db else None)
+    if path is None:
+        raise ConfigError("no audit database: give --db PATH or [audit] db = \"PATH\"")
+    if not Path(path).is_file():
+        raise StateError(f"{path}: no audit database here (run 'dracc audit' first)")
+    return StateStore(path, busy_timeout_s=acfg.busy_timeout_s)
+
+
+def history_document(store: StateStore, vessel=None, unit=None, channel=None) -> dict:
+    """The trend as a JSON-ready dict (schema ``dracc.audit.history/1``)."""
+    series: dict[tuple, dict] = {}
+    for h in store.history(vessel, unit, channel):
+        key = (h["vessel"], h["unit"], h["channel"])
+        s = series.setdefault(key, {"vessel": key[0], "unit": key[1], "channel": key[2],
+                                    "measure": h["measure"], "nights": []})
+        s["nights"].append({k: h[k] for k in ("night", "n", "m_u", "m_y", "kurtosis", "limit_error",
+                                              "apriori_before", "apriori_after", "verdict")})
+    nights = [{"vessel": r.vessel, "night": r.night, "audited_utc": r.audited_utc,
+               "content_sha256": r.content_sha256, "dr_containment_2m": r.dr_containment_2m,
+               "compass_error_deg": r.compass_error_deg, "log_scale": r.log_scale,
+               "rejected_rate": r.rejected_rate, "findings": list(r.findings)}
+              for v in ([vessel] if vessel else store.vessels()) for r in store.nights(v)]
+    events = [{"vessel": e.vessel, "unit": e.unit, "channel": e.channel, "night": e.night,
+               "value": e.value, "previous": e.previous, "reason": e.reason, "evidence": e.evidence}
+              for e in store.apriori_events(vessel)
+              if (unit is None or e.unit == unit) and (channel is None or e.channel == channel)]
+    return {"schema": "dracc.audit.history/1", "series": list(series.values()), "nights": nights,
+            "apriori_events": events}
+
+
+def _png(fig) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    return base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def history_plot(doc: dict, vessel: str) -> str | None:
+    """m_y per unit and the a priori (dashed steps) per channel over nights; base64 PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    series = [s for s in doc["series"] if s["vessel"] == vessel]
+    if not series:
+        return None
+    channels = [c for c in ("lat", "lon", "course") if any(s["channel"] == c for s in series)]
+    fig, axes = plt.subplots(len(channels), 1, figsize=(8, 2.4 * len(channels)), sharex=True,
+                             squeeze=False)
+    for ax, ch in zip(axes[:, 0], channels, strict=True):
+        for s in (s for s in series if s["channel"] == ch):
+            t = pd.to_datetime([n["night"] for n in s["nights"]])
+            y = [math.nan if n["m_y"] is None else n["m_y"] for n in s["nights"]]
+            a = [math.nan if n["apriori_after"] is None else n["apriori_after"] for n in s["nights"]]
+            line, = ax.plot(t, y, "o-", label=f"{s['unit']} m_y")
+            ax.step(t, a, "--", where="post", color=line.get_color(), alpha=0.7,
+                    label=f"{s['unit']} a priori")
+        measure = "deg" if ch == "course" else "m"
+        ax.set_ylabel(f"{ch} ({measure})")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, ncol=3)
+    axes[0, 0].set_title(f"{vessel}: RMS error from deviations (m_y) and a priori, per night")
+    fig.autofmt_xdate()
+    png = _png(fig)
+    plt.close(fig)
+    return png
+
+
+def history_html(doc: dict) -> str:
+    """One self-contained page (no network): per vessel a plot and the table of nights."""
+    e = html.escape
+    parts = ["<!doctype html><html><head><meta charset='utf-8'><title>dracc audit history</title>",
+             "<style>body{font-family:sans-serif;margin:1.5em}table{border-collapse:collapse}"
+             "td,th{border:1px solid #bbb;padding:2px 6px;text-align:right}"
+             "td:first-child,th:first-child{text-align:left}</style></head><body>",
+             "<h1>dracc audit history</h1>"]
+    vessels = sorted({s["vessel"] for s in doc["series"]} | {n["vessel"] for n in doc["nights"]})
+    if not vessels:
+        parts.append("<p>No nights recorded yet.</p>")
+    for v in vessels:
+        parts.append(f"<h2>{e(v)}</h2>")
+        png = history_plot(doc, v)
+        if png:
+            parts.append(f"<img alt='m_y and a priori per night for {e(v)}' "
+                         f"src='data:image/png;base64,{png}'>")
+        parts.append("<table><tr><th>unit</th><th>channel</th><th>night</th><th>n</th><th>m_y</th>"
+                     "<th>limit</th><th>a priori</th><th>verdict</th></tr>")
+        for s in (s for s in doc["series"] if s["vessel"] == v):
+            d = _digits(s["measure"])
+            for n in s["nights"]:
+                parts.append(f"<tr><td>{e(s['unit'])}</td><td>{e(s['channel'])}</td>"
+                             f"<td>{e(n['night'])}</td><td>{n['n']}</td>"
+                             f"<td>{_f(n['m_y'], d, s['measure'])}</td>"
+                             f"<td>{_f(n['limit_error'], d, s['measure'])}</td>"
+                             f"<td>{_f(n['apriori_after'], d, s['measure'])}</td>"
+                             f"<td>{e(n['verdict'] or '-')}</td></tr>")
+        parts.append("</table><h3>Nights</h3><table><tr><th>night</th><th>DR in 2M</th>"
+                     "<th>compass error</th><th>log scale</th><th>findings</th></tr>")
+        for n in (n for n in doc["nights"] if n["vessel"] == v):
+            c = n["dr_containment_2m"]
+            ls = n["log_scale"]
+            parts.append(f"<tr><td>{e(n['night'])}</td><td>{'-' if c is None else f'{100 * c:.1f} %'}"
+                         f"</td><td>{_f(n['compass_error_deg'], 2, 'deg')}</td>"
+                         f"<td>{'-' if ls is None else f'{100 * ls:+.2f} %'}</td>"
+                         f"<td>{e('; '.join(f['message'] for f in n['findings'])) or 'none'}</td></tr>")
+        parts.append("</table>")
+    parts.append("</body></html>\n")
+    return "\n".join(parts)
+
+
+@audit_app.command("history")
+def audit_history(
+    db: Path | None = typer.Option(None, "--db", help="SQLite state file ([audit] db)."),
+    vessel: str | None = typer.Option(None, "--vessel", help="Only this vessel."),
+    unit: str | None = typer.Option(None, "--unit", help="Only this unit (ins1, ins2, ins3)."),
+    channel: str | None = typer.Option(None, "--channel", help="Only this channel (lat, lon, course)."),
+    as_json: bool = typer.Option(False, "--json", help="Print the history as JSON on stdout."),
+    html_out: Path | None = typer.Option(None, "--html", help="Write an HTML page with plots."),
+    config: Path | None = ConfigOption,
+) -> int:
+    """The trend per vessel, unit and channel: m_y, limiting error, a priori and verdict per night."""
+    if channel is not None and channel not in CHANNEL_KEYS:
+        raise ConfigError(f"--channel {channel!r}: expected lat, lon or course")
+    with _open_existing(db, config) as store:
+        doc = history_document(store, vessel, unit, channel)
+    if html_out is not None:
+        atomic.write_text(html_out, history_html(doc))
+    if as_json:
+        out.print(json.dumps(doc, indent=1, ensure_ascii=False), markup=False, highlight=False)
+        return int(ExitCode.OK)
+    if not doc["series"]:
+        out.print("no nights recorded for this selection", markup=False, highlight=False)
+        return int(ExitCode.OK)
+    for s in doc["series"]:
+        d = _digits(s["measure"])
+        t = Table(title=f"{s['vessel']} {s['unit']} {s['channel']} ({s['measure']})")
+        for col in ("night", "n", "m_u", "m_y", "kurtosis", "limit", "a priori", "verdict"):
+            t.add_column(col, justify="left" if col in ("night", "verdict") else "right")
+        for n in s["nights"]:
+            t.add_row(n["night"], str(n["n"]), _f(n["m_u"], d), _f(n["m_y"], d), _f(n["kurtosis"], 2),
+                      _f(n["limit_error"], d), _f(n["apriori_after"], d), n["verdict"] or "-")
+        out.print(t)
+    return int(ExitCode.OK)
