@@ -19,18 +19,35 @@ paper's channels: metres north/east for latitude/longitude, degrees for course
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
+import pandas as pd
+
+from . import __version__
+from .config import Config, DeadReckoningConfig
+from .current import CurrentModel, estimate_current
+from .deadreckoning import (
+    course_magnetic_rad,
+    dead_reckon,
+    deviation_table_rad,
+    dr_consistency,
+    interp_deviation_rad,
+)
+from .deviation import DeviationResult, analyse_deviations, unit_series_from_voyage
+from .deviation.analysis import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS
+from .errors import InsufficientDataError
+from .fusion import PositionFix
+from .geodesy import circmean, offset_ne_m, wrap_2pi, wrap_pi
+from .ingest.frames import INS_ROLES, Voyage
+from .units import DEG_RAD, KN_MPS, NS_PER_S
 
 SCHEMA = "dracc.analysis/1"
 
-#: deviation channels and the unit of their statistics
-CHANNELS = ("lat", "lon", "course")
-CHANNEL_UNITS = {"lat": "m", "lon": "m", "course": "deg"}
-#: the sample column of each channel (the JSON keys of ``deviation.samples``)
-SAMPLE_KEYS = {"lat": "lat_m", "lon": "lon_m", "course": "course_deg"}
+__all__ = ["SCHEMA", "CHANNELS", "CHANNEL_UNITS", "SAMPLE_KEYS", "Analysis", "analyse",
+           "analyse_voyage", "DeviationResult"]
 
 #: ``progress(stage, fraction)``: called with a stage name and 0..1 while work goes on
 Progress = Callable[[str, float], None]
@@ -85,89 +102,6 @@ class Track:
     lon_rad: np.ndarray
 
 
-# ------------------------------------------------------------------------ deviation
-
-
-@dataclass(frozen=True)
-class ChannelStats:
-    """(K3b)-(K8) for one unit and channel, in the channel's unit (m, or deg for course)."""
-
-    n: int  #: samples used
-    m_u: float  #: RMS deviation from the mean (K3b)
-    m_y: float  #: RMS error estimate m_y = k m_u (K5b)
-    kurtosis: float  #: excess kurtosis of the deviations (K6)
-    limit: float  #: limiting error at the configured probability (K8)
-    apriori: float | None = None  #: the configured a priori RMS, if any
-    exceeds_apriori: bool | None = None  #: m_y > a priori (None without an a priori value)
-    new_apriori: float | None = None  #: max(a priori, m_y): the monitoring rule
-
-
-@dataclass(frozen=True)
-class HatStats:
-    """Three-cornered hat for one unit and channel: the unit's own variance and sigma.
-
-    ``variance`` may be negative with few samples: it is reported, flagged, never clamped;
-    ``sigma`` is then NaN.  ``lower``/``upper`` bound sigma at the confidence given in the
-    deviation section (NaN where the bound does not exist).
-    """
-
-    variance: float
-    sigma: float
-    lower: float
-    upper: float
-    negative: bool
-
-
-@dataclass(frozen=True)
-class ReferenceStats:
-    """Validation against a reference (the paper's Table 1) for one unit and channel."""
-
-    n: int
-    rmse: float  #: true error RMS against the reference
-    k_star: float  #: k* = rmse / m_u
-    mark: str  #: '+' where k* <= k, '-' otherwise
-    kurtosis: float  #: excess kurtosis of the errors
-    kurtosis_mark: str  #: '<', '>' or '=': kurtosis of errors against that of deviations
-
-
-@dataclass(frozen=True)
-class UnitStats:
-    """Everything computed for one INS unit over one window."""
-
-    unit: str
-    channels: dict[str, ChannelStats]  #: 'lat', 'lon', 'course' (those with data)
-    r_lat_lon: float  #: correlation of latitude and longitude deviations (K7)
-    hat: dict[str, HatStats]  #: per channel; empty with fewer than three units
-    reference: dict[str, ReferenceStats]  #: per channel; empty without a reference
-
-
-@dataclass(frozen=True)
-class DeviationWindow:
-    """Statistics over one window (a day by default) or the whole log (``label='all'``)."""
-
-    label: str
-    start_ns: int
-    end_ns: int
-    units: dict[str, UnitStats]
-
-
-@dataclass(frozen=True)
-class DeviationSection:
-    """INS accuracy from deviations from the mean (METHODS section 4)."""
-
-    interval_s: float
-    factors: dict[str, float]  #: channel -> k used for m_y (sqrt(2) etc. with two units)
-    probability: float
-    units: tuple[str, ...]  #: the INS roles present ('ins1', 'ins2', 'ins3')
-    time_ns: np.ndarray  #: sampling instants, shape (n,)
-    #: unit -> channel -> deviations at the instants (m, m, deg), NaN where missing
-    samples: dict[str, dict[str, np.ndarray]]
-    whole: DeviationWindow
-    windows: tuple[DeviationWindow, ...]  #: per day (or the configured window)
-    reference_role: str | None  #: where the reference came from ('gnss'), None if none
-    notes: tuple[str, ...] = ()
-
-
 # -------------------------------------------------------------------- dead reckoning
 
 
@@ -219,9 +153,12 @@ class DRSection:
     reference_role: str | None
     containment_2m: float  #: over epochs after the fix (not at it); NaN without a reference
     n_scored: int  #: epochs scored
-    error_over_m_rms: float  #: RMS of actual error / M over scored epochs (1/sqrt(2)·... see docs)
+    expected_inside: float  #: containment a correct Gaussian error would give (0.954-0.982)
+    error_over_m_rms: float  #: sqrt(mean (d/M)^2) over scored epochs: 1 when the covariance is right
     consistent: bool | None  #: None without a reference
     verdict: str  #: one sentence
+    n_gaps_bridged: int  #: heading/speed gaps held over (<= max_gap_s)
+    n_breaks: int  #: gaps that broke the track (restarted at the next fix)
     notes: tuple[str, ...] = ()
 
 
@@ -280,10 +217,13 @@ class Analysis:
     end_ns: int | None
     lines: int
     tracks: tuple[Track, ...]
-    deviation: DeviationSection | None
+    #: INS deviation statistics (METHODS section 4), straight from :mod:`dracc.deviation`
+    deviation: DeviationResult | None
     dead_reckoning: DRSection | None
     calibration: CalibrationSection | None
     current: CurrentSection | None
+    #: where the deviation reference came from ('gnss'), None without one
+    deviation_reference: str | None = None
     #: what could not be computed, one plain sentence each (e.g. "no INS triple: ...")
     missing: tuple[str, ...] = ()
     #: what the pipeline decided or noticed (merged files, role overrides, ...)
@@ -296,3 +236,528 @@ class Analysis:
         if self.start_ns is None or self.end_ns is None:
             return math.nan
         return (self.end_ns - self.start_ns) / 1e9
+
+
+# ===================================================================== computation
+
+#: at most this many points per source in the plotting tracks
+TRACK_POINTS = 4000
+#: the DR time base: heading and speed held onto a grid of this step (seconds)
+DR_STEP_S = 1.0
+#: the current filter runs on a grid of this step, updated by a fix every epoch interval
+CURRENT_STEP_S = 10.0
+#: a reference position is interpolated between samples at most this far apart
+REF_MAX_GAP_S = 5.0
+
+
+def _noop(stage: str, fraction: float) -> None:
+    return None
+
+
+def analyse(paths: Sequence[str | Path], cfg: Config | None = None,
+            progress: Progress | None = None) -> Analysis:
+    """Read the logs ``paths`` (several files of one voyage merge by time) and analyse them.
+
+    ``cfg`` defaults to :class:`~dracc.config.Config` (); ``progress(stage, fraction)``
+    is called as the work goes on.  Raises :class:`~dracc.errors.IngestError` for
+    unreadable input and :class:`InsufficientDataError` when the logs hold no record
+    at all; everything else that is missing is reported in :attr:`Analysis.missing`.
+    """
+    from .ingest import read_logs  # the readers are heavy; import on use
+
+    cfg = cfg or Config()
+    report = progress or _noop
+    report("reading logs", 0.0)
+    voyage = read_logs([Path(p) for p in paths], cfg.ingest)
+    report("reading logs", 1.0)
+    return analyse_voyage(voyage, cfg, report)
+
+
+def analyse_voyage(voyage: Voyage, cfg: Config | None = None,
+                   progress: Progress | None = None) -> Analysis:
+    """Analyse an ingested :class:`~dracc.ingest.frames.Voyage` (see :func:`analyse`)."""
+    cfg = cfg or Config()
+    report = progress or _noop
+    missing: list[str] = []
+    notes: list[str] = []
+
+    inputs = tuple(InputFile(path=str(f["path"]), format=str(f["format"]), lines=int(f["lines"]),
+                             records=int(f["records"]), rejected=dict(f.get("rejected", {})))
+                   for f in voyage.inputs)
+    sources = tuple(SourceRow(key=str(k), roles=tuple(s.roles), records=int(s.records),
+                              sentences={str(a): int(b) for a, b in s.sentences.items()},
+                              first_ns=s.first_ns, last_ns=s.last_ns)
+                    for k, s in voyage.sources.items())
+    firsts = [s.first_ns for s in sources if s.first_ns is not None]
+    lasts = [s.last_ns for s in sources if s.last_ns is not None]
+    if not firsts:
+        raise InsufficientDataError(
+            "no usable record in " + (", ".join(f.path for f in inputs) or "the input")
+            + f" ({voyage.lines} lines read, {voyage.rejects.total} rejected)")
+    te = voyage.time_events
+    time = TimeSummary(duplicates=te.duplicates, backsteps=te.backsteps, gaps=te.gaps,
+                       rollovers=te.rollovers, implausible_dates=te.implausible_dates,
+                       decisions=tuple(te.decisions))
+    if len(inputs) > 1:
+        notes.append(f"{len(inputs)} files merged by time")
+    unassigned = [s.key for s in sources if not s.roles]
+    if unassigned:
+        notes.append("sources without a role (not used): " + ", ".join(unassigned)
+                     + "; assign one with --role KEY=ROLE")
+
+    tracks = _tracks(voyage)
+
+    report("dead reckoning", 0.0)
+    dr, fixes, ref, dr_inputs = _dead_reckoning(voyage, cfg.dead_reckoning, missing, notes)
+    report("dead reckoning", 1.0)
+
+    report("current", 0.0)
+    current = None
+    if dr is not None and dr_inputs is not None and fixes is not None:
+        current = _current(dr_inputs, fixes, cfg.dead_reckoning, missing)
+    report("current", 1.0)
+
+    report("deviation statistics", 0.0)
+    deviation, dev_ref = _deviation(voyage, cfg, missing)
+    report("deviation statistics", 1.0)
+
+    calibration = None
+    missing.append("calibration (compass error, log scale) is not computed by this version")
+
+    settings = {
+        "interval_s": cfg.deviation.interval_s, "window_s": cfg.deviation.window_s,
+        "probability": cfg.deviation.probability, "reset": cfg.dead_reckoning.reset,
+        "fix_role": cfg.dead_reckoning.fix_role, "epoch_interval_s": cfg.dead_reckoning.epoch_interval_s,
+        "max_gap_s": cfg.dead_reckoning.max_gap_s, "variation_deg": cfg.dead_reckoning.variation_deg,
+        "roles": dict(cfg.ingest.sources), "strict": cfg.ingest.strict,
+        "ignore_checksum": cfg.ingest.ignore_checksum, "date": cfg.ingest.date,
+    }
+    return Analysis(
+        schema=SCHEMA, dracc_version=__version__, inputs=inputs, sources=sources,
+        rejected={str(k): int(v) for k, v in voyage.rejects.counts.items()},
+        reject_examples={str(k): tuple(v) for k, v in voyage.rejects.examples.items()},
+        time=time, start_ns=int(min(firsts)), end_ns=int(max(lasts)), lines=int(voyage.lines),
+        tracks=tracks, deviation=deviation, dead_reckoning=dr, calibration=calibration,
+        current=current, deviation_reference=dev_ref, missing=tuple(missing), notes=tuple(notes),
+        settings=settings)
+
+
+# ------------------------------------------------------------------------ helpers
+
+
+def _role_of(voyage: Voyage, key: str) -> str | None:
+    s = voyage.sources.get(key)
+    return s.role if s is not None else None
+
+
+def _valid_positions(df: pd.DataFrame) -> pd.DataFrame:
+    """Positions with a fix (GGA quality 0 and NaN coordinates left out)."""
+    ok = (df["quality"].to_numpy() != 0) & np.isfinite(df["lat_rad"].to_numpy()) \
+        & np.isfinite(df["lon_rad"].to_numpy())
+    return df[ok]
+
+
+def _tracks(voyage: Voyage) -> tuple[Track, ...]:
+    """Every position source, thinned to at most TRACK_POINTS points, for the plots."""
+    pos = voyage.frames.get("position")
+    if pos is None or pos.empty:
+        return ()
+    out = []
+    pos = _valid_positions(pos)
+    for key, df in pos.groupby("source", observed=True, sort=False):
+        if df.empty:
+            continue
+        step = max(1, math.ceil(len(df) / TRACK_POINTS))
+        d = df.iloc[::step]
+        out.append(Track(source=str(key), role=_role_of(voyage, str(key)),
+                         time_ns=d["time_ns"].to_numpy(np.int64),
+                         lat_rad=d["lat_rad"].to_numpy(float), lon_rad=d["lon_rad"].to_numpy(float)))
+    return tuple(out)
+
+
+def _hold(t_src_ns: np.ndarray, values: np.ndarray, t_grid_ns: np.ndarray, max_age_ns: int) -> np.ndarray:
+    """The last sample at or before each grid time, NaN where it is older than ``max_age_ns``.
+
+    Sample-and-hold, as (B20) holds the velocity over a step; nothing is interpolated."""
+    i = np.searchsorted(t_src_ns, t_grid_ns, side="right") - 1
+    ok = i >= 0
+    out = np.full(t_grid_ns.shape, np.nan)
+    j = i[ok]
+    out[ok] = np.where(t_grid_ns[ok] - t_src_ns[j] <= max_age_ns, values[j], np.nan)
+    return out
+
+
+def _interp_position(t_ns: np.ndarray, lat: np.ndarray, lon: np.ndarray, t_q_ns: np.ndarray,
+                     max_gap_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Linear interpolation of a position series at ``t_q_ns``, NaN outside or across gaps."""
+    out_lat = np.full(t_q_ns.shape, np.nan)
+    out_lon = np.full(t_q_ns.shape, np.nan)
+    if t_ns.size == 0:
+        return out_lat, out_lon
+    hi = np.clip(np.searchsorted(t_ns, t_q_ns, side="left"), 0, t_ns.size - 1)
+    lo = np.clip(hi - 1, 0, t_ns.size - 1)
+    exact = t_ns[hi] == t_q_ns
+    bracket = (t_ns[lo] <= t_q_ns) & (t_ns[hi] >= t_q_ns) & (t_ns[hi] - t_ns[lo] <= max_gap_s * 1e9)
+    use = exact | bracket
+    x = (t_ns - t_ns[0]).astype(float)
+    xq = (t_q_ns[use] - t_ns[0]).astype(float)
+    out_lat[use] = np.interp(xq, x, lat)
+    out_lon[use] = wrap_pi(np.interp(xq, x, np.unwrap(lon)))
+    return out_lat, out_lon
+
+
+def _dedupe_sorted(t_ns: np.ndarray, *cols: np.ndarray):
+    """Sort by time and keep the last sample of equal times (strictly increasing times)."""
+    order = np.argsort(t_ns, kind="stable")
+    t = t_ns[order]
+    keep = np.ones(t.size, bool)
+    keep[:-1] = t[1:] != t[:-1]
+    return (t[keep],) + tuple(c[order][keep] for c in cols)
+
+
+# ------------------------------------------------------------------ dead reckoning
+
+
+@dataclass(frozen=True)
+class _DRInputs:
+    """What the DR ran on, kept for the current filter."""
+
+    t0_ns: int
+    time_s: np.ndarray
+    vn_mps: np.ndarray  #: through-the-water velocity (no current), NaN outside legs
+    ve_mps: np.ndarray
+
+
+def _heading_series(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str],
+                    notes: list[str]) -> tuple[np.ndarray, np.ndarray, str] | None:
+    """True heading (B2)/(B3) from the compass: (time_ns, heading_rad, description)."""
+    hdg = voyage.frames.get("heading")
+    if hdg is None or hdg.empty:
+        missing.append("no heading: the log holds no HDT/THS/HDG/HDM sentence; dead reckoning, "
+                       "current and calibration need one")
+        return None
+    hdg = hdg[np.isfinite(hdg["heading_rad"].to_numpy())]
+    compass = voyage.role_sources("compass")
+    if compass:
+        use = hdg[hdg["source"].isin(compass)]
+        who = "compass " + "+".join(compass)
+    else:
+        other = [k for k in hdg["source"].unique().tolist()
+                 if not (set(voyage.sources[k].roles) & {"ins1", "ins2", "ins3", "gnss"})]
+        use = hdg[hdg["source"].isin(other)]
+        who = "heading source " + "+".join(map(str, other))
+        if other:
+            notes.append(f"no source has the role compass; heading taken from {'+'.join(map(str, other))}")
+    if use.empty:
+        missing.append("no heading: heading sentences exist but none has a value from a compass "
+                       "(only empty fields or INS/GNSS headings); dead reckoning not computed")
+        return None
+    refs = set(use["reference"].dropna().unique().tolist())
+    if "T" in refs:
+        use = use[use["reference"] == "T"]
+        t, h = _dedupe_sorted(use["time_ns"].to_numpy(np.int64), use["heading_rad"].to_numpy(float))
+        sent = "+".join(sorted(set(use["sentence"].astype(str).unique().tolist())))
+        return t, h, f"{who} ({sent}, true)"
+    # magnetic: (B2) KDd = KK + d + delta (leeway from the log is added by dead_reckon)
+    t, kk, dev, var = _dedupe_sorted(use["time_ns"].to_numpy(np.int64),
+                                     use["heading_rad"].to_numpy(float),
+                                     use["deviation_rad"].to_numpy(float),
+                                     use["variation_rad"].to_numpy(float))
+    sent = "+".join(sorted(set(use["sentence"].astype(str).unique().tolist())))
+    desc = f"{who} ({sent}, magnetic"
+    if cfg.deviation_table:
+        th, td = deviation_table_rad(cfg.deviation_table)
+        table_dev = interp_deviation_rad(kk, th, td)
+        n_fill = int(np.sum(~np.isfinite(dev)))
+        dev = np.where(np.isfinite(dev), dev, table_dev)
+        if n_fill:
+            desc += ", deviation from the configured table"
+    elif np.any(~np.isfinite(dev)):
+        n_nan = int(np.sum(~np.isfinite(dev)))
+        notes.append(f"magnetic heading without deviation at {n_nan} of {dev.size} samples and no "
+                     "[dead_reckoning] deviation_table: deviation taken as 0 there")
+        dev = np.where(np.isfinite(dev), dev, 0.0)
+    n_var = int(np.sum(~np.isfinite(var)))
+    if n_var:
+        if cfg.variation_deg is not None:
+            var = np.where(np.isfinite(var), var, cfg.variation_deg * DEG_RAD)
+            desc += f", variation {cfg.variation_deg:g}° from the configuration"
+        else:
+            missing.append(f"magnetic variation: the compass sends none at {n_var} of {var.size} "
+                           "samples and none is configured; the DR takes it as 0 there, so its "
+                           "course is off by the local variation (give --variation DEG)")
+            var = np.where(np.isfinite(var), var, 0.0)
+    desc += ")"
+    return t, wrap_2pi(course_magnetic_rad(kk, var, dev)), desc  # (B2)
+
+
+def _speed_series(voyage: Voyage, missing: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray, str] | None:
+    """Speed through the water from the log: (time_ns, longitudinal, transverse, description)."""
+    water = voyage.frames.get("water")
+    logs = voyage.role_sources("log")
+    if water is None or water.empty:
+        missing.append("no speed log: the log holds no VHW/VBW sentence; dead reckoning, current "
+                       "and calibration need one")
+        return None
+    use = water[water["source"].isin(logs)] if logs else water
+    use = use[np.isfinite(use["stw_mps"].to_numpy())]
+    if use.empty:
+        missing.append("no speed through the water: log sentences carry no speed value; dead "
+                       "reckoning not computed")
+        return None
+    t, v, vy = _dedupe_sorted(use["time_ns"].to_numpy(np.int64), use["stw_mps"].to_numpy(float),
+                              use["stw_transverse_mps"].to_numpy(float))
+    sent = "+".join(sorted(set(use["sentence"].astype(str).unique().tolist())))
+    who = "log " + "+".join(logs) if logs else "speed source " + "+".join(
+        map(str, use["source"].unique().tolist()))
+    return t, v, vy, f"{who} ({sent}, through the water)"
+
+
+def _fixes(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str], notes: list[str]):
+    """Restart fixes and the reference: (time_ns, lat_rad, lon_rad, description) or None."""
+    pos = voyage.frames.get("position")
+    if pos is None or pos.empty:
+        missing.append("no position at all: the DR has no start fix and no reference")
+        return None
+    pos = _valid_positions(pos)
+    gnss = voyage.role_sources("gnss")
+    if cfg.fix_role == "gnss" and gnss:
+        g = pos[pos["source"].isin(gnss[:1])]
+        if len(gnss) > 1:
+            notes.append(f"several GNSS sources ({', '.join(gnss)}): fixes and reference from {gnss[0]}")
+        if not g.empty:
+            t, la, lo = _dedupe_sorted(g["time_ns"].to_numpy(np.int64), g["lat_rad"].to_numpy(float),
+                                       g["lon_rad"].to_numpy(float))
+            return t, la, lo, "gnss"
+    ins = [r for r in INS_ROLES if voyage.role_sources(r)]
+    if ins:
+        # the mean of the INS units at the first unit's times (circular mean of longitude)
+        series = []
+        for r in ins:
+            d = pos[pos["source"].isin(voyage.role_sources(r))]
+            series.append(_dedupe_sorted(d["time_ns"].to_numpy(np.int64), d["lat_rad"].to_numpy(float),
+                                         d["lon_rad"].to_numpy(float)))
+        t = series[0][0]
+        lats, lons = [], []
+        for st, sla, slo in series:
+            a, b = _interp_position(st, sla, slo, t, REF_MAX_GAP_S)
+            lats.append(a)
+            lons.append(b)
+        lat = np.nanmean(np.vstack(lats), axis=0)
+        lon = wrap_pi(circmean(np.vstack(lons), axis=0))
+        ok = np.isfinite(lat) & np.isfinite(lon)
+        if cfg.fix_role == "gnss":
+            notes.append("no GNSS: DR fixes and reference from the mean of the INS units "
+                         f"({', '.join(ins)})")
+        return t[ok], lat[ok], lon[ok], "ins_mean"
+    others = pos[~pos["source"].isin([k for k, s in voyage.sources.items() if s.roles])]
+    if not others.empty:
+        key = str(others["source"].iloc[0])
+        o = others[others["source"] == key]
+        notes.append(f"no GNSS or INS role: DR fixes and reference from position source {key}")
+        t, la, lo = _dedupe_sorted(o["time_ns"].to_numpy(np.int64), o["lat_rad"].to_numpy(float),
+                                   o["lon_rad"].to_numpy(float))
+        return t, la, lo, key
+    missing.append("no position fix: the DR has no start position and no reference")
+    return None
+
+
+def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str], notes: list[str]):
+    """Run the DR on a DR_STEP_S grid from the compass and the log; score it against the reference."""
+    heading = _heading_series(voyage, cfg, missing, notes)
+    speed = _speed_series(voyage, missing)
+    fixes = _fixes(voyage, cfg, missing, notes)
+    if heading is None or speed is None or fixes is None:
+        if heading is not None or speed is not None:
+            missing.append("dead reckoning not computed (see above)")
+        return None, fixes, None, None
+    th, hdg, hdg_desc = heading
+    tv, stw, stw_y, spd_desc = speed
+    step_ns = int(DR_STEP_S * NS_PER_S)
+    t_first = max(int(th[0]), int(tv[0]))
+    t_last = min(int(th[-1]), int(tv[-1]))
+    if t_last - t_first < 2 * step_ns:
+        missing.append("dead reckoning: heading and speed do not overlap in time")
+        return None, fixes, None, None
+    t0 = t_first - t_first % step_ns + (step_ns if t_first % step_ns else 0)
+    grid = np.arange(t0, t_last + 1, step_ns, dtype=np.int64)
+    # a held sample older than this is missing at the grid time; dead_reckon bridges up to max_gap_s
+    age = int(max(2.0 * DR_STEP_S, 2.0 * np.median(np.diff(tv)) / 1e9 if tv.size > 1 else 0) * NS_PER_S)
+    age_h = int(max(2.0 * DR_STEP_S, 2.0 * np.median(np.diff(th)) / 1e9 if th.size > 1 else 0) * NS_PER_S)
+    h_g = _hold(th, hdg, grid, age_h)
+    v_g = _hold(tv, stw, grid, age)
+    vy_g = _hold(tv, stw_y, grid, age) if np.any(np.isfinite(stw_y)) else None
+    if vy_g is not None and np.any(~np.isfinite(vy_g) & np.isfinite(v_g)):
+        vy_g = np.where(np.isfinite(vy_g), vy_g, 0.0)
+    ft, flat, flon, fdesc = fixes
+    time_s = (grid - grid[0]) / 1e9
+    fix_s = (ft - grid[0]) / 1e9
+    try:
+        tr = dead_reckon(time_s, h_g, v_g, errors=cfg, fixes=(fix_s, flat, flon),
+                         transverse_mps=vy_g, mode="water")
+    except InsufficientDataError as err:
+        missing.append(f"dead reckoning not computed: {err}")
+        return None, fixes, None, None
+    cons = dr_consistency(tr, fix_s, flat, flon, max_ref_gap_s=REF_MAX_GAP_S)
+    # the actual error at every sample (for the growth plot and the tables)
+    rlat, rlon = _interp_position(ft, flat, flon, grid, REF_MAX_GAP_S)
+    dn, de = offset_ne_m(tr.lat_rad, tr.lon_rad, rlat, rlon)
+    ref_err = np.hypot(dn, de)
+    on = tr.leg >= 0
+    full = DRTrack(time_ns=grid[on], lat_rad=tr.lat_rad[on], lon_rad=tr.lon_rad[on],
+                   since_fix_s=tr.since_fix_s[on], radius_2m_m=tr.radius_2m_m[on],
+                   semi_major_m=tr.semi_major_m[on], semi_minor_m=tr.semi_minor_m[on],
+                   orientation_rad=tr.orientation_rad[on], ref_error_m=ref_err[on],
+                   leg=tr.leg[on].astype(np.int64))
+    ei = np.asarray(tr.epoch_index, dtype=np.int64)
+    epochs = DRTrack(time_ns=grid[ei], lat_rad=tr.lat_rad[ei], lon_rad=tr.lon_rad[ei],
+                     since_fix_s=tr.since_fix_s[ei], radius_2m_m=tr.radius_2m_m[ei],
+                     semi_major_m=tr.semi_major_m[ei], semi_minor_m=tr.semi_minor_m[ei],
+                     orientation_rad=tr.orientation_rad[ei], ref_error_m=ref_err[ei],
+                     leg=tr.leg[ei].astype(np.int64))
+    by_leg = {lc.leg: lc for lc in cons.legs}
+    legs = []
+    for k in range(tr.n_legs):
+        sel = np.flatnonzero(tr.leg == k)
+        if sel.size == 0:
+            continue
+        lc = by_leg.get(k)
+        reason = tr.leg_start_reason[k]
+        legs.append(DRLeg(index=k, start_ns=int(grid[sel[0]]), end_ns=int(grid[sel[-1]]),
+                          fix_source=f"{fdesc} ({reason})",
+                          containment_2m=lc.inside_fraction if lc else math.nan,
+                          n_scored=lc.n_epochs if lc else 0,
+                          max_error_m=lc.max_error_m if lc else math.nan))
+    dr_notes = []
+    n_bridged = sum(g.bridged for g in tr.gaps)
+    if tr.n_breaks:
+        dr_notes.append(f"{tr.n_breaks} heading/speed gap(s) longer than {cfg.max_gap_s:g} s broke "
+                        "the track; it restarted at the next fix")
+    if n_bridged:
+        dr_notes.append(f"{n_bridged} short heading/speed gap(s) bridged by holding the last value")
+    dr_notes.append(f"heading and speed held onto a {DR_STEP_S:g} s grid; error sources as configured "
+                    "(Gauss-Markov, see docs/analyze.md)")
+    if cons.n_epochs:
+        consistent = cons.verdict in ("consistent", "conservative")
+        verdict = (f"{cons.verdict}: reference inside 2M at {100 * cons.inside_fraction:.1f} % of "
+                   f"{cons.n_epochs} epochs in {cons.n_legs} legs (a correct model gives "
+                   f"{100 * cons.expected_inside_fraction:.1f} %); RMS error/M "
+                   f"{cons.rms_error_over_m:.2f} (1 expected)")
+    else:
+        consistent = None
+        verdict = "undetermined: no reference position at any DR epoch after a fix"
+    section = DRSection(
+        heading_source=hdg_desc, speed_source=spd_desc, reset=str(cfg.reset),
+        epoch_interval_s=float(cfg.epoch_interval_s), track=full, epochs=epochs, legs=tuple(legs),
+        reference_role=fdesc, containment_2m=cons.inside_fraction, n_scored=cons.n_epochs,
+        expected_inside=cons.expected_inside_fraction, error_over_m_rms=cons.rms_error_over_m,
+        consistent=consistent, verdict=verdict, n_gaps_bridged=int(n_bridged),
+        n_breaks=int(tr.n_breaks), notes=tuple(dr_notes))
+    inputs = _DRInputs(t0_ns=int(grid[0]), time_s=time_s, vn_mps=tr.vn_mps, ve_mps=tr.ve_mps)
+    return section, fixes, cons, inputs
+
+
+# ------------------------------------------------------------------------- current
+
+
+def _current(dr: _DRInputs, fixes, cfg: DeadReckoningConfig, missing: list[str]) -> CurrentSection | None:
+    """Set and drift from the Kalman filter of the aided-DR paper (dracc.current).
+
+    The filter runs on a CURRENT_STEP_S grid over each stretch where the DR has a water
+    velocity, updated by a fix every ``epoch_interval_s``.
+    """
+    ft, flat, flon, fdesc = fixes
+    step = max(1, int(round(CURRENT_STEP_S / DR_STEP_S)))
+    t = dr.time_s[::step]
+    vn = dr.vn_mps[::step]
+    ve = dr.ve_mps[::step]
+    ok = np.isfinite(vn) & np.isfinite(ve)
+    fix_s = (ft - dr.t0_ns) / 1e9
+    model = CurrentModel.from_config(cfg)
+    # contiguous stretches of valid velocity
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
+    times, sets, drifts, sig, cn_all, ce_all = [], [], [], [], [], []
+    n_updates = 0
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        if b - a < 3:
+            continue
+        ts = t[a:b]
+        sel = np.flatnonzero((fix_s >= ts[0]) & (fix_s <= ts[-1]))
+        if sel.size < 2:
+            continue
+        # one fix per epoch interval (the first at or after each multiple)
+        grid = np.arange(ts[0], ts[-1], cfg.epoch_interval_s)
+        pick = np.unique(np.searchsorted(fix_s, grid, side="left"))
+        pick = pick[(pick < fix_s.size)]
+        pick = pick[(fix_s[pick] >= ts[0]) & (fix_s[pick] <= ts[-1])]
+        if pick.size < 2:
+            continue
+        start_i = pick[0]
+        obs = [(float(fix_s[i]), PositionFix.from_sigma(flat[i], flon[i], cfg.fix_sigma_m))
+               for i in pick[1:]]
+        t_run = ts[ts >= fix_s[start_i]]
+        if t_run.size < 2:
+            continue
+        i0 = np.searchsorted(ts, t_run[0])
+        course = np.arctan2(ve[a + i0:b], vn[a + i0:b])
+        speed = np.hypot(vn[a + i0:b], ve[a + i0:b])
+        # the filter starts at the first fix, advanced to the first epoch by the DR velocity
+        start = PositionFix.from_sigma(flat[start_i], flon[start_i], cfg.fix_sigma_m)
+        obs = [o for o in obs if t_run[0] <= o[0] <= t_run[-1]]
+        ct = estimate_current(t_run, course, speed, start, obs, model)
+        n_updates += len(ct.updates)
+        keep = ct.t_s >= (obs[0][0] if obs else np.inf)  # report after the first update
+        times.append((ct.t_s[keep] * 1e9).astype(np.int64) + dr.t0_ns)
+        sets.append(ct.set_rad[keep])
+        drifts.append(ct.drift_mps[keep])
+        sig.append(ct.drift_sigma_mps[keep])
+        cn_all.append(ct.current_north_mps[keep])
+        ce_all.append(ct.current_east_mps[keep])
+    if not times or not sum(x.size for x in times):
+        missing.append("current not estimated: fewer than two fixes within a stretch of dead reckoning")
+        return None
+    cn = np.concatenate(cn_all)
+    ce = np.concatenate(ce_all)
+    s_d = np.concatenate(sig)
+    mean_n, mean_e = float(np.mean(cn)), float(np.mean(ce))
+    drift = math.hypot(mean_n, mean_e)
+    set_rad = float(wrap_2pi(math.atan2(mean_e, mean_n)))
+    sigma_d = float(np.sqrt(np.mean(s_d**2)))
+    sigma_set = sigma_d / drift if drift > 0 else math.nan
+    note = (f"voyage figures: the mean of the filtered current over {cn.size} filter epochs "
+            f"({CURRENT_STEP_S:g} s grid, a {fdesc} fix every {cfg.epoch_interval_s:g} s); sigma: "
+            "the filter's RMS 1-sigma (not reduced by averaging). Over a leg the filter cannot tell "
+            "current from a constant log or compass error: both are in these figures")
+    return CurrentSection(
+        set_deg=Estimate(math.degrees(set_rad), math.degrees(sigma_set)),
+        drift_kn=Estimate(drift / KN_MPS, sigma_d / KN_MPS),
+        time_ns=np.concatenate(times), set_rad=np.concatenate(sets),
+        drift_mps=np.concatenate(drifts), drift_sigma_mps=s_d, n_updates=n_updates,
+        notes=(note,))
+
+
+# ----------------------------------------------------------------------- deviation
+
+
+def _deviation(voyage: Voyage, cfg: Config, missing: list[str]) -> tuple[DeviationResult | None, str | None]:
+    """INS deviations from the mean (dracc.deviation), with GNSS as the reference where present."""
+    present = [r for r in INS_ROLES if voyage.role_sources(r)]
+    if len(present) < 2:
+        found = f"only {len(present)} INS unit" + (f" ({present[0]})" if present else "s")
+        missing.append(f"no INS triple: {found} found; the deviation statistics need at least "
+                       "two units (three for the paper's factors); map sources to ins1..ins3 with "
+                       "--role KEY=ROLE if they are there under another name")
+        return None, None
+    units = {r: unit_series_from_voyage(voyage, r) for r in present}
+    ref_role = "gnss" if voyage.role_sources("gnss") else None
+    reference = unit_series_from_voyage(voyage, ref_role) if ref_role else None
+    if reference is not None and reference.lat_rad.size == 0:
+        reference, ref_role = None, None
+    result = analyse_deviations(units, cfg.deviation, reference)
+    if len(present) == 2:
+        missing.append(f"no INS triple: only two units ({', '.join(present)}); statistics use "
+                       "the first-approximation factor sqrt(2) and no three-cornered hat")
+    if ref_role is None:
+        missing.append("no reference (GNSS) for the INS: the true error RMS and k* (Table 1) "
+                       "are not computed")
+    return result, ref_role

@@ -7,6 +7,7 @@ Regenerate the golden files with ``DRACC_UPDATE_GOLDEN=1 python -m pytest tests/
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -17,25 +18,22 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from dracc.config import DeviationConfig
+from dracc.deviation import UnitSeries, analyse_deviations
+from dracc.geodesy import add_offset_ne
 from dracc.pipeline import (
     SCHEMA,
     Analysis,
     CalibrationSection,
-    ChannelStats,
     CurrentSection,
-    DeviationSection,
-    DeviationWindow,
     DRLeg,
     DRSection,
     DRTrack,
     Estimate,
-    HatStats,
     InputFile,
-    ReferenceStats,
     SourceRow,
     TimeSummary,
     Track,
-    UnitStats,
 )
 from dracc.report import iso_utc, json_report, tables, terminal
 
@@ -45,27 +43,27 @@ H_NS = 3600 * 10**9
 HOSTILE = '<script>alert("x")</script><img src="http://example.com/x.png">'
 
 
-def _unit_stats(name: str, scale: float, with_ref: bool, negative_hat: bool = False) -> UnitStats:
-    ch = {
-        "lat": ChannelStats(n=25, m_u=100.0 * scale, m_y=132.0 * scale, kurtosis=-0.4,
-                            limit=280.0 * scale, apriori=150.0, exceeds_apriori=132.0 * scale > 150.0,
-                            new_apriori=max(150.0, 132.0 * scale)),
-        "lon": ChannelStats(n=25, m_u=120.0 * scale, m_y=178.8 * scale, kurtosis=0.35,
-                            limit=390.0 * scale),
-        "course": ChannelStats(n=24, m_u=0.05 * scale, m_y=0.0745 * scale, kurtosis=math.nan,
-                               limit=0.16 * scale),
-    }
-    hat = {"lat": HatStats(variance=-20.0 if negative_hat else 9000.0 * scale**2,
-                           sigma=math.nan if negative_hat else 94.9 * scale,
-                           lower=math.nan if negative_hat else 70.0 * scale,
-                           upper=math.nan if negative_hat else 140.0 * scale, negative=negative_hat)}
-    ref = {}
-    if with_ref:
-        ref = {"lat": ReferenceStats(n=25, rmse=127.0 * scale, k_star=1.27, mark="+", kurtosis=-0.2,
-                                     kurtosis_mark=">"),
-               "lon": ReferenceStats(n=25, rmse=190.0 * scale, k_star=1.58, mark="-", kurtosis=0.1,
-                                     kurtosis_mark="<")}
-    return UnitStats(unit=name, channels=ch, r_lat_lon=0.12 * scale, hat=hat, reference=ref)
+@functools.lru_cache(maxsize=1)
+def _deviation():
+    """Deviations computed by dracc.deviation from three units with known, deterministic errors:
+    readings every minute for 25 h; errors are sinusoids of 6 h period with amplitudes
+    (m north, m east, deg) 100/150/0.05 for ins1, 200/300/0.1 for ins2, 240/180/0.06 for ins3;
+    ins3's latitude error is in phase with ins2's (a shared error), which the three-cornered
+    hat shows as a negative variance for ins2: sigma_2^2 = (35100 + 800 - 45920)/2 < 0."""
+    t = T0_NS + np.arange(0, 25 * 3600 + 1, 60, dtype=np.int64) * 10**9
+    x = (t - T0_NS) / 1e9 / (6 * 3600) * 2 * np.pi
+    lat0, lon0 = np.radians(54.0), np.radians(10.0)
+    heading = np.full(t.size, np.radians(60.0))
+    units = {}
+    for k, (name, (an, ae, ac, ph)) in enumerate({"ins1": (100, 150, 0.05, 0.0),
+                                                  "ins2": (200, 300, 0.1, 2.1),
+                                                  "ins3": (240, 180, 0.06, 2.1)}.items()):
+        la, lo = add_offset_ne(lat0, lon0, an * np.sin(x + ph), ae * np.cos(x + 1.3 * k))
+        units[name] = UnitSeries(pos_time_ns=t, lat_rad=la, lon_rad=lo, hdg_time_ns=t,
+                                 heading_rad=heading + np.radians(ac * np.sin(x + 0.7 * k)))
+    ref = UnitSeries(pos_time_ns=t, lat_rad=np.full(t.size, lat0), lon_rad=np.full(t.size, lon0))
+    cfg = DeviationConfig(apriori={"ins1": {"lat_m": 150.0}, "ins2": {"lat_m": 150.0}}, hat_draws=200)
+    return analyse_deviations(units, cfg, ref)
 
 
 def _dr_track(n: int, step_s: float, with_ref: bool) -> DRTrack:
@@ -123,20 +121,7 @@ def make_analysis(kind: str = "full") -> Analysis:
                                  "at least two", "no heading: no HDT/THS/HDG/HDM sentence with a value; "
                                  "dead reckoning not computed"),
                         notes=("role ins1 assigned by --role",))
-    n_inst = 26
-    inst = T0_NS + np.arange(n_inst, dtype="int64") * H_NS
-    phase = np.arange(n_inst) / 6.0
-    samples = {u: {"lat": 100.0 * np.sin(phase + k), "lon": 120.0 * np.cos(phase + k),
-                   "course": 0.05 * np.sin(2 * phase + k)} for k, u in enumerate(("ins1", "ins2", "ins3"))}
-    samples["ins3"]["course"][3] = np.nan
-    units = {u: _unit_stats(u, 1.0 + 0.3 * k, with_ref=True, negative_hat=(u == "ins3"))
-             for k, u in enumerate(("ins1", "ins2", "ins3"))}
-    whole = DeviationWindow(label="all", start_ns=T0_NS, end_ns=T0_NS + 25 * H_NS, units=units)
-    day1 = DeviationWindow(label="2026-03-01", start_ns=T0_NS, end_ns=T0_NS + 24 * H_NS, units=units)
-    dev = DeviationSection(interval_s=3600.0, factors={"lat": 1.32, "lon": 1.49, "course": 1.49},
-                           probability=0.95, units=("ins1", "ins2", "ins3"), time_ns=inst,
-                           samples=samples, whole=whole, windows=(day1,), reference_role="gnss",
-                           notes=("course channel from each unit's HDT heading",))
+    dev = _deviation()
     track = _dr_track(25 * 360, 10.0, with_ref=True)
     pick = np.arange(0, len(track.time_ns), 60)
     epochs = DRTrack(**{f: getattr(track, f)[pick] for f in track.__dataclass_fields__})
@@ -145,8 +130,10 @@ def make_analysis(kind: str = "full") -> Analysis:
                        max_error_m=45.0) for i in range(25))
     dr = DRSection(heading_source="compass HE (HDT, true)", speed_source="log VW (VHW, through water)",
                    reset="1h", epoch_interval_s=600.0, track=track, epochs=epochs, legs=legs,
-                   reference_role="gnss", containment_2m=0.96, n_scored=125, error_over_m_rms=0.71,
-                   consistent=True, verdict="consistent: 96.0 % inside 2M (expected 95-98 %)")
+                   reference_role="gnss", containment_2m=0.96, n_scored=125, expected_inside=0.975,
+                   error_over_m_rms=0.71, consistent=True,
+                   verdict="consistent: 96.0 % inside 2M (expected 95-98 %)", n_gaps_bridged=2,
+                   n_breaks=0, notes=("heading and speed held onto a 1 s grid",))
     cal = CalibrationSection(reference_role="gnss", compass_error_deg=Estimate(0.31, 0.04),
                              log_scale=Estimate(0.029, 0.002), log_offset_kn=Estimate(0.05, 0.02), n=9000)
     ct = T0_NS + np.arange(0, 25 * 3600, 600, dtype="int64") * 10**9
@@ -156,7 +143,7 @@ def make_analysis(kind: str = "full") -> Analysis:
                          n_updates=25)
     missing = ("no magnetic compass: deviation curve not estimated",) if not hostile else (HOSTILE,)
     return Analysis(**a_common, deviation=dev, dead_reckoning=dr, calibration=cal, current=cur,
-                    missing=missing, notes=(HOSTILE,) if hostile else ())
+                    deviation_reference="gnss", missing=missing, notes=(HOSTILE,) if hostile else ())
 
 
 @pytest.fixture(scope="module")
@@ -197,20 +184,24 @@ def test_json_content_and_units():
     assert doc["inputs"][0]["rejected"] == {"checksum": 10, "truncated": 2}
     dev = doc["deviation"]
     assert dev["interval_s"] == 3600.0 and dev["factors"] == {"lat": 1.32, "lon": 1.49, "course": 1.49}
+    assert dev["reference_source"] == "gnss"
     assert len(dev["samples"]) == 26
-    s3 = dev["samples"][3]
+    s3 = dev["samples"][3]  # x = pi: lat errors 0, -200 sin 2.1, -240 sin 2.1 -> mean -126.57
     assert s3["time_utc"] == "2026-03-01T03:00:00Z"
-    assert s3["ins1"]["lat_m"] == pytest.approx(100.0 * math.sin(0.5))
-    assert s3["ins3"]["course_deg"] is None  # NaN -> null
-    u = dev["units"]["ins2"]
-    assert u["lat"]["m_u"] == pytest.approx(130.0) and u["lat"]["unit"] == "m"
-    assert u["course"]["unit"] == "deg" and u["course"]["kurtosis"] is None
-    assert u["r_lat_lon"] == pytest.approx(0.156)
-    assert dev["hat"]["ins3"]["lat"]["negative"] is True and dev["hat"]["ins3"]["lat"]["sigma"] is None
-    assert dev["hat"]["ins3"]["lat"]["variance"] == -20.0  # reported, never clamped
-    assert dev["reference"]["ins1"]["lon"] == {"n": 25, "rmse": 190.0, "k_star": 1.58, "mark": "-",
-                                               "kurtosis": 0.1, "kurtosis_mark": "<"}
-    assert dev["windows"][0]["label"] == "2026-03-01"
+    assert s3["ins1"]["lat_m"] == pytest.approx(440.0 * math.sin(2.1) / 3.0, rel=1e-4)
+    mean_c = (0.1 * math.sin(math.pi + 0.7) + 0.06 * math.sin(math.pi + 1.4)) / 3.0
+    assert s3["ins1"]["course_deg"] == pytest.approx(-mean_c, rel=1e-3)
+    u = dev["units"]["ins1"]
+    assert u["lat"]["kurtosis_kind"] == "excess"
+    assert u["lat"]["m_y"] == pytest.approx(1.32 * u["lat"]["m_u"])  # (K5b)
+    assert u["lat"]["exceeds_apriori"] is True and u["lat"]["new_apriori"] == u["lat"]["m_y"]
+    assert -1.0 <= u["r_lat_lon"] <= 1.0
+    # ins2 and ins3 share a latitude error: the hat's variance for ins2 is negative, not clamped
+    h2 = dev["hat"]["ins2"]["lat"]
+    assert h2["negative"] is True and h2["sigma"] is None and h2["variance"] < 0
+    # errors 100 sin(2 pi i/6), i = 0..25: RMS = 100 sqrt(12.75/26)
+    assert dev["reference"]["ins1"]["lat"]["rmse"] == pytest.approx(100 * math.sqrt(12.75 / 26), rel=1e-3)
+    assert [w["label"] for w in dev["windows"]] == ["2026-03-01", "2026-03-02"]
     dr = doc["dead_reckoning"]
     assert len(dr["epochs"]) == 25 * 6
     e1 = dr["epochs"][1]
@@ -252,8 +243,8 @@ def test_terminal_summary_golden(kind):
 def test_terminal_summary_content():
     text = terminal.render_text(make_analysis("full"))
     for needle in ("2026-03-01 00:00Z → 2026-03-02 01:00Z (25 h 00 min)", "rejected 12 lines: checksum 10",
-                   "inside 2M at 96.0 % of 125 epochs", "excess", "neg. var.", "1.58 -",
-                   "exceeds→171.6", "compass error 0.31 ± 0.04 °", "log scale 2.90 ± 0.20 %",
+                   "inside 2M at 96.0 % of 125 epochs", "excess", "neg. var.", "1.76 -",
+                   "exceeds→178.6", "compass error 0.31 ± 0.04 °", "log scale 2.90 ± 0.20 %",
                    "set 168 ± 12 ° (towards), drift 0.40 ± 0.10 kn"):
         assert needle in text, needle
     bare = terminal.render_text(make_analysis("bare"))
@@ -281,11 +272,14 @@ def test_tables_roundtrip(tmp_path):
     np.testing.assert_allclose(csv["radius_2m_m"], a.dead_reckoning.track.radius_2m_m)
     samples = pd.read_parquet(tmp_path / "deviation_samples.parquet")
     assert list(samples.columns)[:4] == ["time_utc", "ins1_lat_m", "ins1_lon_m", "ins1_course_deg"]
-    assert np.isnan(samples["ins3_course_deg"].iloc[3])
+    assert samples["ins1_lat_m"].iloc[3] == pytest.approx(440.0 * math.sin(2.1) / 3.0, rel=1e-4)
     stats = pd.read_csv(tmp_path / "unit_stats.csv")
     row = stats[(stats.window == "all") & (stats.unit_name == "ins2") & (stats.channel == "lat")].iloc[0]
-    assert row["m_u"] == pytest.approx(130.0) and row["unit"] == "m" and row["k_star"] == 1.27
-    assert set(stats["window"]) == {"all", "2026-03-01"}
+    ref = a.deviation.whole.units["ins2"]
+    assert row["m_u"] == pytest.approx(ref.channels["lat"].m_u) and row["unit"] == "m"
+    assert row["k_star"] == pytest.approx(ref.reference["lat"].k_star)
+    assert bool(row["hat_negative"]) is True
+    assert set(stats["window"]) == {"all", "2026-03-01", "2026-03-02"}
 
 
 def test_tables_bare_writes_nothing(tmp_path):

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import base64
 import html
+import math
 from pathlib import Path
 
 from .. import atomic
@@ -89,6 +90,13 @@ def _summary(a: Analysis) -> str:
     return f'<table class="kv">{kv}</table><h3>Sources</h3>{src}'
 
 
+def _sqrt_bound(var: float, digits: int) -> str:
+    """A variance bound shown as a sigma bound; '<0' where the bound itself is negative."""
+    if var is None or not math.isfinite(var):
+        return "-"
+    return "&lt;0" if var < 0 else fmt(math.sqrt(var), digits)
+
+
 def _units(a: Analysis) -> str:
     d = a.deviation
     if d is None:
@@ -113,8 +121,8 @@ def _units(a: Analysis) -> str:
                 verdict = '<span class="ok">within</span>'
             h = u.hat.get(ch)
             hat = "-" if h is None else ('<span class="bad">negative variance</span>' if h.negative
-                                         else f"{fmt(h.sigma, digits)} [{fmt(h.lower, digits)}, "
-                                              f"{fmt(h.upper, digits)}]")
+                                         else f"{fmt(h.sigma, digits)} [{_sqrt_bound(h.var_lower, digits)}, "
+                                              f"{_sqrt_bound(h.var_upper, digits)}]")
             r = u.reference.get(ch)
             rows.append([_e(name), f"{ch} [{unit}]", str(c.n), fmt(c.m_u, digits), fmt(c.m_y, digits),
                          fmt(c.kurtosis, 2), fmt(c.limit, digits), fmt(c.apriori, digits), verdict,
@@ -124,7 +132,7 @@ def _units(a: Analysis) -> str:
     intro = (f"<p>{len(d.units)} units sampled every {fmt_duration(d.interval_s)} at "
              f"{len(d.time_ns)} instants; m<sub>y</sub> = k·m<sub>u</sub> with k: {fac}; kurtosis is "
              f"<em>excess</em> kurtosis (0 for a normal distribution); limits at P = {p}.</p>")
-    notes = "".join(f"<p>{_e(n)}</p>" for n in d.notes)
+    notes = "".join(f"<p>{_e(n)}</p>" for n in d.messages)
     table = _table(["unit", "channel", "n", "m_u", "m_y", "excess kurtosis", f"limit {p}",
                     "a priori", "a priori verdict", "hat σ [bounds]", "ref RMS", "k*"], rows, left=2)
     windows = ""
@@ -153,7 +161,8 @@ def _dr(a: Analysis) -> str:
     rows = [("heading", _e(dr.heading_source)), ("speed", _e(dr.speed_source)),
             ("restart", _e(dr.reset)), ("legs", str(len(dr.legs))),
             ("reference", _e(dr.reference_role or "none")),
-            ("2M containment", f"{fmt_pct(dr.containment_2m)} of {dr.n_scored} epochs after a fix"),
+            ("2M containment", f"{fmt_pct(dr.containment_2m)} of {dr.n_scored} epochs after a fix "
+                               f"(a correct model: {fmt_pct(dr.expected_inside)})"),
             ("RMS error / M", fmt(dr.error_over_m_rms, 2)), ("verdict", _e(dr.verdict))]
     kv = "".join(f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in rows)
     legs = _table(["leg", "start", "end", "fix", "inside 2M", "scored", "max error [m]"],

@@ -16,20 +16,12 @@ import numpy as np
 
 from .. import atomic
 from ..pipeline import (
-    CHANNEL_UNITS,
-    CHANNELS,
-    SAMPLE_KEYS,
     Analysis,
     CalibrationSection,
-    ChannelStats,
     CurrentSection,
-    DeviationSection,
-    DeviationWindow,
     DRSection,
     DRTrack,
     Estimate,
-    HatStats,
-    ReferenceStats,
 )
 from ..units import mps_to_kn
 from . import iso_utc
@@ -59,61 +51,12 @@ def _estimate(e: Estimate | None) -> dict | None:
     return None if e is None else {"value": _num(e.value), "sigma": _num(e.sigma)}
 
 
-def _channel(c: ChannelStats, unit: str) -> dict:
-    return {"n": int(c.n), "unit": unit, "m_u": _num(c.m_u), "m_y": _num(c.m_y),
-            "kurtosis": _num(c.kurtosis), "limit": _num(c.limit), "apriori": _num(c.apriori),
-            "exceeds_apriori": c.exceeds_apriori, "new_apriori": _num(c.new_apriori)}
-
-
-def _hat(h: HatStats) -> dict:
-    return {"variance": _num(h.variance), "sigma": _num(h.sigma), "lower": _num(h.lower),
-            "upper": _num(h.upper), "negative": bool(h.negative)}
-
-
-def _ref(r: ReferenceStats) -> dict:
-    return {"n": int(r.n), "rmse": _num(r.rmse), "k_star": _num(r.k_star), "mark": r.mark,
-            "kurtosis": _num(r.kurtosis), "kurtosis_mark": r.kurtosis_mark}
-
-
-def _window(w: DeviationWindow) -> dict:
-    units: dict[str, Any] = {}
-    hat: dict[str, Any] = {}
-    ref: dict[str, Any] = {}
-    for name, u in w.units.items():
-        units[name] = {ch: _channel(u.channels[ch], CHANNEL_UNITS[ch]) for ch in CHANNELS
-                       if ch in u.channels}
-        units[name]["r_lat_lon"] = _num(u.r_lat_lon)
-        if u.hat:
-            hat[name] = {ch: _hat(h) for ch, h in u.hat.items()}
-        if u.reference:
-            ref[name] = {ch: _ref(r) for ch, r in u.reference.items()}
-    return {"label": w.label, "start_utc": iso_utc(w.start_ns), "end_utc": iso_utc(w.end_ns),
-            "units": units, "hat": hat, "reference": ref or None}
-
-
-def _deviation(d: DeviationSection) -> dict:
-    samples = []
-    for i, t in enumerate(d.time_ns):
-        row: dict[str, Any] = {"time_utc": iso_utc(int(t))}
-        for unit in d.units:
-            row[unit] = {SAMPLE_KEYS[ch]: _num(d.samples[unit][ch][i])
-                         for ch in CHANNELS if ch in d.samples[unit]}
-        samples.append(row)
-    whole = _window(d.whole)
-    return {
-        "interval_s": float(d.interval_s),
-        "factors": {ch: _num(d.factors[ch]) for ch in CHANNELS},
-        "probability": float(d.probability),
-        "kurtosis_is_excess": True,
-        "units_present": list(d.units),
-        "reference_source": d.reference_role,
-        "samples": samples,
-        "units": whole["units"],
-        "hat": whole["hat"],
-        "reference": whole["reference"],
-        "windows": [_window(w) for w in d.windows],
-        "notes": list(d.notes),
-    }
+def _deviation(a: Analysis) -> dict:
+    """The deviation section: :meth:`DeviationResult.to_dict` (its owner settles the keys),
+    plus where the reference came from."""
+    d = a.deviation.to_dict()
+    d["reference_source"] = a.deviation_reference
+    return d
 
 
 def _epochs(t: DRTrack) -> list[dict]:
@@ -147,7 +90,10 @@ def _dead_reckoning(dr: DRSection) -> dict:
         "epochs": _epochs(dr.epochs),
         "containment_2m": _num(dr.containment_2m),
         "n_scored": int(dr.n_scored),
+        "expected_inside": _num(dr.expected_inside),
         "error_over_m_rms": _num(dr.error_over_m_rms),
+        "gaps_bridged": int(dr.n_gaps_bridged),
+        "breaks": int(dr.n_breaks),
         "consistent": dr.consistent,
         "verdict": dr.verdict,
         "legs": [{"index": leg.index, "start_utc": iso_utc(leg.start_ns),
@@ -221,7 +167,7 @@ def to_dict(a: Analysis) -> dict:
                         for s in a.sources},
         "period": {"start_utc": iso_utc(a.start_ns), "end_utc": iso_utc(a.end_ns),
                    "duration_s": _num(a.duration_s)},
-        "deviation": None if a.deviation is None else _deviation(a.deviation),
+        "deviation": None if a.deviation is None else _deviation(a),
         "dead_reckoning": None if a.dead_reckoning is None else _dead_reckoning(a.dead_reckoning),
         "calibration": None if a.calibration is None else _calibration(a.calibration),
         "current": None if a.current is None else _current(a.current),

@@ -21,7 +21,8 @@ import numpy as np
 import pandas as pd
 
 from .. import atomic
-from ..pipeline import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS, Analysis, DeviationWindow, DRTrack
+from ..deviation import WindowStats
+from ..pipeline import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS, Analysis, DRTrack
 
 
 def _times(time_ns) -> pd.DatetimeIndex:
@@ -57,7 +58,7 @@ def samples_frame(a: Analysis) -> pd.DataFrame | None:
     return pd.DataFrame(cols)
 
 
-def _window_rows(w: DeviationWindow) -> list[dict]:
+def _window_rows(w: WindowStats) -> list[dict]:
     rows = []
     for name, u in w.units.items():
         for ch in CHANNELS:
@@ -69,14 +70,16 @@ def _window_rows(w: DeviationWindow) -> list[dict]:
             rows.append({
                 "window": w.label, "window_start_utc": pd.Timestamp(w.start_ns, unit="ns", tz="UTC"),
                 "unit_name": name, "channel": ch, "unit": CHANNEL_UNITS[ch], "n": c.n,
-                "m_u": c.m_u, "m_y": c.m_y, "kurtosis_excess": c.kurtosis, "limit": c.limit,
+                "m_u": c.m_u, "k": c.k, "m_y": c.m_y, "kurtosis_excess": c.kurtosis,
+                "k_pie": c.k_pie, "k_hm": c.k_hm, "limit": c.limit,
                 "apriori": np.nan if c.apriori is None else c.apriori,
-                "exceeds_apriori": c.exceeds_apriori,
+                "exceeds_apriori": c.exceeds_apriori, "new_apriori": c.new_apriori,
                 "r_lat_lon": u.r_lat_lon,
                 "hat_variance": np.nan if h is None else h.variance,
                 "hat_sigma": np.nan if h is None else h.sigma,
                 "hat_negative": None if h is None else h.negative,
                 "ref_rmse": np.nan if r is None else r.rmse,
+                "ref_m_x": np.nan if r is None else r.m_x,
                 "k_star": np.nan if r is None else r.k_star,
                 "mark": None if r is None else r.mark,
             })

@@ -8,11 +8,12 @@ rich markup disabled, so a log cannot style the terminal.
 
 from __future__ import annotations
 
+import numpy as np
 from rich.console import Console, Group
 from rich.table import Table
 from rich.text import Text
 
-from ..pipeline import CHANNEL_UNITS, CHANNELS, Analysis, DeviationSection, Estimate
+from ..pipeline import CHANNEL_UNITS, CHANNELS, Analysis, DeviationResult, Estimate
 from . import fmt, fmt_duration, fmt_pct, short_utc
 
 _CHANNEL_LABEL = {"lat": "lat", "lon": "lon", "course": "course"}
@@ -41,7 +42,7 @@ def _sources_table(a: Analysis) -> Table:
     return t
 
 
-def _unit_table(d: DeviationSection) -> Table:
+def _unit_table(d: DeviationResult) -> Table:
     p = f"{100 * d.probability:g} %"
     t = Table(box=None, pad_edge=False, show_edge=False, header_style="bold")
     for col in ("unit", "channel", "n", "m_u", "m_y", "excess kurt.", f"limit {p}", "a priori",
@@ -115,15 +116,18 @@ def summary(a: Analysis) -> Group:
     else:
         parts.append(Text(f"heading  {dr.heading_source}; speed {dr.speed_source}; "
                           f"restart {dr.reset}; {len(dr.legs)} leg{'s' if len(dr.legs) != 1 else ''}"))
-        if dr.reference_role is None:
+        if not dr.n_scored:
             parts.append(Text("no reference: consistency not scored"))
         else:
-            final = dr.epochs.radius_2m_m
-            max2m = fmt(float(max(final)) if len(final) else None, 0)
+            r2m = dr.epochs.radius_2m_m
+            max2m = fmt(float(np.nanmax(r2m)) if len(r2m) else None, 0)
             parts.append(Text(f"2M       reference ({dr.reference_role}) inside 2M at "
-                              f"{fmt_pct(dr.containment_2m)} of {dr.n_scored} epochs after a fix; "
-                              f"RMS error/M {fmt(dr.error_over_m_rms, 2)}; largest 2M {max2m} m"))
+                              f"{fmt_pct(dr.containment_2m)} of {dr.n_scored} epochs after a fix "
+                              f"(model: {fmt_pct(dr.expected_inside)}); RMS error/M "
+                              f"{fmt(dr.error_over_m_rms, 2)}; largest 2M {max2m} m"))
         parts.append(Text(f"verdict  {dr.verdict}"))
+        for note in dr.notes:
+            parts.append(Text(f"note: {note}"))
 
     parts.append(Text(""))
     parts.append(_heading("INS deviations from the mean"))
@@ -135,7 +139,7 @@ def summary(a: Analysis) -> Group:
         parts.append(Text(f"{len(d.units)} units, every {fmt_duration(d.interval_s)}, "
                           f"{len(d.time_ns)} instants; k: {fac}; excess kurtosis (normal 0)"))
         parts.append(_unit_table(d))
-        for note in d.notes:
+        for note in d.messages:
             parts.append(Text(f"note: {note}"))
 
     parts.append(Text(""))
