@@ -392,3 +392,29 @@ def test_to_dict_is_json_ready_with_the_report_keys():
     # constant deviations: zero spread after the mean, so kurtosis of errors/deviations
     # with zero RMS is undefined -> None, not NaN, in JSON
     assert d["units"]["ins1"]["course"]["kurtosis"] is None
+
+
+def test_unit_series_from_voyage_leaves_out_invalid_fixes_and_magnetic_headings():
+    from collections import Counter
+
+    from dracc.deviation import unit_series_from_voyage
+    from dracc.ingest.frames import Rejects, SourceInfo, TimeEvents, Voyage, empty_frame, make_frame
+
+    t = np.array([T0, T0 + 1, T0 + 2], dtype=np.int64)
+    pos = make_frame("position", {"time_ns": t, "source": ["INS1", "INS1", "GP"],
+                                  "sentence": ["GGA"] * 3, "line": [1, 2, 3],
+                                  "lat_rad": [0.1, 0.2, 0.3], "lon_rad": [0.4, 0.5, 0.6],
+                                  "quality": [1, 0, 1]})
+    hdg = make_frame("heading", {"time_ns": t, "source": ["INS1"] * 3, "sentence": ["HDT"] * 3,
+                                 "line": [4, 5, 6], "heading_rad": [1.0, 2.0, 3.0],
+                                 "reference": ["T", "M", "T"]})
+    frames = {k: empty_frame(k) for k in ("ground", "water", "distance", "rot")}
+    frames.update(position=pos, heading=hdg)
+    sources = {"INS1": SourceInfo("INS1", ["ins1"], Counter(), Counter()),
+               "GP": SourceInfo("GP", ["gnss"], Counter(), Counter())}
+    v = Voyage(frames, sources, Rejects(), TimeEvents(), [])
+    u = unit_series_from_voyage(v, "ins1")
+    assert list(u.pos_time_ns) == [T0] and list(u.lat_rad) == [0.1]  # quality 0 and GP out
+    assert list(u.heading_rad) == [1.0, 3.0]  # the magnetic reading is not a course
+    g = unit_series_from_voyage(v, "gnss")
+    assert list(g.lon_rad) == [0.6] and len(g.heading_rad) == 0

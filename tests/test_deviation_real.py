@@ -62,3 +62,15 @@ def test_two_real_receivers_as_two_units(palmer):
     crs = res.samples["ins1"]["course"]
     assert np.sum(~np.isnan(crs)) >= 12 and np.nanmax(np.abs(crs)) < 5.0
     assert res.whole.units["ins1"].hat == {}
+    # ten minutes against a 5 h correlation time: no limiting error, and the reason given;
+    # the receivers' offset is nearly constant: (K6) falls below -2, noted
+    lat = stats["lat"]
+    assert lat.n_eff < 1 and math.isnan(lat.limit) and math.isnan(lat.k_hm)
+    assert any("fewer than one independent sample" in n for n in lat.notes)
+    assert lat.kurtosis < -2 and lat.k_pie == 1.0
+    # with the samples taken as independent (correlation time 0) the limit exists
+    res0 = analyse_deviations(palmer, DeviationConfig(interval_s=60.0, window_s=3600.0,
+                                                      max_interp_gap_s=5.0,
+                                                      correlation_time_s=0.0))
+    lat0 = res0.whole.units["ins1"].channels["lat"]
+    assert lat0.n_eff == 12 and lat0.limit == pytest.approx(lat0.k_hm * lat0.m_y)

@@ -71,6 +71,7 @@ class ChannelStats:
     exceeds_apriori: bool | None  #: m_y > a priori (None without one)
     new_apriori: float  #: the monitoring rule: max(a priori, m_y); m_y where there is none
     verdict: str  #: 'exceeds', 'within', or 'no a priori: the deviation estimate is mandatory'
+    notes: tuple[str, ...] = ()  #: why a figure is missing or how it was obtained
 
     def to_dict(self) -> dict:
         return {"n": int(self.n), "m_u": _f(self.m_u), "k": _f(self.k), "m_y": _f(self.m_y),
@@ -78,7 +79,8 @@ class ChannelStats:
                 "kurtosis_for_limit": _f(self.kurtosis_for_limit), "n_eff": _f(self.n_eff),
                 "k_pie": _f(self.k_pie), "k_hm": _f(self.k_hm), "limit": _f(self.limit),
                 "apriori": _f(self.apriori), "exceeds_apriori": self.exceeds_apriori,
-                "new_apriori": _f(self.new_apriori), "verdict": self.verdict}
+                "new_apriori": _f(self.new_apriori), "verdict": self.verdict,
+                "notes": list(self.notes)}
 
 
 @dataclass(frozen=True)
@@ -321,7 +323,21 @@ def _channel_stats(u, factor, kurt_limit, unit, channel, cfg: DeviationConfig) -
     e = float(stats.excess_kurtosis_k6(u))  # (K6)
     e_lim = e if math.isnan(kurt_limit) else kurt_limit
     n_eff = float(stats.effective_samples(n, cfg.interval_s, cfg.correlation_time_s))
-    limit, kp, kh = stats.limiting_error(m_y, cfg.probability, e_lim, cfg.confidence, n_eff)  # (K8)
+    notes: list[str] = []
+    kp = stats.k_pie(cfg.probability, e_lim)  # (K8)
+    if e_lim <= stats.KURTOSIS_MIN:
+        # No law has E <= -2; (K6) gets there when the deviations are nearly constant
+        # (a bias), through its n - 1.45.  The family's limit at E -> -2 is the two-point
+        # law, whose limiting error is its RMS: K_PIE = 1.
+        kp = 1.0
+        notes.append(f"kurtosis {e_lim:.2f} <= -2 (nearly constant deviations): "
+                     "K_PIE = 1, the two-point limit")
+    kh = stats.k_hm(cfg.confidence, n_eff) if n_eff >= 1 else math.nan  # (K8)
+    if n_eff < 1:
+        notes.append(f"fewer than one independent sample (N_eff = {n_eff:.2f} with a "
+                     f"{cfg.correlation_time_s / 3600:g} h correlation time): no upper "
+                     "confidence bound, no limiting error")
+    limit = kp * kh * m_y  # (K8)
     apriori = cfg.apriori.get(unit, {}).get(SAMPLE_KEYS[channel])
     if apriori is None:
         exceeds, new, verdict = None, m_y, "no a priori: the deviation estimate is mandatory"
@@ -334,7 +350,8 @@ def _channel_stats(u, factor, kurt_limit, unit, channel, cfg: DeviationConfig) -
     return ChannelStats(n=n, m_u=m_u, k=factor, m_y=m_y, kurtosis=e, kurtosis_for_limit=e_lim,
                         n_eff=n_eff, k_pie=float(kp), k_hm=float(kh), limit=float(limit),
                         apriori=None if apriori is None else float(apriori),
-                        exceeds_apriori=exceeds, new_apriori=float(new), verdict=verdict)
+                        exceeds_apriori=exceeds, new_apriori=float(new), verdict=verdict,
+                        notes=tuple(notes))
 
 
 def _mode(units: list[str], channel: str, factor: float) -> ChannelMode:
