@@ -455,6 +455,7 @@ def to_metres(rows: Rows) -> Rows:
 class FixSolution:
     """A fused position and its quality.
 
+    Scalars, or arrays with a leading runs axis for a batch (see :func:`fuse_fix`).
     ``cov_m2``: P (north, east; m^2), (W3) for WLS, the sandwich Q Psi^T R Psi Q for LS.
     ``cofactor``: Q = (Psi^T Psi)^-1 of the unit rows (seeds/002 (35)); ``dop`` =
     sqrt(q_nn + q_ee) (METHODS §5).  ``drms_m`` = sqrt(trace P), ``two_drms_m`` = 2 drms
@@ -462,25 +463,29 @@ class FixSolution:
     line; ``chi2`` = r^T R^-1 r with ``redundancy`` = rows - 2 degrees of freedom.
     """
 
-    lat_rad: float
-    lon_rad: float
+    lat_rad: float | np.ndarray
+    lon_rad: float | np.ndarray
     cov_m2: np.ndarray
     ellipse: Ellipse
-    drms_m: float
-    two_drms_m: float
+    drms_m: float | np.ndarray
+    two_drms_m: float | np.ndarray
     cofactor: np.ndarray
-    dop: float
+    dop: float | np.ndarray
     residuals_m: np.ndarray
     kinds: tuple[str, ...]
-    chi2: float
+    chi2: float | np.ndarray
     redundancy: int
     iterations: int
     weighted: bool
 
     @property
-    def variance_factor(self) -> float:
+    def variance_factor(self) -> float | np.ndarray:
         """A posteriori variance of unit weight chi2/redundancy (NaN when redundancy is 0)."""
         return self.chi2 / self.redundancy if self.redundancy > 0 else float("nan")
+
+
+def _t(m):
+    return np.swapaxes(m, -1, -2)
 
 
 def fuse_fix(
@@ -495,59 +500,69 @@ def fuse_fix(
     """Fuse fixes and lines of position by LS (W1) or WLS (W4), iterated about a prior.
 
     The prior is only the first linearisation point; to weigh it as information, add
-    it as a :class:`PositionFix`.  Raises :class:`GeometryError` when the rows cannot
-    fix both coordinates (fewer than 2, or parallel lines) or the iteration diverges.
+    it as a :class:`PositionFix`.  Observations whose measured values are arrays
+    (runs,) give a batch of independent solutions in one call (Monte Carlo): every
+    field of the result then carries the leading runs axis.  Raises
+    :class:`GeometryError` when the rows cannot fix both coordinates (fewer than 2,
+    or parallel lines) or the iteration does not converge.
     """
     if not observations:
         raise GeometryError("fuse_fix: no observations")
-    lat, lon = float(prior_lat_rad), float(prior_lon_rad)
+    lat, lon = np.asarray(prior_lat_rad, float), np.asarray(prior_lon_rad, float)
     iterations = 0
     while True:
         iterations += 1
         rows = to_metres(stack_rows(observations, lat, lon))
         psi, z, r_m2 = rows.g, rows.residual, rows.cov
-        if psi.shape[0] < 2 or np.linalg.matrix_rank(psi, tol=1e-6) < 2:
+        if psi.shape[-2] < 2 or np.any(np.linalg.matrix_rank(psi, tol=1e-6) < 2):
             raise GeometryError(
-                f"fuse_fix: {psi.shape[0]} row(s) ({', '.join(rows.kinds)}) do not fix both "
+                f"fuse_fix: {psi.shape[-2]} row(s) ({', '.join(rows.kinds)}) do not fix both "
                 "coordinates (need two non-parallel lines of position or a fix)"
             )
         if weighted:
-            r_inv = np.linalg.inv(r_m2)
-            normal = psi.T @ r_inv @ psi
-            dx = np.linalg.solve(normal, psi.T @ r_inv @ z)  # (W4)
+            w = np.linalg.inv(r_m2)
+            normal = _t(psi) @ w @ psi
+            dx = np.linalg.solve(normal, (_t(psi) @ w @ z[..., None]))[..., 0]  # (W4)
         else:
-            dx = np.linalg.solve(psi.T @ psi, psi.T @ z)  # (W1)
-        lat, lon = (float(v) for v in add_offset_ne(lat, lon, dx[0], dx[1]))
-        if np.hypot(dx[0], dx[1]) < tolerance_m:
+            dx = np.linalg.solve(_t(psi) @ psi, (_t(psi) @ z[..., None]))[..., 0]  # (W1)
+        lat, lon = add_offset_ne(lat, lon, dx[..., 0], dx[..., 1])
+        step = float(np.max(np.hypot(dx[..., 0], dx[..., 1])))
+        if step < tolerance_m:
             break
         if iterations >= max_iterations:
             raise GeometryError(
                 f"fuse_fix: no convergence after {max_iterations} iterations (last step "
-                f"{np.hypot(dx[0], dx[1]):.3g} m); check the observations and the prior"
+                f"{step:.3g} m); check the observations and the prior"
             )
     rows = to_metres(stack_rows(observations, lat, lon))
     psi, z, r_m2 = rows.g, rows.residual, rows.cov
-    q = np.linalg.inv(psi.T @ psi)  # cofactor matrix, seeds/002 (35)
+    q = np.linalg.inv(_t(psi) @ psi)  # cofactor matrix, seeds/002 (35)
     r_inv = np.linalg.inv(r_m2)
     if weighted:
-        cov = np.linalg.inv(psi.T @ r_inv @ psi)  # (W3)
+        cov = np.linalg.inv(_t(psi) @ r_inv @ psi)  # (W3)
     else:
-        cov = q @ psi.T @ r_m2 @ psi @ q  # covariance of the LS (W1) estimate
-    cov = 0.5 * (cov + cov.T)
-    drms = float(np.sqrt(np.trace(cov)))
+        cov = q @ _t(psi) @ r_m2 @ psi @ q  # covariance of the LS (W1) estimate
+    cov = 0.5 * (cov + _t(cov))
+    drms = np.sqrt(cov[..., 0, 0] + cov[..., 1, 1])
+    dop = np.sqrt(q[..., 0, 0] + q[..., 1, 1])  # (37) in the trace form, METHODS §5
+    chi2 = np.einsum("...i,...ij,...j->...", z, r_inv, z)
+
+    def out(v):
+        return float(v) if np.ndim(v) == 0 else v
+
     return FixSolution(
-        lat_rad=lat,
-        lon_rad=lon,
+        lat_rad=out(lat),
+        lon_rad=out(lon),
         cov_m2=cov,
         ellipse=error_ellipse(cov),
-        drms_m=drms,
-        two_drms_m=2.0 * drms,
+        drms_m=out(drms),
+        two_drms_m=out(2.0 * drms),
         cofactor=q,
-        dop=float(np.sqrt(q[0, 0] + q[1, 1])),  # (37) in the trace form, METHODS §5
+        dop=out(dop),
         residuals_m=z,
         kinds=rows.kinds,
-        chi2=float(z @ r_inv @ z),
-        redundancy=int(psi.shape[0] - 2),
+        chi2=out(chi2),
+        redundancy=int(psi.shape[-2] - 2),
         iterations=iterations,
         weighted=weighted,
     )
