@@ -418,3 +418,12 @@ def test_unit_series_from_voyage_leaves_out_invalid_fixes_and_magnetic_headings(
     assert list(u.heading_rad) == [1.0, 3.0]  # the magnetic reading is not a course
     g = unit_series_from_voyage(v, "gnss")
     assert list(g.lon_rad) == [0.6] and len(g.heading_rad) == 0
+
+
+def test_interpolation_sorts_readings_and_ignores_nan_readings():
+    t = np.array([30, 10, 20, 40], dtype=np.int64)
+    v = np.array([[3.0, 1.0, 2.0, np.nan]])
+    # 15 -> between 10 and 20; 25 -> between 20 and 30; 40: its reading is NaN, so the
+    # nearest valid one within the gap (30) is used; 200 is beyond the gap: missing
+    out = interpolate_at(t, v, np.array([15, 25, 40, 200]), 100e-9)
+    np.testing.assert_allclose(out[0], [1.5, 2.5, 3.0, np.nan])

@@ -87,9 +87,12 @@ def _clean(t_ns, values):
     if v.ndim == 1:
         v = v[None, :]
     ok = ~np.any(np.isnan(v), axis=0)
-    t, v = t[ok], v[:, ok]
-    order = np.argsort(t, kind="stable")
-    return t[order], v[:, order]
+    if not np.all(ok):
+        t, v = t[ok], v[:, ok]
+    if np.any(t[1:] < t[:-1]):  # logs are nearly always in order: sort only when not
+        order = np.argsort(t, kind="stable")
+        t, v = t[order], v[:, order]
+    return t, v
 
 
 def interpolate_at(t_ns, values, instants_ns, max_gap_s: float, circular=(False,)):
