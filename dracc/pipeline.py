@@ -255,11 +255,12 @@ def _noop(stage: str, fraction: float) -> None:
 
 
 def analyse(paths: Sequence[str | Path], cfg: Config | None = None,
-            progress: Progress | None = None) -> Analysis:
+            progress: Progress | None = None, total_bytes: int | None = None) -> Analysis:
     """Read the logs ``paths`` (several files of one voyage merge by time) and analyse them.
 
     ``cfg`` defaults to :class:`~dracc.config.Config` (); ``progress(stage, fraction)``
-    is called as the work goes on.  Raises :class:`~dracc.errors.IngestError` for
+    is called as the work goes on (reading as a fraction of ``total_bytes`` where given).
+    Raises :class:`~dracc.errors.IngestError` for
     unreadable input and :class:`InsufficientDataError` when the logs hold no record
     at all; everything else that is missing is reported in :attr:`Analysis.missing`.
     """
@@ -268,7 +269,14 @@ def analyse(paths: Sequence[str | Path], cfg: Config | None = None,
     cfg = cfg or Config()
     report = progress or _noop
     report("reading logs", 0.0)
-    voyage = read_logs([Path(p) for p in paths], cfg.ingest)
+    read = {"n": 0}
+
+    def on_bytes(n: int) -> None:
+        read["n"] += n
+        if total_bytes:
+            report("reading logs", read["n"] / total_bytes)
+
+    voyage = read_logs([Path(p) for p in paths], cfg.ingest, progress=on_bytes)
     report("reading logs", 1.0)
     return analyse_voyage(voyage, cfg, report)
 
@@ -550,11 +558,16 @@ def _fixes(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str], notes: 
             notes.append("no GNSS: DR fixes and reference from the mean of the INS units "
                          f"({', '.join(ins)})")
         return t[ok], lat[ok], lon[ok], "ins_mean"
-    others = pos[~pos["source"].isin([k for k, s in voyage.sources.items() if s.roles])]
-    if not others.empty:
-        key = str(others["source"].iloc[0])
-        o = others[others["source"] == key]
-        notes.append(f"no GNSS or INS role: DR fixes and reference from position source {key}")
+    # no GNSS or INS role: the position source with the most fixes (e.g. an instrument bus
+    # relaying its GPS as II RMC/GLL)
+    counts = pos["source"].astype(str).value_counts()
+    if len(counts):
+        key = str(counts.index[0])
+        o = pos[pos["source"] == key]
+        role = _role_of(voyage, key)
+        notes.append(f"no GNSS or INS role: DR fixes and reference from position source {key}"
+                     + (f" (role {role})" if role else "")
+                     + "; map the receiver with --role KEY=gnss to choose another")
         t, la, lo = _dedupe_sorted(o["time_ns"].to_numpy(np.int64), o["lat_rad"].to_numpy(float),
                                    o["lon_rad"].to_numpy(float))
         return t, la, lo, key
@@ -637,6 +650,9 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
         dr_notes.append(f"{n_bridged} short heading/speed gap(s) bridged by holding the last value")
     dr_notes.append(f"heading and speed held onto a {DR_STEP_S:g} s grid; error sources as configured "
                     "(Gauss-Markov, see docs/analyze.md)")
+    if 0 < cons.n_epochs < 10:
+        dr_notes.append(f"only {cons.n_epochs} epochs scored: for a short log give a shorter "
+                        "--epoch-interval (e.g. 1min)")
     if cons.n_epochs:
         consistent = cons.verdict in ("consistent", "conservative")
         verdict = (f"{cons.verdict}: reference inside 2M at {100 * cons.inside_fraction:.1f} % of "
@@ -743,8 +759,8 @@ def _deviation(voyage: Voyage, cfg: Config, missing: list[str]) -> tuple[Deviati
     """INS deviations from the mean (dracc.deviation), with GNSS as the reference where present."""
     present = [r for r in INS_ROLES if voyage.role_sources(r)]
     if len(present) < 2:
-        found = f"only {len(present)} INS unit" + (f" ({present[0]})" if present else "s")
-        missing.append(f"no INS triple: {found} found; the deviation statistics need at least "
+        found = f"only one INS unit ({present[0]}) found" if present else "no INS unit found"
+        missing.append(f"no INS triple: {found}; the deviation statistics need at least "
                        "two units (three for the paper's factors); map sources to ins1..ins3 with "
                        "--role KEY=ROLE if they are there under another name")
         return None, None

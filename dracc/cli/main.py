@@ -13,6 +13,7 @@ from .app import VERBOSE, app, err
 # Commands register themselves on ``app`` when imported.
 from . import inspect_cmd  # noqa: F401,E402  isort: skip
 from . import simulate_cmd  # noqa: F401,E402  isort: skip
+from . import analyze_cmd  # noqa: F401,E402  isort: skip
 from . import audit_cmd  # noqa: F401,E402  isort: skip
 from . import fleet_cmd  # noqa: F401,E402  isort: skip
 

@@ -1,0 +1,163 @@
+"""``dracc analyze LOG...``: the main job — dead reckoning, INS deviations, current, reports.
+
+The command parses options into the configuration, calls :func:`dracc.pipeline.analyse`
+once, and hands the result to the renderers: a short summary on stdout (unless the JSON
+goes there), ``--json`` (file or ``-``), ``--html`` (one offline file) and ``--out``
+(CSV and Parquet tables).  Every file is written atomically.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import replace
+from pathlib import Path
+
+import typer
+
+from ..config import load_config, validate
+from ..deadreckoning import parse_reset_s
+from ..errors import ConfigError
+from ..ingest.frames import ROLES
+from .app import ConfigOption, LogsArgument, app, err, out, paths_exist, progress
+
+_DURATION = re.compile(r"^\s*([0-9]*\.?[0-9]+)\s*(s|sec|min|m|h|hr|d)?\s*$", re.IGNORECASE)
+_UNIT_S = {None: 1.0, "s": 1.0, "sec": 1.0, "min": 60.0, "m": 60.0, "h": 3600.0, "hr": 3600.0,
+           "d": 86400.0}
+
+
+def parse_duration_s(text: str, option: str) -> float:
+    """'1h', '2h', '90min', '30s', '1d' or plain seconds ('3600') -> seconds (> 0)."""
+    m = _DURATION.match(text)
+    if not m:
+        raise ConfigError(f"{option} {text!r}: expected a duration such as 1h, 2h, 90min, 30s or 3600")
+    unit = m.group(2).lower() if m.group(2) else None
+    value = float(m.group(1)) * _UNIT_S[unit]
+    if not value > 0 or not math.isfinite(value):
+        raise ConfigError(f"{option} {text!r}: must be positive")
+    return value
+
+
+def parse_roles(items: list[str]) -> dict[str, str]:
+    """['INS2=ins2', 'II=compass'] -> {'INS2': 'ins2', 'II': 'compass'}."""
+    out_: dict[str, str] = {}
+    for item in items:
+        key, sep, role = item.partition("=")
+        key, role = key.strip(), role.strip().lower()
+        if not sep or not key:
+            raise ConfigError(f"--role {item!r}: expected KEY=ROLE, e.g. --role INS2=ins2")
+        if role not in ROLES:
+            raise ConfigError(f"--role {item!r}: role must be one of {', '.join(ROLES)}")
+        out_[key] = role
+    return out_
+
+
+def build_config(config: Path | None, *, interval: str | None = None, window: str | None = None,
+                 dr_reset: str | None = None, probability: float | None = None,
+                 roles: list[str] | None = None, date: str | None = None, strict: bool = False,
+                 ignore_checksum: bool = False, epoch_interval: str | None = None,
+                 variation_deg: float | None = None, fix_role: str | None = None):
+    """The configuration file with the command-line options applied on top."""
+    cfg = load_config(config)
+    ing = cfg.ingest
+    sources = {**ing.sources, **parse_roles(roles or [])}
+    if date is not None and not re.fullmatch(r"\d{4}-\d{2}-\d{2}", date):
+        raise ConfigError(f"--date {date!r}: expected YYYY-MM-DD")
+    ing = replace(ing, sources=sources, strict=ing.strict or strict,
+                  ignore_checksum=ing.ignore_checksum or ignore_checksum,
+                  date=date if date is not None else ing.date)
+    dev = cfg.deviation
+    if interval is not None:
+        dev = replace(dev, interval_s=parse_duration_s(interval, "--interval"))
+    if window is not None:
+        dev = replace(dev, window_s=parse_duration_s(window, "--window"))
+    if probability is not None:
+        if not 0.5 <= probability < 1.0:
+            raise ConfigError(f"--probability {probability}: must be in [0.5, 1)")
+        dev = replace(dev, probability=probability)
+    dr = cfg.dead_reckoning
+    if dr_reset is not None:
+        try:
+            parse_reset_s(dr_reset)
+        except ConfigError as e:
+            raise ConfigError(f"--dr-reset {dr_reset!r}: expected 1h, 4h, 30min, watch or never") from e
+        dr = replace(dr, reset=dr_reset)
+    if epoch_interval is not None:
+        dr = replace(dr, epoch_interval_s=parse_duration_s(epoch_interval, "--epoch-interval"))
+    if variation_deg is not None:
+        if not -180.0 <= variation_deg <= 180.0:
+            raise ConfigError(f"--variation {variation_deg}: must be within ±180 degrees (east +)")
+        dr = replace(dr, variation_deg=variation_deg)
+    if fix_role is not None:
+        if fix_role not in ("gnss", "ins_mean"):
+            raise ConfigError(f"--fix-role {fix_role!r}: must be gnss or ins_mean")
+        dr = replace(dr, fix_role=fix_role)
+    return validate(replace(cfg, ingest=ing, deviation=dev, dead_reckoning=dr))
+
+
+@app.command("analyze")
+def analyze(
+    logs: list[Path] = LogsArgument,
+    config: Path | None = ConfigOption,
+    out_dir: Path | None = typer.Option(None, "--out", "-o", help="Write CSV and Parquet tables "
+                                        "(DR track, DR epochs, deviation samples, per-unit statistics) here."),
+    json_path: str | None = typer.Option(None, "--json", help="Write the JSON report (schema "
+                                         "dracc.analysis/1) to FILE, or '-' for stdout."),
+    html_path: Path | None = typer.Option(None, "--html", help="Write one self-contained offline HTML report."),
+    interval: str | None = typer.Option(None, "--interval", help="INS sampling interval: 1h (default), 2h, 3600 ..."),
+    window: str | None = typer.Option(None, "--window", help="Statistics window: 24h (default), 2d ..."),
+    dr_reset: str | None = typer.Option(None, "--dr-reset", help="Restart the DR from a fix: 1h "
+                                        "(default), 4h, 30min, watch, never."),
+    probability: float | None = typer.Option(None, "--probability", help="Probability of limiting errors (K8), default 0.95."),
+    role: list[str] = typer.Option([], "--role", help="Map a source to a role, KEY=ROLE (repeatable), "
+                                   "e.g. --role INS2=ins2 --role II=compass."),
+    date: str | None = typer.Option(None, "--date", help="YYYY-MM-DD for logs that carry no date."),
+    strict: bool = typer.Option(False, "--strict", help="Fail on the first rejected line."),
+    ignore_checksum: bool = typer.Option(False, "--ignore-checksum", help="Accept lines with wrong checksums (still counted)."),
+    epoch_interval: str | None = typer.Option(None, "--epoch-interval", help="Spacing of reported DR epochs: 10min (default)."),
+    variation: float | None = typer.Option(None, "--variation", help="Magnetic variation in degrees, east +, where the compass sends none."),
+    fix_role: str | None = typer.Option(None, "--fix-role", help="DR restart fixes from gnss (default) or ins_mean."),
+) -> None:
+    """Analyse a voyage: DR with honest 2M circles, INS deviations from the mean, current; reports."""
+    from ..pipeline import analyse
+    from ..report import html as html_report
+    from ..report import json_report, tables, terminal
+
+    paths_exist(logs)
+    cfg = build_config(config, interval=interval, window=window, dr_reset=dr_reset,
+                       probability=probability, roles=role, date=date, strict=strict,
+                       ignore_checksum=ignore_checksum, epoch_interval=epoch_interval,
+                       variation_deg=variation, fix_role=fix_role)
+    total = sum(p.stat().st_size for p in logs if p.is_file())
+    with progress("analyze", 100.0) as advance:
+        state = {"done": 0.0}
+        weights = {"reading logs": 80.0, "dead reckoning": 10.0, "current": 5.0,
+                   "deviation statistics": 5.0}
+        offsets = {"reading logs": 0.0, "dead reckoning": 80.0, "current": 90.0,
+                   "deviation statistics": 95.0}
+
+        def on_progress(stage: str, fraction: float) -> None:
+            target = offsets.get(stage, state["done"]) + weights.get(stage, 0.0) * min(max(fraction, 0.0), 1.0)
+            if target > state["done"]:
+                advance(target - state["done"])
+                state["done"] = target
+
+        result = analyse(logs, cfg, progress=on_progress, total_bytes=total)
+    if json_path == "-":
+        out.file.write(json_report.dumps(result))
+        out.file.flush()
+    else:
+        terminal.print_summary(result, out)
+        if json_path:
+            json_report.write_json(result, json_path)
+            err.print(f"wrote {json_path}", highlight=False, markup=False)
+    if html_path is not None:
+        html_report.write_html(result, html_path)
+        err.print(f"wrote {html_path}", highlight=False, markup=False)
+    if out_dir is not None:
+        written = tables.write_tables(result, out_dir)
+        if written:
+            err.print(f"wrote {len(written)} tables to {out_dir}", highlight=False, markup=False)
+        else:
+            err.print(f"no tables to write to {out_dir} (no DR and no deviation statistics)",
+                      highlight=False, markup=False)
