@@ -67,6 +67,8 @@ MAGIC = b"\x89MCAP0\r\n"
 _PIECE = 1 << 20
 _WINDOW = 8 << 20
 _TOPLEVEL_FLUSH = 20000
+_INDEXED_MAX = 64 << 20  #: chunks up to this size (uncompressed) are decoded whole via their index
+_JSON_BATCH = 50000  #: JSON messages of one channel parsed together
 
 _OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 1, 2, 3, 4, 5, 6
 _OP_DATA_END = 0x0F
@@ -261,6 +263,9 @@ class _Reader:
             self.notes.append(f"{self.file}: Chunk at byte {body_at - 9} cut or damaged in its header; skipped")
             return
         data_at = body_at + 32 + clen + 8
+        if body_at + ln <= size and _usize <= _INDEXED_MAX and self._indexed_chunk(
+                fh, body_at, ln, size, comp, data_at, rlen, _usize):
+            return
         fh.seek(data_at)
         left = min(rlen, size - data_at)
         if comp == "zstd":
@@ -300,6 +305,97 @@ class _Reader:
             if rest:
                 self.notes.append(f"{self.file}: Chunk at byte {body_at - 9}: {len(rest)} bytes of an "
                                   f"incomplete record at its end not read")
+
+    def _indexed_chunk(self, fh, body_at: int, ln: int, size: int, comp: str, data_at: int,
+                       rlen: int, usize: int) -> bool:
+        """Decode a complete chunk through the MessageIndex records that follow it.
+
+        The index gives every message's offset per channel, so the records are located
+        with numpy instead of a walk; the index is checked against the data (opcode,
+        channel id, lengths) and any record it does not cover is walked (schemas and
+        channels; a message there means the index is incomplete).  Returns False (and the
+        caller streams the chunk) when there is no usable index.
+        """
+        pos = body_at + ln
+        bodies = []
+        while pos + 9 <= size:
+            fh.seek(pos)
+            op, n = _REC_HEAD.unpack(fh.read(9))
+            if op != 7 or pos + 9 + n > size:
+                break
+            bodies.append(fh.read(n))
+            pos += 9 + n
+        if not bodies:
+            return False
+        fh.seek(data_at)
+        raw = fh.read(rlen)
+        try:
+            if comp == "zstd":
+                import zstandard
+
+                data = zstandard.ZstdDecompressor().decompress(raw, max_output_size=usize)
+            elif comp == "lz4":
+                import lz4.frame
+
+                data = lz4.frame.decompress(raw)
+            elif comp == "":
+                data = raw
+            else:
+                return False
+        except Exception:  # damaged compressed data: let the streaming path keep what it can
+            return False
+        del raw
+        if len(data) != usize:
+            return False
+        try:
+            cids, offs = [], []
+            for b in bodies:
+                (cid, blen) = struct.unpack_from("<HI", b, 0)
+                pairs = np.frombuffer(b, dtype="<u8", count=blen // 8, offset=6).reshape(-1, 2)
+                offs.append(pairs[:, 1].astype(np.int64))
+                cids.append(np.full(len(pairs), cid, dtype=np.int64))
+        except (struct.error, ValueError):
+            return False
+        off = np.concatenate(offs)
+        cid = np.concatenate(cids)
+        order = np.argsort(off, kind="stable")
+        off, cid = off[order], cid[order]
+        n = len(data)
+        if len(off) and (off[0] < 0 or off[-1] + 31 > n):
+            return False
+        u8 = np.frombuffer(data, dtype=np.uint8)
+        if len(off):
+            if not (u8[off] == _OP_MESSAGE).all():
+                return False
+            length = u8[off[:, None] + 1 + np.arange(8)].copy().view("<u8").ravel().astype(np.int64)
+            ch_in = u8[off[:, None] + 9 + np.arange(2)].copy().view("<u2").ravel().astype(np.int64)
+            end = off + 9 + length
+            if (ch_in != cid).any() or (length < 22).any() or (end > n).any() or (end[:-1] > off[1:]).any():
+                return False
+            log_time = u8[off[:, None] + 15 + np.arange(8)].copy().view("<u8").ravel().astype(np.int64)
+        else:
+            end = off
+        # records the index does not cover: schemas and channels (walked), never messages
+        gap_from = np.concatenate(([0], end))
+        gap_to = np.concatenate((off, [n]))
+        for a, b in zip(gap_from[gap_from < gap_to].tolist(), gap_to[gap_from < gap_to].tolist(), strict=True):
+            p = a
+            while p + 9 <= b:
+                op, rl = _REC_HEAD.unpack_from(data, p)
+                if p + 9 + rl > b or op == _OP_MESSAGE:
+                    return False
+                if op in (_OP_SCHEMA, _OP_CHANNEL):
+                    self._small_record(op, data[p + 9:p + 9 + rl], p)
+                p += 9 + rl
+            if p != b:
+                return False
+        nums = self.msg_no + 1 + np.arange(len(off), dtype=np.int64)
+        self.msg_no += len(off)
+        if len(off):
+            for c in np.unique(cid).tolist():
+                m = cid == c
+                self._decode(c, data, off[m] + 31, end[m], log_time[m], nums[m])
+        return True
 
     def _walk(self, buf: bytes) -> bytes:
         """Decode the complete records at the start of ``buf``; return the incomplete rest."""
@@ -348,7 +444,7 @@ class _Reader:
             if ch.mode == "cdr":
                 self._cdr(ch, buf, starts, ends, times, nums)
             elif ch.mode == "json":
-                self._json(ch, [buf[s:e] for s, e in zip(starts.tolist(), ends.tolist(), strict=False)], times, nums)
+                self._json_queue(ch, _join_lines(buf, starts, ends), len(starts), times, nums)
             elif ch.mode == "protobuf":
                 self._protobuf(ch, buf, starts, ends, times, nums)
             elif ch.mode == "text":
@@ -483,10 +579,29 @@ class _Reader:
         keep = ok
         ch.parts.append((t[keep], nums[keep], {k: v[keep] for k, v in out.items()}))
 
-    def _json(self, ch: _Channel, payloads: list[bytes], times, nums) -> None:
+    def _json_queue(self, ch: _Channel, joined: bytes, n: int, times, nums) -> None:
+        """Collect a channel's JSON payloads (one per line, see :func:`_join_lines`); parse
+        them in batches, since each parse has a fixed cost."""
+        q = ch.state.setdefault("queue", [[], 0, [], []])
+        q[0].append(joined)
+        q[1] += n
+        q[2].append(np.asarray(times, np.int64))
+        q[3].append(np.asarray(nums, np.int64))
+        if q[1] >= _JSON_BATCH:
+            self._json_flush(ch)
+
+    def _json_flush(self, ch: _Channel) -> None:
+        q = ch.state.pop("queue", None)
+        if not q or not q[1] or ch.mode == "skip":
+            return
+        self._json(ch, b"".join(q[0]), np.concatenate(q[2]), np.concatenate(q[3]))
+
+    def _json(self, ch: _Channel, joined: bytes, times, nums) -> None:
+        """Decode newline-separated JSON messages of one channel into quantity columns."""
+        payloads = None
         if "plan" not in ch.state:
             try:
-                first = json.loads(payloads[0])
+                first = json.loads(joined[:joined.find(b"\n")])
             except ValueError:
                 first = None
             plan = self._json_plan(first)
@@ -498,7 +613,9 @@ class _Reader:
                 return
             ch.state["plan"] = plan
         plan = ch.state["plan"]
+        n = len(times)
         if plan["nmea"]:
+            payloads = joined.split(b"\n")[:-1]
             for p, t, k in zip(payloads, times.tolist(), nums.tolist(), strict=False):
                 try:
                     obj = json.loads(p)
@@ -507,11 +624,13 @@ class _Reader:
                     ch.bad += 1
                     add_rejects(self.rejects, "bad JSON message", self.file, np.array([k]), [ch.topic])
             return
-        cols = _json_columns(payloads, plan)
+        cols = _json_columns(joined, n, plan)
         if cols is None:  # pyarrow could not: message by message, counting the bad ones
+            payloads = joined.split(b"\n")[:-1]
             cols = _json_columns_slow(payloads, plan)
         good = cols.pop("_ok")
         if not good.all():
+            payloads = payloads or joined.split(b"\n")[:-1]
             ch.bad += int((~good).sum())
             add_rejects(self.rejects, "bad JSON message", self.file, nums[~good],
                         [bytes(payloads[i][:100]).decode("utf-8", "replace") for i in np.flatnonzero(~good)[:5]])
@@ -598,7 +717,10 @@ class _Reader:
                     self._nmea_text(ch, p, int(ti), int(k))
             else:
                 sub_t = np.asarray(tt, np.int64)
-                self._json(ch, payloads, sub_t, np.asarray(kk, np.int64))
+                lens = np.fromiter((len(x) for x in payloads), dtype=np.int64, count=len(payloads))
+                e = np.cumsum(lens)
+                self._json_queue(ch, _join_lines(b"".join(payloads), e - lens, e), len(payloads), sub_t,
+                                 np.asarray(kk, np.int64))
             return
         out = {q: np.array([getattr(m, f) if m is not None else np.nan for m in msgs], dtype=np.float64)
                for f, q in plan["fields"].items() if q != "reference"}
@@ -650,6 +772,8 @@ class _Reader:
 
     # ---------------------------------------------------------------- result
     def result(self) -> FileResult:
+        for ch in self.channels.values():
+            self._json_flush(ch)
         per_kind: dict[str, list[pd.DataFrame]] = {}
         for ch in self.channels.values():
             if not ch.parts:
@@ -732,15 +856,31 @@ def _repeated(f) -> bool:
     return f.label == f.LABEL_REPEATED
 
 
-def _json_columns(payloads: list[bytes], plan: dict) -> dict[str, np.ndarray] | None:
-    """Columns of one channel's JSON messages in one pyarrow parse, or None if it cannot."""
+def _join_lines(buf: bytes, starts: np.ndarray, ends: np.ndarray) -> bytes:
+    """The payloads ``buf[starts[i]:ends[i]]`` as one newline-terminated line each, built
+    with one numpy gather.  A raw newline inside a JSON text can only be whitespace
+    (RFC 8259 forbids it inside strings), so it becomes a space."""
+    lens = (ends - starts).astype(np.int64)
+    if len(lens) == 0:
+        return b""
+    out_len = lens + 1
+    total = int(out_len.sum())
+    first = np.cumsum(out_len) - out_len  # where each line starts in the output
+    src = np.arange(total, dtype=np.int64) - np.repeat(first - starts, out_len)
+    u8 = np.frombuffer(buf, dtype=np.uint8)
+    last = first + lens  # the newline positions
+    src[last] = 0
+    out = u8[src]
+    out[out == 10] = 32
+    out[last] = 10
+    return out.tobytes()
+
+
+def _json_columns(joined: bytes, n: int, plan: dict) -> dict[str, np.ndarray] | None:
+    """Columns of one channel's JSON messages (one per line) in one pyarrow parse, or None
+    if pyarrow cannot (the caller then parses message by message)."""
     import pyarrow as pa
     import pyarrow.json as pj
-
-    n = len(payloads)
-    joined = b"\n".join(payloads)
-    if joined.count(b"\n") != n - 1 or any(len(p) == 0 for p in payloads):
-        return None
     fields = [pa.field(k, pa.string() if q == "reference" else pa.float64()) for k, q in plan["fields"].items()]
     st = plan["stamp"]
     if st:

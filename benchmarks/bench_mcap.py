@@ -1,0 +1,131 @@
+"""MCAP ingest speed and memory: dracc's reader against the stock per-message path.
+
+Side by side in one run, on the simulated voyage (``dracc.sim.simulate``, default rates)
+written as MCAP (JSON and ROS 2 CDR, zstd chunks of 1 MiB):
+
+* dracc: :func:`dracc.ingest.mcap.read_mcap` into canonical frames (whole file);
+* stock: ``mcap.reader.make_reader(f).iter_messages()`` + ``json.loads`` per message,
+  and ``iter_decoded_messages()`` with the ``mcap-ros2-support`` decoder -- only
+  decoding, no frames built, so the comparison favours the stock path.  The stock path is
+  timed on the first ``--stock-limit`` messages (default 300 000; 0 = all) and its
+  per-message time extrapolated to the file; the printout says so.
+
+Memory: the peak RSS (``VmHWM``) of a fresh subprocess reading the 6 h and the 24 h file, beside the
+size of the frames it returns and the RSS after imports; the reader's own working memory
+is peak - imports - frames.
+
+Usage: ``python benchmarks/bench_mcap.py [--hours 24] [--workdir DIR] [--stock-limit N]``
+(files are cached in DIR between runs).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+_CHILD = r"""
+import sys, json
+from dracc.config import IngestConfig
+from dracc.ingest.mcap import read_mcap
+import dracc.ingest.nmea  # noqa: F401  (import cost outside the measurement)
+def hwm_kib():  # peak RSS of this process image (VmHWM; ru_maxrss keeps the parent's across exec)
+    for line in open("/proc/self/status"):
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1])
+base = hwm_kib()
+r = read_mcap(sys.argv[1], IngestConfig())
+frames = sum(int(f.memory_usage(deep=True).sum()) for f in r.frames.values())
+peak = hwm_kib()
+print(json.dumps({"base_kib": base, "peak_kib": peak, "frames_bytes": frames, "messages": r.lines}))
+"""
+
+
+def make_files(hours: float, workdir: Path) -> dict[str, Path]:
+    from dracc.sim.mcap_out import write_mcap
+    from dracc.sim.model import SimParams, simulate
+
+    out = {enc: workdir / f"voyage_{hours:g}h_{enc}.mcap" for enc in ("json", "ros2")}
+    if all(p.exists() for p in out.values()):
+        return out
+    t = time.perf_counter()
+    v = simulate(SimParams(duration_s=hours * 3600.0))
+    print(f"simulated {hours:g} h in {time.perf_counter() - t:.1f} s: "
+          + ", ".join(f"{k} {len(f)}" for k, f in v.frames.items()), flush=True)
+    for enc, p in out.items():
+        t = time.perf_counter()
+        write_mcap(v.frames, v.roles, p, encoding=enc)
+        print(f"wrote {p.name}: {p.stat().st_size / 1e6:.1f} MB in {time.perf_counter() - t:.1f} s", flush=True)
+    return out
+
+
+def time_dracc(path: Path) -> tuple[float, int]:
+    from dracc.config import IngestConfig
+    from dracc.ingest.mcap import read_mcap
+
+    t = time.perf_counter()
+    r = read_mcap(path, IngestConfig())
+    return time.perf_counter() - t, r.lines
+
+
+def time_stock(path: Path, enc: str, limit: int) -> tuple[float, int]:
+    from mcap.reader import make_reader
+
+    n = 0
+    t = time.perf_counter()
+    with open(path, "rb") as fh:
+        if enc == "json":
+            for _s, _c, m in make_reader(fh).iter_messages():
+                json.loads(m.data)
+                n += 1
+                if n == limit:
+                    break
+        else:
+            from mcap_ros2.decoder import DecoderFactory
+
+            for _s, _c, _m, _d in make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+                n += 1
+                if n == limit:
+                    break
+    return time.perf_counter() - t, n
+
+
+def memory(path: Path) -> dict:
+    res = subprocess.run([sys.executable, "-c", _CHILD, str(path)], capture_output=True, text=True, check=True)
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--hours", type=float, default=24.0)
+    ap.add_argument("--workdir", type=Path, default=Path(tempfile.gettempdir()) / "dracc_bench_mcap")
+    ap.add_argument("--stock-limit", type=int, default=300_000)
+    args = ap.parse_args()
+    args.workdir.mkdir(parents=True, exist_ok=True)
+    files = make_files(args.hours, args.workdir)
+    print(f"\n{'encoding':8} {'messages':>9} {'dracc s':>8} {'us/msg':>7} {'stock us/msg':>12} "
+          f"{'stock s (full file)':>20} {'speed-up':>8}")
+    for enc, p in files.items():
+        td, n = time_dracc(p)
+        ts, ns = time_stock(p, enc, args.stock_limit or -1)
+        per_d, per_s = td / n * 1e6, ts / ns * 1e6
+        full = per_s * n / 1e6
+        note = "" if ns == n else f" (extrapolated from {ns})"
+        print(f"{enc:8} {n:9d} {td:8.2f} {per_d:7.2f} {per_s:12.2f} {full:12.1f}{note} {per_s / per_d:7.1f}x",
+              flush=True)
+    print("\nmemory (fresh subprocess, ROS 2 file):")
+    six = make_files(6.0, args.workdir)["ros2"] if args.hours != 6.0 else files["ros2"]
+    for label, p in (("6 h", six), (f"{args.hours:g} h", files["ros2"])):
+        m = memory(p)
+        own = (m["peak_kib"] - m["base_kib"]) / 1024 - m["frames_bytes"] / 2**20
+        print(f"  {label:5} file {p.stat().st_size / 1e6:6.1f} MB, {m['messages']} msgs: peak RSS "
+              f"{m['peak_kib'] / 1024:7.1f} MiB, after imports {m['base_kib'] / 1024:6.1f} MiB, frames "
+              f"{m['frames_bytes'] / 2**20:6.1f} MiB, reader working memory {own:6.1f} MiB", flush=True)
+
+
+if __name__ == "__main__":
+    main()
