@@ -34,6 +34,7 @@ import hashlib
 import json
 import math
 import os
+import sys
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
@@ -528,6 +529,8 @@ def audit_document(doc: Mapping, *, store: StateStore, acfg: AuditConfig,
             _recompute_chain(store, vessel, seeds)
             sleep_s = os.environ.get(TEST_SLEEP_ENV)
             if sleep_s:  # test hook: a run killed here must leave no partial night
+                print(f"dracc audit: test hook: sleeping {sleep_s} s inside the transaction",
+                      file=sys.stderr, flush=True)
                 time.sleep(float(sleep_s))
         stored = store.night(vessel, night)
         events = tuple(e for e in store.apriori_events(vessel) if e.night == night)

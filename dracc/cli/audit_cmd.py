@@ -70,6 +70,9 @@ def format_summary(o: AuditOutcome, probability: float | None = None) -> str:
     r = o.record
     n = len(o.findings)
     head = "all within limits" if n == 0 else f"{n} finding{'s' if n > 1 else ''}"
+    if o.not_checked:
+        k = len(o.not_checked)
+        head += f" ({k} check{'s' if k > 1 else ''} could not be made: see 'not checked')"
     lines = [f"dracc audit: {r.vessel}, night {r.night}: {head}",
              f"state: {_STATUS[o.status]}"]
     rate = "-" if r.rejected_rate is None else f"{100 * r.rejected_rate:.2f} %"
@@ -312,7 +315,8 @@ def audit_history(
         d = _digits(s["measure"])
         t = Table(title=f"{s['vessel']} {s['unit']} {s['channel']} ({s['measure']})")
         for col in ("night", "n", "m_u", "m_y", "kurtosis", "limit", "a priori", "verdict"):
-            t.add_column(col, justify="left" if col in ("night", "verdict") else "right")
+            t.add_column(col, justify="left" if col in ("night", "verdict") else "right",
+                         no_wrap=True, min_width=10 if col == "night" else None)
         for n in s["nights"]:
             t.add_row(n["night"], str(n["n"]), _f(n["m_u"], d), _f(n["m_y"], d), _f(n["kurtosis"], 2),
                       _f(n["limit_error"], d), _f(n["apriori_after"], d), n["verdict"] or "-")
