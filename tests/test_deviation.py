@@ -427,3 +427,23 @@ def test_interpolation_sorts_readings_and_ignores_nan_readings():
     # nearest valid one within the gap (30) is used; 200 is beyond the gap: missing
     out = interpolate_at(t, v, np.array([15, 25, 40, 200]), 100e-9)
     np.testing.assert_allclose(out[0], [1.5, 2.5, 3.0, np.nan])
+
+
+def test_arc_minutes_against_geographiclib():
+    geod = pytest.importorskip("geographiclib.geodesic").Geodesic.WGS84
+    from dracc.deviation.analysis import metres_to_arcmin
+
+    north_m = geod.Inverse(55.0, 12.0, 55.0 + 1 / 60, 12.0)["s12"]  # one arc-minute north
+    east_m = geod.Inverse(55.0, 12.0, 55.0, 12.0 + 1 / 60)["s12"]  # one arc-minute east
+    dlat, dlon = metres_to_arcmin(north_m, east_m, math.radians(55.0 + 1 / 120))
+    assert dlat == pytest.approx(1.0, rel=1e-6)
+    assert metres_to_arcmin(0.0, east_m, math.radians(55.0))[1] == pytest.approx(1.0, rel=1e-6)
+    # in the report: samples and whole-log RMS in arc-minutes where asked
+    units = _static_units({"ins1": (north_m, 0), "ins2": (0, 0), "ins3": (-north_m, 0)},
+                          n_hours=2)
+    d = analyse_deviations(units).to_dict(arcmin=True)
+    assert d["samples"][0]["ins1"]["lat_arcmin"] == pytest.approx(1.0, rel=1e-4)
+    assert d["samples"][0]["ins1"]["lon_arcmin"] == pytest.approx(0.0, abs=1e-9)
+    lat = d["units"]["ins1"]["lat"]
+    assert lat["m_u_arcmin"] == pytest.approx(lat["m_u"] / north_m, rel=1e-4)
+    assert "lat_arcmin" not in analyse_deviations(units).to_dict()["samples"][0]["ins1"]

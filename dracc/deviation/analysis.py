@@ -22,7 +22,9 @@ import numpy as np
 
 from ..config import DeviationConfig
 from ..errors import ConfigError
+from ..geodesy import k_lambda, k_phi
 from ..ingest.frames import INS_ROLES
+from ..units import ARCMIN_RAD
 from . import stats
 from .hat import three_cornered_hat
 from .reference import course_errors_rad, k_star_mark, kurtosis_mark, position_errors_m
@@ -40,6 +42,15 @@ def _f(x) -> float | None:
         return None
     x = float(x)
     return x if math.isfinite(x) else None
+
+
+def metres_to_arcmin(north_m, east_m, lat_rad):
+    """North/east metres to arc-minutes of latitude and longitude at ``lat_rad``:
+    dphi = north k_phi (B18), dlam = east k_lambda (B19), in arc-minutes."""
+    lat = np.asarray(lat_rad, dtype=float)
+    dlat = np.asarray(north_m, dtype=float) * k_phi(lat) / ARCMIN_RAD  # (B18)
+    dlon = np.asarray(east_m, dtype=float) * k_lambda(lat) / ARCMIN_RAD  # (B19)
+    return dlat, dlon
 
 
 def iso_utc(time_ns) -> str:
@@ -224,6 +235,8 @@ class DeviationResult:
     samples: dict[str, dict[str, np.ndarray]]
     #: unit -> channel -> instants where the unit itself had no reading near the instant
     missing: dict[str, dict[str, int]]
+    #: mean latitude of the position units at each instant (NaN where incomplete)
+    lat_mean_rad: np.ndarray
     whole: WindowStats
     windows: tuple[WindowStats, ...]
     #: unit -> channel -> the long kurtosis windows (24-72 h)
@@ -238,15 +251,42 @@ class DeviationResult:
     def factors(self) -> dict[str, float]:
         return {c: m.factor for c, m in self.channels.items()}
 
-    def to_dict(self) -> dict:
-        """The JSON-ready ``deviation`` section (keys as settled in the reports issue)."""
+    def lat_ref_rad(self) -> float:
+        """The log's mean latitude (for arc-minute conversion of whole-log statistics)."""
+        ok = ~np.isnan(self.lat_mean_rad)
+        return float(np.mean(self.lat_mean_rad[ok])) if np.any(ok) else math.nan
+
+    def to_dict(self, arcmin: bool = False) -> dict:
+        """The JSON-ready ``deviation`` section (keys as settled in the reports issue).
+
+        ``arcmin``: also give latitude/longitude deviations in arc-minutes
+        (``lat_arcmin``, ``lon_arcmin`` per sample, at the instant's mean latitude) and the
+        whole-log ``m_u_arcmin``/``m_y_arcmin`` (at the log's mean latitude).
+        """
         samples = []
+        if arcmin:
+            dlat_am, dlon_am = {}, {}
+            for u in self.units:
+                dlat_am[u], dlon_am[u] = metres_to_arcmin(self.samples[u]["lat"],
+                                                          self.samples[u]["lon"], self.lat_mean_rad)
         for i, t in enumerate(self.time_ns):
             row: dict = {"time_utc": iso_utc(t)}
             for u in self.units:
                 row[u] = {SAMPLE_KEYS[c]: _f(self.samples[u][c][i]) for c in CHANNELS}
+                if arcmin:
+                    row[u]["lat_arcmin"] = _f(dlat_am[u][i])
+                    row[u]["lon_arcmin"] = _f(dlon_am[u][i])
             samples.append(row)
         units: dict = {u: s.to_dict() for u, s in self.whole.units.items()}
+        if arcmin:
+            lat_ref = self.lat_ref_rad()
+            for u, s in self.whole.units.items():
+                for c in ("lat", "lon"):
+                    if c in s.channels:
+                        conv = metres_to_arcmin(1.0, 0.0, lat_ref)[0] if c == "lat" else \
+                            metres_to_arcmin(0.0, 1.0, lat_ref)[1]
+                        units[u][c]["m_u_arcmin"] = _f(s.channels[c].m_u * conv)
+                        units[u][c]["m_y_arcmin"] = _f(s.channels[c].m_y * conv)
         for u, chans in self.kurtosis_upper.items():
             for c, e in chans.items():
                 if u in units and c in units[u]:
@@ -405,16 +445,14 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
     present = tuple(u for u in names if u in pos_units or u in crs_units)
     factors = _factors(cfg)
     modes = {c: _mode(pos_units if c != "course" else crs_units, c, factors[c]) for c in CHANNELS}
-    for c in CHANNELS:  # two units: sqrt(2) whatever the configured factors
-        if modes[c].mode == "three":
-            modes[c] = ChannelMode(modes[c].units, "three", factors[c], None)
 
     # (K1) deviations per channel, units along axis 0
     dev: dict[str, dict[str, np.ndarray]] = {u: dict.fromkeys(CHANNELS, nan) for u in present}
+    lat_mean = nan
     if len(pos_units) >= 2:
         lat = np.vstack([sampled[u].lat_rad for u in pos_units])
         lon = np.vstack([sampled[u].lon_rad for u in pos_units])
-        north, east, _ = stats.deviations_position_m(lat, lon)  # (K1), metres
+        north, east, lat_mean = stats.deviations_position_m(lat, lon)  # (K1), metres
         for j, u in enumerate(pos_units):
             dev[u]["lat"], dev[u]["lon"] = north[j], east[j]
     if len(crs_units) >= 2:
@@ -469,9 +507,9 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
                 if u not in m.units or m.mode == "one":
                     continue
                 uu = dev[u][c][sel]
+                # whole log: the upper bound over the 24-72 h windows (NaN where none
+                # qualifies: then the log's own kurtosis); a window: its own kurtosis
                 e_lim = kup[u].get(c, math.nan) if whole else math.nan
-                if whole and math.isnan(e_lim):
-                    e_lim = math.nan  # no long window qualifies: the whole log's own kurtosis
                 chans[c] = _channel_stats(uu, m.factor, e_lim, u, c, cfg)
                 if u in err:
                     x = err[u][c][sel]
@@ -552,7 +590,8 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
     return DeviationResult(
         interval_s=cfg.interval_s, offset_s=cfg.offset_s, probability=cfg.probability,
         confidence=cfg.confidence, units=present, channels=modes, time_ns=instants,
-        samples=dev, missing=missing, whole=whole, windows=windows, kurtosis_windows=kwin,
+        samples=dev, missing=missing, lat_mean_rad=lat_mean, whole=whole, windows=windows,
+        kurtosis_windows=kwin,
         kurtosis_upper=kup, reference_average=ref_avg, messages=tuple(dedupe(messages)))
 
 
