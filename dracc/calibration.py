@@ -1,0 +1,470 @@
+"""Sensor calibration from a reference (GNSS or the INS mean), with uncertainties.
+
+Beyond the papers (issue 3, "Sensor calibration from the reference").  Pure numpy/scipy
+over arrays; no I/O.
+
+Sign conventions (the same throughout dracc)
+    compass error    eps = compass heading - true heading (the correction pz = -eps, B3)
+    deviation        delta = true magnetic heading - compass heading, so that
+                     KDd = KK + d + delta (B2); curve delta(K) = A + B sin K + C cos K
+                     + D sin 2K + E cos 2K with K the compass heading
+    log              V_log = (1 + s) V_true + b: scale error s (fraction), offset b (m/s)
+
+Three estimators:
+
+:func:`compass_error_from_heading`
+    against a reference *heading* (INS mean, GNSS dual-antenna): differences on the
+    circle, averaged in blocks (blocks longer than the error's correlation time are
+    treated as independent), a constant with its standard error, per-window values and a
+    chi-square test of constancy ("slowly varying where the data support it").
+:func:`deviation_from_heading`
+    the magnetic deviation coefficients A-E against a reference heading by linear least
+    squares over block means, with the covariance from the residuals.
+:func:`calibrate_from_track`
+    against reference *positions* only (GNSS, INS mean): the heading error (constant, or a
+    deviation curve), the log scale and offset, and the current, by nonlinear least
+    squares over segments.  Model, for a segment j of length T_j:
+        (p(t_j + T_j) - p(t_j)) / T_j = mean over the segment of
+            (V_log - b) / (1 + s) * [cos(H - eps(H)), sin(H - eps(H))]  +  c(t_j mid)
+    with the reference displacement p in metres north/east, H the logged heading and
+    c(t) the current, piecewise linear in time between knots every ``current_knot_s``.
+    Current and log scale are separable only where the ship steers different headings
+    within the current's time scale (a 3 % scale error on a northerly course looks
+    exactly like a 0.3 kn northerly current); speed changes separate scale from offset.
+    Singular geometry raises InsufficientDataError saying which.  Uncertainties are
+    f s^2 (J^T J)^-1 with s^2 the residual variance per segment and f = (1+rho)/(1-rho)
+    the AR(1) inflation for the lag-1 correlation rho of consecutive segments' residuals
+    (current wander and slow sensor noise make them correlated).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import optimize, stats
+
+from .errors import InsufficientDataError
+from .geodesy import angdiff, offset_ne_m, wrap_pi
+
+__all__ = [
+    "CompassErrorEstimate",
+    "DeviationEstimate",
+    "TrackCalibration",
+    "block_means",
+    "calibrate_from_track",
+    "compass_error_from_heading",
+    "deviation_from_heading",
+]
+
+
+def _block_ids(time_s, block_s):
+    t = np.asarray(time_s, float)
+    return np.floor((t - t[0]) / block_s).astype(np.int64)
+
+
+def block_means(time_s, values, block_s: float, *, min_samples: int = 2):
+    """Means of ``values`` (n,) or (n, k) over consecutive blocks of ``block_s`` seconds.
+
+    Returns (block_time_s, means, counts) for blocks with at least ``min_samples``
+    finite samples; block_time_s is the mean sample time of the block.
+    """
+    t = np.asarray(time_s, float)
+    v = np.asarray(values, float)
+    v2 = v.reshape(v.shape[0], -1)
+    ok = np.isfinite(t) & np.all(np.isfinite(v2), axis=1)
+    t, v2 = t[ok], v2[ok]
+    if t.size == 0:
+        return np.zeros(0), np.zeros((0,) + v.shape[1:]), np.zeros(0, dtype=np.int64)
+    ids = _block_ids(t, block_s)
+    uniq, start, counts = np.unique(ids, return_index=True, return_counts=True)
+    sums = np.add.reduceat(v2, start, axis=0)
+    tsum = np.add.reduceat(t, start)
+    keep = counts >= min_samples
+    means = (sums[keep] / counts[keep, None]).reshape((-1,) + v.shape[1:])
+    return tsum[keep] / counts[keep], means, counts[keep]
+
+
+# --------------------------------------------------------------------------------------
+# Compass error against a reference heading
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class CompassErrorEstimate:
+    """Compass error eps = compass - reference, constant and per window.
+
+    ``sigma_rad`` is the standard error of the constant from the scatter of block means.
+    ``varying`` is True when the per-window values differ more than their standard
+    errors allow (chi-square, p < alpha); then ``window_error_rad`` is the estimate to use.
+    """
+
+    error_rad: float
+    sigma_rad: float
+    n_samples: int
+    n_blocks: int
+    block_s: float
+    window_start_s: np.ndarray
+    window_error_rad: np.ndarray
+    window_sigma_rad: np.ndarray
+    chi2_constant: float
+    p_constant: float
+    varying: bool
+
+
+def compass_error_from_heading(
+    time_s, compass_rad, reference_rad, *, block_s: float = 600.0, window_s: float = 3600.0,
+    alpha: float = 0.01,
+) -> CompassErrorEstimate:
+    """Estimate the compass error against a reference heading (INS mean, GNSS heading).
+
+    eps_i = angdiff(compass_i, reference_i); block means over ``block_s`` (longer than the
+    compass noise correlation time: default 10 min for tau ~ 2 min) are the independent
+    observations.  Constant: mean of block means, standard error s_b / sqrt(n_b).  Per
+    window of ``window_s``: mean of its blocks, standard error s_w / sqrt(n_in_window)
+    with s_w the pooled within-window scatter; chi2 = sum ((w_j - eps)/sigma_j)^2 on
+    (windows - 1) degrees of freedom tests constancy.
+    """
+    t = np.asarray(time_s, float)
+    d = angdiff(compass_rad, reference_rad)
+    ok = np.isfinite(d) & np.isfinite(t)
+    if ok.sum() < 2:
+        raise InsufficientDataError(
+            "compass calibration needs compass and reference headings at the same times; "
+            f"found {int(ok.sum())} usable pairs"
+        )
+    bt, bm, _ = block_means(t[ok], d[ok], block_s)
+    if bm.size < 3:
+        raise InsufficientDataError(
+            f"compass calibration needs at least 3 blocks of {block_s:g} s with data; found {bm.size}"
+        )
+    eps = float(np.mean(bm))
+    sigma = float(np.std(bm, ddof=1) / math.sqrt(bm.size))
+    wid = np.floor((bt - bt[0] + 0.5 * block_s) / window_s).astype(np.int64)
+    uniq, inv, counts = np.unique(wid, return_inverse=True, return_counts=True)
+    w_mean = np.bincount(inv, weights=bm) / counts
+    resid = bm - w_mean[inv]
+    dof = bm.size - uniq.size
+    if dof > 0 and uniq.size > 1:
+        s_within = math.sqrt(float(np.sum(resid**2)) / dof)
+        w_sigma = s_within / np.sqrt(counts)
+        with np.errstate(divide="ignore"):
+            chi2 = float(np.sum(((w_mean - eps) / w_sigma) ** 2))
+        p = float(stats.chi2.sf(chi2, uniq.size - 1))
+    else:
+        w_sigma = np.full(uniq.size, np.nan)
+        chi2, p = float("nan"), float("nan")
+    return CompassErrorEstimate(
+        error_rad=eps, sigma_rad=sigma, n_samples=int(ok.sum()), n_blocks=int(bm.size),
+        block_s=block_s, window_start_s=t[ok][0] + uniq * window_s, window_error_rad=w_mean,
+        window_sigma_rad=w_sigma, chi2_constant=chi2, p_constant=p,
+        varying=bool(np.isfinite(p) and p < alpha),
+    )
+
+
+# --------------------------------------------------------------------------------------
+# Magnetic deviation curve against a reference heading
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class DeviationEstimate:
+    """Deviation curve coefficients (A, B, C, D, E) in radians with their covariance."""
+
+    coefficients_rad: np.ndarray  #: (5,) A, B, C, D, E
+    covariance_rad2: np.ndarray  #: (5, 5)
+    sigma_rad: np.ndarray  #: (5,) standard errors
+    residual_rms_rad: float  #: of the block means about the curve
+    n_blocks: int
+    heading_coverage_rad: float  #: largest heading gap left uncovered (2 pi minus it is covered)
+
+
+def _curve_basis(k_rad):
+    k = np.asarray(k_rad, float)
+    return np.stack([np.ones_like(k), np.sin(k), np.cos(k), np.sin(2 * k), np.cos(2 * k)], -1)
+
+
+def deviation_from_heading(
+    time_s, compass_rad, reference_true_rad, variation_rad, *, block_s: float = 120.0,
+) -> DeviationEstimate:
+    """Fit delta(K) = A + B sin K + C cos K + D sin 2K + E cos 2K against a reference.
+
+    Observed deviation delta_i = angdiff(reference_true_i, compass_i + d_i) (B2 with
+    z = 0: compare headings, not courses).  The model is linear in A-E, so block means of
+    delta and of the basis functions of the compass heading K keep it exact; ordinary
+    least squares over blocks, covariance s^2 (X^T X)^-1 with s^2 the residual variance
+    (blocks of ``block_s`` treated as independent).  Raises InsufficientDataError when
+    the headings steered do not determine the five coefficients (a swing needs headings
+    all round the compass).
+    """
+    t = np.asarray(time_s, float)
+    k = np.asarray(compass_rad, float)
+    delta = angdiff(reference_true_rad, k + np.asarray(variation_rad, float))
+    cols = np.column_stack([delta, _curve_basis(k)])
+    bt, bm, _ = block_means(t, cols, block_s)
+    if bm.shape[0] < 6:
+        raise InsufficientDataError(
+            f"deviation fit needs at least 6 blocks of {block_s:g} s with compass, reference "
+            f"and variation; found {bm.shape[0]}"
+        )
+    y, X = bm[:, 0], bm[:, 1:]
+    hk = np.sort(np.mod(k[np.isfinite(k)], 2 * np.pi))
+    gaps = np.diff(np.r_[hk, hk[0] + 2 * np.pi])
+    largest_gap = float(gaps.max())
+    cond = np.linalg.cond(X)
+    if not np.isfinite(cond) or cond > 1e6:
+        raise InsufficientDataError(
+            "deviation fit: the compass headings steered do not determine A-E "
+            f"(largest heading gap {math.degrees(largest_gap):.0f} deg); swing the ship "
+            "through all headings"
+        )
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    res = y - X @ coef
+    dof = y.size - 5
+    s2 = float(res @ res) / dof
+    cov = s2 * np.linalg.inv(X.T @ X)
+    return DeviationEstimate(
+        coefficients_rad=coef, covariance_rad2=cov, sigma_rad=np.sqrt(np.diag(cov)),
+        residual_rms_rad=math.sqrt(float(np.mean(res**2))), n_blocks=int(y.size),
+        heading_coverage_rad=largest_gap,
+    )
+
+
+# --------------------------------------------------------------------------------------
+# Heading error, log scale/offset and current against reference positions
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TrackCalibration:
+    """Result of :func:`calibrate_from_track`; every estimate with its standard error.
+
+    ``heading_error_rad`` is the constant compass error eps (heading_model='constant')
+    or the deviation-curve coefficients A-E with the sign of delta = -eps
+    (heading_model='deviation').
+    """
+
+    heading_model: str
+    heading_error_rad: np.ndarray  #: (1,) eps, or (5,) A-E of delta
+    heading_error_sigma_rad: np.ndarray
+    log_scale: float  #: s in V_log = (1 + s) V_true + b
+    log_scale_sigma: float
+    log_offset_mps: float  #: b (0 and sigma NaN when not fitted)
+    log_offset_sigma_mps: float
+    current_knot_s: np.ndarray  #: (m,) knot times of the piecewise-linear current
+    current_ne_mps: np.ndarray  #: (m, 2) current north/east at the knots
+    current_sigma_ne_mps: np.ndarray  #: (m, 2)
+    covariance: np.ndarray  #: of all parameters, in the order heading, s, [b], currents
+    residual_rms_mps: float  #: segment velocity residuals (per axis)
+    residual_lag1_correlation: float  #: rho used to inflate the covariance by (1+rho)/(1-rho)
+    n_segments: int
+    segment_s: float
+
+
+def _segment_reference_velocity(ref_t, ref_lat, ref_lon, edges_s, max_ref_gap_s):
+    """Mean reference velocity (north, east) over each segment from its end positions."""
+    rt = np.asarray(ref_t, float)
+    ok = np.isfinite(rt) & np.isfinite(ref_lat) & np.isfinite(ref_lon)
+    rt = rt[ok]
+    order = np.argsort(rt, kind="stable")
+    rt = rt[order]
+    rla = np.asarray(ref_lat, float)[ok][order]
+    rlo = np.unwrap(np.asarray(ref_lon, float)[ok][order])
+    hi = np.clip(np.searchsorted(rt, edges_s), 1, max(rt.size - 1, 1))
+    lo = hi - 1
+    good = (rt.size >= 2) & (rt[lo] <= edges_s) & (rt[hi] >= edges_s) & (
+        rt[hi] - rt[lo] <= max_ref_gap_s)
+    lat_e = np.interp(edges_s, rt, rla)
+    lon_e = wrap_pi(np.interp(edges_s, rt, rlo))
+    dn, de = offset_ne_m(lat_e[1:], lon_e[1:], lat_e[:-1], lon_e[:-1])
+    dur = np.diff(edges_s)
+    vel = np.column_stack([dn / dur, de / dur])
+    return vel, good[:-1] & good[1:]
+
+
+def calibrate_from_track(
+    time_s,
+    heading_rad,
+    speed_mps,
+    ref_time_s,
+    ref_lat_rad,
+    ref_lon_rad,
+    *,
+    heading_model: str = "constant",
+    fit_log_offset: bool = True,
+    segment_s: float = 600.0,
+    current_knot_s: float = 2 * 3600.0,
+    max_ref_gap_s: float = 5.0,
+    min_coverage: float = 0.9,
+    variation_rad=0.0,
+) -> TrackCalibration:
+    """Heading error, log scale and offset, and current from reference positions.
+
+    time_s, heading_rad (true heading from a gyro; for the deviation model the compass
+    heading plus variation, with ``variation_rad`` (scalar or (n,)) so that the curve is
+    a function of the compass heading K = heading - variation), speed_mps: the log
+    samples on one time base, each held until the next (as in dead reckoning).  Segments of ``segment_s`` whose log samples cover at
+    least ``min_coverage`` of the segment and whose ends have reference positions are
+    used.  The model and its identifiability are in the module docstring.
+    """
+    if heading_model not in ("constant", "deviation"):
+        raise ValueError(f"heading_model must be 'constant' or 'deviation', got {heading_model!r}")
+    t = np.asarray(time_s, float)
+    h = np.asarray(heading_rad, float)
+    v = np.asarray(speed_mps, float)
+    var = np.broadcast_to(np.asarray(variation_rad, float), t.shape)
+    ok = np.isfinite(t) & np.isfinite(h) & np.isfinite(v) & np.isfinite(var)
+    t, h, v, var = t[ok], h[ok], v[ok], var[ok]
+    if t.size < 2:
+        raise InsufficientDataError("log calibration needs heading and speed samples")
+    dt = np.diff(t, append=t[-1])  # each sample held until the next
+    edges = np.arange(t[0], t[-1] + 1e-9, segment_s)
+    if edges.size < 2:
+        raise InsufficientDataError(
+            f"log calibration needs more than one segment of {segment_s:g} s of log data")
+    seg = np.searchsorted(edges, t, side="right") - 1
+    inside = seg < edges.size - 1
+    cover = np.bincount(seg[inside], weights=dt[inside], minlength=edges.size - 1)
+    u_ref, ref_ok = _segment_reference_velocity(
+        ref_time_s, ref_lat_rad, ref_lon_rad, edges, max_ref_gap_s)
+    # a segment is used when the log covers it and no sample holds across its end
+    use_seg = ref_ok & (cover >= min_coverage * segment_s)
+    sample_use = inside & use_seg[np.clip(seg, 0, edges.size - 2)]
+    seg_ids = np.flatnonzero(use_seg)
+    m = seg_ids.size
+    if m < 4:
+        raise InsufficientDataError(
+            f"log calibration: only {m} segments of {segment_s:g} s have both log data and "
+            "reference positions at their ends (need at least 4)")
+    # per-sample arrays restricted to used segments, with a compact segment index
+    hs, vs, ws = h[sample_use], v[sample_use], dt[sample_use]
+    remap = -np.ones(edges.size - 1, dtype=np.int64)
+    remap[seg_ids] = np.arange(m)
+    si = remap[seg[sample_use]]
+    # time-weighted segment means act through the sample weights w/T
+    seg_T = np.bincount(si, weights=ws, minlength=m)
+    wn = ws / seg_T[si]
+    t_mid = 0.5 * (edges[seg_ids] + edges[seg_ids + 1])
+    knots = np.arange(edges[0], edges[-1] + current_knot_s, current_knot_s)
+    if knots.size < 2:
+        knots = np.array([edges[0], edges[-1]])
+    # piecewise-linear current: hat-function weights at each segment's mid time
+    pos = np.clip((t_mid - knots[0]) / current_knot_s, 0, knots.size - 1 - 1e-12)
+    k_lo = np.floor(pos).astype(np.int64)
+    frac = pos - k_lo
+    B = np.zeros((m, knots.size))
+    B[np.arange(m), k_lo] = 1 - frac
+    B[np.arange(m), k_lo + 1] = frac
+    used_knots = np.flatnonzero(B.sum(axis=0) > 0)
+    B = B[:, used_knots]
+    nk = used_knots.size
+    basis = _curve_basis(hs - var[sample_use]) if heading_model == "deviation" else None
+    n_h = 5 if heading_model == "deviation" else 1
+    n_b = 1 if fit_log_offset else 0
+    vspan = float(np.ptp(vs))
+
+    def heading_error(theta):
+        if basis is None:
+            return theta[0]
+        return -(basis @ theta[:5])  # eps = -delta
+
+    def model(theta):
+        eps = heading_error(theta)
+        s = theta[n_h]
+        b = theta[n_h + 1] if n_b else 0.0
+        spd = (vs - b) / (1.0 + s)
+        c = hs - eps
+        mn = np.bincount(si, weights=wn * spd * np.cos(c), minlength=m)
+        me = np.bincount(si, weights=wn * spd * np.sin(c), minlength=m)
+        cur = theta[n_h + 1 + n_b:].reshape(2, nk)
+        return np.column_stack([mn + B @ cur[0], me + B @ cur[1]])
+
+    def resid(theta):
+        return (model(theta) - u_ref[seg_ids]).ravel()
+
+    def jac(theta):
+        """Analytic Jacobian of ``resid`` (rows: segment j north, j east)."""
+        eps = heading_error(theta)
+        s = theta[n_h]
+        b = theta[n_h + 1] if n_b else 0.0
+        spd = (vs - b) / (1.0 + s)
+        c = hs - eps
+        cos_c, sin_c = np.cos(c), np.sin(c)
+        out = np.zeros((m, 2, n_par))
+
+        def seg_sum(x):
+            return np.bincount(si, weights=wn * x, minlength=m)
+
+        # d/d eps of spd [cos c, sin c] = spd [sin c, -cos c]
+        if basis is None:
+            out[:, 0, 0] = seg_sum(spd * sin_c)
+            out[:, 1, 0] = seg_sum(-spd * cos_c)
+        else:
+            for k in range(5):  # eps = -(basis @ A..E)
+                out[:, 0, k] = seg_sum(-basis[:, k] * spd * sin_c)
+                out[:, 1, k] = seg_sum(basis[:, k] * spd * cos_c)
+        out[:, 0, n_h] = seg_sum(-spd * cos_c) / (1.0 + s)
+        out[:, 1, n_h] = seg_sum(-spd * sin_c) / (1.0 + s)
+        if n_b:
+            out[:, 0, n_h + 1] = seg_sum(-cos_c) / (1.0 + s)
+            out[:, 1, n_h + 1] = seg_sum(-sin_c) / (1.0 + s)
+        c0 = n_h + 1 + n_b
+        out[:, 0, c0:c0 + nk] = B
+        out[:, 1, c0 + nk:] = B
+        return out.reshape(2 * m, n_par)
+
+    n_par = n_h + 1 + n_b + 2 * nk
+    if 2 * m <= n_par:
+        raise InsufficientDataError(
+            f"log calibration: {m} segments cannot determine {n_par} parameters; use a longer "
+            "log, shorter segments or a longer current_knot_s")
+    sol = optimize.least_squares(resid, np.zeros(n_par), jac=jac, method="lm", x_scale="jac")
+    J = sol.jac
+    JtJ = J.T @ J
+    names = (["heading"] * n_h + ["log scale"] + ["log offset"] * n_b
+             + ["current"] * (2 * nk))
+    # singular geometry: report which parameter cannot be separated
+    w, vecs = np.linalg.eigh(JtJ / np.outer(np.sqrt(np.diag(JtJ)), np.sqrt(np.diag(JtJ))))
+    if w[0] < 1e-10:
+        # parameter groups carrying > 5 % of any near-null direction
+        null = vecs[:, w < 1e-10] ** 2
+        groups = sorted(set(names))
+        culprits = [g for g in groups
+                    if np.any(null[[i for i, nm in enumerate(names) if nm == g]].sum(0) > 0.05)]
+        hint = ""
+        if "log offset" in culprits and vspan < 0.5:
+            hint = (f"; the log speed spans only {vspan:.2f} m/s, too little to separate "
+                    "scale from offset (fit_log_offset=False)")
+        elif "current" in culprits:
+            hint = "; steer different headings within each current knot interval"
+        raise InsufficientDataError(
+            "log calibration: the data cannot separate " + ", ".join(culprits) + hint)
+    res = sol.fun
+    dof = res.size - n_par
+    s2 = float(res @ res) / dof
+    # residuals of consecutive segments are correlated (current wander, slow sensor
+    # noise): inflate by the AR(1) variance factor (1 + rho) / (1 - rho), rho the lag-1
+    # autocorrelation of the residuals along consecutive used segments, if positive
+    rn = res.reshape(m, 2)
+    consecutive = np.diff(seg_ids) == 1
+    num = float(np.sum(rn[:-1][consecutive] * rn[1:][consecutive]))
+    den = float(np.sum(rn**2))
+    rho = min(max(num / den, 0.0), 0.9) if den > 0 and consecutive.any() else 0.0
+    inflation = (1 + rho) / (1 - rho)
+    cov = inflation * s2 * np.linalg.inv(JtJ)
+    sig = np.sqrt(np.diag(cov))
+    x = sol.x
+    cur = x[n_h + 1 + n_b:].reshape(2, nk).T
+    cur_sig = sig[n_h + 1 + n_b:].reshape(2, nk).T
+    return TrackCalibration(
+        heading_model=heading_model, heading_error_rad=x[:n_h].copy(),
+        heading_error_sigma_rad=sig[:n_h].copy(), log_scale=float(x[n_h]),
+        log_scale_sigma=float(sig[n_h]),
+        log_offset_mps=float(x[n_h + 1]) if n_b else 0.0,
+        log_offset_sigma_mps=float(sig[n_h + 1]) if n_b else float("nan"),
+        current_knot_s=knots[used_knots], current_ne_mps=cur, current_sigma_ne_mps=cur_sig,
+        covariance=cov, residual_rms_mps=math.sqrt(float(np.mean(res**2))),
+        residual_lag1_correlation=rho, n_segments=m,
+        segment_s=segment_s,
+    )
