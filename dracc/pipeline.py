@@ -35,6 +35,8 @@ from .deadreckoning import (
     deviation_table_rad,
     dr_consistency,
     interp_deviation_rad,
+    leeway_from_log_rad,
+    speed_from_components_mps,
 )
 from .deviation import DeviationResult, analyse_deviations, unit_series_from_voyage
 from .deviation.analysis import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS
@@ -178,10 +180,13 @@ class CalibrationSection:
     """Sensor calibration against the reference."""
 
     reference_role: str
-    compass_error_deg: Estimate | None  #: add to the compass heading to get true heading
-    log_scale: Estimate | None  #: multiply the log speed by (1 + scale) ... see docs; fraction
-    log_offset_kn: Estimate | None
-    n: int  #: samples used
+    #: eps = (course-made-good heading used by the DR) - true heading; the correction is -eps
+    compass_error_deg: Estimate | None
+    log_scale: Estimate | None  #: s in V_log = (1 + s) V_true + b (a fraction)
+    log_offset_kn: Estimate | None  #: b; None where speed changes were too small to fit it
+    n: int  #: segments used
+    segment_s: float
+    residual_rms_kn: float  #: RMS of the segment velocity residuals per axis
     notes: tuple[str, ...] = ()
 
 
@@ -329,8 +334,11 @@ def analyse_voyage(voyage: Voyage, cfg: Config | None = None,
     deviation, dev_ref = _deviation(voyage, cfg, missing)
     report("deviation statistics", 1.0)
 
+    report("calibration", 0.0)
     calibration = None
-    missing.append("calibration (compass error, log scale) is not computed by this version")
+    if dr_inputs is not None and fixes is not None:
+        calibration = _calibration(dr_inputs, fixes, missing)
+    report("calibration", 1.0)
 
     settings = {
         "interval_s": cfg.deviation.interval_s, "window_s": cfg.deviation.window_s,
@@ -434,6 +442,8 @@ class _DRInputs:
     time_s: np.ndarray
     vn_mps: np.ndarray  #: through-the-water velocity (no current), NaN outside legs
     ve_mps: np.ndarray
+    heading_rad: np.ndarray  #: course through the water (B2)/(B3) + leeway (B5), NaN where missing
+    speed_mps: np.ndarray  #: speed through the water (B1), NaN where missing
 
 
 def _heading_series(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str],
@@ -669,7 +679,15 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
         expected_inside=cons.expected_inside_fraction, error_over_m_rms=cons.rms_error_over_m,
         consistent=consistent, verdict=verdict, n_gaps_bridged=int(n_bridged),
         n_breaks=int(tr.n_breaks), notes=tuple(dr_notes))
-    inputs = _DRInputs(t0_ns=int(grid[0]), time_s=time_s, vn_mps=tr.vn_mps, ve_mps=tr.ve_mps)
+    # course and speed through the water for the calibration: leeway (B5) and speed (B1)
+    # from a two-component log, as the DR used them
+    if vy_g is not None:
+        course_w = wrap_2pi(h_g + leeway_from_log_rad(v_g, vy_g))  # (B3)/(B2) + z (B5)
+        speed_w = speed_from_components_mps(v_g, vy_g)  # (B1)
+    else:
+        course_w, speed_w = h_g, v_g
+    inputs = _DRInputs(t0_ns=int(grid[0]), time_s=time_s, vn_mps=tr.vn_mps, ve_mps=tr.ve_mps,
+                       heading_rad=course_w, speed_mps=speed_w)
     return section, fixes, cons, inputs
 
 
@@ -750,6 +768,53 @@ def _current(dr: _DRInputs, fixes, cfg: DeadReckoningConfig, missing: list[str])
         time_ns=np.concatenate(times), set_rad=np.concatenate(sets),
         drift_mps=np.concatenate(drifts), drift_sigma_mps=s_d, n_updates=n_updates,
         notes=(note,))
+
+
+# --------------------------------------------------------------------- calibration
+
+#: calibration segments (reference displacement over each) and current knots
+CAL_SEGMENT_S = 600.0
+CAL_KNOT_S = 2 * 3600.0
+
+
+def _calibration(dr: _DRInputs, fixes, missing: list[str]) -> CalibrationSection | None:
+    """Compass error, log scale and offset against the reference positions (dracc.calibration)."""
+    from .calibration import calibrate_from_track
+
+    ft, flat, flon, fdesc = fixes
+    fix_s = (ft - dr.t0_ns) / 1e9
+    notes: list[str] = []
+    try:
+        try:
+            cal = calibrate_from_track(dr.time_s, dr.heading_rad, dr.speed_mps, fix_s, flat, flon,
+                                       segment_s=CAL_SEGMENT_S, current_knot_s=CAL_KNOT_S,
+                                       max_ref_gap_s=REF_MAX_GAP_S)
+        except InsufficientDataError as first:
+            if "offset" not in str(first):
+                raise
+            cal = calibrate_from_track(dr.time_s, dr.heading_rad, dr.speed_mps, fix_s, flat, flon,
+                                       segment_s=CAL_SEGMENT_S, current_knot_s=CAL_KNOT_S,
+                                       max_ref_gap_s=REF_MAX_GAP_S, fit_log_offset=False)
+            notes.append(f"log offset not fitted: {first}")
+    except InsufficientDataError as err:
+        missing.append(f"calibration not computed: {err}")
+        return None
+    eps = float(cal.heading_error_rad[0])
+    eps_sig = float(cal.heading_error_sigma_rad[0])
+    offset = None
+    if math.isfinite(cal.log_offset_sigma_mps):
+        offset = Estimate(cal.log_offset_mps / KN_MPS, cal.log_offset_sigma_mps / KN_MPS)
+    notes.append(f"compass error eps = course through the water used by the DR (heading + "
+                 f"variation + deviation + leeway from the log) - true course (correct by -eps); "
+                 f"log: V_log = (1 + s) V_true + b; current fitted beside them, piecewise linear "
+                 f"with knots every {CAL_KNOT_S / 3600:g} h; {cal.n_segments} segments of "
+                 f"{CAL_SEGMENT_S:g} s; sigmas inflated for correlated residuals "
+                 f"(rho {cal.residual_lag1_correlation:.2f})")
+    return CalibrationSection(
+        reference_role=fdesc, compass_error_deg=Estimate(math.degrees(eps), math.degrees(eps_sig)),
+        log_scale=Estimate(cal.log_scale, cal.log_scale_sigma), log_offset_kn=offset,
+        n=int(cal.n_segments), segment_s=float(cal.segment_s),
+        residual_rms_kn=float(cal.residual_rms_mps / KN_MPS), notes=tuple(notes))
 
 
 # ----------------------------------------------------------------------- deviation

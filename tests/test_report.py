@@ -135,7 +135,8 @@ def make_analysis(kind: str = "full") -> Analysis:
                    verdict="consistent: 96.0 % inside 2M (expected 95-98 %)", n_gaps_bridged=2,
                    n_breaks=0, notes=("heading and speed held onto a 1 s grid",))
     cal = CalibrationSection(reference_role="gnss", compass_error_deg=Estimate(0.31, 0.04),
-                             log_scale=Estimate(0.029, 0.002), log_offset_kn=Estimate(0.05, 0.02), n=9000)
+                             log_scale=Estimate(0.029, 0.002), log_offset_kn=Estimate(0.05, 0.02), n=140,
+                             segment_s=600.0, residual_rms_kn=0.08)
     ct = T0_NS + np.arange(0, 25 * 3600, 600, dtype="int64") * 10**9
     cur = CurrentSection(set_deg=Estimate(168.0, 12.0), drift_kn=Estimate(0.4, 0.1), time_ns=ct,
                          set_rad=np.full(len(ct), np.radians(168.0)),

@@ -179,7 +179,7 @@ def _calibration_current(a: Analysis) -> str:
     if c is None:
         out.append('<p class="missing">Calibration not computed (see Missing).</p>')
     else:
-        rows = [("against", f"{_e(c.reference_role)} ({c.n:,} samples)"),
+        rows = [("against", f"{_e(c.reference_role)} ({c.n} segments of {c.segment_s:g} s)"),
                 ("compass error", _est(c.compass_error_deg, "°")),
                 ("log scale error", _est(c.log_scale, "%", scale=100.0)),
                 ("log offset", _est(c.log_offset_kn, "kn"))]

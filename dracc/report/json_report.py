@@ -109,7 +109,8 @@ def _calibration(c: CalibrationSection) -> dict:
             "compass_error_deg": _estimate(c.compass_error_deg),
             "log_scale": _estimate(c.log_scale),
             "log_offset_kn": _estimate(c.log_offset_kn),
-            "n": int(c.n), "notes": list(c.notes)}
+            "n": int(c.n), "segment_s": float(c.segment_s),
+            "residual_rms_kn": _num(c.residual_rms_kn), "notes": list(c.notes)}
 
 
 def _current(c: CurrentSection) -> dict:

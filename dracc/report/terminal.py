@@ -148,7 +148,7 @@ def summary(a: Analysis) -> Group:
     if c is None:
         parts.append(Text("not computed (see Missing)"))
     else:
-        parts.append(Text(f"against {c.reference_role} ({c.n:,} samples): compass error "
+        parts.append(Text(f"against {c.reference_role} ({c.n} segments of {c.segment_s:g} s): compass error "
                           f"{_est(c.compass_error_deg, '°')}; log scale "
                           f"{_est(c.log_scale and Estimate(100 * c.log_scale.value, 100 * c.log_scale.sigma), '%')}; "
                           f"log offset {_est(c.log_offset_kn, 'kn')}"))
