@@ -107,18 +107,23 @@ def transition(dt_s, tau_s: float):
 
     F = [[I, F_pc I], [0, phi I]], F_pc = tau (1 - exp(-dt/tau)), phi = exp(-dt/tau).
     """
-    phi = np.exp(-np.asarray(dt_s, float) / tau_s)
-    return tau_s * (1.0 - phi), phi
+    x = np.asarray(dt_s, float) / tau_s
+    return -tau_s * np.expm1(-x), np.exp(-x)
 
 
 def process_noise(dt_s, course_rad, speed_mps, model: CurrentModel):
     """Q (..., 4, 4) over dt for state (p_N, p_E, c_N, c_E) (metres, m/s); see module doc."""
     dt = np.asarray(dt_s, float)
     tau, s2 = model.current_tau_s, model.current_sigma_mps**2
-    phi = np.exp(-dt / tau)
-    q_cc = s2 * (1.0 - phi**2)
-    q_pc = s2 * tau * (1.0 - phi) ** 2
-    q_pp = 2.0 * s2 * tau * (dt - 2.0 * tau * (1.0 - phi) + 0.5 * tau * (1.0 - phi**2))
+    x = dt / tau
+    one_m_phi = -np.expm1(-x)  # 1 - phi, exact for small dt
+    one_m_phi2 = -np.expm1(-2.0 * x)  # 1 - phi^2
+    q_cc = s2 * one_m_phi2
+    q_pc = s2 * tau * one_m_phi**2
+    # x - 2(1 - phi) + (1 - phi^2)/2, by its series x^3/3 - x^4/4 + 7x^5/60 where it cancels
+    bracket = np.where(x < 1e-3, x**3 / 3.0 - x**4 / 4.0 + 7.0 * x**5 / 60.0,
+                       x - 2.0 * one_m_phi + 0.5 * one_m_phi2)
+    q_pp = 2.0 * s2 * tau**2 * bracket
     # water-velocity noise as white noise of PSD 2 sigma^2 tau, along and across track
     psd_along = 2.0 * model.speed_sigma_mps**2 * model.speed_tau_s
     psd_across = 2.0 * (np.asarray(speed_mps, float) * model.heading_sigma_rad) ** 2 * model.heading_tau_s

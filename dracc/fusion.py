@@ -372,7 +372,9 @@ class NadirCircle:
     cos(theta) = -u_x cos(phi) cos(lam + w t) - u_y cos(phi) sin(lam + w t) - u_z sin(phi)
     is a circle of angular radius theta (the nadir angle) about the sub-point where
     -u pierces the Earth: phi_s = asin(-u_z), lam_s = atan2(-u_y, -u_x) - w t.
-    Latitudes on it are geodetic, as in the paper (the spherical model of (1)).
+    With geodetic latitude, (cos phi cos lam, cos phi sin lam, sin phi) is the
+    ellipsoid normal, so (1) is the angle between the spin axis and the local vertical,
+    exact on WGS-84; the sub-point is the point whose normal is -u.
     """
 
     sub_lat_rad: float

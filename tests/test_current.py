@@ -61,6 +61,18 @@ def test_process_noise_matches_van_loan():
     assert np.allclose(process_noise(dt, course, speed, model), q, rtol=1e-9, atol=1e-12)
 
 
+@pytest.mark.parametrize("dt_s", [1e-3, 0.1, 3.5, 1000.0])
+def test_position_noise_of_short_steps_has_no_cancellation(dt_s):
+    """Regression: Q_pp = (2 s^2/tau) int_0^dt (tau (1 - exp(-a/tau)))^2 da, by quadrature;
+    the closed form cancels catastrophically for dt << tau unless written with expm1/series."""
+    from scipy.integrate import quad
+
+    m = CurrentModel(speed_sigma_mps=0.0, heading_sigma_rad=0.0)
+    tau, s2 = m.current_tau_s, m.current_sigma_mps**2
+    ref = 2 * s2 / tau * quad(lambda a: (tau * -np.expm1(-a / tau)) ** 2, 0, dt_s, epsabs=0, epsrel=1e-12)[0]
+    assert process_noise(dt_s, 0.0, 0.0, m)[0, 0] == pytest.approx(ref, rel=1e-8)
+
+
 def test_covariance_growth_does_not_depend_on_the_step():
     model = CurrentModel()
     start = PositionFix.from_sigma(LAT0, LON0, 10.0)
