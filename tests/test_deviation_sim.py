@@ -201,3 +201,25 @@ def test_limiting_error_covers_the_true_error_at_its_probability():
     bound = 3 * math.sqrt(p * (1 - p) / runs)
     assert np.mean(fresh <= lim) >= p - bound
     assert np.mean(fresh <= kp * m_y) == pytest.approx(p, abs=0.02)
+
+
+def test_to_dict_validates_against_the_report_schema():
+    # the contract with the reports issue: DeviationResult.to_dict() is the JSON
+    # `deviation` section (the report layer adds `reference_source`)
+    import json
+    from pathlib import Path
+
+    jsonschema = pytest.importorskip("jsonschema")
+    path = Path(__file__).parents[1] / "dracc" / "report" / "analysis.schema.json"
+    if not path.exists():
+        pytest.skip("report schema not present")
+    full = json.loads(path.read_text())
+    validator = jsonschema.Draft202012Validator({"$defs": full["$defs"], **full["$defs"]["deviation"]})
+    units, ref, _ = voyage((150.0, 400.0, 250.0), (0.05, 0.15, 0.1), days=3, step_s=60.0)
+    cfg = DeviationConfig(apriori={"ins1": {"lat_m": 100.0}})
+    for d in (analyse_deviations(units, cfg, reference=ref).to_dict(),
+              analyse_deviations({k: units[k] for k in ("ins1", "ins2")}).to_dict(),
+              analyse_deviations({"ins3": units["ins3"]}).to_dict()):
+        d["reference_source"] = None
+        errors = [f"{list(e.path)}: {e.message}" for e in validator.iter_errors(d)]
+        assert errors == []
