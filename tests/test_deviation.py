@@ -365,6 +365,9 @@ def test_apriori_monitoring_rule():
     ({"apriori": {"ins1": {"lat_m": -3}}}, "lat_m = -3"),
     ({"confidence": 1.0}, "confidence"),
     ({"correlation_time_s": -1.0}, "correlation_time_s"),
+    ({"hat_draws": "many"}, "hat_draws = 'many'"),
+    ({"first_approximation": 1}, "first_approximation"),
+    ({"interval_s": float("nan")}, "interval_s = nan"),
 ])
 def test_config_errors_name_the_key(table, word):
     cfg = config_from_dict({"deviation": table}).deviation

@@ -16,7 +16,7 @@ degrees (the paper's channels).  Time is int64 UTC ns inside, ISO 8601 in ``to_d
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -320,6 +320,20 @@ class DeviationResult:
 
 def check_config(cfg: DeviationConfig) -> None:
     """Raise ConfigError naming the key for values the method cannot use."""
+    for f in fields(DeviationConfig):
+        value, default = getattr(cfg, f.name), getattr(DeviationConfig(), f.name)
+        if isinstance(default, bool):
+            ok = isinstance(value, bool)
+        elif isinstance(default, int):
+            ok = isinstance(value, int) and not isinstance(value, bool)
+        elif isinstance(default, float):
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool) \
+                and math.isfinite(value)
+        else:
+            continue
+        if not ok:
+            raise ConfigError(f"[deviation] {f.name} = {value!r}: must be "
+                              f"{type(default).__name__ if not isinstance(default, float) else 'a finite number'}")
     if cfg.interval_s <= 0 or cfg.window_s <= 0:
         raise ConfigError("[deviation] interval_s and window_s must be positive")
     if cfg.max_interp_gap_s < 0:
@@ -447,7 +461,7 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
     modes = {c: _mode(pos_units if c != "course" else crs_units, c, factors[c]) for c in CHANNELS}
 
     # (K1) deviations per channel, units along axis 0
-    dev: dict[str, dict[str, np.ndarray]] = {u: dict.fromkeys(CHANNELS, nan) for u in present}
+    dev = {u: {c: nan.copy() for c in CHANNELS} for u in present}
     lat_mean = nan
     if len(pos_units) >= 2:
         lat = np.vstack([sampled[u].lat_rad for u in pos_units])
