@@ -379,6 +379,55 @@ def _linear_recurrence(a, b, tau_s, dt):
     return h
 
 
+def _gm_cov3(t, gn, ge, sigma, tau_s):
+    """(n, 3) cumulative [P_NN, P_NE, P_EE] for one process; see the public wrapper."""
+    n = t.size
+    out = np.zeros((n, 3))
+    if n < 2 or sigma == 0.0:
+        return out
+    dt = np.diff(t)
+    gn = np.broadcast_to(gn, (n,))[:-1]
+    ge = np.broadcast_to(ge, (n,))[:-1]
+    s2 = float(sigma) ** 2
+    if math.isinf(tau_s):
+        # bias: position error = e * sum g dt, P = sigma^2 G G^T (exact, any dt)
+        Gn = np.cumsum(gn * dt)
+        Ge = np.cumsum(ge * dt)
+        out[1:, 0] = s2 * Gn * Gn
+        out[1:, 1] = s2 * Gn * Ge
+        out[1:, 2] = s2 * Ge * Ge
+        return out
+    if tau_s == 0.0:
+        var_i = s2 * dt * dt  # (B23): independent per step
+        out[1:, 0] = np.cumsum(var_i * gn * gn)
+        out[1:, 1] = np.cumsum(var_i * gn * ge)
+        out[1:, 2] = np.cumsum(var_i * ge * ge)
+        return out
+    x = dt / tau_s
+    a = np.exp(-x)
+    u = -tau_s * np.expm1(-x)  # tau (1 - a), -> dt as tau -> inf
+    # Var(I_k) = 2 sigma^2 tau^2 (x - 1 + e^-x), with its series where x is small
+    poly = np.where(x < 1e-3, x * x * (0.5 - x / 6 + x * x / 24), x - 1.0 + a)
+    var_i = 2.0 * s2 * tau_s**2 * poly
+    h = _linear_recurrence(a, np.column_stack([gn * u, ge * u]), tau_s, dt)
+    su = s2 * u
+    mn = su * h[:, 0]  # m_k = sigma^2 u_k h_k = Cov(p_k, I_k)
+    me = su * h[:, 1]
+    out[1:, 0] = np.cumsum(2 * gn * mn + var_i * gn * gn)
+    out[1:, 1] = np.cumsum(gn * me + mn * ge + var_i * gn * ge)
+    out[1:, 2] = np.cumsum(2 * ge * me + var_i * ge * ge)
+    return out
+
+
+def _cov3_to_22(c3):
+    out = np.empty(c3.shape[:-1] + (2, 2))
+    out[..., 0, 0] = c3[..., 0]
+    out[..., 0, 1] = c3[..., 1]
+    out[..., 1, 0] = c3[..., 1]
+    out[..., 1, 1] = c3[..., 2]
+    return out
+
+
 def gauss_markov_position_covariance_m2(time_s, g_mps, sigma, tau_s):
     """Position covariance (n, 2, 2) in m^2 caused by one Gauss-Markov error process.
 
@@ -391,36 +440,7 @@ def gauss_markov_position_covariance_m2(time_s, g_mps, sigma, tau_s):
     """
     t = np.asarray(time_s, float)
     g = np.asarray(g_mps, float)
-    n = t.size
-    out = np.zeros((n, 2, 2))
-    if n < 2 or sigma == 0.0:
-        return out
-    dt = np.diff(t)
-    gk = g[:-1]
-    s2 = float(sigma) ** 2
-    if math.isinf(tau_s):
-        # bias: position error = e * sum g dt, P = sigma^2 G G^T (exact, any dt)
-        G = np.cumsum(gk * dt[:, None], axis=0)
-        out[1:] = s2 * G[:, :, None] * G[:, None, :]
-        return out
-    if tau_s == 0.0:
-        var_i = s2 * dt**2  # (B23): independent per step
-        incr = var_i[:, None, None] * gk[:, :, None] * gk[:, None, :]
-        out[1:] = np.cumsum(incr, axis=0)
-        return out
-    x = dt / tau_s
-    a = np.exp(-x)
-    u = -tau_s * np.expm1(-x)  # tau (1 - a), -> dt as tau -> inf
-    # 2 tau^2 (x - 1 + e^-x), with its series where x is small (cancellation)
-    small = x < 1e-3
-    poly = np.where(small, x**2 / 2 - x**3 / 6 + x**4 / 24, x - 1.0 + a)
-    var_i = 2.0 * s2 * tau_s**2 * poly
-    h = _linear_recurrence(a, gk * u[:, None], tau_s, dt)
-    m = s2 * u[:, None] * h
-    incr = (gk[:, :, None] * m[:, None, :] + m[:, :, None] * gk[:, None, :]
-            + var_i[:, None, None] * gk[:, :, None] * gk[:, None, :])
-    out[1:] = np.cumsum(incr, axis=0)
-    return out
+    return _cov3_to_22(_gm_cov3(t, g[:, 0], g[:, 1], sigma, tau_s))
 
 
 @dataclass(frozen=True)
@@ -467,20 +487,20 @@ def error_processes(cfg: DeadReckoningConfig, mode: str = "water") -> tuple[Erro
 
 
 def _sensitivity_mps(acts_on: str, speed_mps, course_rad):
-    """g (n, 2): velocity error (north, east) per unit of an error acting on ``acts_on``."""
+    """(g_north, g_east): velocity error per unit of an error acting on ``acts_on``."""
     v = np.asarray(speed_mps, float)
-    c = np.asarray(course_rad, float)
-    if acts_on == "heading":  # d/dC [V cos C, V sin C]
-        return np.stack([-v * np.sin(c), v * np.cos(c)], -1)
-    if acts_on == "scale":  # dV = s V
-        return np.stack([v * np.cos(c), v * np.sin(c)], -1)
-    if acts_on == "speed":
-        return np.stack([np.cos(c), np.sin(c)], -1)
-    n = v.shape[0]
     if acts_on == "current_n":
-        return np.tile([1.0, 0.0], (n, 1))
+        return 1.0, 0.0
     if acts_on == "current_e":
-        return np.tile([0.0, 1.0], (n, 1))
+        return 0.0, 1.0
+    c = np.asarray(course_rad, float)
+    cos_c, sin_c = np.cos(c), np.sin(c)
+    if acts_on == "heading":  # d/dC [V cos C, V sin C]
+        return -v * sin_c, v * cos_c
+    if acts_on == "scale":  # dV = s V
+        return v * cos_c, v * sin_c
+    if acts_on == "speed":
+        return cos_c, sin_c
     raise ValueError(f"unknown error target {acts_on!r}")
 
 
@@ -491,13 +511,26 @@ def honest_covariance_m2(time_s, speed_mps, course_rad, processes, P0_m2=None):
     process starts stationary at t_0 (a fix resets the position error, not the sensors).
     """
     t = np.asarray(time_s, float)
-    out = np.zeros((t.size, 2, 2))
+    acc = np.zeros((t.size, 3))
     if P0_m2 is not None:
-        out += np.asarray(P0_m2, float)
+        p0 = np.asarray(P0_m2, float)
+        acc += [p0[0, 0], p0[0, 1], p0[1, 1]]
+    done_current = False
     for p in processes:
-        g = _sensitivity_mps(p.acts_on, speed_mps, course_rad)
-        out += gauss_markov_position_covariance_m2(t, g, p.sigma, p.tau_s)
-    return out
+        if p.acts_on in ("current_n", "current_e"):
+            # north and east currents with one (sigma, tau): one scalar run, on the diagonal
+            if done_current:
+                continue
+            pair = [q for q in processes if q.acts_on in ("current_n", "current_e")]
+            if len(pair) == 2 and pair[0].sigma == pair[1].sigma and pair[0].tau_s == pair[1].tau_s:
+                c3 = _gm_cov3(t, 1.0, 0.0, p.sigma, p.tau_s)
+                acc[:, 0] += c3[:, 0]
+                acc[:, 2] += c3[:, 0]
+                done_current = True
+                continue
+        gn, ge = _sensitivity_mps(p.acts_on, speed_mps, course_rad)
+        acc += _gm_cov3(t, gn, ge, p.sigma, p.tau_s)
+    return _cov3_to_22(acc)
 
 
 # --------------------------------------------------------------------------------------
