@@ -422,6 +422,14 @@ def _interp_position(t_ns: np.ndarray, lat: np.ndarray, lon: np.ndarray, t_q_ns:
     return out_lat, out_lon
 
 
+def _ref_gap_s(t_ns: np.ndarray) -> float:
+    """How far apart two reference positions may be to interpolate between them:
+    REF_MAX_GAP_S, or 2.5 typical intervals for a slowly logged reference."""
+    if t_ns.size < 2:
+        return REF_MAX_GAP_S
+    return max(REF_MAX_GAP_S, 2.5 * float(np.median(np.diff(t_ns))) / 1e9)
+
+
 def _dedupe_sorted(t_ns: np.ndarray, *cols: np.ndarray):
     """Sort by time and keep the last sample of equal times (strictly increasing times)."""
     order = np.argsort(t_ns, kind="stable")
@@ -444,6 +452,7 @@ class _DRInputs:
     ve_mps: np.ndarray
     heading_rad: np.ndarray  #: course through the water (B2)/(B3) + leeway (B5), NaN where missing
     speed_mps: np.ndarray  #: speed through the water (B1), NaN where missing
+    ref_gap_s: float  #: reference positions are interpolated across gaps up to this
 
 
 def _heading_series(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str],
@@ -613,6 +622,7 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
     if vy_g is not None and np.any(~np.isfinite(vy_g) & np.isfinite(v_g)):
         vy_g = np.where(np.isfinite(vy_g), vy_g, 0.0)
     ft, flat, flon, fdesc = fixes
+    ref_gap_s = _ref_gap_s(ft)
     time_s = (grid - grid[0]) / 1e9
     fix_s = (ft - grid[0]) / 1e9
     try:
@@ -621,9 +631,9 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
     except InsufficientDataError as err:
         missing.append(f"dead reckoning not computed: {err}")
         return None, fixes, None, None
-    cons = dr_consistency(tr, fix_s, flat, flon, max_ref_gap_s=REF_MAX_GAP_S)
+    cons = dr_consistency(tr, fix_s, flat, flon, max_ref_gap_s=ref_gap_s)
     # the actual error at every sample (for the growth plot and the tables)
-    rlat, rlon = _interp_position(ft, flat, flon, grid, REF_MAX_GAP_S)
+    rlat, rlon = _interp_position(ft, flat, flon, grid, ref_gap_s)
     dn, de = offset_ne_m(tr.lat_rad, tr.lon_rad, rlat, rlon)
     ref_err = np.hypot(dn, de)
     on = tr.leg >= 0
@@ -687,7 +697,7 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
     else:
         course_w, speed_w = h_g, v_g
     inputs = _DRInputs(t0_ns=int(grid[0]), time_s=time_s, vn_mps=tr.vn_mps, ve_mps=tr.ve_mps,
-                       heading_rad=course_w, speed_mps=speed_w)
+                       heading_rad=course_w, speed_mps=speed_w, ref_gap_s=ref_gap_s)
     return section, fixes, cons, inputs
 
 
@@ -775,6 +785,8 @@ def _current(dr: _DRInputs, fixes, cfg: DeadReckoningConfig, missing: list[str])
 #: calibration segments (reference displacement over each) and current knots
 CAL_SEGMENT_S = 600.0
 CAL_KNOT_S = 2 * 3600.0
+#: the log offset is fitted only where the speed spans at least this much (5-95 %)
+CAL_OFFSET_SPREAD_KN = 2.0
 
 
 def _calibration(dr: _DRInputs, fixes, missing: list[str]) -> CalibrationSection | None:
@@ -784,18 +796,17 @@ def _calibration(dr: _DRInputs, fixes, missing: list[str]) -> CalibrationSection
     ft, flat, flon, fdesc = fixes
     fix_s = (ft - dr.t0_ns) / 1e9
     notes: list[str] = []
+    spd = dr.speed_mps[np.isfinite(dr.speed_mps)]
+    spread_mps = float(np.ptp(np.percentile(spd, [5, 95]))) if spd.size else 0.0
+    fit_offset = spread_mps >= CAL_OFFSET_SPREAD_KN * KN_MPS
+    if not fit_offset:
+        notes.append(f"log offset not fitted: the log speed spans only {spread_mps / KN_MPS:.1f} kn "
+                     f"(5-95 %), less than {CAL_OFFSET_SPREAD_KN:g} kn, too little to separate an "
+                     "offset from the scale; the scale absorbs it")
     try:
-        try:
-            cal = calibrate_from_track(dr.time_s, dr.heading_rad, dr.speed_mps, fix_s, flat, flon,
-                                       segment_s=CAL_SEGMENT_S, current_knot_s=CAL_KNOT_S,
-                                       max_ref_gap_s=REF_MAX_GAP_S)
-        except InsufficientDataError as first:
-            if "offset" not in str(first):
-                raise
-            cal = calibrate_from_track(dr.time_s, dr.heading_rad, dr.speed_mps, fix_s, flat, flon,
-                                       segment_s=CAL_SEGMENT_S, current_knot_s=CAL_KNOT_S,
-                                       max_ref_gap_s=REF_MAX_GAP_S, fit_log_offset=False)
-            notes.append(f"log offset not fitted: {first}")
+        cal = calibrate_from_track(dr.time_s, dr.heading_rad, dr.speed_mps, fix_s, flat, flon,
+                                   segment_s=CAL_SEGMENT_S, current_knot_s=CAL_KNOT_S,
+                                   max_ref_gap_s=dr.ref_gap_s, fit_log_offset=fit_offset)
     except InsufficientDataError as err:
         missing.append(f"calibration not computed: {err}")
         return None
