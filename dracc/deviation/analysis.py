@@ -220,7 +220,7 @@ class ChannelMode:
                 "message": self.message}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds arrays: identity, not elementwise ==
 class DeviationResult:
     """The ``deviation`` section: samples, per-window and whole-log statistics."""
 

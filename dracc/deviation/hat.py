@@ -28,7 +28,7 @@ import numpy as np
 from ..geodesy import angdiff
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds arrays: identity, not elementwise ==
 class HatEstimate:
     """Three-cornered-hat variances of the three units in one channel and window.
 

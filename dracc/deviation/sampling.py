@@ -26,7 +26,7 @@ from ..geodesy import angdiff, wrap_2pi, wrap_pi
 DAY_NS = 86_400 * 1_000_000_000
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds arrays: identity, not elementwise ==
 class UnitSeries:
     """One unit's time-tagged readings (an INS, or the reference).
 
@@ -54,7 +54,7 @@ class UnitSeries:
         return (int(t.min()), int(t.max())) if len(t) else None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds arrays: identity, not elementwise ==
 class SampledUnit:
     """One unit at the sampling instants; NaN where missing."""
 
