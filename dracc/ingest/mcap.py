@@ -200,9 +200,12 @@ class _Reader:
                                           f"{body_at + ln}); the complete messages in it before the "
                                           f"cut were read")
                         break
-                elif op in (_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE):
+                elif op in (_OP_SCHEMA, _OP_CHANNEL) or (op == _OP_MESSAGE and not ended):
+                    # the summary repeats schemas and channels, and may hold channels without messages
                     self._small_record(op, fh.read(ln), pos)
-                elif op in (_OP_DATA_END, _OP_FOOTER):
+                elif op == _OP_DATA_END:
+                    ended = True
+                elif op == _OP_FOOTER:
                     ended = True
                     break
                 pos = body_at + ln

@@ -1,0 +1,361 @@
+"""MCAP voyage logs: round trips, real files, independent encoders, damaged and cut files."""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+
+import numpy as np
+import pytest
+from test_csv import assert_same_frames, voyage_frames
+
+from dracc.config import IngestConfig
+from dracc.errors import IngestError
+from dracc.ingest.mcap import read_mcap, topic_role, topic_source
+from dracc.sim.mcap_out import NAVSATFIX, write_mcap
+
+CFG = IngestConfig()
+ROLES = {"INS2": "ins2", "GYRO": "compass", "LOG": "log"}
+
+
+def _expected(fr, encoding):
+    """What each encoding carries: NavSatFix has no HDOP, and its status maps quality."""
+    if encoding == "ros2":
+        fr = dict(fr)
+        p = fr["position"].copy()
+        p["hdop"] = np.nan
+        fr["position"] = p
+    if encoding in ("protobuf",):
+        fr = dict(fr)
+        p = fr["position"].copy()
+        p["hdop"] = np.nan
+        p["quality"] = np.int8(1)
+        fr["position"] = p
+    return fr
+
+
+@pytest.mark.parametrize("encoding", ["json", "ros2", "protobuf"])
+@pytest.mark.parametrize("compression,indexed", [("zstd", True), ("lz4", True), (None, False)])
+def test_round_trip_same_frames(tmp_path, encoding, compression, indexed):
+    fr = voyage_frames()
+    p = write_mcap(fr, ROLES, tmp_path / "v.mcap", encoding=encoding, compression=compression,
+                   chunk_size=3000, indexed=indexed)
+    r = read_mcap(p, CFG)
+    assert r.rejects.total == 0, dict(r.rejects.counts)
+    assert r.lines == sum(len(f) for f in fr.values())
+    assert_same_frames(_expected(fr, encoding), r.frames)
+
+
+def test_round_trip_raw_nmea(tmp_path):
+    pytest.importorskip("dracc.sim.nmea_out")
+    fr = voyage_frames()
+    fr = {k: fr[k] for k in ("position", "heading", "water")}
+    p = write_mcap(fr, ROLES, tmp_path / "n.mcap", encoding="nmea")
+    r = read_mcap(p, CFG)
+    assert r.format == "mcap"
+    # every position/heading/water record comes back from its sentence
+    for kind in fr:
+        got = r.frames[kind]
+        assert len(got) == len(fr[kind]), kind
+        # sentence time fields hold hundredths of a second
+        dt = np.sort(got["time_ns"].to_numpy()) - np.sort(fr[kind]["time_ns"].to_numpy())
+        assert np.abs(dt).max() <= 10_000_000, kind
+    pos = r.frames["position"].sort_values("time_ns")
+    want = fr["position"].sort_values("time_ns")
+    # GGA carries 1e-4 arc-minute resolution or better
+    np.testing.assert_allclose(pos["lat_rad"].to_numpy(), want["lat_rad"].to_numpy(), atol=2e-8)
+    assert set(r.frames["heading"]["source"].astype(str)) == {"GYRO"}
+
+
+def test_topics_give_source_keys_and_roles():
+    assert topic_source("/ins2/fix") == "ins2"
+    assert topic_source("/ins2/heading") == "ins2"
+    assert topic_source("/gyro/heading") == "gyro"
+    assert topic_source("/log/water") == "log"
+    assert topic_source("rise/v0/ais/nmea0183") == "rise/v0/ais/nmea0183"
+    assert topic_source("/fix") == "fix"
+    assert [topic_role(k) for k in ("ins2", "gyro", "log", "gps", "camera")] == \
+        ["ins2", "compass", "log", "gnss", None]
+
+
+# ----------------------------------------------------------------- independent encoders
+def _ros2_writer(path, schema_name, schema_text, topic, msgs):
+    from mcap_ros2.writer import Writer
+
+    with open(path, "wb") as fh:
+        w = Writer(fh)
+        sch = w.register_msgdef(schema_name, schema_text)
+        for t, m in msgs:
+            w.write_message(topic, sch, m, log_time=t, publish_time=t)
+        w.finish()
+
+
+def test_navsatfix_from_the_stock_ros2_encoder(tmp_path):
+    """Messages encoded by mcap-ros2-support (not by dracc), frame_id lengths varying so
+    that both the grouped and the one-by-one decoding run."""
+    msgs = []
+    for i in range(30):
+        stamp = {"sec": 1_700_000_000 + i, "nanosec": 250_000_000}
+        msgs.append((1_800_000_000_000_000_000 + i, {
+            "header": {"stamp": stamp if i != 5 else {"sec": 0, "nanosec": 0}, "frame_id": "gps" + "x" * (i % 3)},
+            "status": {"status": [-1, 0, 1, 2][i % 4], "service": 1},
+            "latitude": 54.0 + i * 1e-4, "longitude": -18.5, "altitude": 10.0 + i,
+            "position_covariance": [0.0] * 9, "position_covariance_type": 0}))
+    p = tmp_path / "fix.mcap"
+    _ros2_writer(p, "sensor_msgs/msg/NavSatFix", NAVSATFIX, "/gps/fix", msgs)
+    r = read_mcap(p, CFG)
+    f = r.frames["position"].sort_values("line")
+    assert len(f) == 30 and set(f["source"].astype(str)) == {"gps"}
+    np.testing.assert_allclose(np.degrees(f["lat_rad"].to_numpy()), 54.0 + np.arange(30) * 1e-4, rtol=1e-15)
+    np.testing.assert_allclose(np.degrees(f["lon_rad"].to_numpy()), -18.5)
+    np.testing.assert_allclose(f["alt_m"].to_numpy(), 10.0 + np.arange(30))
+    assert f["quality"].tolist() == [[0, 1, 2, 4][i % 4] for i in range(30)]
+    t = f["time_ns"].to_numpy()
+    assert t[0] == 1_700_000_000_250_000_000  # header stamp, not the log time
+    assert t[5] == 1_800_000_000_000_000_005  # zero stamp: log time
+
+
+QUAT_STAMPED = ("std_msgs/Header header\ngeometry_msgs/Quaternion quaternion\n" + "=" * 80 +
+                "\nMSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\nfloat64 w\n" + "=" * 80 +
+                "\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n")
+
+
+def test_heading_from_an_enu_quaternion(tmp_path):
+    """REP 103: ENU yaw 0 faces east (heading 90 deg), yaw 90 deg north (0), yaw -90 deg south (180),
+    yaw 150 deg -> heading 300 deg; hand values."""
+    yaws_deg = [0.0, 90.0, -90.0, 150.0]
+    msgs = [(1_700_000_000_000_000_000 + i, {
+        "header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "imu"},
+        "quaternion": {"x": 0.0, "y": 0.0, "z": math.sin(math.radians(y) / 2), "w": math.cos(math.radians(y) / 2)}})
+        for i, y in enumerate(yaws_deg)]
+    p = tmp_path / "q.mcap"
+    _ros2_writer(p, "geometry_msgs/msg/QuaternionStamped", QUAT_STAMPED, "/gyro/heading", msgs)
+    r = read_mcap(p, CFG)
+    h = r.frames["heading"].sort_values("line")
+    np.testing.assert_allclose(np.degrees(h["heading_rad"].to_numpy()), [90.0, 0.0, 180.0, 300.0], atol=1e-9)
+    assert set(h["source"].astype(str)) == {"gyro"}
+
+
+def _json_file(path, topic, payloads, schema_name="foxglove.LocationFix", encoding="json"):
+    from mcap.writer import Writer
+
+    with open(path, "wb") as fh:
+        w = Writer(fh)
+        w.start()
+        sid = w.register_schema(name=schema_name, encoding="jsonschema", data=b"{}") if schema_name else 0
+        cid = w.register_channel(topic=topic, message_encoding=encoding, schema_id=sid)
+        for i, p in enumerate(payloads):
+            w.add_message(cid, log_time=1_700_000_000_000_000_000 + i * 10**9, data=p,
+                          publish_time=1_700_000_000_000_000_000 + i * 10**9)
+        w.finish()
+
+
+def test_json_location_fix_pretty_printed_and_a_bad_message(tmp_path):
+    objs = [json.dumps({"timestamp": {"sec": 1_700_000_100 + i, "nsec": 5}, "frame_id": "f",
+                        "latitude": 10.5 + i, "longitude": 20.25, "altitude": None,
+                        "position_covariance_type": 0}, indent=2).encode() for i in range(5)]
+    objs.insert(2, b'{"latitude": "north", "longitude": 1}')
+    p = tmp_path / "j.mcap"
+    _json_file(p, "/gnss/fix", objs)
+    r = read_mcap(p, CFG)
+    f = r.frames["position"]
+    assert len(f) == 5
+    assert r.rejects.counts["bad JSON message"] == 1
+    assert r.rejects.examples["bad JSON message"][0][1] == 3  # the third message
+    np.testing.assert_allclose(np.degrees(f["lat_rad"].to_numpy()), [10.5, 11.5, 12.5, 13.5, 14.5])
+    assert f["time_ns"].iloc[0] == 1_700_000_100_000_000_005
+    assert f["alt_m"].isna().all()
+
+
+def test_plain_json_objects_units_from_keys(tmp_path):
+    objs = [json.dumps({"time_ns": 1_700_000_000_123_456_789 + i, "stw_kn": 10.0, "sog_long_mps": 5.0}).encode()
+            for i in range(3)]
+    p = tmp_path / "w.mcap"
+    _json_file(p, "/log/water", objs, schema_name="dracc.WaterSpeed")
+    r = read_mcap(p, CFG)
+    w = r.frames["water"]
+    np.testing.assert_allclose(w["stw_mps"].to_numpy(), 10 * 1852 / 3600)
+    np.testing.assert_allclose(w["sog_long_mps"].to_numpy(), 5.0)
+    assert w["time_ns"].tolist() == [1_700_000_000_123_456_789 + i for i in range(3)]  # exact ns
+
+
+def test_json_sentence_and_text_channels_go_to_the_nmea_parser(tmp_path):
+    s = ("$GNGGA,092542.00,4846.4008666,N,00854.7249096,E,4,12,0.47,419.166,M,47.535,M,0.0,0000*66")
+    p = tmp_path / "s.mcap"
+    _json_file(p, "/gnss/nmea", [json.dumps({"sentence": s}).encode()], schema_name="nmea_sentence")
+    r = read_mcap(p, CFG)
+    assert len(r.frames["position"]) == 1 and r.frames["position"]["source"].iloc[0] == "gnss"
+    p2 = tmp_path / "t.mcap"
+    _json_file(p2, "/gnss/nmea", [s.encode() + b"\r\n"], schema_name=None, encoding="nmea0183")
+    r2 = read_mcap(p2, CFG)
+    assert math.degrees(r2.frames["position"]["lat_rad"].iloc[0]) == pytest.approx(48 + 46.4008666 / 60)
+
+
+# ----------------------------------------------------------------- real files
+def test_real_keelson_raw_nmea_in_protobuf(real_dir):
+    r = read_mcap(real_dir / "keelson" / "4a625f9" / "test.mcap", CFG)
+    assert r.lines == 2172
+    assert any("nmea0183" in n and "raw NMEA" in n for n in r.notes)
+    # the 1451 NMEA messages reach the NMEA parser (AIS and VSI: not navigation sentences it decodes)
+    assert r.rejects.total >= 1451
+    assert any("not used" in n and "JSON" in n for n in r.notes)
+
+
+def test_real_keelson_empty_file_says_so(real_dir):
+    r = read_mcap(real_dir / "keelson" / "6389403" / "test.mcap", CFG)
+    assert r.records == 0 and r.lines == 0
+    assert any("no channels" in n and "nothing to read" in n for n in r.notes)
+
+
+@pytest.mark.parametrize("name,channels", [
+    ("talker.mcap", ["/rosout", "/parameter_events", "/topic"]),
+    ("cdr_test_0.mcap", ["/test_topic", "/array_topic"]),
+    ("wrong_rmw_test_0.mcap", ["/test_topic", "/array_topic"]),
+    ("test_bag_for_seek_0.mcap", ["topic1"]),
+    ("rewriter_b_0.mcap", ["c_strings", "a_empty"]),
+    ("only_topics.mcap", ["/rosout", "/parameter_events", "/events/write_split"]),
+])
+def test_real_rosbag2_files_report_channels_and_no_navigation_data(real_dir, name, channels):
+    r = read_mcap(real_dir / "rosbag2" / name, CFG)
+    assert r.records == 0 and r.rejects.total == 0
+    text = "\n".join(r.notes)
+    for c in channels:
+        assert f"channel {c} [" in text
+    assert "no navigation data" in text
+    if name == "wrong_rmw_test_0.mcap":
+        assert "'wrong_format' not supported" in text
+
+
+# ----------------------------------------------------------------- damage
+def test_not_mcap_and_empty_files_are_clear_errors(tmp_path):
+    (tmp_path / "e.mcap").write_bytes(b"")
+    with pytest.raises(IngestError, match="empty file"):
+        read_mcap(tmp_path / "e.mcap", CFG)
+    (tmp_path / "x.mcap").write_bytes(b"$GPGGA,...\r\n")
+    with pytest.raises(IngestError, match="not an MCAP file"):
+        read_mcap(tmp_path / "x.mcap", CFG)
+
+
+def _message_ends(data: bytes) -> list[int]:
+    """File offsets where each message record ends, walking top-level and (uncompressed)
+    chunk records independently of the reader."""
+    ends = []
+    pos = 8
+    while pos + 9 <= len(data):
+        op, ln = struct.unpack_from("<BQ", data, pos)
+        if op == 5:
+            ends.append(pos + 9 + ln)
+        elif op == 6:
+            clen = struct.unpack_from("<I", data, pos + 9 + 28)[0]
+            assert data[pos + 9 + 32:pos + 9 + 32 + clen] == b""  # uncompressed
+            rstart = pos + 9 + 32 + clen + 8
+            (rlen,) = struct.unpack_from("<Q", data, rstart - 8)
+            q = rstart
+            while q < rstart + rlen:
+                op2, ln2 = struct.unpack_from("<BQ", data, q)
+                if op2 == 5:
+                    ends.append(q + 9 + ln2)
+                q += 9 + ln2
+        elif op in (2, 15):
+            break
+        pos += 9 + ln
+    return ends
+
+
+def _derived_fixture(tmp_path, real_dir, **kw):
+    """Positions from real GGA/RMC sentences (nmea_navsat_driver/nmea.log) written as ROS 2
+    NavSatFix: a derived fixture."""
+    from dracc.ingest.nmea import parse_sentences
+
+    lines = (real_dir / "nmea_navsat_driver" / "nmea.log").read_bytes().splitlines()[:120]
+    t = 1_587_374_742_000_000_000 + np.arange(len(lines), dtype=np.int64) * 250_000_000
+    res = parse_sentences(lines, t, ["GNSS"] * len(lines), "nmea.log", CFG)
+    fr = {"position": res.frames["position"]}
+    assert len(fr["position"]) == 120
+    return write_mcap(fr, {"GNSS": "gnss"}, tmp_path / "derived.mcap", **kw), fr
+
+
+@pytest.mark.parametrize("chunked", [True, False])
+def test_cut_files_recover_every_complete_message(tmp_path, real_dir, chunked):
+    p, fr = _derived_fixture(tmp_path, real_dir, encoding="ros2", compression=None, chunk_size=2500)
+    if not chunked:  # rewrite unchunked, from the first file's messages
+        from mcap.reader import make_reader
+        from mcap.writer import CompressionType, Writer
+
+        q = tmp_path / "unchunked.mcap"
+        with open(p, "rb") as src, open(q, "wb") as dst:
+            rd = make_reader(src)
+            w = Writer(dst, use_chunking=False, compression=CompressionType.NONE)
+            w.start()
+            ids = {}
+            for sch, ch, m in rd.iter_messages():
+                if ch.id not in ids:
+                    sid = w.register_schema(sch.name, sch.encoding, sch.data)
+                    ids[ch.id] = w.register_channel(ch.topic, ch.message_encoding, sid)
+                w.add_message(ids[ch.id], m.log_time, m.data, m.publish_time)
+            w.finish()
+        p = q
+    data = p.read_bytes()
+    ends = np.asarray(_message_ends(data))
+    assert len(ends) == 120
+    whole = read_mcap(p, CFG).frames["position"]
+    cut = tmp_path / "cut.mcap"
+    cuts = np.concatenate([np.linspace(9, len(data) - 1, 41).astype(int), ends[::4] - 1, ends[::4]])
+    for k in np.unique(cuts).tolist():
+        cut.write_bytes(data[:k])
+        r = read_mcap(cut, CFG)  # never raises
+        n_complete = int((ends <= k).sum())
+        got = r.frames.get("position")
+        n_got = 0 if got is None else len(got)
+        assert n_got == n_complete, (k, n_got, n_complete)
+        if n_got:
+            np.testing.assert_array_equal(got["lat_rad"].to_numpy(), whole["lat_rad"].to_numpy()[:n_got])
+        if k < len(data) - 8:
+            assert any("ends at byte" in n or "cut" in n for n in r.notes), (k, r.notes)
+
+
+def test_cut_compressed_files_never_raise_and_keep_whole_chunks(tmp_path, real_dir):
+    p, _ = _derived_fixture(tmp_path, real_dir, encoding="json", compression="zstd", chunk_size=3000)
+    data = p.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    prev = 0
+    for k in np.unique(np.linspace(1, len(data), 60).astype(int)).tolist():
+        cut.write_bytes(data[:k])
+        try:
+            r = read_mcap(cut, CFG)
+        except IngestError as err:  # only a cut inside the 8-byte magic is "not MCAP"
+            assert k < 8, (k, err)
+            continue
+        n = r.records
+        assert n >= prev, k  # a longer prefix never yields fewer records
+        prev = n
+    assert prev == 120
+
+
+def test_garbage_after_valid_records_is_reported(tmp_path, real_dir):
+    p, _ = _derived_fixture(tmp_path, real_dir, encoding="ros2", compression="lz4", chunk_size=4000)
+    data = bytearray(p.read_bytes())
+    ends = []
+    pos = 8
+    while True:  # find the second chunk and overwrite its opcode
+        op, ln = struct.unpack_from("<BQ", data, pos)
+        if op == 6:
+            ends.append(pos)
+            if len(ends) == 2:
+                break
+        pos += 9 + ln
+    data[ends[1]] = 0x00
+    q = tmp_path / "bad.mcap"
+    q.write_bytes(bytes(data))
+    r = read_mcap(q, CFG)
+    assert 0 < r.records < 120
+    assert any("invalid record opcode 0x00" in n for n in r.notes)
+
+
+def test_non_indexed_copy_reads_like_the_indexed_file(tmp_path, real_dir):
+    p, fr = _derived_fixture(tmp_path, real_dir, encoding="ros2", compression="zstd", chunk_size=3000)
+    q = tmp_path / "noindex.mcap"
+    write_mcap(fr, {}, q, encoding="ros2", compression="zstd", chunk_size=3000, indexed=False)
+    a, b = read_mcap(p, CFG), read_mcap(q, CFG)
+    assert_same_frames(a.frames, b.frames, rtol=0)
