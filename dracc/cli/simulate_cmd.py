@@ -16,9 +16,10 @@ from ..atomic import atomic_path, write_text
 from ..errors import ConfigError, DraccError
 from .app import app, err
 
-FORMATS = ("nmea", "csv-long", "csv-wide", "mcap-json", "mcap-ros2", "mcap-nmea")
+FORMATS = ("nmea", "csv-long", "csv-wide", "mcap-json", "mcap-ros2", "mcap-protobuf",
+           "mcap-nmea")
 EXT = {"nmea": "nmea", "csv-long": "csv", "csv-wide": "csv", "mcap-json": "mcap",
-       "mcap-ros2": "mcap", "mcap-nmea": "mcap"}
+       "mcap-ros2": "mcap", "mcap-protobuf": "mcap", "mcap-nmea": "mcap"}
 
 
 def write_log(voyage, path: Path, fmt: str, form: str = "tag", tag_time: str = "s") -> None:
@@ -79,6 +80,12 @@ def simulate_cmd(
     lat_deg: float = typer.Option(54.60, "--lat", help="Start latitude, degrees (north +)."),
     lon_deg: float = typer.Option(18.80, "--lon", help="Start longitude, degrees (east +)."),
     speed_kn: float = typer.Option(12.0, "--speed-kn", help="Speed through the water, knots."),
+    legs: str = typer.Option("", "--legs",
+                             help="Headings steered: 'T_S:DEG,T_S:DEG,...' (seconds from the "
+                                  "start, degrees true); default: generated from the seed."),
+    ins_talkers: str = typer.Option("IN,IN,IN", "--ins-talkers",
+                                    help="Talker IDs of INS1-3, e.g. II,IN,IR (tells them apart "
+                                         "in prefix and bare forms, which carry no TAG source)."),
     ins_error_scale: float = typer.Option(1.0, "--ins-error-scale",
                                           help="Multiply every INS error amplitude."),
     gyro_error_deg: float = typer.Option(0.3, "--gyro-error-deg",
@@ -97,15 +104,19 @@ def simulate_cmd(
                                    help="Rate of truth.csv and errors.csv (0: every sample)."),
     name: str = typer.Option("voyage", "--name", help="Stem of the log file name."),
 ) -> None:
-    """Simulate a voyage with known truth: writes OUT/<name>.<ext>, truth.csv, errors.csv,
-    params.json."""
+    """Simulate a voyage with known truth; write its log, truth.csv, errors.csv, params.json.
+
+    The log is OUT/<name>.nmea (or .csv, .mcap); truth.csv and errors.csv hold the true
+    track and every true sensor error (measured - true) at --truth-hz; params.json the
+    parameters, the source roles and each INS unit's true error RMS.
+    """
     from ..sim.model import SimParams, simulate
 
     if fmt not in FORMATS:
         raise ConfigError(f"--format must be one of {', '.join(FORMATS)}, got {fmt!r}")
     if not (hours > 0 and math.isfinite(hours)):
         raise ConfigError(f"--hours must be positive, got {hours}")
-    common = dict(duration_s=hours * 3600.0, seed=seed, start_utc=start, start_lat_deg=lat_deg,
+    common = dict(legs=parse_legs(legs), ins_talkers=tuple(ins_talkers.split(",")), duration_s=hours * 3600.0, seed=seed, start_utc=start, start_lat_deg=lat_deg,
                   start_lon_deg=lon_deg, speed_kn=speed_kn, compass=compass,
                   compass_hz=compass_hz, log_hz=log_hz, ins_hz=ins_hz, gnss_hz=gnss_hz,
                   aux_hz=aux_hz, variation_deg=variation_deg, current_set_deg=current_set_deg)
@@ -145,3 +156,19 @@ def simulate_cmd(
 def params_dict(p) -> dict:
     """SimParams as JSON-ready data (see :meth:`SimParams.to_dict`)."""
     return p.to_dict()
+
+
+def parse_legs(text: str) -> tuple[tuple[float, float], ...] | None:
+    """``'0:60,3600:150'`` -> ((0.0, 60.0), (3600.0, 150.0)); '' -> None (generated)."""
+    if not text.strip():
+        return None
+    legs = []
+    for item in text.split(","):
+        try:
+            t_s, deg = (float(x) for x in item.split(":"))
+        except ValueError as e:
+            raise ConfigError(f"--legs: {item!r} is not T_S:DEG (e.g. 3600:150)") from e
+        if not (math.isfinite(t_s) and math.isfinite(deg)):
+            raise ConfigError(f"--legs: {item!r} is not finite")
+        legs.append((t_s, deg))
+    return tuple(legs)

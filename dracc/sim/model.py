@@ -117,8 +117,8 @@ DEFAULT_INS = (
     InsErrorParams(),
     InsErrorParams(schuler_n_m=350.0, schuler_e_m=450.0, day_n_m=700.0, day_e_m=1000.0,
                    drift_n_mps=-0.004, drift_e_mps=0.005, gm_m=GM(60.0, 3600.0), white_m=5.0,
-                   heading_bias_deg=-0.05, heading_schuler_deg=0.03, heading_day_deg=0.12,
-                   heading_gm_deg=GM(0.02, 1800.0), heading_white_deg=0.01),
+                   heading_bias_deg=-0.08, heading_schuler_deg=0.04, heading_day_deg=0.15,
+                   heading_gm_deg=GM(0.04, 1800.0), heading_white_deg=0.01),
     InsErrorParams(schuler_n_m=180.0, schuler_e_m=220.0, day_n_m=320.0, day_e_m=400.0,
                    drift_n_mps=-0.002, drift_e_mps=0.0025, gm_m=GM(40.0, 3600.0), white_m=3.0,
                    heading_bias_deg=0.03, heading_schuler_deg=0.015, heading_day_deg=0.06,
@@ -186,6 +186,8 @@ class SimParams:
     # three INS
     ins: tuple[InsErrorParams, InsErrorParams, InsErrorParams] = DEFAULT_INS
     ins_velocity_white_kn: float = 0.02
+    #: talker IDs of INS1..INS3; e.g. ("II", "IN", "IR") keeps them apart without TAG blocks
+    ins_talkers: tuple[str, str, str] = ("IN", "IN", "IN")
     # GNSS
     gnss_noise_m: GM = GM(1.5, 60.0)
     gnss_white_m: float = 0.3
@@ -435,6 +437,9 @@ def _check(p: SimParams) -> float:
         raise ConfigError(f"compass must be gyro, magnetic or both, got {p.compass!r}")
     if not -89.0 < p.start_lat_deg < 89.0:
         raise ConfigError(f"start latitude {p.start_lat_deg} deg is outside (-89, 89)")
+    if len(p.ins_talkers) != 3 or not all(
+            len(t) == 2 and t.isascii() and t.isalnum() and t.isupper() for t in p.ins_talkers):
+        raise ConfigError(f"three two-letter INS talker IDs are needed, got {p.ins_talkers!r}")
     if len(p.ins) != 3:
         raise ConfigError(f"three INS error models are needed, got {len(p.ins)}")
     rates = {"compass_hz": p.compass_hz, "log_hz": p.log_hz, "ins_hz": p.ins_hz,
@@ -595,11 +600,13 @@ def simulate(params: SimParams) -> SimVoyage:
     lines = {(s[0], s[1]): line_all[offs[i]:offs[i + 1]] for i, s in enumerate(plan)}
 
     parts: dict[str, list[dict]] = {kind: [] for kind in KINDS}
+    talkers = {k: v[1] for k, v in SOURCES.items()}
+    talkers.update({f"INS{j}": t for j, t in enumerate(p.ins_talkers, start=1)})
 
     def rec(kind: str, src: str, sent: str, kidx: np.ndarray, **cols) -> None:
         m = len(kidx)
         d = {"time_ns": time_ns[kidx], "source": np.full(m, src, dtype=object),
-             "talker": np.full(m, SOURCES[src][1], dtype=object),
+             "talker": np.full(m, talkers[src], dtype=object),
              "sentence": np.full(m, sent, dtype=object), "line": lines[(src, sent)]}
         d.update(cols)
         parts[kind].append(d)

@@ -398,24 +398,35 @@ def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | No
     return tables
 
 
+def _arrays(tb: pd.DataFrame) -> dict[str, np.ndarray]:
+    """A sentence table as plain numpy columns (source and talker as ASCII bytes)."""
+    out = {}
+    for c in tb.columns:
+        if c in ("source", "talker"):
+            out[c] = tb[c].astype(str).to_numpy(dtype=object).astype("S")
+        elif c in ("time_ns", "line", "sub", "quality"):
+            out[c] = tb[c].to_numpy(dtype=np.int64)
+        else:
+            out[c] = tb[c].to_numpy(dtype=float, na_value=np.nan)
+    return out
+
+
 def _order(tables):
     """Global time order: (time_ns, line, sub, type order); returns (type_id, row) per line."""
-    t = np.concatenate([tb["time_ns"].to_numpy(np.int64) for _, tb in tables])
-    ln = np.concatenate([tb["line"].to_numpy(np.int64) for _, tb in tables])
-    sub = np.concatenate([tb["sub"].to_numpy(np.int64) for _, tb in tables])
-    tid = np.repeat(np.arange(len(tables)), [len(tb) for _, tb in tables])
-    row = np.concatenate([np.arange(len(tb)) for _, tb in tables])
+    t = np.concatenate([tb["time_ns"] for _, tb in tables])
+    ln = np.concatenate([tb["line"] for _, tb in tables])
+    sub = np.concatenate([tb["sub"] for _, tb in tables])
+    sizes = [len(tb["time_ns"]) for _, tb in tables]
+    tid = np.repeat(np.arange(len(tables)), sizes)
+    row = np.concatenate([np.arange(k) for k in sizes])
     o = np.lexsort((tid, sub, ln, t))
     return tid[o], row[o], t[o]
 
 
-def _format_block(typ: str, tb: pd.DataFrame, form: str, tag_time: str):
-    """Byte matrix and mask of complete lines (without terminator) for the rows of ``tb``."""
-    n = len(tb)
-    d = {c: tb[c].to_numpy() for c in tb.columns}
-    for c in _NUMERIC[typ]:
-        d[c] = np.asarray(d[c], float)
-    d["time_ns"] = np.asarray(d["time_ns"], np.int64)
+def _format_block(typ: str, d: dict[str, np.ndarray], form: str, tag_time: str,
+                  newline: bytes):
+    """Byte matrix and mask of complete lines (with terminator) for the rows of ``d``."""
+    n = len(d["time_ns"])
     head = _Row(n)
     if form == "tag":
         tag = _Row(n).lit(b"s:").strs(d["source"]).lit(b",c:")
@@ -432,7 +443,7 @@ def _format_block(typ: str, tb: pd.DataFrame, form: str, tag_time: str):
     _LAYOUT[typ](body, d)
     bm, bk = body.build()
     head.lit(b"$").add(bm, bk).lit(b"*").add(_hex2(checksum(bm, bk)), np.ones((n, 2), bool))
-    return head.build()
+    return head.lit(newline).build()
 
 
 def _width(v: np.ndarray) -> int:
@@ -449,37 +460,32 @@ def _check_form(form: str, tag_time: str) -> None:
 def iter_blocks(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None = None,
                 form: str = "bare", tag_time: str = "s", newline: bytes = b"\r\n",
                 chunk_rows: int = CHUNK_ROWS):
-    """Yield ``(time_ns, source, bytes)`` blocks of complete, time-ordered lines."""
+    """Yield ``(time_ns, source, bytes)`` blocks of complete, time-ordered lines
+    (``source`` as an ASCII bytes array)."""
     _check_form(form, tag_time)
-    tables = _sentence_tables(frames, roles)
+    tables = [(typ, _arrays(tb)) for typ, tb in _sentence_tables(frames, roles)]
     if not tables:
         return
     tid, row, t = _order(tables)
-    nl = np.frombuffer(newline, np.uint8)
     for start in range(0, len(tid), chunk_rows):
         ctid, crow = tid[start:start + chunk_rows], row[start:start + chunk_rows]
         m = len(ctid)
         parts = []
-        src = np.empty(m, dtype=object)
+        src = np.empty(m, dtype="S32")
         for i in np.unique(ctid):
             sel = np.flatnonzero(ctid == i)
             typ, tb = tables[i]
-            sub = tb.iloc[crow[sel]]
-            mat, mask = _format_block(typ, sub, form, tag_time)
+            sub = {c: v[crow[sel]] for c, v in tb.items()}
+            mat, mask = _format_block(typ, sub, form, tag_time, newline)
             parts.append((sel, mat, mask))
-            src[sel] = sub["source"].to_numpy(object)
-        width = max(p[1].shape[1] for p in parts) + len(nl)
+            src[sel] = sub["source"]
+        width = max(p[1].shape[1] for p in parts)
         big = np.zeros((m, width), np.uint8)
         keep = np.zeros((m, width), bool)
         for sel, mat, mask in parts:
             w = mat.shape[1]
             big[sel, :w] = mat
             keep[sel, :w] = mask
-        # the terminator goes right after each row's last kept byte
-        last = width - len(nl) - np.argmax(keep[:, ::-1][:, len(nl):], axis=1)
-        for j in range(len(nl)):
-            big[np.arange(m), last + j] = nl[j]
-            keep[np.arange(m), last + j] = True
         yield t[start:start + m], src, big[keep].tobytes()
 
 
@@ -493,7 +499,7 @@ def frames_to_lines(frames: dict[str, pd.DataFrame], roles: dict[str, str] | Non
         lines.extend(blob.split(b"\n")[:-1])
     if not ts:
         return np.zeros(0, np.int64), np.zeros(0, dtype=str), []
-    return np.concatenate(ts), np.concatenate(srcs).astype(str), lines
+    return np.concatenate(ts), np.concatenate(srcs).astype("U"), lines
 
 
 def write_nmea(voyage_or_frames, path: str | Path, form: str = "tag", tag_time: str = "s",
