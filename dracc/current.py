@@ -48,7 +48,7 @@ import numpy as np
 
 from .errors import InsufficientDataError
 from .fusion import Ellipse, Observation, PositionFix, error_ellipse
-from .geodesy import add_offset_ne, offset_ne_m, wrap_2pi
+from .geodesy import add_offset_ne, k_lambda, k_phi, offset_ne_m, wrap_2pi, wrap_pi
 from .units import DEG_RAD, KN_MPS
 
 
@@ -111,8 +111,8 @@ def transition(dt_s, tau_s: float):
     return -tau_s * np.expm1(-x), np.exp(-x)
 
 
-def process_noise(dt_s, course_rad, speed_mps, model: CurrentModel):
-    """Q (..., 4, 4) over dt for state (p_N, p_E, c_N, c_E) (metres, m/s); see module doc."""
+def _current_noise(dt_s, model: CurrentModel):
+    """(q_pp, q_pc, q_cc) of the integrated Gauss-Markov current over dt (module doc)."""
     dt = np.asarray(dt_s, float)
     tau, s2 = model.current_tau_s, model.current_sigma_mps**2
     x = dt / tau
@@ -124,14 +124,27 @@ def process_noise(dt_s, course_rad, speed_mps, model: CurrentModel):
     bracket = np.where(x < 1e-3, x**3 / 3.0 - x**4 / 4.0 + 7.0 * x**5 / 60.0,
                        x - 2.0 * one_m_phi + 0.5 * one_m_phi2)
     q_pp = 2.0 * s2 * tau**2 * bracket
-    # water-velocity noise as white noise of PSD 2 sigma^2 tau, along and across track
+    return q_pp, q_pc, q_cc
+
+
+def _water_noise(dt_s, course_rad, speed_mps, model: CurrentModel):
+    """(v_nn, v_ee, v_ne): position noise from the water velocity over dt, white noise of
+    PSD 2 sigma^2 tau along track (log) and across track (V sigma_C, compass)."""
+    dt = np.asarray(dt_s, float)
     psd_along = 2.0 * model.speed_sigma_mps**2 * model.speed_tau_s
     psd_across = 2.0 * (np.asarray(speed_mps, float) * model.heading_sigma_rad) ** 2 * model.heading_tau_s
     c, s = np.cos(course_rad), np.sin(course_rad)
     v_nn = (psd_along * c**2 + psd_across * s**2) * dt  # (B26) in metres, PSD form
     v_ee = (psd_along * s**2 + psd_across * c**2) * dt  # (B27)
     v_ne = (psd_along - psd_across) * s * c * dt  # (B28), corrected: common factor
-    shape = np.broadcast_shapes(np.shape(dt), np.shape(v_nn))
+    return v_nn, v_ee, v_ne
+
+
+def process_noise(dt_s, course_rad, speed_mps, model: CurrentModel):
+    """Q (..., 4, 4) over dt for state (p_N, p_E, c_N, c_E) (metres, m/s); see module doc."""
+    q_pp, q_pc, q_cc = _current_noise(dt_s, model)
+    v_nn, v_ee, v_ne = _water_noise(dt_s, course_rad, speed_mps, model)
+    shape = np.broadcast_shapes(np.shape(q_pp), np.shape(v_nn))
     q = np.zeros(shape + (4, 4))
     q[..., 0, 0] = q_pp + v_nn
     q[..., 1, 1] = q_pp + v_ee
@@ -158,16 +171,50 @@ class _State:
     p: np.ndarray  # (R, 4, 4)
 
 
-def _predict(st: _State, dt: float, course, speed, model: CurrentModel) -> None:
-    if dt == 0.0:
-        return
-    f_pc, phi = transition(dt, model.current_tau_s)
-    d_n = speed * np.cos(course) * dt + f_pc * st.c[:, 0]  # (B7), (B20): water + current
-    d_e = speed * np.sin(course) * dt + f_pc * st.c[:, 1]  # (B8), corrected (B10), (B21)
-    st.lat, st.lon = add_offset_ne(st.lat, st.lon, d_n, d_e)  # (B16)-(B22) via k_phi, k_lambda
-    st.c = st.c * phi
-    f = _transition_matrix(dt, model.current_tau_s)
-    st.p = f @ st.p @ f.T + process_noise(dt, course, speed, model)
+def _propagate(st: _State, t_from: float, targets, t_s, course, speed, model: CurrentModel):
+    """Predict from t_from to each of ``targets`` (m,), ascending, >= t_from, no update between.
+
+    Vectorised over the segment: with s = target - t_from, F(s) and the current part of Q
+    are exact for the whole span (the discretisation is a semigroup); the water-velocity
+    noise leaves F unchanged, so its contribution is a cumulative sum.  The velocity of
+    epoch k is held over [t_k, t_k+1) ((B20)-(B22)).  Positions: (B16)-(B22) with k_phi,
+    k_lambda at each step's mid latitude.  Returns (lat, lon, c, P) at the targets,
+    shapes (R, m), (R, m), (R, m, 2), (R, m, 4, 4), and leaves ``st`` at the last target.
+    """
+    targets = np.asarray(targets, float)
+    pts = np.concatenate([[t_from], targets])
+    dts = np.diff(pts)  # (m,)
+    k = np.clip(np.searchsorted(t_s, pts[:-1], side="right") - 1, 0, t_s.size - 1)
+    crs, spd = course[:, k], speed[:, k]  # (R, m)
+    f_pc, phi = transition(targets - t_from, model.current_tau_s)  # (m,)
+    step_pc = np.diff(np.concatenate([[0.0], f_pc]))  # increments of tau (1 - phi(s))
+    d_n = spd * np.cos(crs) * dts + step_pc * st.c[:, :1]  # (B7), (B20): water + current
+    d_e = spd * np.sin(crs) * dts + step_pc * st.c[:, 1:]  # (B8), corrected (B10), (B21)
+    lat0 = st.lat[:, None]
+    lat = lat0 + np.cumsum(d_n, axis=1) * k_phi(lat0)
+    for _ in range(2):  # mid-latitude k_phi, refined twice (B16, B18)
+        prev = np.concatenate([lat0, lat[:, :-1]], axis=1)
+        lat = lat0 + np.cumsum(d_n * k_phi(0.5 * (prev + lat)), axis=1)
+    prev = np.concatenate([lat0, lat[:, :-1]], axis=1)
+    lon = wrap_pi(st.lon[:, None] + np.cumsum(d_e * k_lambda(0.5 * (prev + lat)), axis=1))  # (B17, B19)
+    c = phi[None, :, None] * st.c[:, None, :]
+    f = _transition_matrix(targets - t_from, model.current_tau_s)  # (m, 4, 4)
+    p = f @ st.p[:, None] @ np.swapaxes(f, -1, -2)  # (R, m, 4, 4)
+    q_pp, q_pc, q_cc = _current_noise(targets - t_from, model)
+    p[..., 0, 0] += q_pp
+    p[..., 1, 1] += q_pp
+    p[..., 2, 2] += q_cc
+    p[..., 3, 3] += q_cc
+    for i, j in ((0, 2), (2, 0), (1, 3), (3, 1)):
+        p[..., i, j] += q_pc
+    v_nn, v_ee, v_ne = (np.cumsum(v, axis=1) for v in _water_noise(dts, crs, spd, model))
+    p[..., 0, 0] += v_nn
+    p[..., 1, 1] += v_ee
+    p[..., 0, 1] += v_ne
+    p[..., 1, 0] += v_ne
+    if targets.size:
+        st.lat, st.lon, st.c, st.p = lat[:, -1].copy(), lon[:, -1].copy(), c[:, -1].copy(), p[:, -1].copy()
+    return lat, lon, c, p
 
 
 @dataclass(frozen=True)
@@ -340,15 +387,15 @@ def estimate_current(
         updates.append(_update(st, fixes[j][1], fix_times[j]))
         j += 1
     lat[:, 0], lon[:, 0], cur[:, 0], cov[:, 0] = st.lat, st.lon, st.c, st.p
-    for k in range(n - 1):
-        now = t[k]
-        while j < len(fixes) and fix_times[j] <= t[k + 1]:
-            _predict(st, fix_times[j] - now, course[:, k], speed[:, k], model)
-            updates.append(_update(st, fixes[j][1], fix_times[j]))
-            now = fix_times[j]
-            j += 1
-        _predict(st, t[k + 1] - now, course[:, k], speed[:, k], model)
-        lat[:, k + 1], lon[:, k + 1], cur[:, k + 1], cov[:, k + 1] = st.lat, st.lon, st.c, st.p
+    now, e = t[0], 1  # state time; next epoch to record
+    for tf, obs in zip(fix_times[j:], [f[1] for f in fixes[j:]], strict=True):
+        end = max(int(np.searchsorted(t, tf, side="left")), e)  # epochs before the fix: priors
+        seg = _propagate(st, now, np.append(t[e:end], tf), t, course, speed, model)
+        lat[:, e:end], lon[:, e:end], cur[:, e:end], cov[:, e:end] = (a[:, :-1] for a in seg)
+        updates.append(_update(st, obs, tf))
+        now, e = tf, end
+    seg = _propagate(st, now, t[e:], t, course, speed, model)  # epochs at or after the last fix
+    lat[:, e:], lon[:, e:], cur[:, e:], cov[:, e:] = seg
     if not batched:
         lat, lon, cur, cov = lat[0], lon[0], cur[0], cov[0]
         updates = [

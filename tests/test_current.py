@@ -103,6 +103,29 @@ def test_from_config_converts_units():
     assert m.speed_sigma_mps == pytest.approx(0.1 * 0.514444, rel=1e-5)
 
 
+def test_fix_between_epochs_equals_the_fix_time_inserted_as_an_epoch():
+    """A fix at 100 s between epochs 60 and 120 is applied at its own time: the same as
+    making 100 s an epoch that holds the velocity of epoch 60."""
+    rng = np.random.default_rng(1)
+    t = np.arange(0.0, 1200.0 + 1, 60.0)
+    course, speed = rng.uniform(0, 2 * np.pi, t.size), rng.uniform(0, 6, t.size)
+    mark = add_offset_ne(LAT0, LON0, 4000.0, 3000.0)
+    fixes = [(100.0, RangeLOP(float(mark[0]), float(mark[1]), 4800.0, 10.0)),
+             (100.0, PositionFix.from_sigma(*add_offset_ne(LAT0, LON0, 250.0, 0.0), 15.0)),
+             (600.0, PositionFix.from_sigma(*add_offset_ne(LAT0, LON0, 900.0, 600.0), 15.0))]
+    start = PositionFix.from_sigma(LAT0, LON0, 20.0)
+    a = estimate_current(t, course, speed, start, fixes)
+    ti = np.insert(t, 2, 100.0)
+    b = estimate_current(ti, np.insert(course, 2, course[1]), np.insert(speed, 2, speed[1]), start, fixes)
+    keep = np.delete(np.arange(ti.size), 2)
+    assert np.allclose(offset_ne_m(a.lat_rad, a.lon_rad, b.lat_rad[keep], b.lon_rad[keep]), 0.0, atol=1e-6)
+    assert np.allclose(a.cov, b.cov[keep], rtol=1e-9, atol=1e-12)
+    assert [u.kinds for u in a.updates] == [("range",), ("fix_north", "fix_east"), ("fix_north", "fix_east")]
+    # the epoch at 600 s shows the state after the fix at 600 s
+    assert np.allclose(a.cov[10, :2, :2], a.updates[2].cov_after_m2)
+    assert not np.allclose(a.cov[9, :2, :2], a.updates[1].cov_after_m2)  # grown since 100 s
+
+
 # -------------------------------------------------------------- known geometry
 
 
