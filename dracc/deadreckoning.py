@@ -565,11 +565,12 @@ def parse_reset_s(text: str | float) -> float:
 
 @dataclass(frozen=True)
 class Gap:
-    """An interval without usable heading or speed between two valid samples."""
+    """An interval between two valid samples of one channel longer than twice its usual spacing."""
 
     start_s: float  #: time of the last valid sample before the gap
     end_s: float  #: time of the next valid sample (inf: none before the end of the data)
     bridged: bool  #: True: held over (<= max_gap_s); False: the track breaks here
+    channel: str = "heading"  #: 'heading' or 'speed' (the log, both components)
 
     @property
     def duration_s(self) -> float:
@@ -632,6 +633,35 @@ def _as_fixes(fixes, fix_sigma_m):
     return ft[ok][order], flat[ok][order], flon[ok][order], fs[ok][order]
 
 
+def _hold_channel(t, ok, max_gap_s, channel):
+    """Sample-and-hold for one channel: (index of the value held at each sample, usable
+    steps (n-1,), gaps).  Step k (t_k -> t_k+1) is usable when the interval between the
+    valid samples around it is at most ``max_gap_s``; intervals longer than twice the
+    channel's typical spacing are reported as gaps (bridged or breaking)."""
+    n = t.size
+    idx = np.arange(n)
+    last = np.maximum.accumulate(np.where(ok, idx, -1))
+    nxt = np.minimum.accumulate(np.where(ok, idx, n)[::-1])[::-1]
+    lv = last[:-1]
+    lv_time = np.where(lv >= 0, t[np.maximum(lv, 0)], -np.inf)
+    # end of the interval: the next valid sample, or (trailing invalid samples) the step's end
+    end_time = np.where(nxt[1:] >= n, t[1:], t[np.minimum(nxt[1:], n - 1)])
+    steps_ok = (lv >= 0) & (end_time - lv_time <= max_gap_s)
+    vidx = np.flatnonzero(ok)
+    tv = t[vidx]
+    dtv = np.diff(tv)
+    gaps = []
+    if dtv.size:
+        typical = float(np.median(dtv))
+        for j in np.flatnonzero(dtv > 2.0 * typical):
+            gaps.append(Gap(float(tv[j]), float(tv[j + 1]), bool(dtv[j] <= max_gap_s), channel))
+    if vidx.size and vidx[-1] < n - 1 and t[-1] - tv[-1] > max_gap_s:
+        gaps.append(Gap(float(tv[-1]), math.inf, False, channel))
+    if vidx.size and vidx[0] > 0:  # nothing to hold before the first value
+        gaps.insert(0, Gap(float(t[0]), float(tv[0]), False, channel))
+    return np.maximum(last, 0), steps_ok, gaps
+
+
 def dead_reckon(
     time_s,
     heading_rad,
@@ -667,9 +697,12 @@ def dead_reckon(
     ``errors.reset``).  ``errors`` (default DeadReckoningConfig()) gives the error sources,
     ``max_gap_s`` and ``epoch_interval_s`` unless overridden.
 
-    Gaps: a value missing for at most ``max_gap_s`` (between two valid samples) is bridged
-    by holding the last valid heading and speed, and reported; a longer gap breaks the
-    track (positions NaN until the next fix).  Raises InsufficientDataError when there is
+    Heading and speed are held independently, each from its own last valid sample (as
+    (B20) holds the velocity), so a union time base of a 10 Hz compass and a 1 Hz log
+    with NaN where a channel has no sample is the expected input.  A channel missing for
+    at most ``max_gap_s`` (between two of its valid samples) is bridged; a longer gap
+    breaks the track (positions NaN until the next fix).  Intervals longer than twice a
+    channel's usual spacing are reported in ``gaps``.  Raises InsufficientDataError when there is
     no heading at all, no speed at all, or no start position.
     """
     cfg = errors if errors is not None else DeadReckoningConfig()
@@ -702,44 +735,31 @@ def dead_reckon(
     if np.any(np.diff(t) <= 0) or not np.all(np.isfinite(t)):
         raise ValueError("time_s must be finite and strictly increasing")
 
-    if transverse_mps is not None:
-        vy = np.asarray(transverse_mps, float)
-        course = wrap_2pi(hdg + leeway_from_log_rad(spd, vy))  # (B3)/(B2) + z from (B5)/(B6)
-        speed = speed_from_components_mps(spd, vy)  # (B1)
-    else:
-        course = wrap_2pi(hdg)
-        speed = spd
-    valid = np.isfinite(course) & np.isfinite(speed)
-    n_invalid = int(n - valid.sum())
+    vy = None if transverse_mps is None else np.asarray(transverse_mps, float)
+    heading_ok = np.isfinite(hdg)
+    speed_ok = np.isfinite(spd) if vy is None else np.isfinite(spd) & np.isfinite(vy)
+    n_invalid = int(n - np.sum(heading_ok & speed_ok))
 
-    # --- gaps: hold the last valid value up to max_gap_s, break beyond -------------------
-    idx = np.arange(n)
-    last_valid = np.maximum.accumulate(np.where(valid, idx, -1))
-    next_valid = np.minimum.accumulate(np.where(valid, idx, n)[::-1])[::-1]
-    vidx = np.flatnonzero(valid)
+    # --- gaps: each channel holds its last valid value up to max_gap_s, breaks beyond ----
     gaps: list[Gap] = []
-    # intervals between consecutive valid samples
-    tv = t[vidx]
-    dtv = np.diff(tv)
-    typical = float(np.median(dtv)) if dtv.size else 0.0
-    holes = np.flatnonzero((vidx[1:] - vidx[:-1] > 1) | (dtv > max(2.0 * typical, 0.0)))
-    for j in holes:
-        gaps.append(Gap(float(tv[j]), float(tv[j + 1]), bool(dtv[j] <= max_gap)))
-    if vidx.size and vidx[-1] < n - 1:  # trailing invalid samples
-        gaps.append(Gap(float(t[vidx[-1]]), math.inf, bool(t[-1] - t[vidx[-1]] <= max_gap)))
-    if vidx.size and vidx[0] > 0:  # leading invalid samples: nothing to hold
-        gaps.insert(0, Gap(float(t[0]), float(t[vidx[0]]), False))
-    # step k (t_k -> t_k+1) is usable if it lies in a bridged interval of valid data
-    lv = last_valid[:-1]
-    nv_time = np.where(next_valid[1:] < n, t[np.minimum(next_valid[1:], n - 1)], np.inf)
-    lv_time = np.where(lv >= 0, t[np.maximum(lv, 0)], -np.inf)
-    # gap end: the next valid sample, or (trailing invalid samples) the step's own end
-    span = np.where(next_valid[1:] >= n, t[1:], nv_time)
-    step_ok = (lv >= 0) & (span - lv_time <= max_gap)
-    # fill held values
-    src = np.maximum(last_valid, 0)
-    course_f = course[src]
-    speed_f = speed[src]
+    step_ok = np.ones(n - 1, dtype=bool)
+    held = []
+    for channel, ok in (("heading", heading_ok), ("speed", speed_ok)):
+        src, ok_steps, ch_gaps = _hold_channel(t, ok, max_gap, channel)
+        step_ok &= ok_steps
+        held.append(src)
+        gaps.extend(ch_gaps)
+    gaps.sort(key=lambda g: (g.start_s, g.channel))
+    src_h, src_v = held
+    if vy is not None:
+        # (B1) speed and (B5)/(B6) leeway angle from the log's two components
+        speed_f = speed_from_components_mps(spd[src_v], vy[src_v])  # (B1)
+        course_f = wrap_2pi(hdg[src_h] + leeway_from_log_rad(spd[src_v], vy[src_v]))  # (B2)/(B3) + z
+    else:
+        speed_f = spd[src_v]
+        course_f = wrap_2pi(hdg[src_h])
+    valid = heading_ok & speed_ok
+    next_valid = np.minimum.accumulate(np.where(valid, np.arange(n), n)[::-1])[::-1]
 
     # --- velocities over ground ---------------------------------------------------------
     if mode == "water":

@@ -473,3 +473,44 @@ def test_negative_sigma_in_config_is_a_config_error():
     cfg = DeadReckoningConfig(log_noise_kn=ErrorSource(-0.1, 10.0))
     with pytest.raises(ConfigError, match="log_noise_kn"):
         error_processes(cfg)
+
+
+def test_union_time_base_holds_each_channel_independently():
+    """10 Hz compass and 1 Hz log on one union time base (NaN where a channel has no
+    sample): each value is held until its next sample, nothing is reported as a gap."""
+    t = np.arange(0.0, 600.0, 0.1)
+    h = 0.4 + 0.3 * np.sin(t / 60.0)
+    v_full = 5.0 + np.floor(t) * 0.001  # the log's value changes once a second
+    v = np.where(np.isclose(t % 1.0, 0.0) | np.isclose(t % 1.0, 1.0), v_full, np.nan)
+    tr = dead_reckon(t, h, v, lat0_rad=0.2, lon0_rad=0.3)
+    ref = dead_reckon(t, h, v_full, lat0_rad=0.2, lon0_rad=0.3)
+    assert tr.gaps == () and tr.n_legs == 1
+    np.testing.assert_allclose(tr.lat_rad, ref.lat_rad, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(tr.P_m2, ref.P_m2, rtol=1e-12)
+
+
+def test_gap_names_its_channel():
+    t = np.arange(0.0, 100.0)
+    v = np.ones(t.size)
+    v[40:45] = np.nan
+    tr = dead_reckon(t, np.zeros(t.size), v, lat0_rad=0.0, lon0_rad=0.0)
+    assert [(g.channel, g.bridged) for g in tr.gaps] == [("speed", True)]
+
+
+def test_real_log_without_heading_says_so(real_dir):
+    """signalk-server/plaka.log: VHW speed but every HDT/HDM heading field is empty."""
+    path = real_dir / "signalk-server" / "plaka.log"
+    if not path.exists():
+        pytest.skip("plaka.log not present")
+    heading, speed = [], []
+    for line in path.read_text(errors="replace").splitlines()[:20000]:
+        f = line.split("*")[0].split(",")
+        if f[0] in ("$IIHDT", "$IIHDM"):
+            heading.append(float(f[1]) * D if f[1] else np.nan)
+        elif f[0] == "$IIVHW":
+            speed.append(float(f[5]) * 1852 / 3600 if f[5] else np.nan)
+    n = min(len(heading), len(speed))
+    assert n > 100 and np.isfinite(speed[:n]).any()
+    with pytest.raises(InsufficientDataError, match="no heading"):
+        dead_reckon(np.arange(float(n)), np.array(heading[:n]), np.array(speed[:n]),
+                    lat0_rad=0.6, lon0_rad=0.4)
