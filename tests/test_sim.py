@@ -166,7 +166,9 @@ def test_legs_turn_at_the_given_rate():
 
 
 def test_generated_legs_are_explicit():
-    v = simulate(SimParams(duration_s=12 * 3600.0, compass_hz=1.0, seed=2))
+    r = 1 / 60.0
+    v = simulate(SimParams(duration_s=12 * 3600.0, compass_hz=r, log_hz=r, ins_hz=r, gnss_hz=r,
+                           aux_hz=r, seed=2))
     assert v.params.legs is not None and len(v.params.legs) >= 3
     assert v.params.legs[0] == (0.0, 60.0)
 
@@ -290,7 +292,9 @@ def test_ins_velocity_error_is_position_error_rate():
 
 
 def test_unit_rms_matches_errors_and_ins2_is_worst():
-    v = simulate(SimParams(duration_s=24 * 3600.0, compass_hz=1.0, seed=11))
+    r = 0.1
+    v = simulate(SimParams(duration_s=24 * 3600.0, compass_hz=r, log_hz=r, ins_hz=r, gnss_hz=r,
+                           aux_hz=r, seed=11))
     e = v.errors
     for j in (1, 2, 3):
         r = v.unit_rms[f"ins{j}"]

@@ -255,3 +255,26 @@ def test_cli_rejects_bad_options(tmp_path):
     assert _run("simulate", "--hours", "1", "--compass-hz", "3", "--log-hz", "2",
                 "--out", tmp_path) != 0
     assert not any(tmp_path.iterdir())
+
+
+def test_dracc_ingest_reads_back_the_frames(tmp_path):
+    """The contract: ``frames`` is what a perfect parser of the written log returns.  The
+    project's own NMEA ingest reads the TAG form (c: in ms) back to the same frames."""
+    ingest = pytest.importorskip("dracc.ingest")
+    from dracc.config import IngestConfig
+
+    v = simulate(SimParams(duration_s=120.0, compass="both", compass_hz=2.0, seed=3))
+    p = tmp_path / "rt.nmea"
+    write_nmea(v, p, form="tag", tag_time="ms")
+    got = ingest.read_file(p, IngestConfig())
+    assert got.rejects.total == 0
+    for kind, want in v.frames.items():
+        have = got.frames[kind].sort_values("line").reset_index(drop=True)
+        want = want.sort_values("line").reset_index(drop=True)
+        assert len(have) == len(want), kind
+        for c in want.columns:
+            if c in ("source", "talker", "sentence", "reference"):
+                assert (have[c].astype(str).to_numpy() == want[c].astype(str).to_numpy()).all()
+            else:
+                np.testing.assert_allclose(have[c].to_numpy(float), want[c].to_numpy(float),
+                                           rtol=0, atol=1e-12, err_msg=f"{kind}.{c}")
