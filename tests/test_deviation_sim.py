@@ -223,3 +223,30 @@ def test_to_dict_validates_against_the_report_schema():
         d["reference_source"] = None
         errors = [f"{list(e.path)}: {e.message}" for e in validator.iter_errors(d)]
         assert errors == []
+
+
+def test_reference_rms_matches_the_project_simulators_truth():
+    # dracc.sim (another module, its own error model: Schuler, 24 h, drift, Gauss-Markov,
+    # white; unequal units) with its canonical frames as a perfect parser returns them:
+    # the Table 1 reference RMS against GNSS matches the simulator's own per-unit RMS.
+    model = pytest.importorskip("dracc.sim.model")
+    from dracc.deviation import unit_series_from_frames
+
+    sim = model.simulate(model.SimParams(duration_s=3 * DAY_S, seed=3, compass_hz=0.1,
+                                         log_hz=0.1, ins_hz=0.1, gnss_hz=0.1, aux_hz=0.0))
+
+    def unit(role):
+        keys = [k for k, r in sim.roles.items() if r == role]
+        pos, hdg = sim.frames["position"], sim.frames["heading"]
+        return unit_series_from_frames(pos[pos["source"].isin(keys)], hdg[hdg["source"].isin(keys)])
+
+    units = {r: unit(r) for r in ("ins1", "ins2", "ins3")}
+    res = analyse_deviations(units, DeviationConfig(), reference=unit("gnss"))
+    assert len(res.time_ns) == 3 * 24 + 1
+    errors_ns = sim.errors["time_ns"].to_numpy().astype(float)
+    for u in units:
+        for c, col in (("lat", f"{u}_north_m"), ("lon", f"{u}_east_m")):
+            r = res.whole.units[u].reference[c]
+            at_instants = np.interp(res.time_ns.astype(float), errors_ns, sim.errors[col].to_numpy())
+            assert r.rmse == pytest.approx(math.sqrt(np.mean(at_instants**2)), rel=0.005), (u, c)
+            assert r.rmse == pytest.approx(sim.unit_rms[u][f"{c}_m"], rel=0.02), (u, c)
