@@ -450,3 +450,14 @@ def test_arc_minutes_against_geographiclib():
     lat = d["units"]["ins1"]["lat"]
     assert lat["m_u_arcmin"] == pytest.approx(lat["m_u"] / north_m, rel=1e-4)
     assert "lat_arcmin" not in analyse_deviations(units).to_dict()["samples"][0]["ins1"]
+
+
+def test_k_hm_upper_bound_covers_sigma_at_its_confidence():
+    # (K8) K_hm on independent normal samples (sigma = 1): the bound K_hm * m exceeds sigma
+    # in `confidence` of the runs, m = sqrt(mean x^2) from N samples (binomial bound, 3 sd)
+    rng = np.random.default_rng(4)
+    runs = 20_000
+    for n, conf in ((5, 0.95), (40, 0.99)):
+        m = np.sqrt(np.mean(rng.normal(0.0, 1.0, (runs, n)) ** 2, axis=1))
+        share = np.mean(S.k_hm(conf, n) * m >= 1.0)
+        assert abs(share - conf) < 3 * math.sqrt(conf * (1 - conf) / runs), (n, share)
