@@ -338,7 +338,7 @@ def _run_dask(todo, cfg, scheduler, timeout_s, analyser, done) -> None:
                              f"(waited {timeout_s:g} s)") from err
         futures = client.map(analyser, [t.path for t in todo], cfg=cfg, pure=False)
         by_key = {f.key: t for f, t in zip(futures, todo, strict=True)}
-        for fut in as_completed(futures):
+        for fut in as_completed(futures, loop=client.loop):
             task = by_key[fut.key]
             try:
                 result = fut.result()

@@ -145,21 +145,21 @@ def fleet_html(res: FleetResult) -> str:
 
 
 def print_table(res: FleetResult) -> None:
+    """The latest figures per vessel, unit and channel, compact enough for 80 columns."""
     lt = latest(res.table)
-    t = Table(title="fleet: latest log per vessel, unit and channel")
-    for col in ("vessel", "unit", "chan", "days", "logs", "m_y", "kurt", "limit", "a priori",
-                "verdict", "DR in 2M", "compass", "log scale"):
-        t.add_column(col, justify="left" if col in ("vessel", "unit", "chan", "days", "verdict")
-                     else "right")
+    t = Table(title="fleet: latest log per vessel, unit and channel", padding=(0, 1))
+    for col in ("vessel", "unit", "m_y", "kurt", "limit", "a priori", "verdict", "DR 2M",
+                "compass", "log"):
+        left = col in ("vessel", "unit", "verdict")
+        t.add_column(col, justify="left" if left else "right", no_wrap=col in ("vessel", "unit"),
+                     overflow="fold")
     for _, r in lt.iterrows():
-        d = 3 if r["measure"] == "deg" else 1
+        d = 3 if r["measure"] == "deg" else 0
         c = r["dr_containment_2m"]
-        t.add_row(str(r["vessel"]), str(r["unit"]), str(r["channel"]),
-                  f"{r['first_day']}..{r['last_day']}", str(r["logs"]),
-                  f"{_f(r['m_y'], d)} {r['measure']}", _f(r["kurtosis"], 2), _f(r["limit"], d),
-                  _f(r["apriori_after"], d), str(r["apriori_verdict"]),
-                  "-" if pd.isna(c) else f"{100 * c:.1f} %", _f(r["compass_error_deg"], 2) + "°",
-                  _f(r["log_scale_pct"], 2) + " %")
+        t.add_row(str(r["vessel"]), f"{r['unit']} {r['channel']}", f"{_f(r['m_y'], d)}{r['measure']}",
+                  _f(r["kurtosis"], 1), _f(r["limit"], d), _f(r["apriori_after"], d),
+                  str(r["apriori_verdict"]), "-" if pd.isna(c) else f"{100 * c:.0f}%",
+                  _f(r["compass_error_deg"], 2) + "°", _f(r["log_scale_pct"], 1) + "%")
     out.print(t)
 
 

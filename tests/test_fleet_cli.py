@@ -1,0 +1,132 @@
+"""`dracc fleet` end to end on simulated logs: local pool, resume, failures, and a real Dask
+scheduler with a worker on loopback (subprocesses, bounded waits, always torn down)."""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from dracc.cli.main import main
+from dracc.errors import ExitCode
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory) -> Path:
+    """Two vessels, two 2 h logs each, and one file that is not a log."""
+    root = tmp_path_factory.mktemp("fleet")
+    for vessel, seeds in (("Aurora", (31, 32)), ("Nordlys ★", (33, 34))):
+        for i, seed in enumerate(seeds):
+            night = f"2026-11-{18 + i}"
+            assert main(["simulate", "--out", str(root / "sim"), "--hours", "2", "--seed", str(seed),
+                         "--start", f"{night}T00:00:00Z", "--name", f"{vessel[:2]}-{night}",
+                         "--compass-hz", "0.2", "--log-hz", "0.2", "--ins-hz", "0.1",
+                         "--gnss-hz", "0.2", "--aux-hz", "0", "--truth-hz", "0.01"]) == 0
+            (root / vessel).mkdir(exist_ok=True)
+            (root / "sim" / f"{vessel[:2]}-{night}.nmea").rename(root / vessel / f"{night}.nmea")
+    (root / "Nordlys ★" / "notes.txt").write_text("crew list, not a log\n")
+    return root
+
+
+@pytest.fixture(scope="module")
+def local_run(fleet, tmp_path_factory):
+    out = tmp_path_factory.mktemp("local")
+    code = main(["fleet", str(fleet / "Aurora"), str(fleet / "Nordlys ★"), "--workers", "2",
+                 "--out", str(out)])
+    return code, out
+
+
+def test_local_pool_tables_failures_and_pages(local_run):
+    code, out = local_run
+    assert code == ExitCode.INPUT  # one file failed; the rest is in the tables
+    t = pd.read_parquet(out / "fleet.parquet")
+    assert sorted(t["vessel"].unique()) == ["Aurora", "Nordlys ★"]
+    failed = t[t["status"] == "failed"]
+    assert failed["log"].tolist() == ["notes.txt"] and failed["error"].str.len().min() > 10
+    ok = t[t["status"] == "ok"]
+    assert len(ok) == 4 * 9 and set(ok["unit"]) == {"ins1", "ins2", "ins3"}
+    assert ok["m_y"].gt(0).all() and ok["apriori_verdict"].isin(["established", "within", "raised"]).all()
+    first = ok.groupby(["vessel", "unit", "channel"]).head(1)
+    assert (first["apriori_verdict"] == "established").all()  # no a priori configured
+    csv = pd.read_csv(out / "fleet.csv")
+    assert len(csv) == len(t) and list(csv.columns) == list(t.columns)
+    summary = json.loads((out / "fleet.json").read_text())
+    assert summary["failures"][0]["log"] == "notes.txt" and summary["analysed"] == 5
+    assert (out / "vessels" / "Nordlys ★" / "fleet.csv").exists()  # Unicode kept
+    page = (out / "fleet.html").read_text()
+    pngs = re.findall(r"src='data:image/png;base64,([A-Za-z0-9+/=]+)'", page)
+    assert len(pngs) >= 2 and all(base64.b64decode(p)[:4] == b"\x89PNG" for p in pngs)
+    assert "notes.txt" in page and "http" not in page
+    assert pd.read_parquet(out / "trends.parquet")["day"].nunique() == 2
+
+
+def test_rerun_skips_done_logs(local_run, fleet, run_cli):
+    _, out = local_run
+    before = pd.read_parquet(out / "fleet.parquet")
+    code, stdout, err = run_cli("fleet", fleet / "Aurora", fleet / "Nordlys ★", "--workers", "2",
+                                "--out", out)
+    assert code == ExitCode.INPUT
+    assert "1 analysed, 4 from the cache, 1 failed" in err
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "fleet.parquet"), before)
+    assert "Aurora" in stdout  # the terminal table
+    code, _, err = run_cli("fleet", fleet / "Aurora", "--workers", "1", "--out", out, "--force")
+    assert code == ExitCode.OK and "2 analysed, 0 from the cache" in err
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _stop(procs) -> None:
+    for p in procs:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGTERM)
+    deadline = time.monotonic() + 15
+    for p in procs:
+        try:
+            p.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+
+
+def test_dask_scheduler_gives_the_local_table(local_run, fleet, tmp_path):
+    pytest.importorskip("distributed")
+    from distributed import Client
+
+    port = _free_port()
+    addr = f"tcp://127.0.0.1:{port}"
+    common = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    procs = []
+    try:
+        procs.append(subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host",
+                                       "127.0.0.1", "--port", str(port), "--no-dashboard"], **common))
+        procs.append(subprocess.Popen([sys.executable, "-m", "dask", "worker", addr, "--nworkers", "1",
+                                       "--nthreads", "1", "--no-dashboard"], **common))
+        with Client(addr, timeout=60) as c:  # bounded waits for the scheduler and the worker
+            c.wait_for_workers(1, timeout=90)
+        out = tmp_path / "dask"
+        code = main(["fleet", str(fleet / "Aurora"), str(fleet / "Nordlys ★"), "--scheduler", addr,
+                     "--out", str(out)])
+    finally:
+        _stop(procs)
+    assert code == ExitCode.INPUT
+    _, local_out = local_run
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "fleet.parquet"),
+                                  pd.read_parquet(local_out / "fleet.parquet"))
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "trends.parquet"),
+                                  pd.read_parquet(local_out / "trends.parquet"))
