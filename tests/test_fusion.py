@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from dracc.errors import DraccError
 from dracc.fusion import (
@@ -361,3 +363,30 @@ def test_bad_observations_are_refused():
         BearingLOP(LAT0, LON0, 1.0, 0.01, "bridge")
     with pytest.raises(GeometryError, match="less than 1 m"):
         LineLOP(LAT0, LON0, LAT0, LON0, 1.0)
+
+
+# ---------------------------------------------------------------- properties
+
+
+@settings(max_examples=60, deadline=None)
+@given(lat=st.floats(-80, 80), lon=st.floats(-180, 180), az=st.floats(0, 360), s=st.floats(10.0, 50_000.0))
+def test_range_is_symmetric_and_back_azimuth_is_opposite(lat, lon, az, s):
+    lat2, lon2 = _direct(D(lat), D(lon), D(az), s)
+    d12, a12 = range_azimuth(D(lat), D(lon), lat2, lon2)
+    d21, _ = range_azimuth(lat2, lon2, D(lat), D(lon))
+    assert d12 == pytest.approx(d21, abs=1e-6) and d12 == pytest.approx(s, abs=1e-3)
+    assert np.angle(np.exp(1j * (a12 - D(az)))) == pytest.approx(0.0, abs=1e-7)
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.floats(-5000, 5000), e=st.floats(-5000, 5000), sn=st.floats(0.5, 50), se=st.floats(0.5, 50),
+       rho=st.floats(-0.9, 0.9))
+def test_a_fix_alone_is_returned_with_its_covariance(n, e, sn, se, rho):
+    cov = np.array([[sn**2, rho * sn * se], [rho * sn * se, se**2]])
+    fix = PositionFix(*_local(n, e), cov)
+    sol = fuse_fix([fix], LAT0, LON0)
+    assert np.hypot(*offset_ne_m(sol.lat_rad, sol.lon_rad, fix.lat_rad, fix.lon_rad)) < 1e-4
+    assert np.allclose(sol.cov_m2, cov, rtol=1e-9)
+    ell = sol.ellipse
+    assert ell.semi_major_m**2 + ell.semi_minor_m**2 == pytest.approx(sn**2 + se**2, rel=1e-9)
+    assert ell.semi_major_m * ell.semi_minor_m == pytest.approx(np.sqrt(np.linalg.det(cov)), rel=1e-6)
