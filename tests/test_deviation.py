@@ -461,3 +461,15 @@ def test_k_hm_upper_bound_covers_sigma_at_its_confidence():
         m = np.sqrt(np.mean(rng.normal(0.0, 1.0, (runs, n)) ** 2, axis=1))
         share = np.mean(S.k_hm(conf, n) * m >= 1.0)
         assert abs(share - conf) < 3 * math.sqrt(conf * (1 - conf) / runs), (n, share)
+
+
+def test_position_deviations_across_the_antimeridian():
+    # three units 100 m apart east-west astride 180 deg at 10 N: deviations -100, 0, +100 m
+    lat = np.full((3, 1), math.radians(10.0))
+    _, lon_e = add_offset_ne(lat[0], math.pi, 0.0, 100.0)
+    _, lon_w = add_offset_ne(lat[0], math.pi, 0.0, -100.0)
+    lon = np.array([lon_w, [math.pi], lon_e])  # wraps: -179.999..., 180, 179.999...
+    assert lon[2, 0] < 0 < lon[0, 0]
+    north, east, lat_mean = S.deviations_position_m(lat, lon)
+    np.testing.assert_allclose(east[:, 0], [-100.0, 0.0, 100.0], atol=1e-3)
+    np.testing.assert_allclose(north, 0.0, atol=1e-9)
