@@ -76,6 +76,8 @@ __all__ = [
     "speed_covariance_rad2",
     "speed_from_components_mps",
     "total_leeway_rad",
+    "TrueHeading",
+    "true_heading_rad",
     "velocity_ground_ne_mps",
     "velocity_water_ne_mps",
 ]
@@ -168,6 +170,83 @@ def interp_deviation_rad(heading_rad, table_heading_rad, table_deviation_rad):
     """Deviation at ``heading_rad`` by linear interpolation on the circle (periodic in 2 pi)."""
     return np.interp(
         wrap_2pi(heading_rad), table_heading_rad, table_deviation_rad, period=2 * np.pi
+    )
+
+
+@dataclass(frozen=True)
+class TrueHeading:
+    """True heading per sample and where its corrections came from (for the report)."""
+
+    heading_rad: np.ndarray  #: (n,) in [0, 2 pi); NaN where the input heading is NaN
+    n_magnetic: int  #: samples from a magnetic compass ((B2) applied)
+    n_variation_from_sentence: int
+    n_variation_from_config: int
+    deviation_source: str  #: 'sentence', 'curve', 'table', 'none' (0), or 'mixed'
+
+
+def true_heading_rad(
+    heading_rad,
+    reference,
+    deviation_rad=None,
+    variation_rad=None,
+    *,
+    errors: DeadReckoningConfig | None = None,
+    deviation_coefficients_rad=None,
+    gyro_correction_rad=0.0,
+) -> TrueHeading:
+    """True heading from the canonical heading columns, (B2) for magnetic, (B3) for true.
+
+    ``reference`` 'T' (gyro: KZ + pz, B3) or 'M' (magnetic: KK + d + delta, B2), per
+    sample or one string.  Deviation delta: the sentence's field where given, else the
+    curve A-E (``deviation_coefficients_rad``), else the config's deviation table, else 0
+    (the compass error sources then carry it).  Variation d: the sentence's field where
+    given, else ``[dead_reckoning] variation_deg``; a magnetic heading with neither
+    raises InsufficientDataError (dracc does not assume zero variation).  Leeway is added
+    later (dead_reckon's ``transverse_mps``).
+    """
+    cfg = errors if errors is not None else DeadReckoningConfig()
+    h = np.asarray(heading_rad, float)
+    n = h.size
+    ref = np.broadcast_to(np.asarray(reference, dtype=object), (n,))
+    magnetic = np.array([str(r).upper() == "M" for r in ref], dtype=bool) & np.isfinite(h)
+    dev_in = np.full(n, np.nan) if deviation_rad is None else np.broadcast_to(
+        np.asarray(deviation_rad, float), (n,))
+    var_in = np.full(n, np.nan) if variation_rad is None else np.broadcast_to(
+        np.asarray(variation_rad, float), (n,))
+    out = np.asarray(course_gyro_rad(h, gyro_correction_rad), float).copy()  # (B3)
+    if not magnetic.any():
+        return TrueHeading(out, 0, 0, 0, "none")
+    var = var_in.copy()
+    from_sentence = magnetic & np.isfinite(var_in)
+    missing = magnetic & ~np.isfinite(var)
+    if missing.any():
+        if cfg.variation_deg is None:
+            raise InsufficientDataError(
+                f"{int(missing.sum())} magnetic heading samples have no variation and "
+                "[dead_reckoning] variation_deg is not set; give the local variation "
+                "(east positive) in the config"
+            )
+        var[missing] = cfg.variation_deg * DEG_RAD
+    dev = dev_in.copy()
+    sources = {"sentence"} if np.any(magnetic & np.isfinite(dev_in)) else set()
+    need = magnetic & ~np.isfinite(dev)
+    if need.any():
+        if deviation_coefficients_rad is not None:
+            dev[need] = deviation_curve_rad(h[need], deviation_coefficients_rad)
+            sources.add("curve")
+        elif cfg.deviation_table:
+            th, td = deviation_table_rad(cfg.deviation_table)
+            dev[need] = interp_deviation_rad(h[need], th, td)
+            sources.add("table")
+        else:
+            dev[need] = 0.0
+            sources.add("none")
+    out[magnetic] = course_magnetic_rad(h[magnetic], var[magnetic], dev[magnetic])  # (B2)
+    return TrueHeading(
+        heading_rad=out, n_magnetic=int(magnetic.sum()),
+        n_variation_from_sentence=int(from_sentence.sum()),
+        n_variation_from_config=int(missing.sum()),
+        deviation_source=sources.pop() if len(sources) == 1 else "mixed",
     )
 
 

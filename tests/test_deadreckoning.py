@@ -37,6 +37,7 @@ from dracc.deadreckoning import (
     speed_covariance_rad2,
     speed_from_components_mps,
     total_leeway_rad,
+    true_heading_rad,
     velocity_ground_ne_mps,
     velocity_water_ne_mps,
 )
@@ -514,3 +515,19 @@ def test_real_log_without_heading_says_so(real_dir):
     with pytest.raises(InsufficientDataError, match="no heading"):
         dead_reckon(np.arange(float(n)), np.array(heading[:n]), np.array(speed[:n]),
                     lat0_rad=0.6, lon0_rad=0.4)
+
+
+def test_true_heading_from_mixed_gyro_and_magnetic_samples():
+    cfg = DeadReckoningConfig(variation_deg=2.0, deviation_table={"0": 1.0, "180": -1.0})
+    h = np.array([10.0, 10.0, 10.0, 90.0]) * D
+    th = true_heading_rad(h, ["T", "M", "M", "M"], deviation_rad=[np.nan, 0.5 * D, np.nan, np.nan],
+                          variation_rad=[np.nan, 3.0 * D, np.nan, np.nan], errors=cfg)
+    want = np.array([10.0, 10 + 3 + 0.5, 10 + 2 + (1 - 2 * 10 / 180), 90 + 2 + 0.0]) * D
+    np.testing.assert_allclose(th.heading_rad, want, atol=1e-12)
+    assert (th.n_magnetic, th.n_variation_from_sentence, th.n_variation_from_config) == (3, 1, 2)
+    assert th.deviation_source == "mixed"
+
+
+def test_true_heading_magnetic_without_variation_raises():
+    with pytest.raises(InsufficientDataError, match="variation_deg"):
+        true_heading_rad(np.array([0.3]), "M")
