@@ -359,3 +359,46 @@ def test_non_indexed_copy_reads_like_the_indexed_file(tmp_path, real_dir):
     write_mcap(fr, {}, q, encoding="ros2", compression="zstd", chunk_size=3000, indexed=False)
     a, b = read_mcap(p, CFG), read_mcap(q, CFG)
     assert_same_frames(a.frames, b.frames, rtol=0)
+
+
+# ----------------------------------------------------------------- one voyage, every container
+def test_one_simulated_voyage_reads_the_same_from_every_container(tmp_path):
+    """The simulator's voyage written as NMEA, CSV (long, wide) and MCAP (JSON, ROS 2,
+    protobuf, raw NMEA) and read through ``read_logs``: the same records per source and
+    kind, the same roles, the same values (to the resolution of NMEA sentence fields)."""
+    from dracc.ingest import read_logs
+    from dracc.sim.csv_out import write_csv
+    from dracc.sim.model import SimParams, simulate
+    from dracc.sim.nmea_out import write_nmea
+
+    v = simulate(SimParams(duration_s=300, compass_hz=1))
+    paths = {"nmea": tmp_path / "v.nmea"}
+    write_nmea(v, paths["nmea"])
+    for form in ("long", "wide"):
+        paths[f"csv-{form}"] = write_csv(v.frames, tmp_path / f"v_{form}.csv", form)
+    for enc in ("json", "ros2", "protobuf", "nmea"):
+        paths[f"mcap-{enc}"] = write_mcap(v.frames, v.roles, tmp_path / f"v_{enc}.mcap", encoding=enc)
+    coarse = {"lat_rad": 1e-8, "lon_rad": 1e-8, "heading_rad": 2e-5, "cog_rad": 2e-4, "sog_mps": 3e-3,
+              "stw_mps": 3e-3}
+    for name, p in paths.items():
+        voy = read_logs([p], CFG)
+        assert voy.rejects.total == 0, (name, dict(voy.rejects.counts))
+        assert {k: s.role for k, s in voy.sources.items()} == {k: r for k, r in v.roles.items()}, name
+        exact = name in ("csv-long", "csv-wide", "mcap-json", "mcap-ros2", "mcap-protobuf")
+        for kind, want in v.frames.items():
+            got = voy.frames[kind]
+            assert len(got) == len(want), (name, kind)
+            for src, w in want.groupby(want["source"].astype(str), observed=True):
+                g = got[got["source"].astype(str) == src]
+                assert len(g) == len(w), (name, kind, src)
+                cols = [c for c in w.columns if w[c].dtype.kind == "f"] if exact else \
+                    [c for c in coarse if c in w.columns]
+                for c in cols:
+                    a, b = np.sort(w[c].to_numpy()), np.sort(g[c].to_numpy())
+                    if exact and name == "mcap-ros2" and c == "hdop":
+                        continue  # NavSatFix carries no HDOP
+                    if exact and name == "mcap-protobuf" and c == "hdop":
+                        continue  # foxglove.LocationFix carries no HDOP
+                    np.testing.assert_allclose(b, a, rtol=1e-12 if exact else 0,
+                                               atol=1e-12 if exact else coarse[c], equal_nan=True,
+                                               err_msg=f"{name} {kind} {src} {c}")

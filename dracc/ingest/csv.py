@@ -6,7 +6,8 @@ fields with commas quoted as usual):
 long (``csv-long``)
     ``time_utc,source,quantity,value`` -- one value per row; ``quantity`` is a name from
     :mod:`dracc.ingest.csv_quantities` with its unit in the name (``lat_deg``, ``stw_kn``,
-    ``sog_mps``, ``reference`` ...).  Rows of one time and source make one record.
+    ``sog_mps``, ``reference`` ...).  Rows of one time and source make one record; where a
+    quantity repeats at one time and source, its n-th value belongs to the n-th record there.
 wide (``csv-wide``)
     ``time_utc,source,<quantity>,<quantity>,...`` -- one row per time and source; every
     column named by a quantity (or declared in ``[ingest] quantities``) is read, others are
@@ -288,8 +289,10 @@ def _read_long(p: Path, cols: list[str], declared: dict, rejects: Rejects, file:
     lines = np.concatenate([x[5] for x in parts])
     if len(t_ns) == 0:
         return {}, rows
-    # one record per (time, source): factorise the key
-    key = pd.MultiIndex.from_arrays([t_ns, src])
+    # one record per (time, source, occurrence): the n-th value of a quantity at one time and
+    # source belongs to the n-th record there (a GGA and an RMC fix of one receiver at one time)
+    occ = pd.DataFrame({"t": t_ns, "s": src, "q": qn}).groupby(["t", "s", "q"], sort=False).cumcount()
+    key = pd.MultiIndex.from_arrays([t_ns, src, occ.to_numpy()])
     rec, uniq = pd.factorize(key, sort=False)
     nrec = len(uniq)
     first_line = np.full(nrec, np.iinfo(np.int64).max)
@@ -297,17 +300,13 @@ def _read_long(p: Path, cols: list[str], declared: dict, rejects: Rejects, file:
     values: dict[str, np.ndarray] = {}
     for q in pd.unique(qn):
         m = qn == q
-        r = rec[m]
-        dup = pd.Series(r).duplicated().to_numpy()
-        if dup.any():
-            add_rejects(rejects, "quantity repeated at one time and source", file, lines[m][dup],
-                        [str(q)] * 5)
+        r = rec[m]  # distinct within a quantity, by construction of the key
         if q == "reference":
             arr = np.full(nrec, None, dtype=object)
-            arr[r[~dup]] = raw[m][~dup]
+            arr[r] = raw[m]
         else:
             arr = np.full(nrec, np.nan)
-            arr[r[~dup]] = num[m][~dup]
+            arr[r] = num[m]
         values[str(q)] = arr
     t_rec = uniq.get_level_values(0).to_numpy(dtype=np.int64)
     s_rec = uniq.get_level_values(1).to_numpy(dtype=object)
