@@ -354,7 +354,7 @@ class PierLine:
         """Signed offset (right of A->B positive) of the reference point from the pier line."""
         y_side = (self.half_breadth_m + self.gap_m) * (1.0 if self.side == "starboard" else -1.0)
         alpha = self.line().azimuth_rad
-        return float((self.ref_transverse_m - y_side) * np.cos(self.heading_rad - alpha))
+        return float((self.ref_transverse_m - y_side) * np.cos(angdiff(self.heading_rad, alpha)))
 
     def as_line(self) -> LineLOP:
         """The shifted line of position of the reference point."""
