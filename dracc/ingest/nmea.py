@@ -39,8 +39,8 @@ import pandas as pd
 
 from ..errors import IngestError
 from ..units import KN_MPS, NMI_M
-from .frames import KINDS, FileResult, Rejects, TimeEvents, empty_frame, make_frame
-from .tagblock import HEX, parse_prefixes
+from .frames import KIND_COLUMNS, KINDS, FileResult, Rejects, TimeEvents, empty_frame, make_frame
+from .tagblock import HEX, parse_numbers, parse_prefixes
 from .timebase import MISSING_NS, EventCounter, TimeBase, days_from_civil, valid_civil
 
 if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
@@ -81,23 +81,23 @@ REASONS = {
 
 
 # ----------------------------------------------------------------------------- helpers
-def _ranges_any(cum: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """True where the count array ``cum`` (cumsum with leading 0) has events in [a, b)."""
-    return cum[b] - cum[a] > 0
+def _ranges_any(pos: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """True where the sorted positions ``pos`` have an element in [a, b)."""
+    return np.searchsorted(pos, b) > np.searchsorted(pos, a)
 
 
 class _Fields:
     """Field boundaries of a group of sentences (rows) in ``buf``."""
 
-    def __init__(self, buf, commas, addr_end, body_end):
+    def __init__(self, buf, commas, c0, nf, body_end):
+        """``commas``: sorted positions of the commas inside sentence bodies; ``c0`` the
+        index of each row's first comma (the one after the address), ``nf`` its count."""
         self.buf = buf
-        c0 = np.searchsorted(commas, addr_end)  # first comma is at addr_end
-        c1 = np.searchsorted(commas, body_end)
-        self.nf = (c1 - c0).astype(np.int64)  # data fields = number of commas
+        self.nf = nf.astype(np.int64)  # data fields = number of commas
         self.c0 = c0
         self.commas = commas
         self.body_end = body_end
-        self.bad = np.zeros(len(addr_end), dtype=bool)
+        self.bad = np.zeros(len(nf), dtype=bool)
 
     def bounds(self, k: int):
         """[start, end) of data field k (1-based); empty where the field is absent."""
@@ -109,41 +109,14 @@ class _Fields:
         e = np.where(present, e, 0)
         return s, e
 
-    def num(self, k: int, width: int = 20):
+    def num(self, k: int, width: int = 20, decimals: bool = False):
         """Field k as float64, NaN where empty; rows with a non-number are marked bad.
 
         Returns (value, decimals) where decimals = digits after the '.' (-1 if none).
         """
         s, e = self.bounds(k)
-        ln = e - s
-        n = len(s)
-        val = np.full(n, np.nan)
-        dec = np.full(n, -1, dtype=np.int8)
-        has = ln > 0
-        too_long = ln > width
-        self.bad |= too_long
-        has &= ~too_long
-        if not has.any():
-            return val, dec
-        hi = np.flatnonzero(has)
-        w = int(ln[hi].max())
-        cols = np.arange(w)
-        idx = s[hi, None] + cols
-        inside = cols < ln[hi, None]
-        mat = np.where(inside, self.buf[np.minimum(idx, len(self.buf) - 1)], 0).astype(np.uint8)
-        digit = (mat >= 48) & (mat <= 57)
-        dot = mat == 46
-        sign = (mat == 45) | (mat == 43)
-        ok = (np.all(digit | dot | sign | ~inside, axis=1) & digit.any(axis=1)
-              & (dot.sum(axis=1) <= 1) & ~sign[:, 1:].any(axis=1))
-        mat[~ok] = 0
-        mat[~ok, 0] = 48
-        v = np.ascontiguousarray(mat).view(f"S{w}").ravel().astype(np.float64)
-        v[~ok] = np.nan
-        val[hi] = v
-        self.bad[hi[~ok]] = True
-        dpos = np.where(dot.any(axis=1), dot.argmax(axis=1), -1)
-        dec[hi] = np.where(dpos >= 0, ln[hi] - dpos - 1, -1)
+        val, dec, invalid = parse_numbers(self.buf, s, e, width, decimals)
+        self.bad |= invalid
         return val, dec
 
     def char(self, k: int) -> np.ndarray:
@@ -160,7 +133,7 @@ class _Fields:
 
 def _latlon(F: _Fields, k: int, kh: int, pos: int, neg: int, limit_deg: float):
     """ddmm.mmmm + hemisphere -> radians; malformed rows marked bad."""
-    v, dec = F.num(k)
+    v, dec = F.num(k, decimals=True)
     h = F.char(kh)
     deg = np.floor(v / 100.0)
     minutes = v - 100.0 * deg
@@ -346,6 +319,8 @@ class ParsedBlock:
     reject_examples: dict[str, list[tuple[int, str]]]
     first_fatal: tuple[int, str, str] | None  #: (line, reason, text) of the first fatal rejection
     stats: Counter = field(default_factory=Counter)
+    #: names for the 'tag_source' codes (TAG s: / given source keys; '' = none)
+    source_names: list[str] = field(default_factory=list)
 
 
 def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True,
@@ -410,7 +385,7 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
     has_seg = np.zeros(n_lines, dtype=bool)
     has_seg[seg_line] = True
     badbyte = ((buf < 32) & (buf != 9) & (buf != 10) & (buf != 13)) | (buf > 126)
-    cum_bad = np.concatenate(([0], np.cumsum(badbyte)))
+    cum_bad = np.flatnonzero(badbyte)
     noseg = np.flatnonzero(~has_seg & ~blank)
     if len(noseg):
         isbin = _ranges_any(cum_bad, line_start[noseg], line_end[noseg])
@@ -424,6 +399,8 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
                            min(fatal) if fatal else None, stats)
 
     cum_xor = np.bitwise_xor.accumulate(buf)
+    stars = np.flatnonzero(buf == 42)
+    commas = np.flatnonzero(buf == 44)
     # prefixes: text before the first sentence of a line
     first_of_line = np.ones(nseg, dtype=bool)
     first_of_line[1:] = seg_line[1:] != seg_line[:-1]
@@ -433,18 +410,23 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
     pre_seg = np.flatnonzero(first_of_line & (st > line_start[seg_line]))
     if len(pre_seg):
         pl = seg_line[pre_seg]
-        pr = parse_prefixes(buf, line_start[pl], st[pre_seg], cum_xor)
+        pr = parse_prefixes(buf, line_start[pl], st[pre_seg], cum_xor, stars, commas)
         line_ext[pl] = pr.ext_ns
         line_src[pl] = pr.source
         badt = pr.bad_tag | (pr.bad_tag_checksum & (not ignore_checksum))
         line_bad[pl[badt]] = True
         stats["tag_checksum_ignored"] += int((pr.bad_tag_checksum & ignore_checksum).sum())
-        for f, c in zip(*np.unique(pr.form.astype(str), return_counts=True), strict=True):
-            stats[f"prefix_{f}"] += int(c)
+        for f in ("tag", "iso", "unix", "signalk", "other"):
+            c = int(np.count_nonzero(pr.form == f))
+            if c:
+                stats[f"prefix_{f}"] += c
     if ext_line_ns is not None:
         line_ext = np.asarray(ext_line_ns, dtype=np.int64)
     if ext_line_source is not None:
         line_src = np.asarray(ext_line_source, dtype=object)
+    src_codes, src_names = pd.factorize(line_src)
+    src_codes = src_codes.astype(np.int32)
+    src_names = [str(x) for x in src_names]
 
     alive = np.ones(nseg, dtype=bool)
 
@@ -467,8 +449,12 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
     body_end = np.where(has_cs2, seg_end - 3, np.where(has_cs1, seg_end - 2, seg_end))
     h1 = np.where(has_cs1, 0, h1)
     # a '*' elsewhere without two hex digits after it: cut short
-    stars = np.concatenate(([0], np.cumsum(buf == 42)))
-    stray_star = ~has_cs & _ranges_any(stars, st, seg_end)
+    # which sentence each '*' and ',' belongs to (one search per character of interest;
+    # the sentence starts are a small, cache-resident table)
+    sid = np.searchsorted(st, stars, side="right") - 1
+    ok_s = (sid >= 0) & (stars < seg_end[np.maximum(sid, 0)])
+    nstars = np.bincount(sid[ok_s], minlength=nseg)
+    stray_star = ~has_cs & (nstars > 0)
     followed = np.zeros(nseg, dtype=bool)
     followed[:-1] = seg_line[1:] == seg_line[:-1]
     eof_cut = np.zeros(nseg, dtype=bool)
@@ -485,9 +471,14 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
     stats["no_checksum"] += int((~has_cs & alive).sum())
     stats["one_digit_checksum"] += int((has_cs1 & alive).sum())
     # address
-    commas = np.flatnonzero(buf == 44)
-    ci = np.searchsorted(commas, st)
-    first_comma = np.where(ci < len(commas), commas[np.minimum(ci, len(commas) - 1)], len(buf))
+    cid = np.searchsorted(st, commas, side="right") - 1
+    inbody = (cid >= 0) & (commas < body_end[np.maximum(cid, 0)])
+    commas = commas[inbody]  # commas inside sentence bodies
+    cid = cid[inbody]
+    ncomma = np.bincount(cid, minlength=nseg)
+    c_first = np.concatenate(([0], np.cumsum(ncomma)[:-1]))
+    first_comma = np.where(ncomma > 0, commas[np.minimum(c_first, max(len(commas) - 1, 0))]
+                           if len(commas) else 0, body_end)
     addr_len = np.where(first_comma < body_end, first_comma - st - 1, body_end - st - 1)
     a5 = st[:, None] + 1 + np.arange(5)
     amat = buf[np.minimum(a5, len(buf) - 1)]
@@ -514,7 +505,7 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
         rows = np.flatnonzero(alive & (stype_b == stype.encode()))
         if len(rows) == 0:
             continue
-        F = _Fields(buf, commas, st[rows] + 6, body_end[rows])
+        F = _Fields(buf, commas, c_first[rows], ncomma[rows], body_end[rows])
         lo, hi = FIELD_COUNTS[stype]
         badn = (F.nf < lo) | (F.nf > hi)
         if badn.any():
@@ -522,7 +513,7 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
             rows = rows[~badn]
             if len(rows) == 0:
                 continue
-            F = _Fields(buf, commas, st[rows] + 6, body_end[rows])
+            F = _Fields(buf, commas, c_first[rows], ncomma[rows], body_end[rows])
         cols, timing = _decode(stype, F)
         if F.bad.any():
             drop("malformed_field", np.isin(np.arange(nseg), rows[F.bad]))
@@ -533,13 +524,17 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
             if len(rows) == 0:
                 continue
         common = {"line": seg_line[rows] + 1, "seq": rows,
-                  "talker": talker_b[rows], "sentence": np.full(len(rows), stype, dtype=object),
-                  "tag_source": line_src[seg_line[rows]], "ext_ns": line_ext[seg_line[rows]],
+                  "talker": talker_b[rows].view(np.uint16),
+                  "sentence": np.full(len(rows), SENTENCES.index(stype), dtype=np.int8),
+                  "tag_source": src_codes[seg_line[rows]], "ext_ns": line_ext[seg_line[rows]],
                   **timing}
         if stype == "ZDA":
             for c, v in common.items():
                 clock.setdefault(c, []).append(v)
         for kind, d in cols.items():
+            for c, t in KIND_COLUMNS[kind].items():  # every group carries every column
+                if c not in d and t == "float64":
+                    d[c] = np.full(len(rows), np.nan)
             tgt = kinds.setdefault(kind, {})
             for c, v in {**common, **d}.items():
                 tgt.setdefault(c, []).append(v)
@@ -550,7 +545,7 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
         kinds_np[k] = {c: v[order] for c, v in cat.items()}
     clock_np = {c: np.concatenate(v) for c, v in clock.items()}
     return ParsedBlock(n_lines, int(blank.sum()), kinds_np, clock_np, counts, examples,
-                       min(fatal) if fatal else None, stats)
+                       min(fatal) if fatal else None, stats, src_names)
 
 
 # ------------------------------------------------------------------ streaming reader
@@ -660,25 +655,61 @@ def _pool_ok() -> bool:
     return (os.cpu_count() or 1) >= 2
 
 
+_DTYPES: dict[tuple, pd.CategoricalDtype] = {}
+
+
+def _cat(codes: np.ndarray, labels: list[str]) -> pd.Categorical:
+    """Categorical from codes with a cached dtype (building dtypes is the slow part)."""
+    key = tuple(labels)
+    dt = _DTYPES.get(key)
+    if dt is None:
+        dt = _DTYPES[key] = pd.CategoricalDtype(pd.Index(labels, dtype=object))
+    return pd.Categorical.from_codes(codes.astype(np.int32, copy=False), dtype=dt)
+
+
+def _talker_str(code: int) -> str:
+    return int(code).to_bytes(2, "little").decode("ascii", "replace")
+
+
+def _source_categorical(cols: dict[str, np.ndarray], names: list[str], split_talkers: dict,
+                        kind: str) -> tuple[pd.Categorical, pd.Categorical]:
+    """(source, talker) categoricals from codes: the TAG/given source where there is one,
+    else the talker, split by decimals of minutes for fingerprinted talkers."""
+    talker = cols["talker"].astype(np.int64)
+    tag = cols["tag_source"].astype(np.int64)
+    has_tag = np.zeros(len(tag), dtype=bool)
+    if names:
+        named = np.array([bool(n) for n in names])
+        has_tag = named[tag]
+    dec = cols["dec"].astype(np.int64) if kind in ("position", "ground") else np.full(len(tag), -1)
+    split_codes = [int.from_bytes(t.encode(), "little") for t in split_talkers]
+    split = ~has_tag & np.isin(talker, split_codes) if split_codes else np.zeros(len(tag), bool)
+    # one integer per distinct source: tag code, or talker (+ decimals where split)
+    key = np.where(has_tag, tag, (1 << 32) + talker * 64 + np.where(split, dec + 1, 0))
+    ukey, inv = np.unique(key, return_inverse=True)
+    labels = []
+    for k in ukey.tolist():
+        if k < (1 << 32):
+            labels.append(names[k])
+        else:
+            t, d = divmod(k - (1 << 32), 64)
+            labels.append(_talker_str(t) + (f"/{d - 1}dp" if d else ""))
+    if len(set(labels)) == len(labels):
+        src = _cat(inv, labels)
+    else:  # a TAG source named like a talker: one key
+        src = pd.Categorical(np.asarray(labels, dtype=object)[inv])
+    ut, tinv = np.unique(talker, return_inverse=True)
+    tal = _cat(tinv, [_talker_str(t) for t in ut.tolist()])
+    return src, tal
+
+
 def _assemble(pb: ParsedBlock, times: list[np.ndarray], state: StreamState, file: str,
               line0: int, cfg: IngestConfig) -> dict[str, pd.DataFrame]:
     """Turn a parsed block plus resolved times into canonical frames; count events."""
     frames = {}
     order_kinds = [k for k in KINDS if k in pb.kinds]
-    t_all = times
-    for kind, t in zip(order_kinds, t_all, strict=True):
+    for kind, t in zip(order_kinds, times, strict=True):
         cols = pb.kinds[kind]
-        talker = cols["talker"].astype("U2")
-        tag = cols["tag_source"].astype(str)
-        src = np.where(tag != "", tag, talker).astype(object)
-        if kind in ("position", "ground"):
-            split = np.zeros(len(src), dtype=bool)
-            for tk in state.split_talkers:
-                split |= (talker == tk) & (tag == "")
-            if split.any():
-                dec = cols["dec"]
-                src[split] = np.char.add(np.char.add(talker[split], "/"),
-                                         np.char.add(dec[split].astype(str), "dp"))
         line = cols["line"] + line0 - 1
         missing = t == MISSING_NS
         if missing.any():
@@ -686,22 +717,25 @@ def _assemble(pb: ParsedBlock, times: list[np.ndarray], state: StreamState, file
             state.rejects.counts["no_date"] += len(idx)
             ex = state.rejects.examples.setdefault("no_date", [])
             for j in idx[: max(0, 5 - len(ex))]:
-                ex.append((file, int(line[j]), f"{cols['sentence'][j]} time of day without date"))
+                ex.append((file, int(line[j]),
+                           f"{SENTENCES[cols['sentence'][j]]} time of day without date"))
             keep = ~missing
-        else:
-            keep = slice(None)
-        own = ((cols["tod_ns"] >= 0) | (cols["ext_ns"] != MISSING_NS))[keep]
+            cols = {c: v[keep] for c, v in cols.items()}
+            t, line = t[keep], line[keep]
+        if len(t) == 0:
+            continue
+        src, tal = _source_categorical(cols, pb.source_names, state.split_talkers, kind)
+        us, sinv = np.unique(cols["sentence"], return_inverse=True)
+        sent = _cat(sinv, [SENTENCES[i] for i in us])
+        own = (cols["tod_ns"] >= 0) | (cols["ext_ns"] != MISSING_NS)
         if kind == "ground":  # an RMC is counted once, in its position record
-            own = own & (cols["sentence"][keep] != "RMC")
-        data = {c: v[keep] for c, v in cols.items()
-                if c not in ("seq", "tag_source", "dec", "tod_ns", "date_days", "ext_ns", "talker")}
-        data["talker"] = talker[keep]
-        data["source"] = src[keep]
-        data["time_ns"] = t[keep]
-        data["line"] = line[keep]
+            own &= cols["sentence"] != SENTENCES.index("RMC")
+        data = {c: v for c, v in cols.items()
+                if c not in ("seq", "tag_source", "dec", "tod_ns", "date_days", "ext_ns", "talker",
+                             "sentence")}
+        data.update(talker=tal, source=src, sentence=sent, time_ns=t, line=line)
         df = make_frame(kind, data)
-        state.events.add(kind, df["source"].to_numpy(dtype=object), df["time_ns"].to_numpy(),
-                         own, df["line"].to_numpy(), file, data["sentence"])
+        state.events.add(kind, src, t, own, line, file, sent)
         frames[kind] = df
     return frames
 
@@ -777,10 +811,12 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
             raise IngestError(f"{file}:{ln + line0 - 1}: rejected ({REASONS[reason]}): {text!r} "
                               "(--strict)")
         for kind, cols in pb.kinds.items():
-            u, c = np.unique(cols["sentence"].astype(str), return_counts=True)
-            st.sentences.update(dict(zip(u.tolist(), c.tolist(), strict=True)))
+            sc = cols["sentence"][cols["sentence"] != SENTENCES.index("RMC")] if kind == "ground" \
+                else cols["sentence"]
+            u, c = np.unique(sc, return_counts=True)
+            st.sentences.update({SENTENCES[i]: n for i, n in zip(u.tolist(), c.tolist(), strict=True)})
             if kind == "position" and not st.split_talkers and line0 == 1:
-                _fingerprint(cols, st)
+                _fingerprint(cols, st, pb.source_names)
         if pb.clock:
             st.sentences["ZDA"] += len(pb.clock["seq"])
         tod, date, ext, split = _time_arrays(pb)
@@ -822,20 +858,21 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
     yield from _release(st.timebase.finish())
 
 
-def _fingerprint(cols: dict[str, np.ndarray], st: StreamState) -> None:
+def _fingerprint(cols: dict[str, np.ndarray], st: StreamState, pb_names: list[str]) -> None:
     """Split a talker whose position sentences come with different numbers of decimals
     of minutes (two receivers behind one talker, e.g. Hakefjord.txt): each decimal
     count seen in at least 10 % of that talker's positions (and >= 10 of them) in the
     file's first block becomes its own source key ``<talker>/<n>dp``."""
-    talker = cols["talker"].astype("U2")
-    tag = cols["tag_source"].astype(str)
+    names = np.array([bool(n) for n in pb_names]) if pb_names else np.zeros(1, bool)
+    untagged = ~names[cols["tag_source"]] if pb_names else np.ones(len(cols["talker"]), bool)
+    talker = cols["talker"]
     dec = cols["dec"]
-    for tk in np.unique(talker[tag == ""]):
-        sel = (talker == tk) & (tag == "") & (dec >= 0)
+    for tk in np.unique(talker[untagged]).tolist():
+        sel = (talker == tk) & untagged & (dec >= 0)
         u, c = np.unique(dec[sel], return_counts=True)
         big = u[(c >= 10) & (c >= 0.1 * sel.sum())]
         if len(big) >= 2:
-            st.split_talkers[str(tk)] = set(int(x) for x in u)
+            st.split_talkers[_talker_str(tk)] = set(int(x) for x in u)
 
 
 # ------------------------------------------------------------------------ file reader

@@ -35,9 +35,6 @@ for _i, _c in enumerate(b"0123456789ABCDEF"):
 for _i, _c in enumerate(b"abcdef"):
     HEX[_c] = 10 + _i
 
-_TAG_RE = r"^\\(?P<body>[^\\*]*)\*(?P<cs>[0-9A-Fa-f]{1,2})\\$"
-_SRC_RE = r"(?:^|,)s:(?P<s>[^,]*)"
-_C_RE = r"(?:^|,)c:(?P<c>[0-9]+(?:\.[0-9]*)?)"
 _ISO_RE = (r"(?P<iso>\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}:\d{2}(?:\.\d+)?)"
            r"(?P<tz>Z|[+-]\d{2}:?\d{2})?\s*$")
 _UNIX_RE = r"^\s*(?P<u>\d{9,10}(?:\.\d*)?|\d{12,13}(?:\.\d*)?)\s*[,;:]?\s*$"
@@ -72,12 +69,136 @@ class PrefixResult:
     bad_tag: np.ndarray  #: bool: looks like a TAG block but cannot be read
 
 
+#: byte classes packed so that one sum per row counts them: digits (bits 0-7), points
+#: (bits 8-15), signs (bits 16-23), anything else (bits 24-31); NUL padding counts nothing
+_CLASS = np.full(256, 1 << 24, dtype=np.int32)
+_CLASS[0] = 0
+_CLASS[48:58] = 1
+_CLASS[46] = 1 << 8
+_CLASS[43] = _CLASS[45] = 1 << 16
+
+
+def parse_numbers(buf: np.ndarray, s: np.ndarray, e: np.ndarray, width: int = 20,
+                  decimals: bool = True):
+    """Decimal numbers in byte ranges [s, e) of ``buf``, vectorised.
+
+    Returns (value float64 with NaN where empty or invalid, decimals int8 = digits after
+    the point or -1, invalid bool).  A valid number is ``[+-]digits[.digits]`` (or
+    ``.5``) with at least one digit; longer than ``width`` bytes is invalid.
+    """
+    ln = e - s
+    n = len(s)
+    val = np.full(n, np.nan)
+    dec = np.full(n, -1, dtype=np.int8)
+    invalid = ln > width
+    has = (ln > 0) & ~invalid
+    if not has.any():
+        return val, dec, invalid
+    hi = np.flatnonzero(has)
+    lh = ln[hi]
+    w = int(lh.max())
+    if len(buf) < w:
+        buf = np.concatenate((buf, np.zeros(w, dtype=np.uint8)))
+    win = np.lib.stride_tricks.sliding_window_view(buf, w)
+    mat = win[np.minimum(s[hi], len(buf) - w)]
+    shift = s[hi] - np.minimum(s[hi], len(buf) - w)
+    if shift.any():  # ranges in the last w bytes: realign (rare)
+        rows = np.flatnonzero(shift)
+        for r in rows:
+            mat[r] = np.concatenate((buf[s[hi][r]:], np.zeros(w, np.uint8)))[:w]
+    mat = np.where(np.arange(w) < lh[:, None], mat, 0).astype(np.uint8)
+    # fast path: only digits, '.', signs and padding, and numpy parses every row
+    odd = (mat > 57) | ((mat < 48) & (mat != 46) & (mat != 45) & (mat != 43) & (mat != 0))
+    v = None
+    if not odd.any():
+        try:
+            v = np.ascontiguousarray(mat).view(f"S{w}").ravel().astype(np.float64)
+            ok = np.ones(len(hi), dtype=bool)
+        except ValueError:
+            v = None
+    if v is None:  # validate row by row (vectorised): [+-]digits[.digits]
+        tot = _CLASS[mat].sum(axis=1)
+        nd = tot & 255
+        ndot = (tot >> 8) & 255
+        nsign = (tot >> 16) & 255
+        other = tot >> 24
+        sign0 = (mat[:, 0] == 45) | (mat[:, 0] == 43)
+        ok = (nd >= 1) & (ndot <= 1) & (other == 0) & ((nsign == 0) | ((nsign == 1) & sign0))
+        if not ok.all():
+            mat[~ok] = 0
+            mat[~ok, 0] = 48
+        v = np.ascontiguousarray(mat).view(f"S{w}").ravel().astype(np.float64)
+        v[~ok] = np.nan
+    val[hi] = v
+    invalid[hi[~ok]] = True
+    if decimals:
+        dot = mat == 46
+        dpos = np.where(dot.any(axis=1), dot.argmax(axis=1), -1)
+        dec[hi] = np.where(dpos >= 0, lh - dpos - 1, -1)
+    return val, dec, invalid
+
+
+def _key_value(buf, colons, commas, start, stop, key: int):
+    """[s, e) of the value of TAG parameter ``key`` (one letter) in each body [start, stop)."""
+    prev = buf[colons - 2]
+    kc = colons[(buf[colons - 1] == key) & ((prev == 44) | (prev == 92))]
+    i = np.searchsorted(kc, start)
+    pos = kc[np.minimum(i, len(kc) - 1)] if len(kc) else np.zeros(len(start), np.int64)
+    found = (i < len(kc)) & (pos < stop) if len(kc) else np.zeros(len(start), bool)
+    vs = pos + 1
+    j = np.searchsorted(commas, vs)
+    nxt = commas[np.minimum(j, len(commas) - 1)] if len(commas) else stop
+    ve = np.where((j < len(commas)) & (nxt < stop), nxt, stop)
+    return found, np.where(found, vs, 0), np.where(found, ve, 0)
+
+
+def parse_tags(buf: np.ndarray, start: np.ndarray, end: np.ndarray, cum_xor: np.ndarray,
+               stars: np.ndarray, commas: np.ndarray, colons: np.ndarray):
+    """TAG blocks ``buf[start:end]`` (each ``\\...*hh\\``), vectorised with numpy.
+
+    Returns (ok, bad_checksum, ext_ns, source) where ``source`` is an object array.
+    """
+    n = len(start)
+    i = np.searchsorted(stars, start)
+    star = stars[np.minimum(i, len(stars) - 1)] if len(stars) else end
+    cslen = end - 1 - star - 1
+    ok = (i < len(stars)) & (star < end) & (buf[end - 1] == 92) & ((cslen == 1) | (cslen == 2))
+    h_lo = HEX[buf[np.maximum(end - 2, 0)]]
+    h_hi = np.where(cslen == 2, HEX[buf[np.maximum(end - 3, 0)]], 0)
+    ok &= (h_lo >= 0) & (h_hi >= 0)
+    star = np.where(ok, star, start + 1)
+    x = cum_xor[np.maximum(star - 1, 0)] ^ cum_xor[start]  # XOR over (start, star)
+    bad_cs = ok & (x.astype(np.int64) != h_hi.astype(np.int64) * 16 + h_lo)
+    ext = np.full(n, MISSING_NS, dtype=np.int64)
+    fc, cs_, ce = _key_value(buf, colons, commas, start, star, 99)  # 'c'
+    cv, _, cbad = parse_numbers(buf, cs_, ce, decimals=False)
+    has = ok & fc & ~np.isnan(cv)
+    ok &= ~(fc & cbad)
+    # c: in seconds (<= 10 integer digits, i.e. < 1e10) or milliseconds
+    ext[has] = np.round(np.where(cv[has] < 1e10, cv[has] * 1e9, cv[has] * 1e6)).astype(np.int64)
+    source = np.full(n, "", dtype=object)
+    fs, ss, se = _key_value(buf, colons, commas, start, star, 115)  # 's'
+    fs &= ok & (se > ss)
+    if fs.any():
+        hi = np.flatnonzero(fs)
+        w = int((se[hi] - ss[hi]).max())
+        cols = np.arange(w)
+        mat = buf[np.minimum(ss[hi, None] + cols, len(buf) - 1)]
+        mat = np.where(cols < (se[hi] - ss[hi])[:, None], mat, 0).astype(np.uint8)
+        mat = np.where(mat < 128, mat, 63).astype(np.uint8)
+        names = np.ascontiguousarray(mat).view(f"S{w}").ravel()
+        u, inv = np.unique(names, return_inverse=True)
+        source[hi] = np.array([x.decode("ascii") for x in u], dtype=object)[inv]
+    return ok, bad_cs, ext, source
+
+
 def _num(arr: pa.Array) -> np.ndarray:
     return pc.cast(pc.if_else(pc.equal(arr, ""), None, arr), pa.float64()).to_numpy(zero_copy_only=False)
 
 
 def parse_prefixes(buf: np.ndarray, start: np.ndarray, end: np.ndarray,
-                   cum_xor: np.ndarray) -> PrefixResult:
+                   cum_xor: np.ndarray, stars: np.ndarray | None = None,
+                   commas: np.ndarray | None = None) -> PrefixResult:
     """Classify and read prefixes ``buf[start:end]`` (vectorised with Arrow regexes).
 
     ``cum_xor`` is ``np.bitwise_xor.accumulate(buf)`` for the TAG checksum:
@@ -91,42 +212,36 @@ def parse_prefixes(buf: np.ndarray, start: np.ndarray, end: np.ndarray,
     bad_tag = np.zeros(n, dtype=bool)
     if n == 0:
         return PrefixResult(ext, source, form, bad_cs, bad_tag)
-    s = gather_strings(buf, start, end)
-    is_tag = buf[start] == 92  # backslash
+    is_tag = buf[start] == 92
     if is_tag.any():
         ti = np.flatnonzero(is_tag)
-        ts = s.take(pa.array(ti))
-        m = pc.extract_regex(ts, _TAG_RE)
-        ok = m.is_valid().to_numpy(zero_copy_only=False)
-        bad_tag[ti[~ok]] = True
+        # loggers repeat one TAG block on consecutive lines (same source, same second):
+        # parse each run of byte-identical TAG blocks once
+        ts, te = start[ti], end[ti]
+        tl = te - ts
+        head = np.ones(len(ti), dtype=bool)
+        w = int(tl.max())
+        if len(ti) > 1 and w <= 128:
+            mat = np.lib.stride_tricks.sliding_window_view(
+                np.concatenate((buf, np.zeros(w, np.uint8))), w)[ts]
+            mat = np.where(np.arange(w) < tl[:, None], mat, 0)
+            head[1:] = (tl[1:] != tl[:-1]) | np.any(mat[1:] != mat[:-1], axis=1)
+        run = np.cumsum(head) - 1
+        hi = np.flatnonzero(head)
+        if stars is None:
+            stars = np.flatnonzero(buf == 42)
+        if commas is None:
+            commas = np.flatnonzero(buf == 44)
+        colons = np.flatnonzero(buf == 58)
+        ok, bcs, e, src = parse_tags(buf, ts[hi], te[hi], cum_xor, stars, commas, colons)
         form[ti] = "tag"
-        oi = ti[ok]
-        if len(oi):
-            # checksum: bytes strictly between the opening '\' and '*'
-            mo = m.filter(pa.array(ok))
-            cslen = pc.utf8_length(pc.struct_field(mo, "cs")).to_numpy(zero_copy_only=False)
-            a = start[oi] + 1
-            star = end[oi] - 2 - cslen
-            x = cum_xor[star - 1] ^ cum_xor[a - 1]
-            hi = np.where(cslen == 2, HEX[buf[end[oi] - 3]], 0)
-            lo = HEX[buf[end[oi] - 2]]
-            given = (hi * 16 + lo).astype(np.int64)
-            bad_cs[oi] = x.astype(np.int64) != given
-            body = pc.struct_field(mo, "body")
-            src = pc.struct_field(pc.extract_regex(body, _SRC_RE), "s")
-            srcs = src.to_numpy(zero_copy_only=False)
-            source[oi] = np.where(pd.isna(srcs), "", srcs)
-            c = pc.struct_field(pc.extract_regex(body, _C_RE), "c")
-            cv = _num(c.fill_null(""))
-            has = ~np.isnan(cv)
-            # c: in seconds (<= 10 integer digits, i.e. < 1e10) or milliseconds
-            ns = np.where(cv < 1e10, cv * 1e9, cv * 1e6)
-            e = np.full(len(oi), MISSING_NS, dtype=np.int64)
-            e[has] = np.round(ns[has]).astype(np.int64)
-            ext[oi] = e
+        bad_tag[ti] = ~ok[run]
+        bad_cs[ti] = bcs[run]
+        ext[ti] = e[run]
+        source[ti] = src[run]
     rest = np.flatnonzero(~is_tag)
     if len(rest):
-        rs = s.take(pa.array(rest))
+        rs = gather_strings(buf, start[rest], end[rest])
         sk = pc.struct_field(pc.extract_regex(rs, _SK_RE), "ms")
         skv = _num(sk.fill_null(""))
         hit = ~np.isnan(skv)

@@ -30,6 +30,7 @@ import datetime as _dt
 from dataclasses import dataclass, field
 
 import numpy as np
+import pandas as pd
 
 DAY_NS = 86_400 * 1_000_000_000
 HALF_DAY_NS = DAY_NS // 2
@@ -221,6 +222,16 @@ class TimeBase:
         return self._flush()
 
 
+def _codes(values):
+    """(codes, names) of a categorical or any array of labels."""
+    if isinstance(values, pd.Series) and isinstance(values.dtype, pd.CategoricalDtype):
+        values = values.array
+    if isinstance(values, pd.Categorical):
+        return values.codes.astype(np.int64), list(values.categories)
+    codes, names = pd.factorize(np.asarray(values, dtype=object))
+    return codes.astype(np.int64), list(names)
+
+
 @dataclass
 class EventCounter:
     """Counts duplicates, back-steps and gaps per (source, kind) over blocks in order.
@@ -243,13 +254,14 @@ class EventCounter:
         (source, sentence type) so the GGA, GLL and RMC of one fix are not duplicates."""
         if len(time_ns) == 0:
             return
-        sent = np.full(len(time_ns), kind, dtype=object) if sentence is None else np.asarray(sentence)
-        keys = np.char.add(np.char.add(np.asarray(source, dtype=str), "\x1f"), sent.astype(str))
-        ukeys, inv = np.unique(keys, return_inverse=True)
+        sc, sn = _codes(np.full(len(time_ns), kind, dtype=object) if sentence is None else sentence)
+        kc, kn = _codes(source)
+        combo = kc.astype(np.int64) * (len(sn) + 1) + sc
+        ucombo, inv = np.unique(combo, return_inverse=True)
         gap_ns = int(self.gap_s * 1e9)
         tol_ns = int(self.tolerance_s * 1e9)
-        for i, ukey in enumerate(ukeys):
-            key, stype = str(ukey).split("\x1f")
+        for i, uc in enumerate(ucombo.tolist()):
+            key, stype = str(kn[uc // (len(sn) + 1)]), str(sn[uc % (len(sn) + 1)])
             sel = (inv == i) & own
             t = time_ns[sel]
             if len(t) == 0:

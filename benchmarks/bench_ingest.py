@@ -1,0 +1,147 @@
+"""Ingest benchmark: dracc's NMEA reader against pynmea2, and streaming memory 1 day vs 7 days.
+
+Run:  python benchmarks/bench_ingest.py [--workdir DIR] [--baseline-lines N] [--skip-memory]
+
+1. Generates the simulated 24 h log with ``dracc simulate --hours 24 --seed 1 --form tag``
+   (compass 10 Hz, log 1 Hz, three INS GGA+HDT+VTG 1 Hz, GNSS GGA+RMC+ZDA 1 Hz; about
+   2.3 M lines, 136 MB), unless DIR already holds it.
+2. Throughput, side by side in this run:
+   * pynmea2: every line's TAG block split off with ``str.rpartition('\\\\')`` (pynmea2
+     has no TAG block support), ``pynmea2.parse(sentence, check=True)`` and every field
+     read through its attribute (``getattr(msg, name)`` for each ``msg.fields`` entry),
+     on the first ``--baseline-lines`` lines (default 300 000; ``0`` = the whole file),
+     scaled per line;
+   * dracc: ``read_nmea`` on the whole file (checksums, TAG blocks, every field of the
+     14 sentence types to SI, time base, frames sorted by time), two worker processes.
+   The ratio is of lines per second (wall clock).
+3. Memory: ``dracc inspect``'s streaming path (``iter_nmea_blocks`` + per-source
+   summaries) on the 1-day log and on a 7-day log, each in a fresh subprocess; peak RSS
+   of the main process and of the worker processes (``ru_maxrss``).  The 7-day log is the
+   1-day log written seven times one after the other (the content repeats; the
+   streaming reader's memory depends on block size, not on content).
+
+The machine is shared: figures vary with load; run it when the machine is quiet.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+
+
+def ensure_log(workdir: Path) -> Path:
+    log = workdir / "day" / "voyage.nmea"
+    if log.exists():
+        return log
+    cmd = [sys.executable, "-m", "dracc", "simulate", "--hours", "24", "--seed", "1", "--form", "tag",
+           "--out", str(log.parent)]
+    print("generating:", " ".join(cmd[2:]), flush=True)
+    subprocess.run(cmd, check=True, cwd=REPO)
+    return log
+
+
+def ensure_week(day: Path, workdir: Path) -> Path:
+    week = workdir / "week.nmea"
+    if week.exists() and week.stat().st_size == 7 * day.stat().st_size:
+        return week
+    with week.open("wb") as out:
+        for _ in range(7):
+            with day.open("rb") as fh:
+                while chunk := fh.read(64 << 20):
+                    out.write(chunk)
+    return week
+
+
+def bench_pynmea2(path: Path, max_lines: int) -> tuple[int, float, int]:
+    import pynmea2
+
+    n = ok = 0
+    t0 = time.perf_counter()
+    with path.open("r", encoding="ascii", errors="replace") as fh:
+        for line in fh:
+            n += 1
+            _, _, sentence = line.rstrip("\r\n").rpartition("\\")
+            try:
+                msg = pynmea2.parse(sentence, check=True)
+            except pynmea2.ParseError:
+                continue
+            for f in msg.fields:
+                getattr(msg, f[1], None)
+            ok += 1
+            if max_lines and n >= max_lines:
+                break
+    return n, time.perf_counter() - t0, ok
+
+
+def bench_dracc(path: Path) -> tuple[int, float, int]:
+    from dracc.config import IngestConfig
+    from dracc.ingest.nmea import read_nmea
+
+    t0 = time.perf_counter()
+    res = read_nmea(path, IngestConfig())
+    return res.lines, time.perf_counter() - t0, res.records
+
+
+_MEM_CHILD = r"""
+import json, resource, sys, time
+from pathlib import Path
+from dracc.config import IngestConfig
+from dracc.cli.inspect_cmd import inspect_logs
+t = time.perf_counter()
+rep = inspect_logs([Path(sys.argv[1])], IngestConfig(), show_progress=False)
+dt = time.perf_counter() - t
+me = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+print(json.dumps({"lines": rep["lines"], "seconds": dt, "main_kib": me, "worker_kib": kids}))
+"""
+
+
+def memory(path: Path) -> dict:
+    out = subprocess.run([sys.executable, "-c", _MEM_CHILD, str(path)], check=True, cwd=REPO,
+                         capture_output=True, text=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--workdir", type=Path, default=Path(os.environ.get("TMPDIR", "/tmp")) / "dracc-bench-ingest")
+    ap.add_argument("--baseline-lines", type=int, default=300_000)
+    ap.add_argument("--skip-memory", action="store_true")
+    args = ap.parse_args()
+    args.workdir.mkdir(parents=True, exist_ok=True)
+    log = ensure_log(args.workdir)
+    size_mb = log.stat().st_size / 1e6
+    print(f"log: {log} ({size_mb:.1f} MB)")
+
+    n_d, t_d, rec = bench_dracc(log)
+    n_p, t_p, ok = bench_pynmea2(log, args.baseline_lines)
+    rate_d = n_d / t_d
+    rate_p = n_p / t_p
+    print(f"dracc read_nmea : {n_d} lines, {rec} records in {t_d:.2f} s -> {rate_d / 1e3:.0f} k lines/s, "
+          f"{size_mb / t_d:.1f} MB/s")
+    print(f"pynmea2         : {n_p} lines ({ok} parsed) in {t_p:.2f} s -> {rate_p / 1e3:.1f} k lines/s "
+          f"(whole file would take ~{n_d / rate_p:.0f} s)")
+    print(f"throughput ratio dracc / pynmea2: {rate_d / rate_p:.1f}x (target >= 20x)")
+
+    if not args.skip_memory:
+        week = ensure_week(log, args.workdir)
+        m1 = memory(log)
+        m7 = memory(week)
+        for name, m in (("1 day ", m1), ("7 days", m7)):
+            print(f"inspect {name}: {m['lines']} lines in {m['seconds']:.1f} s; peak RSS main "
+                  f"{m['main_kib'] / 1024:.0f} MiB, workers {m['worker_kib'] / 1024:.0f} MiB")
+        r_main = m7["main_kib"] / m1["main_kib"]
+        r_work = m7["worker_kib"] / max(m1["worker_kib"], 1)
+        print(f"peak memory 7 d / 1 d: main {r_main:.2f}x, workers {r_work:.2f}x (target <= 1.5x)")
+
+
+if __name__ == "__main__":
+    main()
