@@ -1,0 +1,194 @@
+"""The pipeline on simulated voyages with known truth, and on logs written by the simulator.
+
+Independent values come from the simulator's truth and error series: the DR against
+the true track, the deviations against the written INS errors, the current against the
+simulated current, the calibration against the simulated sensor errors.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+import pytest
+
+from dracc.config import Config
+from dracc.geodesy import offset_ne_m
+from dracc.ingest.frames import INS_ROLES, KINDS, Rejects, TimeEvents, Voyage, empty_frame
+from dracc.ingest.sources import summarize
+from dracc.pipeline import SCHEMA, analyse, analyse_voyage
+from dracc.sim import GM, SimParams, simulate
+from dracc.sim.model import NO_INS_ERROR
+
+
+def voyage_from_sim(sv, drop_kinds=(), drop_roles=()) -> Voyage:
+    """A Voyage as a perfect reader would return it, roles from the simulator."""
+    frames = {}
+    drop_keys = [k for k, r in sv.roles.items() if r in drop_roles]
+    for k in KINDS:
+        df = sv.frames.get(k, empty_frame(k))
+        if k in drop_kinds:
+            df = empty_frame(k)
+        frames[k] = df[~df["source"].astype(str).isin(drop_keys)].reset_index(drop=True)
+    sources = summarize(frames, "sim.nmea")
+    for key, info in sources.items():
+        if key in sv.roles:
+            info.roles = [sv.roles[key]]
+    n = sum(len(f) for f in frames.values())
+    return Voyage(frames=frames, sources=sources, rejects=Rejects(), time_events=TimeEvents(),
+                  inputs=[{"path": "sim.nmea", "format": "nmea", "lines": n, "records": n,
+                           "rejected": {}}], lines=n)
+
+
+@functools.cache
+def _sim(kind: str):
+    if kind == "noiseless":
+        p = SimParams.noiseless(duration_s=3 * 3600.0, seed=3, compass_hz=1.0, aux_hz=0.0)
+    elif kind == "current":
+        # no sensor error; a steady current setting 168 deg while steering 034 deg, then 124
+        p = SimParams.noiseless(duration_s=3 * 3600.0, seed=4, compass_hz=1.0, aux_hz=0.0,
+                                initial_heading_deg=34.0, legs=((0.0, 34.0), (5400.0, 124.0)),
+                                current_set_deg=168.0, current_drift_kn=0.6)
+    elif kind == "calibration":
+        # a gyro bias (drawn once, sigma 0.5 deg), log scale +4 %, small noise, four headings
+        p = SimParams.noiseless(duration_s=4 * 3600.0, seed=5, compass_hz=1.0, aux_hz=0.0,
+                                gyro_bias_deg=GM(0.5, math.inf), log_scale=0.04,
+                                legs=((0.0, 0.0), (3600.0, 90.0), (7200.0, 200.0), (10800.0, 300.0)),
+                                log_white_kn=0.02, gyro_white_deg=0.02)
+    else:  # "realistic": the simulator's defaults, 12 h
+        p = SimParams(duration_s=12 * 3600.0, seed=6, compass_hz=1.0, aux_hz=0.0)
+    return simulate(p)
+
+
+@functools.cache
+def _analysis(kind: str, **cfg):
+    return analyse_voyage(voyage_from_sim(_sim(kind)), Config())
+
+
+def _truth_at(sv, t_ns):
+    tr = sv.truth
+    i = np.searchsorted(tr["time_ns"].to_numpy(), t_ns)
+    return tr["lat_rad"].to_numpy()[i], tr["lon_rad"].to_numpy()[i]
+
+
+def test_noiseless_dr_follows_the_truth():
+    sv = _sim("noiseless")
+    a = _analysis("noiseless")
+    dr = a.dead_reckoning
+    assert dr is not None and a.schema == SCHEMA
+    lat, lon = _truth_at(sv, dr.track.time_ns)
+    n, e = offset_ne_m(dr.track.lat_rad, dr.track.lon_rad, lat, lon)
+    err = np.hypot(n, e)
+    # hourly restarts from exact fixes; 1 s sample-and-hold through 0.5 deg/s turns
+    assert np.nanmax(err) < 10.0
+    assert len(dr.legs) >= 3 and dr.n_scored >= 15  # hourly restarts (the last at the end)
+    assert np.allclose(dr.track.ref_error_m, err, atol=0.5)  # GNSS is the truth here
+    assert dr.consistent is True  # a tiny error inside a circle built for real sensors
+    assert dr.epochs.time_ns[1] - dr.epochs.time_ns[0] == 600 * 10**9
+
+
+def test_deviation_samples_match_the_written_ins_errors():
+    """u_j = e_j - mean(e) (K1), with e the simulator's INS errors at the instants."""
+    sv = _sim("realistic")
+    a = _analysis("realistic")
+    d = a.deviation
+    assert d is not None and d.units == INS_ROLES and len(d.time_ns) == 13
+    err = sv.errors
+    i = np.searchsorted(err["time_ns"].to_numpy(), d.time_ns)
+    ok = i < len(err)
+    for ch, col in (("lat", "north_m"), ("lon", "east_m")):
+        e = np.vstack([err[f"{u}_{col}"].to_numpy()[i[ok]] for u in INS_ROLES])
+        u_true = e - e.mean(axis=0)
+        for j, unit in enumerate(INS_ROLES):
+            got = d.samples[unit][ch][ok]
+            good = np.isfinite(got)
+            assert good.sum() >= 12
+            np.testing.assert_allclose(got[good], u_true[j][good], atol=2.0)  # written precision
+    # INS2 is the worst unit by construction, and the reference (GNSS) says so too
+    ref = {u: d.whole.units[u].reference["lon"].rmse for u in INS_ROLES}
+    assert max(ref, key=ref.get) == "ins2"
+    assert a.deviation_reference == "gnss"
+
+
+def test_current_set_and_drift_from_the_filter():
+    a = _analysis("current")
+    c = a.current
+    assert c is not None and c.n_updates >= 15
+    assert abs((c.set_deg.value - 168.0 + 180.0) % 360.0 - 180.0) < 8.0  # not its mirror image
+    assert c.drift_kn.value == pytest.approx(0.6, abs=0.1)
+
+
+def test_calibration_recovers_gyro_error_and_log_scale():
+    sv = _sim("calibration")
+    a = _analysis("calibration")
+    cal = a.calibration
+    assert cal is not None and cal.n >= 20
+    ce, ls = cal.compass_error_deg, cal.log_scale
+    true_eps_deg = math.degrees(float(sv.errors["gyro_err_rad"].mean()))  # measured - true
+    assert abs(true_eps_deg) > 0.2  # the seed draws a bias worth finding
+    assert abs(ce.value - true_eps_deg) < max(0.05, 3 * ce.sigma)
+    assert abs(ls.value - 0.04) < max(0.005, 3 * ls.sigma)
+
+
+def test_missing_heading_is_reported_and_the_rest_still_computed():
+    sv = _sim("noiseless")
+    a = analyse_voyage(voyage_from_sim(sv, drop_kinds=("heading",)))
+    assert a.dead_reckoning is None and a.current is None and a.calibration is None
+    assert any(m.startswith("no heading") for m in a.missing)
+    assert a.deviation is not None  # the INS statistics do not need the compass
+
+
+def test_two_ins_units_say_so():
+    sv = _sim("noiseless")
+    a = analyse_voyage(voyage_from_sim(sv, drop_roles=("ins3",)))
+    assert a.deviation is not None and a.deviation.units == ("ins1", "ins2")
+    assert a.deviation.factors["lat"] == pytest.approx(math.sqrt(2.0))
+    assert any("only two units" in m and "sqrt(2)" in m for m in a.missing)
+
+
+def test_no_ins_and_no_gnss():
+    sv = _sim("noiseless")
+    a = analyse_voyage(voyage_from_sim(sv, drop_roles=("ins1", "ins2", "ins3", "gnss")))
+    assert a.deviation is None and a.dead_reckoning is None
+    assert any(m.startswith("no INS triple: no INS unit found") for m in a.missing)
+    assert any("no position" in m for m in a.missing)
+
+
+def test_ins_mean_fixes_when_there_is_no_gnss():
+    sv = _sim("noiseless")  # INS without error here: their mean is the truth
+    a = analyse_voyage(voyage_from_sim(sv, drop_roles=("gnss",)))
+    dr = a.dead_reckoning
+    assert dr is not None and dr.reference_role == "ins_mean"
+    assert np.nanmax(dr.track.ref_error_m) < 10.0
+    assert any("mean of the INS" in n for n in a.notes)
+
+
+def test_files_of_one_voyage_merge_by_time(tmp_path):
+    """One file per instrument (as research vessels record) gives the same result as one file."""
+    from dracc.sim.nmea_out import write_nmea
+
+    sv = simulate(SimParams.noiseless(duration_s=1.5 * 3600.0, seed=8, compass_hz=1.0, aux_hz=0.0,
+                                      ins=(NO_INS_ERROR,) * 3))
+    whole = tmp_path / "all.nmea"
+    write_nmea(sv, whole, form="tag")
+    lines = whole.read_bytes().splitlines(keepends=True)
+    parts = {}
+    for line in lines:
+        key = line.split(b"s:", 1)[1].split(b",", 1)[0].split(b"*", 1)[0] if b"s:" in line else b"x"
+        parts.setdefault(key, []).append(line)
+    paths = []
+    for key, ls in parts.items():
+        p = tmp_path / f"{key.decode()}.nmea"
+        p.write_bytes(b"".join(ls))
+        paths.append(p)
+    assert len(paths) >= 5
+    one = analyse([whole])
+    many = analyse(sorted(paths))
+    assert len(many.inputs) == len(paths) and any("merged by time" in n for n in many.notes)
+    assert one.start_ns == many.start_ns and one.end_ns == many.end_ns
+    np.testing.assert_array_equal(one.dead_reckoning.track.time_ns, many.dead_reckoning.track.time_ns)
+    np.testing.assert_allclose(one.dead_reckoning.track.lat_rad, many.dead_reckoning.track.lat_rad)
+    for u in INS_ROLES:
+        np.testing.assert_allclose(one.deviation.samples[u]["lat"], many.deviation.samples[u]["lat"],
+                                   equal_nan=True)
