@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.optimize import brentq
 
 from dracc.config import DeadReckoningConfig, ErrorSource
@@ -531,3 +533,30 @@ def test_true_heading_from_mixed_gyro_and_magnetic_samples():
 def test_true_heading_magnetic_without_variation_raises():
     with pytest.raises(InsufficientDataError, match="variation_deg"):
         true_heading_rad(np.array([0.3]), "M")
+
+
+# ---------------------------------------------------------------- properties (hypothesis)
+
+
+@settings(max_examples=40, deadline=None)
+@given(lat_deg=st.floats(-75, 75), lon_deg=st.floats(-180, 180), course_deg=st.floats(0, 360),
+       speed=st.floats(0.5, 15.0))
+def test_out_and_back_returns_to_the_start(lat_deg, lon_deg, course_deg, speed):
+    """A rhumb line retraced on the reciprocal course ends where it began (< 1 mm)."""
+    t = np.arange(0.0, 2 * 1800.0 + 1, 10.0)
+    c = np.where(t < 1800.0, course_deg * D, course_deg * D + math.pi)
+    vn, ve = velocity_ground_ne_mps(speed, c)
+    lat, lon = integrate_ne(t, vn, ve, lat_deg * D, lon_deg * D)
+    assert distance_m(lat[-1], lon[-1], lat_deg * D, lon_deg * D) < 1e-3
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), tau=st.sampled_from([0.0, 5.0, 60.0, 900.0, math.inf]))
+def test_gauss_markov_covariance_is_symmetric_positive_semidefinite(seed, tau):
+    rng = np.random.default_rng(seed)
+    t = np.cumsum(np.r_[0.0, rng.uniform(0.1, 20.0, 200)])
+    g = rng.normal(size=(t.size, 2)) * rng.uniform(0, 5)
+    P = gauss_markov_position_covariance_m2(t, g, 0.3, tau)
+    w = np.linalg.eigvalsh(P)
+    assert np.all(w >= -1e-9 * max(1.0, float(np.abs(w).max())))
+    np.testing.assert_array_equal(P[:, 0, 1], P[:, 1, 0])
