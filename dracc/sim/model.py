@@ -38,6 +38,7 @@ from datetime import datetime, timezone
 
 import numpy as np
 import pandas as pd
+from pandas.api.types import union_categoricals
 from scipy.signal import lfilter
 
 from ..errors import ConfigError
@@ -282,18 +283,18 @@ def deviation_curve_rad(kk_rad, coeffs_rad) -> np.ndarray:
 
 
 def compass_course_rad(heading_rad, coeffs_rad, variation_rad) -> np.ndarray:
-    """The magnetic compass course KK with ``heading = KK + delta(KK) + d`` (B2), by fixed point.
-
-    Converges when the deviation's slope |d delta / d KK| < 1 (any real compass).
-    """
+    """The magnetic compass course KK with ``heading = KK + delta(KK) + d`` (B2), by Newton's
+    method on ``f(KK) = KK + delta(KK) + d - heading`` (``f' = 1 + delta'``, > 0 for any real
+    compass, whose deviation changes by far less than a degree per degree of heading)."""
+    a, b, c, d, e = coeffs_rad
     target = np.asarray(heading_rad, float) - variation_rad
-    kk = target.copy()
-    for _ in range(60):
-        nxt = target - deviation_curve_rad(kk, coeffs_rad)
-        if np.max(np.abs(angdiff(nxt, kk)), initial=0.0) < 1e-15:
-            kk = nxt
+    kk = target - deviation_curve_rad(target, coeffs_rad)
+    for _ in range(20):
+        f = angdiff(kk + deviation_curve_rad(kk, coeffs_rad), target)
+        fp = 1.0 + b * np.cos(kk) - c * np.sin(kk) + 2 * d * np.cos(2 * kk) - 2 * e * np.sin(2 * kk)
+        kk = kk - f / fp
+        if np.max(np.abs(f), initial=0.0) < 1e-14:
             break
-        kk = nxt
     return wrap_2pi(kk)
 
 
@@ -603,11 +604,13 @@ def simulate(params: SimParams) -> SimVoyage:
     talkers = {k: v[1] for k, v in SOURCES.items()}
     talkers.update({f"INS{j}": t for j, t in enumerate(p.ins_talkers, start=1)})
 
+    def const(m: int, value: str) -> pd.Categorical:
+        return pd.Categorical.from_codes(np.zeros(m, np.int8), categories=[value])
+
     def rec(kind: str, src: str, sent: str, kidx: np.ndarray, **cols) -> None:
         m = len(kidx)
-        d = {"time_ns": time_ns[kidx], "source": np.full(m, src, dtype=object),
-             "talker": np.full(m, talkers[src], dtype=object),
-             "sentence": np.full(m, sent, dtype=object), "line": lines[(src, sent)]}
+        d = {"time_ns": time_ns[kidx], "source": const(m, src), "talker": const(m, talkers[src]),
+             "sentence": const(m, sent), "line": lines[(src, sent)]}
         d.update(cols)
         parts[kind].append(d)
 
@@ -680,9 +683,14 @@ def simulate(params: SimParams) -> SimVoyage:
             frames[kind] = empty_frame(kind)
             continue
         names = list(dict.fromkeys(c for d in parts[kind] for c in d))
-        # a column one sentence lacks (e.g. HDOP in RMC) is missing there: NaN, never zero
-        cat = {c: np.concatenate([d[c] if c in d else np.full(len(d["time_ns"]), np.nan)
-                                  for d in parts[kind]]) for c in names}
+        cat = {}
+        for c in names:
+            if c in ("source", "talker", "sentence"):
+                cat[c] = union_categoricals([d[c] for d in parts[kind]])
+            else:
+                # a column one sentence lacks (e.g. HDOP in RMC) is missing there: NaN, never 0
+                cat[c] = np.concatenate([d[c] if c in d else np.full(len(d["time_ns"]), np.nan)
+                                         for d in parts[kind]])
         o = np.argsort(cat["line"], kind="stable")
         frames[kind] = make_frame(kind, {c: v[o] for c, v in cat.items()})
 
