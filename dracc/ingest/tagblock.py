@@ -41,6 +41,17 @@ _UNIX_RE = r"^\s*(?P<u>\d{9,10}(?:\.\d*)?|\d{12,13}(?:\.\d*)?)\s*[,;:]?\s*$"
 _SK_RE = r"^(?P<ms>\d{10,13});[A-Za-z];$"
 
 
+def unix_to_ns(v: np.ndarray, is_ms: np.ndarray) -> np.ndarray:
+    """Unix seconds (fraction kept to the microsecond) or milliseconds (to the
+    nanosecond) -> int64 ns, exactly: the integer part is scaled in int64, not in float
+    (1.7e18 ns is beyond float64's 2**53)."""
+    iv = np.floor(v)
+    frac = v - iv
+    whole = iv.astype(np.int64)
+    return np.where(is_ms, whole * 1_000_000 + np.round(frac * 1e6).astype(np.int64),
+                    whole * 1_000_000_000 + np.round(frac * 1e6).astype(np.int64) * 1000)
+
+
 def gather_strings(buf: np.ndarray, start: np.ndarray, end: np.ndarray) -> pa.Array:
     """The byte ranges [start, end) of ``buf`` as an Arrow string array (one copy)."""
     n = len(start)
@@ -106,9 +117,11 @@ def parse_numbers(buf: np.ndarray, s: np.ndarray, e: np.ndarray, width: int = 20
         rows = np.flatnonzero(shift)
         for r in rows:
             mat[r] = np.concatenate((buf[s[hi][r]:], np.zeros(w, np.uint8)))[:w]
-    mat = np.where(np.arange(w) < lh[:, None], mat, 0).astype(np.uint8)
+    inside = np.arange(w) < lh[:, None]
+    nul = inside & (mat == 0)  # a NUL byte inside the field is not padding
+    mat = np.where(inside, mat, 0).astype(np.uint8)
     # fast path: only digits, '.', signs and padding, and numpy parses every row
-    odd = (mat > 57) | ((mat < 48) & (mat != 46) & (mat != 45) & (mat != 43) & (mat != 0))
+    odd = (mat > 57) | ((mat < 48) & (mat != 46) & (mat != 45) & (mat != 43) & (mat != 0)) | nul
     v = None
     if not odd.any():
         try:
@@ -124,6 +137,7 @@ def parse_numbers(buf: np.ndarray, s: np.ndarray, e: np.ndarray, width: int = 20
         other = tot >> 24
         sign0 = (mat[:, 0] == 45) | (mat[:, 0] == 43)
         ok = (nd >= 1) & (ndot <= 1) & (other == 0) & ((nsign == 0) | ((nsign == 1) & sign0))
+        ok &= ~nul.any(axis=1)
         if not ok.all():
             mat[~ok] = 0
             mat[~ok, 0] = 48
@@ -172,10 +186,12 @@ def parse_tags(buf: np.ndarray, start: np.ndarray, end: np.ndarray, cum_xor: np.
     ext = np.full(n, MISSING_NS, dtype=np.int64)
     fc, cs_, ce = _key_value(buf, colons, commas, start, star, 99)  # 'c'
     cv, _, cbad = parse_numbers(buf, cs_, ce, decimals=False)
-    has = ok & fc & ~np.isnan(cv)
+    # a c: time beyond the int64 nanosecond range (year 2262) is unreadable, not wrapped
+    cbad = cbad | (np.abs(np.where(cv < 1e10, cv * 1e9, cv * 1e6)) >= 9.2e18)
+    has = ok & fc & ~np.isnan(cv) & ~cbad
     ok &= ~(fc & cbad)
     # c: in seconds (<= 10 integer digits, i.e. < 1e10) or milliseconds
-    ext[has] = np.round(np.where(cv[has] < 1e10, cv[has] * 1e9, cv[has] * 1e6)).astype(np.int64)
+    ext[has] = unix_to_ns(cv[has], cv[has] >= 1e10)
     source = np.full(n, "", dtype=object)
     fs, ss, se = _key_value(buf, colons, commas, start, star, 115)  # 's'
     fs &= ok & (se > ss)
@@ -245,13 +261,12 @@ def parse_prefixes(buf: np.ndarray, start: np.ndarray, end: np.ndarray,
         sk = pc.struct_field(pc.extract_regex(rs, _SK_RE), "ms")
         skv = _num(sk.fill_null(""))
         hit = ~np.isnan(skv)
-        ext[rest[hit]] = np.round(skv[hit] * 1e6).astype(np.int64)
+        ext[rest[hit]] = unix_to_ns(skv[hit], np.ones(int(hit.sum()), dtype=bool))
         form[rest[hit]] = "signalk"
         un = pc.struct_field(pc.extract_regex(rs, _UNIX_RE), "u")
         unv = _num(un.fill_null(""))
         hit2 = ~np.isnan(unv) & ~hit
-        ns = np.where(unv < 1e11, unv * 1e9, unv * 1e6)
-        ext[rest[hit2]] = np.round(ns[hit2]).astype(np.int64)
+        ext[rest[hit2]] = unix_to_ns(unv[hit2], unv[hit2] >= 1e11)
         form[rest[hit2]] = "unix"
         todo = ~(hit | hit2)
         if todo.any():
