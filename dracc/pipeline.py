@@ -304,9 +304,13 @@ def analyse_voyage(voyage: Voyage, cfg: Config | None = None,
     firsts = [s.first_ns for s in sources if s.first_ns is not None]
     lasts = [s.last_ns for s in sources if s.last_ns is not None]
     if not firsts:
+        why = ", ".join(f"{k} {v}" for k, v in voyage.rejects.counts.most_common(4))
+        hint = ("; the log carries no date: give it with --date YYYY-MM-DD"
+                if voyage.rejects.counts.get("no_date") else "")
         raise InsufficientDataError(
             "no usable record in " + (", ".join(f.path for f in inputs) or "the input")
-            + f" ({voyage.lines} lines read, {voyage.rejects.total} rejected)")
+            + f" ({voyage.lines} lines read, {voyage.rejects.total} rejected"
+            + (f": {why}" if why else "") + ")" + hint)
     te = voyage.time_events
     time = TimeSummary(duplicates=te.duplicates, backsteps=te.backsteps, gaps=te.gaps,
                        rollovers=te.rollovers, implausible_dates=te.implausible_dates,

@@ -1,0 +1,161 @@
+"""``dracc analyze`` end to end: the sample logs, the real logs, every report, option errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import jsonschema
+import pandas as pd
+import pytest
+
+from dracc.cli.analyze_cmd import parse_duration_s, parse_roles
+from dracc.errors import ConfigError, ExitCode
+from dracc.report.json_report import load_schema
+
+SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
+SAMPLE = SAMPLES / "voyage_tag.nmea"
+
+
+@pytest.fixture(scope="module")
+def validator():
+    return jsonschema.Draft202012Validator(load_schema(), format_checker=jsonschema.FormatChecker())
+
+
+def _json(out: str, validator) -> dict:
+    doc = json.loads(out)
+    errors = list(validator.iter_errors(doc))
+    assert not errors, errors[0]
+    return doc
+
+
+@pytest.mark.parametrize("text,seconds", [("1h", 3600.0), ("2h", 7200.0), ("3600", 3600.0),
+                                          ("90min", 5400.0), ("30s", 30.0), ("1d", 86400.0),
+                                          ("0.5h", 1800.0)])
+def test_parse_duration(text, seconds):
+    assert parse_duration_s(text, "--interval") == seconds
+
+
+@pytest.mark.parametrize("text", ["", "abc", "-1h", "0", "1 fortnight"])
+def test_parse_duration_rejects(text):
+    with pytest.raises(ConfigError, match="--interval"):
+        parse_duration_s(text, "--interval")
+
+
+def test_parse_roles():
+    assert parse_roles(["INS2=ins2", " II = Compass "]) == {"INS2": "ins2", "II": "compass"}
+    for bad in ("INS2", "=ins1", "X=radar"):
+        with pytest.raises(ConfigError, match="--role"):
+            parse_roles([bad])
+
+
+@pytest.mark.skipif(not SAMPLE.exists(), reason="sample_logs not generated")
+def test_sample_log_every_report(run_cli, tmp_path, validator):
+    js, page, tables = tmp_path / "r.json", tmp_path / "r.html", tmp_path / "tables"
+    code, out, err = run_cli("analyze", SAMPLE, "--json", js, "--html", page, "--out", tables)
+    assert code == ExitCode.OK, err
+    for section in ("period", "Sources", "Dead reckoning", "INS deviations from the mean",
+                    "Calibration", "Current", "excess"):
+        assert section in out
+    doc = _json(js.read_text(encoding="utf-8"), validator)
+    assert doc["period"]["start_utc"] == "2026-03-01T06:00:00Z"
+    assert doc["deviation"]["units_present"] == ["ins1", "ins2", "ins3"]
+    assert len(doc["deviation"]["samples"]) == 4  # 06:00 .. 09:00
+    assert doc["dead_reckoning"]["containment_2m"] is not None
+    assert doc["dead_reckoning"]["epochs"][0]["time_utc"] == "2026-03-01T06:00:00Z"
+    assert doc["calibration"]["compass_error_deg"]["value"] is not None
+    assert doc["current"]["set_deg"]["value"] is not None
+    html = page.read_text(encoding="utf-8")
+    assert html.count('src="data:image/png;base64,') == 4
+    track = pd.read_parquet(tables / "dr_track.parquet")
+    assert len(track) == len(pd.read_csv(tables / "dr_track.csv")) > 3 * 3000
+    stats = pd.read_parquet(tables / "unit_stats.parquet")
+    assert set(stats["unit_name"]) == {"ins1", "ins2", "ins3"}
+    # nothing half-written is left beside the reports
+    assert not list(tmp_path.rglob("*.part"))
+
+
+@pytest.mark.skipif(not SAMPLE.exists(), reason="sample_logs not generated")
+def test_json_to_stdout_is_only_json(run_cli, validator):
+    code, out, _ = run_cli("analyze", SAMPLE, "--json", "-", "--interval", "2h", "--role", "MAG=compass",
+                           "--dr-reset", "watch", "--probability", "0.9")
+    assert code == ExitCode.OK
+    doc = _json(out, validator)
+    assert doc["deviation"]["interval_s"] == 7200.0 and doc["deviation"]["probability"] == 0.9
+    assert doc["settings"]["reset"] == "watch" and doc["settings"]["roles"] == {"MAG": "compass"}
+    assert len(doc["dead_reckoning"]["legs"]) == 1  # a 3 h voyage within one 4 h watch
+    assert "MAG" in doc["sources"]["compass"]["keys"]
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["--interval", "abc"], "--interval"),
+    (["--role", "GP"], "--role"),
+    (["--role", "GP=radar"], "--role"),
+    (["--dr-reset", "sometimes"], "--dr-reset"),
+    (["--probability", "1.5"], "--probability"),
+    (["--date", "1/3/2026"], "--date"),
+    (["--fix-role", "moon"], "--fix-role"),
+])
+def test_bad_options_are_one_line_config_errors(run_cli, args, needle):
+    code, out, err = run_cli("analyze", SAMPLE, *args)
+    assert code == ExitCode.CONFIG
+    assert err.startswith("error:") and needle in err and len(err.strip().splitlines()) == 1
+    assert out == ""
+
+
+def test_missing_file(run_cli, tmp_path):
+    code, _, err = run_cli("analyze", tmp_path / "nope.nmea")
+    assert code == ExitCode.INPUT and "no such file" in err and "Traceback" not in err
+
+
+# ------------------------------------------------------------------------------ real logs
+
+
+def test_hakefjord_dr_against_its_gps(run_cli, real_dir, validator):
+    """A yacht with magnetic heading, water speed and two GPS receivers: DR and its consistency."""
+    code, out, err = run_cli("analyze", real_dir / "VDRplayer" / "Hakefjord.txt", "--json", "-",
+                             "--epoch-interval", "1min")
+    assert code == ExitCode.OK, err
+    doc = _json(out, validator)
+    dr = doc["dead_reckoning"]
+    assert dr is not None and "magnetic" in dr["heading_source"]
+    assert dr["n_scored"] >= 15 and 0.0 <= dr["containment_2m"] <= 1.0
+    assert dr["error_over_m_rms"] > 0
+    errors = [e["ref_error_m"] for e in dr["epochs"] if e["ref_error_m"] is not None]
+    assert errors and max(errors) < 1000.0  # 22 min at ~5 kn: the DR stays near the GPS
+    assert doc["deviation"] is None
+    assert any(m.startswith("no INS triple") for m in doc["missing"])
+
+
+@pytest.mark.parametrize("rel", ["anemomind/Irene/2014/20140611/NMEA0048.TXT",
+                                 "anemomind/psaros33_Banque_Sturdza/2014/20140821/NMEA0010.TXT"])
+def test_anemomind_sailing_logs(run_cli, real_dir, validator, rel):
+    code, out, err = run_cli("analyze", real_dir / rel, "--json", "-", "--epoch-interval", "5min")
+    assert code == ExitCode.OK, err
+    doc = _json(out, validator)
+    dr = doc["dead_reckoning"]
+    assert dr is not None and dr["n_scored"] >= 10 and dr["containment_2m"] is not None
+    assert len(dr["epochs"]) >= 10
+    assert any(m.startswith("no INS triple") for m in doc["missing"])
+
+
+def test_plaka_no_heading_is_said_plainly(run_cli, real_dir, validator):
+    path = real_dir / "signalk-server" / "plaka.log"
+    code, _, err = run_cli("analyze", path)
+    assert code == ExitCode.INPUT and "--date" in err and len(err.strip().splitlines()) == 1
+    code, out, err = run_cli("analyze", path, "--date", "2019-06-01", "--json", "-")
+    assert code == ExitCode.OK, err
+    doc = _json(out, validator)
+    assert doc["dead_reckoning"] is None
+    assert any(m.startswith("no heading") for m in doc["missing"])
+
+
+def test_gnss_only_log(run_cli, real_dir):
+    code, out, err = run_cli("analyze", real_dir / "gpsd" / "hemi.log")
+    assert code == ExitCode.OK, err
+    assert "no heading" in out and "no speed log" in out and "no INS triple" in out
+
+
+def test_empty_mcap_is_one_line_error(run_cli, real_dir):
+    code, out, err = run_cli("analyze", real_dir / "keelson" / "6389403" / "test.mcap")
+    assert code == ExitCode.INPUT and err.startswith("error:") and "Traceback" not in err
