@@ -27,7 +27,9 @@ Three estimators:
         (p(t_j + T_j) - p(t_j)) / T_j = mean over the segment of
             (V_log - b) / (1 + s) * [cos(H - eps(H)), sin(H - eps(H))]  +  c(t_j mid)
     with the reference displacement p in metres north/east, H the logged heading and
-    c(t) the current, piecewise linear in time between knots every ``current_knot_s``.
+    c(t) the current, piecewise linear in time between knots every ``current_knot_s``;
+    eps is a constant, -delta(K) with the deviation curve A-E, or (slowly varying gyro
+    error) piecewise linear in time between knots every ``heading_knot_s``.
     Current and log scale are separable only where the ship steers different headings
     within the current's time scale (a 3 % scale error on a northerly course looks
     exactly like a 0.3 kn northerly current); speed changes separate scale from offset.
@@ -240,14 +242,18 @@ def deviation_from_heading(
 class TrackCalibration:
     """Result of :func:`calibrate_from_track`; every estimate with its standard error.
 
-    ``heading_error_rad`` is the constant compass error eps (heading_model='constant')
-    or the deviation-curve coefficients A-E with the sign of delta = -eps
-    (heading_model='deviation').
+    ``heading_error_rad`` is the constant compass error eps (heading_model='constant'),
+    the deviation-curve coefficients A-E with the sign of delta = -eps
+    (heading_model='deviation'), or eps at the knots ``heading_knot_s``, linear in time
+    between them (heading_model='varying': a slowly varying gyro error, with
+    ``heading_constant_p`` the chi-square p-value of "constant after all").
     """
 
     heading_model: str
-    heading_error_rad: np.ndarray  #: (1,) eps, or (5,) A-E of delta
+    heading_error_rad: np.ndarray  #: (1,) eps; (5,) A-E of delta; or eps at heading_knot_s
     heading_error_sigma_rad: np.ndarray
+    heading_knot_s: np.ndarray  #: knot times of the 'varying' model (empty otherwise)
+    heading_constant_p: float  #: 'varying': chi-square p-value that eps is constant (NaN otherwise)
     log_scale: float  #: s in V_log = (1 + s) V_true + b
     log_scale_sigma: float
     log_offset_mps: float  #: b (0 and sigma NaN when not fitted)
@@ -295,6 +301,7 @@ def calibrate_from_track(
     fit_log_offset: bool = True,
     segment_s: float = 600.0,
     current_knot_s: float = 2 * 3600.0,
+    heading_knot_s: float = 6 * 3600.0,
     max_ref_gap_s: float = 5.0,
     min_coverage: float = 0.9,
     variation_rad=0.0,
@@ -308,8 +315,9 @@ def calibrate_from_track(
     least ``min_coverage`` of the segment and whose ends have reference positions are
     used.  The model and its identifiability are in the module docstring.
     """
-    if heading_model not in ("constant", "deviation"):
-        raise ValueError(f"heading_model must be 'constant' or 'deviation', got {heading_model!r}")
+    if heading_model not in ("constant", "deviation", "varying"):
+        raise ValueError(
+            f"heading_model must be 'constant', 'deviation' or 'varying', got {heading_model!r}")
     t = np.asarray(time_s, float)
     h = np.asarray(heading_rad, float)
     v = np.asarray(speed_mps, float)
@@ -359,15 +367,28 @@ def calibrate_from_track(
     used_knots = np.flatnonzero(B.sum(axis=0) > 0)
     B = B[:, used_knots]
     nk = used_knots.size
-    basis = _curve_basis(hs - var[sample_use]) if heading_model == "deviation" else None
-    n_h = 5 if heading_model == "deviation" else 1
+    # eps = Hd @ theta_heading, per sample
+    h_knots = np.zeros(0)
+    if heading_model == "deviation":
+        Hd = -_curve_basis(hs - var[sample_use])  # eps = -delta(K)
+    elif heading_model == "varying":
+        ts = t[sample_use]
+        h_knots = np.arange(edges[0], edges[-1] + heading_knot_s, heading_knot_s)
+        hp = np.clip((ts - h_knots[0]) / heading_knot_s, 0, h_knots.size - 1 - 1e-12)
+        h_lo = np.floor(hp).astype(np.int64)
+        Hd = np.zeros((ts.size, h_knots.size))
+        Hd[np.arange(ts.size), h_lo] = 1 - (hp - h_lo)
+        Hd[np.arange(ts.size), h_lo + 1] = hp - h_lo
+        keep_h = np.flatnonzero(Hd.sum(axis=0) > 0)
+        Hd, h_knots = Hd[:, keep_h], h_knots[keep_h]
+    else:
+        Hd = np.ones((hs.size, 1))
+    n_h = Hd.shape[1]
     n_b = 1 if fit_log_offset else 0
     vspan = float(np.ptp(vs))
 
     def heading_error(theta):
-        if basis is None:
-            return theta[0]
-        return -(basis @ theta[:5])  # eps = -delta
+        return Hd @ theta[:n_h]
 
     def model(theta):
         eps = heading_error(theta)
@@ -397,13 +418,9 @@ def calibrate_from_track(
             return np.bincount(si, weights=wn * x, minlength=m)
 
         # d/d eps of spd [cos c, sin c] = spd [sin c, -cos c]
-        if basis is None:
-            out[:, 0, 0] = seg_sum(spd * sin_c)
-            out[:, 1, 0] = seg_sum(-spd * cos_c)
-        else:
-            for k in range(5):  # eps = -(basis @ A..E)
-                out[:, 0, k] = seg_sum(-basis[:, k] * spd * sin_c)
-                out[:, 1, k] = seg_sum(basis[:, k] * spd * cos_c)
+        for k in range(n_h):  # eps = Hd @ theta
+            out[:, 0, k] = seg_sum(Hd[:, k] * spd * sin_c)
+            out[:, 1, k] = seg_sum(-Hd[:, k] * spd * cos_c)
         out[:, 0, n_h] = seg_sum(-spd * cos_c) / (1.0 + s)
         out[:, 1, n_h] = seg_sum(-spd * sin_c) / (1.0 + s)
         if n_b:
@@ -455,10 +472,22 @@ def calibrate_from_track(
     cov = inflation * s2 * np.linalg.inv(JtJ)
     sig = np.sqrt(np.diag(cov))
     x = sol.x
+    if heading_model == "varying" and n_h > 1:
+        # constancy of the heading error: GLS mean of the knot values and its chi-square
+        C = cov[:n_h, :n_h]
+        Ci = np.linalg.inv(C)
+        one = np.ones(n_h)
+        xh = x[:n_h]
+        mean_h = float(one @ Ci @ xh / (one @ Ci @ one))
+        chi2 = float((xh - mean_h) @ Ci @ (xh - mean_h))
+        p_const = float(stats.chi2.sf(chi2, n_h - 1))
+    else:
+        p_const = float("nan")
     cur = x[n_h + 1 + n_b:].reshape(2, nk).T
     cur_sig = sig[n_h + 1 + n_b:].reshape(2, nk).T
     return TrackCalibration(
         heading_model=heading_model, heading_error_rad=x[:n_h].copy(),
+        heading_knot_s=h_knots, heading_constant_p=p_const,
         heading_error_sigma_rad=sig[:n_h].copy(), log_scale=float(x[n_h]),
         log_scale_sigma=float(sig[n_h]),
         log_offset_mps=float(x[n_h + 1]) if n_b else 0.0,

@@ -183,3 +183,23 @@ def test_constant_speed_cannot_separate_log_offset_from_scale():
 
 def test_heading_errors_are_differences_on_the_circle():
     assert angdiff(0.1 * D, 359.9 * D) == pytest.approx(0.2 * D)
+
+
+def test_slowly_varying_gyro_error_from_gnss_track():
+    """Gyro error drifting 0.1 -> 0.7 deg over 24 h, GNSS positions only: the 'varying'
+    model (knots every 6 h) follows it and rejects constancy; a constant 0.3 deg is not
+    called varying."""
+    rng, t, course, speed, glat, glon = _voyage(2)
+    spd = 1.03 * speed + _gm(rng, t.size, 0.1 * KN, 300.0)
+    drift = (0.1 + 0.6 * t / t[-1]) * D
+    hdg = course + drift + _gm(rng, t.size, 0.2 * D, 120.0)
+    cal = calibrate_from_track(t, hdg, spd, t, glat, glon, heading_model="varying",
+                               fit_log_offset=False)
+    truth = (0.1 + 0.6 * cal.heading_knot_s / t[-1]) * D
+    np.testing.assert_allclose(cal.heading_knot_s, np.arange(0, 25, 6) * 3600.0)
+    assert np.all(np.abs(cal.heading_error_rad - truth) < 4 * cal.heading_error_sigma_rad)
+    assert cal.heading_constant_p < 0.01
+    steady = course + 0.3 * D + _gm(rng, t.size, 0.2 * D, 120.0)
+    cal2 = calibrate_from_track(t, steady, spd, t, glat, glon, heading_model="varying",
+                                fit_log_offset=False)
+    assert cal2.heading_constant_p > 0.01
