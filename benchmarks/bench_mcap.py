@@ -10,9 +10,10 @@ written as MCAP (JSON and ROS 2 CDR, zstd chunks of 1 MiB):
   timed on the first ``--stock-limit`` messages (default 300 000; 0 = all) and its
   per-message time extrapolated to the file; the printout says so.
 
-Memory: the peak RSS (``VmHWM``) of a fresh subprocess reading the 6 h and the 24 h file, beside the
-size of the frames it returns and the RSS after imports; the reader's own working memory
-is peak - imports - frames.
+Memory: the peak RSS (``VmHWM``) of a fresh subprocess reading the 6 h and the 24 h file,
+split into the RSS after imports, the RSS held at the end with the frames alive, and the
+transient above it (the reader's working memory: windows, pending columns, the final
+concatenation).
 
 Usage: ``python benchmarks/bench_mcap.py [--hours 24] [--workdir DIR] [--stock-limit N]``
 (files are cached in DIR between runs).
@@ -33,15 +34,17 @@ import sys, json
 from dracc.config import IngestConfig
 from dracc.ingest.mcap import read_mcap
 import dracc.ingest.nmea  # noqa: F401  (import cost outside the measurement)
-def hwm_kib():  # peak RSS of this process image (VmHWM; ru_maxrss keeps the parent's across exec)
+def status_kib(key):  # VmHWM: peak RSS of this process image (ru_maxrss keeps the parent's across exec)
     for line in open("/proc/self/status"):
-        if line.startswith("VmHWM:"):
+        if line.startswith(key + ":"):
             return int(line.split()[1])
-base = hwm_kib()
+base = status_kib("VmHWM")
 r = read_mcap(sys.argv[1], IngestConfig())
-frames = sum(int(f.memory_usage(deep=True).sum()) for f in r.frames.values())
-peak = hwm_kib()
-print(json.dumps({"base_kib": base, "peak_kib": peak, "frames_bytes": frames, "messages": r.lines}))
+peak = status_kib("VmHWM")
+held = status_kib("VmRSS")  # with the frames alive
+frames = sum(int(f.memory_usage(deep=False).sum()) for f in r.frames.values())
+print(json.dumps({"base_kib": base, "peak_kib": peak, "held_kib": held, "frames_bytes": frames,
+                  "messages": r.lines}))
 """
 
 
@@ -121,10 +124,11 @@ def main() -> None:
     six = make_files(6.0, args.workdir)["ros2"] if args.hours != 6.0 else files["ros2"]
     for label, p in (("6 h", six), (f"{args.hours:g} h", files["ros2"])):
         m = memory(p)
-        own = (m["peak_kib"] - m["base_kib"]) / 1024 - m["frames_bytes"] / 2**20
+        transient = (m["peak_kib"] - m["held_kib"]) / 1024
         print(f"  {label:5} file {p.stat().st_size / 1e6:6.1f} MB, {m['messages']} msgs: peak RSS "
-              f"{m['peak_kib'] / 1024:7.1f} MiB, after imports {m['base_kib'] / 1024:6.1f} MiB, frames "
-              f"{m['frames_bytes'] / 2**20:6.1f} MiB, reader working memory {own:6.1f} MiB", flush=True)
+              f"{m['peak_kib'] / 1024:7.1f} MiB = after imports {m['base_kib'] / 1024:6.1f} + held with "
+              f"the frames {(m['held_kib'] - m['base_kib']) / 1024:6.1f} (frames' own arrays "
+              f"{m['frames_bytes'] / 2**20:6.1f}) + transient {transient:6.1f} MiB", flush=True)
 
 
 if __name__ == "__main__":

@@ -164,6 +164,15 @@ def add_rejects(rejects: Rejects, reason: str, file: str, lines: np.ndarray, tex
         rejects.counts[reason] += n - k
 
 
+def _labels(x, n: int):
+    """A string column as given (a Categorical stays one), a scalar as a 1-byte Categorical."""
+    if isinstance(x, pd.Categorical):
+        return x
+    if np.isscalar(x):
+        return pd.Categorical.from_codes(np.zeros(n, dtype=np.int8), categories=[x])
+    return np.asarray(x, dtype=object)
+
+
 def build_frames(time_ns: np.ndarray, source, line: np.ndarray, sentence,
                  values: dict[str, np.ndarray], file: str, rejects: Rejects,
                  talker=None) -> dict[str, pd.DataFrame]:
@@ -202,9 +211,8 @@ def build_frames(time_ns: np.ndarray, source, line: np.ndarray, sentence,
         else:
             cols[q.column] = v
     frames: dict[str, pd.DataFrame] = {}
-    src = np.asarray(source, dtype=object) if not np.isscalar(source) else np.full(n, source, dtype=object)
-    sen = np.asarray(sentence, dtype=object) if not np.isscalar(sentence) else np.full(n, sentence, dtype=object)
-    tal = (np.full(n, "", dtype=object) if talker is None else np.asarray(talker, dtype=object))
+    src, sen = _labels(source, n), _labels(sentence, n)
+    tal = _labels("" if talker is None else talker, n)
     for kind, cols in by_kind.items():
         numeric = {c: v for c, v in cols.items() if c != "reference"}
         present = np.zeros(n, dtype=bool)

@@ -69,6 +69,7 @@ _WINDOW = 8 << 20
 _TOPLEVEL_FLUSH = 20000
 _INDEXED_MAX = 64 << 20  #: chunks up to this size (uncompressed) are decoded whole via their index
 _JSON_BATCH = 50000  #: JSON messages of one channel parsed together
+_PIECE_RECORDS = 200_000  #: decoded records of a channel kept as columns before becoming a frame piece
 
 _OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 1, 2, 3, 4, 5, 6
 _OP_DATA_END = 0x0F
@@ -152,6 +153,7 @@ class _Reader:
         self.nmea_no: list[int] = []
         self.orphans = 0
         self.top_msgs: list[tuple[int, int, bytes, int]] = []
+        self.pieces: dict[str, list[pd.DataFrame]] = {}  #: kind -> frame pieces, in file order per channel
 
     # ---------------------------------------------------------------- records
     def run(self) -> None:
@@ -580,7 +582,7 @@ class _Reader:
             yaw_rad = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))  # ENU yaw (REP 103)
             out["heading_rad"] = np.mod(math.pi / 2 - yaw_rad, 2 * math.pi)  # from north, clockwise
         keep = ok
-        ch.parts.append((t[keep], nums[keep], {k: v[keep] for k, v in out.items()}))
+        self._add_part(ch, t[keep], nums[keep], {k: v[keep] for k, v in out.items()})
 
     def _json_queue(self, ch: _Channel, joined: bytes, n: int, times, nums) -> None:
         """Collect a channel's JSON payloads (one per line, see :func:`_join_lines`); parse
@@ -646,7 +648,7 @@ class _Reader:
             have = tns >= 0
             t = t.copy()
             t[have] = tns[have]
-        ch.parts.append((t[good], nums[good], {k: v[good] for k, v in cols.items()}))
+        self._add_part(ch, t[good], nums[good], {k: v[good] for k, v in cols.items()})
 
     def _json_plan(self, obj) -> dict | None:
         if not isinstance(obj, dict):
@@ -731,7 +733,7 @@ class _Reader:
             f = next(k for k, q in plan["fields"].items() if q == "reference")
             out["reference"] = np.array([(getattr(m, f) or None) if m is not None else None for m in msgs],
                                         dtype=object)
-        ch.parts.append((t[good], nums[good], {k: v[good] for k, v in out.items()}))
+        self._add_part(ch, t[good], nums[good], {k: v[good] for k, v in out.items()})
 
     def _proto_plan(self, ch: _Channel, msg) -> dict | None:
         desc = msg.DESCRIPTOR
@@ -774,24 +776,37 @@ class _Reader:
         ch.state["nmea"] = ch.state.get("nmea", 0) + 1
 
     # ---------------------------------------------------------------- result
+    def _add_part(self, ch: _Channel, t, nums, qs: dict) -> None:
+        """Keep decoded columns of a channel; turn them into compact frame pieces once
+        enough have gathered, so the pending columns stay bounded."""
+        ch.parts.append((t, nums, qs))
+        ch.state["pending"] = ch.state.get("pending", 0) + len(t)
+        if ch.state["pending"] >= _PIECE_RECORDS:
+            self._to_pieces(ch)
+
+    def _to_pieces(self, ch: _Channel) -> None:
+        if not ch.parts:
+            return
+        t = np.concatenate([p[0] for p in ch.parts])
+        k = np.concatenate([p[1] for p in ch.parts])
+        qs = {q: np.concatenate([p[2][q] for p in ch.parts]) for q in ch.parts[0][2]}
+        ch.parts = []
+        ch.state["pending"] = 0
+        n = len(t)
+        sentence = ch.type_name.split("/")[-1].split(".")[-1]
+        frames = build_frames(t, _const_cat(ch.key, n), k, _const_cat(sentence, n), qs, self.file,
+                              self.rejects, talker=_const_cat("", n))
+        ch.state["records"] = ch.state.get("records", 0) + sum(len(f) for f in frames.values())
+        for kind, f in frames.items():
+            self.pieces.setdefault(kind, []).append(f)
+
     def result(self) -> FileResult:
         for ch in self.channels.values():
             self._json_flush(ch)
-        per_kind: dict[str, list[pd.DataFrame]] = {}
-        for ch in self.channels.values():
-            if not ch.parts:
-                continue
-            t = np.concatenate([p[0] for p in ch.parts])
-            k = np.concatenate([p[1] for p in ch.parts])
-            qs = {q: np.concatenate([p[2][q] for p in ch.parts]) for q in ch.parts[0][2]}
-            ch.parts = []
-            sentence = ch.type_name.split("/")[-1].split(".")[-1]
-            frames = build_frames(t, ch.key, k, sentence, qs, self.file, self.rejects)
-            ch.state["records"] = sum(len(f) for f in frames.values())
-            for kind, f in frames.items():
-                per_kind.setdefault(kind, []).append(f)
-        out = {kind: pd.concat(fs, ignore_index=True).sort_values(["time_ns", "line"], kind="stable")
-               .reset_index(drop=True) for kind, fs in per_kind.items()}
+            self._to_pieces(ch)
+        out = {}
+        for kind in list(self.pieces):
+            out[kind] = _concat_sorted(self.pieces.pop(kind))
         res = FileResult(path=self.file, format="mcap", frames=out, lines=self.msg_no, rejects=self.rejects,
                          notes=[])
         if self.nmea_lines:
@@ -805,9 +820,7 @@ class _Reader:
                     continue
                 f = f.copy()
                 f["line"] = nos[f["line"].to_numpy(dtype=np.int64) - 1]  # sentence index -> message number
-                res.frames[kind] = (pd.concat([res.frames[kind], f], ignore_index=True)
-                                    .sort_values(["time_ns", "line"], kind="stable").reset_index(drop=True)
-                                    if kind in res.frames else f)
+                res.frames[kind] = _concat_sorted([res.frames[kind], f]) if kind in res.frames else f
             res.rejects.merge(nres.rejects)
             res.time_events = nres.time_events
             res.notes.extend(nres.notes)
@@ -849,6 +862,39 @@ class _Reader:
             used = [n for n in notes if "not used" not in n]
             notes = used + [f"{k} further channel(s) not used ({why})" for why, k in unused.most_common()]
         return notes
+
+
+def _const_cat(value: str, n: int) -> pd.Categorical:
+    """A categorical column holding one value n times (1 byte a row)."""
+    return pd.Categorical.from_codes(np.zeros(n, dtype=np.int8), categories=[value])
+
+
+def _concat_sorted(pieces: list[pd.DataFrame]) -> pd.DataFrame:
+    """Concatenate frame pieces of one kind (categoricals unified, not turned into objects)
+    ordered by (time_ns, line), one column at a time so that the peak is the pieces plus
+    the result plus one column; the pieces list is emptied."""
+    from pandas.api.types import union_categoricals
+
+    t = np.concatenate([p["time_ns"].to_numpy() for p in pieces])
+    ln = np.concatenate([p["line"].to_numpy() for p in pieces])
+    order = None
+    if len(t) > 1 and not ((t[1:] > t[:-1]) | ((t[1:] == t[:-1]) & (ln[1:] >= ln[:-1]))).all():
+        order = np.lexsort((ln, t))
+    cols = {}
+    for c in pieces[0].columns:
+        if c == "time_ns":
+            v = t
+        elif c == "line":
+            v = ln
+        elif all(isinstance(p[c].dtype, pd.CategoricalDtype) for p in pieces):
+            v = union_categoricals([p[c] for p in pieces]) if len(pieces) > 1 else pieces[0][c].array
+        elif pieces[0][c].dtype == object or isinstance(pieces[0][c].dtype, pd.CategoricalDtype):
+            v = np.concatenate([p[c].to_numpy(dtype=object) for p in pieces])
+        else:
+            v = np.concatenate([p[c].to_numpy() for p in pieces])
+        cols[c] = v if order is None else v[order]
+    pieces.clear()
+    return pd.DataFrame(cols, copy=False)
 
 
 def _repeated(f) -> bool:
