@@ -210,3 +210,14 @@ def test_raw_logger_csv_goes_through_the_nmea_parser(tmp_path, real_dir):
     assert math.degrees(gga["lat_rad"]) == pytest.approx(48 + 46.4008666 / 60, abs=1e-12)
     assert math.degrees(gga["lon_rad"]) == pytest.approx(8 + 54.7249096 / 60, abs=1e-12)
     assert gga["quality"] == 4
+
+
+def test_raw_csv_rejects_name_csv_lines(tmp_path):
+    p = tmp_path / "logger.csv"
+    p.write_text("received_at,raw_data\n"
+                 '2020-04-20T09:25:42Z,"$GNGGA,092542.00,4846.4008666,N,00854.7249096,E,4,12,0.47,419.166,M,47.535,M,0.0,0000*66"\n'
+                 '2020-04-20T09:25:43Z,"$GNGGA,092543.00,4846.4008666,N,00854.7249096,E,4,12,0.47,419.166,M,47.535,M,0.0,0000*00"\n')
+    r = read_csv(p, IngestConfig())
+    assert len(r.frames["position"]) == 1
+    (reason, ex), = r.rejects.examples.items()
+    assert r.rejects.counts[reason] == 1 and ex[0][1] == 3  # the bad checksum is on CSV line 3

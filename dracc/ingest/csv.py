@@ -46,6 +46,7 @@ from .csv_quantities import (
     build_frames,
     check_declared,
     lookup,
+    renumber_examples,
 )
 from .frames import FileResult, Rejects
 
@@ -410,6 +411,7 @@ def _read_raw(p: Path, cols: list[str], cfg: IngestConfig, rejects: Rejects, not
             f = f.copy()
             f["line"] = where[f["line"].to_numpy(dtype=np.int64) - 1]
             res.frames[kind] = f
+    renumber_examples(res.rejects, where)
     res.rejects.merge(rejects)
     res.format = "csv-raw"
     res.lines = rows

@@ -282,3 +282,11 @@ def frame_quantities(kind: str, df: pd.DataFrame) -> dict[str, np.ndarray]:
         elif col.endswith("_m"):
             out[col[:-2] + "_nmi"] = df[col].to_numpy(dtype=np.float64) / NMI_M
     return out
+
+
+def renumber_examples(rejects: Rejects, numbers: np.ndarray) -> None:
+    """Rewrite reject examples numbered by position in a list of sentences (1-based) to the
+    numbers of their origin (CSV line, MCAP message), in place."""
+    for reason, ex in rejects.examples.items():
+        rejects.examples[reason] = [(f, int(numbers[ln - 1]) if 1 <= ln <= len(numbers) else ln, t)
+                                    for f, ln, t in ex]

@@ -59,7 +59,7 @@ import pandas as pd
 
 from ..config import IngestConfig
 from ..errors import IngestError
-from .csv_quantities import add_rejects, build_frames, check_declared, lookup
+from .csv_quantities import add_rejects, build_frames, check_declared, lookup, renumber_examples
 from .frames import FileResult, Rejects
 from .mcap_cdr import CdrError, compile_schema, decode_channel, scalar_paths, string_paths
 
@@ -821,6 +821,7 @@ class _Reader:
                 f = f.copy()
                 f["line"] = nos[f["line"].to_numpy(dtype=np.int64) - 1]  # sentence index -> message number
                 res.frames[kind] = _concat_sorted([res.frames[kind], f]) if kind in res.frames else f
+            renumber_examples(nres.rejects, nos)
             res.rejects.merge(nres.rejects)
             res.time_events = nres.time_events
             res.notes.extend(nres.notes)
