@@ -320,3 +320,16 @@ def test_ins_error_scale():
     np.testing.assert_allclose(b.errors["ins2_north_m"], 2 * a.errors["ins2_north_m"], rtol=1e-12)
     np.testing.assert_allclose(b.errors["ins3_heading_rad"], 2 * a.errors["ins3_heading_rad"],
                                rtol=1e-12)
+
+
+def test_antimeridian_crossing():
+    """Eastward across 180 deg: longitude wraps to -180, the track stays continuous."""
+    v = simulate(SimParams.noiseless(duration_s=1200.0, compass_hz=1.0, start_lat_deg=-20.0,
+                                     start_lon_deg=179.99, legs=((0.0, 90.0),)))
+    lon = v.truth["lon_rad"].to_numpy()
+    assert lon[0] > 0 > lon[-1] and np.all(np.abs(lon) <= np.pi)
+    n_m, e_m = offset_ne_m(v.truth["lat_rad"].to_numpy()[1:], lon[1:],
+                           v.truth["lat_rad"].to_numpy()[:-1], lon[:-1])
+    np.testing.assert_allclose(e_m, 12.0 * KN_MPS, rtol=1e-6)
+    f, tr = at(v, v.frames["position"], "INS1")
+    assert np.max(np.abs(angdiff(f["lon_rad"], tr["lon_rad"]))) < 1e-9

@@ -278,3 +278,19 @@ def test_dracc_ingest_reads_back_the_frames(tmp_path):
             else:
                 np.testing.assert_allclose(have[c].to_numpy(float), want[c].to_numpy(float),
                                            rtol=0, atol=1e-12, err_msg=f"{kind}.{c}")
+
+
+def test_cli_help_legs_and_noiseless(tmp_path, capsys):
+    assert _run("simulate", "--help") == 0
+    assert "--ins-error-scale" in capsys.readouterr().out
+    assert _run("simulate", "--hours", "1", "--legs", "0:60,x", "--out", tmp_path) == 4
+    out = tmp_path / "n"
+    assert _run("simulate", "--hours", "0.02", "--noiseless", "--compass-hz", "1",
+                "--legs", "0:10,30:100", "--format", "nmea", "--form", "bare", "--out", out) == 0
+    info = json.loads((out / "params.json").read_text())
+    assert info["params"]["legs"] == [[0.0, 10.0], [30.0, 100.0]]
+    assert info["params"]["gyro_offset_deg"] == 0.0 and info["params"]["current_drift_kn"] == 0.0
+    errors = pd.read_csv(out / "errors.csv")
+    assert errors["ins2_north_m"].abs().max() == 0.0 and errors["gyro_err_rad"].abs().max() == 0
+    first = (out / "voyage.nmea").read_bytes().split(b"\r\n")[0]
+    assert first == b"$HEHDT,10.000,T*" + b"%02X" % xor(b"HEHDT,10.000,T")
