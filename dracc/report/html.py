@@ -35,7 +35,7 @@ figure { margin: 1em 0; }
 figure img { max-width: 100%; height: auto; border: 1px solid #ddd; }
 figcaption { font-size: 0.9em; color: #555; }
 .kv td:first-child { text-align: left; color: #555; }
-.kv td { text-align: left; }
+.kv td { text-align: left; white-space: normal; }
 """
 
 
@@ -211,7 +211,8 @@ def render_html(a: Analysis) -> str:
                  + "".join(f"<li>{_e(n)}</li>" for n in a.notes) + "</ul></section>")
     figures = "".join([
         _figure(plots.track_plot(a), "track plot",
-                "Track of every source, the dead-reckoning track and its 2M circle at each hour",
+                "Track of every source, the dead-reckoning track and its 2M circles (each hour since "
+                "the fix, and just before each restart)",
                 "fig-track"),
         _figure(plots.deviation_plot(a), "deviation plot",
                 "Hourly deviations from the mean per unit and channel (the paper's Figure 1)",

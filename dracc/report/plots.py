@@ -69,14 +69,19 @@ def track_plot(a: Analysis) -> bytes | None:
         e_km = np.insert(e / 1e3, jumps, np.nan)
         n_km = np.insert(n / 1e3, jumps, np.nan)
         ax.plot(e_km, n_km, lw=1.4, color="black", label="DR")
-        ep = dr.epochs
-        hourly = (ep.time_ns % 3_600_000_000_000) == 0
-        en, ee = offset_ne_m(ep.lat_rad[hourly], ep.lon_rad[hourly], lat0, lon0)
+        # 2M at each whole hour since the fix and at the end of every leg (just before the
+        # restart, where the circle is largest)
+        hour = np.floor(tr.since_fix_s / 3600.0)
+        new_leg = np.r_[True, np.diff(tr.leg) != 0]
+        at_hour = np.flatnonzero(~new_leg & (np.r_[0.0, np.diff(hour)] > 0))
+        leg_end = np.flatnonzero(np.r_[np.diff(tr.leg) != 0, True])
+        pick = np.union1d(at_hour, leg_end)
         first = True
-        for x, y, r in zip(ee / 1e3, en / 1e3, ep.radius_2m_m[hourly] / 1e3, strict=True):
+        for x, y, r in zip(e[pick] / 1e3, n[pick] / 1e3, tr.radius_2m_m[pick] / 1e3, strict=True):
             if np.isfinite(r) and np.isfinite(x):
-                ax.add_patch(Circle((x, y), r, fill=False, color="#ff7f0e", lw=1.0,
-                                    label="2M at each hour" if first else None))
+                ax.add_patch(Circle((x, y), r, fill=False, color="#ff7f0e", lw=1.2,
+                                    label="2M: each hour since the fix, and at each restart"
+                                    if first else None))
                 first = False
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("east of start [km]")
