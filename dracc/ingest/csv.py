@@ -32,6 +32,8 @@ unknown quantity, value not a number, empty value, implausible value.
 
 from __future__ import annotations
 
+import codecs
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -139,6 +141,32 @@ def _line_numbers(k0: int, n: int, invalid_lines: list[int]) -> np.ndarray:
     return k + 2 + np.searchsorted(before, k, side="right")
 
 
+def _utf8_or_replace(path: Path) -> str:
+    """'utf8' for a file of valid UTF-8, else a codec that decodes bad bytes to U+FFFD.
+
+    pyarrow cannot hand a row with invalid UTF-8 to the invalid-row handler (it prints an
+    ignored UnicodeDecodeError and fails the whole file); decoded with replacement, such
+    a row is read and its bad cells are counted like any other unreadable value.
+    """
+    dec = codecs.getincrementaldecoder("utf-8")()
+    try:
+        with path.open("rb") as fh:
+            while chunk := fh.read(_BLOCK_BYTES):
+                dec.decode(chunk)
+        dec.decode(b"", final=True)
+    except UnicodeDecodeError:
+        return _REPLACE_CODEC
+    return "utf8"
+
+
+_REPLACE_CODEC = "dracc-utf8-replace"
+codecs.register(lambda name: codecs.CodecInfo(
+    name=_REPLACE_CODEC, encode=codecs.utf_8_encode, decode=codecs.utf_8_decode,
+    incrementaldecoder=functools.partial(codecs.getincrementaldecoder("utf-8"), errors="replace"),
+    incrementalencoder=codecs.getincrementalencoder("utf-8"))
+    if name.replace("_", "-") == _REPLACE_CODEC else None)
+
+
 def _iter_blocks(path: Path, cols: list[str], rejects: Rejects, file: str):
     """Yield (dict column -> object array, line numbers) per block of the CSV."""
     import pyarrow as pa
@@ -156,7 +184,8 @@ def _iter_blocks(path: Path, cols: list[str], rejects: Rejects, file: str):
     try:
         reader = pcsv.open_csv(
             str(path),
-            read_options=pcsv.ReadOptions(block_size=_BLOCK_BYTES, use_threads=False),
+            read_options=pcsv.ReadOptions(block_size=_BLOCK_BYTES, use_threads=False,
+                                          encoding=_utf8_or_replace(path)),
             parse_options=pcsv.ParseOptions(invalid_row_handler=on_invalid, ignore_empty_lines=False,
                                             newlines_in_values=False),
             convert_options=pcsv.ConvertOptions(column_types={c: pa.string() for c in cols},
