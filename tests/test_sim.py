@@ -333,3 +333,20 @@ def test_antimeridian_crossing():
     np.testing.assert_allclose(e_m, 12.0 * KN_MPS, rtol=1e-6)
     f, tr = at(v, v.frames["position"], "INS1")
     assert np.max(np.abs(angdiff(f["lon_rad"], tr["lon_rad"]))) < 1e-9
+
+
+def test_simulated_gyro_noise_has_its_sigma_and_tau():
+    """The wiring of simulate(): its gyro error, less the 0.3 deg offset, is GM(0.1 deg, 300 s)
+    + 0.02 deg white.  Ten days at 0.1 Hz hold ~1400 correlation times: the variance is
+    within 4 x sqrt(2/1440) = 15 %, the autocorrelation at 300 s within +-0.1 of e^-1."""
+    r = 0.1
+    v = simulate(SimParams(duration_s=10 * 86400.0, compass_hz=r, log_hz=r, ins_hz=r,
+                           gnss_hz=r, aux_hz=r, seed=4))
+    x = v.errors["gyro_err_rad"].to_numpy() / DEG_RAD - 0.3
+    var_gm, var_w = 0.1 ** 2, 0.02 ** 2
+    assert np.var(x) == pytest.approx(var_gm + var_w, rel=0.15)
+    lag = 30  # 300 s at 0.1 Hz
+    rho = np.mean(x[:-lag] * x[lag:]) / var_gm
+    assert rho == pytest.approx(math.exp(-1.0), abs=0.1)
+    y = v.errors["log_noise_long_mps"].to_numpy() / KN_MPS
+    assert np.var(y) == pytest.approx(0.1 ** 2 + 0.02 ** 2, rel=0.15)
