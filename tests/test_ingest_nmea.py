@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 from dracc.config import IngestConfig
 from dracc.errors import IngestError
+from dracc.ingest.frames import FileResult
 from dracc.ingest.nmea import iter_nmea_blocks, parse_sentences, read_nmea
 
 D = math.pi / 180.0
@@ -35,7 +36,7 @@ def tag(params: str, sentence: str) -> str:
     return f"\\{params}*{cs(params)}\\{sentence}"
 
 
-def read_text(tmp_path: Path, text: str, **cfg) -> "object":
+def read_text(tmp_path: Path, text: str, **cfg) -> FileResult:
     p = tmp_path / "log.nmea"
     p.write_bytes(text.encode("latin-1") if isinstance(text, str) else text)
     return read_nmea(p, IngestConfig(**cfg))

@@ -749,9 +749,13 @@ def _time_arrays(pb: ParsedBlock):
         e = np.zeros(0, dtype=np.int64)
         return e, e, e, lambda t: []
     seq = np.concatenate([p["seq"] for p in parts])
+    # an RMC gives a position and a ground row: its date counts once (position row)
+    dates = [np.where(p["sentence"] == SENTENCES.index("RMC"), -1, p["date_days"])
+             if k == "ground" else p["date_days"]
+             for k, p in zip([k for k in KINDS if k in pb.kinds] + ["clock"], parts, strict=False)]
     order = np.argsort(seq, kind="stable")
     tod = np.concatenate([p["tod_ns"] for p in parts])[order]
-    date = np.concatenate([p["date_days"] for p in parts])[order]
+    date = np.concatenate(dates)[order]
     ext = np.concatenate([p["ext_ns"] for p in parts])[order]
     sizes = [len(p["seq"]) for p in parts]
     n_frames = len(parts) - (1 if pb.clock else 0)
