@@ -203,3 +203,9 @@ def test_slowly_varying_gyro_error_from_gnss_track():
     cal2 = calibrate_from_track(t, steady, spd, t, glat, glon, heading_model="varying",
                                 fit_log_offset=False)
     assert cal2.heading_constant_p > 0.01
+
+
+def test_too_short_a_log_for_the_track_calibration_says_so():
+    rng, t, course, speed, glat, glon = _voyage(7, hours=0.5)
+    with pytest.raises(InsufficientDataError, match="need at least 4"):
+        calibrate_from_track(t, course, speed, t, glat, glon)
