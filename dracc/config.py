@@ -91,10 +91,26 @@ class DeviationConfig:
 
 
 @dataclass(frozen=True)
+class FaultsConfig:
+    """Sensor-fault detection (dracc.faults); faults are always reported, excluded only if asked."""
+
+    exclude: bool = False  #: keep flagged records out of the statistics (raw figures still shown)
+    max_speed_kn: float = 60.0  #: a position step implying more than this is a jump ...
+    jump_min_m: float = 500.0  #: ... when it is also longer than this
+    frozen_min_s: float = 1800.0  #: a position repeated exactly for this long is frozen
+    stuck_min_s: float = 600.0  #: a heading repeated exactly for this long is stuck
+    min_records: int = 10  #: a frozen or stuck run needs at least this many records
+    moving_min_kn: float = 1.0  #: other sources showing this speed prove the ship moved
+    turn_min_deg: float = 5.0  #: other headings spanning this much prove the ship turned
+    max_rot_deg_per_min: float = 600.0  #: a rate of turn beyond this is out of range
+
+
+@dataclass(frozen=True)
 class Config:
     ingest: IngestConfig = IngestConfig()
     dead_reckoning: DeadReckoningConfig = DeadReckoningConfig()
     deviation: DeviationConfig = DeviationConfig()
+    faults: FaultsConfig = FaultsConfig()
     #: further sections (audit, fleet, report) as plain tables, validated by their owners
     extra: dict[str, Any] = field(default_factory=dict)
 
@@ -182,7 +198,8 @@ def load_config(path: str | Path | None = None) -> Config:
 
 def config_from_dict(data: dict, where: str = "config") -> Config:
     """Build a validated Config from a parsed TOML document."""
-    sections = {"ingest": IngestConfig, "dead_reckoning": DeadReckoningConfig, "deviation": DeviationConfig}
+    sections = {"ingest": IngestConfig, "dead_reckoning": DeadReckoningConfig, "deviation": DeviationConfig,
+                "faults": FaultsConfig}
     unknown = set(data) - set(sections) - _KNOWN_EXTRA
     if unknown:
         raise ConfigError(f"{where}: unknown section(s): {', '.join(sorted(unknown))}")
