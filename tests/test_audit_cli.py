@@ -183,3 +183,19 @@ def test_audit_help_and_run_alias(run_cli):
     assert code == 0 and "history" in out and "run" in out
     code, out, _ = run_cli("audit", "run", "--help")
     assert code == 0 and "--date" in out and "--summary" in out
+
+
+def test_real_log_without_ins(run_cli, real_dir, tmp_path):
+    # a yacht's 22 min of compass, log and GPS: no INS, and many sentences dracc does not use
+    log = real_dir / "VDRplayer" / "Hakefjord.txt"
+    code, out, _ = run_cli("audit", log, "--db", tmp_path / "s.sqlite", "--vessel", "Hakefjord")
+    assert code == ExitCode.FINDINGS
+    assert "night 2015-07-20" in out
+    for unit in ("ins1", "ins2", "ins3"):
+        assert f"required source {unit} is missing" in out
+    assert "lines rejected" in out and "missing: no INS" in out
+    cfg = _cfg(tmp_path, "[audit]\nrequired_sources = [\"compass\", \"log\"]\nrejected_rate_max_pct = 100.0\n")
+    code, out, _ = run_cli("audit", log, "--db", tmp_path / "s.sqlite", "--vessel", "Hakefjord",
+                           "--config", cfg)
+    # the limits are not analysis settings: the night stays as recorded, today's limits decide
+    assert code == ExitCode.OK and "state: unchanged" in out

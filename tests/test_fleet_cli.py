@@ -130,3 +130,15 @@ def test_dask_scheduler_gives_the_local_table(local_run, fleet, tmp_path):
                                   pd.read_parquet(local_out / "fleet.parquet"))
     pd.testing.assert_frame_equal(pd.read_parquet(out / "trends.parquet"),
                                   pd.read_parquet(local_out / "trends.parquet"))
+
+
+def test_real_logs_and_an_empty_mcap(real_dir, tmp_path):
+    out = tmp_path / "out"
+    code = main(["fleet", str(real_dir / "VDRplayer" / "Hakefjord.txt"),
+                 str(real_dir / "keelson" / "6389403" / "test.mcap"), "--workers", "1", "--out", str(out)])
+    assert code == ExitCode.INPUT
+    t = pd.read_parquet(out / "fleet.parquet").set_index("log")
+    assert t.loc["test.mcap", "status"] == "failed" and "no usable record" in t.loc["test.mcap", "error"]
+    hk = t.loc["Hakefjord.txt"]
+    assert hk["status"] == "ok" and hk["vessel"] == "VDRplayer" and pd.isna(hk["unit"])
+    assert hk["period_start_utc"].startswith("2015-07-20") and hk["rejected_rate_pct"] > 0

@@ -25,15 +25,27 @@ def _f(x, digits: int = 1) -> str:
     return f"{x:,.{digits}f}"
 
 
+def _fu(x, digits: int, unit: str) -> str:
+    """A number with its unit, or '-'."""
+    text = _f(x, digits)
+    return text if text == "-" else text + unit
+
+
+def _s(x) -> str:
+    """Text for a table cell; '-' for missing."""
+    return "-" if x is None or pd.isna(x) else str(x)
+
+
 def latest(table: pd.DataFrame) -> pd.DataFrame:
     """Per vessel, unit and channel: the latest log's row, with the vessel's log count and period."""
-    ok = table[(table["status"] == "ok") & table["unit"].notna()]
+    ok = table[table["status"] == "ok"]
     if ok.empty:
         return ok
-    last = ok.groupby(["vessel", "unit", "channel"], sort=True).tail(1).copy()
+    # logs without INS statistics keep one row (unit and channel empty) for DR and calibration
+    last = ok.groupby(["vessel", "unit", "channel"], sort=True, dropna=False).tail(1).copy()
     span = ok.groupby("vessel").agg(first_day=("day", "min"), last_day=("day", "max"),
                                     logs=("log", "nunique"))
-    return last.join(span, on="vessel").sort_values(["vessel", "unit", "channel"])
+    return last.join(span, on="vessel").sort_values(["vessel", "unit", "channel"], na_position="last")
 
 
 def _png(fig) -> str:
@@ -115,17 +127,17 @@ def fleet_html(res: FleetResult) -> str:
                          "limiting error", "a priori", "verdict", "DR in 2M", "compass error",
                          "log scale")) + "</tr>")
         for _, r in lt.iterrows():
-            d = 3 if r["measure"] == "deg" else 1
+            d = 3 if _s(r["measure"]) == "deg" else 1
             c = r["dr_containment_2m"]
             parts.append(
-                f"<tr><td>{e(str(r['vessel']))}</td><td>{e(str(r['unit']))}</td>"
-                f"<td>{e(str(r['channel']))}</td><td>{e(str(r['first_day']))} to "
-                f"{e(str(r['last_day']))}</td><td>{r['logs']}</td>"
-                f"<td>{_f(r['m_y'], d)} {e(str(r['measure']))}</td><td>{_f(r['kurtosis'], 2)}</td>"
+                f"<tr><td>{e(_s(r['vessel']))}</td><td>{e(_s(r['unit']))}</td>"
+                f"<td>{e(_s(r['channel']))}</td><td>{e(_s(r['first_day']))} to "
+                f"{e(_s(r['last_day']))}</td><td>{r['logs']}</td>"
+                f"<td>{e(_fu(r['m_y'], d, ' ' + _s(r['measure'])))}</td><td>{_f(r['kurtosis'], 2)}</td>"
                 f"<td>{_f(r['limit'], d)}</td><td>{_f(r['apriori_after'], d)}</td>"
-                f"<td>{e(str(r['apriori_verdict']))}</td>"
+                f"<td>{e(_s(r['apriori_verdict']))}</td>"
                 f"<td>{'-' if pd.isna(c) else f'{100 * c:.1f} %'}</td>"
-                f"<td>{_f(r['compass_error_deg'], 2)}°</td><td>{_f(r['log_scale_pct'], 2)} %</td></tr>")
+                f"<td>{_fu(r['compass_error_deg'], 2, '°')}</td><td>{_fu(r['log_scale_pct'], 2, ' %')}</td></tr>")
         parts.append("</table>")
     png = containment_plot(res.table)
     if png:
@@ -154,12 +166,14 @@ def print_table(res: FleetResult) -> None:
         t.add_column(col, justify="left" if left else "right", no_wrap=col in ("vessel", "unit"),
                      overflow="fold")
     for _, r in lt.iterrows():
-        d = 3 if r["measure"] == "deg" else 0
+        d = 3 if _s(r["measure"]) == "deg" else 0
         c = r["dr_containment_2m"]
-        t.add_row(str(r["vessel"]), f"{r['unit']} {r['channel']}", f"{_f(r['m_y'], d)}{r['measure']}",
+        unit = "-" if pd.isna(r["unit"]) else f"{r['unit']} {r['channel']}"
+        measure = "" if pd.isna(r["measure"]) else r["measure"]
+        t.add_row(_s(r["vessel"]), unit, _fu(r["m_y"], d, measure),
                   _f(r["kurtosis"], 1), _f(r["limit"], d), _f(r["apriori_after"], d),
-                  str(r["apriori_verdict"]), "-" if pd.isna(c) else f"{100 * c:.0f}%",
-                  _f(r["compass_error_deg"], 2) + "°", _f(r["log_scale_pct"], 1) + "%")
+                  _s(r["apriori_verdict"]), "-" if pd.isna(c) else f"{100 * c:.0f}%",
+                  _fu(r["compass_error_deg"], 2, "°"), _fu(r["log_scale_pct"], 1, "%"))
     out.print(t)
 
 
