@@ -402,3 +402,22 @@ def test_one_simulated_voyage_reads_the_same_from_every_container(tmp_path):
                     np.testing.assert_allclose(b, a, rtol=1e-12 if exact else 0,
                                                atol=1e-12 if exact else coarse[c], equal_nan=True,
                                                err_msg=f"{name} {kind} {src} {c}")
+
+
+@pytest.mark.parametrize("encoding,compression,indexed", [("json", "zstd", True), ("ros2", None, False),
+                                                          ("protobuf", "lz4", True)])
+def test_random_byte_damage_never_raises(tmp_path, encoding, compression, indexed):
+    """Regression: corrupt log times (> int64), chunk lengths (MemoryError) and schema
+    text once escaped as OverflowError/MemoryError/parser prints."""
+    p = write_mcap(voyage_frames(30), {}, tmp_path / "v.mcap", encoding=encoding, compression=compression,
+                   chunk_size=3000, indexed=indexed)
+    data = p.read_bytes()
+    rng = np.random.default_rng(7)
+    q = tmp_path / "d.mcap"
+    for _ in range(40):
+        d = bytearray(data)
+        for i in rng.integers(8, len(d), rng.integers(1, 6)):
+            d[i] = rng.integers(0, 256)
+        q.write_bytes(bytes(d))
+        r = read_mcap(q, CFG)
+        assert r.lines <= 180

@@ -153,6 +153,7 @@ class _Reader:
         self.nmea_no: list[int] = []
         self.orphans = 0
         self.top_msgs: list[tuple[int, int, bytes, int]] = []
+        self.bad_stamps = 0  #: message stamps out of range (log time used instead)
         self.pieces: dict[str, list[pd.DataFrame]] = {}  #: kind -> frame pieces, in file order per channel
 
     # ---------------------------------------------------------------- records
@@ -252,7 +253,7 @@ class _Reader:
             groups.setdefault(m[0], []).append(i)
         for cid, idx in groups.items():
             ix = np.asarray(idx)
-            times = np.fromiter((msgs[i][1] for i in idx), dtype=np.int64, count=len(idx))
+            times = np.fromiter((msgs[i][1] for i in idx), dtype=np.uint64, count=len(idx))
             nums = np.fromiter((msgs[i][3] for i in idx), dtype=np.int64, count=len(idx))
             self._decode(cid, buf, starts[ix], ends[ix], times, nums)
 
@@ -268,6 +269,10 @@ class _Reader:
             self.notes.append(f"{self.file}: Chunk at byte {body_at - 9} cut or damaged in its header; skipped")
             return
         data_at = body_at + 32 + clen + 8
+        if 32 + clen + 8 + rlen != ln:
+            self.notes.append(f"{self.file}: Chunk at byte {body_at - 9} damaged (its lengths disagree: "
+                              f"{32 + clen + 8 + rlen} vs {ln}); skipped")
+            return
         if body_at + ln <= size and _usize <= _INDEXED_MAX and self._indexed_chunk(
                 fh, body_at, ln, size, comp, data_at, rlen, _usize):
             return
@@ -377,7 +382,7 @@ class _Reader:
             end = off + 9 + length
             if (ch_in != cid).any() or (length < 22).any() or (end > n).any() or (end[:-1] > off[1:]).any():
                 return False
-            log_time = u8[off[:, None] + 15 + np.arange(8)].copy().view("<u8").ravel().astype(np.int64)
+            log_time = u8[off[:, None] + 15 + np.arange(8)].copy().view("<u8").ravel()
         else:
             end = off
         # records the index does not cover: schemas and channels (walked), never messages
@@ -431,11 +436,21 @@ class _Reader:
         self.msg_no = no
         for cid, (s, e, t, k) in per.items():
             self._decode(cid, buf, np.asarray(s, np.int64), np.asarray(e, np.int64),
-                         np.asarray(t, np.int64), np.asarray(k, np.int64))
+                         np.asarray(t, np.uint64), np.asarray(k, np.int64))
         return buf[pos:]
 
     # ---------------------------------------------------------------- decoding
     def _decode(self, cid: int, buf: bytes, starts, ends, times, nums) -> None:
+        times = np.asarray(times)
+        if times.dtype == np.uint64:  # MCAP log times are uint64; beyond int64 is damage
+            over = times > np.uint64(np.iinfo(np.int64).max)
+            if over.any():
+                add_rejects(self.rejects, "log time out of range (after year 2262)", self.file, nums[over],
+                            [f"channel {cid}"] * 5)
+                starts, ends, times, nums = starts[~over], ends[~over], times[~over], nums[~over]
+                if len(starts) == 0:
+                    return
+            times = times.astype(np.int64)
         ch = self.channels.get(cid)
         if ch is None:
             self.orphans += len(starts)
@@ -536,7 +551,13 @@ class _Reader:
         ch.mode = "cdr"
 
     def _stamp(self, sec: np.ndarray, nsec: np.ndarray, log_time: np.ndarray) -> np.ndarray:
+        """Stamp times where the message has a stamp (not zero), else the log time; a stamp
+        outside int64 nanoseconds or with nanoseconds outside [0, 1e9) is counted and the
+        log time used."""
         have = ~np.isnan(sec) & ~np.isnan(nsec) & ((sec != 0) | (nsec != 0))
+        ok = (np.abs(sec) < 9.2e9) & (nsec >= 0) & (nsec < 1e9)
+        self.bad_stamps += int((have & ~ok).sum())
+        have &= ok
         t = np.asarray(log_time, dtype=np.int64).copy()
         if have.any():
             t[have] = sec[have].astype(np.int64) * 1_000_000_000 + nsec[have].astype(np.int64)
@@ -703,7 +724,11 @@ class _Reader:
                 if m is not None and m.HasField(plan["stamp"]):
                     ts = getattr(m, plan["stamp"])
                     if ts.seconds or ts.nanos:
-                        t[i] = ts.seconds * 1_000_000_000 + ts.nanos
+                        v = ts.seconds * 1_000_000_000 + ts.nanos
+                        if abs(v) < 2**63:
+                            t[i] = v
+                        else:
+                            self.bad_stamps += 1
         if plan["bytes"]:
             fld = plan["bytes"]
             payloads, tt, kk = [], [], []
@@ -826,6 +851,9 @@ class _Reader:
             res.time_events = nres.time_events
             res.notes.extend(nres.notes)
         res.notes[:0] = self.notes + self._channel_notes()
+        if self.bad_stamps:
+            res.notes.append(f"{self.file}: {self.bad_stamps} message stamp(s) out of range; their log "
+                             f"time was used")
         if self.orphans:
             add_rejects(res.rejects, "message on an undeclared channel", self.file, np.zeros(1, np.int64),
                         [f"{self.orphans} messages"])

@@ -17,6 +17,8 @@ schema text is parsed by the ROS IDL parser vendored in ``mcap-ros2-support``.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import re
 import struct
 from dataclasses import dataclass, field
@@ -80,7 +82,12 @@ def compile_schema(name: str, text: str) -> list[_Field]:
         if short not in defs:
             raise CdrError(f"schema {name}: no definition of {short}")
         pkg, msg = short.split("/")
-        spec = parse_message_string(pkg, msg, "\n".join(ln for ln in defs[short].splitlines() if ln.strip()))
+        text = "\n".join(ln for ln in defs[short].splitlines() if ln.strip())
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+            try:  # the IDL parser prints what it rejects, then raises: keep only the exception
+                spec = parse_message_string(pkg, msg, text)
+            except Exception as err:  # it raises several types (InvalidResourceName, ValueError ...)
+                raise CdrError(f"schema {name}: {short}: {err}") from err
         out = []
         for f in spec.fields:
             t = f.type
