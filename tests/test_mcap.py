@@ -421,3 +421,11 @@ def test_random_byte_damage_never_raises(tmp_path, encoding, compression, indexe
         q.write_bytes(bytes(d))
         r = read_mcap(q, CFG)
         assert r.lines <= 180
+
+
+def test_topic_named_in_config_is_its_own_source_key(tmp_path):
+    fr = voyage_frames(5)
+    p = write_mcap({"position": fr["position"]}, {}, tmp_path / "v.mcap", encoding="json")
+    r = read_mcap(p, IngestConfig(sources={"/INS2/fix": "ins1"}))
+    assert set(r.frames["position"]["source"].astype(str)) == {"/INS2/fix"}
+    assert set(read_mcap(p, CFG).frames["position"]["source"].astype(str)) == {"INS2"}

@@ -35,7 +35,8 @@ Source keys
     ``position``, ``heading``, ``velocity``, ``water``, ``distance``, ``rot``, ``nmea``,
     ``sentence``): ``/ins2/fix`` and ``/ins2/heading`` are both source ``ins2``.
     :func:`topic_role` suggests a role from the key (``ins2`` -> ins2, ``gyro`` ->
-    compass, ``log`` -> log, ``gps``/``gnss`` -> gnss).
+    compass, ``log`` -> log, ``gps``/``gnss`` -> gnss).  A topic named verbatim in
+    ``[ingest.sources]`` is its own source key (``"/nav/a/fix" = "ins1"``).
 Damage
     A file that ends early yields every complete message before the cut, and a note
     says at which byte it ended; a damaged chunk keeps its messages before the damage;
@@ -229,8 +230,8 @@ class _Reader:
                 c = Channel.read(ReadDataStream(BytesIO(body)))
                 if c.id not in self.channels:
                     sch = self.schemas.get(c.schema_id) if c.schema_id else None
-                    self.channels[c.id] = _Channel(c.id, c.topic, c.message_encoding, sch,
-                                                   topic_source(c.topic))
+                    key = c.topic if c.topic in self.cfg.sources else topic_source(c.topic)
+                    self.channels[c.id] = _Channel(c.id, c.topic, c.message_encoding, sch, key)
             else:
                 cid, _seq, log_time, _pub = _MSG_HEAD.unpack_from(body, 0)
                 self.msg_no += 1
