@@ -192,16 +192,20 @@ class StateStore:
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self.conn = sqlite3.connect(self.path, timeout=busy_timeout_s, isolation_level=None)
+        except (OSError, sqlite3.DatabaseError) as err:
+            raise StateError(f"{self.path}: cannot create the audit database: {err}") from err
+        try:
             self.conn.row_factory = sqlite3.Row
             self.conn.execute(f"PRAGMA busy_timeout = {int(busy_timeout_s * 1000)}")
             mode = self.conn.execute("PRAGMA journal_mode = WAL").fetchone()[0]
             self.conn.execute("PRAGMA synchronous = FULL")
             self.conn.execute("PRAGMA foreign_keys = ON")
             self._init_schema()
-        except sqlite3.DatabaseError as err:
-            raise StateError(f"{self.path}: cannot open the audit database: {err}") from err
-        except OSError as err:
-            raise StateError(f"{self.path}: cannot create the audit database: {err}") from err
+        except BaseException as err:
+            self.conn.close()
+            if isinstance(err, sqlite3.DatabaseError):
+                raise StateError(f"{self.path}: cannot open the audit database: {err}") from err
+            raise
         self.journal_mode = str(mode).lower()
 
     # -- plumbing ------------------------------------------------------------------

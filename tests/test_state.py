@@ -1,0 +1,100 @@
+"""The SQLite state store: opening, WAL, busy handling, round trips, errors."""
+
+from __future__ import annotations
+
+import math
+import sqlite3
+
+import pytest
+
+from dracc.errors import ConfigError, ExitCode
+from dracc.state import AprioriEvent, ChannelRow, NightRecord, StateError, StateStore
+
+
+def _record(night: str = "2026-11-20", m_y: float = 100.0, vessel: str = "Aurora") -> NightRecord:
+    return NightRecord(
+        vessel=vessel, night=night, content_sha256="c" * 64, settings_sha256="s" * 64,
+        audited_utc="2026-11-21T00:20:00Z", period_start_utc=f"{night}T00:00:00Z",
+        period_end_utc=f"{night}T23:59:59Z", inputs=("/logs/a.nmea", "/logs/ü.nmea"),
+        sources={"ins1": "INS1"}, lines=1000, rejected=3, rejected_rate=0.003,
+        dr_containment_2m=math.nan, dr_n_scored=0, compass_error_deg=0.4,
+        compass_error_sigma_deg=0.1, log_scale=None, log_scale_sigma=None,
+        findings=({"kind": "limit", "message": "x"},), missing=("no reference",),
+        channels=(ChannelRow("ins1", "course", 24, 0.07, 0.1, -0.2, 0.3),
+                  ChannelRow("ins1", "lat", 24, m_y / 1.32, m_y, 0.1, 2 * m_y)))
+
+
+def test_round_trip_nan_as_null_and_channel_order(tmp_path):
+    with StateStore(tmp_path / "s.sqlite") as store:
+        assert store.journal_mode == "wal"
+        with store.transaction():
+            store.insert_night(_record())
+        got = store.night("Aurora", "2026-11-20")
+    assert got.dr_containment_2m is None and got.log_scale is None  # NaN and None stored as NULL
+    assert got.inputs == ("/logs/a.nmea", "/logs/ü.nmea") and got.missing == ("no reference",)
+    assert [c.channel for c in got.channels] == ["lat", "course"]  # the paper's order
+    assert got.channels[0].measure == "m" and got.channels[1].measure == "deg"
+    assert got.channels[0].m_u == pytest.approx(100.0 / 1.32)
+
+
+def test_unique_night_per_vessel(tmp_path):
+    with StateStore(tmp_path / "s.sqlite") as store:
+        with store.transaction():
+            store.insert_night(_record())
+            store.insert_night(_record(vessel="Borealis"))
+        with pytest.raises(sqlite3.IntegrityError):
+            with store.transaction():
+                store.insert_night(_record())
+        assert store.vessels() == ["Aurora", "Borealis"]
+        # deleting a night takes its statistics with it
+        with store.transaction():
+            assert store.delete_night("Aurora", "2026-11-20")
+        assert store.conn.execute("SELECT COUNT(*) FROM unit_stats").fetchone()[0] == 2
+
+
+def test_apriori_events_replaced_per_vessel(tmp_path):
+    with StateStore(tmp_path / "s.sqlite") as store:
+        ev = AprioriEvent("Aurora", "ins1", "lat", "2026-11-20", 120.0, None, "established", {"m_y": 120.0})
+        other = AprioriEvent("Borealis", "ins1", "lat", "2026-11-20", 90.0, None, "established", {})
+        with store.transaction():
+            store.replace_apriori_events("Aurora", [ev])
+            store.replace_apriori_events("Borealis", [other])
+            store.replace_apriori_events("Aurora", [ev])
+        assert store.apriori_events("Aurora") == [ev]
+        assert len(store.apriori_events()) == 2
+
+
+def test_second_writer_waits_then_gives_a_clear_error(tmp_path):
+    db = tmp_path / "s.sqlite"
+    with StateStore(db) as a, StateStore(db, busy_timeout_s=0.2) as b:
+        with a.transaction():
+            a.insert_night(_record())
+            # a reader still sees the committed state (nothing yet)
+            assert b.nights() == []
+            with pytest.raises(StateError, match="busy or locked"):
+                with b.transaction():
+                    pass
+        with b.transaction():
+            b.insert_night(_record("2026-11-21"))
+        assert [r.night for r in a.nights()] == ["2026-11-20", "2026-11-21"]
+
+
+def test_not_a_database(tmp_path):
+    junk = tmp_path / "junk.sqlite"
+    junk.write_bytes(b"this is not a database at all" * 100)
+    with pytest.raises(StateError, match="junk.sqlite: cannot open the audit database") as e:
+        StateStore(junk)
+    assert e.value.exit_code == ExitCode.INPUT
+    with pytest.raises(ConfigError, match="is a directory"):
+        StateStore(tmp_path)
+
+
+def test_newer_schema_is_refused(tmp_path):
+    db = tmp_path / "s.sqlite"
+    StateStore(db).close()
+    con = sqlite3.connect(db)
+    con.execute("UPDATE meta SET value = '99' WHERE key = 'schema'")
+    con.commit()
+    con.close()
+    with pytest.raises(StateError, match="schema 99"):
+        StateStore(db)
