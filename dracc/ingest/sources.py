@@ -10,8 +10,8 @@ Role assignment (:func:`assign_roles`), in this order:
 1. the configuration mapping ``[ingest.sources]``; a key there may be a source key or
    a talker ID (then every source with that talker gets the role);
 2. names: a source key naming its unit (``INS1``..``INS3``, ``GYRO``/``HDG``/
-   ``COMPASS``/``HE``, ``LOG``/``VW``/``VD``, ``GNSS``/``GPS``), case-insensitive, as a
-   whole key or a path component of a topic;
+   ``COMPASS``/``HEADING``, ``LOG``/``SPEEDLOG``/``STW``, ``GNSS``/``GPS``), case-insensitive,
+   as a whole key or the last component of a topic; only if one source has that name;
 3. content, only where unambiguous: talker families (GP/GN/GA/GL/GB -> gnss; exactly
    three INS-type talkers or keys (IN, II, IR, or names containing 'INS') with
    positions -> ins1..3 in sorted order); a source with heading sentences and no
@@ -41,9 +41,9 @@ POSITION_SENTENCES = {"GGA", "GLL", "RMC", "GNS"}
 
 _NAME_RULES = [
     (re.compile(r"^(?:.*[/_.-])?ins[_-]?([123])$", re.I), None),
-    (re.compile(r"^(?:.*[/_.-])?(gyro|compass|hdg|heading|he|hc)$", re.I), "compass"),
-    (re.compile(r"^(?:.*[/_.-])?(log|speedlog|vw|vd|stw)$", re.I), "log"),
-    (re.compile(r"^(?:.*[/_.-])?(gnss|gps|gp|gn)$", re.I), "gnss"),
+    (re.compile(r"^(?:.*[/_.-])?(gyro|compass|hdg|heading)$", re.I), "compass"),
+    (re.compile(r"^(?:.*[/_.-])?(log|speedlog|stw)$", re.I), "log"),
+    (re.compile(r"^(?:.*[/_.-])?(gnss|gps)$", re.I), "gnss"),
 ]
 
 
@@ -133,10 +133,17 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
                                        f"{', '.join(sorted(keys))}")
     free = {k: s for k, s in sources.items() if k not in used_keys}
     # 2. names
+    by_name: dict[str, list[SourceInfo]] = {}
     for key, info in free.items():
         role = _name_role(key)
         if role and role not in taken:
-            give(info, role, "name")
+            by_name.setdefault(role, []).append(info)
+    for role, infos in by_name.items():
+        if len(infos) == 1:
+            give(infos[0], role, "name")
+        else:
+            notes.append(f"{role} role not assigned: several sources are named for it "
+                         f"({', '.join(sorted(i.key for i in infos))}); map one in [ingest.sources]")
     free = {k: s for k, s in free.items() if not s.roles}
 
     # 3. content
