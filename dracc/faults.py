@@ -11,7 +11,8 @@ Kinds and the rule that finds each (thresholds in :class:`dracc.config.FaultsCon
     with ``d > jump_min_m`` and ``d / dt > max_speed_kn`` (``dt = 0`` counts as
     infinite speed).  The fault covers the displaced records: from the first record
     after the jump to the record before the next jump of that source (the jump back),
-    or to its last record when it never comes back.
+    or to its last record when it never comes back.  The step out of a frozen run
+    (the unit catching up) belongs to the ``frozen`` fault, not to a jump.
 ``frozen``
     a position source repeating bit-identical latitude and longitude for at least
     ``frozen_min_s`` and ``min_records`` records, unless the other sources show the
@@ -191,9 +192,10 @@ def _span(a_ns: int, b_ns: int) -> str:
 # ---------------------------------------------------------------------- detectors
 
 
-def _jumps(key, role, g, cfg: FaultsConfig) -> list[SensorFault]:
-    ok = np.isfinite(g["lat_rad"].to_numpy(float)) & np.isfinite(g["lon_rad"].to_numpy(float)) \
-        & (g["quality"].to_numpy() != 0)
+def _jumps(key, role, g, cfg: FaultsConfig, catch_up_from_ns: set[int]) -> list[SensorFault]:
+    la, lo = g["lat_rad"].to_numpy(float), g["lon_rad"].to_numpy(float)
+    with np.errstate(invalid="ignore"):  # out-of-range positions are their own fault
+        ok = (np.abs(la) <= math.pi / 2) & (np.abs(lo) <= math.pi) & (g["quality"].to_numpy() != 0)
     g = g[ok]
     if len(g) < 2:
         return []
@@ -206,6 +208,8 @@ def _jumps(key, role, g, cfg: FaultsConfig) -> list[SensorFault]:
     with np.errstate(divide="ignore", invalid="ignore"):
         v_mps = np.where(dt_s > 0, d_m / np.where(dt_s > 0, dt_s, 1.0), np.inf)
     jump = (d_m > cfg.jump_min_m) & (v_mps > cfg.max_speed_kn * KN_MPS)
+    # the step out of a frozen run is the unit catching up, part of the frozen fault
+    jump &= ~np.isin(t[:-1], np.fromiter(catch_up_from_ns, np.int64, len(catch_up_from_ns)))
     idx = np.flatnonzero(jump)  # jump between rows i and i+1
     out = []
     n = 0
@@ -365,8 +369,8 @@ def detect_faults(voyage_or_frames: Voyage | Mapping[str, pd.DataFrame],
         roles = {}
     faults: list[SensorFault] = []
     for key, g in _by_source(frames.get("position")):
-        faults += _jumps(key, roles.get(key), g, cfg)
-        faults += _frozen(key, roles.get(key), g, frames, cfg)
+        frozen = _frozen(key, roles.get(key), g, frames, cfg)
+        faults += frozen + _jumps(key, roles.get(key), g, cfg, {f.end_ns for f in frozen})
     for key, g in _by_source(frames.get("heading")):
         faults += _stuck(key, roles.get(key), g, frames, cfg)
     faults += _out_of_range(frames, roles, cfg)
