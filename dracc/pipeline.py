@@ -41,6 +41,7 @@ from .deadreckoning import (
 from .deviation import DeviationResult, analyse_deviations, unit_series_from_voyage
 from .deviation.analysis import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS
 from .errors import InsufficientDataError
+from .faults import SensorFault, detect_faults, exclude_faults
 from .fusion import PositionFix
 from .geodesy import circmean, offset_ne_m, wrap_2pi, wrap_pi
 from .ingest.frames import INS_ROLES, Voyage
@@ -235,6 +236,8 @@ class Analysis:
     notes: tuple[str, ...] = ()
     #: the options that shaped the result, for the report header
     settings: dict[str, object] = field(default_factory=dict)
+    #: sensor faults (dracc.faults), found in the raw records; always reported
+    faults: tuple[SensorFault, ...] = ()
 
     @property
     def duration_s(self) -> float:
@@ -323,6 +326,7 @@ def analyse_voyage(voyage: Voyage, cfg: Config | None = None,
                      + "; assign one with --role KEY=ROLE")
 
     tracks = _tracks(voyage)
+    faults, voyage = _sensor_faults(voyage, cfg, notes)
 
     report("dead reckoning", 0.0)
     dr, fixes, ref, dr_inputs = _dead_reckoning(voyage, cfg.dead_reckoning, missing, notes)
@@ -351,6 +355,7 @@ def analyse_voyage(voyage: Voyage, cfg: Config | None = None,
         "max_gap_s": cfg.dead_reckoning.max_gap_s, "variation_deg": cfg.dead_reckoning.variation_deg,
         "roles": dict(cfg.ingest.sources), "strict": cfg.ingest.strict,
         "ignore_checksum": cfg.ingest.ignore_checksum, "date": cfg.ingest.date,
+        "faults_exclude": cfg.faults.exclude,
     }
     return Analysis(
         schema=SCHEMA, dracc_version=__version__, inputs=inputs, sources=sources,
@@ -359,7 +364,25 @@ def analyse_voyage(voyage: Voyage, cfg: Config | None = None,
         time=time, start_ns=int(min(firsts)), end_ns=int(max(lasts)), lines=int(voyage.lines),
         tracks=tracks, deviation=deviation, dead_reckoning=dr, calibration=calibration,
         current=current, deviation_reference=dev_ref, missing=tuple(missing), notes=tuple(notes),
-        settings=settings)
+        settings=settings, faults=faults)
+
+
+# -------------------------------------------------------------------- sensor faults
+
+
+def _sensor_faults(voyage: Voyage, cfg: Config, notes: list[str]) -> tuple[tuple[SensorFault, ...], Voyage]:
+    """Sensor faults in the raw records (dracc.faults); their records are left out of
+    what follows only where ``[faults] exclude = true`` (the tracks keep the raw figures)."""
+    faults = tuple(detect_faults(voyage, cfg.faults))
+    if faults and cfg.faults.exclude:
+        voyage, removed = exclude_faults(voyage, list(faults))
+        notes.append(f"{len(faults)} sensor fault(s): their records are left out of the statistics "
+                     "([faults] exclude = true): "
+                     + ", ".join(f"{n} {kind}" for kind, n in sorted(removed.items())))
+    elif faults:
+        notes.append(f"{len(faults)} sensor fault(s) found and reported; their records are still in the "
+                     "statistics (set [faults] exclude = true to leave them out)")
+    return faults, voyage
 
 
 # ------------------------------------------------------------------------ helpers

@@ -205,6 +205,14 @@ def render_html(a: Analysis) -> str:
     if a.missing:
         missing = ('<section id="missing"><h2>Missing</h2><div class="missing"><ul>'
                    + "".join(f"<li>{_e(m)}</li>" for m in a.missing) + "</ul></div></section>")
+    faults = ""
+    if a.faults:  # dracc.faults: shown whenever found, excluded or not
+        faults = ('<section id="faults"><h2>Sensor faults</h2>'
+                  + _table(["kind", "source", "role", "start (UTC)", "end (UTC)", "records", "what was seen"],
+                           [[_e(f.kind), _e(f.source), _e(f.role or "-"), _e(short_utc(f.start_ns)),
+                             _e(short_utc(f.end_ns)), _e(f.n_records), _e(f.message)] for f in a.faults],
+                           left=3)
+                  + "</section>")
     notes = ""
     if a.notes:
         notes = ("<section id=\"notes\"><h2>Notes</h2><ul>"
@@ -237,6 +245,7 @@ def render_html(a: Analysis) -> str:
 <p>Report schema {_e(a.schema)}, dracc {_e(a.dracc_version)}.</p>
 <section id="summary"><h2>Summary</h2>{_summary(a)}</section>
 {missing}
+{faults}
 <section id="dead-reckoning"><h2>Dead reckoning</h2>{_dr(a)}</section>
 <section id="units"><h2>INS accuracy per unit</h2>{_units(a)}</section>
 <section id="calibration"><h2>Calibration and current</h2>{_calibration_current(a)}</section>

@@ -174,6 +174,7 @@ def to_dict(a: Analysis) -> dict:
         "current": None if a.current is None else _current(a.current),
         "missing": list(a.missing),
         "notes": list(a.notes),
+        "faults": [f.to_dict() for f in a.faults],
     }
 
 

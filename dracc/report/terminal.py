@@ -166,6 +166,11 @@ def summary(a: Analysis) -> Group:
         for note in cur.notes:
             parts.append(Text(f"note: {note}"))
 
+    if a.faults:  # dracc.faults: shown whenever found, excluded or not
+        parts.append(Text(""))
+        parts.append(_heading(f"Sensor faults ({len(a.faults)})"))
+        for f in a.faults:
+            parts.append(Text(f"- {f.kind}: {f.message}"))
     if a.missing:
         parts.append(Text(""))
         parts.append(_heading("Missing"))
