@@ -9,7 +9,7 @@ trap 'rm -rf "$tmp"' EXIT
 # The demo voyage: 3 h, four legs, gyro and magnetic compass, current, three INS, GNSS.
 # Rates lowered to keep the folder small: compasses every 5 s, everything else every 30 s.
 r30=0.0333333333333
-voyage=(--hours 3 --seed 1 --start 2026-03-01T06:00:00Z --compass both
+voyage=(--hours 3 --seed 9 --start 2026-03-01T06:00:00Z --compass both
         --legs 0:60,2700:150,5400:30,8100:285
         --compass-hz 0.2 --log-hz $r30 --aux-hz $r30 --ins-hz $r30 --gnss-hz $r30 --truth-hz $r30)
 

@@ -350,3 +350,35 @@ def test_simulated_gyro_noise_has_its_sigma_and_tau():
     assert rho == pytest.approx(math.exp(-1.0), abs=0.1)
     y = v.errors["log_noise_long_mps"].to_numpy() / KN_MPS
     assert np.var(y) == pytest.approx(0.1 ** 2 + 0.02 ** 2, rel=0.15)
+
+
+def test_segments_continue_one_voyage():
+    """A voyage simulated in segments is one voyage: noiseless, it equals the single run;
+    with noise, no error series jumps at a joint more than within a segment."""
+    from dracc.sim.model import simulate_segments
+
+    kw = dict(duration_s=3 * 1800.0, compass_hz=1.0, current_drift_kn=0.7,
+              legs=((0.0, 20.0), (2000.0, 200.0)))
+    whole = simulate(SimParams.noiseless(**kw))
+    parts = list(simulate_segments(SimParams.noiseless(**kw), segment_s=1800.0))
+    assert len(parts) == 3
+    tr = pd.concat([p.truth for p in parts], ignore_index=True)
+    assert np.array_equal(tr["time_ns"], whole.truth["time_ns"])
+    for c in ("lat_rad", "lon_rad", "heading_rad"):
+        np.testing.assert_allclose(tr[c], whole.truth[c], rtol=0, atol=1e-12, err_msg=c)
+    np.testing.assert_allclose(tr["water_distance_m"], whole.truth["water_distance_m"],
+                               rtol=1e-12)  # summation order differs: rounding only
+    trip = pd.concat([p.frames["distance"]["trip_water_m"] for p in parts]).to_numpy()
+    np.testing.assert_allclose(trip, whole.frames["distance"]["trip_water_m"], atol=1e-6)
+
+    noisy = list(simulate_segments(SimParams(seed=2, **kw), segment_s=1800.0))
+    err = pd.concat([p.errors for p in noisy], ignore_index=True)
+    assert len(err) == len(whole.truth) and err["time_ns"].is_unique
+    joints = np.cumsum([len(p.errors) for p in noisy])[:-1]
+    for c in ("ins2_north_m", "ins1_heading_rad", "current_n_mps", "gyro_err_rad"):
+        d = np.abs(np.diff(err[c].to_numpy()))
+        inside = np.delete(d, joints - 1)
+        assert d[joints - 1].max() <= inside.max(), c
+    # the segments draw their own noise: not a copy of the first segment
+    assert not np.allclose(noisy[1].errors["gnss_north_m"].to_numpy()[:100],
+                           noisy[0].errors["gnss_north_m"].to_numpy()[:100])

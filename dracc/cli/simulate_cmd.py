@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -44,22 +46,24 @@ def write_log(voyage, path: Path, fmt: str, form: str = "tag", tag_time: str = "
         raise ConfigError(f"--format must be one of {', '.join(FORMATS)}, got {fmt!r}")
 
 
-def write_table(df: pd.DataFrame, path: Path) -> None:
-    """A truth or error table as CSV: time_utc (ISO, ns) first, floats to 12 significant digits."""
+def write_table(df: pd.DataFrame, fh, header: bool = True) -> None:
+    """A truth or error table as CSV into an open text file: time_utc (ISO, ns) first,
+    floats to 12 significant digits."""
     out = df.copy()
     out.insert(0, "time_utc", np.char.add(np.datetime_as_string(
         df["time_ns"].to_numpy().astype("datetime64[ns]"), unit="ns"), "Z"))
-    with atomic_path(path) as tmp:
-        out.to_csv(tmp, index=False, float_format="%.12g", lineterminator="\n")
+    out.to_csv(fh, index=False, header=header, float_format="%.12g", lineterminator="\n")
 
 
-def _decimate(df: pd.DataFrame, truth_hz: float, base_hz: float) -> pd.DataFrame:
+def decimate(df: pd.DataFrame, truth_hz: float, base_hz: float, start_ns: int) -> pd.DataFrame:
+    """Rows at ``start + k / truth_hz`` (all rows for ``truth_hz <= 0`` or faster than the data)."""
     if truth_hz <= 0 or truth_hz >= base_hz:
         return df
     step = base_hz / truth_hz
     if abs(step - round(step)) > 1e-9:
         raise ConfigError(f"--truth-hz {truth_hz} does not divide the truth rate {base_hz} Hz")
-    return df.iloc[:: int(round(step))]
+    step_ns = int(round(1e9 / truth_hz))
+    return df[(df["time_ns"].to_numpy() - start_ns) % step_ns == 0]
 
 
 @app.command("simulate")
@@ -103,6 +107,9 @@ def simulate_cmd(
     truth_hz: float = typer.Option(1.0, "--truth-hz",
                                    help="Rate of truth.csv and errors.csv (0: every sample)."),
     name: str = typer.Option("voyage", "--name", help="Stem of the log file name."),
+    segment_hours: float = typer.Option(6.0, "--segment-hours",
+                                        help="NMEA: simulate and write in segments of this "
+                                             "length, so memory does not grow with --hours."),
 ) -> None:
     """Simulate a voyage with known truth; write its log, truth.csv, errors.csv, params.json.
 
@@ -110,7 +117,7 @@ def simulate_cmd(
     track and every true sensor error (measured - true) at --truth-hz; params.json the
     parameters, the source roles and each INS unit's true error RMS.
     """
-    from ..sim.model import SimParams, simulate
+    from ..sim.model import SimParams, generated_legs, simulate, simulate_segments, start_ns
 
     if fmt not in FORMATS:
         raise ConfigError(f"--format must be one of {', '.join(FORMATS)}, got {fmt!r}")
@@ -126,31 +133,68 @@ def simulate_cmd(
         params = SimParams(**common, gyro_offset_deg=gyro_error_deg,
                            log_scale=log_scale_pct / 100.0, log_bias_kn=log_bias_kn,
                            current_drift_kn=current_kn).with_ins_error_scale(ins_error_scale)
-    t0 = time.perf_counter()
-    voyage = simulate(params)
-    t1 = time.perf_counter()
+    if not segment_hours > 0:
+        raise ConfigError(f"--segment-hours must be positive, got {segment_hours}")
+    if form not in ("tag", "prefix", "bare") or tag_time not in ("s", "ms"):
+        raise ConfigError(f"--form must be tag, prefix or bare and --tag-time s or ms, "
+                          f"got {form!r}, {tag_time!r}")
+    params = replace(params, legs=generated_legs(params))
+    base_hz = max(compass_hz, log_hz, ins_hz, gnss_hz, aux_hz)
+    t0_ns = start_ns(params.start_utc)
     log_path = out_dir / f"{name}.{EXT[fmt]}"
-    write_log(voyage, log_path, fmt, form=form, tag_time=tag_time)
-    t2 = time.perf_counter()
-    base_hz = 1e9 / float(np.diff(voyage.truth["time_ns"].to_numpy()[:2])[0]) \
-        if len(voyage.truth) > 1 else 1.0
-    write_table(_decimate(voyage.truth, truth_hz, base_hz), out_dir / "truth.csv")
-    write_table(_decimate(voyage.errors, truth_hz, base_hz), out_dir / "errors.csv")
+    t0 = time.perf_counter()
+    records: Counter = Counter()
+    sq = {u: {"lat_m": 0.0, "lon_m": 0.0, "course_deg": 0.0} for u in ("ins1", "ins2", "ins3")}
+    count = dict.fromkeys(sq, 0)
+    roles: dict = {}
+    with (atomic_path(out_dir / "truth.csv") as tt, atomic_path(out_dir / "errors.csv") as te,
+          open(tt, "w", encoding="utf-8") as ft, open(te, "w", encoding="utf-8") as fe):
+        if fmt == "nmea":
+            from ..sim.nmea_out import iter_blocks
+
+            with atomic_path(log_path) as tl, open(tl, "wb") as fl:
+                for i, v in enumerate(simulate_segments(params, segment_hours * 3600.0)):
+                    for _, _, blob in iter_blocks(v.frames, v.roles, form=form, tag_time=tag_time):
+                        fl.write(blob)
+                    _tables_and_tallies(v, i, ft, fe, truth_hz, base_hz, t0_ns, records, sq,
+                                        count)
+                    roles = v.roles
+        else:
+            v = simulate(params)
+            write_log(v, log_path, fmt)
+            _tables_and_tallies(v, 0, ft, fe, truth_hz, base_hz, t0_ns, records, sq, count)
+            roles = v.roles
+    t1 = time.perf_counter()
+    unit_rms = {u: {ch: math.sqrt(s / count[u]) if count[u] else float("nan")
+                    for ch, s in sq[u].items()} for u in sq}
     info = {
         "dracc_version": __version__,
         "format": fmt, "form": form if fmt == "nmea" else None,
         "tag_time": tag_time if fmt == "nmea" and form == "tag" else None,
         "files": {"log": log_path.name, "truth": "truth.csv", "errors": "errors.csv"},
-        "roles": voyage.roles,
-        "unit_rms": voyage.unit_rms,
-        "records": {k: int(len(f)) for k, f in voyage.frames.items()},
-        "params": params_dict(voyage.params),
+        "roles": roles,
+        "unit_rms": unit_rms,
+        "records": dict(records),
+        "params": params_dict(params),
     }
     write_text(out_dir / "params.json", json.dumps(info, indent=2) + "\n")
     size = log_path.stat().st_size
-    err.print(f"simulated {hours:g} h in {t1 - t0:.1f} s, wrote {log_path} "
-              f"({size / 1e6:.1f} MB) in {t2 - t1:.1f} s, truth.csv, errors.csv, params.json",
-              highlight=False)
+    err.print(f"simulated {hours:g} h and wrote {log_path} ({size / 1e6:.1f} MB), truth.csv, "
+              f"errors.csv, params.json in {t1 - t0:.1f} s", highlight=False)
+
+
+def _tables_and_tallies(v, i, ft, fe, truth_hz, base_hz, t0_ns, records, sq, count) -> None:
+    """Append one segment's truth and errors; add up its records and INS squared errors."""
+    write_table(decimate(v.truth, truth_hz, base_hz, t0_ns), ft, header=i == 0)
+    write_table(decimate(v.errors, truth_hz, base_hz, t0_ns), fe, header=i == 0)
+    for kind, f in v.frames.items():
+        records[kind] += len(f)
+    pos = v.frames["position"]
+    for u in sq:
+        n = int((pos["source"] == u.upper()).sum())
+        count[u] += n
+        for ch, rms in v.unit_rms[u].items():
+            sq[u][ch] += n * rms ** 2
 
 
 def params_dict(p) -> dict:

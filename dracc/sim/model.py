@@ -194,6 +194,12 @@ class SimParams:
     gnss_white_m: float = 0.3
     gnss_speed_white_kn: float = 0.03
     gnss_hdop: float = 0.8
+    # segments of a long voyage (see dracc.sim.model.simulate_segments)
+    t0_s: float = 0.0  #: time of this segment's first sample from the voyage start
+    segment: int = 0  #: segment number (its own random streams; phases are shared)
+    skip_first: bool = False  #: drop the first sample (the previous segment's last one)
+    #: values of every Gauss-Markov process and the VLW trip at the first sample
+    state: dict | None = field(default=None, compare=False)
 
     @classmethod
     def noiseless(cls, **overrides) -> SimParams:
@@ -229,7 +235,7 @@ class SimParams:
             if isinstance(v, float) and math.isinf(v):
                 return "inf"
             return v
-        return {f.name: conv(getattr(self, f.name)) for f in fields(self)}
+        return {f.name: conv(getattr(self, f.name)) for f in fields(self) if f.name != "state"}
 
 
 @dataclass(frozen=True)
@@ -245,18 +251,22 @@ class SimVoyage:
     params: SimParams
     #: (time_ns, source) of each GNSS ZDA sentence (no canonical frame holds ZDA)
     zda: pd.DataFrame = field(default_factory=lambda: pd.DataFrame({"time_ns": [], "source": []}))
+    #: every Gauss-Markov process's last value, the VLW trip and the last position: what
+    #: the next segment continues from
+    state: dict = field(default_factory=dict)
 
 
 # --------------------------------------------------------------------------- processes
 
 def gauss_markov(n: int, dt_s: float, sigma: float, tau_s: float, rng: np.random.Generator,
-                 runs: int | None = None) -> np.ndarray:
+                 runs: int | None = None, x0: float | None = None) -> np.ndarray:
     """First-order Gauss-Markov samples, started stationary (variance sigma^2 throughout).
 
     ``x[0] = sigma w0``, ``x[k+1] = a x[k] + sigma sqrt(1 - a^2) w[k+1]``,
     ``a = exp(-dt/tau)`` (exact discretisation of ``dx = -x/tau dt + sigma sqrt(2/tau) dW``).
     ``tau = inf``: a constant ``sigma w0``; ``tau = 0``: white noise.  Shape ``(n,)`` or
-    ``(runs, n)`` (Monte Carlo runs vectorised along axis 0).
+    ``(runs, n)`` (Monte Carlo runs vectorised along axis 0).  ``x0``: continue a process
+    whose value at the first sample is ``x0`` (a voyage simulated in segments).
     """
     shape = (n,) if runs is None else (runs, n)
     if sigma == 0.0 or n == 0:
@@ -264,6 +274,8 @@ def gauss_markov(n: int, dt_s: float, sigma: float, tau_s: float, rng: np.random
     if tau_s < 0 or math.isnan(tau_s):
         raise ConfigError(f"correlation time tau_s must be >= 0 or inf, got {tau_s}")
     w = rng.standard_normal(shape)
+    if x0 is not None and tau_s > 0:
+        w[..., 0] = x0 / sigma
     if math.isinf(tau_s):
         return np.broadcast_to(sigma * w[..., :1], shape).copy()
     if tau_s == 0.0:
@@ -317,7 +329,8 @@ def integrate_track(lat0_rad: float, lon0_rad: float, vn_mps: np.ndarray, ve_mps
     return lat, wrap_pi(lon)
 
 
-def ins_errors(p: InsErrorParams, t_s: np.ndarray, dt_s: float, rng: np.random.Generator):
+def ins_errors(p: InsErrorParams, t_s: np.ndarray, dt_s: float, rng: np.random.Generator,
+               phases: np.ndarray | None = None, gm=None):
     """One INS unit's errors (north_m, east_m, heading_rad, vn_mps, ve_mps) at times ``t_s``.
 
     The velocity errors are the time derivative of the smooth part of the position error
@@ -325,18 +338,21 @@ def ins_errors(p: InsErrorParams, t_s: np.ndarray, dt_s: float, rng: np.random.G
     errors are tied.
     """
     n = len(t_s)
-    ph = rng.uniform(0.0, 2 * np.pi, 6)
+    ph = rng.uniform(0.0, 2 * np.pi, 6) if phases is None else phases
+    if gm is None:
+        def gm(key, sigma, tau_s, r):
+            return gauss_markov(n, dt_s, sigma, tau_s, r)
     ws = 2 * np.pi / SCHULER_PERIOD_S
     wd = 2 * np.pi / DAY_PERIOD_S
-    gm_n = gauss_markov(n, dt_s, p.gm_m.sigma, p.gm_m.tau_s, rng)
-    gm_e = gauss_markov(n, dt_s, p.gm_m.sigma, p.gm_m.tau_s, rng)
+    gm_n = gm("north", p.gm_m.sigma, p.gm_m.tau_s, rng)
+    gm_e = gm("east", p.gm_m.sigma, p.gm_m.tau_s, rng)
     smooth_n = (p.schuler_n_m * np.sin(ws * t_s + ph[0]) + p.day_n_m * np.sin(wd * t_s + ph[1])
                 + p.drift_n_mps * t_s + gm_n)
     smooth_e = (p.schuler_e_m * np.sin(ws * t_s + ph[2]) + p.day_e_m * np.sin(wd * t_s + ph[3])
                 + p.drift_e_mps * t_s + gm_e)
     north = smooth_n + p.white_m * rng.standard_normal(n)
     east = smooth_e + p.white_m * rng.standard_normal(n)
-    hb = gauss_markov(n, dt_s, p.heading_gm_deg.sigma, p.heading_gm_deg.tau_s, rng)
+    hb = gm("heading", p.heading_gm_deg.sigma, p.heading_gm_deg.tau_s, rng)
     heading = DEG_RAD * (p.heading_bias_deg + p.heading_schuler_deg * np.sin(ws * t_s + ph[4])
                          + p.heading_day_deg * np.sin(wd * t_s + ph[5]) + hb
                          + p.heading_white_deg * rng.standard_normal(n))
@@ -377,9 +393,11 @@ def q_latlon_rad(a_rad) -> np.ndarray:
 
 # --------------------------------------------------------------------------- simulate
 
-def _rng(seed: int, component: int) -> np.random.Generator:
-    """An independent stream per component, so adding one never changes the others."""
-    return np.random.default_rng([int(seed) & 0xFFFFFFFF, component])
+def _rng(seed: int, component: int, segment: int = 0) -> np.random.Generator:
+    """An independent stream per component (and segment), so adding one never changes the
+    others."""
+    key = [int(seed) & 0xFFFFFFFF, component] + ([segment] if segment else [])
+    return np.random.default_rng(key)
 
 
 def start_ns(start_utc: str | datetime) -> int:
@@ -483,9 +501,18 @@ def simulate(params: SimParams) -> SimVoyage:
     n = int(round(p.duration_s * base_hz)) + 1
     k = np.arange(n, dtype=np.int64)
     dt = 1.0 / base_hz
-    t_s = k * dt
-    t0_ns = start_ns(p.start_utc)
+    t_s = p.t0_s + k * dt
+    t0_ns = start_ns(p.start_utc) + int(round(p.t0_s * 1e9))
     time_ns = t0_ns + np.rint(k * (1e9 / base_hz)).astype(np.int64)
+    state_in = p.state or {}
+    state_out: dict = {}
+    seg = int(p.segment)
+
+    def gm(key: str, sigma: float, tau_s: float, rng: np.random.Generator) -> np.ndarray:
+        """A GM process continued from the previous segment's last value, if any."""
+        x = gauss_markov(n, dt, sigma, tau_s, rng, x0=state_in.get(key))
+        state_out[key] = float(x[-1]) if n else state_in.get(key)
+        return x
 
     # ---- truth
     legs = p.legs if p.legs is not None else _generated_legs(p)
@@ -496,18 +523,18 @@ def simulate(params: SimParams) -> SimVoyage:
     yaw_amp = p.yaw_amp_deg * DEG_RAD
     psi = wrap_2pi(psi_steer + yaw_amp * np.sin(wy * t_s))
     rot = rot_steer + yaw_amp * wy * np.cos(wy * t_s)
-    rng_env = _rng(p.seed, 2)
-    alpha = p.leeway_deg * DEG_RAD + DEG_RAD * gauss_markov(
-        n, dt, p.leeway_noise_deg.sigma, p.leeway_noise_deg.tau_s, rng_env)
+    rng_env = _rng(p.seed, 2, seg)
+    alpha = p.leeway_deg * DEG_RAD + DEG_RAD * gm(
+        "leeway", p.leeway_noise_deg.sigma, p.leeway_noise_deg.tau_s, rng_env)
     v_mps = np.full(n, p.speed_kn * KN_MPS)
     vx = v_mps * np.cos(alpha)  # (B5): alpha = atan(Vy/Vx)
     vy = v_mps * np.sin(alpha)
     kdw = psi + alpha  # course through the water (B3, B4 with beta = 0 here)
     set_rad = p.current_set_deg * DEG_RAD
-    cn = p.current_drift_kn * KN_MPS * math.cos(set_rad) + KN_MPS * gauss_markov(
-        n, dt, p.current_noise_kn.sigma, p.current_noise_kn.tau_s, rng_env)
-    ce = p.current_drift_kn * KN_MPS * math.sin(set_rad) + KN_MPS * gauss_markov(
-        n, dt, p.current_noise_kn.sigma, p.current_noise_kn.tau_s, rng_env)
+    cn = p.current_drift_kn * KN_MPS * math.cos(set_rad) + KN_MPS * gm(
+        "current_n", p.current_noise_kn.sigma, p.current_noise_kn.tau_s, rng_env)
+    ce = p.current_drift_kn * KN_MPS * math.sin(set_rad) + KN_MPS * gm(
+        "current_e", p.current_noise_kn.sigma, p.current_noise_kn.tau_s, rng_env)
     vn = v_mps * np.cos(kdw) + cn  # (B7-B9)
     ve = v_mps * np.sin(kdw) + ce  # (B10-B12), corrected: sin Kp
     lat, lon = integrate_track(p.start_lat_deg * DEG_RAD, p.start_lon_deg * DEG_RAD, vn, ve, dt)
@@ -519,7 +546,9 @@ def simulate(params: SimParams) -> SimVoyage:
     var_rad = p.variation_deg * DEG_RAD
     kk = compass_course_rad(psi, coeffs, var_rad)
     dev_true = deviation_curve_rad(kk, coeffs)
-    water_dist = np.concatenate(([0.0], np.cumsum(0.5 * (vx[1:] + vx[:-1]) * dt)))
+    water_dist = state_in.get("water_distance_m", 0.0) + np.concatenate(
+        ([0.0], np.cumsum(0.5 * (vx[1:] + vx[:-1]) * dt)))
+    state_out["water_distance_m"] = float(water_dist[-1])
 
     truth = pd.DataFrame({
         "time_ns": time_ns, "t_s": t_s, "lat_rad": lat, "lon_rad": lon, "heading_rad": psi,
@@ -535,39 +564,44 @@ def simulate(params: SimParams) -> SimVoyage:
 
     # ---- sensor errors
     errors: dict[str, np.ndarray] = {"time_ns": time_ns}
-    r = _rng(p.seed, 3)
+    r = _rng(p.seed, 3, seg)
     errors["gyro_err_rad"] = DEG_RAD * (
-        p.gyro_offset_deg + gauss_markov(n, dt, p.gyro_bias_deg.sigma, p.gyro_bias_deg.tau_s, r)
-        + gauss_markov(n, dt, p.gyro_noise_deg.sigma, p.gyro_noise_deg.tau_s, r)
+        p.gyro_offset_deg + gm("gyro_bias", p.gyro_bias_deg.sigma, p.gyro_bias_deg.tau_s, r)
+        + gm("gyro_noise", p.gyro_noise_deg.sigma, p.gyro_noise_deg.tau_s, r)
         + p.gyro_white_deg * r.standard_normal(n))
     rot_noise = p.rot_white_dpm * DEG_RAD / 60.0 * r.standard_normal(n)
-    r = _rng(p.seed, 4)
+    r = _rng(p.seed, 4, seg)
     errors["mag_err_rad"] = DEG_RAD * (
-        gauss_markov(n, dt, p.mag_noise_deg.sigma, p.mag_noise_deg.tau_s, r)
+        gm("mag_noise", p.mag_noise_deg.sigma, p.mag_noise_deg.tau_s, r)
         + p.mag_white_deg * r.standard_normal(n))
-    r = _rng(p.seed, 5)
+    r = _rng(p.seed, 5, seg)
     errors["log_scale"] = np.full(n, float(p.log_scale))
     errors["log_bias_mps"] = np.full(n, p.log_bias_kn * KN_MPS)
     for name in ("log_noise_long_mps", "log_noise_transverse_mps",
                  "log_ground_noise_long_mps", "log_ground_noise_transverse_mps"):
-        errors[name] = KN_MPS * (gauss_markov(n, dt, p.log_noise_kn.sigma, p.log_noise_kn.tau_s, r)
+        errors[name] = KN_MPS * (gm(name, p.log_noise_kn.sigma, p.log_noise_kn.tau_s, r)
                                  + p.log_white_kn * r.standard_normal(n))
     errors["leeway_rad"] = alpha
     errors["current_n_mps"] = cn
     errors["current_e_mps"] = ce
     for j, unit in enumerate(p.ins, start=1):
-        r = _rng(p.seed, 10 + j)
-        en, ee, eh, evn, eve = ins_errors(unit, t_s, dt, r)
+        r = _rng(p.seed, 10 + j, seg)
+        phases = _rng(p.seed, 30 + j).uniform(0.0, 2 * np.pi, 6)  # shared by all segments
+
+        def ins_gm(key, sigma, tau_s, rr, j=j):
+            return gm(f"ins{j}_{key}", sigma, tau_s, rr)
+
+        en, ee, eh, evn, eve = ins_errors(unit, t_s, dt, r, phases=phases, gm=ins_gm)
         wv = p.ins_velocity_white_kn * KN_MPS
         errors[f"ins{j}_north_m"] = en
         errors[f"ins{j}_east_m"] = ee
         errors[f"ins{j}_heading_rad"] = eh
         errors[f"ins{j}_vn_mps"] = evn + wv * r.standard_normal(n)
         errors[f"ins{j}_ve_mps"] = eve + wv * r.standard_normal(n)
-    r = _rng(p.seed, 20)
-    errors["gnss_north_m"] = (gauss_markov(n, dt, p.gnss_noise_m.sigma, p.gnss_noise_m.tau_s, r)
+    r = _rng(p.seed, 20, seg)
+    errors["gnss_north_m"] = (gm("gnss_north", p.gnss_noise_m.sigma, p.gnss_noise_m.tau_s, r)
                               + p.gnss_white_m * r.standard_normal(n))
-    errors["gnss_east_m"] = (gauss_markov(n, dt, p.gnss_noise_m.sigma, p.gnss_noise_m.tau_s, r)
+    errors["gnss_east_m"] = (gm("gnss_east", p.gnss_noise_m.sigma, p.gnss_noise_m.tau_s, r)
                              + p.gnss_white_m * r.standard_normal(n))
     errors["gnss_vn_mps"] = p.gnss_speed_white_kn * KN_MPS * r.standard_normal(n)
     errors["gnss_ve_mps"] = p.gnss_speed_white_kn * KN_MPS * r.standard_normal(n)
@@ -575,7 +609,8 @@ def simulate(params: SimParams) -> SimVoyage:
 
     # ---- sentences (what each source writes, at which samples)
     def idx(hz: float) -> np.ndarray:
-        return np.arange(0, n, int(round(base_hz / hz)), dtype=np.int64)
+        step = int(round(base_hz / hz))
+        return np.arange(step if p.skip_first else 0, n, step, dtype=np.int64)
 
     ic, il, ii, ig = idx(p.compass_hz), idx(p.log_hz), idx(p.ins_hz), idx(p.gnss_hz)
     ia = idx(p.aux_hz) if p.aux_hz > 0 else np.zeros(0, np.int64)
@@ -640,7 +675,9 @@ def simulate(params: SimParams) -> SimVoyage:
         stw_transverse_mps=q_signed(m_trans[il], KN_MPS, SPEED_DEC),
         sog_long_mps=q_signed(m_glong[il], KN_MPS, SPEED_DEC),
         sog_transverse_mps=q_signed(m_gtrans[il], KN_MPS, SPEED_DEC))
-    trip = np.concatenate(([0.0], np.cumsum(0.5 * (m_long[1:] + m_long[:-1]) * dt)))
+    trip = state_in.get("trip_m", 0.0) + np.concatenate(
+        ([0.0], np.cumsum(0.5 * (m_long[1:] + m_long[:-1]) * dt)))
+    state_out["trip_m"] = float(trip[-1])
     rec("distance", "LOG", "VLW", il,
         total_water_m=q_signed(p.log_total_start_nmi * NMI_M + trip[il], NMI_M, DIST_DEC),
         trip_water_m=q_signed(trip[il], NMI_M, DIST_DEC))
@@ -698,5 +735,48 @@ def simulate(params: SimParams) -> SimVoyage:
     roles = {s: SOURCES[s][0] for s, _, _ in plan if not (s == "MAG" and p.compass == "both")}
     zda = pd.DataFrame({"time_ns": time_ns[ig], "source": np.full(len(ig), "GNSS", dtype=object),
                         "line": lines[("GNSS", "ZDA")]})
+    state_out.update(lat_rad=float(lat[-1]), lon_rad=float(lon[-1]), t0_s=float(t_s[-1]),
+                     segment=seg)
+    if p.skip_first:
+        truth = truth.iloc[1:].reset_index(drop=True)
+        err = err.iloc[1:].reset_index(drop=True)
     return SimVoyage(truth=truth, frames=frames, roles=roles, errors=err, unit_rms=unit_rms,
-                     params=p, zda=zda)
+                     params=p, zda=zda, state=state_out)
+
+
+def generated_legs(params: SimParams) -> tuple[tuple[float, float], ...]:
+    """The legs :func:`simulate` steers when ``params.legs`` is None (drawn from the seed)."""
+    return params.legs if params.legs is not None else _generated_legs(params)
+
+
+def simulate_segments(params: SimParams, segment_s: float = 6 * 3600.0):
+    """Simulate a long voyage in consecutive segments of ``segment_s``, yielding a
+    :class:`SimVoyage` per segment, so that memory does not grow with the duration.
+
+    Each segment continues the previous one exactly: the position, every Gauss-Markov
+    process (from its last value), the INS oscillations (same phases, absolute time), the
+    legs and the VLW distances; only the white noise and the GM driving noise are drawn
+    from the segment's own streams.  The first sample of every later segment repeats the
+    previous segment's last one and is dropped.  The result therefore differs from one
+    :func:`simulate` of the whole voyage only in its random draws, not in its statistics.
+    Line numbers in each segment's frames restart at 1.
+    """
+    if not segment_s > 0:
+        raise ConfigError(f"segment length must be positive, got {segment_s} s")
+    legs = generated_legs(params)
+    total = params.duration_s
+    t0, k, state = 0.0, 0, None
+    while True:
+        seg_len = min(segment_s, total - t0)
+        p = replace(params, legs=legs, duration_s=seg_len, t0_s=t0, segment=k,
+                    skip_first=k > 0, state=state)
+        if state is not None:
+            p = replace(p, start_lat_deg=state["lat_rad"] / DEG_RAD,
+                        start_lon_deg=state["lon_rad"] / DEG_RAD)
+        v = simulate(p)
+        yield v
+        state = v.state
+        t0 += seg_len
+        k += 1
+        if t0 >= total - 1e-9:
+            break
