@@ -70,7 +70,7 @@ _WINDOW = 8 << 20
 _TOPLEVEL_FLUSH = 20000
 _INDEXED_MAX = 64 << 20  #: chunks up to this size (uncompressed) are decoded whole via their index
 _JSON_BATCH = 50000  #: JSON messages of one channel parsed together
-_PIECE_RECORDS = 200_000  #: decoded records of a channel kept as columns before becoming a frame piece
+_PIECE_RECORDS = 50_000  #: decoded records of a channel kept as columns before becoming a frame piece
 
 _OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 1, 2, 3, 4, 5, 6
 _OP_DATA_END = 0x0F
@@ -824,7 +824,8 @@ class _Reader:
                               self.rejects, talker=_const_cat("", n))
         ch.state["records"] = ch.state.get("records", 0) + sum(len(f) for f in frames.values())
         for kind, f in frames.items():
-            self.pieces.setdefault(kind, []).append(f)
+            self.pieces.setdefault(kind, []).append(_as_piece(f))
+        del frames
 
     def result(self) -> FileResult:
         for ch in self.channels.values():
@@ -846,7 +847,8 @@ class _Reader:
                     continue
                 f = f.copy()
                 f["line"] = nos[f["line"].to_numpy(dtype=np.int64) - 1]  # sentence index -> message number
-                res.frames[kind] = _concat_sorted([res.frames[kind], f]) if kind in res.frames else f
+                res.frames[kind] = (_concat_sorted([_as_piece(res.frames[kind]), _as_piece(f)])
+                                    if kind in res.frames else f)
             renumber_examples(nres.rejects, nos)
             res.rejects.merge(nres.rejects)
             res.time_events = nres.time_events
@@ -899,32 +901,41 @@ def _const_cat(value: str, n: int) -> pd.Categorical:
     return pd.Categorical.from_codes(np.zeros(n, dtype=np.int8), categories=[value])
 
 
-def _concat_sorted(pieces: list[pd.DataFrame]) -> pd.DataFrame:
-    """Concatenate frame pieces of one kind (categoricals unified, not turned into objects)
-    ordered by (time_ns, line), one column at a time so that the peak is the pieces plus
-    the result plus one column; the pieces list is emptied."""
+def _as_piece(df: pd.DataFrame) -> dict:
+    """A frame as independent column arrays (categoricals stay categoricals), so that the
+    final concatenation can free each piece's column as soon as it is copied."""
+    return {c: (df[c].array if isinstance(df[c].dtype, pd.CategoricalDtype) else df[c].to_numpy(copy=True))
+            for c in df.columns}
+
+
+def _concat_sorted(pieces: list[dict]) -> pd.DataFrame:
+    """Concatenate frame pieces of one kind (from :func:`_as_piece`; categoricals unified,
+    not turned into objects), ordered by (time_ns, line), column by column, freeing each
+    piece's column once copied: the peak is one copy of the frame plus one column.  The
+    pieces list is emptied."""
     from pandas.api.types import union_categoricals
 
-    t = np.concatenate([p["time_ns"].to_numpy() for p in pieces])
-    ln = np.concatenate([p["line"].to_numpy() for p in pieces])
+    names = list(pieces[0])
+    t = np.concatenate([p.pop("time_ns") for p in pieces])
+    ln = np.concatenate([p.pop("line") for p in pieces])
     order = None
     if len(t) > 1 and not ((t[1:] > t[:-1]) | ((t[1:] == t[:-1]) & (ln[1:] >= ln[:-1]))).all():
         order = np.lexsort((ln, t))
-    cols = {}
-    for c in pieces[0].columns:
-        if c == "time_ns":
-            v = t
-        elif c == "line":
-            v = ln
-        elif all(isinstance(p[c].dtype, pd.CategoricalDtype) for p in pieces):
-            v = union_categoricals([p[c] for p in pieces]) if len(pieces) > 1 else pieces[0][c].array
-        elif pieces[0][c].dtype == object or isinstance(pieces[0][c].dtype, pd.CategoricalDtype):
-            v = np.concatenate([p[c].to_numpy(dtype=object) for p in pieces])
+        t, ln = t[order], ln[order]
+    cols = {"time_ns": t}
+    for c in list(pieces[0]):
+        parts = [p.pop(c) for p in pieces]
+        if all(isinstance(x, pd.Categorical) for x in parts):
+            v = union_categoricals(parts) if len(parts) > 1 else parts[0]
+        elif any(isinstance(x, pd.Categorical) or x.dtype == object for x in parts):
+            v = np.concatenate([np.asarray(x, dtype=object) for x in parts])
         else:
-            v = np.concatenate([p[c].to_numpy() for p in pieces])
+            v = np.concatenate(parts)
+        del parts
         cols[c] = v if order is None else v[order]
+    cols["line"] = ln
     pieces.clear()
-    return pd.DataFrame(cols, copy=False)
+    return pd.DataFrame({c: cols.pop(c) for c in names}, copy=False)
 
 
 def _repeated(f) -> bool:
