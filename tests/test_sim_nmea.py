@@ -294,3 +294,24 @@ def test_cli_help_legs_and_noiseless(tmp_path, capsys):
     assert errors["ins2_north_m"].abs().max() == 0.0 and errors["gyro_err_rad"].abs().max() == 0
     first = (out / "voyage.nmea").read_bytes().split(b"\r\n")[0]
     assert first == b"$HEHDT,10.000,T*" + b"%02X" % xor(b"HEHDT,10.000,T")
+
+
+def test_cli_segments_write_one_continuous_log(tmp_path):
+    one, seg = tmp_path / "one", tmp_path / "seg"
+    args = ("simulate", "--hours", "0.1", "--compass-hz", "1", "--form", "prefix", "--seed", "4")
+    assert _run(*args, "--out", one) == 0
+    assert _run(*args, "--segment-hours", "0.03", "--out", seg) == 0
+    a = (one / "voyage.nmea").read_bytes().split(b"\r\n")
+    b = (seg / "voyage.nmea").read_bytes().split(b"\r\n")
+    assert len(a) == len(b)
+    stamps = [ln.split(b" ")[0] for ln in b[:-1]]
+    assert stamps == sorted(stamps) and stamps == [ln.split(b" ")[0] for ln in a[:-1]]
+    truth = pd.read_csv(seg / "truth.csv")
+    assert len(truth) == 361 and truth["time_ns"].is_unique
+    info = json.loads((seg / "params.json").read_text())
+    assert info["records"] == json.loads((one / "params.json").read_text())["records"]
+    for unit in ("ins1", "ins2", "ins3"):
+        assert info["unit_rms"][unit]["lat_m"] > 0
+    for ln in b[:-1]:
+        body = ln.split(b" ", 1)[1]
+        assert int(body[-2:], 16) == xor(body[1:-3])
