@@ -192,6 +192,8 @@ def _tables_and_tallies(v, i, ft, fe, truth_hz, base_hz, t0_ns, records, sq, cou
     pos = v.frames["position"]
     for u in sq:
         n = int((pos["source"] == u.upper()).sum())
+        if n == 0:  # a short last segment may hold no INS sample
+            continue
         count[u] += n
         for ch, rms in v.unit_rms[u].items():
             sq[u][ch] += n * rms ** 2
