@@ -22,6 +22,13 @@ from ..geodesy import offset_ne_m  # noqa: E402
 from ..pipeline import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS, Analysis  # noqa: E402
 
 _DPI = 96
+#: lines are drawn through at most this many points (every k-th sample); circles and
+#: markers are not thinned
+_MAX_LINE_POINTS = 20000
+
+
+def _stride(n: int) -> int:
+    return max(1, -(-n // _MAX_LINE_POINTS))
 _UNIT_COLOURS = {"ins1": "#1f77b4", "ins2": "#d62728", "ins3": "#2ca02c"}
 _ROLE_COLOURS = {"gnss": "#555555", "ins1": "#1f77b4", "ins2": "#d62728", "ins3": "#2ca02c"}
 
@@ -65,9 +72,11 @@ def track_plot(a: Analysis) -> bytes | None:
         tr = dr.track
         n, e = offset_ne_m(tr.lat_rad, tr.lon_rad, lat0, lon0)
         # break the line between legs so restarts do not draw jumps
-        jumps = np.flatnonzero(np.diff(tr.leg) != 0) + 1
-        e_km = np.insert(e / 1e3, jumps, np.nan)
-        n_km = np.insert(n / 1e3, jumps, np.nan)
+        k = _stride(len(n))
+        ns, es, legs = n[::k], e[::k], tr.leg[::k]
+        jumps = np.flatnonzero(np.diff(legs) != 0) + 1
+        e_km = np.insert(es / 1e3, jumps, np.nan)
+        n_km = np.insert(ns / 1e3, jumps, np.nan)
         ax.plot(e_km, n_km, lw=1.4, color="black", label="DR")
         # 2M at each whole hour since the fix and at the end of every leg (just before the
         # restart, where the circle is largest)
@@ -124,12 +133,13 @@ def growth_plot(a: Analysis) -> bytes | None:
         return None
     tr = dr.track
     fig, ax = plt.subplots(figsize=(9, 4.5))
-    hours = tr.since_fix_s / 3600.0
-    jumps = np.flatnonzero(np.diff(tr.leg) != 0) + 1
-    ax.plot(np.insert(hours, jumps, np.nan), np.insert(tr.radius_2m_m, jumps, np.nan),
+    k = _stride(len(tr.time_ns))
+    hours = tr.since_fix_s[::k] / 3600.0
+    jumps = np.flatnonzero(np.diff(tr.leg[::k]) != 0) + 1
+    ax.plot(np.insert(hours, jumps, np.nan), np.insert(tr.radius_2m_m[::k], jumps, np.nan),
             color="#ff7f0e", lw=1.2, label="2M (2 drms)")
     if np.isfinite(tr.ref_error_m).any():
-        ax.plot(np.insert(hours, jumps, np.nan), np.insert(tr.ref_error_m, jumps, np.nan),
+        ax.plot(np.insert(hours, jumps, np.nan), np.insert(tr.ref_error_m[::k], jumps, np.nan),
                 color="black", lw=0.8, label=f"actual error vs {dr.reference_role}")
     ax.set_xlabel("time since the last fix [h]")
     ax.set_ylabel("metres")

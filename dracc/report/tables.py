@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
+import pyarrow.csv as pa_csv
 
 from .. import atomic
 from ..deviation import WindowStats
@@ -126,8 +128,9 @@ def write_tables(a: Analysis, out_dir: str | Path) -> list[Path]:
             csv = df.copy()
             for col in csv.columns:
                 if isinstance(csv[col].dtype, pd.DatetimeTZDtype):
-                    csv[col] = csv[col].dt.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
-            csv.to_csv(tmp, index=False)
+                    naive = csv[col].dt.tz_convert("UTC").dt.tz_localize(None).to_numpy("datetime64[us]")
+                    csv[col] = np.char.add(np.datetime_as_string(naive, unit="us"), "Z")
+            pa_csv.write_csv(pa.Table.from_pandas(csv, preserve_index=False), tmp)
         written.append(csv_path)
         pq_path = out_dir / f"{name}.parquet"
         with atomic.atomic_path(pq_path) as tmp:
