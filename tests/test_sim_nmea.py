@@ -247,6 +247,14 @@ def test_cli_writes_all_files(tmp_path):
     np.testing.assert_allclose(truth["lat_rad"], v.truth["lat_rad"].iloc[::2], rtol=1e-11)
     first = (out / "voyage.nmea").read_text().splitlines()[0]
     assert first.startswith("2026-03-01T00:00:00.000Z $HEHDT,")
+    # TAG form: c: in ms when a sensor writes faster than 1 Hz (auto), else in seconds
+    for hz, digits in (("2", 13), ("1", 10)):
+        d = tmp_path / f"tag{hz}"
+        assert _run("simulate", "--hours", "0.01", "--compass-hz", hz, "--out", d) == 0
+        c = re.search(rb",c:([0-9]+)\*", (d / "voyage.nmea").read_bytes()).group(1)
+        assert len(c) == digits
+        assert json.loads((d / "params.json").read_text())["tag_time"] == ("ms" if hz == "2"
+                                                                            else "s")
 
 
 def test_cli_rejects_bad_options(tmp_path):

@@ -74,7 +74,9 @@ def simulate_cmd(
     start: str = typer.Option("2026-03-01T00:00:00Z", "--start", help="Start time, ISO 8601 UTC."),
     fmt: str = typer.Option("nmea", "--format", help="Log format: " + ", ".join(FORMATS) + "."),
     form: str = typer.Option("tag", "--form", help="NMEA line form: tag, prefix or bare."),
-    tag_time: str = typer.Option("s", "--tag-time", help="TAG block c: time unit: s or ms."),
+    tag_time: str = typer.Option("auto", "--tag-time",
+                                 help="TAG block c: time unit: s, ms, or auto (ms when a sensor "
+                                      "writes faster than 1 Hz, else s)."),
     compass: str = typer.Option("gyro", "--compass", help="Compass fitted: gyro, magnetic or both."),
     compass_hz: float = typer.Option(10.0, "--compass-hz", help="Compass heading rate (Hz)."),
     log_hz: float = typer.Option(1.0, "--log-hz", help="Speed log rate (Hz)."),
@@ -135,9 +137,12 @@ def simulate_cmd(
                            current_drift_kn=current_kn).with_ins_error_scale(ins_error_scale)
     if not segment_hours > 0:
         raise ConfigError(f"--segment-hours must be positive, got {segment_hours}")
-    if form not in ("tag", "prefix", "bare") or tag_time not in ("s", "ms"):
-        raise ConfigError(f"--form must be tag, prefix or bare and --tag-time s or ms, "
+    if form not in ("tag", "prefix", "bare") or tag_time not in ("s", "ms", "auto"):
+        raise ConfigError(f"--form must be tag, prefix or bare and --tag-time s, ms or auto, "
                           f"got {form!r}, {tag_time!r}")
+    if tag_time == "auto":
+        # whole seconds would give every sub-second sentence its neighbour's time
+        tag_time = "ms" if max(compass_hz, log_hz, ins_hz, gnss_hz, aux_hz) > 1.0 else "s"
     params = replace(params, legs=generated_legs(params))
     base_hz = max(compass_hz, log_hz, ins_hz, gnss_hz, aux_hz)
     t0_ns = start_ns(params.start_utc)
