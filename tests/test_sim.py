@@ -99,6 +99,8 @@ def test_start_time_and_bad_params():
         simulate(SimParams(duration_s=10, start_utc="yesterday"))
     with pytest.raises(ConfigError, match="duration"):
         simulate(SimParams(duration_s=0))
+    with pytest.raises(ConfigError, match="simulate_segments"):
+        simulate(SimParams(duration_s=7 * 86400.0))  # 10 Hz for a week: ~10 GB in one piece
 
 
 # ---------------------------------------------------------------- truth

@@ -46,6 +46,7 @@ from ..geodesy import add_offset_ne, angdiff, k_lambda, k_phi, wrap_2pi, wrap_pi
 from ..ingest.frames import KINDS, empty_frame, make_frame
 from ..units import DEG_RAD, KN_MPS, NMI_M
 
+MAX_SAMPLES = 3e6  #: truth samples in one simulate() call (~1.7 kB each at peak)
 SCHULER_PERIOD_S = 84.4 * 60.0  #: Schuler period 2 pi sqrt(R/g) = 84.4 min
 DAY_PERIOD_S = 86400.0  #: the 24 h INS oscillation (earth rate)
 KMH_MPS = 1000.0 / 3600.0
@@ -475,8 +476,11 @@ def _check(p: SimParams) -> float:
         step = base / v
         if abs(step - round(step)) > 1e-9:
             raise ConfigError(f"{k}={v} does not divide the fastest rate {base} Hz into whole steps")
-    if base * p.duration_s > 5e7:
-        raise ConfigError(f"{base} Hz over {p.duration_s} s is more than 5e7 samples; lower the rates")
+    if base * p.duration_s > MAX_SAMPLES:
+        raise ConfigError(f"{base} Hz over {p.duration_s:g} s is {base * p.duration_s:.3g} samples "
+                          f"(about {base * p.duration_s * 1.7e-6:.0f} GB); more than "
+                          f"{MAX_SAMPLES:.0e} in one piece: use simulate_segments (as "
+                          f"`dracc simulate` does) or lower the rates")
     return base
 
 
