@@ -55,7 +55,8 @@ def _cfg(tmp_path, text: str) -> str:
 
 
 LOOSE = "[audit]\nlimits = { all = { lat_m = 1e9, lon_m = 1e9, course_deg = 1e3 } }\n" \
-        "required_sources = [\"ins1\", \"ins2\", \"ins3\"]\n"
+        "required_sources = [\"ins1\", \"ins2\", \"ins3\"]\n" \
+        "log_scale_max_pct = 10.0\ncompass_error_max_deg = 5.0\n"
 TIGHT = "[audit]\nlimits = { all = { lat_m = 1.0, lon_m = 1.0, course_deg = 0.0001 } }\n"
 
 
@@ -67,8 +68,7 @@ def test_exit_0_within_limits_with_reports(run_cli, ship, tmp_path):
     assert code == ExitCode.OK, err
     assert out == ""
     text = (tmp_path / "s.txt").read_text()
-    assert text.startswith("dracc audit: Aurora, night 2026-11-18: all within limits (2 checks "
-                           "could not be made")  # compass error and log scale: not computed yet
+    assert text.startswith("dracc audit: Aurora, night 2026-11-18: all within limits")
     assert "state: recorded" in text and text.rstrip().endswith("exit 0 (ok)")
     doc = json.loads((tmp_path / "r.json").read_text())
     assert doc["schema"] == "dracc.analysis/1" and doc["deviation"]["units"]["ins1"]["lat"]["n"] > 0

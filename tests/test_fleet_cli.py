@@ -45,13 +45,15 @@ def local_run(fleet, tmp_path_factory):
     out = tmp_path_factory.mktemp("local")
     code = main(["fleet", str(fleet / "Aurora"), str(fleet / "Nordlys ★"), "--workers", "2",
                  "--out", str(out)])
-    return code, out
+    # the tables as this run wrote them (a later test re-runs into the same folder)
+    tables = {n: pd.read_parquet(out / f"{n}.parquet") for n in ("fleet", "trends")}
+    return code, out, tables
 
 
 def test_local_pool_tables_failures_and_pages(local_run):
-    code, out = local_run
+    code, out, tables = local_run
     assert code == ExitCode.INPUT  # one file failed; the rest is in the tables
-    t = pd.read_parquet(out / "fleet.parquet")
+    t = tables["fleet"]
     assert sorted(t["vessel"].unique()) == ["Aurora", "Nordlys ★"]
     failed = t[t["status"] == "failed"]
     assert failed["log"].tolist() == ["notes.txt"] and failed["error"].str.len().min() > 10
@@ -73,8 +75,8 @@ def test_local_pool_tables_failures_and_pages(local_run):
 
 
 def test_rerun_skips_done_logs(local_run, fleet, run_cli):
-    _, out = local_run
-    before = pd.read_parquet(out / "fleet.parquet")
+    _, out, tables = local_run
+    before = tables["fleet"]
     code, stdout, err = run_cli("fleet", fleet / "Aurora", fleet / "Nordlys ★", "--workers", "2",
                                 "--out", out)
     assert code == ExitCode.INPUT
@@ -125,11 +127,9 @@ def test_dask_scheduler_gives_the_local_table(local_run, fleet, tmp_path):
     finally:
         _stop(procs)
     assert code == ExitCode.INPUT
-    _, local_out = local_run
-    pd.testing.assert_frame_equal(pd.read_parquet(out / "fleet.parquet"),
-                                  pd.read_parquet(local_out / "fleet.parquet"))
-    pd.testing.assert_frame_equal(pd.read_parquet(out / "trends.parquet"),
-                                  pd.read_parquet(local_out / "trends.parquet"))
+    _, _, local = local_run
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "fleet.parquet"), local["fleet"])
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "trends.parquet"), local["trends"])
 
 
 def test_real_logs_and_an_empty_mcap(real_dir, tmp_path):
