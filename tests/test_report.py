@@ -290,5 +290,8 @@ def test_tables_bare_writes_nothing(tmp_path):
 def test_tables_readable_by_duckdb(tmp_path):
     duckdb = pytest.importorskip("duckdb")
     tables.write_tables(make_analysis("full"), tmp_path)
-    n = duckdb.sql(f"select count(*) from '{tmp_path / 'dr_track.parquet'}'").fetchone()[0]
+    n = duckdb.sql(f"select count(*) from '{tmp_path / 'dr_track.parquet'}'").fetchall()[0][0]
     assert n == 25 * 360
+    rows = duckdb.sql(f"select unit_name, max(m_u) from read_csv_auto('{tmp_path / 'unit_stats.csv'}') "
+                      "where channel = 'lat' group by unit_name order by unit_name").fetchall()
+    assert [r[0] for r in rows] == ["ins1", "ins2", "ins3"] and all(r[1] > 0 for r in rows)
