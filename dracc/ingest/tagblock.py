@@ -160,9 +160,18 @@ def _key_value(buf, colons, commas, start, stop, key: int):
     pos = kc[np.minimum(i, len(kc) - 1)] if len(kc) else np.zeros(len(start), np.int64)
     found = (i < len(kc)) & (pos < stop) if len(kc) else np.zeros(len(start), bool)
     vs = pos + 1
-    j = np.searchsorted(commas, vs)
-    nxt = commas[np.minimum(j, len(commas) - 1)] if len(commas) else stop
-    ve = np.where((j < len(commas)) & (nxt < stop), nxt, stop)
+    # the value ends at the next ',' (or at ``stop``): look through a short window of bytes
+    w = 32
+    win = np.lib.stride_tricks.sliding_window_view(np.concatenate((buf, np.zeros(w, np.uint8))), w)
+    mat = win[np.where(found, vs, 0)]
+    comma = mat == 44
+    has = comma.any(axis=1)
+    ve = np.where(has, vs + comma.argmax(axis=1), stop)
+    far = found & ~has & (stop - vs > w)  # a long value: search the comma table instead
+    if far.any():
+        j = np.searchsorted(commas, vs[far])
+        ve[far] = commas[np.minimum(j, len(commas) - 1)] if len(commas) else stop[far]
+    ve = np.minimum(ve, stop)
     return found, np.where(found, vs, 0), np.where(found, ve, 0)
 
 
