@@ -199,3 +199,23 @@ def test_real_log_without_ins(run_cli, real_dir, tmp_path):
                            "--config", cfg)
     # the limits are not analysis settings: the night stays as recorded, today's limits decide
     assert code == ExitCode.OK and "state: unchanged" in out
+
+
+def test_calibration_checks_against_known_sensor_errors(run_cli, tmp_path):
+    # a simulated night with a gyro reading 2.0 deg high and a log 5 % fast: the audit's
+    # compass and log checks (limits 1 deg, 2 %) must flag both, with about those sizes
+    code = main(["simulate", "--out", str(tmp_path), "--hours", "6", "--seed", "5",
+                 "--start", "2026-11-21T00:00:00Z", "--name", "bad-sensors", "--gyro-error-deg", "2.0",
+                 "--log-scale-pct", "5.0", "--compass-hz", "0.5", "--log-hz", "0.5", "--ins-hz", "0.1",
+                 "--gnss-hz", "0.5", "--aux-hz", "0", "--truth-hz", "0.01"])
+    assert code == 0
+    code, out, _ = run_cli("audit", tmp_path / "bad-sensors.nmea", "--db", tmp_path / "s.sqlite",
+                           "--config", _cfg(tmp_path, "[audit]\nlimits = { all = { lat_m = 1e9, "
+                                                      "lon_m = 1e9, course_deg = 1e3 } }\n"))
+    assert code == ExitCode.FINDINGS
+    con = sqlite3.connect(tmp_path / "s.sqlite")
+    findings = json.loads(con.execute("SELECT findings_json FROM nights").fetchone()[0])
+    by_kind = {f["kind"]: f for f in findings}
+    assert set(by_kind) == {"compass_error", "log_scale"}
+    assert abs(by_kind["compass_error"]["value"]) == pytest.approx(2.0, abs=0.3)
+    assert abs(by_kind["log_scale"]["value"]) == pytest.approx(5.0, abs=1.0)
