@@ -947,23 +947,18 @@ def _repeated(f) -> bool:
 
 
 def _join_lines(buf: bytes, starts: np.ndarray, ends: np.ndarray) -> bytes:
-    """The payloads ``buf[starts[i]:ends[i]]`` as one newline-terminated line each, built
-    with one numpy gather.  A raw newline inside a JSON text can only be whitespace
-    (RFC 8259 forbids it inside strings), so it becomes a space."""
-    lens = (ends - starts).astype(np.int64)
-    if len(lens) == 0:
+    """The payloads ``buf[starts[i]:ends[i]]`` as one newline-terminated line each.  A raw
+    newline inside a JSON text can only be whitespace (RFC 8259 forbids it inside
+    strings), so where there is one it becomes a space."""
+    n = len(starts)
+    if n == 0:
         return b""
-    out_len = lens + 1
-    total = int(out_len.sum())
-    first = np.cumsum(out_len) - out_len  # where each line starts in the output
-    src = np.arange(total, dtype=np.int64) - np.repeat(first - starts, out_len)
-    u8 = np.frombuffer(buf, dtype=np.uint8)
-    last = first + lens  # the newline positions
-    src[last] = 0
-    out = u8[src]
-    out[out == 10] = 32
-    out[last] = 10
-    return out.tobytes()
+    mv = memoryview(buf)
+    parts = [mv[s:e] for s, e in zip(starts.tolist(), ends.tolist(), strict=True)]
+    out = b"\n".join(parts) + b"\n"
+    if out.count(b"\n") != n:
+        out = b"\n".join(bytes(x).replace(b"\n", b" ") for x in parts) + b"\n"
+    return out
 
 
 def _json_columns(joined: bytes, n: int, plan: dict) -> dict[str, np.ndarray] | None:
