@@ -55,7 +55,7 @@ def write_csv(frames: dict[str, pd.DataFrame], path, form: str = "long") -> Path
     path = Path(path)
     parts = []
     if form == "long":
-        for kind, df, qs in _tables(frames):
+        for _kind, df, qs in _tables(frames):
             t = df["time_ns"].to_numpy(dtype=np.int64)
             src = df["source"].astype(str).to_numpy(dtype=object)
             for q, v in qs.items():
@@ -77,7 +77,7 @@ def write_csv(frames: dict[str, pd.DataFrame], path, form: str = "long") -> Path
         out = out.drop(columns="time_ns")
     else:
         merged = None
-        for kind, df, qs in _tables(frames):
+        for _kind, df, qs in _tables(frames):
             t = pd.DataFrame({"time_ns": df["time_ns"].to_numpy(dtype=np.int64),
                               "source": df["source"].astype(str).to_numpy(dtype=object)})
             t["occ"] = t.groupby(["time_ns", "source"]).cumcount().to_numpy()
