@@ -2,35 +2,49 @@
 
 from __future__ import annotations
 
+import signal
 import sys
 import traceback
 
-import click
+try:  # Ctrl-C while the libraries load (seconds on a busy machine): one line, no traceback
+    import click
 
-from ..errors import DraccError, ExitCode
-from .app import VERBOSE, app, err
+    from ..errors import DraccError, ExitCode
+    from .app import VERBOSE, app, err
 
-# Commands register themselves on ``app`` when imported.
-from . import inspect_cmd  # noqa: F401,E402  isort: skip
-from . import simulate_cmd  # noqa: F401,E402  isort: skip
-from . import analyze_cmd  # noqa: F401,E402  isort: skip
-from . import audit_cmd  # noqa: F401,E402  isort: skip
-from . import fleet_cmd  # noqa: F401,E402  isort: skip
+    # Commands register themselves on ``app`` when imported.
+    from . import inspect_cmd  # noqa: F401,E402  isort: skip
+    from . import simulate_cmd  # noqa: F401,E402  isort: skip
+    from . import analyze_cmd  # noqa: F401,E402  isort: skip
+    from . import audit_cmd  # noqa: F401,E402  isort: skip
+    from . import fleet_cmd  # noqa: F401,E402  isort: skip
+except KeyboardInterrupt:
+    sys.stderr.write("error: interrupted while starting; nothing was written\n")
+    sys.exit(130)
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; return (and exit with) a documented :class:`ExitCode`."""
     args = sys.argv[1:] if argv is None else list(argv)
     VERBOSE["on"] = "--verbose" in args or "-v" in args
+    if argv is None:  # the real process: a kill (SIGTERM) unwinds like Ctrl-C, nothing partial
+        signal.signal(signal.SIGTERM, _terminate)
     code = _run(args)
     if argv is None:
         sys.exit(int(code))
     return int(code)
 
 
+def _terminate(signum, frame) -> None:
+    """SIGTERM handler: raise KeyboardInterrupt so atomic writes and transactions roll back."""
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
 def _run(args: list[str]) -> int:
     try:
         result = app(args=args, prog_name="dracc", standalone_mode=False)
+        if result == ExitCode.INTERRUPTED:  # typer turns KeyboardInterrupt into a silent 130
+            raise KeyboardInterrupt
         return int(result) if isinstance(result, int) else ExitCode.OK
     except click.exceptions.Exit as e:
         return e.exit_code
