@@ -80,3 +80,11 @@ def test_roles_from_config_through_read_logs(real_dir):
     v = read_logs([real_dir / "VDRplayer" / "Hakefjord.txt"], IngestConfig(sources={"GP/3dp": "gnss"}))
     assert v.role_sources("gnss") == ["GP/3dp"] and set(v.role_sources("compass")) == {"II"}
     assert len(v.frame("position", "gnss")) > 600
+
+
+def test_heading_only_source_is_the_compass_beside_an_ins_talker():
+    # prefix-form logs: three INS behind one talker IN (GGA + HDT) and a gyro HE (HDT only)
+    s = {"IN": src("IN", "IN", GGA=30, HDT=30, VTG=30), "HE": src("HE", "HE", HDT=100),
+         "GP": src("GP", "GP", GGA=10, RMC=10)}
+    assign_roles(s, {})
+    assert roles(s) == {"IN": None, "HE": "compass", "GP": "gnss"}

@@ -14,9 +14,9 @@ Role assignment (:func:`assign_roles`), in this order:
    as a whole key or the last component of a topic; only if one source has that name;
 3. content, only where unambiguous: talker families (GP/GN/GA/GL/GB -> gnss; exactly
    three INS-type talkers or keys (IN, II, IR, or names containing 'INS') with
-   positions -> ins1..3 in sorted order); a source with heading sentences and no
-   positions -> compass (if it is the only one); a source with VHW/VBW -> log (if the
-   only one).  An instrument bus (e.g. 'II' with HDG + VHW) may be compass and log.
+   positions -> ins1..3 in sorted order); the only source with heading sentences and
+   no positions -> compass (where there is none, the only source with heading sentences
+   at all); the only source with VHW/VBW -> log.  An instrument bus (e.g. 'II' with HDG + VHW) may be compass and log.
 4. Otherwise the role stays free and a note names the candidates; where the data
    clearly need a role that two sources claim, :class:`AmbiguousSourceError` is for
    the caller that requires it (``require_role``).
@@ -171,6 +171,9 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
     if "compass" not in taken:
         cands = [s for s in sources.values() if has(s, HEADING_SENTENCES)
                  and not any(r in INS_ROLES or r == "gnss" for r in s.roles)]
+        pure = [s for s in cands if not has(s, POSITION_SENTENCES)]  # heading sentences only
+        if pure:
+            cands = pure
         if len(cands) == 1:
             give(cands[0], "compass", "the only source of heading sentences")
         elif len(cands) > 1:
