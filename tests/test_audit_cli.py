@@ -96,7 +96,7 @@ def test_exit_3_no_usable_logs(run_cli, tmp_path):
     code, out, err = run_cli("audit", tmp_path / "logs", "--date", "2026-11-20", "--db", tmp_path / "s.sqlite")
     assert code == ExitCode.INPUT and err.startswith("error:") and "Traceback" not in err
     code, _, err = run_cli("audit", tmp_path / "logs", "--date", "20-11-2026", "--db", tmp_path / "s.sqlite")
-    assert code == ExitCode.INPUT and "YYYY-MM-DD" in err
+    assert code == ExitCode.USAGE and "YYYY-MM-DD" in err  # a bad option value is a usage error
     # nothing was recorded: the database is not even opened before the logs are analysed
     assert not (tmp_path / "s.sqlite").exists()
 

@@ -19,9 +19,9 @@ from rich.table import Table
 from typer.core import TyperGroup
 
 from .. import atomic
-from ..audit import CHANNEL_KEYS, AuditOutcome, audit_config, run_audit
+from ..audit import CHANNEL_KEYS, AuditOutcome, audit_config, parse_night, run_audit
 from ..config import load_config
-from ..errors import ConfigError, ExitCode
+from ..errors import ConfigError, DraccError, ExitCode
 from ..state import StateError, StateStore
 from .app import ConfigOption, app, out, progress
 
@@ -122,10 +122,20 @@ def format_summary(o: AuditOutcome, probability: float | None = None) -> str:
 # --------------------------------------------------------------------------- run
 
 
+def _check_date(value: str | None) -> str | None:
+    """--date must be YYYY-MM-DD (a usage error, exit 2, otherwise)."""
+    if value is None:
+        return None
+    try:
+        return parse_night(value)
+    except DraccError as e:
+        raise typer.BadParameter(str(e)) from e
+
+
 @audit_app.command("run")
 def audit_run(
     logs: list[Path] = typer.Argument(..., help="Log files, or folders holding the night's logs."),
-    date: str | None = typer.Option(None, "--date", help="The night to audit, YYYY-MM-DD (files "
+    date: str | None = typer.Option(None, "--date", callback=_check_date, help="The night to audit, YYYY-MM-DD (files "
                                        "in folders must carry it in their name). Default for "
                                        "folders: yesterday (UTC)."),
     pattern: str | None = typer.Option(None, "--pattern", help="Glob for the log files inside "
