@@ -303,7 +303,20 @@ def run_fleet(tasks: Sequence[LogTask], cfg: Config, out: Path, *, workers: int 
     return FleetResult(table, fleet_trends(table), failed, len(todo), cached)
 
 
+def _preload() -> None:
+    """Import the pipeline in the parent so that forked workers start with it loaded."""
+    import importlib
+
+    for name in ("dracc.pipeline", "dracc.ingest", "dracc.report.json_report"):
+        try:
+            importlib.import_module(name)
+        except ImportError:  # pragma: no cover - the worker reports it per log
+            pass
+
+
 def _run_local(todo, cfg, workers, analyser, done) -> None:
+    if analyser is analyse_log:
+        _preload()
     with ProcessPoolExecutor(max_workers=max(1, min(workers, len(todo)))) as pool:
         pending = {pool.submit(analyser, t.path, cfg): t for t in todo}
         try:
