@@ -375,3 +375,25 @@ def test_parse_sentences_sources_and_anchor():
     p = r.frames["position"].iloc[0]
     assert p["source"] == "/ins1/nmea" and p["time_ns"] == (T0 // 86400) * 86400 * 10**9 + 500_000_000
     assert r.frames["heading"].iloc[0]["source"] == "/gyro/nmea" and r.frames["heading"].iloc[0]["time_ns"] == T0 * 10**9
+
+
+def test_broken_worker_pool_falls_back_to_this_process(tmp_path, monkeypatch):
+    import os
+
+    from dracc.ingest import nmea as mod
+
+    p = tmp_path / "sim.nmea"
+    p.write_text(_sim_lines(100))
+    parent = os.getpid()
+    real = mod._parse_range
+
+    def dying(*args):
+        if os.getpid() != parent:
+            os._exit(1)  # a worker killed (e.g. by the OOM killer)
+        return real(*args)
+
+    monkeypatch.setattr(mod, "_parse_range", dying)
+    st = mod.StreamState(str(p))
+    blocks = list(iter_nmea_blocks(p, IngestConfig(), st, block_bytes=20000, workers=2))
+    assert sum(len(b.frames["heading"]) for b in blocks) == 1000
+    assert any("worker pool failed" in n for n in st.notes())

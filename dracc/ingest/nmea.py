@@ -27,9 +27,11 @@ only).  Other well-formed sentences are counted as ``unsupported`` (not an error
 from __future__ import annotations
 
 import os
+import stat
 from collections import Counter
 from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -640,6 +642,8 @@ class StreamState:
             out.append(f"{s['one_digit_checksum']} one-digit checksums ('*5' for '*05') accepted")
         if s["doubled_start"]:
             out.append(f"{s['doubled_start']} doubled sentence starts ('$$') read as one")
+        if s["pool_fallback"]:
+            out.append("the worker pool failed; blocks were parsed in the main process")
         if s["prefix_other"]:
             out.append(f"{s['prefix_other']} line prefixes without a recognisable time ignored")
         for k, v in sorted(s.items()):
@@ -842,23 +846,40 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
             pb = _parse_range(file, off, ln, cfg.ignore_checksum, at_eof[i])
             yield from handle(pb, ln)
     else:
+        # at most nworkers + 1 blocks in flight; a broken pool (a worker killed, e.g. out of
+        # memory) falls back to parsing the remaining blocks in this process
+        pending = list(enumerate(ranges))
+        broken = False
         with ProcessPoolExecutor(max_workers=nworkers) as ex:
             futures = []
-            it = iter(enumerate(ranges))
-            for i, (off, ln) in it:
-                futures.append((ex.submit(_parse_range, file, off, ln, cfg.ignore_checksum,
-                                          at_eof[i]), ln))
-                if len(futures) >= nworkers + 1:
-                    break
+
+            def submit():
+                i, (off, ln) = pending.pop(0)
+                futures.append((ex.submit(_parse_range, file, off, ln, cfg.ignore_checksum, at_eof[i]),
+                                i, off, ln))
+
+            while pending and len(futures) < nworkers + 1:
+                submit()
             while futures:
-                fut, ln = futures.pop(0)
-                pb = fut.result()
-                nxt = next(it, None)
-                if nxt is not None:
-                    i, (off, ln2) = nxt
-                    futures.append((ex.submit(_parse_range, file, off, ln2, cfg.ignore_checksum,
-                                              at_eof[i]), ln2))
+                fut, i, off, ln = futures.pop(0)
+                try:
+                    pb = fut.result() if not broken else None
+                except BrokenProcessPool:
+                    broken = True
+                    pb = None
+                if pb is None:
+                    pb = _parse_range(file, off, ln, cfg.ignore_checksum, at_eof[i])
+                if pending and not broken:
+                    try:
+                        submit()
+                    except BrokenProcessPool:
+                        broken = True
+                if broken and pending and not futures:
+                    i2, (off2, ln2) = pending.pop(0)
+                    futures.append((None, i2, off2, ln2))
                 yield from handle(pb, ln)
+        if broken:
+            st.stats["pool_fallback"] += 1
     yield from _release(st.timebase.finish())
 
 
@@ -901,6 +922,11 @@ def check_readable(path: Path) -> None:
         raise IngestError(f"{path}: no such file")
     if path.is_dir():
         raise IngestError(f"{path}: is a directory, not a log file")
+    mode = path.stat().st_mode
+    if not stat.S_ISREG(mode):  # a FIFO would block on open; a device reads as size 0
+        what = ("a FIFO (named pipe)" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode)
+                else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "not a regular file")
+        raise IngestError(f"{path}: is {what}, not a log file; save the log to a file first")
     try:
         with path.open("rb") as fh:
             fh.read(1)
