@@ -33,7 +33,7 @@ def _sources_table(a: Analysis) -> Table:
     t = Table(box=None, pad_edge=False, show_edge=False, header_style="bold")
     for col, just in (("source", "left"), ("role", "left"), ("records", "right"),
                       ("sentences", "left"), ("first", "left"), ("last", "left")):
-        t.add_column(col, justify=just)  # type: ignore[arg-type]
+        t.add_column(col, justify=just, no_wrap=True)  # type: ignore[arg-type]
     for s in a.sources:
         top = sorted(s.sentences.items(), key=lambda kv: (-kv[1], kv[0]))[:4]
         sent = " ".join(f"{k}:{v}" for k, v in top) + (" …" if len(s.sentences) > 4 else "")
@@ -192,9 +192,22 @@ def render_text(a: Analysis, width: int = 120) -> str:
     return console.export_text()
 
 
+#: the summary's tables are laid out for at least this many columns; a narrower terminal
+#: wraps the long lines rather than the tables hiding figures behind ellipses
+MIN_WIDTH = 110
+
+
 def print_summary(a: Analysis, console: Console) -> None:
     """Print the summary on ``console`` (stdout in the CLI)."""
-    console.print(summary(a))
+    width = console.width
+    if width >= MIN_WIDTH:
+        console.print(summary(a))
+        return
+    console.width = MIN_WIDTH  # rich never prints wider than the console's own width
+    try:
+        console.print(summary(a))
+    finally:
+        console.width = width
 
 
 class _NullFile:
