@@ -385,14 +385,14 @@ def test_broken_worker_pool_falls_back_to_this_process(tmp_path, monkeypatch):
     p = tmp_path / "sim.nmea"
     p.write_text(_sim_lines(100))
     parent = os.getpid()
-    real = mod._parse_range
+    real = mod.parse_buffer
 
-    def dying(*args):
+    def dying(*args, **kw):
         if os.getpid() != parent:
             os._exit(1)  # a worker killed (e.g. by the OOM killer)
-        return real(*args)
+        return real(*args, **kw)
 
-    monkeypatch.setattr(mod, "_parse_range", dying)
+    monkeypatch.setattr(mod, "parse_buffer", dying)  # the forked workers inherit the patch
     st = mod.StreamState(str(p))
     blocks = list(iter_nmea_blocks(p, IngestConfig(), st, block_bytes=20000, workers=2))
     assert sum(len(b.frames["heading"]) for b in blocks) == 1000
