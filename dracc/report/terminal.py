@@ -33,7 +33,9 @@ def _sources_table(a: Analysis) -> Table:
     t = Table(box=None, pad_edge=False, show_edge=False, header_style="bold")
     for col, just in (("source", "left"), ("role", "left"), ("records", "right"),
                       ("sentences", "left"), ("first", "left"), ("last", "left")):
-        t.add_column(col, justify=just, no_wrap=True)  # type: ignore[arg-type]
+        # figures never wrap; a very long source key (it comes from the log) folds
+        t.add_column(col, justify=just, no_wrap=col != "source",  # type: ignore[arg-type]
+                     overflow="fold")
     for s in a.sources:
         top = sorted(s.sentences.items(), key=lambda kv: (-kv[1], kv[0]))[:4]
         sent = " ".join(f"{k}:{v}" for k, v in top) + (" …" if len(s.sentences) > 4 else "")
