@@ -159,3 +159,18 @@ def test_gnss_only_log(run_cli, real_dir):
 def test_empty_mcap_is_one_line_error(run_cli, real_dir):
     code, out, err = run_cli("analyze", real_dir / "keelson" / "6389403" / "test.mcap")
     assert code == ExitCode.INPUT and err.startswith("error:") and "Traceback" not in err
+
+
+def test_shipped_sample_report_shows_every_section(validator):
+    """docs/analyze-sample/ holds the report of `dracc analyze sample_logs/voyage_tag.nmea`."""
+    folder = Path(__file__).resolve().parents[1] / "docs" / "analyze-sample"
+    doc = _json((folder / "report.json").read_text(encoding="utf-8"), validator)
+    for key in ("deviation", "dead_reckoning", "calibration", "current"):
+        assert doc[key] is not None, key
+    html = (folder / "report.html").read_text(encoding="utf-8")
+    for heading in ("Summary", "Sources", "Dead reckoning", "INS accuracy per unit", "Per window",
+                    "Calibration and current", "Plots"):
+        assert f">{heading}</h" in html, heading
+    assert html.count('src="data:image/png;base64,') == 4
+    summary = (folder / "summary.txt").read_text(encoding="utf-8")
+    assert "not computed" not in summary
