@@ -42,7 +42,7 @@ import pandas as pd
 from ..errors import IngestError
 from ..units import KN_MPS, NMI_M
 from .frames import KIND_COLUMNS, KINDS, FileResult, Rejects, TimeEvents, empty_frame, make_frame
-from .tagblock import HEX, parse_numbers, parse_prefixes
+from .tagblock import FORMS, HEX, parse_numbers, parse_prefixes
 from .timebase import MISSING_NS, EventCounter, TimeBase, days_from_civil, valid_civil
 
 if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
@@ -333,7 +333,9 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
     ``ext_line_ns``/``ext_line_source`` give a receive time / source key per line (for
     :func:`parse_sentences`); otherwise they come from TAG blocks and prefixes.
     """
-    buf = np.frombuffer(data, dtype=np.uint8)
+    # 64 zero bytes after the data let fields be gathered as fixed-width windows
+    bufp = np.frombuffer(bytes(data) + bytes(64), dtype=np.uint8)
+    buf = bufp[: len(data)]
     if len(buf) == 0:
         return ParsedBlock(0, 0, {}, {}, Counter(), {}, None)
     ends_nl = buf[-1] == 10
@@ -412,14 +414,14 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
     pre_seg = np.flatnonzero(first_of_line & (st > line_start[seg_line]))
     if len(pre_seg):
         pl = seg_line[pre_seg]
-        pr = parse_prefixes(buf, line_start[pl], st[pre_seg], cum_xor, stars, commas)
+        pr = parse_prefixes(bufp, line_start[pl], st[pre_seg], cum_xor, stars, commas)
         line_ext[pl] = pr.ext_ns
         line_src[pl] = pr.source
         badt = pr.bad_tag | (pr.bad_tag_checksum & (not ignore_checksum))
         line_bad[pl[badt]] = True
         stats["tag_checksum_ignored"] += int((pr.bad_tag_checksum & ignore_checksum).sum())
-        for f in ("tag", "iso", "unix", "signalk", "other"):
-            c = int(np.count_nonzero(pr.form == f))
+        for code, f in enumerate(FORMS):
+            c = int(np.count_nonzero(pr.form == code))
             if c:
                 stats[f"prefix_{f}"] += c
     if ext_line_ns is not None:
@@ -507,7 +509,7 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
         rows = np.flatnonzero(alive & (stype_b == stype.encode()))
         if len(rows) == 0:
             continue
-        F = _Fields(buf, commas, c_first[rows], ncomma[rows], body_end[rows])
+        F = _Fields(bufp, commas, c_first[rows], ncomma[rows], body_end[rows])
         lo, hi = FIELD_COUNTS[stype]
         badn = (F.nf < lo) | (F.nf > hi)
         if badn.any():
@@ -515,7 +517,7 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
             rows = rows[~badn]
             if len(rows) == 0:
                 continue
-            F = _Fields(buf, commas, c_first[rows], ncomma[rows], body_end[rows])
+            F = _Fields(bufp, commas, c_first[rows], ncomma[rows], body_end[rows])
         cols, timing = _decode(stype, F)
         if F.bad.any():
             drop("malformed_field", np.isin(np.arange(nseg), rows[F.bad]))

@@ -41,6 +41,20 @@ _UNIX_RE = r"^\s*(?P<u>\d{9,10}(?:\.\d*)?|\d{12,13}(?:\.\d*)?)\s*[,;:]?\s*$"
 _SK_RE = r"^(?P<ms>\d{10,13});[A-Za-z];$"
 
 
+def gather_rows(buf: np.ndarray, s: np.ndarray, w: int) -> np.ndarray:
+    """Rows of ``w`` bytes of ``buf`` starting at ``s`` (a copy; zeros past the end).
+
+    ``parse_buffer`` passes buffers with 64 trailing zero bytes, so the fix-up for rows
+    running past the end is rarely needed."""
+    if len(buf) < w:
+        buf = np.concatenate((buf, np.zeros(w, dtype=np.uint8)))
+    lim = len(buf) - w
+    mat = np.lib.stride_tricks.sliding_window_view(buf, w)[np.minimum(s, lim)]
+    for r in np.flatnonzero(s > lim):  # rows starting in the last w bytes of an unpadded buffer
+        mat[r] = np.concatenate((buf[s[r]:], np.zeros(w, np.uint8)))[:w]
+    return mat
+
+
 def unix_to_ns(v: np.ndarray, is_ms: np.ndarray) -> np.ndarray:
     """Unix seconds (fraction kept to the microsecond) or milliseconds (to the
     nanosecond) -> int64 ns, exactly: the integer part is scaled in int64, not in float
@@ -69,13 +83,16 @@ def gather_strings(buf: np.ndarray, start: np.ndarray, end: np.ndarray) -> pa.Ar
     return pa.StringArray.from_buffers(n, pa.py_buffer(offsets), pa.py_buffer(data.tobytes()))
 
 
+FORMS = ("other", "tag", "iso", "unix", "signalk")  #: prefix forms, by code
+
+
 @dataclass(frozen=True)
 class PrefixResult:
     """Per prefix: external time (MISSING_NS if none), TAG source ('' if none), form and validity."""
 
     ext_ns: np.ndarray  #: int64
     source: np.ndarray  #: object array of str
-    form: np.ndarray  #: object array: 'tag', 'iso', 'unix', 'signalk', 'other'
+    form: np.ndarray  #: int8 codes into FORMS
     bad_tag_checksum: np.ndarray  #: bool
     bad_tag: np.ndarray  #: bool: looks like a TAG block but cannot be read
 
@@ -108,15 +125,7 @@ def parse_numbers(buf: np.ndarray, s: np.ndarray, e: np.ndarray, width: int = 20
     hi = np.flatnonzero(has)
     lh = ln[hi]
     w = int(lh.max())
-    if len(buf) < w:
-        buf = np.concatenate((buf, np.zeros(w, dtype=np.uint8)))
-    win = np.lib.stride_tricks.sliding_window_view(buf, w)
-    mat = win[np.minimum(s[hi], len(buf) - w)]
-    shift = s[hi] - np.minimum(s[hi], len(buf) - w)
-    if shift.any():  # ranges in the last w bytes: realign (rare)
-        rows = np.flatnonzero(shift)
-        for r in rows:
-            mat[r] = np.concatenate((buf[s[hi][r]:], np.zeros(w, np.uint8)))[:w]
+    mat = gather_rows(buf, s[hi], w)
     inside = np.arange(w) < lh[:, None]
     nul = inside & (mat == 0)  # a NUL byte inside the field is not padding
     mat = np.where(inside, mat, 0).astype(np.uint8)
@@ -162,8 +171,7 @@ def _key_value(buf, colons, commas, start, stop, key: int):
     vs = pos + 1
     # the value ends at the next ',' (or at ``stop``): look through a short window of bytes
     w = 32
-    win = np.lib.stride_tricks.sliding_window_view(np.concatenate((buf, np.zeros(w, np.uint8))), w)
-    mat = win[np.where(found, vs, 0)]
+    mat = gather_rows(buf, np.where(found, vs, 0), w)
     comma = mat == 44
     has = comma.any(axis=1)
     ve = np.where(has, vs + comma.argmax(axis=1), stop)
@@ -232,7 +240,7 @@ def parse_prefixes(buf: np.ndarray, start: np.ndarray, end: np.ndarray,
     n = len(start)
     ext = np.full(n, MISSING_NS, dtype=np.int64)
     source = np.full(n, "", dtype=object)
-    form = np.full(n, "other", dtype=object)
+    form = np.zeros(n, dtype=np.int8)
     bad_cs = np.zeros(n, dtype=bool)
     bad_tag = np.zeros(n, dtype=bool)
     if n == 0:
@@ -247,8 +255,7 @@ def parse_prefixes(buf: np.ndarray, start: np.ndarray, end: np.ndarray,
         head = np.ones(len(ti), dtype=bool)
         w = int(tl.max())
         if len(ti) > 1 and w <= 128:
-            mat = np.lib.stride_tricks.sliding_window_view(
-                np.concatenate((buf, np.zeros(w, np.uint8))), w)[ts]
+            mat = gather_rows(buf, ts, w)
             mat = np.where(np.arange(w) < tl[:, None], mat, 0)
             head[1:] = (tl[1:] != tl[:-1]) | np.any(mat[1:] != mat[:-1], axis=1)
         run = np.cumsum(head) - 1
@@ -259,7 +266,7 @@ def parse_prefixes(buf: np.ndarray, start: np.ndarray, end: np.ndarray,
             commas = np.flatnonzero(buf == 44)
         colons = np.flatnonzero(buf == 58)
         ok, bcs, e, src = parse_tags(buf, ts[hi], te[hi], cum_xor, stars, commas, colons)
-        form[ti] = "tag"
+        form[ti] = FORMS.index("tag")
         bad_tag[ti] = ~ok[run]
         bad_cs[ti] = bcs[run]
         ext[ti] = e[run]
@@ -271,12 +278,12 @@ def parse_prefixes(buf: np.ndarray, start: np.ndarray, end: np.ndarray,
         skv = _num(sk.fill_null(""))
         hit = ~np.isnan(skv)
         ext[rest[hit]] = unix_to_ns(skv[hit], np.ones(int(hit.sum()), dtype=bool))
-        form[rest[hit]] = "signalk"
+        form[rest[hit]] = FORMS.index("signalk")
         un = pc.struct_field(pc.extract_regex(rs, _UNIX_RE), "u")
         unv = _num(un.fill_null(""))
         hit2 = ~np.isnan(unv) & ~hit
         ext[rest[hit2]] = unix_to_ns(unv[hit2], unv[hit2] >= 1e11)
-        form[rest[hit2]] = "unix"
+        form[rest[hit2]] = FORMS.index("unix")
         todo = ~(hit | hit2)
         if todo.any():
             ri = rest[todo]
@@ -292,7 +299,7 @@ def parse_prefixes(buf: np.ndarray, start: np.ndarray, end: np.ndarray,
                 good = ~dt.isna().to_numpy()
                 idx = ri[ok][good]
                 ext[idx] = v[good]
-                form[idx] = "iso"
+                form[idx] = FORMS.index("iso")
     return PrefixResult(ext, source, form, bad_cs, bad_tag)
 
 
