@@ -186,3 +186,17 @@ def test_unreachable_scheduler_is_one_clear_error(tmp_path):
     with pytest.raises(FleetError, match="cannot reach the Dask scheduler"):
         run_fleet(discover([root / "Aurora"]), CFG, tmp_path / "out",
                   scheduler=f"tcp://127.0.0.1:{port}", connect_timeout_s=1.0, analyser=fake_analyser)
+
+
+def test_daemonic_worker_error_says_what_to_do(monkeypatch, tmp_path):
+    # a Dask worker is a daemonic process: the reader's own process pool cannot start there
+    import dracc.audit
+    from dracc.fleet import analyse_log
+
+    def refuse(paths, cfg, progress=None):
+        raise AssertionError("daemonic processes are not allowed to have children")
+
+    monkeypatch.setattr(dracc.audit, "analysis_document", refuse)
+    res = analyse_log(str(tmp_path / "big.nmea"), CFG)
+    assert not res["ok"] and "DASK_DISTRIBUTED__WORKER__DAEMON=False" in res["error"]
+    assert "big.nmea" in res["error"]
