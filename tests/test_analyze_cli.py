@@ -174,3 +174,12 @@ def test_shipped_sample_report_shows_every_section(validator):
     assert html.count('src="data:image/png;base64,') == 4
     summary = (folder / "summary.txt").read_text(encoding="utf-8")
     assert "not computed" not in summary
+
+
+@pytest.mark.skipif(not SAMPLE.exists(), reason="sample_logs not generated")
+def test_unwritable_report_is_one_line_error(run_cli, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    code, _, err = run_cli("analyze", SAMPLE, "--html", blocker / "r.html")
+    assert code == ExitCode.INPUT and err.startswith("error: cannot write") and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1

@@ -17,7 +17,7 @@ import typer
 
 from ..config import load_config, validate
 from ..deadreckoning import parse_reset_s
-from ..errors import ConfigError
+from ..errors import ConfigError, DraccError
 from ..ingest.frames import ROLES
 from .app import ConfigOption, LogsArgument, app, err, out, paths_exist, progress
 
@@ -120,8 +120,6 @@ def analyze(
 ) -> None:
     """Analyse a voyage: DR with honest 2M circles, INS deviations from the mean, current; reports."""
     from ..pipeline import analyse
-    from ..report import html as html_report
-    from ..report import json_report, tables, terminal
 
     paths_exist(logs)
     cfg = build_config(config, interval=interval, window=window, dr_reset=dr_reset,
@@ -131,10 +129,10 @@ def analyze(
     total = sum(p.stat().st_size for p in logs if p.is_file())
     with progress("analyze", 100.0) as advance:
         state = {"done": 0.0}
-        weights = {"reading logs": 80.0, "dead reckoning": 10.0, "current": 5.0,
-                   "deviation statistics": 5.0}
-        offsets = {"reading logs": 0.0, "dead reckoning": 80.0, "current": 90.0,
-                   "deviation statistics": 95.0}
+        weights = {"reading logs": 80.0, "dead reckoning": 8.0, "current": 4.0,
+                   "deviation statistics": 4.0, "calibration": 4.0}
+        offsets = {"reading logs": 0.0, "dead reckoning": 80.0, "current": 88.0,
+                   "deviation statistics": 92.0, "calibration": 96.0}
 
         def on_progress(stage: str, fraction: float) -> None:
             target = offsets.get(stage, state["done"]) + weights.get(stage, 0.0) * min(max(fraction, 0.0), 1.0)
@@ -143,6 +141,19 @@ def analyze(
                 state["done"] = target
 
         result = analyse(logs, cfg, progress=on_progress, total_bytes=total)
+    try:
+        _write_reports(result, json_path, html_path, out_dir)
+    except BrokenPipeError:
+        raise  # stdout closed by the reader (e.g. `| head`): not an error of ours
+    except OSError as e:
+        where = e.filename if e.filename else "a report"
+        raise DraccError(f"cannot write {where}: {e.strerror or e}") from e
+
+
+def _write_reports(result, json_path: str | None, html_path: Path | None, out_dir: Path | None) -> None:
+    from ..report import html as html_report
+    from ..report import json_report, tables, terminal
+
     if json_path == "-":
         out.file.write(json_report.dumps(result))
         out.file.flush()
