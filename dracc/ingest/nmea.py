@@ -453,11 +453,8 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
     body_end = np.where(has_cs2, seg_end - 3, np.where(has_cs1, seg_end - 2, seg_end))
     h1 = np.where(has_cs1, 0, h1)
     # a '*' elsewhere without two hex digits after it: cut short
-    # which sentence each '*' and ',' belongs to (one search per character of interest;
-    # the sentence starts are a small, cache-resident table)
-    sid = np.searchsorted(st, stars, side="right") - 1
-    ok_s = (sid >= 0) & (stars < seg_end[np.maximum(sid, 0)])
-    nstars = np.bincount(sid[ok_s], minlength=nseg)
+    # '*' inside a sentence without a checksum at its end: cut short
+    nstars = np.searchsorted(stars, seg_end) - np.searchsorted(stars, st)
     stray_star = ~has_cs & (nstars > 0)
     followed = np.zeros(nseg, dtype=bool)
     followed[:-1] = seg_line[1:] == seg_line[:-1]
@@ -475,12 +472,9 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
     stats["no_checksum"] += int((~has_cs & alive).sum())
     stats["one_digit_checksum"] += int((has_cs1 & alive).sum())
     # address
-    cid = np.searchsorted(st, commas, side="right") - 1
-    inbody = (cid >= 0) & (commas < body_end[np.maximum(cid, 0)])
-    commas = commas[inbody]  # commas inside sentence bodies
-    cid = cid[inbody]
-    ncomma = np.bincount(cid, minlength=nseg)
-    c_first = np.concatenate(([0], np.cumsum(ncomma)[:-1]))
+    # the commas of each sentence body: [c_first, c_first + ncomma) in the comma table
+    c_first = np.searchsorted(commas, st)
+    ncomma = np.searchsorted(commas, body_end) - c_first
     first_comma = np.where(ncomma > 0, commas[np.minimum(c_first, max(len(commas) - 1, 0))]
                            if len(commas) else 0, body_end)
     addr_len = np.where(first_comma < body_end, first_comma - st - 1, body_end - st - 1)
