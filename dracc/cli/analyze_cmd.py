@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
@@ -141,13 +143,19 @@ def analyze(
                 state["done"] = target
 
         result = analyse(logs, cfg, progress=on_progress, total_bytes=total)
+    _write_reports(result, json_path, html_path, out_dir)
+
+
+@contextmanager
+def _writing(target) -> Iterator[None]:
+    """OSError while writing ``target`` -> one line naming it (a closed stdout pipe passes)."""
     try:
-        _write_reports(result, json_path, html_path, out_dir)
+        yield
     except BrokenPipeError:
         raise  # stdout closed by the reader (e.g. `| head`): not an error of ours
     except OSError as e:
-        where = e.filename if e.filename else "a report"
-        raise DraccError(f"cannot write {where}: {e.strerror or e}") from e
+        detail = f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e)
+        raise DraccError(f"cannot write {target}: {detail}") from e
 
 
 def _write_reports(result, json_path: str | None, html_path: Path | None, out_dir: Path | None) -> None:
@@ -160,13 +168,16 @@ def _write_reports(result, json_path: str | None, html_path: Path | None, out_di
     else:
         terminal.print_summary(result, out)
         if json_path:
-            json_report.write_json(result, json_path)
+            with _writing(json_path):
+                json_report.write_json(result, json_path)
             err.print(f"wrote {json_path}", highlight=False, markup=False)
     if html_path is not None:
-        html_report.write_html(result, html_path)
+        with _writing(html_path):
+            html_report.write_html(result, html_path)
         err.print(f"wrote {html_path}", highlight=False, markup=False)
     if out_dir is not None:
-        written = tables.write_tables(result, out_dir)
+        with _writing(out_dir):
+            written = tables.write_tables(result, out_dir)
         if written:
             err.print(f"wrote {len(written)} tables to {out_dir}", highlight=False, markup=False)
         else:
