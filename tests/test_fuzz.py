@@ -1,0 +1,498 @@
+"""Fuzzing the NMEA ingest: a seeded mutation fuzzer over real and simulated lines, and
+hypothesis properties.
+
+Invariants checked on every mutated log (``check_mutated``):
+
+1. no exception other than :class:`~dracc.errors.DraccError` (zero tracebacks);
+2. every rejected line is counted under a known reason (``nmea.REASONS``), and every
+   non-blank line that gave no record and carries no ZDA is counted at least once;
+3. differential: every untouched line gives the same records as in the clean log (same
+   values; same time and source where the line carries its own time: TAG ``c:`` or a
+   timestamp prefix).
+
+The same machinery drives ``benchmarks/fuzz_long.py`` (the long run before a release).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import random
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from dracc.config import IngestConfig
+from dracc.errors import DraccError
+from dracc.ingest.frames import KIND_COLUMNS
+from dracc.ingest.nmea import REASONS, parse_buffer, read_nmea
+from dracc.ingest.tagblock import parse_numbers
+
+REPO = Path(__file__).resolve().parents[1]
+SAMPLES = REPO / "sample_logs"
+REAL = Path(os.environ.get("DRACC_REAL_DATA", REPO.parent / "shared" / "data" / "real"))
+
+#: corpus: (file, per-line time?) -- lines carrying their own time give exact differential times
+CORPUS_FILES = (
+    (SAMPLES / "voyage_tag.nmea", True),
+    (SAMPLES / "voyage_prefix.nmea", True),
+    (REAL / "VDRplayer" / "Hakefjord.txt", False),
+    (REAL / "gpsd" / "bundg_zeus_9.log", False),
+    (REAL / "openrvdas" / "NBP1406_gyr1-2014-08-01", True),
+    (REAL / "openrvdas" / "NBP1406_seap-2014-08-01", True),
+    (REAL / "anemomind" / "Irene" / "2014" / "20140611" / "NMEA0048.TXT", False),
+    (REAL / "signalk-server" / "plaka.log", False),
+)
+WINDOW = 100  #: lines per fuzzed log
+
+
+def load_corpus(max_lines: int = 6000) -> list[tuple[list[bytes], bool]]:
+    """(lines without terminators, per-line time) for each corpus file present."""
+    out = []
+    for path, timed in CORPUS_FILES:
+        if path.exists():
+            lines = path.read_bytes().replace(b"\r\n", b"\n").split(b"\n")[:max_lines]
+            out.append(([ln for ln in lines if ln.strip()], timed))
+    return out
+
+
+# ------------------------------------------------------------------------ mutations
+
+
+def _checksum(body: bytes) -> bytes:
+    x = 0
+    for c in body:
+        x ^= c
+    return b"%02X" % x
+
+
+def _sentence_span(line: bytes) -> tuple[int, int] | None:
+    """[start of '$'/'!', index of '*') of the sentence in a line, if any."""
+    s = max(line.find(b"$"), -1)
+    if s < 0:
+        s = line.find(b"!")
+    if s < 0:
+        return None
+    e = line.find(b"*", s)
+    return (s, e) if e > s else None
+
+
+def _set_field(line: bytes, k: int, value: bytes) -> bytes | None:
+    """Replace data field ``k`` (1-based) of the sentence and fix the checksum."""
+    sp = _sentence_span(line)
+    if sp is None:
+        return None
+    s, e = sp
+    fields = line[s + 1:e].split(b",")
+    if k >= len(fields):
+        return None
+    fields[k] = value
+    body = b",".join(fields)
+    return line[:s + 1] + body + b"*" + _checksum(body) + line[e + 3:]
+
+
+#: (sentence type, field number, value) making a physically impossible but well-formed line
+OUT_OF_RANGE = {
+    b"GGA": [(2, b"9500.000"), (4, b"18100.000")],  # latitude 95 deg, longitude 181 deg
+    b"RMC": [(3, b"9500.000"), (7, b"-3.0")],  # latitude 95 deg, SOG -3 kn
+    b"GLL": [(1, b"9500.000")],
+    b"HDT": [(1, b"400.0")], b"HDG": [(1, b"400.0")], b"THS": [(1, b"400.0")],  # heading 400 deg
+    b"VTG": [(5, b"-3.0")],  # SOG -3 kn
+    b"VHW": [(5, b"-3.0")],
+}
+
+
+class Mutator:
+    """Seeded line mutations; each returns the new lines or None when it does not apply."""
+
+    OPS = ("bit_flip", "truncate", "garbage", "nul", "wrong_checksum", "no_checksum", "fuse",
+           "huge", "non_ascii", "out_of_range", "swap_time_order", "insert_junk_line")
+
+    def __init__(self, rng: random.Random):
+        self.rng = rng
+
+    def bit_flip(self, b: bytes) -> bytes:
+        a = bytearray(b)
+        for _ in range(self.rng.randint(1, 3)):
+            i = self.rng.randrange(len(a))
+            a[i] ^= 1 << self.rng.randrange(8)
+        return bytes(a).replace(b"\n", b"\x0b")  # a flipped newline would split the line
+
+    def truncate(self, b: bytes) -> bytes:
+        return b[: self.rng.randrange(len(b))]
+
+    def garbage(self, b: bytes) -> bytes:
+        i = self.rng.randrange(len(b) + 1)
+        junk = bytes(self.rng.choice([x for x in range(256) if x != 10])
+                     for _ in range(self.rng.randint(1, 12)))
+        return b[:i] + junk + b[i:]
+
+    def nul(self, b: bytes) -> bytes:
+        i = self.rng.randrange(len(b) + 1)
+        return b[:i] + b"\x00" * self.rng.randint(1, 4) + b[i:]
+
+    def wrong_checksum(self, b: bytes) -> bytes | None:
+        j = b.rfind(b"*")
+        if j < 0 or len(b) < j + 3:
+            return None
+        good = b[j + 1:j + 3]
+        bad = good
+        while bad == good:
+            bad = b"%02X" % self.rng.randrange(256)
+        return b[:j + 1] + bad + b[j + 3:]
+
+    def no_checksum(self, b: bytes) -> bytes | None:
+        j = b.rfind(b"*")
+        return None if j < 0 else b[:j] + b[j + 3:]
+
+    def huge(self, b: bytes) -> bytes:
+        n = self.rng.choice((2_000, 70_000, 300_000))
+        filler = self.rng.choice((b"0", b"1234567890,", b"A", b"$GPGGA,"))
+        i = self.rng.randrange(len(b) + 1)
+        return b[:i] + (filler * (n // len(filler) + 1))[:n] + b[i:]
+
+    def non_ascii(self, b: bytes) -> bytes:
+        i = self.rng.randrange(len(b) + 1)
+        s = self.rng.choice(("é", "°", "€", "😀", "Ω", "\u200b", "\ufeff")).encode()
+        if self.rng.random() < 0.3:
+            s = bytes([self.rng.randrange(128, 256)])  # a lone Latin-1 byte
+        return b[:i] + s + b[i:]
+
+    def out_of_range(self, b: bytes) -> bytes | None:
+        sp = _sentence_span(b)
+        if sp is None:
+            return None
+        t = b[sp[0] + 3:sp[0] + 6]
+        if t not in OUT_OF_RANGE:
+            return None
+        k, v = self.rng.choice(OUT_OF_RANGE[t])
+        return _set_field(b, k, v)
+
+    def mutate_line(self, b: bytes) -> bytes | None:
+        op = self.rng.choice(("bit_flip", "truncate", "garbage", "nul", "wrong_checksum",
+                              "no_checksum", "huge", "non_ascii", "out_of_range"))
+        if not b:
+            return None
+        return getattr(self, op)(b), op
+
+
+@dataclass
+class Mutated:
+    data: bytes  #: the mutated log
+    #: original line index -> line index in the mutated log, for untouched lines only
+    untouched: dict[int, int]
+    ops: Counter  #: mutations applied, by name
+    n_mutated: int  #: lines touched
+
+
+def mutate(lines: list[bytes], rng: random.Random, n_mut: int) -> Mutated:
+    """Apply ``n_mut`` mutations to a copy of ``lines`` (line-level and structural)."""
+    m = Mutator(rng)
+    # each entry: (bytes, original index or None for touched/inserted lines)
+    cur: list[tuple[bytes, int | None]] = [(b, i) for i, b in enumerate(lines)]
+    ops: Counter = Counter()
+    touched = 0
+    for _ in range(n_mut):
+        kind = rng.random()
+        k = rng.randrange(len(cur))
+        if kind < 0.08 and len(cur) > 1:  # fuse two lines (a lost newline)
+            k = min(k, len(cur) - 2)
+            cur[k:k + 2] = [(cur[k][0] + cur[k + 1][0], None)]
+            ops["fuse"] += 1
+            touched += 2
+        elif kind < 0.14 and len(cur) > 1:  # times out of order: two lines swap places
+            j = rng.randrange(len(cur))
+            cur[k], cur[j] = (cur[j][0], None), (cur[k][0], None)
+            ops["swap_time_order"] += 1
+            touched += 2
+        elif kind < 0.18:  # a junk line of its own
+            junk = bytes(rng.randrange(256) for _ in range(rng.randint(0, 80))).replace(b"\n", b"")
+            cur.insert(k, (junk, None))
+            ops["insert_junk_line"] += 1
+            touched += 1
+        else:
+            r = m.mutate_line(cur[k][0])
+            if r is None or r[0] is None:
+                continue
+            cur[k] = (r[0], None)
+            ops[r[1]] += 1
+            touched += 1
+    data = b"\r\n".join(b for b, _ in cur)
+    if rng.random() < 0.5:
+        data += b"\r\n"  # else the log ends without a newline (a cut file)
+    untouched = {i: j for j, (_, i) in enumerate(cur) if i is not None}
+    return Mutated(data, untouched, ops, touched)
+
+
+# ------------------------------------------------------------------------ invariants
+
+
+def records_by_line(frames) -> dict[str, dict[int, tuple]]:
+    """kind -> line -> (time_ns, source, values...) of the records of a FileResult."""
+    out: dict[str, dict[int, tuple]] = {}
+    for kind, df in frames.items():
+        if df is None or df.empty:
+            continue
+        vals = [df[c].to_numpy() for c in KIND_COLUMNS[kind]]
+        t = df["time_ns"].to_numpy(np.int64)
+        src = df["source"].astype(str).to_numpy()
+        lines = df["line"].to_numpy(np.int64)
+        d = out.setdefault(kind, {})
+        for r in range(len(df)):
+            d[int(lines[r])] = (int(t[r]), str(src[r])) + tuple(_norm(v[r]) for v in vals)
+    return out
+
+
+def _norm(x):
+    if isinstance(x, float) and math.isnan(x):
+        return "nan"
+    if isinstance(x, (np.floating,)):
+        return "nan" if np.isnan(x) else float(x)
+    return x if not isinstance(x, np.integer) else int(x)
+
+
+class InvariantError(AssertionError):
+    pass
+
+
+def check_mutated(clean_lines: list[bytes], timed: bool, mut: Mutated, clean_recs, tmp: Path,
+                  cfg: IngestConfig) -> Counter:
+    """Read the mutated log; raise InvariantError when an invariant breaks; return rejects."""
+    p = tmp / "fuzz.nmea"
+    p.write_bytes(mut.data)
+    try:
+        res = read_nmea(p, cfg, workers=1)
+    except DraccError:
+        if cfg.strict:
+            return Counter({"strict": 1})
+        raise
+    unknown = set(res.rejects.counts) - set(REASONS)
+    if unknown:
+        raise InvariantError(f"reject reasons not in nmea.REASONS: {unknown}")
+    got = records_by_line(res.frames)
+    with_record = {ln for d in got.values() for ln in d}
+    mlines = mut.data.split(b"\n")
+    silent = [i + 1 for i, ln in enumerate(mlines) if ln.strip(b"\r \t")
+              and (i + 1) not in with_record and b"ZDA," not in ln]
+    if len(silent) > res.rejects.total:
+        raise InvariantError(f"{len(silent)} non-blank lines gave no record but only "
+                             f"{res.rejects.total} rejects were counted (e.g. line {silent[0]})")
+    # differential: untouched lines give the same records
+    for kind, d in clean_recs.items():
+        g = got.get(kind, {})
+        for ln, rec in d.items():
+            j = mut.untouched.get(ln - 1)
+            if j is None:
+                continue
+            have = g.get(j + 1)
+            want = rec if timed else rec[2:]
+            have = have if (have is None or timed) else have[2:]
+            if have != want:
+                raise InvariantError(f"{kind}: clean line {ln} (mutated line {j + 1}) gave {want}, "
+                                     f"now {have}")
+    return Counter(res.rejects.counts)
+
+
+def clean_records(lines: list[bytes], tmp: Path, cfg: IngestConfig):
+    p = tmp / "clean.nmea"
+    p.write_bytes(b"\r\n".join(lines) + b"\r\n")
+    return records_by_line(read_nmea(p, cfg, workers=1).frames)
+
+
+def fuzz_round(corpus, rng: random.Random, tmp: Path, cfg: IngestConfig) -> tuple[Counter, int, Counter]:
+    """One fuzzed log: a window of a corpus file, 1-8 mutations; (rejects, lines mutated, ops)."""
+    lines, timed = corpus[rng.randrange(len(corpus))]
+    a = rng.randrange(max(1, len(lines) - WINDOW))
+    window = lines[a:a + WINDOW]
+    clean = clean_records(window, tmp, cfg)
+    mut = mutate(window, rng, rng.randint(1, 8))
+    return check_mutated(window, timed, mut, clean, tmp, cfg), mut.n_mutated, mut.ops
+
+
+# ------------------------------------------------------------------------ tests
+
+
+@pytest.fixture(scope="module")
+def corpus():
+    c = load_corpus()
+    if not c:
+        pytest.skip("no corpus files")
+    return c
+
+
+CFG = IngestConfig(date="2014-08-01")
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_seeded_mutation_fuzzer(corpus, tmp_path, seed):
+    """50 mutated logs per seed (150 in all, ~700 mutated lines), every mutation kind."""
+    rng = random.Random(seed)
+    rejects: Counter = Counter()
+    ops: Counter = Counter()
+    for _ in range(50):
+        r, _, o = fuzz_round(corpus, rng, tmp_path, CFG)
+        rejects.update(r)
+        ops.update(o)
+    assert rejects  # the fuzzer does produce rejects (it cannot pass by doing nothing)
+    assert {"fuse", "swap_time_order", "insert_junk_line"} <= set(ops)
+
+
+def test_every_mutation_kind_is_rejected_with_its_reason(tmp_path):
+    """One clean RMC line and one mutation of each kind: each gives the expected reason."""
+    good = b"$GPRMC,120000,A,5000.000,N,01000.000,E,10.0,90.0,010120,,*" + \
+        _checksum(b"GPRMC,120000,A,5000.000,N,01000.000,E,10.0,90.0,010120,,")
+    m = Mutator(random.Random(0))
+    cases = {
+        "checksum": m.wrong_checksum(good),
+        "binary": good[:20] + b"\x00" + good[20:],
+        "truncated": good[:30] + good,  # cut short, then a whole sentence on the same line
+        "malformed_field": _set_field(good, 3, b"9500.000"),  # latitude 95 deg
+        "not_nmea": b"hello, world",
+    }
+    cases["binary_non_ascii"] = "Grüße, Käpt'n".encode()
+    hdt = b"$HEHDT,400.0,T*" + _checksum(b"HEHDT,400.0,T")
+    cases["malformed_field_heading"] = hdt
+    for reason, line in cases.items():
+        pb = parse_buffer(good + b"\r\n" + line + b"\r\n" + good + b"\r\n")
+        want = reason.removesuffix("_heading").removesuffix("_non_ascii")
+        assert pb.reject_counts == Counter({want: 1}), (reason, pb.reject_counts)
+        assert len(pb.kinds["position"]["line"]) == 2 + (reason == "truncated")
+    # a missing checksum is accepted (counted in the stats), as many loggers drop it
+    pb = parse_buffer(m.no_checksum(good) + b"\r\n")
+    assert len(pb.kinds["position"]["line"]) == 1 and pb.stats["no_checksum"] == 1
+
+
+def test_huge_line_is_rejected_and_neighbours_survive(tmp_path):
+    lines = (SAMPLES / "voyage_tag.nmea").read_bytes().split(b"\r\n")[:50]
+    clean = clean_records(lines, tmp_path, IngestConfig())
+    huge = lines[:25] + [b"$GPGGA," + b"1234567890," * 200_000] + lines[25:]
+    mut = Mutated(b"\r\n".join(huge) + b"\r\n", {i: (i if i < 25 else i + 1) for i in range(50)},
+                  Counter(huge=1), 1)
+    rej = check_mutated(lines, True, mut, clean, tmp_path, IngestConfig())
+    assert sum(rej.values()) == 1
+
+
+def test_regression_nul_in_tag_block_time(tmp_path):
+    """Regression (fuzz): a NUL byte inside a TAG block c: field raised ValueError in
+    tagblock.parse_numbers; now the line is rejected as bad_tag."""
+    lines = (SAMPLES / "voyage_tag.nmea").read_bytes().split(b"\r\n")[:20]
+    bad = lines[5].replace(b"c:1", b"c:1\x00\x00", 1)
+    assert bad != lines[5]
+    pb = parse_buffer(b"\r\n".join(lines[:5] + [bad] + lines[6:]) + b"\r\n")
+    assert pb.reject_counts == Counter({"bad_tag": 1})
+    assert sum(len(k["line"]) for k in pb.kinds.values()) == 19
+
+
+def test_regression_tag_time_beyond_int64(tmp_path):
+    """Regression (fuzz): a c: time of 20 digits wrapped around int64 silently."""
+    body = b"s:INS1,c:99999999999999999999"
+    line = b"\\" + body + b"*" + _checksum(body) + b"\\$HEHDT,60.0,T*" + _checksum(b"HEHDT,60.0,T")
+    pb = parse_buffer(line + b"\r\n")
+    assert pb.reject_counts == Counter({"bad_tag": 1})
+
+
+def test_times_out_of_order_are_counted(tmp_path):
+    lines = (SAMPLES / "voyage_tag.nmea").read_bytes().split(b"\r\n")[:400]
+    lines[100:300] = lines[200:300] + lines[100:200]  # a block written late
+    p = tmp_path / "late.nmea"
+    p.write_bytes(b"\r\n".join(lines) + b"\r\n")
+    res = read_nmea(p, IngestConfig(), workers=1)
+    assert res.time_events.backsteps >= 1
+    assert sum(len(f) for f in res.frames.values()) == 400 - 0  # nothing lost
+    t = [f["time_ns"].to_numpy() for f in res.frames.values() if len(f)]
+    assert all(np.all(np.diff(x) >= 0) for x in t)  # frames are sorted by time
+
+
+# ------------------------------------------------------------------------ hypothesis
+
+SETTINGS = settings(max_examples=150, deadline=None, derandomize=True,
+                    suppress_health_check=[HealthCheck.too_slow])
+
+
+@SETTINGS
+@given(st.binary(max_size=600))
+def test_parse_buffer_never_raises_on_bytes(data):
+    pb = parse_buffer(data)
+    assert set(pb.reject_counts) <= set(REASONS)
+    nonblank = sum(1 for ln in data.split(b"\n") if ln.strip(b"\r"))
+    assert pb.n_lines >= nonblank
+
+
+@SETTINGS
+@given(st.lists(st.sampled_from([b"$", b"!", b"*", b",", b"\\", b":", b"\r", b"\n", b"\x00", b"GPGGA",
+                                 b"HEHDT", b"s:", b"c:", b"1", b"A", b"5", b".", b"-", b"FF",
+                                 b"\xff", b"#"]), max_size=80))
+def test_parse_buffer_never_raises_on_nmea_like_tokens(tokens):
+    pb = parse_buffer(b"".join(tokens))
+    assert set(pb.reject_counts) <= set(REASONS)
+
+
+@SETTINGS
+@given(st.binary(max_size=30))
+def test_parse_numbers_agrees_with_python_float(field):
+    """A valid field parses to float(field); anything else is NaN and invalid, never raises."""
+    buf = np.frombuffer(field + b",", dtype=np.uint8)
+    val, _, invalid = parse_numbers(buf, np.array([0]), np.array([len(field)]), width=30)
+    text = field.decode("latin-1")
+    import re
+
+    ok = re.fullmatch(r"[+-]?(\d+\.?\d*|\.\d+)", text) is not None
+    if not field:
+        assert np.isnan(val[0]) and not invalid[0]
+    elif ok:
+        assert not invalid[0] and val[0] == float(text)
+    else:
+        assert invalid[0] and np.isnan(val[0])
+
+
+@SETTINGS
+@given(lat=st.floats(-89.99, 89.99), lon=st.floats(-179.99, 179.99),
+       hdg=st.floats(0, 359.99), sog=st.floats(0, 50), junk=st.binary(max_size=40))
+def test_valid_lines_survive_any_junk_between_them(lat, lon, hdg, sog, junk):
+    """Round trip: RMC + HDT written to their precision read back exactly, whatever junk
+    line sits between them."""
+    la, lo = abs(lat), abs(lon)
+    lat_f = b"%02d%07.4f" % (int(la), (la - int(la)) * 60)
+    lon_f = b"%03d%07.4f" % (int(lo), (lo - int(lo)) * 60)
+    body = b"GPRMC,120000,A,%s,%s,%s,%s,%.1f,%.1f,010120,," % (
+        lat_f, b"N" if lat >= 0 else b"S", lon_f, b"E" if lon >= 0 else b"W", sog, hdg)
+    if b"60.0000" in lat_f or b"60.0000" in lon_f:
+        return  # rounding wrote 60 minutes: not a valid field (the writer's problem)
+    rmc = b"$" + body + b"*" + _checksum(body)
+    hb = b"HEHDT,%.2f,T" % hdg
+    hdt = b"$" + hb + b"*" + _checksum(hb)
+    pb = parse_buffer(rmc + b"\r\n" + junk.replace(b"\n", b"") + b"\r\n" + hdt + b"\r\n")
+    pos = pb.kinds["position"]
+    assert list(pos["line"]) == [1]
+    want_lat = math.radians(int(la) + float(lat_f[2:]) / 60) * (1 if lat >= 0 else -1)
+    assert pos["lat_rad"][0] == pytest.approx(want_lat, abs=1e-12)
+    hd = pb.kinds["heading"]
+    assert list(hd["line"]) == [3]
+    assert hd["heading_rad"][0] == pytest.approx(math.radians(float(b"%.2f" % hdg)), abs=1e-12)
+    gr = pb.kinds["ground"]
+    assert gr["sog_mps"][0] == pytest.approx(float(b"%.1f" % sog) * 1852 / 3600, abs=1e-12)
+
+
+def test_the_invariant_checks_can_fail(tmp_path):
+    """The differential and the reject accounting catch a planted fault."""
+    lines = (SAMPLES / "voyage_tag.nmea").read_bytes().split(b"\r\n")[:30]
+    clean = clean_records(lines, tmp_path, IngestConfig())
+    # a value changed in a line declared untouched
+    changed = list(lines)
+    changed[7] = changed[7].replace(b",", b",1", 1)
+    j = changed[7].rfind(b"$")
+    body = changed[7][j + 1:changed[7].rfind(b"*")]
+    changed[7] = changed[7][:j + 1] + body + b"*" + _checksum(body)
+    mut = Mutated(b"\r\n".join(changed) + b"\r\n", {i: i for i in range(30)}, Counter(), 0)
+    with pytest.raises(InvariantError, match="clean line 8"):
+        check_mutated(lines, True, mut, clean, tmp_path, IngestConfig())
+    # a line that vanished without a reject: map line 3 onto a blank-free log missing it
+    mut = Mutated(b"\r\n".join(lines[:3] + lines[4:]) + b"\r\n",
+                  {i: i for i in range(30)}, Counter(), 0)
+    with pytest.raises(InvariantError):
+        check_mutated(lines, True, mut, clean, tmp_path, IngestConfig())
