@@ -40,6 +40,8 @@ def simulate(root: Path, n_logs: int, hours: float) -> list[Path]:
         vessel = VESSELS[i % len(VESSELS)]
         day = 1 + i // len(VESSELS)
         name = f"2026-03-{day:02d}"
+        if (root / vessel / f"{name}.nmea").exists():  # a --workdir from an earlier run
+            continue
         code = dracc(["simulate", "--out", str(root / "sim"), "--hours", str(hours), "--seed", str(100 + i),
                       "--start", f"{name}T00:00:00Z", "--name", f"{vessel}-{name}", "--compass-hz", "1",
                       "--truth-hz", "0.01", "--lat", str(50 + 2 * (i % 5)), "--lon", str(-5 + i)])
