@@ -3,8 +3,9 @@
 Each log file is one task.  Workers run :func:`analyse_log` (the pipeline plus the JSON
 serialiser) and send back a small summary of the analysis document (no samples, no DR
 epochs).  The parent caches every summary under ``OUT/cache/`` keyed by the SHA-256 of
-the log's bytes and of the analysis settings (written atomically), so a re-run skips
-what was done unless ``force``; a failing log becomes a row with ``status='failed'`` and
+the log's bytes and of the analysis settings (written atomically; entries written by
+another dracc version are analysed again), so a re-run skips what was done unless
+``force``; a failing log becomes a row with ``status='failed'`` and
 an entry in ``failures``, never the end of the batch.
 
 Engines: a local :class:`concurrent.futures.ProcessPoolExecutor` (``workers``), or an
@@ -259,6 +260,8 @@ def _read_cache(p: Path) -> dict | None:
     except (OSError, ValueError):
         return None  # absent or unreadable: analysed again (and rewritten)
     if doc.get("schema") != CACHE_SCHEMA or not isinstance(doc.get("summary"), dict):
+        return None
+    if doc.get("dracc_version") != __version__:  # another dracc may analyse differently
         return None
     return doc["summary"]
 

@@ -200,3 +200,15 @@ def test_daemonic_worker_error_says_what_to_do(monkeypatch, tmp_path):
     res = analyse_log(str(tmp_path / "big.nmea"), CFG)
     assert not res["ok"] and "DASK_DISTRIBUTED__WORKER__DAEMON=False" in res["error"]
     assert "big.nmea" in res["error"]
+
+
+def test_cache_of_another_dracc_version_is_redone(tmp_path):
+    root = _fleet(tmp_path)
+    out = tmp_path / "out"
+    tasks = discover([root / "Aurora"])
+    run_fleet(tasks, CFG, out, workers=1, analyser=fake_analyser)
+    entry = sorted((out / "cache").rglob("*.json"))[0]
+    doc = json.loads(entry.read_text())
+    doc["dracc_version"] = "0.0.1"
+    entry.write_text(json.dumps(doc))
+    assert run_fleet(tasks, CFG, out, workers=1, analyser=fake_analyser).analysed == 1
