@@ -267,15 +267,17 @@ def analyse(paths: Sequence[str | Path], cfg: Config | None = None,
     """Read the logs ``paths`` (several files of one voyage merge by time) and analyse them.
 
     ``cfg`` defaults to :class:`~dracc.config.Config` (); ``progress(stage, fraction)``
-    is called as the work goes on (reading as a fraction of ``total_bytes`` where given).
-    Raises :class:`~dracc.errors.IngestError` for
-    unreadable input and :class:`InsufficientDataError` when the logs hold no record
-    at all; everything else that is missing is reported in :attr:`Analysis.missing`.
+    is called as the work goes on (reading as a fraction of ``total_bytes``, by default
+    the size of the files).  Raises :class:`~dracc.errors.IngestError` for unreadable
+    input and :class:`InsufficientDataError` when the logs hold no record at all;
+    everything else that is missing is reported in :attr:`Analysis.missing`.
     """
     from .ingest import read_logs  # the readers are heavy; import on use
 
     cfg = cfg or Config()
     report = progress or _noop
+    if total_bytes is None:
+        total_bytes = sum(Path(p).stat().st_size for p in paths if Path(p).is_file())
     report("reading logs", 0.0)
     read = {"n": 0}
 

@@ -192,3 +192,19 @@ def test_files_of_one_voyage_merge_by_time(tmp_path):
     for u in INS_ROLES:
         np.testing.assert_allclose(one.deviation.samples[u]["lat"], many.deviation.samples[u]["lat"],
                                    equal_nan=True)
+
+
+def test_progress_reports_every_stage():
+    from pathlib import Path
+
+    sample = Path(__file__).resolve().parents[1] / "sample_logs" / "voyage_tag.nmea"
+    if not sample.exists():
+        pytest.skip("sample_logs not generated")
+    seen: list[tuple[str, float]] = []
+    analyse([sample], progress=lambda stage, f: seen.append((stage, f)))
+    stages = [s for s, _ in seen]
+    for s in ("reading logs", "dead reckoning", "current", "deviation statistics", "calibration"):
+        assert (s, 0.0) in seen and (s, 1.0) in seen, s
+    reading = [f for s, f in seen if s == "reading logs"]
+    assert reading == sorted(reading) and len(reading) >= 3  # bytes read, as they are read
+    assert stages.index("reading logs") < stages.index("dead reckoning")
