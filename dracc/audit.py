@@ -590,7 +590,7 @@ def run_audit(inputs: Sequence[Path], cfg: Config, *, db: str | Path | None = No
     Returns ``(outcome, analysis)``, the analysis for the JSON and HTML reports.
     Raises IngestError/InsufficientDataError (exit 3) when no usable logs are found and
     ConfigError (exit 4) for a bad ``[audit]`` section or no database path.  Without
-    ``night`` and with a folder among the inputs (and no ``pattern``), the night is
+    ``night`` and with a folder among the inputs, the night is
     yesterday (UTC): cron runs the audit after midnight.
     """
     acfg = audit_config(cfg)
@@ -601,7 +601,7 @@ def run_audit(inputs: Sequence[Path], cfg: Config, *, db: str | Path | None = No
     has_dir = any(Path(p).is_dir() for p in inputs)
     if night is not None:
         night = parse_night(night)
-    elif has_dir and pattern is None:
+    elif has_dir:
         night = yesterday_utc(now)
     paths = select_logs(inputs, night, pattern or acfg.pattern)
     content_hash = content_sha256(paths)
