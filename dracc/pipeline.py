@@ -324,7 +324,7 @@ def analyse_voyage(voyage: Voyage, cfg: Config | None = None,
         notes.append(f"{len(inputs)} files merged by time")
     unassigned = [s.key for s in sources if not s.roles]
     if unassigned:
-        notes.append("sources without a role (not used): " + ", ".join(unassigned)
+        notes.append("sources without a role: " + ", ".join(unassigned)
                      + "; assign one with --role KEY=ROLE")
 
     tracks = _tracks(voyage)
@@ -337,7 +337,11 @@ def analyse_voyage(voyage: Voyage, cfg: Config | None = None,
     report("current", 0.0)
     current = None
     if dr is not None and dr_inputs is not None and fixes is not None:
-        current = _current(dr_inputs, fixes, cfg.dead_reckoning, missing)
+        if dr_inputs.mode == "water":
+            current = _current(dr_inputs, fixes, cfg.dead_reckoning, missing)
+        else:
+            missing.append("current not estimated: the log measures over the ground (VBW ground "
+                           "components), so the DR already moves with the current")
     report("current", 1.0)
 
     report("deviation statistics", 0.0)
@@ -477,11 +481,12 @@ class _DRInputs:
 
     t0_ns: int
     time_s: np.ndarray
-    vn_mps: np.ndarray  #: through-the-water velocity (no current), NaN outside legs
+    vn_mps: np.ndarray  #: the DR velocity (water mode: through the water, no current), NaN outside legs
     ve_mps: np.ndarray
-    heading_rad: np.ndarray  #: course through the water (B2)/(B3) + leeway (B5), NaN where missing
-    speed_mps: np.ndarray  #: speed through the water (B1), NaN where missing
+    heading_rad: np.ndarray  #: course (B2)/(B3) + leeway or drift angle (B5)/(B6), NaN where missing
+    speed_mps: np.ndarray  #: speed (B1) through the water or over the ground, NaN where missing
     ref_gap_s: float  #: reference positions are interpolated across gaps up to this
+    mode: str  #: 'water' (relative log) or 'ground' (absolute log)
 
 
 def _heading_series(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str],
@@ -547,26 +552,33 @@ def _heading_series(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
     return t, wrap_2pi(course_magnetic_rad(kk, var, dev)), desc  # (B2)
 
 
-def _speed_series(voyage: Voyage, missing: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray, str] | None:
-    """Speed through the water from the log: (time_ns, longitudinal, transverse, description)."""
+def _speed_series(voyage: Voyage, missing: list[str]):
+    """The log's speed: (time_ns, longitudinal, transverse, description, mode).
+
+    Through the water (VHW, VBW water components; mode 'water', B7-B12) where the log
+    gives it; otherwise over the ground (VBW ground components; mode 'ground', B13-B14).
+    """
     water = voyage.frames.get("water")
     logs = voyage.role_sources("log")
     if water is None or water.empty:
         missing.append("no speed log: the log holds no VHW/VBW sentence; dead reckoning, current "
                        "and calibration need one")
         return None
-    use = water[water["source"].isin(logs)] if logs else water
-    use = use[np.isfinite(use["stw_mps"].to_numpy())]
-    if use.empty:
-        missing.append("no speed through the water: log sentences carry no speed value; dead "
-                       "reckoning not computed")
-        return None
-    t, v, vy = _dedupe_sorted(use["time_ns"].to_numpy(np.int64), use["stw_mps"].to_numpy(float),
-                              use["stw_transverse_mps"].to_numpy(float))
-    sent = "+".join(sorted(set(use["sentence"].astype(str).unique().tolist())))
-    who = "log " + "+".join(logs) if logs else "speed source " + "+".join(
-        map(str, use["source"].unique().tolist()))
-    return t, v, vy, f"{who} ({sent}, through the water)"
+    frame = water[water["source"].isin(logs)] if logs else water
+    for col, col_y, mode, what in (("stw_mps", "stw_transverse_mps", "water", "through the water"),
+                                   ("sog_long_mps", "sog_transverse_mps", "ground", "over the ground")):
+        use = frame[np.isfinite(frame[col].to_numpy())]
+        if use.empty:
+            continue
+        t, v, vy = _dedupe_sorted(use["time_ns"].to_numpy(np.int64), use[col].to_numpy(float),
+                                  use[col_y].to_numpy(float))
+        sent = "+".join(sorted(set(use["sentence"].astype(str).unique().tolist())))
+        who = "log " + "+".join(logs) if logs else "speed source " + "+".join(
+            map(str, use["source"].unique().tolist()))
+        return t, v, vy, f"{who} ({sent}, {what})", mode
+    missing.append("no log speed: the log sentences carry no speed value, through the water or "
+                   "over the ground; dead reckoning not computed")
+    return None
 
 
 def _fixes(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str], notes: list[str]):
@@ -633,7 +645,7 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
             missing.append("dead reckoning not computed (see above)")
         return None, fixes, None, None
     th, hdg, hdg_desc = heading
-    tv, stw, stw_y, spd_desc = speed
+    tv, stw, stw_y, spd_desc, mode = speed
     step_ns = int(DR_STEP_S * NS_PER_S)
     t_first = max(int(th[0]), int(tv[0]))
     t_last = min(int(th[-1]), int(tv[-1]))
@@ -656,7 +668,7 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
     fix_s = (ft - grid[0]) / 1e9
     try:
         tr = dead_reckon(time_s, h_g, v_g, errors=cfg, fixes=(fix_s, flat, flon),
-                         transverse_mps=vy_g, mode="water")
+                         transverse_mps=vy_g, mode=mode)
     except InsufficientDataError as err:
         missing.append(f"dead reckoning not computed: {err}")
         return None, fixes, None, None
@@ -726,7 +738,7 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
     else:
         course_w, speed_w = h_g, v_g
     inputs = _DRInputs(t0_ns=int(grid[0]), time_s=time_s, vn_mps=tr.vn_mps, ve_mps=tr.ve_mps,
-                       heading_rad=course_w, speed_mps=speed_w, ref_gap_s=ref_gap_s)
+                       heading_rad=course_w, speed_mps=speed_w, ref_gap_s=ref_gap_s, mode=mode)
     return section, fixes, cons, inputs
 
 
@@ -844,8 +856,10 @@ def _calibration(dr: _DRInputs, fixes, missing: list[str]) -> CalibrationSection
     offset = None
     if math.isfinite(cal.log_offset_sigma_mps):
         offset = Estimate(cal.log_offset_mps / KN_MPS, cal.log_offset_sigma_mps / KN_MPS)
-    notes.append(f"compass error eps = course through the water used by the DR (heading + "
-                 f"variation + deviation + leeway from the log) - true course (correct by -eps); "
+    through = "through the water" if dr.mode == "water" else "over the ground"
+    notes.append(f"compass error eps = course {through} used by the DR (heading + "
+                 f"variation + deviation + leeway/drift angle from the log) - true course "
+                 f"(correct by -eps); "
                  f"log: V_log = (1 + s) V_true + b; current fitted beside them, piecewise linear "
                  f"with knots every {CAL_KNOT_S / 3600:g} h; {cal.n_segments} segments of "
                  f"{CAL_SEGMENT_S:g} s; sigmas inflated for correlated residuals "

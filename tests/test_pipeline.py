@@ -208,3 +208,19 @@ def test_progress_reports_every_stage():
     reading = [f for s, f in seen if s == "reading logs"]
     assert reading == sorted(reading) and len(reading) >= 3  # bytes read, as they are read
     assert stages.index("reading logs") < stages.index("dead reckoning")
+
+
+def test_ground_log_when_there_is_no_water_speed():
+    """A log giving only VBW ground components: DR over the ground (B13, B14), no current."""
+    sv = _sim("noiseless")
+    v = voyage_from_sim(sv)
+    w = v.frames["water"].copy()
+    assert np.isfinite(w["sog_long_mps"]).any()
+    w["stw_mps"] = np.nan
+    w["stw_transverse_mps"] = np.nan
+    v.frames["water"] = w
+    a = analyse_voyage(v)
+    dr = a.dead_reckoning
+    assert dr is not None and "over the ground" in dr.speed_source
+    assert np.nanmax(dr.track.ref_error_m) < 10.0
+    assert a.current is None and any("over the ground" in m for m in a.missing)
