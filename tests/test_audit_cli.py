@@ -219,3 +219,31 @@ def test_calibration_checks_against_known_sensor_errors(run_cli, tmp_path):
     assert set(by_kind) == {"compass_error", "log_scale"}
     assert abs(by_kind["compass_error"]["value"]) == pytest.approx(2.0, abs=0.3)
     assert abs(by_kind["log_scale"]["value"]) == pytest.approx(5.0, abs=1.0)
+
+
+def test_summary_text_by_hand(tmp_path):
+    from test_audit_helpers import make_doc
+
+    from dracc.audit import AuditConfig, audit_document
+    from dracc.cli.audit_cmd import format_summary
+    from dracc.state import StateStore
+
+    with StateStore(tmp_path / "s.sqlite") as store:
+        def run(night, lat, **kw):
+            return audit_document(make_doc(night, m_y={"ins1": {"lat": lat, "course": 0.1}}, **kw),
+                                  store=store, acfg=AuditConfig(required_sources=("ins1",)), seeds={},
+                                  vessel="Aurora", night=None, content_hash=night, settings_hash="s")
+        first = format_summary(run("2026-11-19", 100.0), 0.95)
+        second = format_summary(run("2026-11-20", 150.0, containment=0.5, log_scale=None), 0.95)
+    assert first.splitlines()[0] == "dracc audit: Aurora, night 2026-11-19: all within limits"
+    assert "a priori established for 2 unit channel(s)" in first
+    assert first.rstrip().endswith("exit 0 (ok)")
+    lines = second.splitlines()
+    assert lines[0] == ("dracc audit: Aurora, night 2026-11-20: 1 finding (1 check could not be made: "
+                        "see 'not checked')")
+    assert "  - DR: reference inside 2M at 50.0 % of epochs < 90.0 %" in lines
+    assert "a priori raised: ins1 lat 100.0 m -> 150.0 m (tonight's m_y is larger)" in lines
+    assert "  ins1  lat      24      150.0 m      300.0 m      150.0 m  raised" in lines
+    assert "not checked: log scale: not estimated (no speed log or no reference)" in lines
+    assert "calibration: compass error +0.20 ± 0.05 deg" in lines
+    assert lines[-1] == "exit 1 (findings)"

@@ -94,11 +94,17 @@ def format_summary(o: AuditOutcome, probability: float | None = None) -> str:
             lines.append(f"  {c.unit:<5} {c.channel:<6} {c.n:>4} {_f(c.m_y, d, c.measure):>12} "
                          f"{_f(c.limit_error, d, c.measure):>12} "
                          f"{_f(c.apriori_after, d, c.measure):>12}  {c.verdict or '-'}")
+    established = [e for e in o.apriori_events if e.reason == "established"]
+    if established:
+        lines.append(f"a priori established for {len(established)} unit channel(s) without a "
+                     "previous value: tonight's m_y (shown in the table)")
     for e in o.apriori_events:
+        if e.reason != "raised":
+            continue
         measure = CHANNEL_KEYS[e.channel].rsplit("_", 1)[1]
         d = _digits(measure)
-        was = "none" if e.previous is None else _f(e.previous, d, measure)
-        lines.append(f"a priori {e.reason}: {e.unit} {e.channel} {was} -> {_f(e.value, d, measure)}")
+        lines.append(f"a priori raised: {e.unit} {e.channel} {_f(e.previous, d, measure)} -> "
+                     f"{_f(e.value, d, measure)} (tonight's m_y is larger)")
     if r.dr_containment_2m is not None:
         lines.append(f"DR: reference inside 2M at {100 * r.dr_containment_2m:.1f} % of "
                      f"{_f(r.dr_n_scored, 0)} epochs")
