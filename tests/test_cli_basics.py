@@ -8,6 +8,7 @@ import sys
 import pytest
 
 from dracc import __version__
+import dracc.cli.main  # noqa: F401  (registers every command on app)
 from dracc.cli.app import app
 from dracc.errors import ExitCode
 

@@ -7,7 +7,7 @@ import sys
 import traceback
 
 try:  # Ctrl-C while the libraries load (seconds on a busy machine): one line, no traceback
-    import click
+    import click.exceptions
 
     from ..errors import DraccError, ExitCode
     from .app import VERBOSE, app, err
@@ -21,6 +21,24 @@ try:  # Ctrl-C while the libraries load (seconds on a busy machine): one line, n
 except KeyboardInterrupt:
     sys.stderr.write("error: interrupted while starting; nothing was written\n")
     sys.exit(130)
+
+
+def _click_exceptions():
+    """click's Exit/Abort/ClickException classes, and typer's own (typer >= 0.20 vendors click)."""
+    exits, aborts, errors = [click.exceptions.Exit], [click.exceptions.Abort], [click.exceptions.ClickException]
+    try:
+        import typer
+        import typer._click.exceptions as vendored
+
+        exits.append(typer.Exit)
+        aborts.append(typer.Abort)
+        errors.append(vendored.ClickException)
+    except (ImportError, AttributeError):
+        pass
+    return tuple(exits), tuple(aborts), tuple(errors)
+
+
+_EXIT, _ABORT, _CLICK_ERROR = _click_exceptions()
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -46,12 +64,12 @@ def _run(args: list[str]) -> int:
         if result == ExitCode.INTERRUPTED:  # typer turns KeyboardInterrupt into a silent 130
             raise KeyboardInterrupt
         return int(result) if isinstance(result, int) else ExitCode.OK
-    except click.exceptions.Exit as e:
+    except _EXIT as e:
         return e.exit_code
-    except click.exceptions.Abort:
+    except _ABORT:
         err.print("error: interrupted", style="red", highlight=False)
         return ExitCode.INTERRUPTED
-    except click.ClickException as e:
+    except _CLICK_ERROR as e:
         e.show()
         return ExitCode.USAGE
     except DraccError as e:
