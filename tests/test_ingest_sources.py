@@ -88,3 +88,10 @@ def test_heading_only_source_is_the_compass_beside_an_ins_talker():
          "GP": src("GP", "GP", GGA=10, RMC=10)}
     assign_roles(s, {})
     assert roles(s) == {"IN": None, "HE": "compass", "GP": "gnss"}
+
+
+def test_gyro_preferred_over_magnetic_compass():
+    s = {"HE": src("HE", "HE", HDT=100, ROT=10), "HC": src("HC", "HC", HDG=100)}
+    notes = assign_roles(s, {})
+    assert roles(s) == {"HE": "compass", "HC": None}
+    assert any("true heading" in n for n in notes)

@@ -16,7 +16,8 @@ Role assignment (:func:`assign_roles`), in this order:
    three INS-type talkers or keys (IN, II, IR, or names containing 'INS') with
    positions -> ins1..3 in sorted order); the only source with heading sentences and
    no positions -> compass (where there is none, the only source with heading sentences
-   at all); the only source with VHW/VBW -> log.  An instrument bus (e.g. 'II' with HDG + VHW) may be compass and log.
+   at all; where there are several, the only one giving true heading, HDT/THS); the only
+   source with VHW/VBW -> log.  An instrument bus (e.g. 'II' with HDG + VHW) may be compass and log.
 4. Otherwise the role stays free and a note names the candidates; where the data
    clearly need a role that two sources claim, :class:`AmbiguousSourceError` is for
    the caller that requires it (``require_role``).
@@ -174,7 +175,11 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
         pure = [s for s in cands if not has(s, POSITION_SENTENCES)]  # heading sentences only
         if pure:
             cands = pure
-        if len(cands) == 1:
+        true = [s for s in cands if has(s, {"HDT", "THS"})]
+        if len(cands) > 1 and len(true) == 1:  # a gyro (true heading) beside magnetic compasses
+            give(true[0], "compass", "the only source of true heading (HDT/THS) among "
+                 f"{', '.join(sorted(s.key for s in cands))}")
+        elif len(cands) == 1:
             give(cands[0], "compass", "the only source of heading sentences")
         elif len(cands) > 1:
             notes.append("compass role not assigned: several heading sources "
