@@ -58,10 +58,10 @@ def test_config_mapping_by_key_and_by_talker_first():
 
 def test_ambiguous_candidates_are_named_not_guessed():
     s = {"GP/3dp": src("GP/3dp", "GP", RMC=5), "GP/5dp": src("GP/5dp", "GP", RMC=5),
-         "HE": src("HE", "HE", HDT=5), "HC": src("HC", "HC", HDG=5)}
+         "HE": src("HE", "HE", HDT=5), "HN": src("HN", "HN", THS=5)}
     notes = assign_roles(s, {})
     assert all(v is None for v in roles(s).values())
-    assert any("GP/3dp, GP/5dp" in n for n in notes) and any("HC, HE" in n for n in notes)
+    assert any("GP/3dp, GP/5dp" in n for n in notes) and any("HE, HN" in n for n in notes)
     with pytest.raises(AmbiguousSourceError, match="no source has role gnss"):
         require_role(s, "gnss")
 
