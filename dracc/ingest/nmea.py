@@ -952,6 +952,8 @@ def parse_sentences(lines: Sequence[bytes], time_ns: np.ndarray, source: Sequenc
     data = b"\n".join(clean) + (b"\n" if clean else b"")
     t = np.asarray(time_ns, dtype=np.int64)
     src = np.asarray(list(source), dtype=object)
+    if not (len(t) == len(src) == len(clean)):
+        raise ValueError(f"parse_sentences: {len(clean)} lines, {len(t)} times, {len(src)} sources")
     st = StreamState(file)
     st.events.gap_s = cfg.gap_s
     st.events.tolerance_s = cfg.backstep_tolerance_s
