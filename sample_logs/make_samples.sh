@@ -31,4 +31,14 @@ cp "$tmp/tag/voyage_tag.nmea" "$tmp/prefix/voyage_prefix.nmea" "$tmp/long/voyage
    "$tmp/wide/voyage_wide.csv" "$tmp/mcap/voyage.mcap" \
    "$tmp/tag/truth.csv" "$tmp/tag/errors.csv" "$tmp/tag/params.json" "$here/"
 chmod 644 "$here"/voyage_* "$here"/voyage.mcap "$here"/truth.csv "$here"/errors.csv "$here"/params.json
-ls -l "$here"
+# A day at sea (26 h, so that a whole UTC day of hourly instants is covered): the INS
+# statistics need many instants.  Rates lowered further: compass every 10 s, the rest
+# every minute.  Only the MCAP log and its parameters are kept (truth: rerun this script).
+r60=0.0166666666667
+dracc simulate --hours 26 --seed 11 --start 2026-03-01T00:00:00Z --compass gyro \
+    --compass-hz 0.1 --log-hz $r60 --aux-hz 0 --ins-hz $r60 --gnss-hz $r60 --truth-hz $r60 \
+    --format mcap-json --name voyage_day --out "$tmp/day"
+mkdir -p "$here/day"
+cp "$tmp/day/voyage_day.mcap" "$tmp/day/params.json" "$here/day/"
+chmod 644 "$here"/day/*
+ls -l "$here" "$here/day"
