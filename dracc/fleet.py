@@ -486,6 +486,11 @@ def fleet_trends(table: pd.DataFrame) -> pd.DataFrame:
     return df
 
 
+def count_logs(table: pd.DataFrame) -> int:
+    """The number of logs in a fleet table (a log has one row per unit and channel)."""
+    return len(table.drop_duplicates(["vessel", "log", "sha256"]))
+
+
 def write_tables(result: FleetResult, out: Path) -> list[Path]:
     """fleet.parquet/.csv, trends.parquet/.csv, failures in fleet.json, and per vessel
     ``vessels/<safe name>/fleet.csv`` and ``trends.csv``; all written atomically."""
@@ -508,7 +513,7 @@ def write_tables(result: FleetResult, out: Path) -> list[Path]:
         put_df(result.trends[result.trends["vessel"] == vessel],
                inside(out, "vessels", vessel, "trends.csv"))
     summary = {"schema": "dracc.fleet/1", "dracc_version": __version__,
-               "logs": int(result.table["log"].nunique()) if len(result.table) else 0,
+               "logs": count_logs(result.table),
                "vessels": sorted(result.table["vessel"].dropna().unique().tolist()),
                "analysed": result.analysed, "cached": result.cached,
                "failures": list(result.failures)}

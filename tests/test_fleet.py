@@ -100,7 +100,9 @@ def test_fleet_run_table_rule_failures_and_resume(tmp_path):
     assert (out / "fleet.parquet").exists() and (out / "trends.csv").exists()
     back = pd.read_parquet(out / "fleet.parquet")
     pd.testing.assert_frame_equal(back, t, check_dtype=False)
-    assert json.loads((out / "fleet.json").read_text())["failures"][0]["log"] == "broken.nmea"
+    summary = json.loads((out / "fleet.json").read_text())
+    assert summary["failures"][0]["log"] == "broken.nmea"
+    assert summary["logs"] == 6  # two vessels hold logs of the same names
     assert all(out.resolve() in p.parents for p in written)
     assert _calls(root) == sorted(["2026-11-18.nmea", "2026-11-19.nmea", "2026-11-20.nmea"] * 1
                                   + ["2026-11-19.nmea", "2026-11-20.nmea"])

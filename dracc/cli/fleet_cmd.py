@@ -15,7 +15,7 @@ from rich.table import Table
 from .. import atomic
 from ..config import load_config
 from ..errors import ConfigError, ExitCode
-from ..fleet import FleetResult, discover, fleet_config, inside, run_fleet, write_tables
+from ..fleet import FleetResult, count_logs, discover, fleet_config, inside, run_fleet, write_tables
 from .app import ConfigOption, app, err, out, progress
 
 
@@ -116,7 +116,7 @@ def fleet_html(res: FleetResult) -> str:
              "td,th{border:1px solid #bbb;padding:2px 6px;text-align:right}"
              "td:nth-child(-n+3),th:nth-child(-n+3){text-align:left}.bad{color:#b00}</style>"
              "</head><body><h1>dracc fleet report</h1>",
-             f"<p>{res.table['log'].nunique()} logs of {res.table['vessel'].nunique()} vessels; "
+             f"<p>{count_logs(res.table)} logs of {res.table['vessel'].nunique()} vessels; "
              f"{res.analysed} analysed in this run, {res.cached} from the cache, "
              f"{len(res.failures)} failed.</p>"]
     lt = latest(res.table)
