@@ -303,6 +303,8 @@ def run_fleet(tasks: Sequence[LogTask], cfg: Config, out: Path, *, workers: int 
             progress(1)
 
     if todo:
+        # largest first: the last tasks to finish are short ones (less idle time at the end)
+        todo.sort(key=lambda t: _size(t.path), reverse=True)
         if scheduler:
             _run_dask(todo, cfg, scheduler, connect_timeout_s, analyser, done)
         else:
@@ -311,6 +313,13 @@ def run_fleet(tasks: Sequence[LogTask], cfg: Config, out: Path, *, workers: int 
     failed = tuple({"vessel": t.vessel, "log": t.log, "path": t.path, "error": failures[t.path]}
                    for t in tasks if t.path in failures)
     return FleetResult(table, fleet_trends(table), failed, len(todo), cached)
+
+
+def _size(path: str) -> int:
+    try:
+        return os.path.getsize(path)
+    except OSError:
+        return 0
 
 
 def _preload() -> None:
