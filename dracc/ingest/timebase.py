@@ -213,7 +213,10 @@ class TimeBase:
             else:
                 out = []
                 for p in self._pending:
-                    t = np.where(p[2], p[1], MISSING_NS).astype(np.int64)
+                    tod_ns, ext_ns, has_ext, has_tod = p[0], p[1], p[2], p[3]
+                    t = np.where(has_ext, ext_ns, MISSING_NS).astype(np.int64)
+                    both = has_ext & has_tod
+                    t[both] = nearest_day(tod_ns[both], ext_ns[both])  # rule 1, as in _flush
                     out.append(t)
                 self._pending = []
                 self.decisions.append("no date in the log and none given: records with only a "
