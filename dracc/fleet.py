@@ -533,5 +533,5 @@ def write_tables(result: FleetResult, out: Path) -> list[Path]:
 
 
 __all__ = ["CHANNELS", "FleetConfig", "FleetError", "FleetResult", "LogTask", "analyse_log",
-           "discover", "fleet_config", "fleet_table", "fleet_trends", "inside", "run_fleet",
+           "count_logs", "discover", "fleet_config", "fleet_table", "fleet_trends", "inside", "run_fleet",
            "safe_name", "summarise", "write_tables"]
