@@ -225,6 +225,86 @@ def parse_tags(buf: np.ndarray, start: np.ndarray, end: np.ndarray, cum_xor: np.
     return ok, bad_cs, ext, source
 
 
+#: TAG blocks up to this many bytes are read as rows of a byte matrix (the common case);
+#: longer ones through the buffer-wide tables of ``parse_tags``
+TAG_ROW_BYTES = 128
+
+
+def _key_value_rows(mat: np.ndarray, stop: np.ndarray, keys: tuple[int, ...]):
+    """[s, e) (relative to each row) of the values of TAG parameters ``keys`` (one
+    letter each) in rows of a byte matrix, each row one TAG block from its opening
+    backslash, zeros past its end.
+
+    The same rule as :func:`_key_value`: the first ``key:`` preceded by ``,`` or the
+    opening backslash before ``stop``; the value runs to the next ``,`` or to ``stop``.
+    Returns one (found, s, e) per key.
+    """
+    n, w = mat.shape
+    cols = np.arange(w, dtype=np.int16)
+    before = cols < stop.astype(np.int16)[:, None]
+    prev2 = mat[:, :-2]
+    colon = np.zeros((n, w), dtype=bool)
+    colon[:, 2:] = (mat[:, 2:] == 58) & ((prev2 == 44) | (prev2 == 92))
+    colon &= before
+    comma = mat == 44
+    out = []
+    for key in keys:
+        hit = np.zeros((n, w), dtype=bool)
+        hit[:, 2:] = colon[:, 2:] & (mat[:, 1:-1] == key)
+        found = hit.any(axis=1)
+        vs = hit.argmax(axis=1) + 1
+        after = comma & (cols >= vs.astype(np.int16)[:, None])
+        ve = np.where(after.any(axis=1), after.argmax(axis=1), w)
+        ve = np.minimum(ve, stop)
+        out.append((found, np.where(found, vs, 0), np.where(found, ve, 0)))
+    return out
+
+
+def parse_tag_rows(buf: np.ndarray, mat: np.ndarray, start: np.ndarray, length: np.ndarray,
+                   cum_xor: np.ndarray):
+    """:func:`parse_tags` for TAG blocks given as rows of a byte matrix.
+
+    ``mat[i, :length[i]]`` are the bytes of TAG block i (``\\...*hh\\``, starting at
+    ``start[i]`` in ``buf``), zeros after; the result is the same as
+    ``parse_tags(buf, start, start + length, ...)``, without buffer-wide tables of
+    stars, commas and colons.
+    """
+    n, w = mat.shape
+    rows = np.arange(n)
+    ln = length.astype(np.int64)
+    isstar = mat == 42
+    star = isstar.argmax(axis=1)  # first '*' of the block
+    cslen = ln - star - 2
+    ok = isstar.any(axis=1) & (mat[rows, ln - 1] == 92) & ((cslen == 1) | (cslen == 2))
+    h_lo = HEX[mat[rows, np.maximum(ln - 2, 0)]]
+    h_hi = np.where(cslen == 2, HEX[mat[rows, np.maximum(ln - 3, 0)]], 0)
+    ok &= (h_lo >= 0) & (h_hi >= 0)
+    star = np.where(ok, star, 1)
+    x = cum_xor[np.maximum(start + star - 1, 0)] ^ cum_xor[start]  # XOR over (start, star)
+    bad_cs = ok & (x.astype(np.int64) != h_hi.astype(np.int64) * 16 + h_lo)
+    ext = np.full(n, MISSING_NS, dtype=np.int64)
+    (fc, cs_, ce), (fs, ss, se) = _key_value_rows(mat, star, (99, 115))  # 'c', 's'
+    cv, _, cbad = parse_numbers(buf, start + cs_, start + ce, decimals=False)
+    cv = np.where(fc, cv, np.nan)
+    cbad = cbad | (np.abs(np.where(cv < 1e10, cv * 1e9, cv * 1e6)) >= 9.2e18)
+    has = ok & fc & ~np.isnan(cv) & ~cbad
+    ok &= ~(fc & cbad)
+    ext[has] = unix_to_ns(cv[has], cv[has] >= 1e10)  # c: in seconds (< 1e10) or ms
+    source = np.full(n, "", dtype=object)
+    fs &= ok & (se > ss)
+    if fs.any():
+        hi = np.flatnonzero(fs)
+        sw = int((se[hi] - ss[hi]).max())
+        cols = np.arange(sw)
+        sub = mat[hi[:, None], np.minimum(ss[hi, None] + cols, w - 1)]
+        sub = np.where(cols < (se[hi] - ss[hi])[:, None], sub, 0).astype(np.uint8)
+        sub = np.where(sub < 128, sub, 63).astype(np.uint8)
+        names = np.ascontiguousarray(sub).view(f"S{sw}").ravel()
+        u, inv = np.unique(names, return_inverse=True)
+        source[hi] = np.array([x.decode("ascii") for x in u], dtype=object)[inv]
+    return ok, bad_cs, ext, source
+
+
 def _num(arr: pa.Array) -> np.ndarray:
     return pc.cast(pc.if_else(pc.equal(arr, ""), None, arr), pa.float64()).to_numpy(zero_copy_only=False)
 
@@ -248,29 +328,39 @@ def parse_prefixes(buf: np.ndarray, start: np.ndarray, end: np.ndarray,
     is_tag = buf[start] == 92
     if is_tag.any():
         ti = np.flatnonzero(is_tag)
-        # loggers repeat one TAG block on consecutive lines (same source, same second):
-        # parse each run of byte-identical TAG blocks once
-        ts, te = start[ti], end[ti]
-        tl = te - ts
-        head = np.ones(len(ti), dtype=bool)
-        w = int(tl.max())
-        if len(ti) > 1 and w <= 128:
-            mat = gather_rows(buf, ts, w)
-            mat = np.where(np.arange(w) < tl[:, None], mat, 0)
-            head[1:] = (tl[1:] != tl[:-1]) | np.any(mat[1:] != mat[:-1], axis=1)
-        run = np.cumsum(head) - 1
-        hi = np.flatnonzero(head)
-        if stars is None:
-            stars = np.flatnonzero(buf == 42)
-        if commas is None:
-            commas = np.flatnonzero(buf == 44)
-        colons = np.flatnonzero(buf == 58)
-        ok, bcs, e, src = parse_tags(buf, ts[hi], te[hi], cum_xor, stars, commas, colons)
         form[ti] = FORMS.index("tag")
-        bad_tag[ti] = ~ok[run]
-        bad_cs[ti] = bcs[run]
-        ext[ti] = e[run]
-        source[ti] = src[run]
+        tl = end[ti] - start[ti]
+        short = tl <= TAG_ROW_BYTES
+        if short.any():
+            si = ti[short]
+            ts, sl = start[si], tl[short]
+            w = -(-int(sl.max()) // 8) * 8  # whole 8-byte words, compared as uint64
+            mat = gather_rows(buf, ts, w)
+            mat *= np.arange(w, dtype=np.uint8) < sl.astype(np.uint8)[:, None]
+            # loggers repeat one TAG block on consecutive lines (same source, same
+            # second): parse each run of byte-identical TAG blocks once
+            words = mat.view(np.uint64)
+            head = np.ones(len(si), dtype=bool)
+            head[1:] = (sl[1:] != sl[:-1]) | np.any(words[1:] != words[:-1], axis=1)
+            run = np.cumsum(head) - 1
+            hi = np.flatnonzero(head)
+            ok, bcs, e, src = parse_tag_rows(buf, mat[hi], ts[hi], sl[hi], cum_xor)
+            bad_tag[si] = ~ok[run]
+            bad_cs[si] = bcs[run]
+            ext[si] = e[run]
+            source[si] = src[run]
+        if not short.all():
+            li = ti[~short]
+            if stars is None:
+                stars = np.flatnonzero(buf == 42)
+            if commas is None:
+                commas = np.flatnonzero(buf == 44)
+            colons = np.flatnonzero(buf == 58)
+            ok, bcs, e, src = parse_tags(buf, start[li], end[li], cum_xor, stars, commas, colons)
+            bad_tag[li] = ~ok
+            bad_cs[li] = bcs
+            ext[li] = e
+            source[li] = src
     rest = np.flatnonzero(~is_tag)
     if len(rest):
         rs = gather_strings(buf, start[rest], end[rest])
