@@ -217,13 +217,12 @@ def _decode(stype: str, F: _Fields) -> tuple[dict[str, dict[str, np.ndarray]], d
         ref = F.char(2)
         if stype == "THS":
             h = np.where(ref == 86, np.nan, h)  # mode V: not valid
-            refs = np.full(n, "T", dtype=object)
-        else:
-            refs = np.full(n, "T" if stype == "HDT" else "M", dtype=object)
+        # the reference as a byte ('T' 84, 'M' 77): compact between processes
+        refs = np.full(n, 77 if stype == "HDM" else 84, dtype=np.uint8)
         out["heading"] = {"heading_rad": h, "reference": refs,
                           "deviation_rad": nanv, "variation_rad": nanv}
     elif stype == "HDG":
-        out["heading"] = {"heading_rad": _angle(F, 1), "reference": np.full(n, "M", dtype=object),
+        out["heading"] = {"heading_rad": _angle(F, 1), "reference": np.full(n, 77, dtype=np.uint8),
                           "deviation_rad": _signed(F, 2, 3), "variation_rad": _signed(F, 4, 5)}
     elif stype == "ROT":
         v, _ = F.num(1)
@@ -689,6 +688,28 @@ def _cat(codes: np.ndarray, labels: list[str]) -> pd.Categorical:
     return pd.Categorical.from_codes(codes.astype(np.int32, copy=False), dtype=dt)
 
 
+def _small_unique(x: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(x, return_inverse=True)`` for integers in [0, size): a count per
+    value instead of a sort."""
+    u = np.flatnonzero(np.bincount(x, minlength=size))
+    lut = np.zeros(size, dtype=np.int64)
+    lut[u] = np.arange(len(u))
+    return u, lut[x]
+
+
+def _reference_strings(codes: np.ndarray) -> pd.api.extensions.ExtensionArray:
+    """The heading reference column ('T'/'M') from its byte codes, as the string array
+    pandas infers from Python strings.  Each value is one ASCII letter, so the codes
+    are the string data and the offsets count 0, 1, 2, ... (no Python objects)."""
+    import pyarrow as pa
+
+    n = len(codes)
+    arr = pa.LargeStringArray.from_buffers(
+        n, pa.py_buffer(np.arange(n + 1, dtype=np.int64)),
+        pa.py_buffer(np.ascontiguousarray(codes, dtype=np.uint8)))
+    return pd.array(arr, dtype=pd.StringDtype(na_value=np.nan))
+
+
 def _talker_str(code: int) -> str:
     return int(code).to_bytes(2, "little").decode("ascii", "replace")
 
@@ -708,7 +729,7 @@ def _source_categorical(cols: dict[str, np.ndarray], names: list[str], split_tal
     split = ~has_tag & np.isin(talker, split_codes) if split_codes else np.zeros(len(tag), bool)
     # one integer per distinct source: tag code, or talker (+ decimals where split)
     key = np.where(has_tag, tag, (1 << 32) + talker * 64 + np.where(split, dec + 1, 0))
-    ukey, inv = np.unique(key, return_inverse=True)
+    inv, ukey = pd.factorize(key, sort=True)  # = np.unique(key, return_inverse=True), by hashing
     labels = []
     for k in ukey.tolist():
         if k < (1 << 32):
@@ -720,7 +741,7 @@ def _source_categorical(cols: dict[str, np.ndarray], names: list[str], split_tal
         src = _cat(inv, labels)
     else:  # a TAG source named like a talker: one key
         src = pd.Categorical(np.asarray(labels, dtype=object)[inv])
-    ut, tinv = np.unique(talker, return_inverse=True)
+    ut, tinv = _small_unique(talker, 1 << 16)
     tal = _cat(tinv, [_talker_str(t) for t in ut.tolist()])
     return src, tal
 
@@ -747,7 +768,7 @@ def _assemble(pb: ParsedBlock, times: list[np.ndarray], state: StreamState, file
         if len(t) == 0:
             continue
         src, tal = _source_categorical(cols, pb.source_names, state.split_talkers, kind)
-        us, sinv = np.unique(cols["sentence"], return_inverse=True)
+        us, sinv = _small_unique(cols["sentence"].astype(np.int64), len(SENTENCES))
         sent = _cat(sinv, [SENTENCES[i] for i in us])
         own = (cols["tod_ns"] >= 0) | (cols["ext_ns"] != MISSING_NS)
         if kind == "ground":  # an RMC is counted once, in its position record
@@ -756,7 +777,10 @@ def _assemble(pb: ParsedBlock, times: list[np.ndarray], state: StreamState, file
                 if c not in ("seq", "tag_source", "dec", "tod_ns", "date_days", "ext_ns", "talker",
                              "sentence")}
         data.update(talker=tal, source=src, sentence=sent, time_ns=t, line=line)
+        ref = data.pop("reference", None)
         df = make_frame(kind, data)
+        if ref is not None:
+            df["reference"] = _reference_strings(ref)
         state.events.add(kind, src, t, own, line, file, sent)
         frames[kind] = df
     return frames
@@ -816,9 +840,13 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
             raise IngestError(f"--date {cfg.date!r}: expected YYYY-MM-DD") from err
     st.events.gap_s = cfg.gap_s
     st.events.tolerance_s = cfg.backstep_tolerance_s
-    ranges = list(_block_ranges(path, block_bytes))
     size = path.stat().st_size
     nworkers = workers if workers is not None else (2 if size >= PARALLEL_MIN_BYTES and _pool_ok() else 1)
+    if nworkers > 1:  # a multiple of the workers' count of equal blocks: none waits at the end
+        n_blocks = -(-size // block_bytes)
+        n_blocks = -(-n_blocks // nworkers) * nworkers
+        block_bytes = max(-(-size // n_blocks), 1)
+    ranges = list(_block_ranges(path, block_bytes))
     held: list = []
 
     def handle(pb: ParsedBlock, nbytes: int):
@@ -839,8 +867,8 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
         for kind, cols in pb.kinds.items():
             sc = cols["sentence"][cols["sentence"] != SENTENCES.index("RMC")] if kind == "ground" \
                 else cols["sentence"]
-            u, c = np.unique(sc, return_counts=True)
-            st.sentences.update({SENTENCES[i]: n for i, n in zip(u.tolist(), c.tolist(), strict=True)})
+            c = np.bincount(sc.astype(np.int64), minlength=len(SENTENCES))
+            st.sentences.update({SENTENCES[i]: int(c[i]) for i in np.flatnonzero(c).tolist()})
             if kind == "position" and not st.split_talkers and line0 == 1:
                 _fingerprint(cols, st, pb.source_names)
         if pb.clock:

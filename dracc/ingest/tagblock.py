@@ -125,14 +125,18 @@ def parse_numbers(buf: np.ndarray, s: np.ndarray, e: np.ndarray, width: int = 20
     hi = np.flatnonzero(has)
     lh = ln[hi]
     w = int(lh.max())
-    mat = gather_rows(buf, s[hi], w)
-    inside = np.arange(w) < lh[:, None]
-    nul = inside & (mat == 0)  # a NUL byte inside the field is not padding
-    mat = np.where(inside, mat, 0).astype(np.uint8)
+    mat = gather_rows(buf, s[hi], w)  # a fresh copy: masked in place
+    mat *= np.arange(w, dtype=np.uint8) < lh.astype(np.uint8)[:, None]
+    # a NUL byte inside a field is not padding: after masking, the zeros are the
+    # padding (w - length per row) plus any NUL inside
+    if np.count_nonzero(mat == 0) != mat.size - int(lh.sum()):
+        nul = (mat == 0) & (np.arange(w) < lh[:, None])
+    else:
+        nul = np.zeros((len(hi), 1), dtype=bool)
     # fast path: only digits, '.', signs and padding, and numpy parses every row
-    odd = (mat > 57) | ((mat < 48) & (mat != 46) & (mat != 45) & (mat != 43) & (mat != 0)) | nul
+    odd = ((mat - np.uint8(48)) > 9) & (mat != 46) & (mat != 45) & (mat != 43) & (mat != 0)
     v = None
-    if not odd.any():
+    if not (odd.any() or nul.any()):
         try:
             v = np.ascontiguousarray(mat).view(f"S{w}").ravel().astype(np.float64)
             ok = np.ones(len(hi), dtype=bool)

@@ -260,12 +260,17 @@ class EventCounter:
         sc, sn = _codes(np.full(len(time_ns), kind, dtype=object) if sentence is None else sentence)
         kc, kn = _codes(source)
         combo = kc.astype(np.int64) * (len(sn) + 1) + sc
-        ucombo, inv = np.unique(combo, return_inverse=True)
+        # the rows of each (source, sentence) stream, in stream order: one stable sort
+        counts = np.bincount(combo)
+        ucombo = np.flatnonzero(counts)
+        order = np.argsort(combo, kind="stable")
+        bounds = np.concatenate(([0], np.cumsum(counts[ucombo])))
         gap_ns = int(self.gap_s * 1e9)
         tol_ns = int(self.tolerance_s * 1e9)
         for i, uc in enumerate(ucombo.tolist()):
             key, stype = str(kn[uc // (len(sn) + 1)]), str(sn[uc % (len(sn) + 1)])
-            sel = (inv == i) & own
+            rows = order[bounds[i]:bounds[i + 1]]
+            sel = rows[own[rows]]
             t = time_ns[sel]
             if len(t) == 0:
                 continue
