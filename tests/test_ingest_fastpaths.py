@@ -4,15 +4,23 @@
   ``tagblock.parse_tags`` (buffer-wide tables of stars, commas and colons), on
   hand-made and random TAG blocks, well-formed and damaged;
 * ``parse_prefixes`` on long TAG blocks (the general path) and short ones (the matrix
-  path) mixed in one buffer.
+  path) mixed in one buffer;
+* ``ingest.summarize_frames`` (counts on categorical codes) against
+  ``sources.summarize`` (sorting strings), on real and sample logs.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as hs
 
+from dracc.config import IngestConfig
+from dracc.ingest import read_file, summarize_frames
+from dracc.ingest.sources import summarize
 from dracc.ingest.tagblock import (
     TAG_ROW_BYTES,
     gather_rows,
@@ -103,3 +111,40 @@ def test_parse_prefixes_mixes_short_and_long_tags():
     assert pr.source.tolist() == ["A", "A", "LONG", "B"]
     assert (pr.ext_ns // 10**9).tolist() == [1700000000, 1700000000, 1700000002, 1700000001]
     assert not pr.bad_tag.any() and not pr.bad_tag_checksum.any()
+
+
+# --------------------------------------------------------------- source summaries
+REAL = Path("/work/shared/data/real")
+SAMPLES = Path(__file__).resolve().parent.parent / "sample_logs"
+
+
+def _summaries_equal(a: dict, b: dict) -> None:
+    assert list(a) == list(b)  # sources in the same order
+    for k in a:
+        assert a[k] == b[k]
+        assert list(a[k].sentences.items()) == list(b[k].sentences.items())  # insertion order too
+        assert list(a[k].talkers.items()) == list(b[k].talkers.items())
+
+
+@pytest.mark.parametrize("path", [REAL / "VDRplayer" / "Hakefjord.txt", SAMPLES / "voyage_tag.nmea",
+                                  SAMPLES / "voyage_prefix.nmea", SAMPLES / "voyage.mcap"])
+def test_summarize_frames_equals_summarize(path):
+    if not path.exists():
+        pytest.skip(f"{path} not present")
+    r = read_file(path, IngestConfig())
+    fast = summarize_frames(r.frames, r.path)
+    _summaries_equal(summarize(r.frames, r.path), fast)
+    assert sum(s.records for s in fast.values()) == sum(len(df) for df in r.frames.values())
+
+
+def test_summarize_frames_accumulates_and_falls_back():
+    """Two files into one summary; a frame with plain string columns (general path)."""
+    r = read_file(SAMPLES / "voyage_tag.nmea", IngestConfig())
+    plain = {k: df.astype({"source": object, "talker": object, "sentence": object})
+             for k, df in r.frames.items()}
+    a = summarize(r.frames, "one")
+    summarize(plain, "two", into=a)
+    b = summarize_frames(r.frames, "one")
+    summarize_frames(plain, "two", into=b)
+    _summaries_equal(a, b)
+    assert all(s.files == {"one", "two"} for s in b.values())

@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import IngestError
-from .frames import KINDS, FileResult, Rejects, TimeEvents, Voyage, empty_frame
+from .frames import KINDS, FileResult, Rejects, SourceInfo, TimeEvents, Voyage, empty_frame
 from .nmea import check_readable
 from .sources import assign_roles, summarize
 
@@ -90,8 +90,71 @@ def _merge_frames(results: list[FileResult]) -> dict[str, pd.DataFrame]:
             df = pd.concat(parts, ignore_index=True)
         for c in ("source", "talker", "sentence"):
             df[c] = df[c].astype("category")
-        order = np.argsort(df["time_ns"].to_numpy(), kind="stable")
+        t = df["time_ns"].to_numpy()
+        if len(parts) == 1 and not (t[1:] < t[:-1]).any():  # one file's frame: sorted already
+            out[kind] = df.reset_index(drop=True)
+            continue
+        order = np.argsort(t, kind="stable")
         out[kind] = df.iloc[order].reset_index(drop=True)
+    return out
+
+
+def _labels(col: pd.Series) -> tuple[np.ndarray, list[str]] | None:
+    """(codes, labels as str) of a categorical column whose labels are distinct strings
+    and which has no missing value; None otherwise."""
+    if not isinstance(col.dtype, pd.CategoricalDtype):
+        return None
+    codes = col.cat.codes.to_numpy().astype(np.int64)
+    labels = [str(x) for x in col.cat.categories]
+    if len(set(labels)) != len(labels) or (len(codes) and codes.min() < 0):
+        return None
+    return codes, labels
+
+
+def summarize_frames(frames: dict[str, pd.DataFrame], file: str,
+                     into: dict | None = None) -> dict:
+    """:func:`sources.summarize`, counted on the categorical codes of the frames.
+
+    The same :class:`SourceInfo` values, in the same order (sources in order of first
+    appearance per kind, sentences and talkers added in sorted order), from counts per
+    code instead of sorting millions of strings.  Frames whose string columns are not
+    categoricals go through :func:`sources.summarize`.
+    """
+    out = {} if into is None else into
+    for kind, df in frames.items():
+        if df is None or len(df) == 0:
+            continue
+        parts = [_labels(df[c]) for c in ("source", "sentence", "talker")]
+        if any(p is None for p in parts):
+            summarize({kind: df}, file, into=out)
+            continue
+        (src, src_l), (sent, sent_l), (talk, talk_l) = parts
+        ns, nt, nk = len(src_l), len(sent_l), len(talk_l)
+        t = df["time_ns"].to_numpy()
+        counted = np.ones(len(src), dtype=bool)
+        if kind == "ground" and "RMC" in sent_l:  # an RMC is counted in its position row
+            counted = sent != sent_l.index("RMC")
+        sc = src[counted]
+        by_sent = np.bincount(sc * nt + sent[counted], minlength=ns * nt).reshape(ns, nt)
+        tc = np.bincount(sc * nk + talk[counted], minlength=ns * nk).reshape(ns, nk)
+        records = np.bincount(src, minlength=ns)
+        lo = np.full(ns, np.iinfo(np.int64).max)
+        hi = np.full(ns, np.iinfo(np.int64).min)
+        np.minimum.at(lo, src, t)
+        np.maximum.at(hi, src, t)
+        for i in pd.unique(src).tolist():  # order of first appearance, as pd.factorize
+            key = src_l[i]
+            info = out.setdefault(key, SourceInfo(key=key))
+            if by_sent[i].any():
+                js = sorted(np.flatnonzero(by_sent[i]).tolist(), key=sent_l.__getitem__)
+                info.sentences.update({sent_l[j]: int(by_sent[i, j]) for j in js})
+                jt = sorted(np.flatnonzero(tc[i]).tolist(), key=talk_l.__getitem__)
+                info.talkers.update({talk_l[j]: int(tc[i, j]) for j in jt if talk_l[j]})
+            info.records += int(records[i])
+            a, b = int(lo[i]), int(hi[i])
+            info.first_ns = a if info.first_ns is None else min(info.first_ns, a)
+            info.last_ns = b if info.last_ns is None else max(info.last_ns, b)
+            info.files.add(file)
     return out
 
 
@@ -108,7 +171,7 @@ def read_logs(paths: list[Path], cfg: IngestConfig, progress=None) -> Voyage:
     frames = _merge_frames(results)
     sources: dict = {}
     for r in results:
-        summarize(r.frames, r.path, into=sources)
+        summarize_frames(r.frames, r.path, into=sources)
     rejects = Rejects()
     te = TimeEvents()
     inputs = []
