@@ -15,7 +15,7 @@ from pathlib import Path
 
 from .. import atomic
 from ..pipeline import CHANNEL_UNITS, CHANNELS, Analysis, Estimate
-from . import fmt, fmt_duration, fmt_pct, iso_utc, plots, short_utc
+from . import fmt, fmt_duration, fmt_pct, iso_utc, short_utc
 
 CSP = "default-src 'none'; img-src data:; style-src 'unsafe-inline'; base-uri 'none'; form-action 'none'"
 
@@ -217,6 +217,8 @@ def render_html(a: Analysis) -> str:
     if a.notes:
         notes = ("<section id=\"notes\"><h2>Notes</h2><ul>"
                  + "".join(f"<li>{_e(n)}</li>" for n in a.notes) + "</ul></section>")
+    from . import plots  # matplotlib loads only when a page is drawn
+
     figures = "".join([
         _figure(plots.track_plot(a), "track plot",
                 "Track of every source, the dead-reckoning track and its 2M circles (each hour since "
