@@ -90,6 +90,18 @@ def fix_dates(date_days: np.ndarray, latest_days: int | None = None):
     return d, int(fixable.sum()), int(unusable.sum())
 
 
+def drop_implausible_ext(ext_ns: np.ndarray, latest_days: int | None = None):
+    """Rule 4 for external times (TAG ``c:``, logger prefixes, MCAP log times): a time
+    outside 2000-01-01 .. today+1 (a garbled prefix read as a Unix time, a bit flip in a
+    year) is not used.  Returns (ext_ns with those set to MISSING_NS, n_unused)."""
+    latest = today_days() + 1 if latest_days is None else latest_days
+    has = ext_ns != MISSING_NS
+    bad = has & ((ext_ns < _EPOCH_2000_DAYS * DAY_NS) | (ext_ns >= (latest + 1) * DAY_NS))
+    if not bad.any():
+        return ext_ns, 0
+    return np.where(bad, MISSING_NS, ext_ns), int(bad.sum())
+
+
 def nearest_day(tod_ns: np.ndarray, ref_ns: np.ndarray) -> np.ndarray:
     """Time of day placed on the UTC day that puts it nearest to ``ref_ns`` (rule 1)."""
     day0 = np.floor_divide(ref_ns, DAY_NS) * DAY_NS
@@ -125,6 +137,8 @@ class TimeBase:
         (block_id, time_ns) pairs in order (possibly empty, possibly several)."""
         date_days, nfix, nbad = fix_dates(date_days)
         self.week_rollovers += nfix
+        self.implausible += nbad
+        ext_ns, nbad = drop_implausible_ext(ext_ns)
         self.implausible += nbad
         has_ext = ext_ns != MISSING_NS
         has_tod = tod_ns >= 0
