@@ -522,3 +522,20 @@ def test_regression_one_damaged_prefix_moves_other_records_to_the_logger_time(tm
     assert pos["line"].tolist() == [1]
     assert pos["time_ns"].tolist() == [1406851257_690_000_000]  # 00:00:57.69, the time of fix
     assert res.rejects.counts["no_date"] == 1  # the line without a readable prefix: no date
+
+
+def test_regression_garbled_prefix_time_far_in_the_future(tmp_path):
+    """Regression (fuzz through the whole pipeline): digits inserted into an ISO prefix
+    ('...1234567890,12345678' + '2109-03-01T...') left a valid-looking time in 2109; one such
+    record stretched the voyage over decades and the daily deviation windows took minutes.
+    External times outside 2000-01-01 .. today+1 are now counted as implausible, not used."""
+    lines = (SAMPLES / "voyage_prefix.nmea").read_bytes().split(b"\r\n")[:200]
+    assert lines[50][:4] == b"2026" and b"HDT" in lines[50]  # an HDT: no time of its own
+    bad = b"1234567890,12345678" + b"2109" + lines[50][4:]
+    p = tmp_path / "garbled.nmea"
+    p.write_bytes(b"\r\n".join(lines[:50] + [bad] + lines[51:]) + b"\r\n")
+    res = read_nmea(p, IngestConfig(), workers=1)
+    t = np.concatenate([f["time_ns"].to_numpy() for f in res.frames.values() if len(f)])
+    assert t.max() - t.min() < 3600 * 10**9
+    assert res.time_events.implausible_dates == 1
+    assert any("implausible" in n for n in res.notes + res.time_events.decisions)
