@@ -127,12 +127,30 @@ def _equal_runs(*cols: np.ndarray) -> list[tuple[int, int]]:
     return [(a, b + 1) for a, b in _runs(same)]
 
 
+def _long_equal_runs(t: np.ndarray, min_records: int, min_s: float,
+                     *cols: np.ndarray) -> list[tuple[int, int]]:
+    """The runs of :func:`_equal_runs` with at least ``min_records`` rows spanning at
+    least ``min_s`` seconds, filtered with numpy (a 1 Hz receiver giving GGA and RMC
+    repeats each position once: tens of thousands of runs of two)."""
+    same = np.ones(len(cols[0]) - 1, dtype=bool) if len(cols[0]) > 1 else np.zeros(0, bool)
+    for c in cols:
+        same &= c[1:] == c[:-1]
+    m = np.concatenate(([False], same, [False]))
+    edges = np.flatnonzero(m[1:] != m[:-1])
+    a, b = edges[::2], edges[1::2] + 1
+    keep = (b - a >= min_records) & ((t[b - 1] - t[a]) / NS_PER_S >= min_s)
+    return list(zip(a[keep].tolist(), b[keep].tolist(), strict=True))
+
+
 def _by_source(df: pd.DataFrame):
     if df is None or df.empty:
         return
     for key, g in df.groupby("source", observed=True, sort=True):
         if len(g):
-            yield str(key), g.sort_values("time_ns", kind="stable")
+            t = g["time_ns"].to_numpy()
+            if (t[1:] < t[:-1]).any():  # canonical frames are sorted: then nothing to do
+                g = g.sort_values("time_ns", kind="stable")
+            yield str(key), g
 
 
 def _window(df: pd.DataFrame | None, exclude: str, a_ns: int, b_ns: int) -> pd.DataFrame | None:
@@ -247,7 +265,7 @@ def _frozen(key, role, g, frames, cfg: FaultsConfig) -> list[SensorFault]:
     lon = g["lon_rad"].to_numpy(float)
     line = g["line"].to_numpy(np.int64)
     out = []
-    for a, b in _equal_runs(lat, lon):
+    for a, b in _long_equal_runs(t, cfg.min_records, cfg.frozen_min_s, lat, lon):
         dur_s = (t[b - 1] - t[a]) / NS_PER_S
         if b - a < cfg.min_records or dur_s < cfg.frozen_min_s:
             continue
@@ -276,7 +294,7 @@ def _stuck(key, role, g, frames, cfg: FaultsConfig) -> list[SensorFault]:
     h = g["heading_rad"].to_numpy(float)
     line = g["line"].to_numpy(np.int64)
     out = []
-    for a, b in _equal_runs(h):
+    for a, b in _long_equal_runs(t, cfg.min_records, cfg.stuck_min_s, h):
         dur_s = (t[b - 1] - t[a]) / NS_PER_S
         if b - a < cfg.min_records or dur_s < cfg.stuck_min_s:
             continue
@@ -326,10 +344,14 @@ def _limits(cfg: FaultsConfig) -> dict[str, list[tuple[str, float, str, object]]
 
 
 def _out_of_range(frames: Mapping[str, pd.DataFrame], roles: Mapping[str, str | None],
-                  cfg: FaultsConfig) -> list[SensorFault]:
+                  cfg: FaultsConfig, split: dict | None = None) -> list[SensorFault]:
+    """``split``: kind -> [(source, rows)] already made by the caller (else made here)."""
     out = []
+    split = {} if split is None else split
     for kind, checks in _limits(cfg).items():
-        for key, g in _by_source(frames.get(kind)):
+        if kind not in split:
+            split[kind] = list(_by_source(frames.get(kind)))
+        for key, g in split[kind]:
             t = g["time_ns"].to_numpy(np.int64)
             line = g["line"].to_numpy(np.int64)
             for col, scale, shown, bad_of in checks:
@@ -368,12 +390,13 @@ def detect_faults(voyage_or_frames: Voyage | Mapping[str, pd.DataFrame],
         frames = voyage_or_frames
         roles = {}
     faults: list[SensorFault] = []
-    for key, g in _by_source(frames.get("position")):
+    split = {kind: list(_by_source(frames.get(kind))) for kind in ("position", "heading")}
+    for key, g in split["position"]:
         frozen = _frozen(key, roles.get(key), g, frames, cfg)
         faults += frozen + _jumps(key, roles.get(key), g, cfg, {f.end_ns for f in frozen})
-    for key, g in _by_source(frames.get("heading")):
+    for key, g in split["heading"]:
         faults += _stuck(key, roles.get(key), g, frames, cfg)
-    faults += _out_of_range(frames, roles, cfg)
+    faults += _out_of_range(frames, roles, cfg, split)
     faults.sort(key=lambda f: (f.start_ns, f.source, f.kind))
     return faults
 
