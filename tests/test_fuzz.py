@@ -539,3 +539,30 @@ def test_regression_garbled_prefix_time_far_in_the_future(tmp_path):
     assert t.max() - t.min() < 3600 * 10**9
     assert res.time_events.implausible_dates == 1
     assert any("implausible" in n for n in res.notes + res.time_events.decisions)
+
+
+def test_regression_iso_prefix_with_a_huge_fraction(tmp_path):
+    """Regression (fuzz through the whole pipeline, OOM-killed at 24 GB): a timestamp prefix
+    whose fraction ran on for 300 000 digits matched the ISO regex and the matches were
+    widened to one fixed-width array (<U300023 x 10 159 rows = 11.4 GiB).  A fraction has
+    at most 9 digits now; such a prefix is not a time, and its sentence is still read."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    from dracc.ingest.tagblock import _ISO_RE
+
+    ok = "2026-03-01T06:00:40.123456789Z "
+    long = "2026-03-01T06:00:40." + "0" * 5000 + "Z "
+    m = pc.extract_regex(pa.array([ok, long]), _ISO_RE)
+    assert m.is_valid().to_pylist() == [True, False]
+    line = long.encode() + b"$HEHDT,59.909,T*13"
+    res = read_nmea(_write(tmp_path, [line] * 3), IngestConfig(date="2026-03-01"), workers=1)
+    # no time anywhere on these lines: counted (no_date), the prefixes noted as ignored
+    assert res.rejects.counts == Counter({"no_date": 3})
+    assert "3 line prefixes without a recognisable time ignored" in res.notes
+
+
+def _write(tmp: Path, lines: list[bytes]) -> Path:
+    p = tmp / "log.nmea"
+    p.write_bytes(b"\r\n".join(lines) + b"\r\n")
+    return p
