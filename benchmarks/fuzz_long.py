@@ -20,6 +20,13 @@ Containers
     result (records counted) or an IngestError (one line), never another exception; a
     file cut short never yields more records than the whole file.
 
+Pipeline
+    whole logs (sample and real) with 1-10 % of their lines mutated, through
+    ``dracc.pipeline.analyse`` and every renderer (JSON checked against its schema,
+    HTML, terminal): a report or a one-line error, never another exception.  The
+    address space is capped (``--max-memory-gb``) so a runaway allocation shows as a
+    MemoryError instead of the kernel killing a process on a shared machine.
+
 Prints the inputs tried, the rejects by reason, the outcomes and the number of
 tracebacks; a traceback's input is saved under ``--crash-dir`` to reproduce it.
 """
@@ -28,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import random
+import resource
 import sys
 import tempfile
 import time
@@ -169,14 +177,63 @@ def run_containers(n: int, rng: random.Random, tmp: Path, crash_dir: Path) -> di
             "examples": examples}
 
 
+PIPELINE_LOGS = [SAMPLES / "voyage_tag.nmea", SAMPLES / "voyage_prefix.nmea",
+                 REAL / "VDRplayer" / "Hakefjord.txt",
+                 REAL / "anemomind" / "Irene" / "2014" / "20140611" / "NMEA0048.TXT"]
+
+
+def run_pipeline(n: int, rng: random.Random, tmp: Path, crash_dir: Path) -> dict:
+    """Whole logs with 1-10 % of their lines mutated, through analyse() and every renderer."""
+    import jsonschema
+
+    from dracc.config import Config
+    from dracc.pipeline import analyse
+    from dracc.report import html as html_report
+    from dracc.report import json_report, terminal
+
+    schema = json_report.load_schema()
+    logs = [p for p in PIPELINE_LOGS if p.exists()]
+    out: Counter = Counter()
+    tracebacks = 0
+    examples: list[str] = []
+    for i in range(n):
+        src = logs[rng.randrange(len(logs))]
+        lines = [ln for ln in src.read_bytes().replace(b"\r\n", b"\n").split(b"\n") if ln]
+        mut = mutate(lines, rng, rng.randint(1, max(1, len(lines) // 10)))
+        q = tmp / "voyage.nmea"
+        q.write_bytes(mut.data)
+        out["lines_mutated"] += mut.n_mutated
+        try:
+            a = analyse([q], Config())
+            jsonschema.validate(json_report.to_dict(a), schema)
+            html_report.render_html(a)
+            terminal.render_text(a)
+            out["analysed"] += 1
+            out["sensor_faults"] += len(a.faults)
+        except DraccError:
+            out["one_line_error"] += 1
+        except Exception as e:  # noqa: BLE001 - MemoryError included (address space is capped)
+            tracebacks += 1
+            if len(examples) < 10:
+                examples.append(f"pipeline {src.name}: {type(e).__name__}: {str(e)[:200]}")
+            _save(crash_dir, f"pipeline-{i}", mut.data, e)
+    return {"counts": out, "tracebacks": tracebacks, "examples": examples}
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--lines", type=int, default=100_000, help="mutated NMEA lines to try")
     ap.add_argument("--containers", type=int, default=1000, help="damaged MCAP/CSV files to try")
+    ap.add_argument("--pipeline", type=int, default=60,
+                    help="whole mutated logs through analyse() and the renderers")
+    ap.add_argument("--max-memory-gb", type=float, default=4.0,
+                    help="address-space cap: a runaway allocation is a MemoryError, not an OOM kill")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--crash-dir", type=Path, default=Path("fuzz-crashes"))
     a = ap.parse_args()
     rng = random.Random(a.seed)
+    limit = int(a.max_memory_gb * 2**30)
+    resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         t0 = time.perf_counter()
@@ -184,6 +241,8 @@ def main() -> int:
         t1 = time.perf_counter()
         co = run_containers(a.containers, rng, tmp, a.crash_dir)
         t2 = time.perf_counter()
+        pi = run_pipeline(a.pipeline, rng, tmp, a.crash_dir)
+        t3 = time.perf_counter()
     c = nm["counts"]
     print(f"seed {a.seed}")
     print(f"NMEA: {c['lines_mutated']:,} mutated lines in {c['logs']:,} logs of {WINDOW} lines "
@@ -204,10 +263,15 @@ def main() -> int:
                                    if k not in ("read", "records", "one_line_error")))
     print("  errors: " + "; ".join(f"{k} ({v})" for k, v in co["errors"].most_common(8)))
     print(f"  invariant violations {co['violations']}; tracebacks {co['tracebacks']}")
-    total_tb = nm["tracebacks"] + co["tracebacks"]
-    print(f"inputs tried {c['lines_mutated'] + a.containers:,}; tracebacks = {total_tb}; "
+    pc = pi["counts"]
+    print(f"pipeline: {a.pipeline} whole logs with {pc['lines_mutated']:,} mutated lines through "
+          f"analyse, JSON (schema-checked), HTML and terminal ({t3 - t2:.0f} s): "
+          f"{pc['analysed']} analysed ({pc['sensor_faults']} sensor faults flagged), "
+          f"{pc['one_line_error']} one-line errors; tracebacks {pi['tracebacks']}")
+    total_tb = nm["tracebacks"] + co["tracebacks"] + pi["tracebacks"]
+    print(f"inputs tried {c['lines_mutated'] + a.containers + a.pipeline:,}; tracebacks = {total_tb}; "
           f"invariant violations = {nm['violations'] + co['violations']}")
-    for e in nm["examples"] + co["examples"]:
+    for e in nm["examples"] + co["examples"] + pi["examples"]:
         print("  example:", e)
     return 1 if total_tb or nm["violations"] or co["violations"] else 0
 
