@@ -566,3 +566,33 @@ def _write(tmp: Path, lines: list[bytes]) -> Path:
     p = tmp / "log.nmea"
     p.write_bytes(b"\r\n".join(lines) + b"\r\n")
     return p
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_mutated_voyage_through_the_whole_pipeline(tmp_path, seed):
+    """A whole simulated voyage with 3 % of its lines mutated: analyse, the JSON (checked
+    against its schema), the HTML and the terminal summary, without a traceback; the
+    out-of-range SOG the mutations write is flagged as a sensor fault."""
+    import jsonschema
+
+    from dracc.config import Config
+    from dracc.pipeline import analyse
+    from dracc.report import html as html_report
+    from dracc.report import json_report, terminal
+
+    rng = random.Random(seed)
+    lines = [ln for ln in (SAMPLES / "voyage_tag.nmea").read_bytes().split(b"\r\n") if ln]
+    mut = mutate(lines, rng, len(lines) * 3 // 100)
+    # and one RMC of the GNSS with SOG -3 kn and a valid checksum
+    k = next(i for i, ln in enumerate(lines) if b"GPRMC" in ln)
+    neg = _set_field(lines[k], 7, b"-3.0")
+    p = tmp_path / "voyage.nmea"
+    p.write_bytes(mut.data + b"\r\n" + neg + b"\r\n")
+    a = analyse([p], Config())
+    doc = json_report.to_dict(a)
+    jsonschema.validate(doc, json_report.load_schema())
+    assert html_report.render_html(a).rstrip().endswith("</html>")
+    assert "Sensor faults" in terminal.render_text(a)
+    assert any(f["kind"] == "out_of_range" and f["values"].get("min_sog_kn") == -3.0
+               for f in doc["faults"])
+    assert sum(doc["rejected"].values()) > 0
