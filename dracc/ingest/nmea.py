@@ -49,8 +49,10 @@ if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
     from ..config import IngestConfig
 
 DEG = np.pi / 180.0
-BLOCK_BYTES = 16 * 1024 * 1024  #: block size for streaming
-PARALLEL_MIN_BYTES = 2 * BLOCK_BYTES  #: files at least this large use two processes
+FIRST_BLOCK_BYTES = 16 * 1024 * 1024  #: the first block (where talkers are fingerprinted)
+#: the later blocks: small enough that a worker reuses its memory (fresh pages are dear)
+BLOCK_BYTES = 8 * 1024 * 1024
+PARALLEL_MIN_BYTES = 32 * 1024 * 1024  #: files at least this large use two processes
 
 #: sentence type -> (min, max) number of data fields after the address
 FIELD_COUNTS = {
@@ -552,13 +554,15 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
 
 
 # ------------------------------------------------------------------ streaming reader
-def _block_ranges(path: Path, block_bytes: int) -> Iterator[tuple[int, int]]:
-    """(offset, length) of blocks of whole lines."""
+def _block_ranges(path: Path, block_bytes: int,
+                  first_bytes: int | None = None) -> Iterator[tuple[int, int]]:
+    """(offset, length) of blocks of whole lines: the first about ``first_bytes`` (default
+    ``block_bytes``), the others about ``block_bytes``."""
     size = path.stat().st_size
     with path.open("rb") as fh:
         off = 0
         while off < size:
-            end = off + block_bytes
+            end = off + ((first_bytes or block_bytes) if off == 0 else block_bytes)
             if end >= size:
                 yield off, size - off
                 return
@@ -816,14 +820,16 @@ def _time_arrays(pb: ParsedBlock):
 
 
 def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | None = None,
-                     block_bytes: int = BLOCK_BYTES, workers: int | None = None,
+                     block_bytes: int | None = None, workers: int | None = None,
                      progress=None) -> Iterator[Block]:
     """Stream an NMEA text file as resolved blocks with bounded memory.
 
     ``state`` (a :class:`StreamState`, created if None) accumulates rejections, time
     events and statistics while iterating; read it after the loop.  Blocks are parsed
-    in up to two worker processes (files >= ``PARALLEL_MIN_BYTES``), at most 2 blocks
-    ahead.  ``progress(n_bytes)`` is called as blocks finish.  Raises IngestError in
+    in up to two worker processes (files >= ``PARALLEL_MIN_BYTES``), at most 3 blocks
+    ahead (the first block is twice as large: the other worker goes on meanwhile).  ``block_bytes`` None: a first block of ``FIRST_BLOCK_BYTES``, then blocks of
+    about ``BLOCK_BYTES``, as many as make the count a multiple of the workers' (none
+    waits alone at the end); a number: blocks of that size.  ``progress(n_bytes)`` is called as blocks finish.  Raises IngestError in
     ``cfg.strict`` mode at the first rejected line.
     """
     path = Path(path)
@@ -842,11 +848,15 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
     st.events.tolerance_s = cfg.backstep_tolerance_s
     size = path.stat().st_size
     nworkers = workers if workers is not None else (2 if size >= PARALLEL_MIN_BYTES and _pool_ok() else 1)
-    if nworkers > 1:  # a multiple of the workers' count of equal blocks: none waits at the end
-        n_blocks = -(-size // block_bytes)
-        n_blocks = -(-n_blocks // nworkers) * nworkers
-        block_bytes = max(-(-size // n_blocks), 1)
-    ranges = list(_block_ranges(path, block_bytes))
+    if block_bytes is not None:
+        ranges = list(_block_ranges(path, block_bytes))
+    else:
+        rest = max(size - FIRST_BLOCK_BYTES, 0)
+        n_rest = -(-rest // BLOCK_BYTES)
+        if (1 + n_rest) % nworkers:
+            n_rest += nworkers - (1 + n_rest) % nworkers
+        later = max(-(-rest // n_rest), 1) if n_rest else BLOCK_BYTES
+        ranges = list(_block_ranges(path, later, FIRST_BLOCK_BYTES))
     held: list = []
 
     def handle(pb: ParsedBlock, nbytes: int):
@@ -892,7 +902,7 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
             pb = _parse_range(file, off, ln, cfg.ignore_checksum, at_eof[i])
             yield from handle(pb, ln)
     else:
-        # at most nworkers + 1 blocks in flight; a broken pool (a worker killed, e.g. out of
+        # at most nworkers + 2 blocks in flight; a broken pool (a worker killed, e.g. out of
         # memory) falls back to parsing the remaining blocks in this process
         pending = list(enumerate(ranges))
         broken = False
@@ -904,7 +914,7 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
                 futures.append((ex.submit(_parse_range, file, off, ln, cfg.ignore_checksum, at_eof[i]),
                                 i, off, ln))
 
-            while pending and len(futures) < nworkers + 1:
+            while pending and len(futures) < nworkers + 2:
                 submit()
             while futures:
                 fut, i, off, ln = futures.pop(0)
