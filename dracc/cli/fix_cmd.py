@@ -584,7 +584,8 @@ def solve(specs: Sequence[ObsSpec], prior_deg: tuple[float, float] | None,
                             "--pier, --nadir or --file")
     if prior_deg is not None:
         lat, lon = prior_deg
-        return fuse_fix(obs, _rad(lat), _rad(lon), weighted=weighted), lat, lon, "given"
+        sol = fuse_fix(obs, _rad(lat), _rad(lon), weighted=weighted)
+        return _near(sol, specs, lat, lon), lat, lon, "given"
     if all(isinstance(s.obs, NadirCircle) for s in specs):
         raise FixUsageError("dracc fix: nadir circles are thousands of km wide; give --prior LAT,LON "
                             "(the DR position) to choose the intersection")
@@ -621,7 +622,23 @@ def solve(specs: Sequence[ObsSpec], prior_deg: tuple[float, float] | None,
         raise GeometryError(f"the observations fit {len(good)} positions ({cands}); give --prior "
                             "LAT,LON near the ship (e.g. the DR position) to choose one")
     best = good[0] if good else min(found, key=lambda s: s.chi2)
-    return best, lat0, lon0, "mean of the fixes" if any(s.is_fix for s in specs) else "mean of the marks"
+    return _near(best, specs, lat0, lon0), lat0, lon0, "mean of the fixes" if any(s.is_fix for s in specs) else "mean of the marks"
+
+
+def _near(sol: FixSolution, specs: Sequence[ObsSpec], lat_deg: float, lon_deg: float) -> FixSolution:
+    """Refuse a solution far beyond the observations' own scale (nearly parallel lines).
+
+    Straight lines of position are great circles: two "parallel" transits (e.g. two
+    meridians) meet thousands of km away, with an enormous DOP.  A solution more than
+    max(100 km, 10 x the largest range or circle radius) from the prior is no fix.
+    """
+    limit_m = max([100_000.0] + [10.0 * s.scale_m for s in specs if s.scale_m is not None])
+    d_m = float(distance_m(_rad(lat_deg), _rad(lon_deg), sol.lat_rad, sol.lon_rad))
+    if d_m > limit_m:
+        raise GeometryError(
+            f"the lines of position meet {d_m / NMI_M:,.0f} nmi from the prior "
+            f"(DOP {float(sol.dop):,.0f}): they are nearly parallel (or the prior is far off); no fix")
+    return sol
 
 
 def fix_report(specs: Sequence[ObsSpec], prior_deg: tuple[float, float] | None,
