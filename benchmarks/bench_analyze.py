@@ -6,11 +6,17 @@ Run:  python benchmarks/bench_analyze.py [--workdir DIR] [--repeat N] [--skip-ba
    (compass 10 Hz, log 1 Hz, three INS GGA+HDT+VTG 1 Hz, GNSS GGA+RMC+ZDA 1 Hz; about
    2.3 M lines), unless DIR already holds it.
 2. Side by side in this run, wall clock, each in a fresh process (imports included):
-   * the baseline: a plain script that reads every line, keeps the INS GGA sentences
-     (TAG ``s:INS1..3``), parses them with ``pynmea2.parse``, builds a pandas frame, takes
-     each unit's position at the top of every hour and its deviation from the mean of
-     the three in metres north and east -- only what the paper's method needs, nothing
-     else (no DR, no statistics, no reports);
+   * the plain baseline (the one issue 5's ">= 5x" target refers to: "a plain pynmea2 +
+     pandas script that only extracts the three INS positions at each hour"): every line
+     through ``pynmea2.parse(check=True)``, the INS GGA fixes kept; run on the first
+     ``--plain-lines`` lines (default 200 000; 0 = the whole file) and scaled to the file
+     (its hourly pandas step takes milliseconds and is left out);
+   * the pre-filtered baseline, shown for honesty: the same job, but lines without
+     ``GGA`` and ``s:INS`` are skipped by a substring test before pynmea2 sees them (it
+     parses 11 % of the lines), then a pandas frame, each unit's position at the top of
+     every hour and its deviation from the mean of the three in metres north and east --
+     only what the paper's method needs (no checksums of other lines, no DR, no
+     statistics, no reports);
    * ``dracc analyze LOG --json FILE`` (ingest of every sentence, DR with 2M, consistency,
      calibration, current filter, deviation statistics with hat and reference, JSON);
    * ``dracc analyze LOG --json FILE --html FILE`` (plus four plots and the HTML page).
@@ -67,10 +73,12 @@ with open(sys.argv[1], encoding="ascii", errors="replace") as fh:
         tag, _, sentence = line.rpartition("\\")
         src = tag.split("s:")[1].split(",")[0].split("*")[0]
         c = int(tag.split("c:")[1].split("*")[0].split(",")[0])
+        c_ms = c if c >= 10**11 else c * 1000  # TAG c: in seconds or milliseconds
         msg = pynmea2.parse(sentence.strip(), check=True)
-        rows.append((src, c, msg.latitude, msg.longitude))
+        rows.append((src, c_ms, msg.latitude, msg.longitude))
 df = pd.DataFrame(rows, columns=["unit", "t", "lat", "lon"])
-df = df[df["t"] % 3600 == 0]
+df = df[df["t"] % 3_600_000 == 0]
+df["t"] //= 1000
 wide = df.pivot_table(index="t", columns="unit", values=["lat", "lon"])
 lat, lon = wide["lat"], wide["lon"]
 r = 6371000.0
@@ -162,6 +170,7 @@ def main() -> None:
     args = ap.parse_args()
     args.workdir.mkdir(parents=True, exist_ok=True)
     log = ensure_log(args.workdir)
+    load0 = os.getloadavg()[0]
     n_lines = sum(1 for _ in log.open("rb"))
     print(f"log: {log} ({n_lines:,} lines, {log.stat().st_size / 1e6:.0f} MB)")
 
@@ -179,7 +188,8 @@ def main() -> None:
         rows.insert(0, (name, t_base))
         plain = args.workdir / "plain.py"
         plain.write_text(PLAIN, encoding="utf-8")
-        res = subprocess.run([sys.executable, str(plain), str(log), str(args.plain_lines)], check=True,
+        n_max = args.plain_lines or n_lines
+        res = subprocess.run([sys.executable, str(plain), str(log), str(n_max)], check=True,
                              capture_output=True, text=True)
         n_done, t_done = res.stdout.split()
         t_plain = float(t_done) / int(n_done) * n_lines  # the hourly pandas step is negligible
@@ -190,12 +200,13 @@ def main() -> None:
     print(f"\n{'run':55s} {'wall s':>8s} {'CPU s':>8s} {'lines/s':>12s}")
     for name, t in rows:
         print(f"{name:55s} {t:8.2f} {CPU.get(name, float('nan')):8.2f} {n_lines / t:12,.0f}")
-    print(f"(load average now {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs)")
+    print(f"(load average {load0:.1f} before, {os.getloadavg()[0]:.1f} after, on {os.cpu_count()} CPUs)")
     if not args.skip_baseline:
-        print(f"\nspeed-up without HTML vs every-line pynmea2: {t_plain / t_nohtml:.1f}x (target >= 5x)")
-        print(f"speed-up with HTML    vs every-line pynmea2: {t_plain / t_html:.1f}x")
-        print(f"speed-up without HTML vs pre-filtered script: {t_base / t_nohtml:.1f}x")
-        print(f"speed-up with HTML    vs pre-filtered script: {t_base / t_html:.1f}x")
+        print("\nthe target (issue 5): dracc analyze without HTML >= 5x faster than the plain script")
+        print(f"speed-up without HTML vs plain (every-line) pynmea2: {t_plain / t_nohtml:.1f}x (target >= 5x)")
+        print(f"speed-up with HTML    vs plain (every-line) pynmea2: {t_plain / t_html:.1f}x")
+        print(f"speed-up without HTML vs pre-filtered script:        {t_base / t_nohtml:.1f}x (not the target)")
+        print(f"speed-up with HTML    vs pre-filtered script:        {t_base / t_html:.1f}x")
         # the two agree on what they share
         import numpy as np
         import pandas as pd

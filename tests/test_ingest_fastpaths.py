@@ -5,6 +5,8 @@
   hand-made and random TAG blocks, well-formed and damaged;
 * ``parse_prefixes`` on long TAG blocks (the general path) and short ones (the matrix
   path) mixed in one buffer;
+* ``tagblock.parse_numbers``: Arrow's cast (the common case) against numpy's
+  ``astype`` with row-wise validation (the general path);
 * ``ingest.summarize_frames`` (counts on categorical codes) against
   ``sources.summarize`` (sorting strings), on real and sample logs.
 """
@@ -19,11 +21,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as hs
 
 from dracc.config import IngestConfig
-from dracc.ingest import read_file, summarize_frames
+from dracc.ingest import read_file, summarize_frames, tagblock
 from dracc.ingest.sources import summarize
 from dracc.ingest.tagblock import (
     TAG_ROW_BYTES,
     gather_rows,
+    parse_numbers,
     parse_prefixes,
     parse_tag_rows,
     parse_tags,
@@ -148,3 +151,48 @@ def test_summarize_frames_accumulates_and_falls_back():
     summarize_frames(plain, "two", into=b)
     _summaries_equal(a, b)
     assert all(s.files == {"one", "two"} for s in b.values())
+
+
+# ------------------------------------------------------------------------- numbers
+def _numbers(fields: list[bytes], decimals: bool = True):
+    data = b",".join(fields) + b","
+    buf = np.frombuffer(data + bytes(64), dtype=np.uint8)
+    ends = np.cumsum([len(f) + 1 for f in fields]) - 1
+    starts = ends - np.array([len(f) for f in fields])
+    return parse_numbers(buf, starts, ends, 20, decimals)
+
+
+@settings(max_examples=300, deadline=None)
+@given(hs.lists(hs.text(alphabet="0123456789.+-", min_size=0, max_size=22), min_size=1, max_size=8),
+       hs.booleans())
+def test_numbers_arrow_path_equals_general_path(fields, decimals):
+    """Arrow's cast (fast path) and numpy's astype with row-wise validation (general
+    path) give the same values, decimals and invalid flags, bit for bit."""
+    raw = [f.encode() for f in fields]
+    fast = _numbers(raw, decimals)
+    saved = tagblock._numbers_arrow
+    tagblock._numbers_arrow = lambda *a: None
+    try:
+        general = _numbers(raw, decimals)
+    finally:
+        tagblock._numbers_arrow = saved
+    assert fast[0].tobytes() == general[0].tobytes()  # NaN and -0.0 included
+    assert fast[1].tolist() == general[1].tolist()
+    assert fast[2].tolist() == general[2].tolist()
+
+
+def test_numbers_fast_path_values():
+    val, dec, invalid = _numbers([b"5741.2345", b"-0.5", b"+12", b"", b"7.", b"1.2.3"])
+    assert val[:3].tolist() == [5741.2345, -0.5, 12.0] and np.isnan(val[3]) and val[4] == 7.0
+    assert dec.tolist() == [4, 1, -1, -1, 0, -1]
+    assert invalid.tolist() == [False, False, False, False, False, True] and np.isnan(val[5])
+
+
+_VALID = hs.from_regex(r"[+-]?[0-9]{0,12}(\.[0-9]{0,9})?", fullmatch=True)
+
+
+@settings(max_examples=300, deadline=None)
+@given(hs.lists(_VALID, min_size=1, max_size=8), hs.booleans())
+def test_numbers_arrow_path_on_numbers(fields, decimals):
+    """Mostly well-formed numbers: the fast path is taken and agrees with the general one."""
+    test_numbers_arrow_path_equals_general_path.hypothesis.inner_test(fields, decimals)

@@ -108,6 +108,35 @@ _CLASS[46] = 1 << 8
 _CLASS[43] = _CLASS[45] = 1 << 16
 
 
+def _numbers_arrow(buf: np.ndarray, s: np.ndarray, ln: np.ndarray, decimals: bool):
+    """The common case of :func:`parse_numbers` (non-empty fields of ``[+-.0-9]`` only):
+    the fields' bytes gathered end to end into one Arrow string array and cast to
+    float64 by Arrow (correctly rounded, like numpy's ``astype`` from bytes, and about
+    six times faster).  Returns (value, decimals) or None -- some other byte, or a field
+    Arrow cannot read (``1.2.3``, ``-``): then the general path decides row by row."""
+    offsets = np.zeros(len(s) + 1, dtype=np.int64)
+    np.cumsum(ln, out=offsets[1:])
+    total = int(offsets[-1])
+    if total >= 1 << 31:  # pragma: no cover - blocks are tens of MB
+        return None
+    d = buf[np.repeat(s - offsets[:-1], ln) + np.arange(total)]
+    if (((d - np.uint8(48)) > 9) & (d != 46) & (d != 45) & (d != 43)).any():
+        return None
+    arr = pa.StringArray.from_buffers(len(s), pa.py_buffer(offsets.astype(np.int32)),
+                                      pa.py_buffer(d))
+    try:
+        v = pc.cast(arr, pa.float64()).to_numpy(zero_copy_only=False)
+    except pa.ArrowInvalid:
+        return None
+    dec = None
+    if decimals:  # digits after the (one) point; -1 without one
+        dots = np.flatnonzero(d == 46)
+        row = np.searchsorted(offsets, dots, side="right") - 1
+        dec = np.full(len(s), -1, dtype=np.int64)
+        dec[row] = offsets[row + 1] - dots - 1
+    return v, dec
+
+
 def parse_numbers(buf: np.ndarray, s: np.ndarray, e: np.ndarray, width: int = 20,
                   decimals: bool = True):
     """Decimal numbers in byte ranges [s, e) of ``buf``, vectorised.
@@ -126,6 +155,12 @@ def parse_numbers(buf: np.ndarray, s: np.ndarray, e: np.ndarray, width: int = 20
         return val, dec, invalid
     hi = np.flatnonzero(has)
     lh = ln[hi]
+    fast = _numbers_arrow(buf, s[hi], lh, decimals)
+    if fast is not None:
+        val[hi] = fast[0]
+        if decimals:
+            dec[hi] = fast[1]
+        return val, dec, invalid
     w = int(lh.max())
     mat = gather_rows(buf, s[hi], w)  # a fresh copy: masked in place
     mat *= np.arange(w, dtype=np.uint8) < lh.astype(np.uint8)[:, None]
