@@ -209,7 +209,8 @@ def _schema_keys(schema) -> set[str]:
         for k, v in schema.get("properties", {}).items():
             keys.add(k)
             keys |= _schema_keys(v)
-        keys |= _schema_keys(schema.get("items", {}))
+        if "items" in schema:
+            keys |= _schema_keys(schema["items"])
     return keys
 
 
