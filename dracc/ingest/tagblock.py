@@ -252,6 +252,12 @@ def parse_tags(buf: np.ndarray, start: np.ndarray, end: np.ndarray, cum_xor: np.
     ext[has] = unix_to_ns(cv[has], cv[has] >= 1e10)
     source = np.full(n, "", dtype=object)
     fs, ss, se = _key_value(buf, colons, commas, start, star, 115)  # 's'
+    # printable ASCII only (NUL and pairs of equal bytes leave the XOR checksum unchanged),
+    # and a source of at most MAX_SOURCE_CHARS (fuzz: 300 000-character source keys)
+    for i in np.flatnonzero(ok):  # long TAG blocks only: rare
+        blk = buf[start[i]:end[i]]
+        ok[i] = not np.any((blk < 32) | (blk > 126))
+    ok &= ~(fs & (se - ss > MAX_SOURCE_CHARS))
     fs &= ok & (se > ss)
     if fs.any():
         hi = np.flatnonzero(fs)
@@ -269,6 +275,8 @@ def parse_tags(buf: np.ndarray, start: np.ndarray, end: np.ndarray, cum_xor: np.
 #: TAG blocks up to this many bytes are read as rows of a byte matrix (the common case);
 #: longer ones through the buffer-wide tables of ``parse_tags``
 TAG_ROW_BYTES = 128
+#: a TAG ``s:`` source identification longer than this is not one (IEC 61162-450 allows 15)
+MAX_SOURCE_CHARS = 64
 
 
 def _key_value_rows(mat: np.ndarray, stop: np.ndarray, keys: tuple[int, ...]):
@@ -281,23 +289,35 @@ def _key_value_rows(mat: np.ndarray, stop: np.ndarray, keys: tuple[int, ...]):
     Returns one (found, s, e) per key.
     """
     n, w = mat.shape
-    cols = np.arange(w, dtype=np.int16)
-    before = cols < stop.astype(np.int16)[:, None]
-    prev2 = mat[:, :-2]
-    colon = np.zeros((n, w), dtype=bool)
-    colon[:, 2:] = (mat[:, 2:] == 58) & ((prev2 == 44) | (prev2 == 92))
-    colon &= before
-    comma = mat == 44
+    flat = mat.ravel()
+    # the colons and commas of all rows, as positions in the flattened matrix (a few per
+    # row), rather than boolean matrices
+    colon = np.flatnonzero(flat == 58)
+    col = colon % w
+    row = colon // w
+    colon, col, row = colon[col >= 2], col[col >= 2], row[col >= 2]
+    prev2 = flat[colon - 2]
+    ok = (col < stop[row]) & ((prev2 == 44) | (prev2 == 92))
+    colon, col, row = colon[ok], col[ok], row[ok]
+    comma = np.flatnonzero(flat == 44)
     out = []
     for key in keys:
-        hit = np.zeros((n, w), dtype=bool)
-        hit[:, 2:] = colon[:, 2:] & (mat[:, 1:-1] == key)
-        found = hit.any(axis=1)
-        vs = hit.argmax(axis=1) + 1
-        after = comma & (cols >= vs.astype(np.int16)[:, None])
-        ve = np.where(after.any(axis=1), after.argmax(axis=1), w)
-        ve = np.minimum(ve, stop)
-        out.append((found, np.where(found, vs, 0), np.where(found, ve, 0)))
+        sel = flat[colon - 1] == key
+        c, r = col[sel], row[sel]
+        first = np.ones(len(r), dtype=bool)
+        first[1:] = r[1:] != r[:-1]  # the first ``key:`` of each row
+        c, r = c[first], r[first]
+        found = np.zeros(n, dtype=bool)
+        found[r] = True
+        vs = np.zeros(n, dtype=np.int64)
+        vs[r] = c + 1
+        # the first comma at or after the value's start in the same row, else the row's end
+        j = np.searchsorted(comma, r * w + c + 1)
+        nxt = comma[np.minimum(j, len(comma) - 1)] if len(comma) else np.zeros(len(r), np.int64)
+        same = (j < len(comma)) & (nxt < (r + 1) * w)
+        ve = np.zeros(n, dtype=np.int64)
+        ve[r] = np.minimum(np.where(same, nxt - r * w, w), stop[r])
+        out.append((found, vs, ve))
     return out
 
 
@@ -325,6 +345,10 @@ def parse_tag_rows(buf: np.ndarray, mat: np.ndarray, start: np.ndarray, length: 
     bad_cs = ok & (x.astype(np.int64) != h_hi.astype(np.int64) * 16 + h_lo)
     ext = np.full(n, MISSING_NS, dtype=np.int64)
     (fc, cs_, ce), (fs, ss, se) = _key_value_rows(mat, star, (99, 115))  # 'c', 's'
+    # printable ASCII only (NUL and pairs of equal bytes leave the XOR checksum unchanged),
+    # and a source of at most MAX_SOURCE_CHARS (fuzz)
+    ok &= ~np.any(((mat < 32) | (mat > 126)) & (np.arange(w) < ln[:, None]), axis=1)
+    ok &= ~(fs & (se - ss > MAX_SOURCE_CHARS))
     cv, _, cbad = parse_numbers(buf, start + cs_, start + ce, decimals=False)
     cv = np.where(fc, cv, np.nan)
     cbad = cbad | (np.abs(np.where(cv < 1e10, cv * 1e9, cv * 1e6)) >= 9.2e18)
