@@ -596,3 +596,20 @@ def test_mutated_voyage_through_the_whole_pipeline(tmp_path, seed):
     assert any(f["kind"] == "out_of_range" and f["values"].get("min_sog_kn") == -3.0
                for f in doc["faults"])
     assert sum(doc["rejected"].values()) > 0
+
+
+def test_regression_tag_source_with_nul_or_300k_characters(tmp_path):
+    """Regression (whole-pipeline fuzz: a MemoryError drawing the track plot): NUL bytes
+    and pairs of equal bytes leave a TAG block's XOR checksum unchanged, so a TAG source
+    'G\\0\\0\\0YRO' or 'GAAAA…' (300 000 characters) passed and became a source key (and a
+    plot legend 300 000 characters wide).  TAG blocks are printable ASCII now and a source
+    identification has at most 64 characters; such lines are rejected as bad_tag."""
+    lines = (SAMPLES / "voyage_tag.nmea").read_bytes().split(b"\r\n")[:20]
+    assert lines[0].startswith(b"\\s:GYRO,")
+    nul = lines[0].replace(b"s:GY", b"s:G\x00\x00\x00Y", 1)  # XOR unchanged by NULs
+    long = lines[0].replace(b"s:GY", b"s:G" + b"A" * 300_000 + b"Y", 1)  # even count: XOR unchanged
+    short_long = lines[0].replace(b"s:GY", b"s:G" + b"A" * 80 + b"Y", 1)  # a row-path TAG block
+    res = read_nmea(_write(tmp_path, [nul, long, short_long] + lines[1:]), IngestConfig(), workers=1)
+    assert res.rejects.counts == Counter({"bad_tag": 3})
+    keys = {str(k) for f in res.frames.values() if len(f) for k in f["source"].unique()}
+    assert keys <= {"GYRO", "MAG", "LOG", "INS1", "INS2", "INS3", "GNSS"}
