@@ -431,3 +431,37 @@ def test_nadir_circles_fix_with_a_prior(run_cli):
     j = fix_json(run_cli, *args, "--prior", "35.3,128.6")
     assert geo_distance_m(j["lat_deg"], j["lon_deg"], *np.degrees(ship)) < 1.0
     assert [r["unit"] for r in j["residuals"]] == ["deg"] * 3
+
+
+def test_real_log_two_receivers_fused_as_fixes(run_cli, real_dir):
+    """Hakefjord.txt (VDRplayer): two GPS receivers on one yacht.  Their literal RMC/GGA
+    fields go in as navigator text ('57 59.10253N'); the fused fix must be the inverse-
+    variance weighted mean (by hand on the geodesic) with chi2 = s^2 / (s1^2 + s2^2)."""
+    path = real_dir / "VDRplayer" / "Hakefjord.txt"
+    if not path.is_file():
+        pytest.skip(f"{path} not found")
+    lines = path.read_text(encoding="ascii", errors="replace").splitlines()
+    rmc = next(x for x in lines if x.startswith("$GPRMC,092215.00,")).split(",")
+    ggas = [x.split(",") for x in lines if x.startswith(("$GPGGA,092214,", "$GPGGA,092216,"))]
+
+    def text(field, hemi, width):  # NMEA ddmm.mmmm -> '57 59.10253N'
+        return f"{field[:width]} {field[width:]}{hemi}"
+
+    def deg(field, hemi, width):
+        return parse_coordinate_deg(text(field, hemi, width), "lat" if width == 2 else "lon")
+
+    fine = (deg(rmc[3], rmc[4], 2), deg(rmc[5], rmc[6], 3))
+    assert fine == pytest.approx((57 + 59.10253 / 60, 11 + 44.34844 / 60), abs=1e-12)
+    # the Garmin GGA at 09:22:14 and :16, averaged to 09:22:15 (a straight track over 2 s)
+    garmin = tuple(np.mean([[deg(g[2], g[3], 2), deg(g[4], g[5], 3)] for g in ggas], axis=0))
+    s1, s2 = 3.0, 10.0
+    j = fix_json(run_cli, "--fix", f"{text(rmc[3], rmc[4], 2)},{text(rmc[5], rmc[6], 3)},{s1}",
+                 "--fix", f"{garmin[0]:.10f},{garmin[1]:.10f},{s2}")
+    inv = GEOD.Inverse(*fine, *garmin)
+    s = inv["s12"]
+    assert 1.0 < s < 20.0  # the receivers agree to metres (README: median 4 m)
+    expected = direct(*fine, inv["azi1"], s * s1**2 / (s1**2 + s2**2))[:2]
+    assert geo_distance_m(j["lat_deg"], j["lon_deg"], *expected) < 0.01
+    assert j["chi2"] == pytest.approx(s**2 / (s1**2 + s2**2), rel=1e-4)
+    assert j["redundancy"] == 2 and j["consistent"] is True
+    assert j["drms_m"] == pytest.approx(math.sqrt(2 * s1**2 * s2**2 / (s1**2 + s2**2)), rel=1e-9)

@@ -205,10 +205,15 @@ def _fields_error(where: str, exc_type: type, value: str, reason: str):
 class _Reader:
     """Field access with one-line errors naming the option (or table) and the value."""
 
-    def __init__(self, where: str, value: str, exc_type: type):
+    def __init__(self, where: str, value: str | None, exc_type: type):
         self.where, self.value, self.exc_type = where, value, exc_type
 
     def fail(self, reason: str):
+        if self.value is None:  # a file: name the table and key, not a re-joined value
+            for field, key in (("BRG_DEG", "bearing_deg"), ("DIST", "dist")):
+                reason = reason.replace(field, key)
+            reason = re.sub(r"\b[A-Z][A-Z0-9_]*[A-Z0-9]\b(?= )", lambda m: m.group(0).lower(), reason)
+            return self.exc_type(f"{self.where}: {reason}")
         return _fields_error(self.where, self.exc_type, self.value, reason)
 
     def coord(self, raw, axis: str, name: str) -> float:
@@ -354,7 +359,7 @@ def _rad(deg: float) -> float:
 def build_observation(p: Pending, label: str, piers: Sequence[ObsSpec]) -> ObsSpec:
     """The library observation (radians, metres) from parsed fields; one-line errors."""
     exc = FixUsageError if p.source.startswith("--") else FixFileError
-    value = ",".join(str(v) for v in p.fields.values()) if exc is FixUsageError else str(p.fields)
+    value = ",".join(str(v) for v in p.fields.values()) if exc is FixUsageError else None
     r = _Reader(p.source, value, exc)
     f = p.fields
     try:
@@ -438,7 +443,7 @@ def build_observation(p: Pending, label: str, piers: Sequence[ObsSpec]) -> ObsSp
             return ObsSpec(label, p.source, obs, "deg", sigma, not given, ((lat, lon),),
                            scale_m=r_m, circle=True)
     except GeometryError as e:  # the library refuses the observation itself (e.g. a pier misaligned)
-        raise GeometryError(f"{p.source} {value!r}: {e}") from None
+        raise GeometryError(f"{p.source} {value!r}: {e}" if value else f"{p.source}: {e}") from None
     raise AssertionError(p.kind)  # pragma: no cover - kinds come from OPTION_FORMS/TABLE_FORMS
 
 
@@ -808,7 +813,7 @@ def _prior(text: str | None, file_prior: dict | None, file: Path | None) -> tupl
         r = _Reader("--prior", text, FixUsageError)
         return r.coord(parts[0], "lat", "LAT"), r.coord(parts[1], "lon", "LON")
     if file_prior is not None:
-        r = _Reader(f"{file}: [prior]", str(file_prior), FixFileError)
+        r = _Reader(f"{file}: [prior]", None, FixFileError)
         return r.coord(file_prior["lat"], "lat", "lat"), r.coord(file_prior["lon"], "lon", "lon")
     return None
 
