@@ -855,9 +855,9 @@ def fix_cmd(
                                           "of the fixes, else of the marks; then other solutions are "
                                           "searched for and an ambiguity is an error)."),
     file: Path | None = typer.Option(None, "--file", "-f", metavar="OBS.TOML",
-                                     help="Observations as TOML tables ([[fix]], [[range]], [[bearing]], "
-                                          "[[line]], [[pier]], [[abeam]], [[nadir]], [prior]); combine "
-                                          "with the options."),
+                                     help="Observations as TOML table arrays named fix, range, bearing, "
+                                          "line, pier, abeam, nadir, and an optional prior table "
+                                          "(docs/fix.md); they combine with the options."),
     ls: bool = typer.Option(False, "--ls", help="Unweighted least squares (W1) instead of WLS (W4)."),
     as_json: bool = typer.Option(False, "--json", help="Print the dracc.fix/1 JSON object instead of tables."),
 ) -> None:
