@@ -4,7 +4,7 @@ Run:  python benchmarks/bench_ingest.py [--workdir DIR] [--baseline-lines N] [--
 
 1. Generates the simulated 24 h log with ``dracc simulate --hours 24 --seed 1 --form tag``
    (compass 10 Hz, log 1 Hz, three INS GGA+HDT+VTG 1 Hz, GNSS GGA+RMC+ZDA 1 Hz; about
-   2.3 M lines, 136 MB), unless DIR already holds it.
+   2.3 M lines, 143 MB), unless DIR already holds it.
 2. Throughput, side by side in this run:
    * pynmea2: every line's TAG block split off with ``str.rpartition('\\\\')`` (pynmea2
      has no TAG block support), ``pynmea2.parse(sentence, check=True)`` and every field
