@@ -676,7 +676,7 @@ def _worker_init() -> None:
         libc = ctypes.CDLL(None)
         libc.mallopt(-1, 1 << 30)  # M_TRIM_THRESHOLD: do not give freed heap back
         libc.mallopt(-3, 1 << 25)  # M_MMAP_THRESHOLD: arrays up to 32 MiB from the heap
-    except (OSError, AttributeError):  # pragma: no cover - not glibc
+    except (OSError, AttributeError, TypeError):  # pragma: no cover - not glibc
         pass
 
 
