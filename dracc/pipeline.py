@@ -635,6 +635,29 @@ def _fixes(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str], notes: 
     return None
 
 
+#: a silence of both heading and speed longer than this is left out of the DR grid
+DR_SILENCE_S = 3600.0
+
+
+def _dr_grid(th: np.ndarray, tv: np.ndarray, t_first: int, t_last: int, step_ns: int,
+             silence_ns: int) -> tuple[np.ndarray, list[tuple[int, int]]]:
+    """The DR time grid: every ``step_ns`` (aligned to multiples of it) from ``t_first`` to
+    ``t_last``, leaving out silences of both heading and speed longer than ``silence_ns``
+    (the track breaks over them anyway).  One stray record dated years away used to make
+    a grid of years (126 million points; fuzz).  Returns (grid, skipped (from, to) pairs)."""
+    u = np.union1d(th, tv)
+    u = u[(u >= t_first) & (u <= t_last)]
+    cut = np.flatnonzero(np.diff(u) > silence_ns)
+    starts = np.concatenate(([u[0]], u[cut + 1]))
+    ends = np.concatenate((u[cut], [u[-1]]))
+    parts = []
+    for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+        a0 = a - a % step_ns + (step_ns if a % step_ns else 0)
+        parts.append(np.arange(a0, b + 1, step_ns, dtype=np.int64))
+    skipped = list(zip(u[cut].tolist(), u[cut + 1].tolist(), strict=True))
+    return np.concatenate(parts), skipped
+
+
 def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str], notes: list[str]):
     """Run the DR on a DR_STEP_S grid from the compass and the log; score it against the reference."""
     heading = _heading_series(voyage, cfg, missing, notes)
@@ -652,8 +675,15 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
     if t_last - t_first < 2 * step_ns:
         missing.append("dead reckoning: heading and speed do not overlap in time")
         return None, fixes, None, None
-    t0 = t_first - t_first % step_ns + (step_ns if t_first % step_ns else 0)
-    grid = np.arange(t0, t_last + 1, step_ns, dtype=np.int64)
+    grid, skipped = _dr_grid(th, tv, t_first, t_last, step_ns, int(DR_SILENCE_S * NS_PER_S))
+    if grid.size < 3:
+        missing.append("dead reckoning: heading and speed do not overlap in time")
+        return None, fixes, None, None
+    for a, b in skipped:
+        notes.append(f"heading and speed both silent for {(b - a) / NS_PER_S / 3600:,.1f} h "
+                     f"({pd.Timestamp(a, tz='UTC'):%Y-%m-%d %H:%M:%S} to "
+                     f"{pd.Timestamp(b, tz='UTC'):%Y-%m-%d %H:%M:%S} UTC): the dead-reckoning "
+                     "grid skips it (the track breaks there)")
     # a held sample older than this is missing at the grid time; dead_reckon bridges up to max_gap_s
     age = int(max(2.0 * DR_STEP_S, 2.0 * np.median(np.diff(tv)) / 1e9 if tv.size > 1 else 0) * NS_PER_S)
     age_h = int(max(2.0 * DR_STEP_S, 2.0 * np.median(np.diff(th)) / 1e9 if th.size > 1 else 0) * NS_PER_S)
