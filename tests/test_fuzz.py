@@ -613,3 +613,27 @@ def test_regression_tag_source_with_nul_or_300k_characters(tmp_path):
     assert res.rejects.counts == Counter({"bad_tag": 3})
     keys = {str(k) for f in res.frames.values() if len(f) for k in f["source"].unique()}
     assert keys <= {"GYRO", "MAG", "LOG", "INS1", "INS2", "INS3", "GNSS"}
+
+
+def test_regression_stray_records_years_away_do_not_make_a_dr_grid_of_years(tmp_path):
+    """Regression (whole-pipeline fuzz: MemoryError, 126 million grid points): one heading
+    and one speed record dated four years early (a plausible date, so the time base keeps
+    them) made the 1 s dead-reckoning grid span four years.  Silences of both heading and
+    speed longer than an hour are now left out of the grid, with a note; the track is the
+    same elsewhere."""
+    from dracc.config import Config
+    from dracc.pipeline import analyse
+
+    lines = (SAMPLES / "voyage_prefix.nmea").read_bytes().split(b"\r\n")[:3000]
+    hdt = next(ln for ln in lines if b"HEHDT" in ln)
+    vhw = next(ln for ln in lines if b"VWVHW" in ln)
+    stray = [hdt.replace(b"2026-", b"2022-", 1), vhw.replace(b"2026-", b"2022-", 1)]
+    a = analyse([_write(tmp_path, stray + lines)], Config())
+    assert a.dead_reckoning is not None
+    assert a.dead_reckoning.track.time_ns.size < 4000  # ~50 min at 1 s, not 4 years
+    assert any("both silent for 35,0" in n and "2022-03-01" in n for n in a.notes)
+    clean = analyse([_write(tmp_path, lines)], Config()).dead_reckoning
+    t = clean.epochs.time_ns
+    sel = np.isin(a.dead_reckoning.epochs.time_ns, t)
+    assert sel.sum() == t.size
+    assert np.array_equal(a.dead_reckoning.epochs.lat_rad[sel], clean.epochs.lat_rad, equal_nan=True)
