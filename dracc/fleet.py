@@ -25,7 +25,6 @@ from __future__ import annotations
 import glob
 import hashlib
 import json
-import math
 import os
 import unicodedata
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -452,47 +451,60 @@ def _typed(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def _apply_rule(df: pd.DataFrame, seeds: Mapping[tuple[str, str], float]) -> None:
-    """The monitoring rule per vessel, unit and channel, log after log in time order."""
-    ok = (df["status"] == "ok") & df["unit"].notna()
-    for (_vessel, unit, channel), idx in df[ok].groupby(["vessel", "unit", "channel"]).groups.items():
-        sub = df.loc[idx]
+    """The monitoring rule per vessel, unit and channel, log after log in time order
+    (:func:`dracc.audit.apriori_chain` on each series; one assignment per column)."""
+    ok_pos = np.flatnonzero(((df["status"] == "ok") & df["unit"].notna()).to_numpy(dtype=bool))
+    before = np.full(len(df), np.nan)
+    after = np.full(len(df), np.nan)
+    verdict = np.full(len(df), None, dtype=object)
+    logs = df["log"].to_numpy(dtype=object)
+    m_y = df["m_y"].to_numpy(dtype="float64")
+    keys = df.iloc[ok_pos][["vessel", "unit", "channel"]]
+    for (_vessel, unit, channel), pos in keys.groupby(["vessel", "unit", "channel"], sort=False).indices.items():
+        rows = ok_pos[pos]  # in table order: time order within the vessel
         steps = apriori_chain(seeds.get((unit, channel)),
-                              [(str(lg), None if pd.isna(m) else float(m))
-                               for lg, m in zip(sub["log"], sub["m_y"], strict=True)])
-        df.loc[idx, "apriori_before"] = [np.nan if s.before is None else s.before for s in steps]
-        df.loc[idx, "apriori_after"] = [np.nan if s.after is None else s.after for s in steps]
-        df.loc[idx, "apriori_verdict"] = [s.verdict for s in steps]
+                              [(str(logs[r]), None if np.isnan(m_y[r]) else float(m_y[r])) for r in rows])
+        before[rows] = [np.nan if st.before is None else st.before for st in steps]
+        after[rows] = [np.nan if st.after is None else st.after for st in steps]
+        verdict[rows] = [st.verdict for st in steps]
+    df["apriori_before"] = before
+    df["apriori_after"] = after
+    df["apriori_verdict"] = pd.array(verdict, dtype="string")
 
 
 def fleet_trends(table: pd.DataFrame) -> pd.DataFrame:
     """Per vessel, day, unit and channel: pooled RMS m_y (weights n), the a priori at the
-    day's end, and the DR containment pooled over scored epochs."""
+    day's end, and the DR containment of the vessel's logs that day pooled over their
+    scored epochs (weights ``dr_n_scored``)."""
     ok = table[(table["status"] == "ok") & table["unit"].notna() & table["day"].notna()]
-    rows = []
-    for (vessel, day, unit, channel), g in ok.groupby(["vessel", "day", "unit", "channel"], sort=True):
-        n = g["n"].astype("float64").to_numpy()
-        m_y = g["m_y"].to_numpy(dtype="float64")
-        good = np.isfinite(m_y) & (n > 0)
-        pooled = math.sqrt(float(np.sum(n[good] * m_y[good] ** 2) / np.sum(n[good]))) if good.any() \
-            else math.nan  # pooled RMS, weights n_i
-        dr = g.drop_duplicates("log")
-        w = dr["dr_n_scored"].astype("float64").to_numpy()
-        c = dr["dr_containment_2m"].to_numpy(dtype="float64")
-        okc = np.isfinite(c) & np.isfinite(w) & (w > 0)
-        contain = float(np.sum(w[okc] * c[okc]) / np.sum(w[okc])) if okc.any() else math.nan
-        rows.append({"vessel": vessel, "day": day, "unit": unit, "channel": channel,
-                     "measure": g["measure"].iloc[0], "logs": int(g["log"].nunique()),
-                     "n": int(np.sum(n[good])), "m_y": pooled,
-                     "apriori_after": float(g["apriori_after"].iloc[-1]),
-                     "dr_containment_2m": contain})
-    df = pd.DataFrame(rows, columns=list(TREND_COLUMNS))
-    for c in ("vessel", "day", "unit", "channel", "measure"):
-        df[c] = df[c].astype("string")
-    for c in ("logs", "n"):
-        df[c] = df[c].astype("Int64")
-    for c in ("m_y", "apriori_after", "dr_containment_2m"):
-        df[c] = df[c].astype("float64")
-    return df
+    key = ["vessel", "day", "unit", "channel"]
+    n = ok["n"].astype("float64")
+    m_y = ok["m_y"].astype("float64")
+    good = m_y.notna() & (n > 0)
+    parts = ok[key + ["measure", "log", "apriori_after"]].assign(
+        _n=n.where(good, 0.0), _nm2=(n * m_y**2).where(good, 0.0))
+    agg = parts.groupby(key, sort=True).agg(
+        measure=("measure", "first"), logs=("log", "nunique"), n=("_n", "sum"), nm2=("_nm2", "sum"),
+        apriori_after=("apriori_after", "last")).reset_index()
+    with np.errstate(invalid="ignore", divide="ignore"):
+        agg["m_y"] = np.where(agg["n"] > 0, np.sqrt(agg["nm2"] / agg["n"]), np.nan)  # pooled RMS
+    per_log = ok.drop_duplicates(["vessel", "log", "sha256"])
+    w = per_log["dr_n_scored"].astype("float64")
+    c = per_log["dr_containment_2m"].astype("float64")
+    okc = c.notna() & w.notna() & (w > 0)
+    dr = per_log[["vessel", "day"]].assign(_w=w.where(okc, 0.0), _wc=(w * c).where(okc, 0.0))
+    dr = dr.groupby(["vessel", "day"], sort=True).agg(w=("_w", "sum"), wc=("_wc", "sum")).reset_index()
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dr["dr_containment_2m"] = np.where(dr["w"] > 0, dr["wc"] / dr["w"], np.nan)
+    df = agg.merge(dr[["vessel", "day", "dr_containment_2m"]], on=["vessel", "day"], how="left")
+    df = df[list(TREND_COLUMNS)].copy()
+    for col in ("vessel", "day", "unit", "channel", "measure"):
+        df[col] = df[col].astype("string")
+    for col in ("logs", "n"):
+        df[col] = df[col].round().astype("Int64")
+    for col in ("m_y", "apriori_after", "dr_containment_2m"):
+        df[col] = df[col].astype("float64")
+    return df.reset_index(drop=True)
 
 
 def count_logs(table: pd.DataFrame) -> int:

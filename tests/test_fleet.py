@@ -143,7 +143,8 @@ def test_unreadable_cache_entry_is_redone(tmp_path):
 def test_trends_pool_rms_per_day():
     from dracc.fleet import fleet_trends
 
-    t = pd.DataFrame({"vessel": ["V"] * 2, "log": ["a", "b"], "status": ["ok"] * 2, "day": ["d"] * 2,
+    t = pd.DataFrame({"vessel": ["V"] * 2, "log": ["a", "b"], "sha256": ["1", "2"],
+                      "status": ["ok"] * 2, "day": ["d"] * 2,
                       "unit": ["ins1"] * 2, "channel": ["lat"] * 2, "measure": ["m"] * 2,
                       "n": [10, 30], "m_y": [100.0, 200.0], "apriori_after": [100.0, 200.0],
                       "dr_containment_2m": [1.0, 0.5], "dr_n_scored": [10, 30]})
@@ -214,3 +215,32 @@ def test_cache_of_another_dracc_version_is_redone(tmp_path):
     doc["dracc_version"] = "0.0.1"
     entry.write_text(json.dumps(doc))
     assert run_fleet(tasks, CFG, out, workers=1, analyser=fake_analyser).analysed == 1
+
+
+def test_table_rule_equals_the_reference_chain():
+    # the fleet table applies dracc.audit.apriori_chain per vessel, unit and channel
+    import numpy as np
+
+    from dracc.audit import apriori_chain
+    from dracc.fleet import LogTask, fleet_table
+
+    rng = np.random.default_rng(3)
+    tasks, summaries = [], {}
+    for i in range(12):
+        vessel = "AB"[i % 2]
+        night = f"2026-11-{10 + i // 2:02d}"
+        lat = float(rng.lognormal(5, 0.4)) if i % 5 else float("nan")
+        doc = make_doc(night, m_y={"ins1": {"lat": lat, "lon": float(rng.lognormal(5, 0.4))}})
+        t = LogTask(vessel, f"/x/{vessel}/{night}.nmea", f"{night}.nmea", f"{i:064d}")
+        tasks.append(t)
+        summaries[t.path] = summarise(doc)
+    seeds = {("ins1", "lat"): 150.0}
+    t = fleet_table(tasks, summaries, {}, seeds)
+    for (_vessel, unit, channel), g in t.groupby(["vessel", "unit", "channel"]):
+        steps = apriori_chain(seeds.get((unit, channel)),
+                              [(lg, None if pd.isna(m) else m) for lg, m in zip(g["log"], g["m_y"], strict=True)])
+        assert g["apriori_verdict"].tolist() == [s.verdict for s in steps]
+        np.testing.assert_array_equal(g["apriori_after"].to_numpy(),
+                                      [np.nan if s.after is None else s.after for s in steps])
+        assert g["period_start_utc"].is_monotonic_increasing
+    assert "no data" in set(t["apriori_verdict"]) and "raised" in set(t["apriori_verdict"])
