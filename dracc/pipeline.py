@@ -464,12 +464,24 @@ def _ref_gap_s(t_ns: np.ndarray) -> float:
 
 
 def _dedupe_sorted(t_ns: np.ndarray, *cols: np.ndarray):
-    """Sort by time and keep the last sample of equal times (strictly increasing times)."""
+    """Sort by time and keep one sample per time (strictly increasing times).
+
+    Each column takes the last *finite* value among the samples of one time, so two
+    sentences of one instant complement each other whatever order the container put them
+    in (a log's VHW and VBW: only VBW carries the transverse speed)."""
     order = np.argsort(t_ns, kind="stable")
     t = t_ns[order]
-    keep = np.ones(t.size, bool)
-    keep[:-1] = t[1:] != t[:-1]
-    return (t[keep],) + tuple(c[order][keep] for c in cols)
+    starts = np.flatnonzero(np.r_[True, t[1:] != t[:-1]]) if t.size else np.zeros(0, np.int64)
+    position = np.arange(t.size)
+    out = [t[starts]]
+    for c in cols:
+        c = c[order]
+        if starts.size == 0:
+            out.append(c)
+            continue
+        last_finite = np.maximum.reduceat(np.where(np.isfinite(c), position, -1), starts)
+        out.append(np.where(last_finite >= 0, c[np.maximum(last_finite, 0)], np.nan))
+    return tuple(out)
 
 
 # ------------------------------------------------------------------ dead reckoning
