@@ -44,7 +44,7 @@ from scipy import stats
 
 from .config import DeadReckoningConfig, ErrorSource
 from .errors import ConfigError, InsufficientDataError
-from .geodesy import k_lambda, k_phi, offset_ne_m, wrap_2pi, wrap_pi
+from .geodesy import interp_position, k_lambda, k_phi, offset_ne_m, wrap_2pi, wrap_pi
 from .units import DEG_RAD, KN_MPS
 
 __all__ = [
@@ -1069,28 +1069,6 @@ class Consistency:
     verdict: str  #: 'consistent', 'inconsistent (circle too small)', 'conservative', 'undetermined'
 
 
-def _interp_reference(ref_t, ref_lat, ref_lon, t_query, max_ref_gap_s):
-    rt = np.asarray(ref_t, float)
-    rla = np.asarray(ref_lat, float)
-    rlo = np.asarray(ref_lon, float)
-    ok = np.isfinite(rt) & np.isfinite(rla) & np.isfinite(rlo)
-    rt, rla, rlo = rt[ok], rla[ok], rlo[ok]
-    order = np.argsort(rt, kind="stable")
-    rt, rla, rlo = rt[order], rla[order], np.unwrap(rlo[order])
-    out_lat = np.full(t_query.shape, np.nan)
-    out_lon = np.full(t_query.shape, np.nan)
-    if rt.size == 0:
-        return out_lat, out_lon
-    hi = np.clip(np.searchsorted(rt, t_query, side="left"), 0, rt.size - 1)
-    lo = np.clip(hi - 1, 0, rt.size - 1)
-    exact = rt[hi] == t_query
-    bracket = (rt[lo] <= t_query) & (rt[hi] >= t_query) & (rt[hi] - rt[lo] <= max_ref_gap_s)
-    use = exact | bracket
-    out_lat[use] = np.interp(t_query[use], rt, rla)
-    out_lon[use] = wrap_pi(np.interp(t_query[use], rt, rlo))
-    return out_lat, out_lon
-
-
 def dr_consistency(
     track: DRTrack,
     ref_time_s,
@@ -1122,7 +1100,8 @@ def dr_consistency(
     ei = np.asarray(track.epoch_index, dtype=np.int64)
     ei = ei[track.since_fix_s[ei] > 0]
     t_e = track.time_s[ei]
-    rlat, rlon = _interp_reference(ref_time_s, ref_lat_rad, ref_lon_rad, t_e, max_ref_gap_s)
+    rlat, rlon = interp_position(np.asarray(ref_time_s, float), ref_lat_rad, ref_lon_rad, t_e,
+                                 max_ref_gap_s)
     has = np.isfinite(rlat)
     ei, t_e, rlat, rlon = ei[has], t_e[has], rlat[has], rlon[has]
     dn, de = offset_ne_m(track.lat_rad[ei], track.lon_rad[ei], rlat, rlon)

@@ -104,3 +104,45 @@ def distance_m(lat1_rad, lon1_rad, lat2_rad, lon2_rad):
     """Distance in metres between nearby points (local-tangent approximation, see offset_ne_m)."""
     n, e = offset_ne_m(lat2_rad, lon2_rad, lat1_rad, lon1_rad)
     return np.hypot(n, e)
+
+
+def interp_position(t, lat_rad, lon_rad, t_query, max_gap):
+    """Position at ``t_query`` by linear interpolation in time, NaN outside and across gaps.
+
+    ``t`` (n,) and ``t_query`` (k,) share one time unit: float seconds, or int64
+    nanoseconds (then shifted to ``t[0]`` before the float interpolation, exact for spans
+    under 2**53 ns, 104 days); ``max_gap`` is in that unit too.  Samples with a non-finite
+    time or coordinate are left out and the rest sorted by time (stable).  A query time
+    gets a position when it equals a sample time, or lies between two neighbouring samples
+    at most ``max_gap`` apart; NaN otherwise (before the first sample, after the last,
+    inside a longer gap).  Latitude is linear in time; longitude is unwrapped
+    (``np.unwrap``) before the interpolation and wrapped back into (-pi, pi], so a leg
+    across the antimeridian interpolates the short way.  Returns ``(lat_rad, lon_rad)``,
+    each shaped like ``t_query``.
+    """
+    t = np.asarray(t)
+    if not np.issubdtype(t.dtype, np.integer):
+        t = t.astype(float)
+    t_query = np.asarray(t_query)
+    lat = np.asarray(lat_rad, float)
+    lon = np.asarray(lon_rad, float)
+    ok = np.isfinite(t) & np.isfinite(lat) & np.isfinite(lon)
+    t, lat, lon = t[ok], lat[ok], lon[ok]
+    order = np.argsort(t, kind="stable")
+    t, lat, lon = t[order], lat[order], np.unwrap(lon[order])
+    out_lat = np.full(t_query.shape, np.nan)
+    out_lon = np.full(t_query.shape, np.nan)
+    if t.size == 0:
+        return out_lat, out_lon
+    hi = np.clip(np.searchsorted(t, t_query, side="left"), 0, t.size - 1)
+    lo = np.clip(hi - 1, 0, t.size - 1)
+    exact = t[hi] == t_query
+    bracket = (t[lo] <= t_query) & (t[hi] >= t_query) & (t[hi] - t[lo] <= max_gap)
+    use = exact | bracket
+    if np.issubdtype(t.dtype, np.integer):
+        x, xq = (t - t[0]).astype(float), (t_query[use] - t[0]).astype(float)
+    else:
+        x, xq = t, t_query[use]
+    out_lat[use] = np.interp(xq, x, lat)
+    out_lon[use] = wrap_pi(np.interp(xq, x, lon))
+    return out_lat, out_lon

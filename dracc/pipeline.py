@@ -43,7 +43,7 @@ from .deviation.analysis import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS
 from .errors import InsufficientDataError
 from .faults import SensorFault, detect_faults, exclude_faults
 from .fusion import PositionFix
-from .geodesy import circmean, offset_ne_m, wrap_2pi, wrap_pi
+from .geodesy import circmean, interp_position, offset_ne_m, wrap_2pi, wrap_pi
 from .ingest.frames import INS_ROLES, Voyage
 from .units import DEG_RAD, KN_MPS, NS_PER_S
 
@@ -436,25 +436,6 @@ def _hold(t_src_ns: np.ndarray, values: np.ndarray, t_grid_ns: np.ndarray, max_a
     return out
 
 
-def _interp_position(t_ns: np.ndarray, lat: np.ndarray, lon: np.ndarray, t_q_ns: np.ndarray,
-                     max_gap_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Linear interpolation of a position series at ``t_q_ns``, NaN outside or across gaps."""
-    out_lat = np.full(t_q_ns.shape, np.nan)
-    out_lon = np.full(t_q_ns.shape, np.nan)
-    if t_ns.size == 0:
-        return out_lat, out_lon
-    hi = np.clip(np.searchsorted(t_ns, t_q_ns, side="left"), 0, t_ns.size - 1)
-    lo = np.clip(hi - 1, 0, t_ns.size - 1)
-    exact = t_ns[hi] == t_q_ns
-    bracket = (t_ns[lo] <= t_q_ns) & (t_ns[hi] >= t_q_ns) & (t_ns[hi] - t_ns[lo] <= max_gap_s * 1e9)
-    use = exact | bracket
-    x = (t_ns - t_ns[0]).astype(float)
-    xq = (t_q_ns[use] - t_ns[0]).astype(float)
-    out_lat[use] = np.interp(xq, x, lat)
-    out_lon[use] = wrap_pi(np.interp(xq, x, np.unwrap(lon)))
-    return out_lat, out_lon
-
-
 def _ref_gap_s(t_ns: np.ndarray) -> float:
     """How far apart two reference positions may be to interpolate between them:
     REF_MAX_GAP_S, or 2.5 typical intervals for a slowly logged reference."""
@@ -620,7 +601,7 @@ def _fixes(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str], notes: 
         t = series[0][0]
         lats, lons = [], []
         for st, sla, slo in series:
-            a, b = _interp_position(st, sla, slo, t, REF_MAX_GAP_S)
+            a, b = interp_position(st, sla, slo, t, REF_MAX_GAP_S * 1e9)
             lats.append(a)
             lons.append(b)
         lat = np.nanmean(np.vstack(lats), axis=0)
@@ -716,7 +697,7 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
         return None, fixes, None, None
     cons = dr_consistency(tr, fix_s, flat, flon, max_ref_gap_s=ref_gap_s)
     # the actual error at every sample (for the growth plot and the tables)
-    rlat, rlon = _interp_position(ft, flat, flon, grid, ref_gap_s)
+    rlat, rlon = interp_position(ft, flat, flon, grid, ref_gap_s * 1e9)
     dn, de = offset_ne_m(tr.lat_rad, tr.lon_rad, rlat, rlon)
     ref_err = np.hypot(dn, de)
     on = tr.leg >= 0
