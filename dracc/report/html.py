@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import base64
 import html
-import math
 from pathlib import Path
 
 from .. import atomic
-from ..pipeline import CHANNEL_UNITS, CHANNELS, Analysis, Estimate
+from ..pipeline import CHANNELS, Analysis, Estimate
 from . import fmt, fmt_duration, fmt_pct, iso_utc, short_utc
+from .rows import EXCEEDS, WITHIN, channel_rows, unit_rows
 
 CSP = "default-src 'none'; img-src data:; style-src 'unsafe-inline'; base-uri 'none'; form-action 'none'"
 
@@ -90,44 +90,25 @@ def _summary(a: Analysis) -> str:
     return f'<table class="kv">{kv}</table><h3>Sources</h3>{src}'
 
 
-def _sqrt_bound(var: float, digits: int) -> str:
-    """A variance bound shown as a sigma bound; '<0' where the bound itself is negative."""
-    if var is None or not math.isfinite(var):
-        return "-"
-    return "&lt;0" if var < 0 else fmt(math.sqrt(var), digits)
-
-
 def _units(a: Analysis) -> str:
     d = a.deviation
     if d is None:
         return '<p class="missing">INS deviation statistics not computed (see Missing).</p>'
     p = f"{100 * d.probability:g} %"
     rows = []
-    for name in d.units:
-        u = d.whole.units.get(name)
-        if u is None:
-            continue
-        for ch in CHANNELS:
-            c = u.channels.get(ch)
-            if c is None:
-                continue
-            unit = CHANNEL_UNITS[ch]
-            digits = 3 if unit == "deg" else 1
-            if c.exceeds_apriori is None:
-                verdict = "no a priori"
-            elif c.exceeds_apriori:
-                verdict = f'<span class="bad">exceeds; new {fmt(c.new_apriori, digits)}</span>'
-            else:
+    for _, urows in unit_rows(d):
+        for r in urows or ():
+            if r.verdict == EXCEEDS:
+                verdict = f'<span class="bad">exceeds; new {r.new_apriori}</span>'
+            elif r.verdict == WITHIN:
                 verdict = '<span class="ok">within</span>'
-            h = u.hat.get(ch)
-            hat = "-" if h is None else ('<span class="bad">negative variance</span>' if h.negative
-                                         else f"{fmt(h.sigma, digits)} [{_sqrt_bound(h.var_lower, digits)}, "
-                                              f"{_sqrt_bound(h.var_upper, digits)}]")
-            r = u.reference.get(ch)
-            rows.append([_e(name), f"{ch} [{unit}]", str(c.n), fmt(c.m_u, digits), fmt(c.m_y, digits),
-                         fmt(c.kurtosis, 2), fmt(c.limit, digits), fmt(c.apriori, digits), verdict,
-                         hat, "-" if r is None else fmt(r.rmse, digits),
-                         "-" if r is None else f"{fmt(r.k_star, 2)} {_e(r.mark)}"])
+            else:
+                verdict = r.verdict
+            hat = "-" if not r.has_hat else ('<span class="bad">negative variance</span>'
+                                             if r.hat_negative else
+                                             f"{r.hat_sigma} [{_e(r.hat_lower)}, {_e(r.hat_upper)}]")
+            rows.append([_e(r.unit), r.channel_text, r.n, r.m_u, r.m_y, r.kurtosis, r.limit,
+                         r.apriori, verdict, hat, r.ref_rms, _e(r.k_star)])
     fac = ", ".join(f"{ch} {fmt(d.factors[ch], 3)}" for ch in CHANNELS)
     intro = (f"<p>{len(d.units)} units sampled every {fmt_duration(d.interval_s)} at "
              f"{len(d.time_ns)} instants; m<sub>y</sub> = k·m<sub>u</sub> with k: {fac}; kurtosis is "
@@ -140,15 +121,9 @@ def _units(a: Analysis) -> str:
         wrows = []
         for w in d.windows:
             for name, u in w.units.items():
-                for ch in CHANNELS:
-                    c = u.channels.get(ch)
-                    if c is None:
-                        continue
-                    digits = 3 if CHANNEL_UNITS[ch] == "deg" else 1
-                    r = u.reference.get(ch)
-                    wrows.append([_e(w.label), _e(name), ch, str(c.n), fmt(c.m_u, digits),
-                                  fmt(c.m_y, digits), fmt(c.kurtosis, 2),
-                                  "-" if r is None else f"{fmt(r.k_star, 2)} {_e(r.mark)}"])
+                for r in channel_rows(name, u):
+                    wrows.append([_e(w.label), _e(r.unit), r.channel, r.n, r.m_u, r.m_y,
+                                  r.kurtosis, _e(r.k_star)])
         windows = ("<h3>Per window</h3>" + _table(["window", "unit", "channel", "n", "m_u", "m_y",
                                                    "excess kurtosis", "k*"], wrows, left=3))
     return intro + table + notes + windows

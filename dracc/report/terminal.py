@@ -13,10 +13,9 @@ from rich.console import Console, Group
 from rich.table import Table
 from rich.text import Text
 
-from ..pipeline import CHANNEL_UNITS, CHANNELS, Analysis, DeviationResult, Estimate
+from ..pipeline import CHANNELS, Analysis, DeviationResult, Estimate
 from . import fmt, fmt_duration, fmt_pct, short_utc
-
-_CHANNEL_LABEL = {"lat": "lat", "lon": "lon", "course": "course"}
+from .rows import EXCEEDS, unit_rows
 
 
 def _est(e: Estimate | None, unit: str, digits: int = 2) -> str:
@@ -51,36 +50,23 @@ def _unit_table(d: DeviationResult) -> Table:
                 "verdict", "hat σ", "ref RMS", "k*"):
         t.add_column(col, justify="left" if col in ("unit", "channel", "verdict") else "right",
                      no_wrap=True)
-    for name in d.units:
-        u = d.whole.units.get(name)
-        if u is None:
+    for name, rows in unit_rows(d):
+        if rows is None:
             t.add_row(name, "-", "0", *["-"] * 9)
             continue
-        for ch in CHANNELS:
-            c = u.channels.get(ch)
-            if c is None:
-                continue
-            unit = CHANNEL_UNITS[ch]
-            digits = 3 if unit == "deg" else 1
-            if c.exceeds_apriori is None:
-                verdict = "no a priori"
-            elif c.exceeds_apriori:
-                verdict = f"exceeds→{fmt(c.new_apriori, digits)}"
+        for r in rows:
+            if r.verdict == EXCEEDS:
+                verdict = f"exceeds→{r.new_apriori}"
             else:
-                verdict = "within"
-            h = u.hat.get(ch)
-            if h is None:
+                verdict = r.verdict
+            if not r.has_hat:
                 hat = "-"
-            elif h.negative:
+            elif r.hat_negative:
                 hat = "neg. var."
             else:
-                hat = fmt(h.sigma, digits)
-            r = u.reference.get(ch)
-            t.add_row(name, f"{_CHANNEL_LABEL[ch]} [{unit}]", str(c.n), fmt(c.m_u, digits),
-                      fmt(c.m_y, digits), fmt(c.kurtosis, 2), fmt(c.limit, digits),
-                      fmt(c.apriori, digits), verdict, hat,
-                      "-" if r is None else fmt(r.rmse, digits),
-                      "-" if r is None else f"{fmt(r.k_star, 2)} {r.mark}")
+                hat = r.hat_sigma
+            t.add_row(name, r.channel_text, r.n, r.m_u, r.m_y, r.kurtosis, r.limit, r.apriori,
+                      verdict, hat, r.ref_rms, r.k_star)
     return t
 
 

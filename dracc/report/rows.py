@@ -1,0 +1,102 @@
+"""The per-unit statistics table as plain row values, one model for every renderer.
+
+The terminal summary and the HTML report print the same figures of
+:class:`~dracc.deviation.UnitStats`: the same digits per channel (3 decimals in
+degrees, 1 in metres), the same verdict against the a priori RMS and the same
+three-cornered-hat figures.  They take them from here and only style them, so the two
+reports cannot drift apart.  Every text is plain (no markup, not escaped): the HTML
+renderer escapes what it prints.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ..deviation import UnitStats
+from ..pipeline import CHANNEL_UNITS, CHANNELS, DeviationResult
+from . import fmt
+
+#: the verdict against the a priori RMS
+NO_APRIORI, EXCEEDS, WITHIN = "no a priori", "exceeds", "within"
+
+
+def channel_digits(channel: str) -> int:
+    """Decimals of a channel's figures: 3 in degrees (course), 1 in metres (lat, lon)."""
+    return 3 if CHANNEL_UNITS[channel] == "deg" else 1
+
+
+def sigma_bound(var: float | None, digits: int) -> str:
+    """A variance bound shown as a sigma bound: '-' where none, '<0' where negative."""
+    if var is None or not math.isfinite(var):
+        return "-"
+    return "<0" if var < 0 else fmt(math.sqrt(var), digits)
+
+
+@dataclass(frozen=True)
+class UnitRow:
+    """One unit and channel, every figure already formatted ('-' where there is none)."""
+
+    unit: str  #: the unit's name (from the configuration or the log: escape it in HTML)
+    channel: str  #: 'lat', 'lon' or 'course'
+    channel_unit: str  #: 'm' or 'deg'
+    n: str
+    m_u: str
+    m_y: str
+    kurtosis: str  #: excess kurtosis, 2 decimals
+    limit: str
+    apriori: str
+    verdict: str  #: NO_APRIORI, EXCEEDS or WITHIN
+    new_apriori: str  #: the suggested a priori RMS where the verdict is EXCEEDS
+    has_hat: bool  #: a three-cornered-hat figure exists for this channel
+    hat_negative: bool  #: the hat variance is negative (reported, never clamped)
+    hat_sigma: str
+    hat_lower: str  #: bootstrap bounds as sigmas (see :func:`sigma_bound`)
+    hat_upper: str
+    ref_rms: str  #: RMS error against the reference, '-' without one
+    k_star: str  #: k* and its mark, e.g. '0.53 +'; '-' without a reference
+
+    @property
+    def channel_text(self) -> str:
+        """'lat [m]', 'course [deg]'."""
+        return f"{self.channel} [{self.channel_unit}]"
+
+
+def channel_rows(name: str, u: UnitStats) -> list[UnitRow]:
+    """The rows of one unit's statistics (one window), in CHANNELS order."""
+    rows = []
+    for ch in CHANNELS:
+        c = u.channels.get(ch)
+        if c is None:
+            continue
+        digits = channel_digits(ch)
+        if c.exceeds_apriori is None:
+            verdict = NO_APRIORI
+        elif c.exceeds_apriori:
+            verdict = EXCEEDS
+        else:
+            verdict = WITHIN
+        h = u.hat.get(ch)
+        r = u.reference.get(ch)
+        rows.append(UnitRow(
+            unit=name, channel=ch, channel_unit=CHANNEL_UNITS[ch], n=str(c.n),
+            m_u=fmt(c.m_u, digits), m_y=fmt(c.m_y, digits), kurtosis=fmt(c.kurtosis, 2),
+            limit=fmt(c.limit, digits), apriori=fmt(c.apriori, digits), verdict=verdict,
+            new_apriori=fmt(c.new_apriori, digits) if verdict == EXCEEDS else "-",
+            has_hat=h is not None, hat_negative=h is not None and bool(h.negative),
+            hat_sigma="-" if h is None else fmt(h.sigma, digits),
+            hat_lower="-" if h is None else sigma_bound(h.var_lower, digits),
+            hat_upper="-" if h is None else sigma_bound(h.var_upper, digits),
+            ref_rms="-" if r is None else fmt(r.rmse, digits),
+            k_star="-" if r is None else f"{fmt(r.k_star, 2)} {r.mark}"))
+    return rows
+
+
+def unit_rows(d: DeviationResult) -> list[tuple[str, list[UnitRow] | None]]:
+    """The whole-log table: each unit of ``d.units`` in order with its rows, or None for a
+    unit without statistics."""
+    out: list[tuple[str, list[UnitRow] | None]] = []
+    for name in d.units:
+        u = d.whole.units.get(name)
+        out.append((name, None if u is None else channel_rows(name, u)))
+    return out
