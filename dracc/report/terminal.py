@@ -70,6 +70,58 @@ def _unit_table(d: DeviationResult) -> Table:
     return t
 
 
+def _section(title: str, body: list | None) -> list:
+    """A blank line, the heading, then the body, or 'not computed' where there is none."""
+    return [Text(""), _heading(title), *(body if body is not None else
+                                         [Text("not computed (see Missing)")])]
+
+
+def _bullets(title: str, items) -> list:
+    """A blank line, the heading and one '- item' line per item; nothing without items."""
+    if not items:
+        return []
+    return [Text(""), _heading(title), *(Text(f"- {item}") for item in items)]
+
+
+def _notes(notes) -> list:
+    return [Text(f"note: {note}") for note in notes]
+
+
+def _dr_body(dr) -> list:
+    body = [Text(f"heading  {dr.heading_source}; speed {dr.speed_source}; "
+                 f"restart {dr.reset}; {len(dr.legs)} leg{'s' if len(dr.legs) != 1 else ''}")]
+    if not dr.n_scored:
+        body.append(Text("no reference: consistency not scored"))
+    else:
+        r2m = dr.epochs.radius_2m_m
+        max2m = fmt(float(np.nanmax(r2m)) if len(r2m) else None, 0)
+        body.append(Text(f"2M       reference ({dr.reference_role}) inside 2M at "
+                         f"{fmt_pct(dr.containment_2m)} of {dr.n_scored} epochs after a fix "
+                         f"(model: {fmt_pct(dr.expected_inside)}); RMS error/M "
+                         f"{fmt(dr.error_over_m_rms, 2)}; largest 2M {max2m} m"))
+    body.append(Text(f"verdict  {dr.verdict}"))
+    return body + _notes(dr.notes)
+
+
+def _deviation_body(d: DeviationResult) -> list:
+    fac = ", ".join(f"{ch} {fmt(d.factors[ch], 3)}" for ch in CHANNELS)
+    return [Text(f"{len(d.units)} units, every {fmt_duration(d.interval_s)}, "
+                 f"{len(d.time_ns)} instants; k: {fac}; excess kurtosis (normal 0)"),
+            _unit_table(d)] + _notes(d.messages)
+
+
+def _calibration_body(c) -> list:
+    scale = c.log_scale and Estimate(100 * c.log_scale.value, 100 * c.log_scale.sigma)
+    return [Text(f"against {c.reference_role} ({c.n} segments of {c.segment_s:g} s): compass error "
+                 f"{_est(c.compass_error_deg, '°')}; log scale {_est(scale, '%')}; "
+                 f"log offset {_est(c.log_offset_kn, 'kn')}")] + _notes(c.notes)
+
+
+def _current_body(cur) -> list:
+    return [Text(f"set {_est(cur.set_deg, '°', 0)} (towards), drift {_est(cur.drift_kn, 'kn')}"
+                 f" ({cur.n_updates} fix updates)")] + _notes(cur.notes)
+
+
 def summary(a: Analysis) -> Group:
     """The summary as a rich renderable."""
     parts: list = []
@@ -96,79 +148,15 @@ def summary(a: Analysis) -> Group:
     parts.append(_heading("Sources"))
     parts.append(_sources_table(a))
 
-    parts.append(Text(""))
-    parts.append(_heading("Dead reckoning"))
-    dr = a.dead_reckoning
-    if dr is None:
-        parts.append(Text("not computed (see Missing)"))
-    else:
-        parts.append(Text(f"heading  {dr.heading_source}; speed {dr.speed_source}; "
-                          f"restart {dr.reset}; {len(dr.legs)} leg{'s' if len(dr.legs) != 1 else ''}"))
-        if not dr.n_scored:
-            parts.append(Text("no reference: consistency not scored"))
-        else:
-            r2m = dr.epochs.radius_2m_m
-            max2m = fmt(float(np.nanmax(r2m)) if len(r2m) else None, 0)
-            parts.append(Text(f"2M       reference ({dr.reference_role}) inside 2M at "
-                              f"{fmt_pct(dr.containment_2m)} of {dr.n_scored} epochs after a fix "
-                              f"(model: {fmt_pct(dr.expected_inside)}); RMS error/M "
-                              f"{fmt(dr.error_over_m_rms, 2)}; largest 2M {max2m} m"))
-        parts.append(Text(f"verdict  {dr.verdict}"))
-        for note in dr.notes:
-            parts.append(Text(f"note: {note}"))
-
-    parts.append(Text(""))
-    parts.append(_heading("INS deviations from the mean"))
-    d = a.deviation
-    if d is None:
-        parts.append(Text("not computed (see Missing)"))
-    else:
-        fac = ", ".join(f"{ch} {fmt(d.factors[ch], 3)}" for ch in CHANNELS)
-        parts.append(Text(f"{len(d.units)} units, every {fmt_duration(d.interval_s)}, "
-                          f"{len(d.time_ns)} instants; k: {fac}; excess kurtosis (normal 0)"))
-        parts.append(_unit_table(d))
-        for note in d.messages:
-            parts.append(Text(f"note: {note}"))
-
-    parts.append(Text(""))
-    parts.append(_heading("Calibration"))
-    c = a.calibration
-    if c is None:
-        parts.append(Text("not computed (see Missing)"))
-    else:
-        parts.append(Text(f"against {c.reference_role} ({c.n} segments of {c.segment_s:g} s): compass error "
-                          f"{_est(c.compass_error_deg, '°')}; log scale "
-                          f"{_est(c.log_scale and Estimate(100 * c.log_scale.value, 100 * c.log_scale.sigma), '%')}; "
-                          f"log offset {_est(c.log_offset_kn, 'kn')}"))
-        for note in c.notes:
-            parts.append(Text(f"note: {note}"))
-
-    parts.append(Text(""))
-    parts.append(_heading("Current"))
-    cur = a.current
-    if cur is None:
-        parts.append(Text("not computed (see Missing)"))
-    else:
-        parts.append(Text(f"set {_est(cur.set_deg, '°', 0)} (towards), drift {_est(cur.drift_kn, 'kn')}"
-                          f" ({cur.n_updates} fix updates)"))
-        for note in cur.notes:
-            parts.append(Text(f"note: {note}"))
-
-    if a.faults:  # dracc.faults: shown whenever found, excluded or not
-        parts.append(Text(""))
-        parts.append(_heading(f"Sensor faults ({len(a.faults)})"))
-        for f in a.faults:
-            parts.append(Text(f"- {f.kind}: {f.message}"))
-    if a.missing:
-        parts.append(Text(""))
-        parts.append(_heading("Missing"))
-        for m in a.missing:
-            parts.append(Text(f"- {m}"))
-    if a.notes:
-        parts.append(Text(""))
-        parts.append(_heading("Notes"))
-        for n in a.notes:
-            parts.append(Text(f"- {n}"))
+    parts += _section("Dead reckoning", None if a.dead_reckoning is None else _dr_body(a.dead_reckoning))
+    parts += _section("INS deviations from the mean",
+                      None if a.deviation is None else _deviation_body(a.deviation))
+    parts += _section("Calibration", None if a.calibration is None else _calibration_body(a.calibration))
+    parts += _section("Current", None if a.current is None else _current_body(a.current))
+    # dracc.faults: shown whenever found, excluded or not
+    parts += _bullets(f"Sensor faults ({len(a.faults)})", [f"{f.kind}: {f.message}" for f in a.faults])
+    parts += _bullets("Missing", a.missing)
+    parts += _bullets("Notes", a.notes)
     return Group(*parts)
 
 
