@@ -40,6 +40,23 @@ def _png(fig) -> bytes:
     return buf.getvalue()
 
 
+def _finish(fig, ax, xlabel: str, ylabel: str, title: str, legend_loc: str) -> bytes:
+    """Axis labels, grid, legend and title in the report's style, then the PNG."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc=legend_loc, fontsize=8)
+    ax.set_title(title)
+    return _png(fig)
+
+
+def _utc_axis(fig, ax) -> None:
+    """A shared UTC date axis ('day hh:mm') at the bottom of ``fig``."""
+    ax.xaxis.set_major_formatter(mdates.DateFormatter("%d %H:%M"))
+    ax.set_xlabel("UTC")
+    fig.autofmt_xdate()
+
+
 def _dt(time_ns) -> np.ndarray:
     """int64 ns -> numpy datetime64 for matplotlib's date axis."""
     return np.asarray(time_ns, dtype="int64").astype("datetime64[ns]")
@@ -93,12 +110,8 @@ def track_plot(a: Analysis) -> bytes | None:
                                     if first else None))
                 first = False
     ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("east of start [km]")
-    ax.set_ylabel("north of start [km]")
-    ax.grid(True, alpha=0.3)
-    ax.legend(loc="best", fontsize=8)
-    ax.set_title("Tracks, dead reckoning and 2M circles")
-    return _png(fig)
+    return _finish(fig, ax, "east of start [km]", "north of start [km]",
+                   "Tracks, dead reckoning and 2M circles", "best")
 
 
 def deviation_plot(a: Analysis) -> bytes | None:
@@ -120,9 +133,7 @@ def deviation_plot(a: Analysis) -> bytes | None:
     axes[0].legend(loc="upper right", fontsize=8, ncol=3)
     axes[0].set_title(f"Deviations from the mean of {len(d.units)} units, "
                       f"every {d.interval_s / 3600:g} h")
-    axes[-1].xaxis.set_major_formatter(mdates.DateFormatter("%d %H:%M"))
-    axes[-1].set_xlabel("UTC")
-    fig.autofmt_xdate()
+    _utc_axis(fig, axes[-1])
     return _png(fig)
 
 
@@ -136,17 +147,17 @@ def growth_plot(a: Analysis) -> bytes | None:
     k = _stride(len(tr.time_ns))
     hours = tr.since_fix_s[::k] / 3600.0
     jumps = np.flatnonzero(np.diff(tr.leg[::k]) != 0) + 1
-    ax.plot(np.insert(hours, jumps, np.nan), np.insert(tr.radius_2m_m[::k], jumps, np.nan),
-            color="#ff7f0e", lw=1.2, label="2M (2 drms)")
+
+    def by_leg(y):  # a break (NaN) at each restart, so no line joins two legs
+        return np.insert(y, jumps, np.nan)
+
+    ax.plot(by_leg(hours), by_leg(tr.radius_2m_m[::k]), color="#ff7f0e", lw=1.2,
+            label="2M (2 drms)")
     if np.isfinite(tr.ref_error_m).any():
-        ax.plot(np.insert(hours, jumps, np.nan), np.insert(tr.ref_error_m[::k], jumps, np.nan),
-                color="black", lw=0.8, label=f"actual error vs {dr.reference_role}")
-    ax.set_xlabel("time since the last fix [h]")
-    ax.set_ylabel("metres")
-    ax.grid(True, alpha=0.3)
-    ax.legend(loc="upper left", fontsize=8)
-    ax.set_title("Growth of 2M since the fix against the actual DR error")
-    return _png(fig)
+        ax.plot(by_leg(hours), by_leg(tr.ref_error_m[::k]), color="black", lw=0.8,
+                label=f"actual error vs {dr.reference_role}")
+    return _finish(fig, ax, "time since the last fix [h]", "metres",
+                   "Growth of 2M since the fix against the actual DR error", "upper left")
 
 
 def current_plot(a: Analysis) -> bytes | None:
@@ -169,8 +180,6 @@ def current_plot(a: Analysis) -> bytes | None:
     ax2.set_yticks([0, 90, 180, 270, 360])
     ax2.set_ylabel("set (towards) [°]")
     ax2.grid(True, alpha=0.3)
-    ax2.xaxis.set_major_formatter(mdates.DateFormatter("%d %H:%M"))
-    ax2.set_xlabel("UTC")
     ax1.set_title("Estimated current")
-    fig.autofmt_xdate()
+    _utc_axis(fig, ax2)
     return _png(fig)
