@@ -387,15 +387,14 @@ def calibrate_from_track(
     n_b = 1 if fit_log_offset else 0
     vspan = float(np.ptp(vs))
 
-    def heading_error(theta):
-        return Hd @ theta[:n_h]
-
-    def model(theta):
-        eps = heading_error(theta)
+    def speed_course(theta):
+        """Log speed corrected by scale s and offset b, (vs - b) / (1 + s); course hs - eps."""
         s = theta[n_h]
         b = theta[n_h + 1] if n_b else 0.0
-        spd = (vs - b) / (1.0 + s)
-        c = hs - eps
+        return (vs - b) / (1.0 + s), hs - Hd @ theta[:n_h], s
+
+    def model(theta):
+        spd, c, _ = speed_course(theta)
         mn = np.bincount(si, weights=wn * spd * np.cos(c), minlength=m)
         me = np.bincount(si, weights=wn * spd * np.sin(c), minlength=m)
         cur = theta[n_h + 1 + n_b:].reshape(2, nk)
@@ -406,11 +405,7 @@ def calibrate_from_track(
 
     def jac(theta):
         """Analytic Jacobian of ``resid`` (rows: segment j north, j east)."""
-        eps = heading_error(theta)
-        s = theta[n_h]
-        b = theta[n_h + 1] if n_b else 0.0
-        spd = (vs - b) / (1.0 + s)
-        c = hs - eps
+        spd, c, s = speed_course(theta)
         cos_c, sin_c = np.cos(c), np.sin(c)
         out = np.zeros((m, 2, n_par))
 
