@@ -7,8 +7,8 @@ import sys
 
 import pytest
 
-from dracc import __version__
 import dracc.cli.main  # noqa: F401  (registers every command on app)
+from dracc import __version__
 from dracc.cli.app import app
 from dracc.errors import ExitCode
 

@@ -7,8 +7,8 @@ import math
 
 import numpy as np
 import pytest
-
 from conftest import SAMPLES
+
 from dracc.config import Config
 from dracc.pipeline import _dedupe_sorted, analyse
 from dracc.report.json_report import to_dict

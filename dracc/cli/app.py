@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-import sys
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Optional
 
 import typer
 from rich.console import Console
@@ -80,4 +78,4 @@ def paths_exist(paths: list[Path]) -> list[Path]:
     return paths
 
 
-OptionalPath = Optional[Path]
+OptionalPath = Path | None

@@ -111,7 +111,7 @@ class Rejects:
         if len(ex) < self.max_examples:
             ex.append((file, int(line), text[:120]))
 
-    def merge(self, other: "Rejects") -> None:
+    def merge(self, other: Rejects) -> None:
         self.counts.update(other.counts)
         for reason, ex in other.examples.items():
             mine = self.examples.setdefault(reason, [])
