@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import json
 import math
+import mmap
 import struct
 from dataclasses import dataclass, field
 from io import BytesIO
@@ -71,6 +72,7 @@ _TOPLEVEL_FLUSH = 20000
 _INDEXED_MAX = 64 << 20  #: chunks up to this size (uncompressed) are decoded whole via their index
 _JSON_BATCH = 50000  #: JSON messages of one channel parsed together
 _PIECE_RECORDS = 50_000  #: decoded records of a channel kept as columns before becoming a frame piece
+_PENDING_RECORDS = 100_000  #: decoded records of all channels kept as columns (the largest one goes first)
 
 _OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 1, 2, 3, 4, 5, 6
 _OP_DATA_END = 0x0F
@@ -155,7 +157,8 @@ class _Reader:
         self.orphans = 0
         self.top_msgs: list[tuple[int, int, bytes, int]] = []
         self.bad_stamps = 0  #: message stamps out of range (log time used instead)
-        self.pieces: dict[str, list[pd.DataFrame]] = {}  #: kind -> frame pieces, in file order per channel
+        self.stores: dict[str, _KindStore] = {}  #: kind -> its records so far, in sorted runs
+        self.pending = 0  #: decoded records of all channels not yet in the stores
 
     # ---------------------------------------------------------------- records
     def run(self) -> None:
@@ -807,8 +810,11 @@ class _Reader:
         enough have gathered, so the pending columns stay bounded."""
         ch.parts.append((t, nums, qs))
         ch.state["pending"] = ch.state.get("pending", 0) + len(t)
+        self.pending += len(t)
         if ch.state["pending"] >= _PIECE_RECORDS:
             self._to_pieces(ch)
+        elif self.pending >= _PENDING_RECORDS:
+            self._to_pieces(max(self.channels.values(), key=lambda c: c.state.get("pending", 0)))
 
     def _to_pieces(self, ch: _Channel) -> None:
         if not ch.parts:
@@ -817,6 +823,7 @@ class _Reader:
         k = np.concatenate([p[1] for p in ch.parts])
         qs = {q: np.concatenate([p[2][q] for p in ch.parts]) for q in ch.parts[0][2]}
         ch.parts = []
+        self.pending -= ch.state["pending"]
         ch.state["pending"] = 0
         n = len(t)
         sentence = ch.type_name.split("/")[-1].split(".")[-1]
@@ -824,17 +831,16 @@ class _Reader:
                               self.rejects, talker=_const_cat("", n))
         ch.state["records"] = ch.state.get("records", 0) + sum(len(f) for f in frames.values())
         for kind, f in frames.items():
-            self.pieces.setdefault(kind, []).append(_as_piece(f))
+            self.stores.setdefault(kind, _KindStore()).add(f)
         del frames
 
     def result(self) -> FileResult:
+        _trim_heap()
         for ch in self.channels.values():
             self._json_flush(ch)
             self._to_pieces(ch)
-        out = {}
-        for kind in list(self.pieces):
-            out[kind] = _concat_sorted(self.pieces.pop(kind))
-        res = FileResult(path=self.file, format="mcap", frames=out, lines=self.msg_no, rejects=self.rejects,
+        _trim_heap()
+        res = FileResult(path=self.file, format="mcap", frames={}, lines=self.msg_no, rejects=self.rejects,
                          notes=[])
         if self.nmea_lines:
             from .nmea import parse_sentences
@@ -847,12 +853,14 @@ class _Reader:
                     continue
                 f = f.copy()
                 f["line"] = nos[f["line"].to_numpy(dtype=np.int64) - 1]  # sentence index -> message number
-                res.frames[kind] = (_concat_sorted([_as_piece(res.frames[kind]), _as_piece(f)])
-                                    if kind in res.frames else f)
+                self.stores.setdefault(kind, _KindStore()).add(f)
             renumber_examples(nres.rejects, nos)
             res.rejects.merge(nres.rejects)
             res.time_events = nres.time_events
             res.notes.extend(nres.notes)
+        for kind in list(self.stores):
+            res.frames[kind] = self.stores.pop(kind).frame()
+        _trim_heap()
         res.notes[:0] = self.notes + self._channel_notes()
         if self.bad_stamps:
             res.notes.append(f"{self.file}: {self.bad_stamps} message stamp(s) out of range; their log "
@@ -901,41 +909,194 @@ def _const_cat(value: str, n: int) -> pd.Categorical:
     return pd.Categorical.from_codes(np.zeros(n, dtype=np.int8), categories=[value])
 
 
-def _as_piece(df: pd.DataFrame) -> dict:
-    """A frame as independent column arrays (categoricals stay categoricals), so that the
-    final concatenation can free each piece's column as soon as it is copied."""
-    return {c: (df[c].array if isinstance(df[c].dtype, pd.CategoricalDtype) else df[c].to_numpy(copy=True))
-            for c in df.columns}
+def _trim_heap() -> None:
+    """Give the free memory of the C heap back to the kernel (glibc ``malloc_trim``).
+    Freed blocks in the middle of the heap otherwise stay in the process: after the
+    read, a few tens of MiB of decoding buffers would sit beside the frames.  Without
+    glibc this does nothing."""
+    global _LIBC
+    if _LIBC is None:
+        try:
+            import ctypes
+
+            _LIBC = ctypes.CDLL(None).malloc_trim
+        except (OSError, AttributeError, TypeError):  # pragma: no cover - not glibc
+            _LIBC = False
+    if _LIBC:
+        _LIBC(0)
 
 
-def _concat_sorted(pieces: list[dict]) -> pd.DataFrame:
-    """Concatenate frame pieces of one kind (from :func:`_as_piece`; categoricals unified,
-    not turned into objects), ordered by (time_ns, line), column by column, freeing each
-    piece's column once copied: the peak is one copy of the frame plus one column.  The
-    pieces list is emptied."""
-    from pandas.api.types import union_categoricals
+_LIBC = None
 
-    names = list(pieces[0])
-    t = np.concatenate([p.pop("time_ns") for p in pieces])
-    ln = np.concatenate([p.pop("line") for p in pieces])
-    order = None
-    if len(t) > 1 and not ((t[1:] > t[:-1]) | ((t[1:] == t[:-1]) & (ln[1:] >= ln[:-1]))).all():
-        order = np.lexsort((ln, t))
-        t, ln = t[order], ln[order]
-    cols = {"time_ns": t}
-    for c in list(pieces[0]):
-        parts = [p.pop(c) for p in pieces]
-        if all(isinstance(x, pd.Categorical) for x in parts):
-            v = union_categoricals(parts) if len(parts) > 1 else parts[0]
-        elif any(isinstance(x, pd.Categorical) or x.dtype == object for x in parts):
-            v = np.concatenate([np.asarray(x, dtype=object) for x in parts])
+
+def _mapped_empty(n: int, dtype) -> np.ndarray:
+    """An uninitialised array in its own anonymous memory mapping: when the array is
+    garbage its pages go back to the kernel at once (a freed malloc block of a few
+    hundred KiB usually stays in the heap, so a run's memory would outlive the run).
+    Pages count towards the RSS only once written."""
+    dt = np.dtype(dtype)
+    flags = getattr(mmap, "MAP_PRIVATE", None)
+    anon = getattr(mmap, "MAP_ANONYMOUS", None)
+    if flags is None or anon is None or n == 0:  # pragma: no cover - not POSIX
+        return np.empty(n, dtype=dt)
+    mm = mmap.mmap(-1, n * dt.itemsize, flags=flags | anon)
+    return np.frombuffer(mm, dtype=dt, count=n)
+
+
+def _code_dtype(ncat: int) -> np.dtype:
+    """The integer type pandas gives the codes of ``ncat`` categories (the smallest)."""
+    for t in (np.int8, np.int16, np.int32):
+        if ncat < np.iinfo(t).max:
+            return np.dtype(t)
+    return np.dtype(np.int64)
+
+
+@dataclass
+class _Run:
+    """Records of one kind sorted by (time_ns, line), as columns (labels as codes)."""
+
+    cols: dict[str, np.ndarray]
+    n: int
+    pos: int = 0  #: records already merged into the output
+
+    def key(self, i: int) -> tuple[int, int]:
+        return int(self.cols["time_ns"][i]), int(self.cols["line"][i])
+
+    def count_upto(self, key: tuple[int, int]) -> int:
+        """How many of the records from ``pos`` on have (time_ns, line) <= ``key``."""
+        t = self.cols["time_ns"][self.pos:self.n]
+        lo = int(np.searchsorted(t, key[0], side="left"))
+        hi = int(np.searchsorted(t, key[0], side="right"))
+        return lo + int(np.searchsorted(self.cols["line"][self.pos + lo:self.pos + hi], key[1], side="right"))
+
+
+class _KindStore:
+    """The records of one kind, gathered piece by piece in compact sorted runs and
+    merged into the frame at the end.
+
+    Each piece (a canonical frame of a few ten thousand records) is ordered by
+    (time_ns, line) (a stable sort of the piece alone) and copied into a run whose
+    columns live in their own memory mappings (:func:`_mapped_empty`); string columns
+    are kept as the smallest integer codes into one label list per column.  The runs
+    together are the size of the frame.  :meth:`frame` merges them into the output
+    columns, allocated once at their final size, a step of at most about ``step``
+    records at a time, releasing each run as soon as it is used up: the memory above
+    the frame is a few runs and one step, whatever the length of the voyage.  The
+    order is that of a stable sort of all pieces in the order they were added by
+    (time_ns, line).
+    """
+
+    def __init__(self, step: int = 1 << 16):
+        self.step = step
+        self.names: list[str] = []
+        self.how: dict[str, tuple] = {}  #: column -> ('num', None), ('cat', None) or ('str', its dtype)
+        self.labels: dict[str, dict] = {}  #: label column -> {label: code}
+        self.runs: list[_Run] = []
+        self.total = 0
+
+    def add(self, df: pd.DataFrame) -> None:
+        """Add a canonical frame (any order; its columns as in the first frame added)."""
+        n = len(df)
+        if n == 0:
+            return
+        if not self.names:
+            self.names = list(df.columns)
+            for c in self.names:
+                dt = df[c].dtype
+                if isinstance(dt, pd.CategoricalDtype):
+                    self.how[c] = ("cat", None)
+                elif pd.api.types.is_string_dtype(dt):  # object or str
+                    self.how[c] = ("str", dt)
+                else:
+                    self.how[c] = ("num", None)
+                if self.how[c][0] != "num":
+                    self.labels[c] = {}
+        t = df["time_ns"].to_numpy(dtype=np.int64)
+        ln = df["line"].to_numpy(dtype=np.int64)
+        order = None
+        if n > 1 and not ((t[1:] > t[:-1]) | ((t[1:] == t[:-1]) & (ln[1:] >= ln[:-1]))).all():
+            order = np.lexsort((ln, t))  # stable: equal keys keep the piece's order
+        cols = {}
+        for c in self.names:
+            v = self._codes(c, df[c]) if c in self.labels else df[c].to_numpy()
+            if order is not None:
+                v = v[order]
+            cols[c] = _mapped_empty(n, v.dtype)
+            cols[c][:] = v
+        self.runs.append(_Run(cols, n))
+        self.total += n
+
+    def _codes(self, c: str, col: pd.Series) -> np.ndarray:
+        """A label column as codes into this store's labels for ``c`` (-1: missing)."""
+        if isinstance(col.dtype, pd.CategoricalDtype):
+            codes, uniq = col.cat.codes.to_numpy(), col.cat.categories
         else:
-            v = np.concatenate(parts)
-        del parts
-        cols[c] = v if order is None else v[order]
-    cols["line"] = ln
-    pieces.clear()
-    return pd.DataFrame({c: cols.pop(c) for c in names}, copy=False)
+            codes, uniq = pd.factorize(col, use_na_sentinel=True)
+        known = self.labels[c]
+        lut = np.empty(len(uniq) + 1, dtype=np.int64)
+        for i, u in enumerate(uniq.tolist()):
+            lut[i] = known.setdefault(u, len(known))
+        lut[-1] = -1  # code -1 indexes the last entry
+        return lut[codes].astype(_code_dtype(len(known)))
+
+    def frame(self) -> pd.DataFrame:
+        """The merged frame (see the class doc); the runs are released on the way."""
+        out = {}
+        for c in self.names:
+            dt = (np.result_type(*[r.cols[c].dtype for r in self.runs]) if self.how[c][0] == "num"
+                  else _code_dtype(len(self.labels[c])))
+            out[c] = np.empty(self.total, dtype=dt)
+        o = 0
+        active = self.runs
+        self.runs = []
+        while active:
+            ends = [(r, min(r.pos + self.step, r.n) - 1) for r in active]
+            k0 = min(r.key(e) for r, e in ends)
+            over = [r for r in active if r.key(r.pos) <= k0]
+            if len(over) > 1:  # overlapping runs: a smaller step from each, ~step records in all
+                b = max(self.step // len(over), 1)
+                k0 = min(r.key(min(r.pos + b, r.n) - 1) for r in over)
+            takes = [(r, r.count_upto(k0)) for r in over]
+            takes = [(r, m) for r, m in takes if m]
+            m_all = sum(m for _, m in takes)
+            if len(takes) == 1:
+                r, m = takes[0]
+                for c in self.names:
+                    out[c][o:o + m] = r.cols[c][r.pos:r.pos + m]
+            else:
+                t = np.concatenate([r.cols["time_ns"][r.pos:r.pos + m] for r, m in takes])
+                ln = np.concatenate([r.cols["line"][r.pos:r.pos + m] for r, m in takes])
+                order = np.lexsort((ln, t))  # stable: equal keys in the order the runs were added
+                for c in self.names:
+                    out[c][o:o + m_all] = np.concatenate([r.cols[c][r.pos:r.pos + m] for r, m in takes])[order]
+            o += m_all
+            for r, m in takes:
+                r.pos += m
+            active = [r for r in active if r.pos < r.n]  # used-up runs are dropped: their mappings unmapped
+        self.total = 0
+        for c in self.names:
+            how, dtype = self.how[c]
+            if how == "cat":
+                cats = pd.CategoricalDtype(pd.Index(list(self.labels[c]), dtype=object))
+                out[c] = pd.Categorical.from_codes(out[c], dtype=cats, validate=False)
+            elif how == "str":
+                out[c] = _strings(out[c], list(self.labels[c]), dtype)
+        return pd.DataFrame(out, copy=False)
+
+
+def _strings(codes: np.ndarray, labels: list, dtype) -> object:
+    """A string column of ``dtype`` from codes into ``labels`` (-1: missing), built by
+    pyarrow for pandas' arrow strings (no Python object per row)."""
+    if isinstance(dtype, pd.StringDtype) and dtype.storage == "pyarrow":
+        import pyarrow as pa
+
+        dic = pa.DictionaryArray.from_arrays(pa.array(codes, mask=codes < 0),
+                                             pa.array(labels, pa.large_string()))
+        return dtype.construct_array_type()._from_sequence(dic.cast(pa.large_string()), dtype=dtype)
+    vals = np.empty(len(labels) + 1, dtype=object)
+    vals[:-1] = labels
+    vals[-1] = None
+    return vals[codes] if isinstance(dtype, np.dtype) else pd.array(vals[codes], dtype=dtype)
 
 
 def _repeated(f) -> bool:
