@@ -301,6 +301,13 @@ def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | No
         out["sub"] = 0
         return out
 
+    def table(df: pd.DataFrame, kind: str, cols) -> pd.DataFrame:
+        """base() with the numeric columns ``cols`` of ``df`` (NaN where df lacks one)."""
+        out = base(df, kind)
+        for c in cols:
+            out[c] = _col(df, c)
+        return out
+
     def sent(df: pd.DataFrame) -> np.ndarray:
         if "sentence" in df:
             return df["sentence"].astype(str).to_numpy(object)
@@ -314,9 +321,7 @@ def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | No
         is_rmc = s == "RMC"
         gga = pos[~is_rmc]
         if len(gga):
-            b = base(gga, "position")
-            for c in ("lat_rad", "lon_rad", "hdop", "alt_m"):
-                b[c] = _col(gga, c)
+            b = table(gga, "position", ("lat_rad", "lon_rad", "hdop", "alt_m"))
             b["quality"] = (gga["quality"].to_numpy(np.int64) if "quality" in gga
                             else np.ones(len(gga), np.int64))
             tables.append(("GGA", b))
@@ -328,21 +333,13 @@ def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | No
         vtg = gnd[~is_rmc]
         rmc_gnd = gnd[is_rmc]
         if len(vtg):
-            b = base(vtg, "ground")
-            for c in ("cog_rad", "sog_mps"):
-                b[c] = _col(vtg, c)
-            tables.append(("VTG", b))
+            tables.append(("VTG", table(vtg, "ground", ("cog_rad", "sog_mps"))))
     if len(rmc_pos) or len(rmc_gnd):
-        bp = base(rmc_pos, "position") if len(rmc_pos) else None
+        bp = table(rmc_pos, "position", ("lat_rad", "lon_rad")) if len(rmc_pos) else None
         if bp is not None:
-            for c in ("lat_rad", "lon_rad"):
-                bp[c] = _col(rmc_pos, c)
             bp["quality"] = (rmc_pos["quality"].to_numpy(np.int64) if "quality" in rmc_pos
                              else np.ones(len(rmc_pos), np.int64))
-        bg = base(rmc_gnd, "ground") if len(rmc_gnd) else None
-        if bg is not None:
-            for c in ("cog_rad", "sog_mps"):
-                bg[c] = _col(rmc_gnd, c)
+        bg = table(rmc_gnd, "ground", ("cog_rad", "sog_mps")) if len(rmc_gnd) else None
         keys = ["time_ns", "source", "line", "talker", "sub"]
         if bp is None:
             rmc = bg.assign(lat_rad=np.nan, lon_rad=np.nan, quality=1)
@@ -371,10 +368,7 @@ def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | No
         for t in ("HDT", "THS", "HDG", "HDM"):
             sub = hd[typ == t]
             if len(sub):
-                b = base(sub, "heading")
-                for c in _NUMERIC[t]:
-                    b[c] = _col(sub, c)
-                tables.append((t, b))
+                tables.append((t, table(sub, "heading", _NUMERIC[t])))
     w = frames.get("water")
     if w is not None and len(w):
         s = sent(w)
@@ -384,17 +378,11 @@ def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | No
         for t in ("VHW", "VBW"):
             sub = w[typ == t]
             if len(sub):
-                b = base(sub, "water")
-                for c in _NUMERIC[t]:
-                    b[c] = _col(sub, c)
-                tables.append((t, b))
+                tables.append((t, table(sub, "water", _NUMERIC[t])))
     for kind, t in (("distance", "VLW"), ("rot", "ROT")):
         f = frames.get(kind)
         if f is not None and len(f):
-            b = base(f, kind)
-            for c in _NUMERIC[t]:
-                b[c] = _col(f, c)
-            tables.append((t, b))
+            tables.append((t, table(f, kind, _NUMERIC[t])))
     return tables
 
 
