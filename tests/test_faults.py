@@ -49,6 +49,15 @@ def _t0(sim) -> int:
     return int(sim.frames["position"]["time_ns"].iloc[0])
 
 
+def _freeze_ins3_two_hours(sim, pos: pd.DataFrame) -> tuple[int, int, np.ndarray]:
+    """INS3 repeats its position from 30 min to 2 h 30 min (in place): (start_ns, end_ns, rows)."""
+    a, b = _t0(sim) + H // 2, _t0(sim) + H // 2 + 2 * H
+    i = _rows(pos, "INS3", a, b)
+    pos.loc[i, "lat_rad"] = pos.loc[i[0], "lat_rad"]
+    pos.loc[i, "lon_rad"] = pos.loc[i[0], "lon_rad"]
+    return a, b, i
+
+
 def test_clean_simulated_voyage_has_no_fault(sim):
     assert detect_faults(sim.frames) == []
 
@@ -112,10 +121,7 @@ def test_frozen_unit_for_two_hours(sim):
     """INS3 repeats one position for 2 h while the ship makes 12 kn."""
     f = _frames(sim)
     pos = f["position"]
-    a, b = _t0(sim) + H // 2, _t0(sim) + H // 2 + 2 * H
-    i = _rows(pos, "INS3", a, b)
-    pos.loc[i, "lat_rad"] = pos.loc[i[0], "lat_rad"]
-    pos.loc[i, "lon_rad"] = pos.loc[i[0], "lon_rad"]
+    a, b, i = _freeze_ins3_two_hours(sim, pos)
     (fl,) = detect_faults(f)
     assert (fl.kind, fl.source, fl.start_ns, fl.end_ns) == ("frozen", "INS3", a, b)
     assert fl.n_records == i.size == 7201
@@ -223,10 +229,7 @@ def test_negative_sog_through_the_nmea_reader(tmp_path):
 def test_exclude_removes_exactly_the_flagged_records(sim):
     f = _frames(sim)
     pos = f["position"]
-    a, b = _t0(sim) + H // 2, _t0(sim) + H // 2 + 2 * H
-    i = _rows(pos, "INS3", a, b)
-    pos.loc[i, "lat_rad"] = pos.loc[i[0], "lat_rad"]
-    pos.loc[i, "lon_rad"] = pos.loc[i[0], "lon_rad"]
+    a, b, i = _freeze_ins3_two_hours(sim, pos)
     voy = Voyage(frames=f, sources={}, rejects=None, time_events=None, inputs=[])  # type: ignore[arg-type]
     faults = detect_faults(voy)
     out, removed = exclude_faults(voy, faults)
