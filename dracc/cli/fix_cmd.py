@@ -49,6 +49,7 @@ from ..geodesy import (
     wrap_pi,
 )
 from ..units import CABLE_M, NMI_M
+from ..units import finite_or_none as _finite
 from .app import app, out
 
 try:  # Python >= 3.11
@@ -668,11 +669,6 @@ def format_dm(value_deg: float, axis: str, decimals: int = 3) -> str:
         deg, minutes = deg + 1, 0.0
     width = 2 if axis == "lat" else 3
     return f"{deg:0{width}d}°{minutes:0{decimals + 3}.{decimals}f}'{hemi}"
-
-
-def _finite(x) -> float | None:
-    x = float(x)
-    return x if math.isfinite(x) else None
 
 
 def to_json(rep: FixReport) -> dict:

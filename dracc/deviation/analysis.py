@@ -25,6 +25,7 @@ from ..errors import ConfigError
 from ..geodesy import k_lambda, k_phi
 from ..ingest.frames import INS_ROLES
 from ..units import ARCMIN_RAD
+from ..units import finite_or_none as _f
 from . import stats
 from .hat import three_cornered_hat
 from .reference import course_errors_rad, k_star_mark, kurtosis_mark, position_errors_m
@@ -34,14 +35,6 @@ CHANNELS = ("lat", "lon", "course")
 #: the sample key of each channel (JSON ``deviation.samples``) and the a priori config key
 SAMPLE_KEYS = {"lat": "lat_m", "lon": "lon_m", "course": "course_deg"}
 CHANNEL_UNITS = {"lat": "m", "lon": "m", "course": "deg"}
-
-
-def _f(x) -> float | None:
-    """A JSON-ready float: None for NaN/inf/None."""
-    if x is None:
-        return None
-    x = float(x)
-    return x if math.isfinite(x) else None
 
 
 def metres_to_arcmin(north_m, east_m, lat_rad):

@@ -23,6 +23,7 @@ from ..pipeline import (
     DRTrack,
     Estimate,
 )
+from ..units import finite_or_none as _num
 from ..units import mps_to_kn
 from . import iso_utc
 
@@ -32,14 +33,6 @@ SCHEMA_PATH = Path(__file__).with_name("analysis.schema.json")
 def load_schema() -> dict:
     """The JSON Schema (draft 2020-12) of the report."""
     return json.loads(SCHEMA_PATH.read_text(encoding="utf-8"))
-
-
-def _num(x) -> float | None:
-    """A finite float, or None for None/NaN/inf (JSON has no NaN)."""
-    if x is None:
-        return None
-    v = float(x)
-    return v if math.isfinite(v) else None
 
 
 def _deg(x_rad) -> float | None:
