@@ -12,7 +12,7 @@ setup(
             "dracc.ingest._nmeascan",
             sources=["dracc/ingest/_nmeascan.c"],
             # no fused multiply-add: the same doubles as the numpy path
-            extra_compile_args=["-O2", "-ffp-contract=off", "-fno-strict-aliasing"],
+            extra_compile_args=["-O3", "-ffp-contract=off", "-fno-strict-aliasing"],
             optional=True,
         )
     ]

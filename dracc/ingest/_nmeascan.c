@@ -370,13 +370,10 @@ static int intern(NameTable *T, const uint8_t *b, Py_ssize_t off, Py_ssize_t len
 /* TAG block b[0, ln) ('\...*hh\').  Returns 0 if it is well formed with a correct
  * checksum (tagblock.parse_tag_rows), filling ext_ns and the source span. */
 static int parse_tag(const uint8_t *b, Py_ssize_t ln, int64_t *ext, Py_ssize_t *ss, Py_ssize_t *sl) {
-    Py_ssize_t star = -1, j;
-    for (j = 0; j < ln; j++)
-        if (b[j] == '*') {
-            star = j;
-            break;
-        }
-    if (star < 0) return -1;
+    Py_ssize_t j;
+    const uint8_t *ps = memchr(b, '*', (size_t)ln);
+    if (!ps) return -1;
+    Py_ssize_t star = ps - b;
     Py_ssize_t cslen = ln - star - 2;
     if (b[ln - 1] != '\\' || (cslen != 1 && cslen != 2)) return -1;
     int hlo = hexval(b[ln - 2]);
@@ -431,7 +428,7 @@ typedef struct {
     Py_ssize_t n;
     /* per line (capacity cap_lines) */
     uint8_t *fallback;
-    int32_t *nseg;
+    int64_t *nseg;
     Py_ssize_t cap_lines;
     /* side buffer (capacity n) */
     uint8_t *sub;
@@ -449,24 +446,32 @@ typedef struct {
 
 /* one line [ls, le) (le at the LF or the end), index li, segments before it seg0 */
 static int scan_line(Scan *S, Py_ssize_t ls, Py_ssize_t le, Py_ssize_t li, int64_t seg0,
-                     int *nseg_out) {
+                     Py_ssize_t *nseg_out) {
     const uint8_t *b = S->b;
     Py_ssize_t end = le;
     if (end > ls && b[end - 1] == '\r') end--;
-    int nseg = 0, nstart = 0, printable = 1;
+    /* one branch-free pass (vectorised by the compiler): sentence starts, bytes outside
+     * printable ASCII; the segment count is exact (doubled starts '$$' count once) */
+    size_t nstart = 0;
+    unsigned bad = 0;
     Py_ssize_t st = -1, j;
-    int comment = end > ls && b[ls] == '#';
-    for (j = ls; j < le; j++) {
+    for (j = ls; j < end; j++) {
         uint8_t c = b[j];
-        if (c == '$' || c == '!') {
-            nstart++;
-            if (!(j + 1 < S->n && (b[j + 1] == '$' || b[j + 1] == '!'))) {
+        bad |= (uint8_t)(c - 32) > 94;
+        nstart += (c == '$') + (c == '!');
+    }
+    int comment = end > ls && b[ls] == '#';
+    int printable = !bad;
+    Py_ssize_t nseg = (Py_ssize_t)nstart;
+    if (nstart > 1) {  /* several starts: count them as numpy does, for the seq numbers */
+        nseg = 0;
+        for (j = ls; j < end; j++)
+            if ((b[j] == '$' || b[j] == '!') &&
+                !(j + 1 < S->n && (b[j + 1] == '$' || b[j + 1] == '!')))
                 nseg++;
-                if (st < 0) st = j;
-            }
-        } else if (c < 32 || c > 126) {
-            if (j < end) printable = 0;
-        }
+    } else if (nstart == 1) {
+        const uint8_t *d = memchr(b + ls, '$', (size_t)(end - ls));
+        st = d ? (Py_ssize_t)(d - b) : -1;
     }
     *nseg_out = comment ? 0 : nseg;
     if (end == ls) {  /* blank */
@@ -474,7 +479,7 @@ static int scan_line(Scan *S, Py_ssize_t ls, Py_ssize_t le, Py_ssize_t li, int64
         S->n_blank++;
         return 0;
     }
-    if (comment || !printable || nstart != 1 || nseg != 1 || b[st] != '$') return 1;
+    if (comment || !printable || nstart != 1 || st < 0) return 1;
     int64_t ext = MISSING_NS;
     Py_ssize_t ss = 0, sl = 0;
     int tagged = st > ls;
@@ -493,14 +498,14 @@ static int scan_line(Scan *S, Py_ssize_t ls, Py_ssize_t le, Py_ssize_t li, int64
     F.nf = 0;
     F.bad = 0;
     uint8_t x = 0;
+    for (j = st + 1; j < F.body_end; j++) x ^= b[j];
+    if (x != h1 * 16 + h2) return 1;
     for (j = st + 1; j < F.body_end; j++) {
-        x ^= b[j];
         if (b[j] == ',') {
             if (F.nf == MAXF) return 1;
             F.comma[F.nf++] = j;
         }
     }
-    if (x != h1 * 16 + h2) return 1;
     if (F.nf == 0 || F.comma[0] - st - 1 != 5) return 1;
     const uint8_t *a = b + st + 1;
     for (j = 0; j < 5; j++) {
@@ -548,10 +553,10 @@ static void scan_all(Scan *S) {
             S->overflow = 1;
             return;
         }
-        int nseg = 0;
+        Py_ssize_t nseg = 0;
         int fb = scan_line(S, ls, le, li, seg, &nseg);
         S->fallback[li] = (uint8_t)fb;
-        S->nseg[li] = nseg;
+        S->nseg[li] = (int64_t)nseg;
         if (fb) {
             memcpy(S->sub + S->sub_len, b + ls, (size_t)(next - ls));
             S->sub_len += next - ls;
@@ -598,7 +603,7 @@ static PyObject *scan(PyObject *self, PyObject *args) {
     static const char *what[14] = {"fallback", "nseg", "sub", "r_line", "r_seq", "r_talker",
                                    "r_stype", "r_src", "r_ext", "r_tod", "r_date", "r_dec",
                                    "r_code", "r_val"};
-    const Py_ssize_t per[14] = {1, 4, 0, 8, 8, 2, 1, 4, 8, 8, 8, 1, 1, 8 * NVAL};
+    const Py_ssize_t per[14] = {1, 8, 0, 8, 8, 2, 1, 4, 8, 8, 8, 1, 1, 8 * NVAL};
     PyObject *res = NULL;
     for (nv = 0; nv < 14; nv++) {
         Py_ssize_t need = nv == 2 ? in.len : per[nv] * cap;

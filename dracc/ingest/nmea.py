@@ -593,7 +593,7 @@ def _scan_c(data: bytes) -> dict:
     """Run the compiled kernel over ``data``; arrays trimmed to their lengths."""
     cap = data.count(b"\n") + 1
     nval = _nmeascan.NVAL
-    a = {"fallback": np.empty(cap, np.uint8), "nseg": np.empty(cap, np.int32),
+    a = {"fallback": np.empty(cap, np.uint8), "nseg": np.empty(cap, np.int64),
          "sub": np.empty(len(data), np.uint8), "line": np.empty(cap, np.int64),
          "seq": np.empty(cap, np.int64), "talker": np.empty(cap, np.uint16),
          "sentence": np.empty(cap, np.int8), "src": np.empty(cap, np.int32),
@@ -633,7 +633,7 @@ def _parse_c(data: bytes, ignore_checksum: bool, at_eof: bool) -> ParsedBlock:
     code_of = {nm: i for i, nm in enumerate(names)}
     lut_c = np.array([code_of[nm] for nm in r["names"]] or [0], dtype=np.int32)
     lut_sub = np.array([code_of[str(nm)] for nm in pbs.source_names] or [0], dtype=np.int32)
-    nseg = r["nseg"].astype(np.int64)
+    nseg = r["nseg"]
     if not nseg.any():
         names = []  # no sentence anywhere: the numpy path names no sources
     seg_base = np.cumsum(nseg) - nseg
