@@ -1,4 +1,9 @@
-"""NMEA 0183 text ingest, vectorised over blocks of bytes.
+"""NMEA 0183 text ingest, over blocks of bytes.
+
+Where it is built, the compiled kernel ``_nmeascan`` (one pass in C, see ``_parse_c``)
+decodes the clean lines of a block and hands every other line to the numpy path below,
+which is also the fallback without a compiler and the reference of the differential
+tests (tests/test_nmeascan.py).
 
 A block (tens of MB, cut at a newline) is read as one ``uint8`` array; line ends,
 sentence starts (``$``/``!``), commas and ``*`` are found with ``np.flatnonzero``;
