@@ -365,3 +365,14 @@ def test_streamed_small_blocks_equal(voyage, tmp_path):
             pd.testing.assert_frame_equal(x.frames[k], y.frames[k], check_exact=True)
     assert sc.rejects.counts == sn.rejects.counts and sc.rejects.counts["truncated"] >= 1
     assert sc.stats == sn.stats and sc.time_events() == sn.time_events()
+
+
+def test_without_the_kernel_the_numpy_path_reads(monkeypatch):
+    """A machine without a compiler: ``_nmeascan`` missing, ``engine="c"`` falls back."""
+    data = (_tag(b"s:GP1,c:1700000000") + GOOD + b"\r\n") * 3 + b"garbage\r\n"
+    want = parse_buffer(data, engine="numpy")
+    monkeypatch.setattr(nmea, "_nmeascan", None)
+    assert not nmea.engine_available()
+    got = parse_buffer(data, engine="c")
+    assert_same_block(got, want)
+    assert got.reject_counts == Counter({"not_nmea": 1}) and len(got.kinds["position"]["seq"]) == 3
