@@ -21,6 +21,7 @@ Run:  python benchmarks/bench_ingest.py [--workdir DIR] [--baseline-lines N] [--
    streaming reader's memory depends on block size, not on content).
 
 The machine is shared: figures vary with load; run it when the machine is quiet.
+``DRACC_NMEA_ENGINE=numpy`` runs the numpy path only (the figures before the kernel).
 """
 
 from __future__ import annotations
@@ -130,6 +131,10 @@ def main() -> None:
     log = ensure_log(args.workdir)
     size_mb = log.stat().st_size / 1e6
     print(f"log: {log} ({size_mb:.1f} MB)")
+    from dracc.ingest import nmea
+
+    print("engine:", "compiled kernel + numpy for the other lines" if nmea.engine_available()
+          else "numpy (DRACC_NMEA_ENGINE=numpy or the kernel not built)")
 
     load = os.getloadavg()[0]
     n_d, t_d, rec, c_d = bench_dracc(log)

@@ -1,4 +1,9 @@
-"""NMEA 0183 text ingest, vectorised over blocks of bytes.
+"""NMEA 0183 text ingest, over blocks of bytes.
+
+Where it is built, the compiled kernel ``_nmeascan`` (one pass in C, see ``_parse_c``)
+decodes the clean lines of a block and hands every other line to the numpy path below,
+which is also the fallback without a compiler and the reference of the differential
+tests (tests/test_nmeascan.py).
 
 A block (tens of MB, cut at a newline) is read as one ``uint8`` array; line ends,
 sentence starts (``$``/``!``), commas and ``*`` are found with ``np.flatnonzero``;
@@ -326,19 +331,21 @@ class ParsedBlock:
     source_names: list[str] = field(default_factory=list)
 
 
-def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True,
+def _parse_numpy(data: bytes, ignore_checksum: bool = False, at_eof: bool = True,
                  ext_line_ns: np.ndarray | None = None,
-                 ext_line_source: np.ndarray | None = None) -> ParsedBlock:
-    """Parse a buffer of whole lines (the vectorised core).
+                 ext_line_source: np.ndarray | None = None) -> tuple[ParsedBlock, np.ndarray]:
+    """Parse a buffer of whole lines (the vectorised numpy core).
 
     ``ext_line_ns``/``ext_line_source`` give a receive time / source key per line (for
-    :func:`parse_sentences`); otherwise they come from TAG blocks and prefixes.
+    :func:`parse_sentences`); otherwise they come from TAG blocks and prefixes.  Returns
+    the block and the source key of each line (object array, '' for none), from which
+    ``source_names`` are factorized in order of first appearance.
     """
     # 64 zero bytes after the data let fields be gathered as fixed-width windows
     bufp = np.frombuffer(bytes(data) + bytes(64), dtype=np.uint8)
     buf = bufp[: len(data)]
     if len(buf) == 0:
-        return ParsedBlock(0, 0, {}, {}, Counter(), {}, None)
+        return ParsedBlock(0, 0, {}, {}, Counter(), {}, None), np.zeros(0, dtype=object)
     ends_nl = buf[-1] == 10
     # one pass finds the line feeds and the bytes outside printable ASCII:
     # (b - 32) mod 256 > 94 for b < 32 or b > 126
@@ -404,8 +411,8 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
             sel = noseg[m]
             reject(reason, sel, line_start[sel], line_end[sel])
     if nseg == 0:
-        return ParsedBlock(n_lines, int(blank.sum()), {}, {}, counts, examples,
-                           min(fatal) if fatal else None, stats)
+        return (ParsedBlock(n_lines, int(blank.sum()), {}, {}, counts, examples,
+                            min(fatal) if fatal else None, stats), np.full(n_lines, "", dtype=object))
 
     cum_xor = np.bitwise_xor.accumulate(buf)
     commas = np.flatnonzero(buf == 44)
@@ -549,8 +556,173 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
         order = np.argsort(cat["seq"], kind="stable")  # back to stream order
         kinds_np[k] = {c: v[order] for c, v in cat.items()}
     clock_np = {c: np.concatenate(v) for c, v in clock.items()}
-    return ParsedBlock(n_lines, int(blank.sum()), kinds_np, clock_np, counts, examples,
-                       min(fatal) if fatal else None, stats, src_names)
+    return (ParsedBlock(n_lines, int(blank.sum()), kinds_np, clock_np, counts, examples,
+                        min(fatal) if fatal else None, stats, src_names), line_src)
+
+
+# ------------------------------------------------------------- compiled scanning kernel
+try:  # optional: built from _nmeascan.c when a C compiler was there at install time
+    from . import _nmeascan
+except ImportError:  # pragma: no cover - exercised on machines without a compiler
+    _nmeascan = None
+
+#: "c" (the compiled kernel where built, numpy for what it leaves) or "numpy" (numpy
+#: only); the environment variable DRACC_NMEA_ENGINE sets it for benchmarks
+ENGINE = os.environ.get("DRACC_NMEA_ENGINE", "c")
+
+#: the kinds in the order the numpy path creates them (first sentence type of each)
+_KIND_ORDER = ("heading", "rot", "water", "distance", "position", "ground")
+_T = {s: i for i, s in enumerate(SENTENCES)}
+#: kind -> sentence type codes giving it; value column -> column of the kernel's r_val
+_KIND_TYPES = {
+    "heading": (_T["HDT"], _T["HDM"], _T["HDG"], _T["THS"]),
+    "rot": (_T["ROT"],), "water": (_T["VHW"], _T["VBW"]), "distance": (_T["VLW"],),
+    "position": (_T["GGA"], _T["GLL"], _T["RMC"], _T["GNS"]), "ground": (_T["RMC"], _T["VTG"]),
+}
+_KIND_VALS = {
+    "heading": {"heading_rad": 0, "reference": "code", "deviation_rad": 1, "variation_rad": 2},
+    "rot": {"rot_radps": 0},
+    "water": {"stw_mps": 0, "stw_transverse_mps": 1, "sog_long_mps": 2, "sog_transverse_mps": 3},
+    "distance": {"total_water_m": 0, "trip_water_m": 1},
+    "position": {"lat_rad": 0, "lon_rad": 1, "alt_m": 2, "hdop": 3, "quality": "code"},
+    "ground": {"cog_rad": 0, "sog_mps": 1},
+}
+
+
+def engine_available() -> bool:
+    """True if the compiled kernel is built and selected."""
+    return _nmeascan is not None and ENGINE == "c"
+
+
+def _scan_c(data: bytes) -> dict:
+    """Run the compiled kernel over ``data``; arrays trimmed to their lengths."""
+    cap = data.count(b"\n") + 1
+    nval = _nmeascan.NVAL
+    a = {"fallback": np.empty(cap, np.uint8), "nseg": np.empty(cap, np.int64),
+         "sub": np.empty(len(data), np.uint8), "line": np.empty(cap, np.int64),
+         "seq": np.empty(cap, np.int64), "talker": np.empty(cap, np.uint16),
+         "sentence": np.empty(cap, np.int8), "src": np.empty(cap, np.int32),
+         "ext_ns": np.empty(cap, np.int64), "tod_ns": np.empty(cap, np.int64),
+         "date_days": np.empty(cap, np.int64), "dec": np.empty(cap, np.int8),
+         "code": np.empty(cap, np.int8), "val": np.empty((cap, nval), np.float64)}
+    n_lines, n_blank, n_rows, sub_len, n_tag, names, first = _nmeascan.scan(
+        data, cap, a["fallback"], a["nseg"], a["sub"], a["line"], a["seq"], a["talker"],
+        a["sentence"], a["src"], a["ext_ns"], a["tod_ns"], a["date_days"], a["dec"], a["code"],
+        a["val"])
+    out = {k: v[:n_rows] for k, v in a.items() if k not in ("fallback", "nseg", "sub")}
+    out.update(fallback=a["fallback"][:n_lines], nseg=a["nseg"][:n_lines],
+               sub=a["sub"][:sub_len].tobytes(), n_lines=n_lines, n_blank=n_blank, n_tag=n_tag,
+               names=names, first=first)
+    return out
+
+
+def _parse_c(data: bytes, ignore_checksum: bool, at_eof: bool) -> ParsedBlock:
+    """:func:`parse_buffer` with the compiled kernel: it decodes the clean lines and
+    copies all others into a side buffer, parsed by :func:`_parse_numpy`; the two are
+    merged back into stream order (line numbers, ``seq``, TAG source codes in order of
+    first appearance), so the result equals the numpy path's."""
+    r = _scan_c(data)
+    n_lines = r["n_lines"]
+    fb_lines = np.flatnonzero(r["fallback"])
+    pbs, src_sub = _parse_numpy(r["sub"], ignore_checksum, at_eof)
+    if pbs.n_lines != len(fb_lines):  # pragma: no cover - an internal inconsistency
+        raise AssertionError(f"_nmeascan: {len(fb_lines)} fallback lines, numpy read {pbs.n_lines}")
+    # TAG source names, factorized over all lines in order of first appearance
+    first = dict(zip(r["names"], r["first"], strict=True))
+    sub_codes, sub_names = pd.factorize(src_sub)
+    if len(sub_names):
+        _, idx = np.unique(sub_codes, return_index=True)
+        for nm, i in zip(sub_names.tolist(), fb_lines[idx].tolist(), strict=True):
+            first[nm] = min(first.get(nm, i), i)
+    names = sorted(first, key=first.__getitem__)
+    code_of = {nm: i for i, nm in enumerate(names)}
+    lut_c = np.array([code_of[nm] for nm in r["names"]] or [0], dtype=np.int32)
+    lut_sub = np.array([code_of[str(nm)] for nm in pbs.source_names] or [0], dtype=np.int32)
+    nseg = r["nseg"]
+    if not nseg.any():
+        names = []  # no sentence anywhere: the numpy path names no sources
+    seg_base = np.cumsum(nseg) - nseg
+    sub_nseg = nseg[fb_lines]
+    sub_base = np.cumsum(sub_nseg) - sub_nseg
+
+    def from_sub(cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        out = dict(cols)
+        li = cols["line"] - 1
+        out["line"] = fb_lines[li] + 1
+        out["seq"] = seg_base[fb_lines[li]] + (cols["seq"] - sub_base[li])
+        out["tag_source"] = lut_sub[cols["tag_source"]]
+        return out
+
+    sent = r["sentence"]
+    common = {"line": r["line"], "seq": r["seq"], "talker": r["talker"], "sentence": sent,
+              "tag_source": lut_c[r["src"]], "ext_ns": r["ext_ns"], "tod_ns": r["tod_ns"],
+              "date_days": r["date_days"], "dec": r["dec"]}
+    val = r["val"]
+    kinds: dict[str, dict[str, np.ndarray]] = {}
+    for kind in _KIND_ORDER:
+        types = _KIND_TYPES[kind]
+        sel = np.flatnonzero(np.isin(sent, types)) if len(sent) else np.zeros(0, np.int64)
+        parts = []
+        if len(sel):
+            cols = {c: v[sel] for c, v in common.items()}
+            for c, j in _KIND_VALS[kind].items():
+                if j == "code":
+                    code = r["code"][sel]
+                    cols[c] = code.view(np.uint8) if c == "reference" else code
+                elif kind == "ground":  # RMC: (cog, sog) in columns 4, 5
+                    rmc = sent[sel] == _T["RMC"]
+                    cols[c] = np.where(rmc, val[sel, 4 + j], val[sel, j])
+                else:
+                    cols[c] = val[sel, j]
+            parts.append(cols)
+        if kind in pbs.kinds:
+            parts.append(from_sub(pbs.kinds[kind]))
+        if parts:
+            kinds[kind] = _merge_parts(parts)
+    parts = []
+    zda = np.flatnonzero(sent == _T["ZDA"]) if len(sent) else np.zeros(0, np.int64)
+    if len(zda):
+        parts.append({c: v[zda] for c, v in common.items()})
+    if pbs.clock:
+        parts.append(from_sub(pbs.clock))
+    clock = _merge_parts(parts) if parts else {}
+    examples = {k: [(int(fb_lines[ln - 1]) + 1, tx) for ln, tx in v]
+                for k, v in pbs.reject_examples.items()}
+    fatal = pbs.first_fatal
+    if fatal is not None:
+        fatal = (int(fb_lines[fatal[0] - 1]) + 1, fatal[1], fatal[2])
+    stats = Counter(pbs.stats)
+    stats["blank"] += r["n_blank"]
+    if r["n_tag"]:
+        stats["prefix_tag"] += r["n_tag"]
+    return ParsedBlock(n_lines, r["n_blank"] + pbs.n_blank, kinds, clock, Counter(pbs.reject_counts),
+                       examples, fatal, stats, [str(x) for x in names])
+
+
+def _merge_parts(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """Rows from the kernel and from the numpy path, merged in stream order (``seq``)."""
+    if len(parts) == 1:
+        return parts[0]
+    cat = {c: np.concatenate([p[c] for p in parts]) for c in parts[0]}
+    order = np.argsort(cat["seq"], kind="stable")
+    return {c: v[order] for c, v in cat.items()}
+
+
+def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True,
+                 ext_line_ns: np.ndarray | None = None,
+                 ext_line_source: np.ndarray | None = None,
+                 engine: str | None = None) -> ParsedBlock:
+    """Parse a buffer of whole lines.
+
+    ``engine`` "c" uses the compiled kernel (:mod:`dracc.ingest._nmeascan`) where it is
+    built, "numpy" the vectorised numpy core only; None follows :data:`ENGINE`.  Both
+    give the same block (tests/test_nmeascan.py).  Lines with an external time/source
+    (``ext_line_ns``/``ext_line_source``, for :func:`parse_sentences`) take the numpy core.
+    """
+    use_c = (engine or ENGINE) == "c" and _nmeascan is not None
+    if use_c and ext_line_ns is None and ext_line_source is None and len(data):
+        return _parse_c(data if isinstance(data, bytes) else bytes(data), ignore_checksum, at_eof)
+    return _parse_numpy(data, ignore_checksum, at_eof, ext_line_ns, ext_line_source)[0]
 
 
 # ------------------------------------------------------------------ streaming reader

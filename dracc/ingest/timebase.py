@@ -277,7 +277,8 @@ class EventCounter:
         # the rows of each (source, sentence) stream, in stream order: one stable sort
         counts = np.bincount(combo)
         ucombo = np.flatnonzero(counts)
-        order = np.argsort(combo, kind="stable")
+        # small keys as int16: numpy's stable sort is then a radix sort (the same order)
+        order = np.argsort(combo.astype(np.int16) if len(counts) <= 1 << 15 else combo, kind="stable")
         bounds = np.concatenate(([0], np.cumsum(counts[ucombo])))
         gap_ns = int(self.gap_s * 1e9)
         tol_ns = int(self.tolerance_s * 1e9)
