@@ -71,6 +71,8 @@ _WINDOW = 8 << 20
 _TOPLEVEL_FLUSH = 20000
 _INDEXED_MAX = 64 << 20  #: chunks up to this size (uncompressed) are decoded whole via their index
 _JSON_BATCH = 50000  #: JSON messages of one channel parsed together
+_JSON_QUEUED = 50000  #: JSON messages of all channels waiting to be parsed (the largest queue goes first)
+_TRIM_RECORDS = 200_000  #: records moved into the stores between two trims of the C heap
 _PIECE_RECORDS = 50_000  #: decoded records of a channel kept as columns before becoming a frame piece
 _PENDING_RECORDS = 100_000  #: decoded records of all channels kept as columns (the largest one goes first)
 
@@ -159,6 +161,8 @@ class _Reader:
         self.bad_stamps = 0  #: message stamps out of range (log time used instead)
         self.stores: dict[str, _KindStore] = {}  #: kind -> its records so far, in sorted runs
         self.pending = 0  #: decoded records of all channels not yet in the stores
+        self.queued = 0  #: JSON messages of all channels waiting to be parsed
+        self.untrimmed = 0  #: records moved into the stores since the C heap was last trimmed
 
     # ---------------------------------------------------------------- records
     def run(self) -> None:
@@ -617,11 +621,16 @@ class _Reader:
         q[1] += n
         q[2].append(np.asarray(times, np.int64))
         q[3].append(np.asarray(nums, np.int64))
+        self.queued += n
         if q[1] >= _JSON_BATCH:
             self._json_flush(ch)
+        elif self.queued >= _JSON_QUEUED:
+            self._json_flush(max(self.channels.values(), key=lambda c: c.state.get("queue", [0, 0])[1]))
 
     def _json_flush(self, ch: _Channel) -> None:
         q = ch.state.pop("queue", None)
+        if q:
+            self.queued -= q[1]
         if not q or not q[1] or ch.mode == "skip":
             return
         self._json(ch, b"".join(q[0]), np.concatenate(q[2]), np.concatenate(q[3]))
@@ -833,6 +842,10 @@ class _Reader:
         for kind, f in frames.items():
             self.stores.setdefault(kind, _KindStore()).add(f)
         del frames
+        self.untrimmed += n
+        if self.untrimmed >= _TRIM_RECORDS:
+            _trim_heap()
+            self.untrimmed = 0
 
     def result(self) -> FileResult:
         _trim_heap()
@@ -910,10 +923,10 @@ def _const_cat(value: str, n: int) -> pd.Categorical:
 
 
 def _trim_heap() -> None:
-    """Give the free memory of the C heap back to the kernel (glibc ``malloc_trim``).
-    Freed blocks in the middle of the heap otherwise stay in the process: after the
-    read, a few tens of MiB of decoding buffers would sit beside the frames.  Without
-    glibc this does nothing."""
+    """Give the free memory of the C heap (glibc ``malloc_trim``) and of pyarrow's pool
+    back to the kernel.  Freed blocks in the middle of the heap otherwise stay in the
+    process, and their amount drifts with the file: a few tens of MiB of decoding
+    buffers would sit beside the frames.  Without glibc only pyarrow's pool is trimmed."""
     global _LIBC
     if _LIBC is None:
         try:
@@ -924,6 +937,10 @@ def _trim_heap() -> None:
             _LIBC = False
     if _LIBC:
         _LIBC(0)
+    import sys
+
+    if "pyarrow" in sys.modules:  # the JSON parser's buffers (arrow's own allocator keeps them)
+        sys.modules["pyarrow"].default_memory_pool().release_unused()
 
 
 _LIBC = None
@@ -989,7 +1006,8 @@ class _KindStore:
     def __init__(self, step: int = 1 << 16):
         self.step = step
         self.names: list[str] = []
-        self.how: dict[str, tuple] = {}  #: column -> ('num', None), ('cat', None) or ('str', its dtype)
+        #: column -> ('num', None), ('cat', dtype of its categories) or ('str', its dtype), from the first piece
+        self.how: dict[str, tuple] = {}
         self.labels: dict[str, dict] = {}  #: label column -> {label: code}
         self.runs: list[_Run] = []
         self.total = 0
@@ -1004,7 +1022,7 @@ class _KindStore:
             for c in self.names:
                 dt = df[c].dtype
                 if isinstance(dt, pd.CategoricalDtype):
-                    self.how[c] = ("cat", None)
+                    self.how[c] = ("cat", dt.categories.dtype)
                 elif pd.api.types.is_string_dtype(dt):  # object or str
                     self.how[c] = ("str", dt)
                 else:
@@ -1076,8 +1094,18 @@ class _KindStore:
         self.total = 0
         for c in self.names:
             how, dtype = self.how[c]
-            if how == "cat":
-                cats = pd.CategoricalDtype(pd.Index(list(self.labels[c]), dtype=object))
+            if how == "cat":  # categories sorted, whatever order the pieces came in
+                labels = list(self.labels[c])
+                try:
+                    rank = sorted(range(len(labels)), key=labels.__getitem__)
+                except TypeError:  # labels of different types: kept in order of appearance
+                    rank = list(range(len(labels)))
+                if rank != sorted(rank):
+                    lut = np.empty(len(labels) + 1, dtype=out[c].dtype)
+                    lut[rank] = np.arange(len(labels))
+                    lut[-1] = -1
+                    out[c] = lut[out[c]]
+                cats = pd.CategoricalDtype(pd.Index([labels[i] for i in rank], dtype=dtype))
                 out[c] = pd.Categorical.from_codes(out[c], dtype=cats, validate=False)
             elif how == "str":
                 out[c] = _strings(out[c], list(self.labels[c]), dtype)
