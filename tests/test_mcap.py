@@ -429,3 +429,108 @@ def test_topic_named_in_config_is_its_own_source_key(tmp_path):
     r = read_mcap(p, IngestConfig(sources={"/INS2/fix": "ins1"}))
     assert set(r.frames["position"]["source"].astype(str)) == {"/INS2/fix"}
     assert set(read_mcap(p, CFG).frames["position"]["source"].astype(str)) == {"INS2"}
+
+
+# ---------------------------------------------------------------- bounded-memory store
+def _random_pieces(rng, n_pieces, sources):
+    """Canonical-looking heading pieces with many equal times and equal (time, line) keys."""
+    import pandas as pd
+
+    pieces = []
+    for _ in range(n_pieces):
+        n = int(rng.integers(0, 40))
+        t = rng.integers(0, 30, n).astype(np.int64) * 1_000_000_000
+        if rng.random() < 0.5:
+            t = np.sort(t)  # most pieces arrive sorted, some not
+        src = rng.choice(sources, n)
+        ref = rng.choice(np.array(["T", "M", None], dtype=object), n)
+        pieces.append(pd.DataFrame({
+            "time_ns": t,
+            "source": pd.Categorical(src),
+            "line": rng.integers(1, 6, n).astype(np.int64),
+            "heading_rad": rng.uniform(0, 2 * math.pi, n),
+            "quality": rng.integers(0, 5, n).astype(np.int8),
+            "reference": ref,
+        }))
+    return pieces
+
+
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("step", [1, 3, 17, 1 << 16])
+def test_store_merge_equals_a_stable_sort_of_all_pieces(seed, step):
+    """The runs merged step by step give exactly the stable (time_ns, line) sort of the
+    pieces concatenated in the order they were added (ties included)."""
+    import pandas as pd
+
+    from dracc.ingest.mcap import _KindStore
+
+    rng = np.random.default_rng(seed)
+    pieces = _random_pieces(rng, int(rng.integers(1, 12)), np.array(["INS1", "GYRO", "INS2", "A"]))
+    store = _KindStore(step=step)
+    for p in pieces:
+        store.add(p)
+    got = store.frame()
+    assert store.runs == [] and store.total == 0  # everything released
+    allp = pd.concat([p.astype({"source": object}) for p in pieces], ignore_index=True)
+    order = np.lexsort((allp["line"].to_numpy(), allp["time_ns"].to_numpy()))
+    want = allp.iloc[order].reset_index(drop=True)
+    assert len(got) == len(want)
+    for c in ("time_ns", "line", "heading_rad", "quality"):
+        np.testing.assert_array_equal(got[c].to_numpy(), want[c].to_numpy())
+        assert got[c].dtype == pieces[0][c].dtype
+    assert list(got["source"].astype(object)) == list(want["source"])
+    assert list(got["source"].cat.categories) == sorted(set(want["source"]))  # sorted categories
+    assert got["reference"].dtype == pieces[0]["reference"].dtype
+    assert ([None if pd.isna(x) else x for x in got["reference"]]
+            == [None if pd.isna(x) else x for x in want["reference"]])
+
+
+def test_store_codes_widen_past_127_labels():
+    """More labels than int8 codes hold: codes widen, every label stays right."""
+    import pandas as pd
+
+    from dracc.ingest.mcap import _KindStore
+
+    store = _KindStore(step=50)
+    names = [f"S{i:03d}" for i in range(300)]
+    for k in range(3):  # the first pieces' runs have int8 codes, later ones int16
+        sub = names[k * 100:(k + 1) * 100]
+        store.add(pd.DataFrame({"time_ns": np.arange(100, dtype=np.int64)[::-1] * 10 + k,
+                                "source": pd.Categorical(sub), "line": np.arange(100, dtype=np.int64)}))
+    got = store.frame()
+    assert got["source"].cat.codes.dtype == np.int16
+    want = {(t, n) for k in range(3) for t, n in zip(np.arange(100)[::-1] * 10 + k, names[k * 100:(k + 1) * 100],
+                                                  strict=True)}
+    assert set(zip(got["time_ns"].tolist(), got["source"].astype(str).tolist(), strict=True)) == want
+    assert (np.diff(got["time_ns"].to_numpy()) > 0).all()
+
+
+def test_mapped_arrays_are_writable_and_sized():
+    from dracc.ingest.mcap import _mapped_empty
+
+    a = _mapped_empty(1000, np.int16)
+    a[:] = np.arange(1000)
+    assert a.dtype == np.int16 and len(a) == 1000 and a.flags.writeable and a[999] == 999
+    assert len(_mapped_empty(0, np.float64)) == 0
+
+
+@pytest.mark.parametrize("encoding", ["json", "ros2"])
+def test_frames_do_not_depend_on_piece_and_queue_sizes(tmp_path, monkeypatch, encoding):
+    """Tiny budgets (pieces of 7 records, queues of 5 JSON messages over all channels,
+    the C heap trimmed after every piece) give the same frames as the defaults."""
+    import pandas as pd
+
+    import dracc.ingest.mcap as mc
+
+    fr = voyage_frames(n=300)
+    p = write_mcap(fr, ROLES, tmp_path / "v.mcap", encoding=encoding, chunk_size=1 << 12)
+    want = read_mcap(p, CFG)
+    monkeypatch.setattr(mc, "_PIECE_RECORDS", 7)
+    monkeypatch.setattr(mc, "_PENDING_RECORDS", 11)
+    monkeypatch.setattr(mc, "_JSON_BATCH", 5)
+    monkeypatch.setattr(mc, "_JSON_QUEUED", 5)
+    monkeypatch.setattr(mc, "_TRIM_RECORDS", 1)
+    got = read_mcap(p, CFG)
+    assert want.frames.keys() == got.frames.keys() and want.notes == got.notes
+    for kind, f in want.frames.items():
+        pd.testing.assert_frame_equal(f, got.frames[kind])
