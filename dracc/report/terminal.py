@@ -65,8 +65,9 @@ def _unit_table(d: DeviationResult) -> Table:
                 hat = "neg. var."
             else:
                 hat = r.hat_sigma
-            t.add_row(name, r.channel_text, r.n, r.m_u, r.m_y, r.kurtosis, r.limit, r.apriori,
-                      verdict, hat, r.ref_rms, r.k_star)
+            # Text, not str: rich would read 'lat [m]' as markup and print 'lat'
+            t.add_row(*(Text(str(c)) for c in (name, r.channel_text, r.n, r.m_u, r.m_y, r.kurtosis,
+                                               r.limit, r.apriori, verdict, hat, r.ref_rms, r.k_star)))
     return t
 
 
