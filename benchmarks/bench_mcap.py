@@ -11,10 +11,12 @@ written as MCAP (JSON and ROS 2 CDR, zstd chunks of 1 MiB):
   per-message time extrapolated to the file; the printout says so.  Each side runs
   ``--repeat`` times, alternating, and the best time counts.
 
-Memory: the peak RSS (``VmHWM``) of a fresh subprocess reading the 6 h and the 24 h file,
-split into the RSS after imports, the RSS held at the end with the frames alive, and the
-transient above it (the reader's working memory: windows, pending columns, the final
-concatenation).
+Memory: the peak RSS (``VmHWM``) of a fresh subprocess reading the 6 h and the 24 h file
+(ROS 2 and JSON), minus the RSS after imports, minus the returned frames' own arrays
+(``memory_usage(deep=False)``): the reader's working memory above its output.  The two
+voyages are printed side by side with the verdict: bounded when the 24 h figure is within
+``--mem-tolerance`` MiB (default 5) of the 6 h one.  The load average (``os.getloadavg``)
+is printed beside every timing.
 
 Usage: ``python benchmarks/bench_mcap.py [--hours 24] [--workdir DIR] [--stock-limit N] [--repeat 2]``
 (files are cached in DIR between runs).
@@ -24,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -109,11 +112,12 @@ def main() -> None:
     ap.add_argument("--workdir", type=Path, default=Path(tempfile.gettempdir()) / "dracc_bench_mcap")
     ap.add_argument("--stock-limit", type=int, default=300_000)
     ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--mem-tolerance", type=float, default=5.0, help="MiB (see the module doc)")
     args = ap.parse_args()
     args.workdir.mkdir(parents=True, exist_ok=True)
     files = make_files(args.hours, args.workdir)
     print(f"\n{'encoding':8} {'messages':>9} {'dracc s':>8} {'us/msg':>7} {'stock us/msg':>12} "
-          f"{'stock s (full file)':>20} {'speed-up':>8}")
+          f"{'stock s (full file)':>20} {'speed-up':>8}  load (1/5/15 min)")
     for enc, p in files.items():
         # best of --repeat, alternating, so that load from other jobs hits both sides alike
         runs = [(time_dracc(p), time_stock(p, enc, args.stock_limit or -1)) for _ in range(args.repeat)]
@@ -122,18 +126,26 @@ def main() -> None:
         per_d, per_s = td / n * 1e6, ts / ns * 1e6
         full = per_s * n / 1e6
         note = "" if ns == n else f" (extrapolated from {ns})"
-        print(f"{enc:8} {n:9d} {td:8.2f} {per_d:7.2f} {per_s:12.2f} {full:12.1f}{note} {per_s / per_d:7.1f}x",
+        load = "/".join(f"{x:.2f}" for x in os.getloadavg())
+        print(f"{enc:8} {n:9d} {td:8.2f} {per_d:7.2f} {per_s:12.2f} {full:12.1f}{note} {per_s / per_d:7.1f}x  {load}",
               flush=True)
-    print("\nmemory (fresh subprocess, ROS 2 file):")
-    six = make_files(6.0, args.workdir)["ros2"] if args.hours != 6.0 else files["ros2"]
-    for label, p in (("6 h", six), (f"{args.hours:g} h", files["ros2"])):
-        m = memory(p)
-        transient = (m["peak_kib"] - m["held_kib"]) / 1024
-        print(f"  {label:5} file {p.stat().st_size / 1e6:6.1f} MB, {m['messages']} msgs: peak RSS "
-              f"{m['peak_kib'] / 1024:7.1f} MiB = after imports {m['base_kib'] / 1024:6.1f} + held with "
-              f"the frames {(m['held_kib'] - m['base_kib']) / 1024:6.1f} (frames' own arrays "
-              f"{m['frames_bytes'] / 2**20:6.1f}) + transient {transient:6.1f} MiB", flush=True)
-
+    print("\nmemory: fresh subprocess per file; working = peak RSS - RSS after imports - frames' own arrays")
+    six = make_files(6.0, args.workdir) if args.hours != 6.0 else files
+    print(f"{'encoding':8} {'voyage':>6} {'file MB':>8} {'messages':>9} {'peak MiB':>9} {'imports':>8} "
+          f"{'frames':>7} {'working':>8}  load (1/5/15 min)")
+    for enc in files:
+        work = []
+        for label, p in (("6 h", six[enc]), (f"{args.hours:g} h", files[enc])):
+            m = memory(p)
+            w = (m["peak_kib"] - m["base_kib"]) / 1024 - m["frames_bytes"] / 2**20
+            work.append(w)
+            load = "/".join(f"{x:.2f}" for x in os.getloadavg())
+            print(f"{enc:8} {label:>6} {p.stat().st_size / 1e6:8.1f} {m['messages']:9d} {m['peak_kib'] / 1024:9.1f} "
+                  f"{m['base_kib'] / 1024:8.1f} {m['frames_bytes'] / 2**20:7.1f} {w:8.1f}  {load}", flush=True)
+        d = work[1] - work[0]
+        verdict = "bounded" if abs(d) <= args.mem_tolerance else "GROWS with the file"
+        print(f"{enc:8} working memory 6 h {work[0]:.1f} MiB, {args.hours:g} h {work[1]:.1f} MiB: "
+              f"difference {d:+.1f} MiB (tolerance {args.mem_tolerance:g}): {verdict}", flush=True)
 
 if __name__ == "__main__":
     main()

@@ -918,8 +918,17 @@ class _Reader:
 
 
 def _const_cat(value: str, n: int) -> pd.Categorical:
-    """A categorical column holding one value n times (1 byte a row)."""
-    return pd.Categorical.from_codes(np.zeros(n, dtype=np.int8), categories=[value])
+    """A categorical column holding one value n times (1 byte a row); the dtype is
+    cached (building a categories index costs more than the column)."""
+    dt = _CONST_DTYPES.get(value)
+    if dt is None:
+        if len(_CONST_DTYPES) > 4096:
+            _CONST_DTYPES.clear()
+        dt = _CONST_DTYPES[value] = pd.CategoricalDtype(pd.Index([value]))
+    return pd.Categorical.from_codes(np.zeros(n, dtype=np.int8), dtype=dt, validate=False)
+
+
+_CONST_DTYPES: dict[str, pd.CategoricalDtype] = {}
 
 
 def _trim_heap() -> None:
@@ -1047,7 +1056,7 @@ class _KindStore:
     def _codes(self, c: str, col: pd.Series) -> np.ndarray:
         """A label column as codes into this store's labels for ``c`` (-1: missing)."""
         if isinstance(col.dtype, pd.CategoricalDtype):
-            codes, uniq = col.cat.codes.to_numpy(), col.cat.categories
+            codes, uniq = col.array.codes, col.dtype.categories
         else:
             codes, uniq = pd.factorize(col, use_na_sentinel=True)
         known = self.labels[c]
