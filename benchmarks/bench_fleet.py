@@ -1,6 +1,6 @@
 """Fleet speed: a fleet of simulated voyage logs on 1 and 2 local workers, and on Dask.
 
-    python benchmarks/bench_fleet.py [--logs 20] [--hours 3] [--workdir DIR] [--no-dask]
+    python benchmarks/bench_fleet.py [--logs 20] [--hours 6] [--workdir DIR] [--repeat N] [--no-dask]
 
 Simulates ``--logs`` voyages with ``dracc simulate`` (different seeds, five vessels),
 then runs the batch (:func:`dracc.fleet.run_fleet`, ``force=True`` so every log is
@@ -104,7 +104,8 @@ def dask_cluster(n_workers: int):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--logs", type=int, default=20)
-    ap.add_argument("--hours", type=float, default=3.0)
+    ap.add_argument("--hours", type=float, default=6.0, help="per log; 6 h = 25 MB, below the size "
+                    "at which the NMEA reader starts processes of its own")
     ap.add_argument("--workdir", type=Path, default=None)
     ap.add_argument("--no-dask", action="store_true")
     ap.add_argument("--repeat", type=int, default=1, help="best of N (interleaved) runs per pool size")
