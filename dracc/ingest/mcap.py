@@ -6,8 +6,15 @@ Reading
     compression of the official ``mcap`` package; the summary and the indexes are not
     needed, so indexed and non-indexed files read alike.  A chunk is never held whole:
     its compressed bytes are read in 1 MiB pieces and decompressed incrementally (zstd,
-    lz4, none), and complete records are decoded in windows of about 8 MiB.  Memory is
-    that window plus the decoded columns.
+    lz4, none), and complete records are decoded in windows of about 8 MiB.
+Memory
+    Besides the frames it returns, the reader holds a window, the decoded columns of at
+    most 100 000 records (all channels) and JSON texts of at most 50 000 messages; frame
+    pieces go into sorted runs in their own memory mappings (:class:`_KindStore`) that
+    are merged step by step into the output columns at the end, each run unmapped when
+    used up; the C heap and pyarrow's pool are trimmed every 200 000 records.  So the
+    working memory does not grow with the file (``benchmarks/bench_mcap.py``), except
+    for raw NMEA text, which is collected and parsed at the end.
 Decoding
     Messages are grouped by channel within each window and decoded together:
     ROS 2 CDR onto numpy structured arrays (:mod:`dracc.ingest.mcap_cdr`), JSON with one
