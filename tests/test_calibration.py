@@ -209,3 +209,17 @@ def test_too_short_a_log_for_the_track_calibration_says_so():
     rng, t, course, speed, glat, glon = _voyage(7, hours=0.5)
     with pytest.raises(InsufficientDataError, match="need at least 4"):
         calibrate_from_track(t, course, speed, t, glat, glon)
+
+
+def test_regression_single_straight_leg_with_yaw_is_not_separable(tmp_path):
+    """A simulated 3 h voyage on one course (yaw noise only) fitted a compass error of
+    -0.3 +- 31 deg and a log scale of 175 +- 151 %: nearly singular, now reported as such."""
+    from dracc.cli.main import main
+    from dracc.config import Config
+    from dracc.pipeline import analyse
+
+    assert main(["simulate", "--out", str(tmp_path), "--hours", "3", "--seed", "105", "--name", "v",
+                 "--compass-hz", "1", "--truth-hz", "0.01", "--legs", "0:60"]) == 0
+    a = analyse([tmp_path / "v.nmea"], Config())
+    assert a.calibration is None
+    assert any("cannot separate" in m for m in a.missing)
