@@ -224,13 +224,6 @@ def analyse_log(path: str, cfg: Config) -> dict:
         return {"ok": True, "summary": summarise(analysis_document([Path(path)], cfg))}
     except DraccError as err:
         return {"ok": False, "error": str(err)}
-    except AssertionError as err:
-        if "daemonic" not in str(err):
-            return {"ok": False, "error": f"internal error (AssertionError: {err})"}
-        # the NMEA reader parses large files in two processes of its own
-        return {"ok": False, "error": f"{path}: this log needs the reader's own worker processes, "
-                "which a daemonic Dask worker cannot start: run the Dask workers with "
-                "DASK_DISTRIBUTED__WORKER__DAEMON=False"}
     except Exception as err:  # a dracc bug on one log must not stop the fleet
         return {"ok": False, "error": f"internal error ({type(err).__name__}: {err})"}
 

@@ -397,3 +397,23 @@ def test_broken_worker_pool_falls_back_to_this_process(tmp_path, monkeypatch):
     blocks = list(iter_nmea_blocks(p, IngestConfig(), st, block_bytes=20000, workers=2))
     assert sum(len(b.frames["heading"]) for b in blocks) == 1000
     assert any("worker pool failed" in n for n in st.notes())
+
+
+def _pool_ok_in_child(q):
+    from dracc.ingest import nmea
+
+    q.put(nmea._pool_ok())
+
+
+def test_regression_reader_parses_alone_inside_a_daemonic_process():
+    """Inside a Dask worker (daemonic) the reader's own pool raised 'daemonic processes are
+    not allowed to have children' for logs of 32 MB and more."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("fork")
+    q = ctx.Queue()
+    p = ctx.Process(target=_pool_ok_in_child, args=(q,), daemon=True)
+    p.start()
+    allowed = q.get(timeout=60)
+    p.join(timeout=60)
+    assert allowed is False

@@ -833,7 +833,11 @@ class StreamState:
 
 
 def _pool_ok() -> bool:
-    return (os.cpu_count() or 1) >= 2
+    """Two cores, and a process that may start children: a daemonic process (a Dask
+    worker, a multiprocessing.Pool worker) may not, so there the reader parses alone."""
+    import multiprocessing
+
+    return (os.cpu_count() or 1) >= 2 and not multiprocessing.current_process().daemon
 
 
 def _worker_init() -> None:
