@@ -505,13 +505,17 @@ def test_store_codes_widen_past_127_labels():
     assert (np.diff(got["time_ns"].to_numpy()) > 0).all()
 
 
-def test_mapped_arrays_are_writable_and_sized():
-    from dracc.ingest.mcap import _mapped_empty
+def test_mapped_columns_are_separate_writable_and_sized():
+    from dracc.ingest.mcap import _mapped_columns
 
-    a = _mapped_empty(1000, np.int16)
-    a[:] = np.arange(1000)
-    assert a.dtype == np.int16 and len(a) == 1000 and a.flags.writeable and a[999] == 999
-    assert len(_mapped_empty(0, np.float64)) == 0
+    a, b, c = _mapped_columns(1001, [np.int16, np.float64, np.int8])
+    a[:] = np.arange(1001)
+    b[:] = -1.5
+    c[:] = 7
+    assert [x.dtype for x in (a, b, c)] == [np.int16, np.float64, np.int8]
+    assert all(len(x) == 1001 and x.flags.writeable and x.ctypes.data % 64 == 0 for x in (a, b, c))
+    assert a[1000] == 1000 and (b == -1.5).all() and (c == 7).all()  # no column overlaps another
+    assert [len(x) for x in _mapped_columns(0, [np.float64, np.int8])] == [0, 0]
 
 
 @pytest.mark.parametrize("encoding", ["json", "ros2"])

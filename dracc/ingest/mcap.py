@@ -59,6 +59,7 @@ import json
 import math
 import mmap
 import struct
+import sys
 from dataclasses import dataclass, field
 from io import BytesIO
 from pathlib import Path
@@ -953,8 +954,6 @@ def _trim_heap() -> None:
             _LIBC = False
     if _LIBC:
         _LIBC(0)
-    import sys
-
     if "pyarrow" in sys.modules:  # the JSON parser's buffers (arrow's own allocator keeps them)
         sys.modules["pyarrow"].default_memory_pool().release_unused()
 
@@ -962,18 +961,28 @@ def _trim_heap() -> None:
 _LIBC = None
 
 
-def _mapped_empty(n: int, dtype) -> np.ndarray:
-    """An uninitialised array in its own anonymous memory mapping: when the array is
-    garbage its pages go back to the kernel at once (a freed malloc block of a few
-    hundred KiB usually stays in the heap, so a run's memory would outlive the run).
-    Pages count towards the RSS only once written."""
-    dt = np.dtype(dtype)
+def _mapped_columns(n: int, dtypes: list) -> list[np.ndarray]:
+    """Uninitialised arrays of ``n`` items, one per dtype, together in one anonymous
+    memory mapping: when all of them are garbage the pages go back to the kernel at once
+    (a freed malloc block of a few hundred KiB usually stays in the heap, so a run's
+    memory would outlive the run).  Pages count towards the RSS only once written.
+    Plain arrays where there is no anonymous mmap (not POSIX) or the kernel refuses one
+    (e.g. too many mappings)."""
+    dts = [np.dtype(d) for d in dtypes]
+    offs, size = [], 0
+    for dt in dts:
+        offs.append(size)
+        size += -(-n * dt.itemsize // 64) * 64  # each column 64-byte aligned
     flags = getattr(mmap, "MAP_PRIVATE", None)
     anon = getattr(mmap, "MAP_ANONYMOUS", None)
-    if flags is None or anon is None or n == 0:  # pragma: no cover - not POSIX
-        return np.empty(n, dtype=dt)
-    mm = mmap.mmap(-1, n * dt.itemsize, flags=flags | anon)
-    return np.frombuffer(mm, dtype=dt, count=n)
+    if flags is not None and anon is not None and size > 0:
+        try:
+            mm = mmap.mmap(-1, size, flags=flags | anon)
+        except OSError:  # pragma: no cover - the kernel's mapping limit
+            mm = None
+        if mm is not None:
+            return [np.frombuffer(mm, dtype=dt, count=n, offset=o) for dt, o in zip(dts, offs, strict=True)]
+    return [np.empty(n, dtype=dt) for dt in dts]
 
 
 def _code_dtype(ncat: int) -> np.dtype:
@@ -1009,7 +1018,7 @@ class _KindStore:
 
     Each piece (a canonical frame of a few ten thousand records) is ordered by
     (time_ns, line) (a stable sort of the piece alone) and copied into a run whose
-    columns live in their own memory mappings (:func:`_mapped_empty`); string columns
+    columns live in one memory mapping of its own (:func:`_mapped_columns`); string columns
     are kept as the smallest integer codes into one label list per column.  The runs
     together are the size of the frame.  :meth:`frame` merges them into the output
     columns, allocated once at their final size, a step of at most about ``step``
@@ -1050,13 +1059,14 @@ class _KindStore:
         order = None
         if n > 1 and not ((t[1:] > t[:-1]) | ((t[1:] == t[:-1]) & (ln[1:] >= ln[:-1]))).all():
             order = np.lexsort((ln, t))  # stable: equal keys keep the piece's order
-        cols = {}
+        vals = {}
         for c in self.names:
             v = self._codes(c, df[c]) if c in self.labels else df[c].to_numpy()
-            if order is not None:
-                v = v[order]
-            cols[c] = _mapped_empty(n, v.dtype)
+            vals[c] = v if order is None else v[order]
+        cols = dict(zip(self.names, _mapped_columns(n, [v.dtype for v in vals.values()]), strict=True))
+        for c, v in vals.items():
             cols[c][:] = v
+        del vals
         self.runs.append(_Run(cols, n))
         self.total += n
 
@@ -1134,9 +1144,13 @@ def _strings(codes: np.ndarray, labels: list, dtype) -> object:
     if isinstance(dtype, pd.StringDtype) and dtype.storage == "pyarrow":
         import pyarrow as pa
 
-        dic = pa.DictionaryArray.from_arrays(pa.array(codes, mask=codes < 0),
+        missing = codes < 0
+        dic = pa.DictionaryArray.from_arrays(pa.array(codes, mask=missing if missing.any() else None),
                                              pa.array(labels, pa.large_string()))
-        return dtype.construct_array_type()._from_sequence(dic.cast(pa.large_string()), dtype=dtype)
+        arr = dic.cast(pa.large_string())
+        if arr.null_count == 0:  # no validity bitmap where nothing is missing (as pandas builds it)
+            arr = pa.Array.from_buffers(arr.type, len(arr), [None, *arr.buffers()[1:]], offset=arr.offset)
+        return dtype.construct_array_type()._from_sequence(arr, dtype=dtype)
     vals = np.empty(len(labels) + 1, dtype=object)
     vals[:-1] = labels
     vals[-1] = None
