@@ -14,6 +14,7 @@ from dracc.errors import ConfigError, ExitCode
 from dracc.report.json_report import load_schema
 
 SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
+SAMPLE_DAY = SAMPLES / "day" / "voyage_day.mcap"
 SAMPLE = SAMPLES / "voyage_tag.nmea"
 
 
@@ -183,3 +184,13 @@ def test_unwritable_report_is_one_line_error(run_cli, tmp_path):
     code, _, err = run_cli("analyze", SAMPLE, "--html", blocker / "r.html")
     assert code == ExitCode.INPUT and err.startswith("error: cannot write") and "Traceback" not in err
     assert len(err.strip().splitlines()) == 1
+
+
+def test_regression_summary_to_a_file_is_not_squeezed_to_80_columns(run_cli):
+    """Redirected to a file, rich laid the tables out in 80 columns: 'sou/rce' split over
+    two lines and figures cut to '221…'."""
+    code, out, _ = run_cli("analyze", SAMPLE_DAY)
+    assert code == 0
+    assert any(line.startswith("source  role") for line in out.splitlines())
+    assert "…" not in out
+    assert "lat [m]" in out and "course [deg]" in out

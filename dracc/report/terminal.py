@@ -172,15 +172,15 @@ def render_text(a: Analysis, width: int = 120) -> str:
 #: the summary's tables are laid out for at least this many columns; a narrower terminal
 #: wraps the long lines rather than the tables hiding figures behind ellipses
 MIN_WIDTH = 110
+#: a file or a pipe has no width: lay the tables out as wide as their content needs, up to this
+FILE_WIDTH = 200
 
 
 def print_summary(a: Analysis, console: Console) -> None:
     """Print the summary on ``console`` (stdout in the CLI)."""
     width = console.width
-    if width >= MIN_WIDTH:
-        console.print(summary(a))
-        return
-    console.width = MIN_WIDTH  # rich never prints wider than the console's own width
+    target = max(width, MIN_WIDTH) if console.is_terminal else FILE_WIDTH
+    console.width = target  # rich never prints wider than the console's own width
     try:
         console.print(summary(a))
     finally:
