@@ -880,7 +880,10 @@ class _Reader:
             res.time_events = nres.time_events
             res.notes.extend(nres.notes)
         for kind in list(self.stores):
-            res.frames[kind] = self.stores.pop(kind).frame()
+            store = self.stores.pop(kind)
+            if store.total:
+                res.frames[kind] = store.frame()
+            del store
         _trim_heap()
         res.notes[:0] = self.notes + self._channel_notes()
         if self.bad_stamps:
