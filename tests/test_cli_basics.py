@@ -58,3 +58,18 @@ def test_console_script_runs_as_module():
 def test_exit_codes_are_stable():
     # Documented in the README; scripts and cron depend on these numbers.
     assert [int(c) for c in ExitCode] == [0, 1, 2, 3, 4, 5, 130]
+
+
+def test_regression_cli_runs_without_click_installed():
+    """typer >= 0.20 vendors click and does not install it: a plain `pip install .` had no
+    click, and `import click` in the entry point failed before any command ran."""
+    code = (
+        "import sys; sys.modules['click'] = None\n"  # any `import click` now fails
+        "from dracc.cli.main import main\n"
+        "assert main(['--version']) == 0\n"
+        "assert main(['no-such-command']) == 2\n"
+        "assert main(['inspect', '/nonexistent/log.nmea']) == 3\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "Traceback" not in r.stderr

@@ -7,8 +7,6 @@ import sys
 import traceback
 
 try:  # Ctrl-C while the libraries load (seconds on a busy machine): one line, no traceback
-    import click.exceptions
-
     from ..errors import DraccError, ExitCode
     from .app import VERBOSE, app, err
 
@@ -25,16 +23,24 @@ except KeyboardInterrupt:
 
 
 def _click_exceptions():
-    """click's Exit/Abort/ClickException classes, and typer's own (typer >= 0.20 vendors click)."""
-    exits, aborts, errors = [click.exceptions.Exit], [click.exceptions.Abort], [click.exceptions.ClickException]
+    """The Exit/Abort/ClickException classes the CLI layer may raise: typer's own (typer >=
+    0.20 vendors click and no longer installs it) and, for older typer, click's."""
+    import typer
+
+    exits, aborts, errors = [typer.Exit], [typer.Abort], []
     try:
-        import typer
         import typer._click.exceptions as vendored
 
-        exits.append(typer.Exit)
-        aborts.append(typer.Abort)
         errors.append(vendored.ClickException)
-    except (ImportError, AttributeError):
+    except ImportError:
+        pass
+    try:
+        import click.exceptions  # typer < 0.20 runs on click itself
+
+        exits.append(click.exceptions.Exit)
+        aborts.append(click.exceptions.Abort)
+        errors.append(click.exceptions.ClickException)
+    except ImportError:
         pass
     return tuple(exits), tuple(aborts), tuple(errors)
 
