@@ -7,11 +7,7 @@ exits 0 (all within limits), 1 (findings), 3 (no usable logs) or 4 (config error
 
 from __future__ import annotations
 
-import base64
-import html
-import io
 import json
-import math
 from pathlib import Path
 
 import typer
@@ -22,6 +18,9 @@ from .. import atomic
 from ..audit import CHANNEL_KEYS, AuditOutcome, audit_config, parse_night, run_audit
 from ..config import load_config
 from ..errors import ConfigError, DraccError, ExitCode
+from ..report.audit_html import fmt_value as _f
+from ..report.audit_html import history_html
+from ..report.audit_html import measure_digits as _digits
 from ..state import StateError, StateStore
 from .app import ConfigOption, app, out, progress
 
@@ -44,16 +43,6 @@ app.add_typer(audit_app, name="audit")
 
 
 # --------------------------------------------------------------------- the summary
-
-
-def _f(x, digits: int = 1, unit: str = "") -> str:
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return "-"
-    return f"{x:,.{digits}f}{(' ' + unit) if unit else ''}"
-
-
-def _digits(measure: str) -> int:
-    return 3 if measure == "deg" else 1
 
 
 _STATUS = {
@@ -221,87 +210,6 @@ def history_document(store: StateStore, vessel=None, unit=None, channel=None) ->
               if (unit is None or e.unit == unit) and (channel is None or e.channel == channel)]
     return {"schema": "dracc.audit.history/1", "series": list(series.values()), "nights": nights,
             "apriori_events": events}
-
-
-def _png(fig) -> str:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
-    return base64.b64encode(buf.getvalue()).decode("ascii")
-
-
-def history_plot(doc: dict, vessel: str) -> str | None:
-    """m_y per unit and the a priori (dashed steps) per channel over nights; base64 PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import pandas as pd
-
-    series = [s for s in doc["series"] if s["vessel"] == vessel]
-    if not series:
-        return None
-    channels = [c for c in ("lat", "lon", "course") if any(s["channel"] == c for s in series)]
-    fig, axes = plt.subplots(len(channels), 1, figsize=(8, 2.4 * len(channels)), sharex=True,
-                             squeeze=False)
-    for ax, ch in zip(axes[:, 0], channels, strict=True):
-        for s in (s for s in series if s["channel"] == ch):
-            t = pd.to_datetime([n["night"] for n in s["nights"]])
-            y = [math.nan if n["m_y"] is None else n["m_y"] for n in s["nights"]]
-            a = [math.nan if n["apriori_after"] is None else n["apriori_after"] for n in s["nights"]]
-            line, = ax.plot(t, y, "o-", label=f"{s['unit']} m_y")
-            ax.step(t, a, "--", where="post", color=line.get_color(), alpha=0.7,
-                    label=f"{s['unit']} a priori")
-        measure = "deg" if ch == "course" else "m"
-        ax.set_ylabel(f"{ch} ({measure})")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, ncol=3)
-    axes[0, 0].set_title(f"{vessel}: RMS error from deviations (m_y) and a priori, per night")
-    fig.autofmt_xdate()
-    png = _png(fig)
-    plt.close(fig)
-    return png
-
-
-def history_html(doc: dict) -> str:
-    """One self-contained page (no network): per vessel a plot and the table of nights."""
-    e = html.escape
-    parts = ["<!doctype html><html><head><meta charset='utf-8'><title>dracc audit history</title>",
-             "<style>body{font-family:sans-serif;margin:1.5em}table{border-collapse:collapse}"
-             "td,th{border:1px solid #bbb;padding:2px 6px;text-align:right}"
-             "td:first-child,th:first-child{text-align:left}</style></head><body>",
-             "<h1>dracc audit history</h1>"]
-    vessels = sorted({s["vessel"] for s in doc["series"]} | {n["vessel"] for n in doc["nights"]})
-    if not vessels:
-        parts.append("<p>No nights recorded yet.</p>")
-    for v in vessels:
-        parts.append(f"<h2>{e(v)}</h2>")
-        png = history_plot(doc, v)
-        if png:
-            parts.append(f"<img alt='m_y and a priori per night for {e(v)}' "
-                         f"src='data:image/png;base64,{png}'>")
-        parts.append("<table><tr><th>unit</th><th>channel</th><th>night</th><th>n</th><th>m_y</th>"
-                     "<th>limit</th><th>a priori</th><th>verdict</th></tr>")
-        for s in (s for s in doc["series"] if s["vessel"] == v):
-            d = _digits(s["measure"])
-            for n in s["nights"]:
-                parts.append(f"<tr><td>{e(s['unit'])}</td><td>{e(s['channel'])}</td>"
-                             f"<td>{e(n['night'])}</td><td>{n['n']}</td>"
-                             f"<td>{_f(n['m_y'], d, s['measure'])}</td>"
-                             f"<td>{_f(n['limit_error'], d, s['measure'])}</td>"
-                             f"<td>{_f(n['apriori_after'], d, s['measure'])}</td>"
-                             f"<td>{e(n['verdict'] or '-')}</td></tr>")
-        parts.append("</table><h3>Nights</h3><table><tr><th>night</th><th>DR in 2M</th>"
-                     "<th>compass error</th><th>log scale</th><th>findings</th></tr>")
-        for n in (n for n in doc["nights"] if n["vessel"] == v):
-            c = n["dr_containment_2m"]
-            ls = n["log_scale"]
-            parts.append(f"<tr><td>{e(n['night'])}</td><td>{'-' if c is None else f'{100 * c:.1f} %'}"
-                         f"</td><td>{_f(n['compass_error_deg'], 2, 'deg')}</td>"
-                         f"<td>{'-' if ls is None else f'{100 * ls:+.2f} %'}</td>"
-                         f"<td>{e('; '.join(f['message'] for f in n['findings'])) or 'none'}</td></tr>")
-        parts.append("</table>")
-    parts.append("</body></html>\n")
-    return "\n".join(parts)
 
 
 @audit_app.command("history")

@@ -33,9 +33,10 @@ _UNIT_COLOURS = {"ins1": "#1f77b4", "ins2": "#d62728", "ins3": "#2ca02c"}
 _ROLE_COLOURS = {"gnss": "#555555", "ins1": "#1f77b4", "ins2": "#d62728", "ins3": "#2ca02c"}
 
 
-def _png(fig) -> bytes:
+def png_bytes(fig, dpi: int = _DPI) -> bytes:
+    """The figure as PNG bytes (no software tag, so the bytes are reproducible); closes it."""
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=_DPI, bbox_inches="tight", metadata={"Software": None})
+    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight", metadata={"Software": None})
     plt.close(fig)
     return buf.getvalue()
 
@@ -47,7 +48,7 @@ def _finish(fig, ax, xlabel: str, ylabel: str, title: str, legend_loc: str) -> b
     ax.grid(True, alpha=0.3)
     ax.legend(loc=legend_loc, fontsize=8)
     ax.set_title(title)
-    return _png(fig)
+    return png_bytes(fig)
 
 
 def _utc_axis(fig, ax) -> None:
@@ -134,7 +135,7 @@ def deviation_plot(a: Analysis) -> bytes | None:
     axes[0].set_title(f"Deviations from the mean of {len(d.units)} units, "
                       f"every {d.interval_s / 3600:g} h")
     _utc_axis(fig, axes[-1])
-    return _png(fig)
+    return png_bytes(fig)
 
 
 def growth_plot(a: Analysis) -> bytes | None:
@@ -182,4 +183,4 @@ def current_plot(a: Analysis) -> bytes | None:
     ax2.grid(True, alpha=0.3)
     ax1.set_title("Estimated current")
     _utc_axis(fig, ax2)
-    return _png(fig)
+    return png_bytes(fig)

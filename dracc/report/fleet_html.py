@@ -1,0 +1,146 @@
+"""The ``dracc fleet`` page: latest figures per vessel, DR containment and trend plots.
+
+Renders a :class:`~dracc.fleet.FleetResult`; nothing is estimated here.  The page is one
+self-contained file (:mod:`dracc.report.page`); matplotlib loads only when a plot is drawn.
+The cell formatters and :func:`latest` are shared with the terminal table of ``dracc fleet``.
+"""
+
+from __future__ import annotations
+
+import html
+import math
+
+import pandas as pd
+
+from ..fleet import FleetResult, count_logs
+from .page import PAGE_END, img_tag, page_head
+
+_DPI = 85
+
+
+def fmt_num(x, digits: int = 1) -> str:
+    """``x`` to ``digits`` decimals with a thousands separator; '-' if missing or not finite."""
+    if x is None or pd.isna(x) or (isinstance(x, float) and not math.isfinite(x)):
+        return "-"
+    return f"{x:,.{digits}f}"
+
+
+def fmt_num_unit(x, digits: int, unit: str) -> str:
+    """A number with its unit, or '-'."""
+    text = fmt_num(x, digits)
+    return text if text == "-" else text + unit
+
+
+def cell_text(x) -> str:
+    """Text for a table cell; '-' for missing."""
+    return "-" if x is None or pd.isna(x) else str(x)
+
+
+def latest(table: pd.DataFrame) -> pd.DataFrame:
+    """Per vessel, unit and channel: the latest log's row, with the vessel's log count and period."""
+    ok = table[table["status"] == "ok"]
+    if ok.empty:
+        return ok
+    # logs without INS statistics keep one row (unit and channel empty) for DR and calibration
+    last = ok.groupby(["vessel", "unit", "channel"], sort=True, dropna=False).tail(1).copy()
+    span = ok.groupby("vessel").agg(first_day=("day", "min"), last_day=("day", "max"),
+                                    logs=("log", "nunique"))
+    return last.join(span, on="vessel").sort_values(["vessel", "unit", "channel"], na_position="last")
+
+
+def trend_plot(trends: pd.DataFrame, vessel: str) -> bytes | None:
+    """Per channel: the day's pooled m_y per unit and the a priori (dashed); PNG bytes."""
+    import matplotlib  # loaded only when a page is drawn
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .plots import png_bytes
+
+    t = trends[trends["vessel"] == vessel]
+    if t.empty:
+        return None
+    channels = [c for c in ("lat", "lon", "course") if (t["channel"] == c).any()]
+    fig, axes = plt.subplots(len(channels), 1, figsize=(8, 2.2 * len(channels)), sharex=True,
+                             squeeze=False)
+    for ax, ch in zip(axes[:, 0], channels, strict=True):
+        for unit, g in t[t["channel"] == ch].groupby("unit"):
+            days = pd.to_datetime(g["day"].astype(str))
+            line, = ax.plot(days, g["m_y"], "o-", label=f"{unit} m_y")
+            ax.step(days, g["apriori_after"], "--", where="post", color=line.get_color(), alpha=0.7,
+                    label=f"{unit} a priori")
+        ax.set_ylabel(f"{ch} ({'deg' if ch == 'course' else 'm'})")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, ncol=3)
+    axes[0, 0].set_title(f"{vessel}: daily RMS error from deviations (pooled m_y) and a priori")
+    fig.autofmt_xdate()
+    return png_bytes(fig, dpi=_DPI)
+
+
+def containment_plot(table: pd.DataFrame) -> bytes | None:
+    """DR containment in 2M per vessel and log (the 2 drms promise ~95 %); PNG bytes."""
+    import matplotlib  # loaded only when a page is drawn
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .plots import png_bytes
+
+    d = table[table["dr_containment_2m"].notna()].drop_duplicates(["vessel", "log"])
+    if d.empty:
+        return None
+    fig, ax = plt.subplots(figsize=(8, 0.4 * d["vessel"].nunique() + 1.5))
+    vessels = sorted(d["vessel"].unique())
+    for i, v in enumerate(vessels):
+        c = d.loc[d["vessel"] == v, "dr_containment_2m"] * 100
+        ax.plot(c, [i] * len(c), "o", alpha=0.7)
+    ax.axvline(95.4, ls="--", color="grey", lw=1)
+    ax.set_yticks(range(len(vessels)), vessels)
+    ax.set_xlabel("reference inside 2M (% of DR epochs), per log")
+    ax.set_title("Dead-reckoning consistency")
+    ax.grid(alpha=0.3)
+    return png_bytes(fig, dpi=_DPI)
+
+
+def fleet_html(res: FleetResult) -> str:
+    """One self-contained page (offline): fleet table of latest figures, plots, failures."""
+    e = html.escape
+    _f, _fu, _s = fmt_num, fmt_num_unit, cell_text
+    parts = [page_head("dracc fleet report",
+                       "td:nth-child(-n+3),th:nth-child(-n+3){text-align:left}.bad{color:#b00}"),
+             f"<p>{count_logs(res.table)} logs of {res.table['vessel'].nunique()} vessels; "
+             f"{res.analysed} analysed in this run, {res.cached} from the cache, "
+             f"{len(res.failures)} failed.</p>"]
+    lt = latest(res.table)
+    if not lt.empty:
+        parts.append("<h2>Latest figures per vessel, unit and channel</h2><table><tr>"
+                     + "".join(f"<th>{h}</th>" for h in (
+                         "vessel", "unit", "channel", "days", "logs", "m_y", "kurtosis",
+                         "limiting error", "a priori", "verdict", "DR in 2M", "compass error",
+                         "log scale")) + "</tr>")
+        for _, r in lt.iterrows():
+            d = 3 if _s(r["measure"]) == "deg" else 1
+            c = r["dr_containment_2m"]
+            parts.append(
+                f"<tr><td>{e(_s(r['vessel']))}</td><td>{e(_s(r['unit']))}</td>"
+                f"<td>{e(_s(r['channel']))}</td><td>{e(_s(r['first_day']))} to "
+                f"{e(_s(r['last_day']))}</td><td>{r['logs']}</td>"
+                f"<td>{e(_fu(r['m_y'], d, ' ' + _s(r['measure'])))}</td><td>{_f(r['kurtosis'], 2)}</td>"
+                f"<td>{_f(r['limit'], d)}</td><td>{_f(r['apriori_after'], d)}</td>"
+                f"<td>{e(_s(r['apriori_verdict']))}</td>"
+                f"<td>{'-' if pd.isna(c) else f'{100 * c:.1f} %'}</td>"
+                f"<td>{_fu(r['compass_error_deg'], 2, '°')}</td><td>{_fu(r['log_scale_pct'], 2, ' %')}</td></tr>")
+        parts.append("</table>")
+    png = containment_plot(res.table)
+    if png:
+        parts.append("<h2>Dead reckoning</h2>" + img_tag(png, "DR containment per vessel"))
+    for v in sorted(res.trends["vessel"].dropna().unique()):
+        png = trend_plot(res.trends, v)
+        if png:
+            parts.append(f"<h2>{e(str(v))}</h2>" + img_tag(png, f"trend of {e(str(v))}"))
+    if res.failures:
+        parts.append("<h2 class='bad'>Failures</h2><ul>")
+        parts += [f"<li>{e(f['vessel'])} / {e(f['log'])}: {e(f['error'])}</li>" for f in res.failures]
+        parts.append("</ul>")
+    parts.append(PAGE_END)
+    return "\n".join(parts)
