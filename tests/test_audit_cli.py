@@ -150,7 +150,7 @@ def test_rule_over_nights_idempotence_and_history(run_cli, ship, tmp_path):
     assert code == ExitCode.OK and "Søren ins2 lon (m)" in out and "2026-11-20" in out
     page = (tmp_path / "h.html").read_text()
     png = re.search(r"src='data:image/png;base64,([A-Za-z0-9+/=]+)'", page).group(1)
-    assert base64.b64decode(png)[:8] == b"\x89PNG\r\n\x1a\n" and "http" not in page
+    assert base64.b64decode(png)[:8] == b"\x89PNG\r\n\x1a\n" and "http://" not in page and "https://" not in page
 
     # a changed log replaces its night (one transaction) and the chain follows
     log = ship / "nav-2026-11-20.nmea"

@@ -70,7 +70,7 @@ def test_local_pool_tables_failures_and_pages(local_run):
     page = (out / "fleet.html").read_text()
     pngs = re.findall(r"src='data:image/png;base64,([A-Za-z0-9+/=]+)'", page)
     assert len(pngs) >= 2 and all(base64.b64decode(p)[:4] == b"\x89PNG" for p in pngs)
-    assert "notes.txt" in page and "http" not in page and "5 logs of 2 vessels" in page
+    assert "notes.txt" in page and "http://" not in page and "https://" not in page and "5 logs of 2 vessels" in page
     assert pd.read_parquet(out / "trends.parquet")["day"].nunique() == 2
 
 

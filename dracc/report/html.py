@@ -8,16 +8,14 @@ from the logs goes through :func:`html.escape` as well.
 
 from __future__ import annotations
 
-import base64
 import html
 from pathlib import Path
 
 from .. import atomic
 from ..pipeline import CHANNELS, Analysis, Estimate
 from . import fmt, fmt_duration, fmt_pct, iso_utc, short_utc
+from .page import CSP, data_uri  # one policy and one data URI for every page
 from .rows import EXCEEDS, WITHIN, channel_rows, unit_rows
-
-CSP = "default-src 'none'; img-src data:; style-src 'unsafe-inline'; base-uri 'none'; form-action 'none'"
 
 _CSS = """
 body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; margin: 1.5em auto;
@@ -55,8 +53,7 @@ def _table(headers: list[str], rows: list[list[str]], left: int = 1) -> str:
 def _figure(png: bytes | None, alt: str, caption: str, fig_id: str) -> str:
     if png is None:
         return f'<p class="missing">{_e(caption)}: nothing to plot (see Missing).</p>'
-    b64 = base64.b64encode(png).decode("ascii")
-    return (f'<figure id="{fig_id}"><img alt="{_e(alt)}" src="data:image/png;base64,{b64}">'
+    return (f'<figure id="{fig_id}"><img alt="{_e(alt)}" src="{data_uri(png)}">'
             f"<figcaption>{_e(caption)}</figcaption></figure>")
 
 

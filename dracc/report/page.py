@@ -16,6 +16,10 @@ BASE_CSS = ("body{font-family:sans-serif;margin:1.5em}table{border-collapse:coll
 
 PAGE_END = "</body></html>\n"
 
+#: what the browser may load: inline style and data: images only, no script, no URL
+#: (the same policy as the analysis report)
+CSP = "default-src 'none'; img-src data:; style-src 'unsafe-inline'; base-uri 'none'; form-action 'none'"
+
 
 def data_uri(png: bytes) -> str:
     """``data:image/png;base64,…`` for PNG bytes (the page stays offline)."""
@@ -30,5 +34,6 @@ def img_tag(png: bytes, alt_html: str) -> str:
 def page_head(title: str, css: str = "") -> str:
     """Doctype, head with the title and inline style (``BASE_CSS`` + ``css``), and the h1."""
     t = html.escape(title)
-    return (f"<!doctype html><html><head><meta charset='utf-8'><title>{t}</title>\n"
+    return (f"<!doctype html><html><head><meta charset='utf-8'>"
+            f"<meta http-equiv='Content-Security-Policy' content=\"{CSP}\"><title>{t}</title>\n"
             f"<style>{BASE_CSS}{css}</style></head><body>\n<h1>{t}</h1>")
