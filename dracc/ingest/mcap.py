@@ -692,20 +692,27 @@ class _Reader:
             t[have] = tns[have]
         self._add_part(ch, t[good], nums[good], {k: v[good] for k, v in cols.items()})
 
+    def _quantities_of(self, names) -> dict[str, str]:
+        """Field name -> quantity name (unit in the name) for the fields dracc reads:
+        foxglove's latitude/longitude/altitude, and names with a unit suffix or declared in
+        ``[ingest.quantities]``.  One rule for JSON objects and protobuf descriptors."""
+        fields: dict[str, str] = {}
+        if "latitude" in names and "longitude" in names:
+            fields.update({"latitude": "lat_deg", "longitude": "lon_deg"})
+            if "altitude" in names:
+                fields["altitude"] = "alt_m"
+        for name in names:
+            q = lookup(name, self.declared)
+            if q is not None:
+                fields[name] = q.name
+        return fields
+
     def _json_plan(self, obj) -> dict | None:
         if not isinstance(obj, dict):
             return None
         if isinstance(obj.get("sentence"), str):
             return {"nmea": True}
-        fields: dict[str, str] = {}
-        if "latitude" in obj and "longitude" in obj:
-            fields.update({"latitude": "lat_deg", "longitude": "lon_deg"})
-            if "altitude" in obj:
-                fields["altitude"] = "alt_m"
-        for k in obj:
-            q = lookup(k, self.declared)
-            if q is not None:
-                fields[k] = q.name
+        fields = self._quantities_of(obj)
         if not fields:
             return None
         stamp = None
@@ -788,15 +795,7 @@ class _Reader:
         ts = names.get("timestamp")
         if ts is not None and ts.message_type is not None and ts.message_type.full_name == "google.protobuf.Timestamp":
             stamp = "timestamp"
-        fields: dict[str, str] = {}
-        if "latitude" in names and "longitude" in names:
-            fields.update({"latitude": "lat_deg", "longitude": "lon_deg"})
-            if "altitude" in names:
-                fields["altitude"] = "alt_m"
-        for n_ in names:
-            q = lookup(n_, self.declared)
-            if q is not None:
-                fields[n_] = q.name
+        fields = self._quantities_of(names)
         if fields:
             return {"stamp": stamp, "fields": fields, "bytes": None}
         # a wrapper of raw text (keelson TimestampedBytes: timestamp + value)

@@ -241,32 +241,28 @@ def decode_channel(fields: list[_Field], buf: bytes, starts: np.ndarray, ends: n
     return values, strings, ok
 
 
-def scalar_paths(fields: list[_Field], prefix: str = "") -> list[str]:
+def _leaf_paths(fields: list[_Field], kind: str, prefix: str = "") -> list[str]:
+    """Dotted paths of every scalar field of ``kind`` ('prim' or 'string'), not inside arrays."""
+    out = []
+    for f in fields:
+        path = f"{prefix}.{f.name}" if prefix else f.name
+        if f.array is not None:
+            continue
+        if f.kind == kind:
+            out.append(path)
+        elif f.kind == "msg":
+            out.extend(_leaf_paths(f.sub, kind, path))
+    return out
+
+
+def scalar_paths(fields: list[_Field]) -> list[str]:
     """Dotted paths of every scalar primitive field (not inside arrays)."""
-    out = []
-    for f in fields:
-        path = f"{prefix}.{f.name}" if prefix else f.name
-        if f.array is not None:
-            continue
-        if f.kind == "prim":
-            out.append(path)
-        elif f.kind == "msg":
-            out.extend(scalar_paths(f.sub, path))
-    return out
+    return _leaf_paths(fields, "prim")
 
 
-def string_paths(fields: list[_Field], prefix: str = "") -> list[str]:
+def string_paths(fields: list[_Field]) -> list[str]:
     """Dotted paths of every scalar string field (not inside arrays)."""
-    out = []
-    for f in fields:
-        path = f"{prefix}.{f.name}" if prefix else f.name
-        if f.array is not None:
-            continue
-        if f.kind == "string":
-            out.append(path)
-        elif f.kind == "msg":
-            out.extend(string_paths(f.sub, path))
-    return out
+    return _leaf_paths(fields, "string")
 
 
 def encode_fixed(fields: list[_Field], columns: dict[str, np.ndarray], strings: dict[str, str],
