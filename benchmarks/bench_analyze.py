@@ -40,6 +40,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
+sys.path.insert(0, str(HERE))
+from _common import ensure_day_log  # noqa: E402
 
 PLAIN = r'''
 import sys, time, pynmea2
@@ -91,14 +93,7 @@ print(len(df), "hourly INS fixes")
 
 
 def ensure_log(workdir: Path) -> Path:
-    log = workdir / "day" / "voyage.nmea"
-    if log.exists():
-        return log
-    cmd = [sys.executable, "-m", "dracc", "simulate", "--hours", "24", "--seed", "1", "--form", "tag",
-           "--out", str(log.parent)]
-    print("generating:", " ".join(cmd[2:]), flush=True)
-    subprocess.run(cmd, check=True, cwd=REPO, stdout=subprocess.DEVNULL)
-    return log
+    return ensure_day_log(workdir, quiet=True)
 
 
 CPU: dict[str, float] = {}

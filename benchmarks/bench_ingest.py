@@ -37,17 +37,12 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
+sys.path.insert(0, str(HERE))
+from _common import ensure_day_log  # noqa: E402
 
 
 def ensure_log(workdir: Path) -> Path:
-    log = workdir / "day" / "voyage.nmea"
-    if log.exists():
-        return log
-    cmd = [sys.executable, "-m", "dracc", "simulate", "--hours", "24", "--seed", "1", "--form", "tag",
-           "--out", str(log.parent)]
-    print("generating:", " ".join(cmd[2:]), flush=True)
-    subprocess.run(cmd, check=True, cwd=REPO)
-    return log
+    return ensure_day_log(workdir, quiet=False)
 
 
 def ensure_week(day: Path, workdir: Path) -> Path:
