@@ -45,8 +45,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import optimize
 
+from . import distributions as dist
 from .errors import InsufficientDataError
 from .geodesy import angdiff, offset_ne_m, wrap_pi
 
@@ -153,7 +154,7 @@ def compass_error_from_heading(
         w_sigma = s_within / np.sqrt(counts)
         with np.errstate(divide="ignore"):
             chi2 = float(np.sum(((w_mean - eps) / w_sigma) ** 2))
-        p = float(stats.chi2.sf(chi2, uniq.size - 1))
+        p = float(dist.chi2_sf(chi2, uniq.size - 1))
     else:
         w_sigma = np.full(uniq.size, np.nan)
         chi2, p = float("nan"), float("nan")
@@ -483,7 +484,7 @@ def calibrate_from_track(
         xh = x[:n_h]
         mean_h = float(one @ Ci @ xh / (one @ Ci @ one))
         chi2 = float((xh - mean_h) @ Ci @ (xh - mean_h))
-        p_const = float(stats.chi2.sf(chi2, n_h - 1))
+        p_const = float(dist.chi2_sf(chi2, n_h - 1))
     else:
         p_const = float("nan")
     cur = x[n_h + 1 + n_b:].reshape(2, nk).T

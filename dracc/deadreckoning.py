@@ -40,8 +40,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
+from . import distributions as dist
 from .config import DeadReckoningConfig, ErrorSource
 from .errors import ConfigError, InsufficientDataError
 from .geodesy import interp_position, k_lambda, k_phi, offset_ne_m, wrap_2pi, wrap_pi
@@ -418,8 +418,8 @@ def prob_inside_2m(P_m2):
     x1 = r * np.sin(theta)
     rem = r * np.cos(theta)  # sqrt(R^2 - x1^2)
     with np.errstate(divide="ignore", invalid="ignore"):
-        inner = np.where(s2 > 0, 2 * stats.norm.cdf(rem / np.where(s2 > 0, s2, 1.0)) - 1, 1.0)
-        dens = stats.norm.pdf(x1 / s1) / s1
+        inner = np.where(s2 > 0, 2 * dist.norm_cdf(rem / np.where(s2 > 0, s2, 1.0)) - 1, 1.0)
+        dens = dist.norm_pdf(x1 / s1) / s1
     val = np.sum(_GL_W * dens * inner * r * np.cos(theta), axis=-1) * 0.5 * np.pi
     return np.where(s1[..., 0] > 0, val, 1.0)
 
@@ -1133,10 +1133,10 @@ def dr_consistency(
         verdict, p_small, q, q_hi, q_lo = "undetermined", nan, nan, nan, nan
     else:
         k_eff = int(round(sum(leg.inside_fraction for leg in legs)))
-        p_small = float(stats.binom.cdf(k_eff, n_legs, float(p_exp.min())))
+        p_small = float(dist.binom_cdf(k_eff, n_legs, float(p_exp.min())))
         q = float(np.mean([leg.rms_error_over_m**2 for leg in legs]))
-        q_hi = float(stats.chi2.ppf(1 - alpha, n_legs) / n_legs)
-        q_lo = float(stats.chi2.ppf(alpha, n_legs) / n_legs)
+        q_hi = float(dist.chi2_ppf(1 - alpha, n_legs) / n_legs)
+        q_lo = float(dist.chi2_ppf(alpha, n_legs) / n_legs)
         if p_small < alpha or q > q_hi:
             verdict = "inconsistent (circle too small)"
         elif bool(inside.all()) and q < q_lo:

@@ -444,6 +444,12 @@ def _ref_gap_s(t_ns: np.ndarray) -> float:
     return max(REF_MAX_GAP_S, 2.5 * float(np.median(np.diff(t_ns))) / 1e9)
 
 
+def _sentence_types(df: pd.DataFrame) -> str:
+    """'HDT+THS': the sentence types among the rows (unique on the categorical codes,
+    not on a million strings)."""
+    return "+".join(sorted({str(x) for x in df["sentence"].unique()}))
+
+
 def _dedupe_sorted(t_ns: np.ndarray, *cols: np.ndarray):
     """Sort by time and keep one sample per time (strictly increasing times).
 
@@ -510,14 +516,14 @@ def _heading_series(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
     if "T" in refs:
         use = use[use["reference"] == "T"]
         t, h = _dedupe_sorted(use["time_ns"].to_numpy(np.int64), use["heading_rad"].to_numpy(float))
-        sent = "+".join(sorted(set(use["sentence"].astype(str).unique().tolist())))
+        sent = _sentence_types(use)
         return t, h, f"{who} ({sent}, true)"
     # magnetic: (B2) KDd = KK + d + delta (leeway from the log is added by dead_reckon)
     t, kk, dev, var = _dedupe_sorted(use["time_ns"].to_numpy(np.int64),
                                      use["heading_rad"].to_numpy(float),
                                      use["deviation_rad"].to_numpy(float),
                                      use["variation_rad"].to_numpy(float))
-    sent = "+".join(sorted(set(use["sentence"].astype(str).unique().tolist())))
+    sent = _sentence_types(use)
     desc = f"{who} ({sent}, magnetic"
     if cfg.deviation_table:
         th, td = deviation_table_rad(cfg.deviation_table)
@@ -565,7 +571,7 @@ def _speed_series(voyage: Voyage, missing: list[str]):
             continue
         t, v, vy = _dedupe_sorted(use["time_ns"].to_numpy(np.int64), use[col].to_numpy(float),
                                   use[col_y].to_numpy(float))
-        sent = "+".join(sorted(set(use["sentence"].astype(str).unique().tolist())))
+        sent = _sentence_types(use)
         who = "log " + "+".join(logs) if logs else "speed source " + "+".join(
             map(str, use["source"].unique().tolist()))
         return t, v, vy, f"{who} ({sent}, {what})", mode
@@ -613,9 +619,9 @@ def _fixes(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str], notes: 
         return t[ok], lat[ok], lon[ok], "ins_mean"
     # no GNSS or INS role: the position source with the most fixes (e.g. an instrument bus
     # relaying its GPS as II RMC/GLL)
-    counts = pos["source"].astype(str).value_counts()
-    if len(counts):
-        key = str(counts.index[0])
+    codes, keys = pd.factorize(pos["source"])  # keys in order of first appearance
+    if len(keys):
+        key = str(keys[int(np.argmax(np.bincount(codes[codes >= 0], minlength=len(keys))))])
         o = pos[pos["source"] == key]
         role = _role_of(voyage, key)
         notes.append(f"no GNSS or INS role: DR fixes and reference from position source {key}"

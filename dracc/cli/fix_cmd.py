@@ -24,6 +24,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
+from ..distributions import chi2_ppf
 from ..errors import ConfigError, ExitCode, IngestError
 from ..fusion import (
     BearingLOP,
@@ -544,12 +545,10 @@ def _residual_rows(specs: Sequence[ObsSpec], sol: FixSolution) -> tuple[Residual
 
 
 def _verdict(sol: FixSolution, rows: Sequence[ResidualRow]) -> tuple[float | None, bool | None, str]:
-    from scipy.stats import chi2 as chi2_dist
-
     if sol.redundancy == 0:
         return None, None, ("no redundancy: the fix passes exactly through the observations, "
                             "so they cannot be checked against each other")
-    bound = float(chi2_dist.ppf(0.95, sol.redundancy))
+    bound = float(chi2_ppf(0.95, sol.redundancy))
     if sol.chi2 <= bound:
         return bound, True, (f"residuals consistent with the sigmas (chi-square {sol.chi2:.2f} "
                              f"<= {bound:.2f}, the 95 % bound for {sol.redundancy} degree(s) of freedom)")
@@ -617,10 +616,8 @@ def solve(specs: Sequence[ObsSpec], prior_deg: tuple[float, float] | None,
     if not found:
         assert first_error is not None
         raise first_error
-    from scipy.stats import chi2 as chi2_dist
-
     redundancy = found[0].redundancy
-    bound = float(chi2_dist.ppf(0.999, redundancy)) if redundancy > 0 else math.inf
+    bound = float(chi2_ppf(0.999, redundancy)) if redundancy > 0 else math.inf
     good = [s for s in found if s.chi2 <= bound or redundancy == 0]
     if len(good) > 1:
         cands = "; ".join(f"{format_dm(math.degrees(s.lat_rad), 'lat')} "

@@ -25,8 +25,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import stats as sps
 
+from .. import distributions as dist
 from ..geodesy import angdiff, circmean, k_lambda, k_phi
 
 #: (K3b) the paper's Student-corrected number of deviations is n - 1.45
@@ -203,12 +203,12 @@ def k_pie(probability, kurtosis):
     neg = (e < 0) & (e > KURTOSIS_MIN)
     if np.any(pos):
         nu = 4.0 + 6.0 / e[pos]
-        out[pos] = sps.t.ppf(q[pos], nu) * np.sqrt((nu - 2.0) / nu)
+        out[pos] = dist.t_ppf(q[pos], nu) * np.sqrt((nu - 2.0) / nu)
     if np.any(zero):
-        out[zero] = sps.norm.ppf(q[zero])
+        out[zero] = dist.norm_ppf(q[zero])
     if np.any(neg):
         a = (-6.0 / e[neg] - 3.0) / 2.0
-        out[neg] = (2.0 * sps.beta.ppf(q[neg], a, a) - 1.0) * np.sqrt(2.0 * a + 1.0)
+        out[neg] = (2.0 * dist.beta_ppf(q[neg], a, a) - 1.0) * np.sqrt(2.0 * a + 1.0)
     return out if out.ndim else float(out)
 
 
@@ -235,7 +235,7 @@ def k_hm(confidence, n_eff):
     """
     nu = np.asarray(n_eff, dtype=float)
     with np.errstate(invalid="ignore", divide="ignore"):
-        out = np.where(nu > 0, np.sqrt(nu / sps.chi2.ppf(1.0 - confidence, np.where(nu > 0, nu, 1.0))),
+        out = np.where(nu > 0, np.sqrt(nu / dist.chi2_ppf(1.0 - confidence, np.where(nu > 0, nu, 1.0))),
                        np.nan)
     return out if out.ndim else float(out)
 

@@ -7,7 +7,8 @@ DataFrame sorted by ``time_ns`` with these columns (and no others needed downstr
     time_ns:int64, source:str, lat_rad, lon_rad, alt_m, quality:int8 (GGA fix
     quality; 1 where only "valid" is known, 0 invalid), hdop
 ``heading``   (HDT, THS, HDG, HDM)
-    time_ns, source, heading_rad, reference:str ('T' true, 'M' magnetic),
+    time_ns, source, heading_rad, reference ('T' true, 'M' magnetic: a categorical
+    of these two, NaN where unknown),
     deviation_rad, variation_rad (east positive; NaN where absent)
 ``ground``    (VTG, RMC: course and speed over ground)
     time_ns, source, cog_rad, sog_mps
@@ -42,13 +43,17 @@ import pandas as pd
 ROLES = ("compass", "log", "ins1", "ins2", "ins3", "gnss")
 INS_ROLES = ("ins1", "ins2", "ins3")
 
+#: the heading reference: two letters as a categorical (a string column of a million
+#: rows costs more to filter, sort and concatenate than all the numbers beside it)
+REFERENCE_DTYPE = pd.CategoricalDtype(["M", "T"])
+
 COMMON_COLUMNS = {"time_ns": "int64", "source": "category", "talker": "category",
                   "sentence": "category", "line": "int64"}
 
 KIND_COLUMNS: dict[str, dict[str, str]] = {
     "position": {"lat_rad": "float64", "lon_rad": "float64", "alt_m": "float64",
                  "quality": "int8", "hdop": "float64"},
-    "heading": {"heading_rad": "float64", "reference": "object",
+    "heading": {"heading_rad": "float64", "reference": REFERENCE_DTYPE,
                 "deviation_rad": "float64", "variation_rad": "float64"},
     "ground": {"cog_rad": "float64", "sog_mps": "float64"},
     "water": {"stw_mps": "float64", "stw_transverse_mps": "float64",
@@ -77,7 +82,10 @@ def make_frame(kind: str, data: dict[str, np.ndarray]) -> pd.DataFrame:
     for c, t in cols.items():
         if c in data:
             v = data[c]
-            if t == "category":
+            if t is REFERENCE_DTYPE:
+                out[c] = (v if isinstance(v, pd.Categorical) and v.dtype == t
+                          else pd.Categorical(np.asarray(v, dtype=object), dtype=t))
+            elif t == "category":
                 out[c] = v if isinstance(v, pd.Categorical) else pd.Categorical(np.asarray(v, dtype=object))
             elif t == "object":
                 out[c] = np.asarray(v, dtype=object)
@@ -89,6 +97,8 @@ def make_frame(kind: str, data: dict[str, np.ndarray]) -> pd.DataFrame:
             out[c] = np.full(n, np.nan)
         elif t == "int8":
             out[c] = np.zeros(n, dtype=np.int8)
+        elif t is REFERENCE_DTYPE:
+            out[c] = pd.Categorical.from_codes(np.full(n, -1, dtype=np.int8), dtype=t)
         elif t == "object":
             out[c] = np.full(n, None, dtype=object)
         else:

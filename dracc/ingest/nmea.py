@@ -46,7 +46,16 @@ import pandas as pd
 
 from ..errors import IngestError
 from ..units import KN_MPS, NMI_M
-from .frames import KIND_COLUMNS, KINDS, FileResult, Rejects, TimeEvents, empty_frame, make_frame
+from .frames import (
+    KIND_COLUMNS,
+    KINDS,
+    REFERENCE_DTYPE,
+    FileResult,
+    Rejects,
+    TimeEvents,
+    empty_frame,
+    make_frame,
+)
 from .tagblock import FORMS, HEX, parse_numbers, parse_prefixes
 from .timebase import MISSING_NS, EventCounter, TimeBase, days_from_civil, valid_civil
 
@@ -877,17 +886,10 @@ def _small_unique(x: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
     return u, lut[x]
 
 
-def _reference_strings(codes: np.ndarray) -> pd.api.extensions.ExtensionArray:
-    """The heading reference column ('T'/'M') from its byte codes, as the string array
-    pandas infers from Python strings.  Each value is one ASCII letter, so the codes
-    are the string data and the offsets count 0, 1, 2, ... (no Python objects)."""
-    import pyarrow as pa
-
-    n = len(codes)
-    arr = pa.LargeStringArray.from_buffers(
-        n, pa.py_buffer(np.arange(n + 1, dtype=np.int64)),
-        pa.py_buffer(np.ascontiguousarray(codes, dtype=np.uint8)))
-    return pd.array(arr, dtype=pd.StringDtype(na_value=np.nan))
+def _reference_categorical(codes: np.ndarray) -> pd.Categorical:
+    """The heading reference column from its byte codes: 'T' (84), 'M' (77), else NaN."""
+    c = np.where(codes == ord("T"), 1, np.where(codes == ord("M"), 0, -1)).astype(np.int8)
+    return pd.Categorical.from_codes(c, dtype=REFERENCE_DTYPE)
 
 
 def _talker_str(code: int) -> str:
@@ -957,10 +959,9 @@ def _assemble(pb: ParsedBlock, times: list[np.ndarray], state: StreamState, file
                 if c not in ("seq", "tag_source", "dec", "tod_ns", "date_days", "ext_ns", "talker",
                              "sentence")}
         data.update(talker=tal, source=src, sentence=sent, time_ns=t, line=line)
-        ref = data.pop("reference", None)
+        if "reference" in data:
+            data["reference"] = _reference_categorical(data["reference"])
         df = make_frame(kind, data)
-        if ref is not None:
-            df["reference"] = _reference_strings(ref)
         state.events.add(kind, src, t, own, line, file, sent)
         frames[kind] = df
     return frames
