@@ -45,7 +45,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize
 
 from . import distributions as dist
 from .errors import InsufficientDataError
@@ -60,6 +59,58 @@ __all__ = [
     "compass_error_from_heading",
     "deviation_from_heading",
 ]
+
+
+@dataclass(frozen=True)
+class LeastSquaresSolution:
+    x: np.ndarray
+    fun: np.ndarray  #: residuals at x
+    jac: np.ndarray  #: Jacobian at x
+    n_iter: int
+
+
+def levenberg_marquardt(resid, jac, x0: np.ndarray, ftol: float = 1e-10, xtol: float = 1e-10,
+                        max_iter: int = 200) -> LeastSquaresSolution:
+    """min ||resid(x)||^2 by Levenberg-Marquardt with Marquardt's scaling.
+
+    Each step solves (J'J + lam diag(J'J)) dx = -J' r (Marquardt 1963; the damping scaled
+    by the Jacobian's column norms, as MINPACK's x_scale="jac"); a step that lowers the cost
+    is taken and lam shrinks tenfold, otherwise lam grows tenfold.  Stops when the cost
+    falls by less than ``ftol`` relative or the step is below ``xtol`` relative to x.
+    The calibration models are nearly linear, so it ends in a few Gauss-Newton steps.
+    """
+    x = np.asarray(x0, dtype=float).copy()
+    r = resid(x)
+    J = jac(x)
+    cost = float(r @ r)
+    lam = 1e-3
+    it = 0
+    for it in range(1, max_iter + 1):
+        A = J.T @ J
+        g = J.T @ r
+        d = np.diag(A).copy()
+        d[d <= 0] = max(float(d.max(initial=0.0)), 1.0) * 1e-12  # a column without effect
+        while True:
+            try:
+                dx = np.linalg.solve(A + lam * np.diag(d), -g)
+            except np.linalg.LinAlgError:
+                dx = np.linalg.lstsq(A + lam * np.diag(d), -g, rcond=None)[0]
+            x_new = x + dx
+            r_new = resid(x_new)
+            cost_new = float(r_new @ r_new)
+            if np.isfinite(cost_new) and cost_new <= cost:
+                break
+            lam *= 10.0
+            if lam > 1e16:  # no step lowers the cost: x is the minimum to rounding
+                return LeastSquaresSolution(x, r, J, it)
+        small_step = float(np.linalg.norm(dx)) <= xtol * (xtol + float(np.linalg.norm(x)))
+        small_gain = cost - cost_new <= ftol * cost
+        x, r, cost = x_new, r_new, cost_new
+        J = jac(x)
+        lam = max(lam / 10.0, 1e-12)
+        if small_step or small_gain:
+            break
+    return LeastSquaresSolution(x, r, J, it)
 
 
 def _block_ids(time_s, block_s):
@@ -440,7 +491,7 @@ def calibrate_from_track(
         raise InsufficientDataError(
             f"log calibration: {m} segments cannot determine {n_par} parameters; use a longer "
             "log, shorter segments or a longer current_knot_s")
-    sol = optimize.least_squares(resid, np.zeros(n_par), jac=jac, method="lm", x_scale="jac")
+    sol = levenberg_marquardt(resid, jac, np.zeros(n_par))
     J = sol.jac
     JtJ = J.T @ J
     names = (["heading"] * n_h + ["log scale"] + ["log offset"] * n_b

@@ -340,6 +340,56 @@ def test_blocks_and_workers_give_the_same_frames(tmp_path):
     assert len(whole.frames["heading"]) == 3000 and whole.lines == 300 * 14
 
 
+def test_worker_blocks_come_back_through_files_that_are_removed(tmp_path, monkeypatch):
+    """The workers hand parsed blocks over as files (not through the pool's pipe); none is
+    left behind, whether the file is read to its end, the reader is abandoned half-way
+    or a --strict error stops it."""
+    import tempfile
+
+    from dracc.ingest import nmea as mod
+
+    handover = tmp_path / "handover"
+    handover.mkdir()
+    made = []
+
+    def here():
+        d = tempfile.TemporaryDirectory(prefix="dracc-ingest-", dir=handover)
+        made.append(d.name)
+        return d
+
+    monkeypatch.setattr(mod, "_handover_dir", here)
+    p = tmp_path / "sim.nmea"
+    p.write_text(_sim_lines(300))
+    par = list(iter_nmea_blocks(p, IngestConfig(), block_bytes=20000, workers=2))
+    assert sum(len(b.frames["heading"]) for b in par) == 3000
+    it = iter_nmea_blocks(p, IngestConfig(), block_bytes=20000, workers=2)
+    next(it)
+    it.close()  # abandoned after the first block
+    bad = tmp_path / "bad.nmea"
+    bad.write_text(_sim_lines(150) + "$GPGGA,garbage*00\n" + _sim_lines(150))
+    with pytest.raises(IngestError):
+        list(iter_nmea_blocks(bad, IngestConfig(strict=True), block_bytes=20000, workers=2))
+    assert len(made) == 3
+    assert list(handover.iterdir()) == []
+
+
+def test_a_parsed_block_survives_the_file_handover_unchanged(tmp_path):
+    from dracc.ingest import nmea as mod
+
+    p = tmp_path / "sim.nmea"
+    p.write_text(_sim_lines(50))
+    direct = mod._parse_range(str(p), 0, p.stat().st_size, False, True)
+    meta, sizes, name = mod._parse_range_to_file(str(tmp_path), 0, str(p), 0, p.stat().st_size,
+                                                 False, True)
+    back = mod._load_parsed(meta, sizes, name)
+    assert not Path(name).exists()
+    assert back.n_lines == direct.n_lines and back.source_names == direct.source_names
+    for kind, cols in direct.kinds.items():
+        for c, v in cols.items():
+            np.testing.assert_array_equal(back.kinds[kind][c], v)
+            assert back.kinds[kind][c].dtype == v.dtype
+
+
 # --------------------------------------------------------------------------- round trips
 @settings(max_examples=60, deadline=None)
 @given(lat=st.floats(-89.999, 89.999), lon=st.floats(-179.999, 179.999),

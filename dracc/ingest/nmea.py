@@ -32,7 +32,9 @@ only).  Other well-formed sentences are counted as ``unsupported`` (not an error
 from __future__ import annotations
 
 import os
+import pickle
 import stat
+import tempfile
 from collections import Counter
 from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -865,6 +867,50 @@ def _worker_init() -> None:
         pass
 
 
+
+def _handover_dir() -> tempfile.TemporaryDirectory:
+    """Where workers leave parsed blocks for the main process: shared memory (tmpfs)
+    where there is one, else the temporary directory."""
+    shm = "/dev/shm"
+    base = shm if os.path.isdir(shm) and os.access(shm, os.W_OK) else None
+    return tempfile.TemporaryDirectory(prefix="dracc-ingest-", dir=base)
+
+
+def _parse_range_to_file(folder: str, i: int, path: str, off: int, length: int,
+                         ignore_checksum: bool, at_eof: bool) -> tuple[bytes, list[int], str]:
+    """:func:`_parse_range` in a worker, its arrays written to a file in ``folder``.
+
+    A block's arrays (about 1.3x its text) sent through the pool's pipe cost the worker
+    more than parsing them (64 KiB at a time, each a switch to the reader); written to
+    a file they are two copies.  Returns (pickle of the block without its arrays, the
+    arrays' sizes, the file), for :func:`_load_parsed`."""
+    pb = _parse_range(path, off, length, ignore_checksum, at_eof)
+    buffers: list[pickle.PickleBuffer] = []
+    meta = pickle.dumps(pb, protocol=5, buffer_callback=buffers.append)
+    views = [b.raw() for b in buffers]
+    name = os.path.join(folder, f"block-{i}")
+    with open(name, "wb") as fh:
+        for v in views:
+            fh.write(v)
+    return meta, [v.nbytes for v in views], name
+
+
+def _load_parsed(meta: bytes, sizes: list[int], name: str) -> ParsedBlock:
+    """The block :func:`_parse_range_to_file` left in ``name`` (the file is removed);
+    its arrays share one buffer read from the file."""
+    buf = bytearray(sum(sizes))
+    with open(name, "rb", buffering=0) as fh:
+        n = fh.readinto(buf)
+    os.unlink(name)
+    if n != len(buf):  # pragma: no cover - the worker wrote less than it said
+        raise OSError(f"{name}: {n} of {len(buf)} bytes")
+    views, at, whole = [], 0, memoryview(buf)
+    for size in sizes:
+        views.append(whole[at:at + size])
+        at += size
+    return pickle.loads(meta, buffers=views)
+
+
 _DTYPES: dict[tuple, pd.CategoricalDtype] = {}
 
 
@@ -1083,20 +1129,21 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
         # memory) falls back to parsing the remaining blocks in this process
         pending = list(enumerate(ranges))
         broken = False
-        with ProcessPoolExecutor(max_workers=nworkers, initializer=_worker_init) as ex:
+        with _handover_dir() as folder, \
+                ProcessPoolExecutor(max_workers=nworkers, initializer=_worker_init) as ex:
             futures = []
 
             def submit():
                 i, (off, ln) = pending.pop(0)
-                futures.append((ex.submit(_parse_range, file, off, ln, cfg.ignore_checksum, at_eof[i]),
-                                i, off, ln))
+                futures.append((ex.submit(_parse_range_to_file, folder, i, file, off, ln,
+                                          cfg.ignore_checksum, at_eof[i]), i, off, ln))
 
             while pending and len(futures) < nworkers + 2:
                 submit()
             while futures:
                 fut, i, off, ln = futures.pop(0)
                 try:
-                    pb = fut.result() if not broken else None
+                    pb = _load_parsed(*fut.result()) if not broken else None
                 except BrokenProcessPool:
                     broken = True
                     pb = None
