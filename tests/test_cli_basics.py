@@ -73,3 +73,36 @@ def test_regression_cli_runs_without_click_installed():
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert "Traceback" not in r.stderr
+
+
+def _analyze_process(*args, stdout=subprocess.PIPE):
+    return subprocess.run([sys.executable, "-m", "dracc", "analyze", "sample_logs/voyage_tag.nmea", *args],
+                          stdout=stdout, stderr=subprocess.PIPE, timeout=300,
+                          cwd=__import__("pathlib").Path(__file__).resolve().parents[1])
+
+
+def test_quick_exit_after_analyze_loses_no_output(tmp_path):
+    """A successful analyze ends the process with os._exit (no heap teardown): the report
+    on stdout, the summary in a file and the messages on stderr are all there, whole."""
+    import json
+
+    r = _analyze_process("--json", "-")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(r.stdout)  # the whole document, flushed before the exit
+    assert doc["schema"] == "dracc.analysis/1" and doc["deviation"]["units"]
+    summary = tmp_path / "summary.txt"
+    with summary.open("wb") as fh:
+        r = _analyze_process("--json", str(tmp_path / "r.json"), "--html", str(tmp_path / "r.html"),
+                             stdout=fh)
+    assert r.returncode == 0
+    text = summary.read_text(encoding="utf-8")
+    assert text.startswith("dracc analyze") and "\nCurrent\n" in text and text.endswith("\n")
+    assert f"wrote {tmp_path / 'r.html'}" in r.stderr.decode()
+    assert json.loads((tmp_path / "r.json").read_text(encoding="utf-8"))["schema"]
+    assert (tmp_path / "r.html").read_text(encoding="utf-8").rstrip().endswith("</html>")
+
+
+def test_a_failing_analyze_still_exits_with_its_code():
+    r = subprocess.run([sys.executable, "-m", "dracc", "analyze", "no/such/log.nmea"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == ExitCode.INPUT and "no/such/log.nmea" in r.stderr

@@ -27,6 +27,10 @@ err = Console(stderr=True, soft_wrap=True)
 
 VERBOSE = {"on": False}
 
+#: set by a command once everything it writes is written and closed: the process then ends
+#: at once (see ``main._quick_exit``) instead of freeing a voyage's frames piece by piece
+QUICK_EXIT = {"on": False}
+
 
 def _version(value: bool) -> None:
     if value:
