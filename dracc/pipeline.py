@@ -328,7 +328,9 @@ def analyse_voyage(voyage: Voyage, cfg: Config | None = None,
                      + "; assign one with --role KEY=ROLE")
 
     tracks = _tracks(voyage)
+    report("sensor faults", 0.0)
     faults, voyage = _sensor_faults(voyage, cfg, notes)
+    report("sensor faults", 1.0)
 
     report("dead reckoning", 0.0)
     dr, fixes, ref, dr_inputs = _dead_reckoning(voyage, cfg.dead_reckoning, missing, notes)

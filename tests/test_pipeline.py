@@ -203,11 +203,12 @@ def test_progress_reports_every_stage():
     seen: list[tuple[str, float]] = []
     analyse([sample], progress=lambda stage, f: seen.append((stage, f)))
     stages = [s for s, _ in seen]
-    for s in ("reading logs", "dead reckoning", "current", "deviation statistics", "calibration"):
+    for s in ("reading logs", "sensor faults", "dead reckoning", "current", "deviation statistics",
+              "calibration"):
         assert (s, 0.0) in seen and (s, 1.0) in seen, s
     reading = [f for s, f in seen if s == "reading logs"]
     assert reading == sorted(reading) and len(reading) >= 3  # bytes read, as they are read
-    assert stages.index("reading logs") < stages.index("dead reckoning")
+    assert stages.index("reading logs") < stages.index("sensor faults") < stages.index("dead reckoning")
 
 
 def test_ground_log_when_there_is_no_water_speed():

@@ -133,10 +133,10 @@ def analyze(
     with _gc_spares_loaded_code():
         with progress("analyze", 100.0) as advance:
             state = {"done": 0.0}
-            weights = {"reading logs": 80.0, "dead reckoning": 8.0, "current": 4.0,
-                       "deviation statistics": 4.0, "calibration": 4.0}
-            offsets = {"reading logs": 0.0, "dead reckoning": 80.0, "current": 88.0,
-                       "deviation statistics": 92.0, "calibration": 96.0}
+            weights = {"reading logs": 78.0, "sensor faults": 2.0, "dead reckoning": 8.0,
+                       "current": 4.0, "deviation statistics": 4.0, "calibration": 4.0}
+            offsets = {"reading logs": 0.0, "sensor faults": 78.0, "dead reckoning": 80.0,
+                       "current": 88.0, "deviation statistics": 92.0, "calibration": 96.0}
 
             def on_progress(stage: str, fraction: float) -> None:
                 target = offsets.get(stage, state["done"]) + weights.get(stage, 0.0) * min(max(fraction, 0.0), 1.0)
