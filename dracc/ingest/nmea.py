@@ -31,6 +31,7 @@ only).  Other well-formed sentences are counted as ``unsupported`` (not an error
 
 from __future__ import annotations
 
+import mmap
 import os
 import pickle
 import stat
@@ -896,20 +897,17 @@ def _parse_range_to_file(folder: str, i: int, path: str, off: int, length: int,
 
 
 def _load_parsed(meta: bytes, sizes: list[int], name: str) -> ParsedBlock:
-    """The block :func:`_parse_range_to_file` left in ``name`` (the file is removed);
-    its arrays share one buffer read from the file."""
-    buf = bytearray(sum(sizes))
-    with open(name, "rb", buffering=0) as fh:
-        n = fh.readinto(buf)
+    """The block :func:`_parse_range_to_file` left in ``name``.  Its arrays are views of
+    the file mapped copy-on-write (no copy; the pages are already in memory) and the file
+    is removed at once: the mapping lives as long as the arrays do."""
+    with open(name, "rb") as fh:
+        whole = memoryview(mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_COPY)) if sum(sizes) else None
     os.unlink(name)
-    if n != len(buf):  # pragma: no cover - the worker wrote less than it said
-        raise OSError(f"{name}: {n} of {len(buf)} bytes")
-    views, at, whole = [], 0, memoryview(buf)
+    views, at = [], 0
     for size in sizes:
         views.append(whole[at:at + size])
         at += size
     return pickle.loads(meta, buffers=views)
-
 
 _DTYPES: dict[tuple, pd.CategoricalDtype] = {}
 
