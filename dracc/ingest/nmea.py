@@ -1046,11 +1046,14 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
     """Stream an NMEA text file as resolved blocks with bounded memory.
 
     ``state`` (a :class:`StreamState`, created if None) accumulates rejections, time
-    events and statistics while iterating; read it after the loop.  Blocks are parsed
-    in up to two worker processes (files >= ``PARALLEL_MIN_BYTES``), at most 3 blocks
-    ahead (the first block is twice as large: the other worker goes on meanwhile).  ``block_bytes`` None: a first block of ``FIRST_BLOCK_BYTES``, then blocks of
-    about ``BLOCK_BYTES``, as many as make the count a multiple of the workers' (none
-    waits alone at the end); a number: blocks of that size.  ``progress(n_bytes)`` is called as blocks finish.  Raises IngestError in
+    events and statistics while iterating; read it after the loop.  Files of at least
+    ``PARALLEL_MIN_BYTES`` are parsed by up to two worker processes, at most four blocks
+    ahead, which hand their blocks over as files (:func:`_parse_range_to_file`); this
+    process resolves times and builds frames in order.  ``block_bytes`` None: a first
+    block of ``FIRST_BLOCK_BYTES`` (twice the others: the other worker goes on
+    meanwhile), then blocks of about ``BLOCK_BYTES``, as many as make the count a
+    multiple of the workers' (none waits alone at the end); a number: blocks of that
+    size.  ``progress(n_bytes)`` is called as blocks finish.  Raises IngestError in
     ``cfg.strict`` mode at the first rejected line.
     """
     path = Path(path)
