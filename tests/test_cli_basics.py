@@ -106,3 +106,18 @@ def test_a_failing_analyze_still_exits_with_its_code():
     r = subprocess.run([sys.executable, "-m", "dracc", "analyze", "no/such/log.nmea"],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == ExitCode.INPUT and "no/such/log.nmea" in r.stderr
+
+
+def test_the_cli_runs_blas_on_one_thread_unless_told_otherwise():
+    """Idle OpenBLAS threads spin after each call and took CPU from the ingest workers."""
+    # OpenBLAS threads keep the interpreter's name; pyarrow's jemalloc thread has its own
+    code = ("import os, dracc.cli.main, numpy; a = numpy.ones((300, 300)); a @ a; "
+            "names = [open(f'/proc/self/task/{t}/comm').read().strip() "
+            "for t in os.listdir('/proc/self/task')]; "
+            "print(os.environ['OPENBLAS_NUM_THREADS'], names.count(names[0]))")
+    env = {k: v for k, v in __import__("os").environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
+    assert r.returncode == 0 and r.stdout.split() == ["1", "1"], r.stdout + r.stderr  # no BLAS thread
+    env["OPENBLAS_NUM_THREADS"] = "3"
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
+    assert r.stdout.split()[0] == "3"
