@@ -151,7 +151,8 @@ def _by_source(df: pd.DataFrame):
     if df is None or df.empty:
         return
     codes, keys = pd.factorize(df["source"], sort=True)
-    order = np.argsort(codes, kind="stable")  # stable: time order kept within a source
+    # stable: time order kept within a source; int16 keys make numpy's stable sort a radix sort
+    order = np.argsort(codes.astype(np.int16) if len(keys) < 1 << 15 else codes, kind="stable")
     bounds = np.searchsorted(codes[order], np.arange(len(keys) + 1))
     numeric = {c: df[c].to_numpy() for c in df.columns
                if pd.api.types.is_numeric_dtype(df[c].dtype)}
