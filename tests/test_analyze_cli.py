@@ -194,3 +194,25 @@ def test_regression_summary_to_a_file_is_not_squeezed_to_80_columns(run_cli):
     assert any(line.startswith("source  role") for line in out.splitlines())
     assert "…" not in out
     assert "lat [m]" in out and "course [deg]" in out
+
+
+@pytest.mark.skipif(not SAMPLE.exists(), reason="sample_logs not generated")
+def test_interrupt_while_drawing_the_html_leaves_the_previous_reports(run_cli, tmp_path, monkeypatch):
+    """The JSON, HTML and tables of one run appear together: a Ctrl-C while the plots are
+    drawn (the slow part) leaves the previous run's JSON and tables, not a new JSON beside
+    an old HTML."""
+    from dracc.report import html
+
+    js, page, tables = tmp_path / "r.json", tmp_path / "r.html", tmp_path / "tables"
+    args = ("analyze", SAMPLE, "--json", js, "--html", page, "--out", tables)
+    assert run_cli(*args)[0] == 0
+    before = {p: p.read_bytes() for p in [js, page, *tables.iterdir()]}
+
+    def interrupted(a, path):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(html, "write_html", interrupted)
+    code, _, err = run_cli(*args, "--interval", "2h")  # a different JSON had it been written
+    assert code == ExitCode.INTERRUPTED and "interrupted" in err
+    assert {p: p.read_bytes() for p in [js, page, *tables.iterdir()]} == before
+    assert not [p for p in tmp_path.rglob("*.part")]

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import typer
 
+from .. import atomic
 from ..config import load_config, validate
 from ..deadreckoning import parse_reset_s
 from ..errors import ConfigError, DraccError
@@ -174,27 +175,32 @@ def _writing(target) -> Iterator[None]:
 
 
 def _write_reports(result, json_path: str | None, html_path: Path | None, out_dir: Path | None) -> None:
+    """The terminal summary (or the JSON on stdout), then the report files: each written in
+    full to a temporary file and all renamed together at the end
+    (:func:`dracc.atomic.together`), so that an interrupt while the plots are drawn
+    leaves every earlier report as it was, not a new JSON beside an old HTML."""
     from ..report import html as html_report
     from ..report import json_report, tables, terminal
 
-    if json_path == "-":
-        out.file.write(json_report.dumps(result))
-        out.file.flush()
-    else:
-        terminal.print_summary(result, out)
-        if json_path:
-            with _writing(json_path):
-                json_report.write_json(result, json_path)
-            err.print(f"wrote {json_path}", highlight=False, markup=False)
-    if html_path is not None:
-        with _writing(html_path):
-            html_report.write_html(result, html_path)
-        err.print(f"wrote {html_path}", highlight=False, markup=False)
-    if out_dir is not None:
-        with _writing(out_dir):
-            written = tables.write_tables(result, out_dir)
-        if written:
-            err.print(f"wrote {len(written)} tables to {out_dir}", highlight=False, markup=False)
+    said = []
+    with _writing("the reports"), atomic.together():
+        if json_path == "-":
+            out.file.write(json_report.dumps(result))
+            out.file.flush()
         else:
-            err.print(f"no tables to write to {out_dir} (no DR and no deviation statistics)",
-                      highlight=False, markup=False)
+            terminal.print_summary(result, out)
+            if json_path:
+                with _writing(json_path):
+                    json_report.write_json(result, json_path)
+                said.append(f"wrote {json_path}")
+        if html_path is not None:
+            with _writing(html_path):
+                html_report.write_html(result, html_path)
+            said.append(f"wrote {html_path}")
+        if out_dir is not None:
+            with _writing(out_dir):
+                written = tables.write_tables(result, out_dir)
+            said.append(f"wrote {len(written)} tables to {out_dir}" if written else
+                        f"no tables to write to {out_dir} (no DR and no deviation statistics)")
+    for line in said:
+        err.print(line, highlight=False, markup=False)
