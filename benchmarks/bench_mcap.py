@@ -1,7 +1,8 @@
 """MCAP ingest speed and memory: dracc's reader against the stock per-message path.
 
 Side by side in one run, on the simulated voyage (``dracc.sim.simulate``, default rates)
-written as MCAP (JSON and ROS 2 CDR, zstd chunks of 1 MiB):
+written as MCAP (JSON and ROS 2 CDR, zstd chunks of 1 MiB; and raw NMEA sentences, one per
+message, for the memory table):
 
 * dracc: :func:`dracc.ingest.mcap.read_mcap` into canonical frames (whole file);
 * stock: ``mcap.reader.make_reader(f).iter_messages()`` + ``json.loads`` per message,
@@ -12,7 +13,7 @@ written as MCAP (JSON and ROS 2 CDR, zstd chunks of 1 MiB):
   ``--repeat`` times, alternating, and the best time counts.
 
 Memory: the peak RSS (``VmHWM``) of a fresh subprocess reading the 6 h and the 24 h file
-(ROS 2 and JSON), minus the RSS after imports, minus the returned frames' own arrays
+(ROS 2, JSON and raw NMEA), minus the RSS after imports, minus the returned frames' own arrays
 (``memory_usage(deep=False)``): the reader's working memory above its output.  The two
 voyages are printed side by side with the verdict: bounded when the 24 h figure is within
 ``--mem-tolerance`` MiB (default 5) of the 6 h one.  The load average (``os.getloadavg``)
@@ -56,7 +57,7 @@ def make_files(hours: float, workdir: Path) -> dict[str, Path]:
     from dracc.sim.mcap_out import write_mcap
     from dracc.sim.model import SimParams, simulate
 
-    out = {enc: workdir / f"voyage_{hours:g}h_{enc}.mcap" for enc in ("json", "ros2")}
+    out = {enc: workdir / f"voyage_{hours:g}h_{enc}.mcap" for enc in ("json", "ros2", "nmea")}
     if all(p.exists() for p in out.values()):
         return out
     t = time.perf_counter()
@@ -119,6 +120,8 @@ def main() -> None:
     print(f"\n{'encoding':8} {'messages':>9} {'dracc s':>8} {'us/msg':>7} {'stock us/msg':>12} "
           f"{'stock s (full file)':>20} {'speed-up':>8}  load (1/5/15 min)")
     for enc, p in files.items():
+        if enc == "nmea":  # raw NMEA sentences: in the memory table only
+            continue
         # best of --repeat, alternating, so that load from other jobs hits both sides alike
         runs = [(time_dracc(p), time_stock(p, enc, args.stock_limit or -1)) for _ in range(args.repeat)]
         td, n = min(r[0] for r in runs)

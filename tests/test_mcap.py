@@ -7,6 +7,7 @@ import math
 import struct
 
 import numpy as np
+import pandas as pd
 import pytest
 from test_csv import assert_same_frames, voyage_frames
 
@@ -66,6 +67,27 @@ def test_round_trip_raw_nmea(tmp_path):
     # GGA carries 1e-4 arc-minute resolution or better
     np.testing.assert_allclose(pos["lat_rad"].to_numpy(), want["lat_rad"].to_numpy(), atol=2e-8)
     assert set(r.frames["heading"]["source"].astype(str)) == {"GYRO"}
+
+
+def test_raw_nmea_parsed_in_chunks_equals_one_parse(tmp_path, monkeypatch):
+    """Raw NMEA in MCAP is parsed a chunk of sentences at a time (memory bounded by the
+    chunk, not the file): chunks of 7 sentences give the frames, rejects, time events
+    and message numbers of one parse over everything."""
+    pytest.importorskip("dracc.sim.nmea_out")
+    import dracc.ingest.mcap as mcap_mod
+
+    fr = voyage_frames()
+    fr = {k: fr[k] for k in ("position", "heading", "water")}
+    p = write_mcap(fr, ROLES, tmp_path / "n.mcap", encoding="nmea")
+    whole = read_mcap(p, CFG)
+    monkeypatch.setattr(mcap_mod, "_NMEA_CHUNK", 7)
+    chunked = read_mcap(p, CFG)
+    assert chunked.lines == whole.lines and chunked.records == whole.records
+    for kind, f in whole.frames.items():
+        pd.testing.assert_frame_equal(chunked.frames[kind], f, check_categorical=False)
+    assert dict(chunked.rejects.counts) == dict(whole.rejects.counts)
+    te_w, te_c = whole.time_events, chunked.time_events
+    assert (te_c.duplicates, te_c.backsteps, te_c.gaps) == (te_w.duplicates, te_w.backsteps, te_w.gaps)
 
 
 def test_topics_give_source_keys_and_roles():

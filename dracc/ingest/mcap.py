@@ -13,8 +13,9 @@ Memory
     pieces go into sorted runs in their own memory mappings (:class:`_KindStore`) that
     are merged step by step into the output columns at the end, each run unmapped when
     used up; the C heap and pyarrow's pool are trimmed every 200 000 records.  So the
-    working memory does not grow with the file (``benchmarks/bench_mcap.py``), except
-    for raw NMEA text, which is collected and parsed at the end.
+    working memory does not grow with the file (``benchmarks/bench_mcap.py``).  Raw NMEA
+    text is parsed 100 000 sentences at a time (:class:`dracc.ingest.nmea.SentenceStream`,
+    one time base through all chunks), its frames going into the stores like the others.
 Decoding
     Messages are grouped by channel within each window and decoded together:
     ROS 2 CDR onto numpy structured arrays (:mod:`dracc.ingest.mcap_cdr`), JSON with one
@@ -69,7 +70,7 @@ import pandas as pd
 
 from ..config import IngestConfig
 from ..errors import IngestError
-from .csv_quantities import add_rejects, build_frames, check_declared, lookup, renumber_examples
+from .csv_quantities import add_rejects, build_frames, check_declared, lookup
 from .frames import FileResult, Rejects
 from .mcap_cdr import CdrError, compile_schema, decode_channel, scalar_paths, string_paths
 
@@ -81,6 +82,7 @@ _INDEXED_MAX = 64 << 20  #: chunks up to this size (uncompressed) are decoded wh
 _JSON_BATCH = 50000  #: JSON messages of one channel parsed together
 _JSON_QUEUED = 50000  #: JSON messages of all channels waiting to be parsed (the largest queue goes first)
 _TRIM_RECORDS = 200_000  #: records moved into the stores between two trims of the C heap
+_NMEA_CHUNK = 100_000  #: raw NMEA sentences gathered before they are parsed
 _PIECE_RECORDS = 50_000  #: decoded records of a channel kept as columns before becoming a frame piece
 _PENDING_RECORDS = 100_000  #: decoded records of all channels kept as columns (the largest one goes first)
 
@@ -160,10 +162,13 @@ class _Reader:
         self.rejects = Rejects()
         self.notes: list[str] = []
         self.msg_no = 0
+        # raw NMEA text: one chunk of sentences (text, time, source, message number) at a
+        # time, parsed by ``nmea`` (a SentenceStream) when full, its frames into the stores
         self.nmea_lines: list[bytes] = []
         self.nmea_time: list[int] = []
         self.nmea_src: list[str] = []
         self.nmea_no: list[int] = []
+        self.nmea = None
         self.orphans = 0
         self.top_msgs: list[tuple[int, int, bytes, int]] = []
         self.bad_stamps = 0  #: message stamps out of range (log time used instead)
@@ -819,6 +824,27 @@ class _Reader:
             self.nmea_src.append(ch.key)
             self.nmea_no.append(k)
         ch.state["nmea"] = ch.state.get("nmea", 0) + 1
+        if len(self.nmea_lines) >= _NMEA_CHUNK:
+            self._nmea_flush()
+
+    def _nmea_flush(self) -> None:
+        """Parse the sentences gathered so far (one chunk) and let go of their text."""
+        if not self.nmea_lines:
+            return
+        if self.nmea is None:
+            from .nmea import SentenceStream
+
+            self.nmea = SentenceStream(self.file, self.cfg)
+        released = self.nmea.add(self.nmea_lines, np.asarray(self.nmea_time, dtype=np.int64),
+                                 self.nmea_src, numbers=np.asarray(self.nmea_no, dtype=np.int64))
+        self.nmea_lines, self.nmea_time, self.nmea_src, self.nmea_no = [], [], [], []
+        self._nmea_store(released)
+
+    def _nmea_store(self, released: list) -> None:
+        for frames in released:
+            for kind, f in frames.items():
+                if len(f):
+                    self.stores.setdefault(kind, _KindStore()).add(f)
 
     # ---------------------------------------------------------------- result
     def _add_part(self, ch: _Channel, t, nums, qs: dict) -> None:
@@ -862,19 +888,10 @@ class _Reader:
         _trim_heap()
         res = FileResult(path=self.file, format="mcap", frames={}, lines=self.msg_no, rejects=self.rejects,
                          notes=[])
-        if self.nmea_lines:
-            from .nmea import parse_sentences
-
-            nres = parse_sentences(self.nmea_lines, np.asarray(self.nmea_time, dtype=np.int64),
-                                   self.nmea_src, self.file, self.cfg)
-            nos = np.asarray(self.nmea_no, dtype=np.int64)
-            for kind, f in nres.frames.items():
-                if len(f) == 0:
-                    continue
-                f = f.copy()
-                f["line"] = nos[f["line"].to_numpy(dtype=np.int64) - 1]  # sentence index -> message number
-                self.stores.setdefault(kind, _KindStore()).add(f)
-            renumber_examples(nres.rejects, nos)
+        self._nmea_flush()
+        if self.nmea is not None:
+            self._nmea_store(self.nmea.finish())
+            nres = self.nmea.result([])
             res.rejects.merge(nres.rejects)
             res.time_events = nres.time_events
             res.notes.extend(nres.notes)

@@ -1228,36 +1228,86 @@ def read_nmea(path: str | Path, cfg: IngestConfig, progress=None, workers: int |
     return res
 
 
+class SentenceStream:
+    """Sentences that arrive with an external receive time and source key each (MCAP raw
+    NMEA messages: topic as source key), parsed chunk by chunk as they come.
+
+    :meth:`add` a chunk, then :meth:`finish`; each returns the frames of the chunks whose
+    times are resolved by then (a dict kind -> frame per chunk, in order), and
+    :meth:`result` gives the bookkeeping.  One time base and one set of event counters
+    run through all chunks, so the frames are those of one parse over everything, while
+    only one chunk of text is held at a time.  Time-of-fix fields are anchored to the
+    date of the given time (rule 1 of :mod:`dracc.ingest.timebase`).  ``line`` counts
+    sentences from 1 over all chunks, or is the given ``numbers`` (message numbers).
+    """
+
+    def __init__(self, file: str, cfg: IngestConfig):
+        self.file, self.cfg = file, cfg
+        self.st = StreamState(file)
+        self.st.events.gap_s = cfg.gap_s
+        self.st.events.tolerance_s = cfg.backstep_tolerance_s
+        self._held: list = []
+
+    def add(self, lines: Sequence[bytes], time_ns: np.ndarray, source: Sequence[str],
+            numbers: np.ndarray | None = None) -> list[dict[str, pd.DataFrame]]:
+        clean = [bytes(x).replace(b"\r", b"").replace(b"\n", b" ") for x in lines]
+        t = np.asarray(time_ns, dtype=np.int64)
+        src = np.asarray(list(source), dtype=object)
+        if not (len(t) == len(src) == len(clean)) or (numbers is not None and len(numbers) != len(clean)):
+            raise ValueError(f"SentenceStream: {len(clean)} lines, {len(t)} times, {len(src)} sources")
+        if not clean:
+            return []
+        pb = parse_buffer(b"\n".join(clean) + b"\n", ignore_checksum=self.cfg.ignore_checksum,
+                          at_eof=False, ext_line_ns=t, ext_line_source=src)
+        st, line0 = self.st, self.st.lines + 1
+        nos = None if numbers is None else np.asarray(numbers, dtype=np.int64)
+
+        def number(ln: int) -> int:  # 1-based sentence of this chunk -> what the caller counts
+            return int(nos[ln - 1]) if nos is not None else ln + line0 - 1
+
+        st.lines += pb.n_lines
+        st.stats.update(pb.stats)
+        for reason, c in pb.reject_counts.items():
+            st.rejects.counts[reason] += c
+            ex = st.rejects.examples.setdefault(reason, [])
+            for ln, text in pb.reject_examples.get(reason, [])[: max(0, 5 - len(ex))]:
+                ex.append((self.file, number(ln), text))
+        if self.cfg.strict and pb.first_fatal is not None:
+            ln, reason, text = pb.first_fatal
+            raise IngestError(f"{self.file}: message {number(ln)}: rejected ({REASONS[reason]}): "
+                              f"{text!r} (--strict)")
+        tod, date, ext, split = _time_arrays(pb)
+        self._held.append((pb, split, line0, nos))
+        return self._release(st.timebase.feed(tod, date, ext))
+
+    def finish(self) -> list[dict[str, pd.DataFrame]]:
+        """The frames of the chunks still held (call once, after the last :meth:`add`)."""
+        return self._release(self.st.timebase.finish())
+
+    def _release(self, done) -> list[dict[str, pd.DataFrame]]:
+        out = []
+        for t in done:
+            pb, split, line0, nos = self._held.pop(0)
+            frames = _assemble(pb, split(t), self.st, self.file, line0, self.cfg)
+            if nos is not None:
+                for f in frames.values():
+                    f["line"] = nos[f["line"].to_numpy(np.int64) - line0]
+            out.append(frames)
+        return out
+
+    def result(self, frames: list[dict[str, pd.DataFrame]]) -> FileResult:
+        """The :class:`FileResult` of ``frames`` (those returned, concatenated and sorted by
+        time) with the counts, rejects, time events and notes of every chunk."""
+        st = self.st
+        return FileResult(path=self.file, format="nmea", frames=_concat(frames), lines=st.lines,
+                          rejects=st.rejects, time_events=st.time_events(), notes=st.notes())
+
+
 def parse_sentences(lines: Sequence[bytes], time_ns: np.ndarray, source: Sequence[str], file: str,
                     cfg: IngestConfig) -> FileResult:
-    """Parse sentences that arrive with an external receive time and source key each
-    (MCAP raw NMEA messages: topic as source key).  Time-of-fix fields are anchored to
-    the date of the given time (rule 1 of :mod:`dracc.ingest.timebase`)."""
-    clean = [bytes(x).replace(b"\r", b"").replace(b"\n", b" ") for x in lines]
-    data = b"\n".join(clean) + (b"\n" if clean else b"")
-    t = np.asarray(time_ns, dtype=np.int64)
-    src = np.asarray(list(source), dtype=object)
-    if not (len(t) == len(src) == len(clean)):
-        raise ValueError(f"parse_sentences: {len(clean)} lines, {len(t)} times, {len(src)} sources")
-    st = StreamState(file)
-    st.events.gap_s = cfg.gap_s
-    st.events.tolerance_s = cfg.backstep_tolerance_s
-    if not clean:
-        return FileResult(path=file, format="nmea", frames={k: empty_frame(k) for k in KINDS}, lines=0)
-    pb = parse_buffer(data, ignore_checksum=cfg.ignore_checksum, at_eof=False,
-                      ext_line_ns=t, ext_line_source=src)
-    st.lines = pb.n_lines
-    st.stats.update(pb.stats)
-    for reason, c in pb.reject_counts.items():
-        st.rejects.counts[reason] += c
-        st.rejects.examples[reason] = [(file, ln, tx) for ln, tx in pb.reject_examples.get(reason, [])]
-    if cfg.strict and pb.first_fatal is not None:
-        ln, reason, text = pb.first_fatal
-        raise IngestError(f"{file}: message {ln}: rejected ({REASONS[reason]}): {text!r} (--strict)")
-    tod, date, ext, split = _time_arrays(pb)
-    done = st.timebase.feed(tod, date, ext) + st.timebase.finish()
-    frames = _assemble(pb, split(np.concatenate(done) if done else np.zeros(0, np.int64)),
-                       st, file, 1, cfg) if done else {}
-    return FileResult(path=file, format="nmea", frames=_concat([frames]), lines=st.lines,
-                      rejects=st.rejects, time_events=st.time_events(), notes=st.notes())
+    """:class:`SentenceStream` over one chunk: sentences with an external receive time
+    and source key each, parsed at once."""
+    stream = SentenceStream(file, cfg)
+    frames = stream.add(lines, time_ns, source)
+    return stream.result(frames + stream.finish())
 
