@@ -1201,7 +1201,10 @@ def _join_lines(buf: bytes, starts: np.ndarray, ends: np.ndarray) -> bytes:
 
 def _json_columns(joined: bytes, n: int, plan: dict) -> dict[str, np.ndarray] | None:
     """Columns of one channel's JSON messages (one per line) in one pyarrow parse, or None
-    if pyarrow cannot (the caller then parses message by message)."""
+    if pyarrow cannot (the caller then parses message by message).  The parse allocates
+    from the C heap (pyarrow's system pool), which ``_trim_heap`` gives back: pyarrow's
+    default pool (mimalloc) kept freed parse buffers, 9 MiB more at 24 h than at 6 h
+    (``benchmarks/bench_mcap.py``)."""
     import pyarrow as pa
     import pyarrow.json as pj
     fields = [pa.field(k, pa.string() if q == "reference" else pa.float64()) for k, q in plan["fields"].items()]
@@ -1218,7 +1221,8 @@ def _json_columns(joined: bytes, n: int, plan: dict) -> dict[str, np.ndarray] | 
         table = pj.read_json(BytesIO(joined),
                              read_options=pj.ReadOptions(use_threads=False, block_size=max(len(joined) + 1, 1 << 16)),
                              parse_options=pj.ParseOptions(explicit_schema=pa.schema(fields),
-                                                           unexpected_field_behavior="ignore"))
+                                                           unexpected_field_behavior="ignore"),
+                             memory_pool=pa.system_memory_pool())
     except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
         return None
     if table.num_rows != n:
@@ -1231,7 +1235,7 @@ def _json_columns(joined: bytes, n: int, plan: dict) -> dict[str, np.ndarray] | 
         else:
             cols[q] = c.to_numpy(zero_copy_only=False).astype(np.float64)
     if st:
-        s = table.column(st[0]).combine_chunks()
+        s = table.column(st[0]).combine_chunks(memory_pool=pa.system_memory_pool())
         if st[0] == "header":
             s = s.field("stamp")
         sec = s.field(st[1]).to_numpy(zero_copy_only=False).astype(np.float64)
