@@ -50,7 +50,7 @@ from .csv_quantities import (
     lookup,
     renumber_examples,
 )
-from .frames import FileResult, Rejects
+from .frames import KINDS, FileResult, Rejects
 
 TIME_COLUMNS = ("time_utc", "time_ns", "received_at", "timestamp", "time", "datetime", "date_time",
                 "utc", "log_time")
@@ -190,6 +190,7 @@ def _iter_blocks(path: Path, cols: list[str], rejects: Rejects, file: str):
                                             newlines_in_values=False),
             convert_options=pcsv.ConvertOptions(column_types={c: pa.string() for c in cols},
                                                 strings_can_be_null=False, quoted_strings_can_be_null=False),
+            memory_pool=pa.system_memory_pool(),  # freed blocks go back to the C heap (see mcap)
         )
     except (pa.ArrowInvalid, OSError) as err:
         raise IngestError(f"{file}: cannot read as CSV: {err}") from err
@@ -278,12 +279,36 @@ def read_csv(path, cfg: IngestConfig) -> FileResult:
     return FileResult(path=file, format=form, frames=frames, lines=rows, rejects=rejects, notes=notes)
 
 
+class _Labels:
+    """Strings as small integer codes, the same code for the same string in every block
+    (one Python string per distinct label, not one per row)."""
+
+    def __init__(self):
+        self.code: dict[str, int] = {}
+
+    def codes(self, text: np.ndarray) -> np.ndarray:
+        local, uniq = pd.factorize(text)
+        lut = np.array([self.code.setdefault(str(u), len(self.code)) for u in uniq] or [0], dtype=np.int32)
+        return lut[local]
+
+    def labels(self) -> np.ndarray:
+        return np.array(list(self.code), dtype=object)
+
+
 def _read_long(p: Path, cols: list[str], declared: dict, rejects: Rejects, file: str):
+    """One value per row: rows become records by (time, source, occurrence).  Each block
+    keeps only numbers: the time in ns, source and quantity as codes, the value as a float
+    (the text only for ``reference``), the line; the rows of the whole file then become
+    records together (a record's rows may lie in different blocks).  So the file costs
+    about 30 bytes a row until the end, not the Python strings of every row."""
     tcol = _find(cols, TIME_COLUMNS)
     scol = _find(cols, ("source",))
     qcol = _find(cols, ("quantity",))
     vcol = _find(cols, ("value",))
+    sources, quantities = _Labels(), _Labels()
     parts: list[tuple] = []
+    refs: list[tuple[int, np.ndarray]] = []  #: (row of the first kept row in its block, reference texts)
+    kept_so_far = 0
     rows = 0
     stem = p.stem
     for data, lines in _iter_blocks(p, cols, rejects, file):
@@ -308,40 +333,74 @@ def _read_long(p: Path, cols: list[str], declared: dict, rejects: Rejects, file:
             num[nr] = _numbers(val[nr], lines[nr], "value", rejects, file)
             keep &= ~(nr & np.isnan(num) & (np.char.lower(val.astype(str)) != "nan"))
         src = data[scol] if scol else np.full(len(val), stem, dtype=object)
-        parts.append((t_ns[keep], src[keep], qmapped[keep], num[keep], val[keep], lines[keep]))
-    if not parts:
+        k = np.flatnonzero(keep)
+        parts.append((t_ns[k], sources.codes(src[k]), quantities.codes(qmapped[k]), num[k], lines[k]))
+        r = isref[k]
+        if r.any():
+            refs.append((kept_so_far, np.flatnonzero(r), val[k][r]))
+        kept_so_far += len(k)
+    if not parts or kept_so_far == 0:
         return {}, rows
-    t_ns = np.concatenate([x[0] for x in parts])
-    src = np.concatenate([x[1] for x in parts])
-    qn = np.concatenate([x[2] for x in parts])
-    num = np.concatenate([x[3] for x in parts])
-    raw = np.concatenate([x[4] for x in parts])
-    lines = np.concatenate([x[5] for x in parts])
-    if len(t_ns) == 0:
-        return {}, rows
+    t_ns, sc, qc, num, lines = (np.concatenate([x[i] for x in parts]) for i in range(5))
+    del parts
     # one record per (time, source, occurrence): the n-th value of a quantity at one time and
     # source belongs to the n-th record there (a GGA and an RMC fix of one receiver at one time)
-    occ = pd.DataFrame({"t": t_ns, "s": src, "q": qn}).groupby(["t", "s", "q"], sort=False).cumcount()
-    key = pd.MultiIndex.from_arrays([t_ns, src, occ.to_numpy()])
-    rec, uniq = pd.factorize(key, sort=False)
-    nrec = len(uniq)
+    occ = _occurrence(t_ns, sc, qc)
+    order = np.lexsort((occ, sc, t_ns))  # records: runs of equal (time, source, occurrence)
+    ts, ss, os_ = t_ns[order], sc[order], occ[order]
+    starts = np.r_[True, (ts[1:] != ts[:-1]) | (ss[1:] != ss[:-1]) | (os_[1:] != os_[:-1])]
+    rec = np.empty(len(order), dtype=np.int64)
+    rec[order] = np.cumsum(starts) - 1
+    t_rec, s_codes = ts[starts], ss[starts]
+    del ts, ss, os_, order
+    nrec = len(t_rec)
     first_line = np.full(nrec, np.iinfo(np.int64).max)
     np.minimum.at(first_line, rec, lines)
     values: dict[str, np.ndarray] = {}
-    for q in pd.unique(qn):
-        m = qn == q
+    qlabels = quantities.labels()
+    for code in pd.unique(qc):
+        m = qc == code
         r = rec[m]  # distinct within a quantity, by construction of the key
+        q = str(qlabels[code])
         if q == "reference":
+            text = np.full(len(qc), None, dtype=object)
+            for at, idx, v in refs:
+                text[at + idx] = v
             arr = np.full(nrec, None, dtype=object)
-            arr[r] = raw[m]
+            arr[r] = text[m]
         else:
             arr = np.full(nrec, np.nan)
             arr[r] = num[m]
-        values[str(q)] = arr
-    t_rec = uniq.get_level_values(0).to_numpy(dtype=np.int64)
-    s_rec = uniq.get_level_values(1).to_numpy(dtype=object)
+        values[q] = arr
+    s_rec = sources.labels()[s_codes]
     frames = build_frames(t_rec, s_rec, first_line, "csv", values, file, rejects)
     return _sorted(frames), rows
+
+
+def _concat_kinds(parts: list[dict[str, pd.DataFrame]]) -> dict[str, pd.DataFrame]:
+    """The frames of every block, one per kind (string columns categorical again)."""
+    out = {}
+    for kind in KINDS:
+        dfs = [f[kind] for f in parts if len(f.get(kind, ()))]
+        if not dfs:
+            continue
+        df = pd.concat(dfs, ignore_index=True) if len(dfs) > 1 else dfs[0]
+        for c in ("source", "talker", "sentence"):
+            df[c] = df[c].astype("category")
+        out[kind] = df
+    return out
+
+
+def _occurrence(t: np.ndarray, s: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """For each row, how many rows before it (in file order) have its time, source and
+    quantity: 0 for the first value of a quantity at a time and source, 1 for the second."""
+    order = np.lexsort((q, s, t))  # stable: file order within equal keys
+    ts, ss, qs = t[order], s[order], q[order]
+    idx = np.arange(len(order))
+    new = np.r_[True, (ts[1:] != ts[:-1]) | (ss[1:] != ss[:-1]) | (qs[1:] != qs[:-1])]
+    occ = np.empty(len(order), dtype=np.int32)
+    occ[order] = idx - np.maximum.accumulate(np.where(new, idx, 0))
+    return occ
 
 
 def _sorted(frames: dict[str, pd.DataFrame]) -> dict[str, pd.DataFrame]:
@@ -383,15 +442,10 @@ def _read_wide(p: Path, cols: list[str], declared: dict, rejects: Rejects, notes
             else:
                 vals[qname] = _numbers(text, lines[ok], c, rejects, file)
         src = data[scol][ok] if scol else np.full(int(ok.sum()), p.stem, dtype=object)
-        parts.append((t_ns[ok], src, lines[ok], vals))
-    if not parts:
-        return {}, rows
-    t_ns = np.concatenate([x[0] for x in parts])
-    src = np.concatenate([x[1] for x in parts])
-    lines = np.concatenate([x[2] for x in parts])
-    values = {q: np.concatenate([x[3][q] for x in parts]) for q in parts[0][3]}
-    frames = build_frames(t_ns, src, lines, "csv", values, file, rejects)
-    return _sorted(frames), rows
+        # a row is a record: each block becomes compact frames at once (a float for every
+        # column of every row, and a string per row, made memory grow with the file)
+        parts.append(build_frames(t_ns[ok], src, lines[ok], "csv", vals, file, rejects))
+    return _sorted(_concat_kinds(parts)), rows
 
 
 def _read_raw(p: Path, cols: list[str], cfg: IngestConfig, rejects: Rejects, notes: list[str],
