@@ -221,3 +221,42 @@ def test_raw_csv_rejects_name_csv_lines(tmp_path):
     assert len(r.frames["position"]) == 1
     (reason, ex), = r.rejects.examples.items()
     assert r.rejects.counts[reason] == 1 and ex[0][1] == 3  # the bad checksum is on CSV line 3
+
+
+@pytest.mark.parametrize("form", ["long", "wide"])
+def test_small_blocks_and_unsorted_rows_give_the_same_frames(tmp_path, monkeypatch, form):
+    """The long form makes a time's rows into records once a later time is seen, block by
+    block; a file not sorted by time is read again whole.  Blocks of 2 kB (a record's rows
+    split over blocks), and the same rows shuffled, give the frames of one big block."""
+    import dracc.ingest.csv as csv_mod
+
+    fr = voyage_frames(n=400)
+    p = write_csv(fr, tmp_path / f"v_{form}.csv", form=form)
+    whole = read_csv(p, IngestConfig())
+    monkeypatch.setattr(csv_mod, "_BLOCK_BYTES", 2048)
+    small = read_csv(p, IngestConfig())
+    head, *body = p.read_text(encoding="utf-8").splitlines(keepends=True)
+    rng = np.random.default_rng(4)
+    shuffled = tmp_path / f"shuffled_{form}.csv"
+    shuffled.write_text(head + "".join(body[i] for i in rng.permutation(len(body))), encoding="utf-8")
+    passes = []
+    real_pass = csv_mod._read_long_pass
+
+    def counted(*args):
+        passes.append(args[-1])  # streaming or not
+        return real_pass(*args)
+
+    monkeypatch.setattr(csv_mod, "_read_long_pass", counted)
+    mixed = read_csv(shuffled, IngestConfig())
+    if form == "long":
+        assert passes == [True, False]  # the unsorted rows were noticed and the file read again
+    assert small.lines == whole.lines == mixed.lines
+    for kind, f in whole.frames.items():
+        pd.testing.assert_frame_equal(small.frames[kind], f, check_categorical=False)
+        # shuffled: the same records, their lines where the rows went
+        cols = [c for c in f.columns if c != "line"]
+        pd.testing.assert_frame_equal(
+            mixed.frames[kind][cols].sort_values(["time_ns", "source"], kind="stable").reset_index(drop=True),
+            f[cols].sort_values(["time_ns", "source"], kind="stable").reset_index(drop=True),
+            check_categorical=False)
+    assert dict(small.rejects.counts) == dict(whole.rejects.counts) == dict(mixed.rejects.counts)

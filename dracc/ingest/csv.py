@@ -295,20 +295,41 @@ class _Labels:
         return np.array(list(self.code), dtype=object)
 
 
+class _Unsorted(Exception):
+    """A long-form CSV row whose time was already made into records (the file is not
+    sorted by time): the file is read again, all rows at once."""
+
+
 def _read_long(p: Path, cols: list[str], declared: dict, rejects: Rejects, file: str):
-    """One value per row: rows become records by (time, source, occurrence).  Each block
-    keeps only numbers: the time in ns, source and quantity as codes, the value as a float
-    (the text only for ``reference``), the line; the rows of the whole file then become
-    records together (a record's rows may lie in different blocks).  So the file costs
-    about 30 bytes a row until the end, not the Python strings of every row."""
+    """One value per row: rows become records by (time, source, occurrence).
+
+    In a file sorted by time, the rows of a time are complete once a later time is seen:
+    each block's rows up to its last time become records at once, so the memory holds a
+    block and its frames.  A row older than rows already made into records means the file
+    is not sorted: it is then read again with every row kept as numbers (time in ns, source
+    and quantity as codes, the value, the line: about 40 bytes a row) and the rows of the
+    whole file become records together.  Both give the same frames."""
+    for streaming in (True, False):
+        mine = Rejects()
+        try:
+            frames, rows = _read_long_pass(p, cols, declared, mine, file, streaming)
+        except _Unsorted:
+            continue
+        rejects.merge(mine)
+        return frames, rows
+    raise AssertionError("unreachable")  # pragma: no cover - the second pass never raises _Unsorted
+
+
+def _read_long_pass(p: Path, cols: list[str], declared: dict, rejects: Rejects, file: str,
+                    streaming: bool):
     tcol = _find(cols, TIME_COLUMNS)
     scol = _find(cols, ("source",))
     qcol = _find(cols, ("quantity",))
     vcol = _find(cols, ("value",))
     sources, quantities = _Labels(), _Labels()
-    parts: list[tuple] = []
-    refs: list[tuple[int, np.ndarray]] = []  #: (row of the first kept row in its block, reference texts)
-    kept_so_far = 0
+    held: list[tuple] = []  #: rows not yet made into records: (t, source, quantity, value, line, reference text)
+    parts: list[dict[str, pd.DataFrame]] = []
+    done_upto: int | None = None  #: the latest time made into records (streaming)
     rows = 0
     stem = p.stem
     for data, lines in _iter_blocks(p, cols, rejects, file):
@@ -334,17 +355,34 @@ def _read_long(p: Path, cols: list[str], declared: dict, rejects: Rejects, file:
             keep &= ~(nr & np.isnan(num) & (np.char.lower(val.astype(str)) != "nan"))
         src = data[scol] if scol else np.full(len(val), stem, dtype=object)
         k = np.flatnonzero(keep)
-        parts.append((t_ns[k], sources.codes(src[k]), quantities.codes(qmapped[k]), num[k], lines[k]))
-        r = isref[k]
-        if r.any():
-            refs.append((kept_so_far, np.flatnonzero(r), val[k][r]))
-        kept_so_far += len(k)
-    if not parts or kept_so_far == 0:
-        return {}, rows
-    t_ns, sc, qc, num, lines = (np.concatenate([x[i] for x in parts]) for i in range(5))
-    del parts
-    # one record per (time, source, occurrence): the n-th value of a quantity at one time and
-    # source belongs to the n-th record there (a GGA and an RMC fix of one receiver at one time)
+        if len(k) == 0:
+            continue
+        ref = np.where(isref[k], val[k], None)
+        block = (t_ns[k], sources.codes(src[k]), quantities.codes(qmapped[k]), num[k], lines[k], ref)
+        if not streaming:
+            held.append(block)
+            continue
+        if done_upto is not None and block[0].min() <= done_upto:
+            raise _Unsorted
+        rows_now = tuple(np.concatenate([h[i] for h in held] + [block[i]]) for i in range(6))
+        t_last = rows_now[0].max()
+        complete = rows_now[0] < t_last
+        if complete.any():
+            parts.append(_records(*(x[complete] for x in rows_now), sources, quantities, file, rejects))
+            done_upto = int(rows_now[0][complete].max())
+        held = [tuple(x[~complete] for x in rows_now)]
+    if held and len(held[0][0]):
+        rows_now = tuple(np.concatenate([h[i] for h in held]) for i in range(6))
+        held = []
+        parts.append(_records(*rows_now, sources, quantities, file, rejects))
+    return _sorted(_concat_kinds(parts)), rows
+
+
+def _records(t_ns, sc, qc, num, lines, ref, sources: _Labels, quantities: _Labels, file: str,
+             rejects: Rejects) -> dict[str, pd.DataFrame]:
+    """Frames from long-form rows: one record per (time, source, occurrence), the n-th value
+    of a quantity at one time and source belonging to the n-th record there (a GGA and an
+    RMC fix of one receiver at one time)."""
     occ = _occurrence(t_ns, sc, qc)
     order = np.lexsort((occ, sc, t_ns))  # records: runs of equal (time, source, occurrence)
     ts, ss, os_ = t_ns[order], sc[order], occ[order]
@@ -363,18 +401,13 @@ def _read_long(p: Path, cols: list[str], declared: dict, rejects: Rejects, file:
         r = rec[m]  # distinct within a quantity, by construction of the key
         q = str(qlabels[code])
         if q == "reference":
-            text = np.full(len(qc), None, dtype=object)
-            for at, idx, v in refs:
-                text[at + idx] = v
             arr = np.full(nrec, None, dtype=object)
-            arr[r] = text[m]
+            arr[r] = ref[m]
         else:
             arr = np.full(nrec, np.nan)
             arr[r] = num[m]
         values[q] = arr
-    s_rec = sources.labels()[s_codes]
-    frames = build_frames(t_rec, s_rec, first_line, "csv", values, file, rejects)
-    return _sorted(frames), rows
+    return build_frames(t_rec, sources.labels()[s_codes], first_line, "csv", values, file, rejects)
 
 
 def _concat_kinds(parts: list[dict[str, pd.DataFrame]]) -> dict[str, pd.DataFrame]:
