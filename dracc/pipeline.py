@@ -322,6 +322,16 @@ def analyse_voyage(voyage: Voyage, cfg: Config | None = None,
                        decisions=tuple(te.decisions))
     if len(inputs) > 1:
         notes.append(f"{len(inputs)} files merged by time")
+    spells = recording_spells(voyage.frames, int(SPELL_GAP_S * NS_PER_S))
+    if len(spells) > 1:
+        def when(a: int, b: int) -> str:
+            fa, fb = (f"{pd.Timestamp(x, tz='UTC'):%Y-%m-%d %H:%MZ}" for x in (a, b))
+            return fa if fa == fb else f"{fa} to {fb}"
+        shown = "; ".join(f"{when(a, b)} ({n:,} records)" for a, b, n in spells[:6])
+        more = f"; and {len(spells) - 6} more" if len(spells) > 6 else ""
+        notes.append(f"the records fall in {len(spells)} spells more than {SPELL_GAP_S / 3600:g} h "
+                     f"apart: {shown}{more}. The period spans them all; the statistics use "
+                     "the instants with readings only (a stray record with a wrong date shows here)")
     unassigned = [s.key for s in sources if not s.roles]
     if unassigned:
         notes.append("sources without a role: " + ", ".join(unassigned)
@@ -638,6 +648,28 @@ def _fixes(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str], notes: 
 
 #: a silence of both heading and speed longer than this is left out of the DR grid
 DR_SILENCE_S = 3600.0
+#: records further apart than this (in every frame) form separate recording spells
+SPELL_GAP_S = 6 * 3600.0
+
+
+def recording_spells(frames, gap_ns: int) -> list[tuple[int, int, int]]:
+    """(first ns, last ns, records) of each spell of recording: the records of all frames,
+    cut where none comes for more than ``gap_ns``.  Frames are sorted by time."""
+    runs = []
+    for df in frames.values():
+        if df is None or not len(df):
+            continue
+        t = df["time_ns"].to_numpy(np.int64)
+        cut = np.flatnonzero(np.diff(t) > gap_ns)
+        starts, ends = np.r_[0, cut + 1], np.r_[cut, len(t) - 1]
+        runs += [(int(t[a]), int(t[b]), int(b - a + 1)) for a, b in zip(starts, ends, strict=True)]
+    spells: list[tuple[int, int, int]] = []
+    for a, b, n in sorted(runs):
+        if spells and a - spells[-1][1] <= gap_ns:
+            spells[-1] = (spells[-1][0], max(spells[-1][1], b), spells[-1][2] + n)
+        else:
+            spells.append((a, b, n))
+    return spells
 
 
 def _dr_grid(th: np.ndarray, tv: np.ndarray, t_first: int, t_last: int, step_ns: int,

@@ -308,6 +308,25 @@ def test_missing_unit_at_an_instant_is_not_filled():
     assert not np.isnan(res.samples["ins3"]["lat"][2])
 
 
+def test_instants_with_no_reading_from_any_unit_are_not_instants():
+    """A recording pause (or a stray record days later) leaves hours where no unit has a
+    reading: they are not sampling instants, not 'missing' for every unit, and make no
+    per-day window."""
+    a = _static_units({"ins1": (100, 0), "ins2": (0, 0), "ins3": (-100, 0)}, n_hours=3)
+    b = _static_units({"ins1": (100, 0), "ins2": (0, 0), "ins3": (-100, 0)}, n_hours=2,
+                      t0=T0 + 40 * 24 * H)  # the same units 40 days later
+    units = {u: UnitSeries(np.r_[a[u].pos_time_ns, b[u].pos_time_ns], np.r_[a[u].lat_rad, b[u].lat_rad],
+                           np.r_[a[u].lon_rad, b[u].lon_rad], np.r_[a[u].hdg_time_ns, b[u].hdg_time_ns],
+                           np.r_[a[u].heading_rad, b[u].heading_rad]) for u in a}
+    res = analyse_deviations(units, DeviationConfig(max_interp_gap_s=120.0))
+    assert len(res.time_ns) == 4 + 3  # 00:00..03:00 and 00:00..02:00 forty days later
+    assert res.missing["ins1"] == {"lat": 0, "lon": 0, "course": 0}
+    assert not [m for m in res.messages if "missing at" in m]
+    assert len(res.windows) == 2
+    assert res.whole.units["ins1"].channels["lat"].n == 7
+    np.testing.assert_allclose(res.samples["ins1"]["lat"], 100.0, atol=1e-3)
+
+
 def test_two_units_left_half_difference_sqrt2_and_said_so():
     units = _static_units({"ins1": (30, -8), "ins3": (-10, 12)}, n_hours=4)
     res = analyse_deviations(units)

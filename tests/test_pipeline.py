@@ -194,6 +194,50 @@ def test_files_of_one_voyage_merge_by_time(tmp_path):
                                    equal_nan=True)
 
 
+def test_recording_spells_cut_where_no_frame_has_a_record():
+    import pandas as pd
+
+    from dracc.pipeline import recording_spells
+
+    h = 3_600_000_000_000
+    frames = {"position": pd.DataFrame({"time_ns": np.array([0, h, 2 * h, 40 * 24 * h], np.int64)}),
+              "heading": pd.DataFrame({"time_ns": np.array([h // 2, 5 * h, 12 * h], np.int64)})}
+    # 5 h and 12 h bridge nothing more than 6 h apart... except 5 h -> 12 h (7 h)
+    assert recording_spells(frames, 6 * h) == [(0, 5 * h, 5), (12 * h, 12 * h, 1),
+                                               (40 * 24 * h, 40 * 24 * h, 1)]
+    assert recording_spells(frames, 1000 * h) == [(0, 40 * 24 * h, 7)]
+    assert recording_spells({"position": pd.DataFrame({"time_ns": np.zeros(0, np.int64)})}, h) == []
+
+
+def test_a_stray_record_days_away_is_said_and_does_not_fill_the_report(tmp_path):
+    """A record with a plausible but wrong date stretches the period: the report says the
+    records fall in separate spells, and the hourly sampling keeps to the hours with
+    readings (not 960 empty instants and 40 empty days)."""
+    from pathlib import Path
+
+    sample = Path(__file__).resolve().parents[1] / "sample_logs" / "voyage_tag.nmea"
+    if not sample.exists():
+        pytest.skip("sample_logs not generated")
+
+    def line(tag: str, sentence: str) -> str:
+        cs = lambda s: f"{functools.reduce(lambda a, c: a ^ ord(c), s, 0):02X}"  # noqa: E731
+        return f"\\{tag}*{cs(tag)}\\${sentence}*{cs(sentence)}\n"
+
+    t = 1772344800 + 40 * 86400  # 40 days after the log's first second
+    stray = tmp_path / "stray.nmea"
+    stray.write_text(sample.read_text(encoding="ascii") + line(
+        f"s:INS1,c:{t}", "INGGA,060000.00,5436.138899,N,01848.019925,E,1,,,25.0,M,,M,,"),
+        encoding="ascii")
+    plain, a = analyse([sample]), analyse([stray])
+    assert (a.end_ns - a.start_ns) / 3.6e12 > 900  # the period as recorded
+    said = [n for n in a.notes if "spells" in n]
+    assert len(said) == 1 and "2 spells more than 6 h apart" in said[0] and "(1 records)" in said[0]
+    assert not any("spells" in n for n in plain.notes)
+    assert len(a.deviation.time_ns) == len(plain.deviation.time_ns) + 1  # + the stray hour
+    assert len(a.deviation.windows) == len(plain.deviation.windows) + 1
+    assert not any(m.startswith("ins1 lat: missing") for m in a.deviation.messages)  # its own hour
+
+
 def test_progress_reports_every_stage():
     from pathlib import Path
 

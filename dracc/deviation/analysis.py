@@ -29,7 +29,7 @@ from ..units import finite_or_none as _f
 from . import stats
 from .hat import three_cornered_hat
 from .reference import course_errors_rad, k_star_mark, kurtosis_mark, position_errors_m
-from .sampling import DAY_NS, UnitSeries, sample_unit, sampling_instants
+from .sampling import DAY_NS, SampledUnit, UnitSeries, sample_unit, sampling_instants
 
 CHANNELS = ("lat", "lon", "course")
 #: the sample key of each channel (JSON ``deviation.samples``) and the a priori config key
@@ -444,6 +444,15 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
     else:
         instants = np.empty(0, np.int64)
     sampled = {u: sample_unit(units[u], instants, cfg.max_interp_gap_s) for u in names}
+    # an instant at which no unit has a reading (a pause in the recording, or a stray
+    # record days away) is not an instant of the method: left out, not counted as missing
+    recording = np.zeros(len(instants), dtype=bool)
+    for su in sampled.values():
+        recording |= ~np.isnan(su.lat_rad) | ~np.isnan(su.heading_rad)
+    if not recording.all():
+        instants = instants[recording]
+        sampled = {u: SampledUnit(lat_rad=su.lat_rad[recording], lon_rad=su.lon_rad[recording],
+                                  heading_rad=su.heading_rad[recording]) for u, su in sampled.items()}
     n_inst = len(instants)
     nan = np.full(n_inst, np.nan)
 
