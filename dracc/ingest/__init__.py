@@ -131,13 +131,13 @@ def summarize_frames(frames: dict[str, pd.DataFrame], file: str,
         (src, src_l), (sent, sent_l), (talk, talk_l) = parts
         ns, nt, nk = len(src_l), len(sent_l), len(talk_l)
         t = df["time_ns"].to_numpy()
-        counted = np.ones(len(src), dtype=bool)
+        # one count per (source, sentence, talker); the rest are its sums
+        full = np.bincount((src * nt + sent) * nk + talk, minlength=ns * nt * nk).reshape(ns, nt, nk)
+        records = full.sum(axis=(1, 2))
         if kind == "ground" and "RMC" in sent_l:  # an RMC is counted in its position row
-            counted = sent != sent_l.index("RMC")
-        sc = src[counted]
-        by_sent = np.bincount(sc * nt + sent[counted], minlength=ns * nt).reshape(ns, nt)
-        tc = np.bincount(sc * nk + talk[counted], minlength=ns * nk).reshape(ns, nk)
-        records = np.bincount(src, minlength=ns)
+            full[:, sent_l.index("RMC"), :] = 0
+        by_sent = full.sum(axis=2)
+        tc = full.sum(axis=1)
         lo = np.full(ns, np.iinfo(np.int64).max)
         hi = np.full(ns, np.iinfo(np.int64).min)
         np.minimum.at(lo, src, t)

@@ -1192,8 +1192,10 @@ def _concat(frames_list: list[dict[str, pd.DataFrame]]) -> dict[str, pd.DataFram
         df = pd.concat(parts, ignore_index=True) if len(parts) > 1 else parts[0]
         for c in ("source", "talker", "sentence"):
             df[c] = df[c].astype("category")
-        order = np.argsort(df["time_ns"].to_numpy(), kind="stable")
-        out[kind] = df.iloc[order].reset_index(drop=True)
+        t = df["time_ns"].to_numpy()
+        if (t[1:] < t[:-1]).any():  # a log in time order (nearly all) is not copied again
+            df = df.iloc[np.argsort(t, kind="stable")]
+        out[kind] = df.reset_index(drop=True)
     return out
 
 
