@@ -67,6 +67,9 @@ if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
 
 DEG = np.pi / 180.0
 FIRST_BLOCK_BYTES = 16 * 1024 * 1024  #: the first block (where talkers are fingerprinted)
+#: the first block when workers parse the others: parsed by the main process while they
+#: start (about 70 000 lines, plenty to fingerprint talkers)
+MAIN_FIRST_BLOCK_BYTES = 4 * 1024 * 1024
 #: the later blocks: small enough that a worker reuses its memory (fresh pages are dear)
 BLOCK_BYTES = 8 * 1024 * 1024
 PARALLEL_MIN_BYTES = 32 * 1024 * 1024  #: files at least this large use two processes
@@ -1049,10 +1052,10 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
     events and statistics while iterating; read it after the loop.  Files of at least
     ``PARALLEL_MIN_BYTES`` are parsed by up to two worker processes, at most four blocks
     ahead, which hand their blocks over as files (:func:`_parse_range_to_file`); this
-    process resolves times and builds frames in order.  ``block_bytes`` None: a first
-    block of ``FIRST_BLOCK_BYTES`` (twice the others: the other worker goes on
-    meanwhile), then blocks of about ``BLOCK_BYTES``, as many as make the count a
-    multiple of the workers' (none waits alone at the end); a number: blocks of that
+    process parses the first block itself while they start, then resolves times and builds
+    frames in order.  ``block_bytes`` None: a first block of ``FIRST_BLOCK_BYTES``
+    (``MAIN_FIRST_BLOCK_BYTES`` with workers), then blocks of about ``BLOCK_BYTES``, as
+    many as the workers share evenly (none waits alone at the end); a number: blocks of that
     size.  ``progress(n_bytes)`` is called as blocks finish.  Raises IngestError in
     ``cfg.strict`` mode at the first rejected line.
     """
@@ -1075,12 +1078,13 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
     if block_bytes is not None:
         ranges = list(_block_ranges(path, block_bytes))
     else:
-        rest = max(size - FIRST_BLOCK_BYTES, 0)
+        first_bytes = MAIN_FIRST_BLOCK_BYTES if nworkers > 1 else FIRST_BLOCK_BYTES
+        rest = max(size - first_bytes, 0)
         n_rest = -(-rest // BLOCK_BYTES)
-        if (1 + n_rest) % nworkers:
-            n_rest += nworkers - (1 + n_rest) % nworkers
+        if n_rest % nworkers:  # the workers share the blocks after the first evenly
+            n_rest += nworkers - n_rest % nworkers
         later = max(-(-rest // n_rest), 1) if n_rest else BLOCK_BYTES
-        ranges = list(_block_ranges(path, later, FIRST_BLOCK_BYTES))
+        ranges = list(_block_ranges(path, later, first_bytes))
     held: list = []
 
     def handle(pb: ParsedBlock, nbytes: int):
@@ -1139,8 +1143,11 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
                 futures.append((ex.submit(_parse_range_to_file, folder, i, file, off, ln,
                                           cfg.ignore_checksum, at_eof[i]), i, off, ln))
 
+            # the first block is parsed here while the workers start and take the next ones
+            i0, (off0, ln0) = pending.pop(0)
             while pending and len(futures) < nworkers + 2:
                 submit()
+            yield from handle(_parse_range(file, off0, ln0, cfg.ignore_checksum, at_eof[i0]), ln0)
             while futures:
                 fut, i, off, ln = futures.pop(0)
                 try:
