@@ -50,7 +50,7 @@ from .csv_quantities import (
     lookup,
     renumber_examples,
 )
-from .frames import KINDS, FileResult, Rejects
+from .frames import FileResult, Rejects, concat_blocks
 
 TIME_COLUMNS = ("time_utc", "time_ns", "received_at", "timestamp", "time", "datetime", "date_time",
                 "utc", "log_time")
@@ -375,7 +375,7 @@ def _read_long_pass(p: Path, cols: list[str], declared: dict, rejects: Rejects, 
         rows_now = tuple(np.concatenate([h[i] for h in held]) for i in range(6))
         held = []
         parts.append(_records(*rows_now, sources, quantities, file, rejects))
-    return _sorted(_concat_kinds(parts)), rows
+    return _sorted(concat_blocks(parts, every_kind=False)), rows
 
 
 def _records(t_ns, sc, qc, num, lines, ref, sources: _Labels, quantities: _Labels, file: str,
@@ -408,20 +408,6 @@ def _records(t_ns, sc, qc, num, lines, ref, sources: _Labels, quantities: _Label
             arr[r] = num[m]
         values[q] = arr
     return build_frames(t_rec, sources.labels()[s_codes], first_line, "csv", values, file, rejects)
-
-
-def _concat_kinds(parts: list[dict[str, pd.DataFrame]]) -> dict[str, pd.DataFrame]:
-    """The frames of every block, one per kind (string columns categorical again)."""
-    out = {}
-    for kind in KINDS:
-        dfs = [f[kind] for f in parts if len(f.get(kind, ()))]
-        if not dfs:
-            continue
-        df = pd.concat(dfs, ignore_index=True) if len(dfs) > 1 else dfs[0]
-        for c in ("source", "talker", "sentence"):
-            df[c] = df[c].astype("category")
-        out[kind] = df
-    return out
 
 
 def _occurrence(t: np.ndarray, s: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -478,7 +464,7 @@ def _read_wide(p: Path, cols: list[str], declared: dict, rejects: Rejects, notes
         # a row is a record: each block becomes compact frames at once (a float for every
         # column of every row, and a string per row, made memory grow with the file)
         parts.append(build_frames(t_ns[ok], src, lines[ok], "csv", vals, file, rejects))
-    return _sorted(_concat_kinds(parts)), rows
+    return _sorted(concat_blocks(parts, every_kind=False)), rows
 
 
 def _read_raw(p: Path, cols: list[str], cfg: IngestConfig, rejects: Rejects, notes: list[str],

@@ -106,6 +106,27 @@ def make_frame(kind: str, data: dict[str, np.ndarray]) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
+
+def concat_blocks(blocks: list[dict[str, pd.DataFrame]], every_kind: bool = True) -> dict[str, pd.DataFrame]:
+    """One frame per kind from the frames of consecutive blocks (dicts kind -> frame),
+    sorted by time (stable: a block's order kept among equal times), the string columns
+    categorical.  ``every_kind``: an empty frame for a kind no block has."""
+    out = {}
+    for kind in KINDS:
+        parts = [f[kind] for f in blocks if kind in f and len(f[kind])]
+        if not parts:
+            if every_kind:
+                out[kind] = empty_frame(kind)
+            continue
+        df = pd.concat(parts, ignore_index=True) if len(parts) > 1 else parts[0]
+        for c in ("source", "talker", "sentence"):
+            df[c] = df[c].astype("category")
+        t = df["time_ns"].to_numpy()
+        if (t[1:] < t[:-1]).any():  # a log in time order (nearly all) is not copied again
+            df = df.iloc[np.argsort(t, kind="stable")]
+        out[kind] = df.reset_index(drop=True)
+    return out
+
 @dataclass
 class Rejects:
     """Rejected lines, counted by reason, with the first few examples of each."""

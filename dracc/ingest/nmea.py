@@ -56,7 +56,7 @@ from .frames import (
     FileResult,
     Rejects,
     TimeEvents,
-    empty_frame,
+    concat_blocks,
     make_frame,
 )
 from .tagblock import FORMS, HEX, parse_numbers, parse_prefixes
@@ -821,6 +821,27 @@ class StreamState:
         te.examples = list(self.events.examples)
         return te
 
+    def count_block(self, pb: ParsedBlock, strict: bool, number=None, label: str = "{path}:{n}") -> int:
+        """Add a parsed block's lines, statistics and rejects; return the stream line of its
+        first line.  ``number(ln, line0)``: the number a reject example gets for the block's
+        line ``ln`` (default: its line in the stream); ``label``: how the strict-mode error
+        names it.  In ``strict`` mode the block's first rejected line raises IngestError."""
+        line0 = self.lines + 1
+        num = number or (lambda ln, first: ln + first - 1)
+        self.lines += pb.n_lines
+        self.blank += pb.n_blank
+        self.stats.update(pb.stats)
+        for reason, c in pb.reject_counts.items():
+            self.rejects.counts[reason] += c
+            ex = self.rejects.examples.setdefault(reason, [])
+            for ln, text in pb.reject_examples.get(reason, [])[: max(0, 5 - len(ex))]:
+                ex.append((self.path, num(ln, line0), text))
+        if strict and pb.first_fatal is not None:
+            ln, reason, text = pb.first_fatal
+            where = label.format(path=self.path, n=num(ln, line0))
+            raise IngestError(f"{where}: rejected ({REASONS[reason]}): {text!r} (--strict)")
+        return line0
+
     def notes(self) -> list[str]:
         s = self.stats
         out = []
@@ -1088,20 +1109,8 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
     held: list = []
 
     def handle(pb: ParsedBlock, nbytes: int):
-        line0 = st.lines + 1
-        st.lines += pb.n_lines
-        st.blank += pb.n_blank
+        line0 = st.count_block(pb, cfg.strict)
         st.bytes += nbytes
-        st.stats.update(pb.stats)
-        for reason, c in pb.reject_counts.items():
-            st.rejects.counts[reason] += c
-            ex = st.rejects.examples.setdefault(reason, [])
-            for ln, text in pb.reject_examples.get(reason, [])[: max(0, 5 - len(ex))]:
-                ex.append((file, ln + line0 - 1, text))
-        if cfg.strict and pb.first_fatal is not None:
-            ln, reason, text = pb.first_fatal
-            raise IngestError(f"{file}:{ln + line0 - 1}: rejected ({REASONS[reason]}): {text!r} "
-                              "(--strict)")
         for kind, cols in pb.kinds.items():
             sc = cols["sentence"][cols["sentence"] != SENTENCES.index("RMC")] if kind == "ground" \
                 else cols["sentence"]
@@ -1189,23 +1198,6 @@ def _fingerprint(cols: dict[str, np.ndarray], st: StreamState, pb_names: list[st
 
 
 # ------------------------------------------------------------------------ file reader
-def _concat(frames_list: list[dict[str, pd.DataFrame]]) -> dict[str, pd.DataFrame]:
-    out = {}
-    for kind in KINDS:
-        parts = [f[kind] for f in frames_list if kind in f and len(f[kind])]
-        if not parts:
-            out[kind] = empty_frame(kind)
-            continue
-        df = pd.concat(parts, ignore_index=True) if len(parts) > 1 else parts[0]
-        for c in ("source", "talker", "sentence"):
-            df[c] = df[c].astype("category")
-        t = df["time_ns"].to_numpy()
-        if (t[1:] < t[:-1]).any():  # a log in time order (nearly all) is not copied again
-            df = df.iloc[np.argsort(t, kind="stable")]
-        out[kind] = df.reset_index(drop=True)
-    return out
-
-
 def check_readable(path: Path) -> None:
     """Raise IngestError for a path that is not a readable file."""
     if not path.exists():
@@ -1230,7 +1222,7 @@ def read_nmea(path: str | Path, cfg: IngestConfig, progress=None, workers: int |
     check_readable(path)
     st = StreamState(str(path))
     blocks = [b.frames for b in iter_nmea_blocks(path, cfg, st, progress=progress, workers=workers)]
-    frames = _concat(blocks)
+    frames = concat_blocks(blocks)
     res = FileResult(path=str(path), format="nmea", frames=frames, lines=st.lines,
                      rejects=st.rejects, time_events=st.time_events(), notes=st.notes())
     res.notes.extend(f"{k}: {v}" for k, v in st.events.per_source.items() if v["backsteps"] or v["gaps"])
@@ -1268,23 +1260,10 @@ class SentenceStream:
             return []
         pb = parse_buffer(b"\n".join(clean) + b"\n", ignore_checksum=self.cfg.ignore_checksum,
                           at_eof=False, ext_line_ns=t, ext_line_source=src)
-        st, line0 = self.st, self.st.lines + 1
         nos = None if numbers is None else np.asarray(numbers, dtype=np.int64)
-
-        def number(ln: int) -> int:  # 1-based sentence of this chunk -> what the caller counts
-            return int(nos[ln - 1]) if nos is not None else ln + line0 - 1
-
-        st.lines += pb.n_lines
-        st.stats.update(pb.stats)
-        for reason, c in pb.reject_counts.items():
-            st.rejects.counts[reason] += c
-            ex = st.rejects.examples.setdefault(reason, [])
-            for ln, text in pb.reject_examples.get(reason, [])[: max(0, 5 - len(ex))]:
-                ex.append((self.file, number(ln), text))
-        if self.cfg.strict and pb.first_fatal is not None:
-            ln, reason, text = pb.first_fatal
-            raise IngestError(f"{self.file}: message {number(ln)}: rejected ({REASONS[reason]}): "
-                              f"{text!r} (--strict)")
+        st = self.st
+        line0 = st.count_block(pb, self.cfg.strict, label="{path}: message {n}",
+                               number=None if nos is None else (lambda ln, first: int(nos[ln - 1])))
         tod, date, ext, split = _time_arrays(pb)
         self._held.append((pb, split, line0, nos))
         return self._release(st.timebase.feed(tod, date, ext))
@@ -1308,7 +1287,7 @@ class SentenceStream:
         """The :class:`FileResult` of ``frames`` (those returned, concatenated and sorted by
         time) with the counts, rejects, time events and notes of every chunk."""
         st = self.st
-        return FileResult(path=self.file, format="nmea", frames=_concat(frames), lines=st.lines,
+        return FileResult(path=self.file, format="nmea", frames=concat_blocks(frames), lines=st.lines,
                           rejects=st.rejects, time_events=st.time_events(), notes=st.notes())
 
 
