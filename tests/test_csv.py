@@ -242,9 +242,9 @@ def test_small_blocks_and_unsorted_rows_give_the_same_frames(tmp_path, monkeypat
     passes = []
     real_pass = csv_mod._read_long_pass
 
-    def counted(*args):
-        passes.append(args[-1])  # streaming or not
-        return real_pass(*args)
+    def counted(*args, streaming):
+        passes.append(streaming)
+        return real_pass(*args, streaming=streaming)
 
     monkeypatch.setattr(csv_mod, "_read_long_pass", counted)
     mixed = read_csv(shuffled, IngestConfig())

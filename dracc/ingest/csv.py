@@ -309,15 +309,14 @@ def _read_long(p: Path, cols: list[str], declared: dict, rejects: Rejects, file:
     is not sorted: it is then read again with every row kept as numbers (time in ns, source
     and quantity as codes, the value, the line: about 40 bytes a row) and the rows of the
     whole file become records together.  Both give the same frames."""
-    for streaming in (True, False):
-        mine = Rejects()
-        try:
-            frames, rows = _read_long_pass(p, cols, declared, mine, file, streaming)
-        except _Unsorted:
-            continue
-        rejects.merge(mine)
-        return frames, rows
-    raise AssertionError("unreachable")  # pragma: no cover - the second pass never raises _Unsorted
+    mine = Rejects()
+    try:
+        frames, rows = _read_long_pass(p, cols, declared, mine, file, streaming=True)
+    except _Unsorted:
+        mine = Rejects()  # what the first pass counted is counted again
+        frames, rows = _read_long_pass(p, cols, declared, mine, file, streaming=False)
+    rejects.merge(mine)
+    return frames, rows
 
 
 def _read_long_pass(p: Path, cols: list[str], declared: dict, rejects: Rejects, file: str,
