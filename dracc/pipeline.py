@@ -508,15 +508,15 @@ def _heading_series(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
         missing.append("no heading: the log holds no HDT/THS/HDG/HDM sentence; dead reckoning, "
                        "current and calibration need one")
         return None
-    hdg = hdg[np.isfinite(hdg["heading_rad"].to_numpy())]
+    valid = np.isfinite(hdg["heading_rad"].to_numpy())  # one selection below: one copy of the rows
     compass = voyage.role_sources("compass")
     if compass:
-        use = hdg[hdg["source"].isin(compass)]
+        use = hdg[valid & hdg["source"].isin(compass).to_numpy()]
         who = "compass " + "+".join(compass)
     else:
-        other = [k for k in hdg["source"].unique().tolist()
+        other = [k for k in hdg["source"][valid].unique().tolist()
                  if not (set(voyage.sources[k].roles) & {"ins1", "ins2", "ins3", "gnss"})]
-        use = hdg[hdg["source"].isin(other)]
+        use = hdg[valid & hdg["source"].isin(other).to_numpy()]
         who = "heading source " + "+".join(map(str, other))
         if other:
             notes.append(f"no source has the role compass; heading taken from {'+'.join(map(str, other))}")
