@@ -777,6 +777,10 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
     if 0 < cons.n_epochs < 10:
         dr_notes.append(f"only {cons.n_epochs} epochs scored: for a short log give a shorter "
                         "--epoch-interval (e.g. 1min)")
+    if 0 < cons.n_legs < 5:
+        dr_notes.append(f"only {cons.n_legs} leg(s) scored, and each leg is one trial: the test "
+                        "calls the circles too small only when the reference lies outside them "
+                        "in most legs or far outside; a shorter --dr-reset gives more legs")
     if cons.n_epochs:
         consistent = cons.verdict in ("consistent", "conservative")
         verdict = (f"{cons.verdict}: reference inside 2M at {100 * cons.inside_fraction:.1f} % of "

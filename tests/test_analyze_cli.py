@@ -124,6 +124,8 @@ def test_hakefjord_dr_against_its_gps(run_cli, real_dir, validator):
     assert dr["error_over_m_rms"] > 0
     errors = [e["ref_error_m"] for e in dr["epochs"] if e["ref_error_m"] is not None]
     assert errors and max(errors) < 1000.0  # 22 min at ~5 kn: the DR stays near the GPS
+    # one leg: the report says how little the consistency test can see
+    assert any(n.startswith("only 1 leg(s) scored") for n in dr["notes"])
     assert doc["deviation"] is None
     assert any(m.startswith("no INS triple") for m in doc["missing"])
 
