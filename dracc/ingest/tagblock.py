@@ -241,15 +241,9 @@ def parse_tags(buf: np.ndarray, start: np.ndarray, end: np.ndarray, cum_xor: np.
     star = np.where(ok, star, start + 1)
     x = cum_xor[np.maximum(star - 1, 0)] ^ cum_xor[start]  # XOR over (start, star)
     bad_cs = ok & (x.astype(np.int64) != h_hi.astype(np.int64) * 16 + h_lo)
-    ext = np.full(n, MISSING_NS, dtype=np.int64)
     fc, cs_, ce = _key_value(buf, colons, commas, start, star, 99)  # 'c'
     cv, _, cbad = parse_numbers(buf, cs_, ce, decimals=False)
-    # a c: time beyond the int64 nanosecond range (year 2262) is unreadable, not wrapped
-    cbad = cbad | (np.abs(np.where(cv < 1e10, cv * 1e9, cv * 1e6)) >= 9.2e18)
-    has = ok & fc & ~np.isnan(cv) & ~cbad
-    ok &= ~(fc & cbad)
-    # c: in seconds (<= 10 integer digits, i.e. < 1e10) or milliseconds
-    ext[has] = unix_to_ns(cv[has], cv[has] >= 1e10)
+    ext, ok = _tag_time_ns(cv, cbad, fc, ok)
     source = np.full(n, "", dtype=object)
     fs, ss, se = _key_value(buf, colons, commas, start, star, 115)  # 's'
     # printable ASCII only (NUL and pairs of equal bytes leave the XOR checksum unchanged),
@@ -261,15 +255,30 @@ def parse_tags(buf: np.ndarray, start: np.ndarray, end: np.ndarray, cum_xor: np.
     fs &= ok & (se > ss)
     if fs.any():
         hi = np.flatnonzero(fs)
-        w = int((se[hi] - ss[hi]).max())
-        cols = np.arange(w)
-        mat = buf[np.minimum(ss[hi, None] + cols, len(buf) - 1)]
-        mat = np.where(cols < (se[hi] - ss[hi])[:, None], mat, 0).astype(np.uint8)
-        mat = np.where(mat < 128, mat, 63).astype(np.uint8)
-        names = np.ascontiguousarray(mat).view(f"S{w}").ravel()
-        u, inv = np.unique(names, return_inverse=True)
-        source[hi] = np.array([x.decode("ascii") for x in u], dtype=object)[inv]
+        source[hi] = _decode_names(gather_rows(buf, ss[hi], int((se[hi] - ss[hi]).max())), se[hi] - ss[hi])
     return ok, bad_cs, ext, source
+
+
+def _tag_time_ns(cv: np.ndarray, cbad: np.ndarray, fc: np.ndarray, ok: np.ndarray):
+    """(times in ns, MISSING_NS where none; ok) from parsed ``c:`` values: seconds (up to
+    10 integer digits, < 1e10) or milliseconds.  A time beyond the int64 nanosecond range
+    (year 2262) is unreadable, not wrapped: its TAG block is not ok."""
+    cbad = cbad | (np.abs(np.where(cv < 1e10, cv * 1e9, cv * 1e6)) >= 9.2e18)
+    has = ok & fc & ~np.isnan(cv) & ~cbad
+    ext = np.full(len(cv), MISSING_NS, dtype=np.int64)
+    ext[has] = unix_to_ns(cv[has], cv[has] >= 1e10)
+    return ext, ok & ~(fc & cbad)
+
+
+def _decode_names(rows: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """Strings from rows of bytes (row i: its first ``lengths[i]`` bytes; a byte outside
+    ASCII reads '?'), decoded once per distinct name."""
+    cols = np.arange(rows.shape[1])
+    rows = np.where(cols < lengths[:, None], rows, 0).astype(np.uint8)
+    rows = np.where(rows < 128, rows, 63).astype(np.uint8)
+    names = np.ascontiguousarray(rows).view(f"S{rows.shape[1]}").ravel()
+    u, inv = np.unique(names, return_inverse=True)
+    return np.array([x.decode("ascii") for x in u], dtype=object)[inv]
 
 
 #: TAG blocks up to this many bytes are read as rows of a byte matrix (the common case);
@@ -343,30 +352,19 @@ def parse_tag_rows(buf: np.ndarray, mat: np.ndarray, start: np.ndarray, length: 
     star = np.where(ok, star, 1)
     x = cum_xor[np.maximum(start + star - 1, 0)] ^ cum_xor[start]  # XOR over (start, star)
     bad_cs = ok & (x.astype(np.int64) != h_hi.astype(np.int64) * 16 + h_lo)
-    ext = np.full(n, MISSING_NS, dtype=np.int64)
     (fc, cs_, ce), (fs, ss, se) = _key_value_rows(mat, star, (99, 115))  # 'c', 's'
     # printable ASCII only (NUL and pairs of equal bytes leave the XOR checksum unchanged),
     # and a source of at most MAX_SOURCE_CHARS (fuzz)
     ok &= ~np.any(((mat < 32) | (mat > 126)) & (np.arange(w) < ln[:, None]), axis=1)
     ok &= ~(fs & (se - ss > MAX_SOURCE_CHARS))
     cv, _, cbad = parse_numbers(buf, start + cs_, start + ce, decimals=False)
-    cv = np.where(fc, cv, np.nan)
-    cbad = cbad | (np.abs(np.where(cv < 1e10, cv * 1e9, cv * 1e6)) >= 9.2e18)
-    has = ok & fc & ~np.isnan(cv) & ~cbad
-    ok &= ~(fc & cbad)
-    ext[has] = unix_to_ns(cv[has], cv[has] >= 1e10)  # c: in seconds (< 1e10) or ms
+    ext, ok = _tag_time_ns(np.where(fc, cv, np.nan), cbad, fc, ok)
     source = np.full(n, "", dtype=object)
     fs &= ok & (se > ss)
     if fs.any():
         hi = np.flatnonzero(fs)
-        sw = int((se[hi] - ss[hi]).max())
-        cols = np.arange(sw)
-        sub = mat[hi[:, None], np.minimum(ss[hi, None] + cols, w - 1)]
-        sub = np.where(cols < (se[hi] - ss[hi])[:, None], sub, 0).astype(np.uint8)
-        sub = np.where(sub < 128, sub, 63).astype(np.uint8)
-        names = np.ascontiguousarray(sub).view(f"S{sw}").ravel()
-        u, inv = np.unique(names, return_inverse=True)
-        source[hi] = np.array([x.decode("ascii") for x in u], dtype=object)[inv]
+        cols = np.arange(int((se[hi] - ss[hi]).max()))
+        source[hi] = _decode_names(mat[hi[:, None], np.minimum(ss[hi, None] + cols, w - 1)], se[hi] - ss[hi])
     return ok, bad_cs, ext, source
 
 
