@@ -29,35 +29,24 @@ def measure_digits(measure: str) -> int:
 
 def history_plot(doc: dict, vessel: str) -> bytes | None:
     """m_y per unit and the a priori (dashed steps) per channel over nights; PNG bytes."""
-    import matplotlib  # loaded only when a page is drawn
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import pandas as pd
 
-    from .plots import png_bytes
+    from .plots import m_y_apriori_plot  # matplotlib loaded only when a page is drawn
 
     series = [s for s in doc["series"] if s["vessel"] == vessel]
     if not series:
         return None
-    channels = [c for c in ("lat", "lon", "course") if any(s["channel"] == c for s in series)]
-    fig, axes = plt.subplots(len(channels), 1, figsize=(8, 2.4 * len(channels)), sharex=True,
-                             squeeze=False)
-    for ax, ch in zip(axes[:, 0], channels, strict=True):
-        for s in (s for s in series if s["channel"] == ch):
-            t = pd.to_datetime([n["night"] for n in s["nights"]])
-            y = [math.nan if n["m_y"] is None else n["m_y"] for n in s["nights"]]
-            a = [math.nan if n["apriori_after"] is None else n["apriori_after"] for n in s["nights"]]
-            line, = ax.plot(t, y, "o-", label=f"{s['unit']} m_y")
-            ax.step(t, a, "--", where="post", color=line.get_color(), alpha=0.7,
-                    label=f"{s['unit']} a priori")
-        measure = "deg" if ch == "course" else "m"
-        ax.set_ylabel(f"{ch} ({measure})")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, ncol=3)
-    axes[0, 0].set_title(f"{vessel}: RMS error from deviations (m_y) and a priori, per night")
-    fig.autofmt_xdate()
-    return png_bytes(fig, dpi=_DPI)
+
+    def nan_for_none(values):
+        return [math.nan if v is None else v for v in values]
+
+    lines = {c: [(s["unit"], pd.to_datetime([n["night"] for n in s["nights"]]),
+                  nan_for_none(n["m_y"] for n in s["nights"]),
+                  nan_for_none(n["apriori_after"] for n in s["nights"]))
+                 for s in series if s["channel"] == c]
+             for c in ("lat", "lon", "course") if any(s["channel"] == c for s in series)}
+    return m_y_apriori_plot(lines, f"{vessel}: RMS error from deviations (m_y) and a priori, per night",
+                            2.4, dpi=_DPI)
 
 
 def history_html(doc: dict) -> str:

@@ -50,31 +50,16 @@ def latest(table: pd.DataFrame) -> pd.DataFrame:
 
 def trend_plot(trends: pd.DataFrame, vessel: str) -> bytes | None:
     """Per channel: the day's pooled m_y per unit and the a priori (dashed); PNG bytes."""
-    import matplotlib  # loaded only when a page is drawn
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from .plots import png_bytes
+    from .plots import m_y_apriori_plot  # matplotlib loaded only when a page is drawn
 
     t = trends[trends["vessel"] == vessel]
     if t.empty:
         return None
-    channels = [c for c in ("lat", "lon", "course") if (t["channel"] == c).any()]
-    fig, axes = plt.subplots(len(channels), 1, figsize=(8, 2.2 * len(channels)), sharex=True,
-                             squeeze=False)
-    for ax, ch in zip(axes[:, 0], channels, strict=True):
-        for unit, g in t[t["channel"] == ch].groupby("unit"):
-            days = pd.to_datetime(g["day"].astype(str))
-            line, = ax.plot(days, g["m_y"], "o-", label=f"{unit} m_y")
-            ax.step(days, g["apriori_after"], "--", where="post", color=line.get_color(), alpha=0.7,
-                    label=f"{unit} a priori")
-        ax.set_ylabel(f"{ch} ({'deg' if ch == 'course' else 'm'})")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, ncol=3)
-    axes[0, 0].set_title(f"{vessel}: daily RMS error from deviations (pooled m_y) and a priori")
-    fig.autofmt_xdate()
-    return png_bytes(fig, dpi=_DPI)
+    lines = {c: [(unit, pd.to_datetime(g["day"].astype(str)), g["m_y"], g["apriori_after"])
+                 for unit, g in t[t["channel"] == c].groupby("unit")]
+             for c in ("lat", "lon", "course") if (t["channel"] == c).any()}
+    return m_y_apriori_plot(lines, f"{vessel}: daily RMS error from deviations (pooled m_y) and a priori",
+                            2.2, dpi=_DPI)
 
 
 def containment_plot(table: pd.DataFrame) -> bytes | None:

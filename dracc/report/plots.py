@@ -41,6 +41,26 @@ def png_bytes(fig, dpi: int = _DPI) -> bytes:
     return buf.getvalue()
 
 
+def m_y_apriori_plot(lines: dict[str, list[tuple[str, object, object, object]]], title: str,
+                     row_height_in: float, dpi: int = _DPI) -> bytes:
+    """One panel per channel: each unit's m_y (points and line) and its a priori (dashed
+    steps, same colour) over nights or days.  ``lines``: channel -> [(unit, times, m_y,
+    a priori)], times as datetimes; NaN where a value is missing.  PNG bytes."""
+    fig, axes = plt.subplots(len(lines), 1, figsize=(8, row_height_in * len(lines)), sharex=True,
+                             squeeze=False)
+    for ax, (ch, rows) in zip(axes[:, 0], lines.items(), strict=True):
+        for unit, t, m_y, apriori in rows:
+            line, = ax.plot(t, m_y, "o-", label=f"{unit} m_y")
+            ax.step(t, apriori, "--", where="post", color=line.get_color(), alpha=0.7,
+                    label=f"{unit} a priori")
+        ax.set_ylabel(f"{ch} ({'deg' if ch == 'course' else 'm'})")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, ncol=3)
+    axes[0, 0].set_title(title)
+    fig.autofmt_xdate()
+    return png_bytes(fig, dpi=dpi)
+
+
 def _finish(fig, ax, xlabel: str, ylabel: str, title: str, legend_loc: str) -> bytes:
     """Axis labels, grid, legend and title in the report's style, then the PNG."""
     ax.set_xlabel(xlabel)
