@@ -352,7 +352,7 @@ def test_worker_blocks_come_back_through_files_that_are_removed(tmp_path, monkey
     handover.mkdir()
     made = []
 
-    def here():
+    def here(needed_bytes):
         d = tempfile.TemporaryDirectory(prefix="dracc-ingest-", dir=handover)
         made.append(d.name)
         return d
@@ -373,6 +373,36 @@ def test_worker_blocks_come_back_through_files_that_are_removed(tmp_path, monkey
     assert list(handover.iterdir()) == []
 
 
+def test_without_room_for_the_handover_blocks_come_through_the_pipe(tmp_path, monkeypatch):
+    """A container's /dev/shm may hold 64 MB: where neither it nor the temporary directory
+    has room for the blocks, or a worker cannot write its file, the block comes through the
+    pool's pipe, and the frames are the same."""
+    import os as os_mod
+
+    from dracc.ingest import nmea as mod
+
+    p = tmp_path / "sim.nmea"
+    p.write_text(_sim_lines(300))
+    with_files = list(iter_nmea_blocks(p, IngestConfig(), block_bytes=20000, workers=2))
+
+    class Full:
+        f_bavail, f_frsize = 0, 4096
+
+    monkeypatch.setattr(mod.os, "statvfs", lambda path: Full())
+    with mod._handover_dir(1) as folder:
+        assert folder is None
+    piped = list(iter_nmea_blocks(p, IngestConfig(), block_bytes=20000, workers=2))
+    assert [b.lines for b in piped] == [b.lines for b in with_files]
+    for a, b in zip(piped, with_files, strict=True):
+        for kind, f in b.frames.items():
+            assert a.frames[kind].equals(f), kind
+    # a worker that cannot write its file hands the block back itself
+    pb = mod._parse_range_to_file(str(tmp_path / "no" / "such" / "folder"), 0, str(p), 0,
+                                  p.stat().st_size, False, True)
+    assert isinstance(pb, mod.ParsedBlock) and mod._load_parsed(pb) is pb
+    assert not os_mod.path.exists(tmp_path / "no")
+
+
 def test_a_parsed_block_survives_the_file_handover_unchanged(tmp_path):
     from dracc.ingest import nmea as mod
 
@@ -381,7 +411,7 @@ def test_a_parsed_block_survives_the_file_handover_unchanged(tmp_path):
     direct = mod._parse_range(str(p), 0, p.stat().st_size, False, True)
     meta, sizes, name = mod._parse_range_to_file(str(tmp_path), 0, str(p), 0, p.stat().st_size,
                                                  False, True)
-    back = mod._load_parsed(meta, sizes, name)
+    back = mod._load_parsed((meta, sizes, name))
     assert not Path(name).exists()
     assert back.n_lines == direct.n_lines and back.source_names == direct.source_names
     for kind, cols in direct.kinds.items():

@@ -31,6 +31,7 @@ only).  Other well-formed sentences are counted as ``unsupported`` (not an error
 
 from __future__ import annotations
 
+import contextlib
 import mmap
 import os
 import pickle
@@ -893,37 +894,55 @@ def _worker_init() -> None:
 
 
 
-def _handover_dir() -> tempfile.TemporaryDirectory:
-    """Where workers leave parsed blocks for the main process: shared memory (tmpfs)
-    where there is one, else the temporary directory."""
-    shm = "/dev/shm"
-    base = shm if os.path.isdir(shm) and os.access(shm, os.W_OK) else None
-    return tempfile.TemporaryDirectory(prefix="dracc-ingest-", dir=base)
+def _handover_dir(needed_bytes: int):
+    """Where workers leave parsed blocks for the main process: shared memory (tmpfs), else
+    the temporary directory, whichever has room for ``needed_bytes`` (a reader of a whole
+    file keeps its blocks until the end; a container's /dev/shm may hold only 64 MB); a
+    context giving None where neither has: the blocks then come through the pool's pipe."""
+    for base in ("/dev/shm", tempfile.gettempdir()):
+        try:
+            st = os.statvfs(base)
+        except OSError:
+            continue
+        if os.access(base, os.W_OK) and st.f_bavail * st.f_frsize >= needed_bytes:
+            return tempfile.TemporaryDirectory(prefix="dracc-ingest-", dir=base)
+    return contextlib.nullcontext(None)
 
 
-def _parse_range_to_file(folder: str, i: int, path: str, off: int, length: int,
-                         ignore_checksum: bool, at_eof: bool) -> tuple[bytes, list[int], str]:
+def _parse_range_to_file(folder: str | None, i: int, path: str, off: int, length: int,
+                         ignore_checksum: bool, at_eof: bool):
     """:func:`_parse_range` in a worker, its arrays written to a file in ``folder``.
 
     A block's arrays (about 1.3x its text) sent through the pool's pipe cost the worker
     more than parsing them (64 KiB at a time, each a switch to the reader); written to
     a file they are two copies.  Returns (pickle of the block without its arrays, the
-    arrays' sizes, the file), for :func:`_load_parsed`."""
+    arrays' sizes, the file) for :func:`_load_parsed`; or the block itself where there is
+    no folder or the file cannot be written (a full disk): it then goes through the pipe."""
     pb = _parse_range(path, off, length, ignore_checksum, at_eof)
+    if folder is None:
+        return pb
     buffers: list[pickle.PickleBuffer] = []
     meta = pickle.dumps(pb, protocol=5, buffer_callback=buffers.append)
     views = [b.raw() for b in buffers]
     name = os.path.join(folder, f"block-{i}")
-    with open(name, "wb") as fh:
-        for v in views:
-            fh.write(v)
+    try:
+        with open(name, "wb") as fh:
+            for v in views:
+                fh.write(v)
+    except OSError:
+        with contextlib.suppress(OSError):
+            os.unlink(name)
+        return pb
     return meta, [v.nbytes for v in views], name
 
 
-def _load_parsed(meta: bytes, sizes: list[int], name: str) -> ParsedBlock:
-    """The block :func:`_parse_range_to_file` left in ``name``.  Its arrays are views of
-    the file mapped copy-on-write (no copy; the pages are already in memory) and the file
-    is removed at once: the mapping lives as long as the arrays do."""
+def _load_parsed(handed) -> ParsedBlock:
+    """The block a worker handed over (:func:`_parse_range_to_file`).  From a file, its
+    arrays are views of the file mapped copy-on-write (no copy; the pages are already in
+    memory) and the file is removed at once: the mapping lives as long as the arrays do."""
+    if isinstance(handed, ParsedBlock):
+        return handed
+    meta, sizes, name = handed
     with open(name, "rb") as fh:
         whole = memoryview(mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_COPY)) if sum(sizes) else None
     os.unlink(name)
@@ -932,6 +951,7 @@ def _load_parsed(meta: bytes, sizes: list[int], name: str) -> ParsedBlock:
         views.append(whole[at:at + size])
         at += size
     return pickle.loads(meta, buffers=views)
+
 
 _DTYPES: dict[tuple, pd.CategoricalDtype] = {}
 
@@ -1143,7 +1163,7 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
         # memory) falls back to parsing the remaining blocks in this process
         pending = list(enumerate(ranges))
         broken = False
-        with _handover_dir() as folder, \
+        with _handover_dir(2 * size) as folder, \
                 ProcessPoolExecutor(max_workers=nworkers, initializer=_worker_init) as ex:
             futures = []
 
@@ -1160,7 +1180,7 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
             while futures:
                 fut, i, off, ln = futures.pop(0)
                 try:
-                    pb = _load_parsed(*fut.result()) if not broken else None
+                    pb = _load_parsed(fut.result()) if not broken else None
                 except BrokenProcessPool:
                     broken = True
                     pb = None
