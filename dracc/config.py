@@ -49,6 +49,7 @@ class IngestConfig:
 
 @dataclass(frozen=True)
 class DeadReckoningConfig:
+    learn: bool = True  #: learn the errors and the current from the reference, causally (dracc.ep)
     reset: str = "1h"  #: restart from a fix: a duration ("1h", "4h", "30min"), "watch" (4 h) or "never"
     fix_role: str = "gnss"  #: where restart fixes come from: "gnss", "ins_mean"
     max_gap_s: float = 30.0  #: bridge heading/speed gaps up to this long; longer ones break the track
@@ -62,7 +63,8 @@ class DeadReckoningConfig:
     log_scale: ErrorSource = ErrorSource(0.02 / 1.96, math.inf)  #: fraction of speed
     log_bias_kn: ErrorSource = ErrorSource(0.2 / 1.96, math.inf)
     log_noise_kn: ErrorSource = ErrorSource(0.1, 300.0)
-    current_kn: ErrorSource = ErrorSource(0.3, 3600.0)  #: per axis, north and east
+    #: per axis: a persistent current of the order of a knot (the prior of the learned EP)
+    current_kn: ErrorSource = ErrorSource(0.7, 6 * 3600.0)
     leeway_deg: ErrorSource = ErrorSource(0.5, 1800.0)
     fix_sigma_m: float = 10.0  #: 1-sigma per axis of a restart fix when the source gives none
 

@@ -797,6 +797,7 @@ def dead_reckon(
     max_gap_s: float | None = None,
     epoch_interval_s: float | None = None,
     covariance_step_s: float | None = 1.0,
+    covariance: bool = True,
 ) -> DRTrack:
     """Dead-reckon a track from heading and speed samples, with the honest 2M circle.
 
@@ -826,7 +827,9 @@ def dead_reckon(
 
     ``covariance_step_s``: the correlated error processes are propagated on a grid of
     about this step where the data are denser (see :func:`honest_covariance_m2`);
-    None propagates at every sample (exact, slower at 10 Hz).
+    None propagates at every sample (exact, slower at 10 Hz).  ``covariance=False`` skips
+    the configured covariance (P, 2M and the ellipse are NaN): for a caller that forms its
+    own, as :func:`dracc.ep.estimate_position` does.
     """
     cfg = errors if errors is not None else DeadReckoningConfig()
     if mode not in ("water", "ground"):
@@ -965,10 +968,13 @@ def dead_reckon(
         reasons.append(reason)
         sl = slice(k_start, k_end + 1)
         la, lo = integrate_ne(t[sl], vn[sl], ve[sl], s_lat, s_lon)
-        Pl = honest_covariance_m2(
-            t[sl], speed_f[sl], course_f[sl], processes, P0_m2=s_sig**2 * np.eye(2),
-            step_s=covariance_step_s,
-        )
+        if covariance:
+            Pl = honest_covariance_m2(
+                t[sl], speed_f[sl], course_f[sl], processes, P0_m2=s_sig**2 * np.eye(2),
+                step_s=covariance_step_s,
+            )
+        else:
+            Pl = np.full((k_end + 1 - k_start, 2, 2), np.nan)
         last = k_end + 1 if nxt is None else k_end  # the reset sample belongs to the new leg
         m = last - k_start
         lat[k_start:last] = la[:m]

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +40,7 @@ from .deadreckoning import (
 )
 from .deviation import DeviationResult, analyse_deviations, unit_series_from_voyage
 from .deviation.analysis import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS
+from .ep import ErrorPrior, estimate_position, heading_prior_rad
 from .errors import InsufficientDataError
 from .faults import SensorFault, detect_faults, exclude_faults
 from .fusion import PositionFix
@@ -127,6 +128,11 @@ class DRTrack:
     orientation_rad: np.ndarray
     ref_error_m: np.ndarray
     leg: np.ndarray  #: int: index of the leg (restart) each row belongs to
+    #: the water track: heading and log alone, no current, no learned corrections
+    water_lat_rad: np.ndarray
+    water_lon_rad: np.ndarray
+    #: bool: the row's model was learned from fixes before its leg (scored out of sample)
+    scored: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -691,6 +697,20 @@ def _dr_grid(th: np.ndarray, tv: np.ndarray, t_first: int, t_last: int, step_ns:
     return np.concatenate(parts), skipped
 
 
+def _error_prior(cfg: DeadReckoningConfig, lat_rad: float, gyro: bool, speed_mps) -> ErrorPrior:
+    """What the EP assumes before it has learned anything: the configured current as a
+    persistent one, the compass bias (gyro: x sec phi, METHODS section 6) with the leeway,
+    the log scale with its offset at the median speed."""
+    v = float(np.nanmedian(speed_mps)) if np.any(np.isfinite(speed_mps)) else math.nan
+    offset_as_scale = cfg.log_bias_kn.sigma * KN_MPS / v if v > 0.5 else 0.0
+    return ErrorPrior(
+        current_sigma_mps=cfg.current_kn.sigma * KN_MPS,
+        heading_sigma_rad=heading_prior_rad(cfg.compass_bias_deg.sigma * DEG_RAD,
+                                            cfg.leeway_deg.sigma * DEG_RAD, lat_rad, gyro),
+        scale_sigma=math.hypot(cfg.log_scale.sigma, offset_as_scale),
+        fix_sigma_m=cfg.fix_sigma_m)
+
+
 def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str], notes: list[str]):
     """Run the DR on a DR_STEP_S grid from the compass and the log; score it against the reference."""
     heading = _heading_series(voyage, cfg, missing, notes)
@@ -731,27 +751,42 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
     fix_s = (ft - grid[0]) / 1e9
     try:
         tr = dead_reckon(time_s, h_g, v_g, errors=cfg, fixes=(fix_s, flat, flon),
-                         transverse_mps=vy_g, mode=mode)
+                         transverse_mps=vy_g, mode=mode, covariance=not cfg.learn)
     except InsufficientDataError as err:
         missing.append(f"dead reckoning not computed: {err}")
         return None, fixes, None, None
-    cons = dr_consistency(tr, fix_s, flat, flon, max_ref_gap_s=ref_gap_s)
+    water = tr
+    est = None
+    if cfg.learn:
+        gyro = hdg_desc.endswith("true)")
+        est = estimate_position(water, fix_s, flat, flon,
+                                _error_prior(cfg, float(np.nanmedian(flat)), gyro, v_g),
+                                ref_max_gap_s=ref_gap_s)
+        tr = est.track
+        scored = est.learned_leg[np.maximum(tr.leg[tr.epoch_index], 0)] & (tr.leg[tr.epoch_index] >= 0)
+        cons = dr_consistency(replace(tr, epoch_index=tr.epoch_index[scored]), fix_s, flat, flon,
+                              max_ref_gap_s=ref_gap_s)
+    else:
+        cons = dr_consistency(tr, fix_s, flat, flon, max_ref_gap_s=ref_gap_s)
     # the actual error at every sample (for the growth plot and the tables)
     rlat, rlon = interp_position(ft, flat, flon, grid, ref_gap_s * 1e9)
     dn, de = offset_ne_m(tr.lat_rad, tr.lon_rad, rlat, rlon)
     ref_err = np.hypot(dn, de)
     on = tr.leg >= 0
-    full = DRTrack(time_ns=grid[on], lat_rad=tr.lat_rad[on], lon_rad=tr.lon_rad[on],
-                   since_fix_s=tr.since_fix_s[on], radius_2m_m=tr.radius_2m_m[on],
-                   semi_major_m=tr.semi_major_m[on], semi_minor_m=tr.semi_minor_m[on],
-                   orientation_rad=tr.orientation_rad[on], ref_error_m=ref_err[on],
-                   leg=tr.leg[on].astype(np.int64))
+    learned_leg = est.learned_leg if est is not None else np.ones(tr.n_legs, bool)
+    scored_row = (tr.leg >= 0) & learned_leg[np.maximum(tr.leg, 0)] & (tr.since_fix_s > 0)
+
+    def rows(idx):
+        return DRTrack(time_ns=grid[idx], lat_rad=tr.lat_rad[idx], lon_rad=tr.lon_rad[idx],
+                       since_fix_s=tr.since_fix_s[idx], radius_2m_m=tr.radius_2m_m[idx],
+                       semi_major_m=tr.semi_major_m[idx], semi_minor_m=tr.semi_minor_m[idx],
+                       orientation_rad=tr.orientation_rad[idx], ref_error_m=ref_err[idx],
+                       leg=tr.leg[idx].astype(np.int64), water_lat_rad=water.lat_rad[idx],
+                       water_lon_rad=water.lon_rad[idx], scored=scored_row[idx])
+
+    full = rows(on)
     ei = np.asarray(tr.epoch_index, dtype=np.int64)
-    epochs = DRTrack(time_ns=grid[ei], lat_rad=tr.lat_rad[ei], lon_rad=tr.lon_rad[ei],
-                     since_fix_s=tr.since_fix_s[ei], radius_2m_m=tr.radius_2m_m[ei],
-                     semi_major_m=tr.semi_major_m[ei], semi_minor_m=tr.semi_minor_m[ei],
-                     orientation_rad=tr.orientation_rad[ei], ref_error_m=ref_err[ei],
-                     leg=tr.leg[ei].astype(np.int64))
+    epochs = rows(ei)
     by_leg = {lc.leg: lc for lc in cons.legs}
     legs = []
     for k in range(tr.n_legs):
@@ -804,7 +839,7 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
         speed_w = speed_from_components_mps(v_g, vy_g)  # (B1)
     else:
         course_w, speed_w = h_g, v_g
-    inputs = _DRInputs(t0_ns=int(grid[0]), time_s=time_s, vn_mps=tr.vn_mps, ve_mps=tr.ve_mps,
+    inputs = _DRInputs(t0_ns=int(grid[0]), time_s=time_s, vn_mps=water.vn_mps, ve_mps=water.ve_mps,
                        heading_rad=course_w, speed_mps=speed_w, ref_gap_s=ref_gap_s, mode=mode)
     return section, fixes, cons, inputs
 
