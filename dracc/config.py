@@ -50,10 +50,12 @@ class IngestConfig:
 @dataclass(frozen=True)
 class DeadReckoningConfig:
     learn: bool = True  #: learn the errors and the current from the reference, causally (dracc.ep)
-    reset: str = "1h"  #: restart from a fix: a duration ("1h", "4h", "30min"), "watch" (4 h) or "never"
+    #: restart from a fix: "auto" (1 h on logs of 8 h or more, shorter on short logs), a
+    #: duration ("1h", "4h", "30min"), "watch" (4 h) or "never"
+    reset: str = "auto"
     fix_role: str = "gnss"  #: where restart fixes come from: "gnss", "ins_mean"
     max_gap_s: float = 30.0  #: bridge heading/speed gaps up to this long; longer ones break the track
-    epoch_interval_s: float = 600.0  #: spacing of reported DR epochs
+    epoch_interval_s: float | None = None  #: spacing of reported DR epochs (None: 10 min, shorter for short resets)
     variation_deg: float | None = None  #: magnetic variation (east +) where the log has none
     deviation_table: dict[str, float] = field(default_factory=dict)  #: heading_deg -> deviation_deg (east +)
     # Error sources (METHODS §2, §6).  Defaults from IMO performance standards,

@@ -62,6 +62,7 @@ __all__ = [
     "deviation_curve_rad",
     "deviation_table_rad",
     "dr_consistency",
+    "dr_schedule",
     "error_ellipse",
     "error_processes",
     "gauss_markov_position_covariance_m2",
@@ -681,6 +682,37 @@ def parse_reset_s(text: str | float) -> float:
     return value
 
 
+#: where a reset of "auto" stops shrinking: a log of 8 h or more gets hourly legs
+_AUTO_RESETS_S = (30.0, 60.0, 120.0, 300.0, 600.0, 900.0, 1200.0, 1800.0, 3600.0)
+
+
+def dr_schedule(cfg: DeadReckoningConfig, span_s: float) -> tuple[float, str, float]:
+    """(reset_s, label, epoch_interval_s) for a DR over ``span_s`` seconds.
+
+    ``reset = "auto"``: every hour on a log of 8 h or more; on a shorter one the largest of
+    30 s, 1, 2, 5, 10, 15, 20, 30 min giving at least 8 legs, so that the consistency test
+    has legs to learn from and to score.  ``epoch_interval_s`` unset: 10 min, or a sixth of
+    the reset interval where that is shorter (at least 5 s).
+    """
+    if str(cfg.reset).strip().lower() == "auto":
+        fits = [r for r in _AUTO_RESETS_S if r <= span_s / 8.0]
+        reset_s = fits[-1] if fits else _AUTO_RESETS_S[0]
+        label = f"auto ({_duration_label(reset_s)})"
+    else:
+        reset_s = parse_reset_s(cfg.reset)
+        label = str(cfg.reset)
+    if cfg.epoch_interval_s is not None:
+        epoch_s = float(cfg.epoch_interval_s)
+    else:
+        epoch_s = 600.0 if not math.isfinite(reset_s) else float(np.clip(reset_s / 6.0, 5.0, 600.0))
+    return reset_s, label, epoch_s
+
+
+def _duration_label(s: float) -> str:
+    return f"{s / 3600:g}h" if s >= 3600 else f"{s / 60:g}min" if s >= 60 else f"{s:g}s"
+
+
+
 @dataclass(frozen=True)
 class Gap:
     """An interval between two valid samples of one channel longer than twice its usual spacing."""
@@ -837,8 +869,10 @@ def dead_reckon(
     if mode == "ground" and current_ne_mps is not None:
         raise ValueError("a current applies to a water (relative) log only")
     max_gap = float(cfg.max_gap_s if max_gap_s is None else max_gap_s)
-    epoch_dt = float(cfg.epoch_interval_s if epoch_interval_s is None else epoch_interval_s)
-    reset = parse_reset_s(cfg.reset if reset_s is None else reset_s)
+    t_span = float(np.ptp(time_s)) if np.size(time_s) else 0.0
+    auto_reset, _, auto_epoch = dr_schedule(cfg, t_span)
+    epoch_dt = float(auto_epoch if epoch_interval_s is None else epoch_interval_s)
+    reset = auto_reset if reset_s is None else parse_reset_s(reset_s)
     if not max_gap > 0 or not epoch_dt > 0:
         raise ConfigError(
             f"[dead_reckoning] max_gap_s ({max_gap}) and epoch_interval_s ({epoch_dt}) "
@@ -1037,6 +1071,9 @@ class LegConsistency:
     inside_fraction: float
     rms_error_over_m: float  #: sqrt(mean (d/M)^2); 1 when the covariance is right
     max_error_m: float
+    mean_nees: float = math.nan  #: mean over the leg's epochs of d^T P^-1 d (2 expected)
+    last_nees: float = math.nan  #: at the leg's last epoch: one chi^2_2 draw per leg
+    nees_upper: float = math.nan  #: chi^2_2 quantile 1 - alpha: a leg above it misses
 
 
 @dataclass(frozen=True)
@@ -1073,6 +1110,10 @@ class Consistency:
     chi2_lower: float  #: conservative below this (with every epoch inside)
     alpha: float
     verdict: str  #: 'consistent', 'inconsistent (circle too small)', 'conservative', 'undetermined'
+    nees_statistic: float = math.nan  #: sum over legs of the last epoch's NEES ~ chi^2(2 n_legs)
+    nees_lower: float = math.nan  #: chi^2_{alpha/2}(2 n_legs)
+    nees_upper: float = math.nan  #: chi^2_{1-alpha/2}(2 n_legs)
+    reference_sigma_m: float = 0.0  #: the reference's own noise, added to P for the test
 
 
 def dr_consistency(
@@ -1083,6 +1124,7 @@ def dr_consistency(
     *,
     max_ref_gap_s: float = 5.0,
     alpha: float = 0.01,
+    ref_sigma_m: float = 0.0,
 ) -> Consistency:
     """Does the reference (GNSS, INS mean) lie inside the DR's 2M circle as often as it should?
 
@@ -1098,9 +1140,12 @@ def dr_consistency(
     "inconsistent (circle too small)" when P(K <= k | n, p_min) < alpha (one-sided
     binomial, p_min the lowest expected containment over the epochs), or when the mean
     over legs of mean (d/M)^2 -- expected 1, as E|d|^2 = tr P = M^2 -- exceeds
-    chi2_{1-alpha}(n)/n (the widest case, a line-shaped ellipse: (d/M)^2 ~ chi2_1).
-    It is "conservative" when every epoch is inside and that mean is below
-    chi2_alpha(n)/n (the circle much larger than the errors).  Otherwise "consistent";
+    chi2_{1-alpha}(n)/n (the widest case, a line-shaped ellipse: (d/M)^2 ~ chi2_1), or when
+    the sum over legs of the NEES at each leg's last epoch (chi^2 with 2 n degrees of
+    freedom) exceeds its two-sided 1 - alpha/2 quantile.
+    It is "conservative" when every epoch is inside and that mean, or the NEES sum, is
+    below its lower quantile (the circle much larger than the errors).  ``ref_sigma_m``:
+    the reference's own noise per axis, added to P where DR and reference are compared.  Otherwise "consistent";
     "undetermined" when no epoch has a reference.
     """
     ei = np.asarray(track.epoch_index, dtype=np.int64)
@@ -1112,7 +1157,7 @@ def dr_consistency(
     ei, t_e, rlat, rlon = ei[has], t_e[has], rlat[has], rlon[has]
     dn, de = offset_ne_m(track.lat_rad[ei], track.lon_rad[ei], rlat, rlon)
     d = np.hypot(dn, de)
-    P = track.P_m2[ei]
+    P = track.P_m2[ei] + float(ref_sigma_m) ** 2 * np.eye(2)
     m_err = np.sqrt(P[:, 0, 0] + P[:, 1, 1])  # (B30) in metres
     radius = 2.0 * m_err  # (B31)
     inside = d <= radius
@@ -1124,6 +1169,7 @@ def dr_consistency(
     legs_e = track.leg[ei]
 
     legs: list[LegConsistency] = []
+    nees_leg_hi = float(dist.chi2_ppf(1 - alpha, 2))
     for leg_id in np.unique(legs_e):
         sel = legs_e == leg_id
         k = int(inside[sel].sum())
@@ -1131,21 +1177,26 @@ def dr_consistency(
             leg=int(leg_id), start_s=float(track.leg_start_s[leg_id]), n_epochs=int(sel.sum()),
             n_inside=k, inside_fraction=k / int(sel.sum()),
             rms_error_over_m=float(np.sqrt(np.mean(ratio[sel] ** 2))),
-            max_error_m=float(d[sel].max()),
+            max_error_m=float(d[sel].max()), mean_nees=float(np.mean(nees[sel])),
+            last_nees=float(nees[sel][-1]), nees_upper=nees_leg_hi,
         ))
     n_legs = len(legs)
     if n_legs == 0:
         nan = float("nan")
         verdict, p_small, q, q_hi, q_lo = "undetermined", nan, nan, nan, nan
+        nees_sum, nees_lo, nees_hi = nan, nan, nan
     else:
+        nees_sum = float(sum(leg.last_nees for leg in legs))
+        nees_lo = float(dist.chi2_ppf(alpha / 2, 2 * n_legs))
+        nees_hi = float(dist.chi2_ppf(1 - alpha / 2, 2 * n_legs))
         k_eff = int(round(sum(leg.inside_fraction for leg in legs)))
         p_small = float(dist.binom_cdf(k_eff, n_legs, float(p_exp.min())))
         q = float(np.mean([leg.rms_error_over_m**2 for leg in legs]))
         q_hi = float(dist.chi2_ppf(1 - alpha, n_legs) / n_legs)
         q_lo = float(dist.chi2_ppf(alpha, n_legs) / n_legs)
-        if p_small < alpha or q > q_hi:
+        if p_small < alpha or q > q_hi or nees_sum > nees_hi:
             verdict = "inconsistent (circle too small)"
-        elif bool(inside.all()) and q < q_lo:
+        elif bool(inside.all()) and (q < q_lo or nees_sum < nees_lo):
             verdict = "conservative"
         else:
             verdict = "consistent"
@@ -1160,5 +1211,6 @@ def dr_consistency(
         rms_error_over_m=float(np.sqrt(np.mean(ratio**2))) if n_ep else float("nan"),
         mean_nees=float(np.mean(nees)) if n_ep else float("nan"),
         n_legs=n_legs, p_value_too_small=p_small, chi2_statistic=q, chi2_upper=q_hi,
-        chi2_lower=q_lo, alpha=alpha, verdict=verdict,
+        chi2_lower=q_lo, alpha=alpha, verdict=verdict, nees_statistic=nees_sum,
+        nees_lower=nees_lo, nees_upper=nees_hi, reference_sigma_m=float(ref_sigma_m),
     )

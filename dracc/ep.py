@@ -1,44 +1,48 @@
 """Estimated position over the ground, with a DR error model learned causally from the fixes.
 
 Source: the dead-reckoning paper (seeds/000, B7-B12: the water track plus the current
-(Vp, Kp)), the aided dead-reckoning paper (seeds/003: a Gauss-Markov medium estimated
-from intermittent fixes and blended into the DR); METHODS sections 2, 3 and 7.
+(Vp, Kp)), the aided dead-reckoning paper (seeds/003: Gauss-Markov errors of the medium
+and the sensors estimated from intermittent fixes and blended into the DR); METHODS
+sections 2, 3 and 7.
 
 The ship's velocity over the ground is the DR velocity through the water ``v_w`` (B7-B10
 without the current) plus what the DR does not know::
 
-    v_g = v_w + cbar + c'(t) + eps J_eps(t) + s J_s(t) + n(t)
+    v_g = v_w + cbar + c(t) + n(t) + eps J_eps(t) + s J_s(t)
 
-    cbar        a persistent current (north, east), m/s
-    c'(t)       its variation: first-order Gauss-Markov (sigma_c, tau_c) per axis
-    eps         heading error (compass error + leeway), rad: J_eps = d v_w / dC = (-v_E, v_N)
-    s           log scale error (fraction):              J_s   = v_w     = ( v_N, v_E)
-    n(t)        white velocity noise of spectral density q_n (m^2/s) per axis: the log's,
-                compass's and leeway's short-correlated noise
+    cbar    a persistent current (north, east), m/s
+    c(t)    the current's variation: first-order Gauss-Markov (sigma_c, tau_c) per axis
+    n(t)    short-term velocity noise (log, compass, leeway): Gauss-Markov (sigma_n, tau_n)
+    eps     heading error (compass error + leeway), rad: J_eps = d v_w / dC = (-v_E, v_N)
+    s       log scale error (fraction):              J_s   = v_w     = ( v_N, v_E)
 
-A Kalman filter with the state ``x = [p_N, p_E, cbar_N, cbar_E, c'_N, c'_E, eps, s]``,
-``p`` the integral of ``v_g - v_w`` (the error of the water track, metres), observes
-``y = reference position - water track`` at steps of ``step_s``.  Its exact
-discretisation over a step of dt (phi = exp(-dt/tau_c))::
+A Kalman filter with the state ``x = [p, cbar, c, n, eps, s]`` (p: the integral of
+``v_g - v_w``, the error of the water track in metres north/east; 10 states) observes
+``y = reference position - water track`` every ``step_s``.  Exact discretisation over a
+step dt, for each Gauss-Markov process g = c, n (phi = exp(-dt/tau))::
 
-    p+    = p + dt cbar + tau_c (1 - phi) c' + G eps_s     G = int J dt over the step
-    c'+   = phi c'
-    Q: the integrated Gauss-Markov current (dracc.current._current_noise) + q_n dt on p
+    p+ = p + dt cbar + tau_c (1 - phi_c) c + tau_n (1 - phi_n) n + G [eps, s],  G = int J dt
+    g+ = phi g,  Q: the integrated Gauss-Markov process (dracc.current._current_noise)
 
-The hyper-parameters ``(sigma_c, tau_c, q_n)`` and a widening of the sensor priors are not
-known; the filter runs for every point of a grid of them at once (a leading axis), and
-each point's cumulative log-likelihood of the innovations up to a time weighs it there
-(Bayesian model averaging, i.e. maximum likelihood when the data are many).  Everything
-a leg uses comes from the fixes *before* its start fix (causal): the posterior of
-``(cbar, c', eps, s)`` at the start, the weights at the start.
+The hyper-parameters ``(sigma_c, tau_c, sigma_n, tau_n)``, the fixes' noise and a widening
+of the sensor priors are not known: the filter runs for every point of a grid of them at
+once (a leading axis), and each point's cumulative log-likelihood of the innovations up to
+a time weighs it there (Bayesian model averaging, i.e. maximum likelihood once the data
+are many).  A point whose log-likelihood falls PRUNE_LOGLIK below the best is dropped
+from the run (its weight is below e^-25 and does not come back).  Everything a leg uses
+comes from the fixes *before* its start fix (causal): the posterior at the start, the
+weights at the start.
 
 The estimated position of a leg started at a fix at t_s is the fix plus the water track
-plus the predicted correction ``mu(h) = h cbar + tau_c (1 - phi(h)) c' + G(h) [eps, s]``,
-``h = t - t_s``; its covariance, per grid point m,
-``A P_s A^T + Q_current(h) + q_n h I + sigma_fix^2 I`` with ``A = [h I, tau_c(1-phi) I, G(h)]``,
-and over the grid the moment-matched mixture ``sum w_m (Sigma_m + mu_m mu_m^T) - mu mu^T``.
+plus the predicted correction, with h = t - t_s and A(h) = [h I, tau_c (1 - phi_c(h)) I,
+tau_n (1 - phi_n(h)) I, G(h)] acting on the posterior of ``(cbar, c, n, eps, s)``::
+
+    mu(h)    = A(h) x_s
+    Sigma(h) = A P_s A^T + Q_c(h) + Q_n(h) + sigma_fix^2 I       (per grid point)
+
+and over the grid the moment-matched mixture ``sum w (Sigma + mu mu^T) - mu_bar mu_bar^T``.
 So the circle grows with the time since the estimate (the current's uncertainty and its
-change), not only with the distance run, and it widens where the grid points disagree.
+change), not only with the distance run, and widens where the grid points disagree.
 """
 
 from __future__ import annotations
@@ -56,25 +60,32 @@ from .units import KN_MPS
 __all__ = [
     "ErrorPrior",
     "EstimatedPosition",
-    "estimate_position",
+    "FilterHistory",
     "Hyperparameters",
     "LearnedModel",
     "LegForecast",
-    "FilterHistory",
+    "estimate_position",
+    "forecast_legs",
+    "heading_prior_rad",
     "hyperparameter_grid",
     "learn_error_model",
-    "forecast_legs",
     "sensitivities",
 ]
 
-#: state layout
-P_, CBAR, CVAR, EPS, SCALE = slice(0, 2), slice(2, 4), slice(4, 6), 6, 7
-N_STATE = 8
+#: state layout: p (0, 1), cbar (2, 3), c (4, 5), n (6, 7), eps (8), s (9), delta (10)
+N_STATE = 11
+EPS, SCALE, DELTA = 8, 9, 10
+#: the heading-dependent error delta decorrelates over this change of course (rad)
+TURN_DECORRELATION_RAD = 1.0
+#: the sensor priors (IMO limits) are widened by this factor: real logs are often worse
+PRIOR_WIDENING = 2.0
 #: a step whose water track broke: the water-track error p is re-anchored by the next fix
 _REANCHOR_M2 = 1e14
 #: an innovation that even the widest grid point finds this improbable (NIS, 2 dof) is an
 #: outlier (a GNSS jump) and is not used
 OUTLIER_NIS = 60.0
+#: grid points this far below the best log-likelihood leave the run
+PRUNE_LOGLIK = 25.0
 
 
 @dataclass(frozen=True)
@@ -84,32 +95,42 @@ class ErrorPrior:
     current_sigma_mps: float  #: persistent current, per axis (a knot or so: honest about not knowing)
     heading_sigma_rad: float  #: compass error + leeway (IMO gyro limit with sec phi, as 95 %)
     scale_sigma: float  #: log scale error (IMO 2 % or 0.2 kn, as 95 %)
-    fix_sigma_m: float  #: the reference fixes, per axis
+    fix_sigma_m: float  #: the reference fixes, per axis (the grid spans 0.3-3 times this)
 
 
 @dataclass(frozen=True)
 class Hyperparameters:
     """The grid of models the filter weighs, each (M,)."""
 
-    current_sigma_mps: np.ndarray  #: sigma_c of the current's variation c'
+    current_sigma_mps: np.ndarray  #: sigma_c of the current's variation c
     current_tau_s: np.ndarray  #: tau_c
-    noise_psd_m2ps: np.ndarray  #: q_n
-    prior_widening: np.ndarray  #: factor on the heading and scale priors
+    noise_sigma_mps: np.ndarray  #: sigma_n of the short-term velocity noise n
+    noise_tau_s: np.ndarray  #: tau_n
+    turn_sigma_rad: np.ndarray  #: sigma of the heading-dependent error delta
+    fix_sigma_m: np.ndarray  #: the reference fixes' noise, per axis
 
     @property
     def size(self) -> int:
         return int(self.current_sigma_mps.size)
 
+    def take(self, idx) -> Hyperparameters:
+        return Hyperparameters(*(getattr(self, f)[idx] for f in self.__dataclass_fields__))
 
-def hyperparameter_grid() -> Hyperparameters:
-    """The default grid: current variation 0.05-1.5 kn over 0.5-8 h, white velocity noise
-    of 0.3-30 m^2/s (0.1 kn over 5 min is 1.6 m^2/s), sensor priors as given or 4x wider."""
-    sig = np.array([0.05, 0.15, 0.5, 1.5]) * KN_MPS
-    tau = np.array([0.5, 2.0, 8.0]) * 3600.0
-    q = np.array([0.3, 3.0, 30.0])
-    wide = np.array([1.0, 4.0])
-    g = np.meshgrid(sig, tau, q, wide, indexing="ij")
-    return Hyperparameters(*(a.ravel() for a in g))
+    @property
+    def noise_psd_m2ps(self) -> np.ndarray:
+        """The short-term noise as white noise at horizons beyond tau_n: 2 sigma_n^2 tau_n."""
+        return 2.0 * self.noise_sigma_mps**2 * self.noise_tau_s
+
+
+def hyperparameter_grid(fix_sigma_m: float = 10.0) -> Hyperparameters:
+    """The default grid: the current's variation 0.05-1.5 kn over 0.5-8 h; short-term
+    noise 0.03-0.3 kn over 1 or 10 min (a log's 0.1 kn over 5 min lies between); a
+    heading-dependent error (residual deviation, leeway that changes side with the tack) of
+    0 or 1.5 deg; fix noise 0.1, 0.3, 1 or 3 times ``fix_sigma_m``."""
+    axes = (np.array([0.05, 0.15, 0.5, 1.5]) * KN_MPS, np.array([0.5, 2.0, 8.0]) * 3600.0,
+            np.array([0.03, 0.1, 0.3]) * KN_MPS, np.array([60.0, 600.0]),
+            np.array([0.0, 1.5]) * math.pi / 180.0, np.array([0.1, 0.3, 1.0, 3.0]) * fix_sigma_m)
+    return Hyperparameters(*(a.ravel() for a in np.meshgrid(*axes, indexing="ij")))
 
 
 def sensitivities(vn_w_mps, ve_w_mps):
@@ -124,7 +145,7 @@ class FilterHistory:
     """The filter at its steps (after each update), mixed over the grid: for the current plot."""
 
     time_s: np.ndarray  #: (K,)
-    current_ne_mps: np.ndarray  #: (K, 2): cbar + c'
+    current_ne_mps: np.ndarray  #: (K, 2): cbar + c
     current_sigma_mps: np.ndarray  #: (K,): sqrt of half the trace of its covariance
     heading_error_rad: np.ndarray  #: (K,) eps: add to the DR course
     scale_error: np.ndarray  #: (K,) s: V_true = (1 + s) V_log
@@ -133,26 +154,55 @@ class FilterHistory:
 
 @dataclass(frozen=True)
 class LearnedModel:
-    """The filter's posterior at each leg start (causal) and at the end of the data."""
+    """The filter's posterior at each leg start (causal) and at the end of the data.
+
+    Grid points left out of the run have weight 0 (and x, P of zero)."""
 
     hyper: Hyperparameters
     prior: ErrorPrior
     step_s: float
     start_s: np.ndarray  #: (L,) leg start times
     weights: np.ndarray  #: (L, M) grid weights at each start
-    x: np.ndarray  #: (L, M, 8) posterior mean at each start
-    P: np.ndarray  #: (L, M, 8, 8) posterior covariance at each start
+    x: np.ndarray  #: (L, M, 10) posterior mean at each start
+    P: np.ndarray  #: (L, M, 10, 10) posterior covariance at each start
     learned_s: np.ndarray  #: (L,) span of reference data the start's posterior has seen
     n_updates: np.ndarray  #: (L,) fixes used before each start
     final_weights: np.ndarray  #: (M,)
-    final_x: np.ndarray  #: (M, 8)
-    final_P: np.ndarray  #: (M, 8, 8)
+    final_x: np.ndarray  #: (M, 10)
+    final_P: np.ndarray  #: (M, 10, 10)
     n_outliers: int  #: fixes left out as outliers
     history: FilterHistory
 
 
-def _mix_mean(w, x):
-    return np.einsum("...m,...mi->...i", w, x)
+class _Process:
+    """sigma and tau of one Gauss-Markov process, in the two names _current_noise reads."""
+
+    def __init__(self, sigma, tau):
+        self.current_sigma_mps = sigma
+        self.current_tau_s = tau
+
+
+def _weights(loglik):
+    """Grid weights from cumulative log-likelihoods (..., M), uniform prior over the grid."""
+    w = np.exp(loglik - loglik.max(axis=-1, keepdims=True))
+    return w / w.sum(axis=-1, keepdims=True)
+
+
+def _step_matrices(d: float, hp: Hyperparameters):
+    """F entries and Q (M, 10, 10) over a step d for the two Gauss-Markov processes."""
+    M = hp.size
+    Q = np.zeros((M, N_STATE, N_STATE))
+    f = []
+    for (sig, tau), j in (((hp.current_sigma_mps, hp.current_tau_s), 4),
+                          ((hp.noise_sigma_mps, hp.noise_tau_s), 6)):
+        f_pc, phi = transition(d, tau)
+        q_pp, q_pc, q_cc = _current_noise(d, _Process(sig, tau))
+        Q[:, 0, 0] += q_pp
+        Q[:, 1, 1] += q_pp
+        Q[:, 0, j] = Q[:, j, 0] = Q[:, 1, j + 1] = Q[:, j + 1, 1] = q_pc
+        Q[:, j, j] = Q[:, j + 1, j + 1] = q_cc
+        f.append((f_pc, phi))
+    return f, Q
 
 
 def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_rad, ref_lon_rad,
@@ -165,7 +215,7 @@ def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_r
     (GNSS or INS mean) positions; leg_start_s (L,) the DR's leg start times (samples of
     time_s).  The filter steps every ``step_s`` and at each leg start.
     """
-    hp = hyper if hyper is not None else hyperparameter_grid()
+    hp_all = hyper if hyper is not None else hyperparameter_grid(prior.fix_sigma_m)
     t = np.asarray(time_s, float)
     n = t.size
     vn = np.nan_to_num(np.asarray(vn_w_mps, float))
@@ -183,11 +233,9 @@ def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_r
 
     starts = np.asarray(leg_start_s, float)
     grid = np.arange(t[0], t[-1] + 1e-9, step_s)
-    tf = np.unique(np.concatenate([grid, starts, [t[-1]]]))
-    kf = np.clip(np.searchsorted(t, tf, side="left"), 0, n - 1)
+    kf = np.clip(np.searchsorted(t, np.concatenate([grid, starts, [t[-1]]]), side="left"), 0, n - 1)
+    kf = np.unique(kf)
     tf = t[kf]
-    tf, first = np.unique(tf, return_index=True)
-    kf = kf[first]
     rlat, rlon = interp_position(np.asarray(ref_time_s, float), ref_lat_rad, ref_lon_rad, tf,
                                  ref_max_gap_s)
     has_ref = np.isfinite(rlat) & np.isfinite(rlon)
@@ -199,17 +247,19 @@ def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_r
         d = np.column_stack([dn, de]) - (W[kf[iv[1:]]] - W[kf[iv[:-1]]])
         y[iv] = np.concatenate([np.zeros((1, 2)), np.cumsum(d, axis=0)])
 
-    M = hp.size
-    R = prior.fix_sigma_m ** 2
-    x = np.zeros((M, N_STATE))
-    P = np.zeros((M, N_STATE, N_STATE))
+    M_all = hp_all.size
+    active = np.arange(M_all)
+    hp = hp_all
+    x = np.zeros((M_all, N_STATE))
+    P = np.zeros((M_all, N_STATE, N_STATE))
     P[:, 0, 0] = P[:, 1, 1] = _REANCHOR_M2
     P[:, 2, 2] = P[:, 3, 3] = prior.current_sigma_mps ** 2
     P[:, 4, 4] = P[:, 5, 5] = hp.current_sigma_mps ** 2
-    P[:, 6, 6] = (prior.heading_sigma_rad * hp.prior_widening) ** 2
-    P[:, 7, 7] = (prior.scale_sigma * hp.prior_widening) ** 2
-    loglik = np.zeros(M)
-    tau = hp.current_tau_s
+    P[:, 6, 6] = P[:, 7, 7] = hp.noise_sigma_mps ** 2
+    P[:, EPS, EPS] = (prior.heading_sigma_rad * PRIOR_WIDENING) ** 2
+    P[:, SCALE, SCALE] = (prior.scale_sigma * PRIOR_WIDENING) ** 2
+    P[:, DELTA, DELTA] = hp.turn_sigma_rad ** 2
+    loglik = np.zeros(M_all)
 
     start_idx = np.searchsorted(tf, starts)
     want = np.zeros(tf.size, bool)
@@ -219,41 +269,52 @@ def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_r
     n_upd = 0
     n_out = 0
     K_ = tf.size
-    h_x = np.zeros((K_, M, N_STATE))
-    h_Pc = np.zeros((K_, M, 2, 2))
-    h_ll = np.zeros((K_, M))
+    h_cur = np.zeros((K_, 2))
+    h_sig = np.zeros(K_)
+    h_eps = np.zeros(K_)
+    h_s = np.zeros(K_)
     h_upd = np.zeros(K_, bool)
     d_all = np.diff(tf)
     G_all = JI[kf[1:]] - JI[kf[:-1]]
+    # course change between consecutive filter steps (mean water course over each step)
+    dW = W[kf[1:]] - W[kf[:-1]]
+    course = np.arctan2(dW[:, 1], dW[:, 0])
+    turn = np.abs(np.angle(np.exp(1j * np.diff(course, prepend=course[:1]))))
+    turn = np.where(np.hypot(dW[:, 0], dW[:, 1]) > 1.0, turn, 0.0)
+    rho_turn = np.exp(-turn / TURN_DECORRELATION_RAD)
     broke = bad_before[kf[1:]] > bad_before[kf[:-1]]
     cache: dict[float, tuple] = {}
-    F = np.zeros((M, N_STATE, N_STATE))
-    F[:, range(N_STATE), range(N_STATE)] = 1.0
     eye2 = np.eye(2)
+
+    def new_F():
+        F = np.zeros((active.size, N_STATE, N_STATE))
+        F[:, range(N_STATE), range(N_STATE)] = 1.0
+        return F
+
+    F = new_F()
     for i in range(K_):
         if i > 0:
             d = float(d_all[i - 1])
             if d not in cache:
-                f_pc, phi = transition(d, tau)
-                q_pp, q_pc, q_cc = _current_noise(d, _Tau(tau, hp.current_sigma_mps))
-                Q = np.zeros((M, N_STATE, N_STATE))
-                Q[:, 0, 0] = Q[:, 1, 1] = q_pp + hp.noise_psd_m2ps * d
-                Q[:, 0, 4] = Q[:, 4, 0] = Q[:, 1, 5] = Q[:, 5, 1] = q_pc
-                Q[:, 4, 4] = Q[:, 5, 5] = q_cc
-                cache[d] = (f_pc, phi, Q)
-            f_pc, phi, Q = cache[d]
+                cache[d] = _step_matrices(d, hp)
+            ((fc, phic), (fn, phin)), Q = cache[d]
             F[:, 0:2, 2:4] = d * eye2
-            F[:, 0, 4] = F[:, 1, 5] = f_pc
-            F[:, 4, 4] = F[:, 5, 5] = phi
-            F[:, 0:2, 6:8] = G_all[i - 1]
+            F[:, 0, 4] = F[:, 1, 5] = fc
+            F[:, 4, 4] = F[:, 5, 5] = phic
+            F[:, 0, 6] = F[:, 1, 7] = fn
+            F[:, 6, 6] = F[:, 7, 7] = phin
+            F[:, 0:2, 8:10] = G_all[i - 1]
+            F[:, 0:2, DELTA] = G_all[i - 1][:, 0]
+            F[:, DELTA, DELTA] = rho_turn[i - 1]
             x = np.matmul(F, x[:, :, None])[:, :, 0]
             P = F @ P @ F.transpose(0, 2, 1) + Q
+            P[:, DELTA, DELTA] += hp.turn_sigma_rad ** 2 * (1.0 - rho_turn[i - 1] ** 2)
             if broke[i - 1]:
                 P[:, 0, 0] += _REANCHOR_M2
                 P[:, 1, 1] += _REANCHOR_M2
         if has_ref[i]:
             nu = y[i] - x[:, 0:2]
-            S = P[:, 0:2, 0:2] + R * eye2
+            S = P[:, 0:2, 0:2] + (hp.fix_sigma_m ** 2)[:, None, None] * eye2
             det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] ** 2
             Si = np.empty_like(S)
             Si[:, 0, 0] = S[:, 1, 1] / det
@@ -275,53 +336,46 @@ def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_r
                     first_ref_t = tf[i]
                 n_upd += 1
                 h_upd[i] = True
-        h_x[i] = x
-        h_Pc[i] = P[:, 2:4, 2:4] + P[:, 4:6, 4:6] + P[:, 2:4, 4:6] + P[:, 4:6, 2:4]
-        h_ll[i] = loglik
+        w = _weights(loglik)
+        c_mix = x[:, 2:4] + x[:, 4:6]
+        h_cur[i] = w @ c_mix
+        cov_c = P[:, 2:4, 2:4] + P[:, 4:6, 4:6] + P[:, 2:4, 4:6] + P[:, 4:6, 2:4]
+        spread = np.sum((c_mix - h_cur[i]) ** 2, axis=1)
+        h_sig[i] = math.sqrt(max(0.5 * float(w @ (cov_c[:, 0, 0] + cov_c[:, 1, 1] + spread)), 0.0))
+        h_eps[i] = float(w @ x[:, EPS])
+        h_s[i] = float(w @ x[:, SCALE])
         if want[i]:
             span = tf[i] - first_ref_t if math.isfinite(first_ref_t) else 0.0
-            snaps[i] = (_weights(loglik), x.copy(), P.copy(), span, n_upd)
-    # the history, mixed over the grid
-    w_all = _weights(h_ll)  # (K, M)
-    c_mix = h_x[:, :, 2:4] + h_x[:, :, 4:6]
-    h_cur = np.einsum("km,kmi->ki", w_all, c_mix)
-    spread = np.sum((c_mix - h_cur[:, None, :]) ** 2, axis=2)
-    h_sig = np.sqrt(0.5 * np.einsum("km,km->k", w_all,
-                                    np.trace(h_Pc, axis1=2, axis2=3) + spread))
-    h_eps = np.einsum("km,km->k", w_all, h_x[:, :, EPS])
-    h_s = np.einsum("km,km->k", w_all, h_x[:, :, SCALE])
+            snaps[i] = (active.copy(), w, x.copy(), P.copy(), span, n_upd)
+        keep = loglik >= loglik.max() - PRUNE_LOGLIK
+        if not keep.all():
+            active, x, P, loglik = active[keep], x[keep], P[keep], loglik[keep]
+            hp = hp_all.take(active)
+            cache = {k: ([(a[keep], b[keep]) for a, b in f], Q[keep]) for k, (f, Q) in cache.items()}
+            F = new_F()
     L = starts.size
-    weights = np.zeros((L, M))
-    xs = np.zeros((L, M, N_STATE))
-    Ps = np.zeros((L, M, N_STATE, N_STATE))
+    weights = np.zeros((L, M_all))
+    xs = np.zeros((L, M_all, N_STATE))
+    Ps = np.zeros((L, M_all, N_STATE, N_STATE))
     learned = np.zeros(L)
     nu_before = np.zeros(L, np.int64)
     for j, i in enumerate(start_idx):
-        w, xx, PP, span, nn = snaps[int(min(i, tf.size - 1))]
-        weights[j], xs[j], Ps[j], learned[j], nu_before[j] = w, xx, PP, span, nn
+        act, w, xx, PP, span, nn = snaps[int(min(i, tf.size - 1))]
+        weights[j, act], xs[j, act], Ps[j, act] = w, xx, PP
+        learned[j], nu_before[j] = span, nn
+    fw = np.zeros(M_all)
+    fx = np.zeros((M_all, N_STATE))
+    fP = np.zeros((M_all, N_STATE, N_STATE))
+    fw[active], fx[active], fP[active] = _weights(loglik), x, P
     hist = FilterHistory(time_s=tf, current_ne_mps=h_cur, current_sigma_mps=h_sig,
                          heading_error_rad=h_eps, scale_error=h_s, updated=h_upd)
-    return LearnedModel(hyper=hp, prior=prior, step_s=float(step_s), start_s=starts,
+    return LearnedModel(hyper=hp_all, prior=prior, step_s=float(step_s), start_s=starts,
                         weights=weights, x=xs, P=Ps, learned_s=learned, n_updates=nu_before,
-                        final_weights=_weights(loglik), final_x=x, final_P=P, n_outliers=n_out,
+                        final_weights=fw, final_x=fx, final_P=fP, n_outliers=n_out,
                         history=hist)
 
 
-@dataclass(frozen=True)
-class _Tau:
-    """The two fields of dracc.current.CurrentModel that _current_noise reads."""
-
-    current_tau_s: np.ndarray
-    current_sigma_mps: np.ndarray
-
-
-def _weights(loglik):
-    """Grid weights from cumulative log-likelihoods (..., M), uniform prior over the grid."""
-    w = np.exp(loglik - loglik.max(axis=-1, keepdims=True))
-    return w / w.sum(axis=-1, keepdims=True)
-
-
-def _significant(w, mass: float = 1.0 - 1e-6):
+def _significant(w, mass: float = 1.0 - 1e-4):
     """Indices of the largest weights that together hold ``mass`` of the total."""
     order = np.argsort(w)[::-1]
     n = int(np.searchsorted(np.cumsum(w[order]), mass * w.sum())) + 1
@@ -334,12 +388,50 @@ class LegForecast:
 
     offset_ne_m: np.ndarray  #: (n, 2) mu: add to the water track
     P_m2: np.ndarray  #: (n, 2, 2) covariance of the EP error, metres north/east
-    components_m2: dict  #: name -> (n,) trace contribution (fix, current, current change, heading, scale, noise)
+    inflation: np.ndarray  #: (L, 3) the factor on each leg's covariance, in thirds of its horizon
+    leg_nees: np.ndarray  #: (L, 3) mean NEES/2 of each leg against the reference, per third (raw model)
+    components_m2: dict  #: name -> (n,) trace contribution (fix, current, current change, heading, log scale, noise)
+
+
+#: covariance matching over earlier legs: prior weight (in legs) of an inflation of 1, the
+#: forgetting factor per leg, the cap on one leg's mean NEES/2, and the factor's bounds
+INFLATION_PRIOR_LEGS = 3.0
+INFLATION_FORGET = 0.95
+INFLATION_LEG_CAP = 25.0
+INFLATION_BOUNDS = (0.25, 25.0)
+#: the factor is learned in this many equal parts of the reset interval
+INFLATION_BINS = 3
+
+
+def _horizon_span(model: LearnedModel) -> float:
+    starts = model.start_s
+    return float(np.median(np.diff(starts))) if starts.size > 1 else 3600.0
+
+
+def _horizon_bin(h, model: LearnedModel):
+    return np.clip((np.asarray(h) / _horizon_span(model) * INFLATION_BINS).astype(int), 0,
+                   INFLATION_BINS - 1)
+
+
+def _inflation_at(h, factors, model: LearnedModel):
+    """The factor at horizons h: linear between the parts' centres, constant beyond."""
+    span = _horizon_span(model)
+    centres = (np.arange(INFLATION_BINS) + 0.5) * span / INFLATION_BINS
+    return np.interp(h, centres, factors)
 
 
 def forecast_legs(time_s, vn_w_mps, ve_w_mps, leg_of, model: LearnedModel, *,
-                  horizon_step_s: float = 60.0) -> LegForecast:
-    """The EP correction and covariance at every sample of every leg (see module docstring)."""
+                  ref_offset_ne_m=None, horizon_step_s: float = 60.0) -> LegForecast:
+    """The EP correction and covariance at every sample of every leg (see module docstring).
+
+    ``ref_offset_ne_m`` (n, 2): the reference minus the water track at each sample (NaN
+    where there is none).  With it, each leg's covariance is multiplied by a factor
+    learned from the legs that ended before it started (covariance matching): the mean
+    over those legs of their mean NEES/2 against the reference, shrunk towards 1 by
+    INFLATION_PRIOR_LEGS legs and forgetting older legs by INFLATION_FORGET per leg.  It
+    corrects what the one-step likelihood of the grid cannot see, how fast the error
+    really grows over a leg.
+    """
     t = np.asarray(time_s, float)
     n = t.size
     vn = np.nan_to_num(np.asarray(vn_w_mps, float))
@@ -348,68 +440,124 @@ def forecast_legs(time_s, vn_w_mps, ve_w_mps, leg_of, model: LearnedModel, *,
     J = sensitivities(vn[:-1], ve[:-1]) * dt[:, None, None]
     JI = np.concatenate([np.zeros((1, 2, 2)), np.cumsum(J, axis=0)])
     leg_of = np.asarray(leg_of)
+    # for the heading-dependent error: course per sample and, per leg, its start course
+    course = np.arctan2(ve, vn)
+    n_legs_ = model.start_s.size
+    first = np.full(n_legs_, -1)
+    on = leg_of >= 0
+    idx_on = np.flatnonzero(on)
+    if idx_on.size:
+        legs_on = leg_of[idx_on]
+        uniq, pos = np.unique(legs_on, return_index=True)
+        first[uniq[uniq < n_legs_]] = idx_on[pos[uniq < n_legs_]]
+    c0 = np.where(leg_of >= 0, course[np.maximum(first[np.clip(leg_of, 0, n_legs_ - 1)], 0)], course)
+    dpsi = np.abs(np.angle(np.exp(1j * (course - c0))))
+    rho = np.exp(-dpsi / TURN_DECORRELATION_RAD)
+    J_eps = J[:, :, 0]
+    JRI = np.concatenate([np.zeros((1, 2)), np.cumsum(J_eps * rho[:-1, None], axis=0)])
+    JNI = np.concatenate([np.zeros((1, 2)), np.cumsum(J_eps * np.sqrt(1 - rho[:-1, None] ** 2), axis=0)])
     off = np.full((n, 2), np.nan)
     Pout = np.full((n, 2, 2), np.nan)
     names = ("fix", "current", "current change", "heading", "log scale", "noise")
     comp = {k: np.full(n, np.nan) for k in names}
-    hp = model.hyper
-    tau = hp.current_tau_s
-    R = model.prior.fix_sigma_m ** 2
-    for leg in range(model.start_s.size):
+    n_legs = model.start_s.size
+    nb = INFLATION_BINS
+    inflation = np.ones((n_legs, nb))
+    leg_nees = np.full((n_legs, nb), np.nan)
+    leg_end = np.full(n_legs, np.inf)
+    acc_num = np.full(nb, INFLATION_PRIOR_LEGS)
+    acc_den = np.full(nb, INFLATION_PRIOR_LEGS)
+    for leg in range(n_legs):
         sel = np.flatnonzero(leg_of == leg)
+        # the legs that ended before this one started, in order: fold them in
+        for j in range(leg):
+            if not leg_end[j] <= model.start_s[leg]:
+                continue
+            has = np.isfinite(leg_nees[j])
+            acc_num[has] = INFLATION_PRIOR_LEGS + INFLATION_FORGET * (acc_num[has] - INFLATION_PRIOR_LEGS) \
+                + np.minimum(leg_nees[j][has], INFLATION_LEG_CAP)
+            acc_den[has] = INFLATION_PRIOR_LEGS + INFLATION_FORGET * (acc_den[has] - INFLATION_PRIOR_LEGS) + 1.0
+            leg_end[j] = np.nan  # folded in
+        inflation[leg] = np.clip(acc_num / acc_den, *INFLATION_BOUNDS)
         if sel.size == 0:
             continue
         k0 = sel[0]
         t0 = t[k0]
-        th = np.unique(np.concatenate([np.arange(0.0, t[sel[-1]] - t0, horizon_step_s),
-                                       [t[sel[-1]] - t0]]))
+        step = min(horizon_step_s, max((t[sel[-1]] - t0) / 20.0, 1.0))
+        th = np.unique(np.concatenate([np.arange(0.0, t[sel[-1]] - t0, step), [t[sel[-1]] - t0]]))
         kh = np.clip(np.searchsorted(t, t0 + th), 0, n - 1)
         G = JI[kh] - JI[k0]  # (H, 2, 2)
-        w = model.weights[leg]
-        keep = _significant(w)
-        w = w[keep] / w[keep].sum()
-        tau_k = tau[keep]
-        f_pc, _ = transition(th[:, None], tau_k[None, :])  # (H, m)
+        keep = _significant(model.weights[leg])
+        w = model.weights[leg][keep]
+        w = w / w.sum()
+        hp = model.hyper.take(keep)
+        fc, _ = transition(th[:, None], hp.current_tau_s[None, :])  # (H, m)
+        fn, _ = transition(th[:, None], hp.noise_tau_s[None, :])
         H, m = th.size, keep.size
-        A = np.zeros((H, m, 2, 6))
+        # the heading-dependent error: its value at the start counts as far as the course
+        # stays near the start course (Gr), a new one takes over as it turns away (Gn)
+        Gr = JRI[kh] - JRI[k0]
+        Gn = JNI[kh] - JNI[k0]
+        A = np.zeros((H, m, 2, 9))
         A[:, :, 0, 0] = A[:, :, 1, 1] = th[:, None]
-        A[:, :, 0, 2] = A[:, :, 1, 3] = f_pc
-        A[:, :, :, 4:6] = G[:, None]
-        xs = model.x[leg][keep, 2:]  # (m, 6)
-        Ps = model.P[leg][keep, 2:, 2:]  # (m, 6, 6)
+        A[:, :, 0, 2] = A[:, :, 1, 3] = fc
+        A[:, :, 0, 4] = A[:, :, 1, 5] = fn
+        A[:, :, :, 6:8] = G[:, None]
+        A[:, :, :, 8] = Gr[:, None]
+        xs = model.x[leg][keep, 2:]  # (m, 9)
+        Ps = model.P[leg][keep, 2:, 2:]  # (m, 9, 9)
         mu = np.matmul(A, xs[None, :, :, None])[..., 0]  # (H, m, 2)
-        AP = np.matmul(A, Ps[None])  # (H, m, 2, 6)
+        AP = np.matmul(A, Ps[None])  # (H, m, 2, 9)
         S = np.matmul(AP, A.transpose(0, 1, 3, 2))
-        q_pp, _, _ = _current_noise(th[:, None], _Tau(tau_k[None, :],
-                                                      hp.current_sigma_mps[keep][None, :]))
-        noise = hp.noise_psd_m2ps[keep][None, :] * th[:, None]
-        S[..., 0, 0] += q_pp + noise + R
-        S[..., 1, 1] += q_pp + noise + R
+        qc, _, _ = _current_noise(th[:, None], _Process(hp.current_sigma_mps[None, :],
+                                                        hp.current_tau_s[None, :]))
+        qn, _, _ = _current_noise(th[:, None], _Process(hp.noise_sigma_mps[None, :],
+                                                        hp.noise_tau_s[None, :]))
+        R = hp.fix_sigma_m ** 2
+        S[..., 0, 0] += qc + qn + R
+        S[..., 1, 1] += qc + qn + R
+        turn_new = (hp.turn_sigma_rad ** 2)[None, :, None, None] * (Gn[:, :, None] * Gn[:, None, :])[:, None]
+        S += turn_new
         mu_mix = np.einsum("m,hmi->hi", w, mu)
         dev = mu - mu_mix[:, None, :]
         S_mix = np.einsum("m,hmij->hij", w, S + dev[..., :, None] * dev[..., None, :])
-
-        # contributions to the trace, for naming what dominates a miss
-        def part(block):
-            Ab = A[..., block]
-            return np.einsum("m,hmij,mjk,hmik->h", w, Ab, Ps[:, block, block], Ab)
-
+        # the trace split by state: tr(A P A^T) = sum_j sum_i (A P)_ij A_ij, grouped by
+        # column j (cross-covariances shared between their two columns); for naming what
+        # dominates a miss
+        by_col = np.einsum("hmj,m->hj", np.sum(AP * A, axis=2), w)  # (H, 9)
         contrib = {
-            "fix": np.full(H, 2 * R),
-            "current": part(slice(0, 4)) + np.einsum("m,hmi->h", w, dev**2),
-            "current change": 2 * q_pp @ w,
-            "heading": part(slice(4, 5)),
-            "log scale": part(slice(5, 6)),
-            "noise": 2 * noise @ w,
+            "fix": np.full(H, 2 * float(R @ w)),
+            "current": by_col[:, 0:4].sum(axis=1) + np.einsum("m,hmi->h", w, dev**2),
+            "current change": 2 * qc @ w,
+            "heading": by_col[:, 6] + by_col[:, 8] + np.trace(turn_new, axis1=2, axis2=3) @ w,
+            "log scale": by_col[:, 7],
+            "noise": 2 * qn @ w + by_col[:, 4:6].sum(axis=1),
         }
         ts = t[sel] - t0
+        if ref_offset_ne_m is not None:
+            yr = np.asarray(ref_offset_ne_m)[kh]
+            ok = np.isfinite(yr).all(axis=1) & (th > 0)
+            if ok.any():
+                e = mu_mix[ok] - yr[ok]
+                Sk = S_mix[ok]
+                det = Sk[:, 0, 0] * Sk[:, 1, 1] - Sk[:, 0, 1] ** 2
+                nees = (Sk[:, 1, 1] * e[:, 0] ** 2 - 2 * Sk[:, 0, 1] * e[:, 0] * e[:, 1]
+                        + Sk[:, 0, 0] * e[:, 1] ** 2) / det
+                b = _horizon_bin(th[ok], model)
+                for q in range(nb):
+                    if np.any(b == q):
+                        leg_nees[leg, q] = float(np.mean(nees[b == q])) / 2.0
+                leg_end[leg] = t[sel[-1]]
+        lam = _inflation_at(th, inflation[leg], model)
+        S_mix = S_mix * lam[:, None, None]
         for j in range(2):
             off[sel, j] = np.interp(ts, th, mu_mix[:, j])
             for k in range(2):
                 Pout[sel, j, k] = np.interp(ts, th, S_mix[:, j, k])
         for k, v in contrib.items():
-            comp[k][sel] = np.interp(ts, th, v)
-    return LegForecast(offset_ne_m=off, P_m2=Pout, components_m2=comp)
+            comp[k][sel] = np.interp(ts, th, v * lam)
+    return LegForecast(offset_ne_m=off, P_m2=Pout, components_m2=comp, inflation=inflation,
+                       leg_nees=leg_nees)
 
 
 def heading_prior_rad(compass_bias_rad: float, leeway_rad: float, lat_rad: float,
@@ -421,7 +569,7 @@ def heading_prior_rad(compass_bias_rad: float, leeway_rad: float, lat_rad: float
 
 
 #: a leg is scored out of sample when its start's posterior has seen at least this span of
-#: reference data (and MIN_LEARNED_UPDATES fixes)
+#: reference data (or one reset interval, if shorter) and MIN_LEARNED_UPDATES fixes
 MIN_LEARNED_S = 1800.0
 MIN_LEARNED_UPDATES = 3
 
@@ -435,6 +583,7 @@ class EstimatedPosition:
     model: LearnedModel
     forecast: LegForecast
     learned_leg: np.ndarray  #: (L,) bool: the leg's model was learned from earlier fixes
+    reference_sigma_m: float  #: the fixes' noise per axis, as learned over the whole voyage
 
 
 def step_ok_of(track: DRTrack) -> np.ndarray:
@@ -452,17 +601,21 @@ def estimate_position(track: DRTrack, ref_time_s, ref_lat_rad, ref_lon_rad, prio
                       hyper: Hyperparameters | None = None) -> EstimatedPosition:
     """The estimated position of every leg of a water-track DR, learned causally (module doc).
 
-    ``step_s``: the filter's step; by default 300 s, shorter for logs under 25 h
-    (at least 100 steps, at least 60 s).
+    ``step_s``: the filter's step; by default 300 s, shorter for logs under 8 h 20 min
+    (at least 100 steps, at least 5 s).
     """
     t = track.time_s
     span = float(t[-1] - t[0]) if t.size else 0.0
     if step_s is None:
-        step_s = float(np.clip(span / 100.0, 60.0, 300.0))
+        step_s = float(np.clip(span / 100.0, 5.0, 300.0))
     model = learn_error_model(t, track.vn_mps, track.ve_mps, step_ok_of(track), ref_time_s,
                               ref_lat_rad, ref_lon_rad, track.leg_start_s, prior, hyper=hyper,
                               step_s=step_s, ref_max_gap_s=ref_max_gap_s)
-    fc = forecast_legs(t, track.vn_mps, track.ve_mps, track.leg, model)
+    rlat, rlon = interp_position(np.asarray(ref_time_s, float), ref_lat_rad, ref_lon_rad, t,
+                                 ref_max_gap_s)
+    y_n, y_e = offset_ne_m(rlat, rlon, track.lat_rad, track.lon_rad)
+    fc = forecast_legs(t, track.vn_mps, track.ve_mps, track.leg, model,
+                       ref_offset_ne_m=np.column_stack([y_n, y_e]))
     on = track.leg >= 0
     lat = np.full(t.size, np.nan)
     lon = np.full(t.size, np.nan)
@@ -475,5 +628,8 @@ def estimate_position(track: DRTrack, ref_time_s, ref_lat_rad, ref_lon_rad, prio
     smaj, smin, orient = (np.where(nan, np.nan, a) for a in (smaj, smin, orient))
     ep = replace(track, lat_rad=lat, lon_rad=lon, P_m2=P, radius_2m_m=radius, semi_major_m=smaj,
                  semi_minor_m=smin, orientation_rad=orient)
-    learned = (model.learned_s >= MIN_LEARNED_S) & (model.n_updates >= MIN_LEARNED_UPDATES)
-    return EstimatedPosition(track=ep, water=track, model=model, forecast=fc, learned_leg=learned)
+    need_s = min(MIN_LEARNED_S, track.reset_s)
+    learned = (model.learned_s >= need_s) & (model.n_updates >= MIN_LEARNED_UPDATES)
+    ref_sigma = math.sqrt(float(model.final_weights @ model.hyper.fix_sigma_m**2))
+    return EstimatedPosition(track=ep, water=track, model=model, forecast=fc, learned_leg=learned,
+                             reference_sigma_m=ref_sigma)

@@ -32,6 +32,7 @@ from .current import CurrentModel, estimate_current
 from .deadreckoning import (
     course_magnetic_rad,
     dead_reckon,
+    dr_schedule,
     deviation_table_rad,
     dr_consistency,
     interp_deviation_rad,
@@ -40,7 +41,7 @@ from .deadreckoning import (
 )
 from .deviation import DeviationResult, analyse_deviations, unit_series_from_voyage
 from .deviation.analysis import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS
-from .ep import ErrorPrior, estimate_position, heading_prior_rad
+from .ep import MIN_LEARNED_S, OUTLIER_NIS, ErrorPrior, estimate_position, heading_prior_rad
 from .errors import InsufficientDataError
 from .faults import SensorFault, detect_faults, exclude_faults
 from .fusion import PositionFix
@@ -169,6 +170,16 @@ class DRSection:
     n_gaps_bridged: int  #: heading/speed gaps held over (<= max_gap_s)
     n_breaks: int  #: gaps that broke the track (restarted at the next fix)
     notes: tuple[str, ...] = ()
+    mean_nees: float = math.nan  #: over the scored epochs, 2 expected
+    nees_statistic: float = math.nan  #: sum over legs of the last epoch's NEES ~ chi^2(2 legs)
+    nees_lower: float = math.nan
+    nees_upper: float = math.nan
+    leg_checks: tuple = ()  #: dracc.deadreckoning.LegConsistency per scored leg
+    dominant_source: str | None = None  #: what the 2M is mostly made of where it fails
+    dominant_key: str | None = None  #: the [dead_reckoning] key that sets its prior
+    learned: dict | None = None  #: the model learned from the voyage (see _learned_summary)
+    reference_sigma_m: float = 0.0  #: the reference's noise, added to P in the comparison
+    scored_out_of_sample: bool = False  #: only epochs after the data their model learned from
 
 
 # ----------------------------------------------------------- calibration and current
@@ -355,7 +366,9 @@ def analyse_voyage(voyage: Voyage, cfg: Config | None = None,
     report("current", 0.0)
     current = None
     if dr is not None and dr_inputs is not None and fixes is not None:
-        if dr_inputs.mode == "water":
+        if dr_inputs.mode == "water" and dr_inputs.estimated is not None:
+            current = _current_learned(dr_inputs, fixes)
+        elif dr_inputs.mode == "water":
             current = _current(dr_inputs, fixes, cfg.dead_reckoning, missing)
         else:
             missing.append("current not estimated: the log measures over the ground (VBW ground "
@@ -504,6 +517,8 @@ class _DRInputs:
     speed_mps: np.ndarray  #: speed (B1) through the water or over the ground, NaN where missing
     ref_gap_s: float  #: reference positions are interpolated across gaps up to this
     mode: str  #: 'water' (relative log) or 'ground' (absolute log)
+    epoch_interval_s: float = 600.0  #: the DR's epoch spacing (the old filter's fix spacing)
+    estimated: object = None  #: dracc.ep.EstimatedPosition where the model was learned
 
 
 def _heading_series(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str],
@@ -697,6 +712,73 @@ def _dr_grid(th: np.ndarray, tv: np.ndarray, t_first: int, t_last: int, step_ns:
     return np.concatenate(parts), skipped
 
 
+#: what each part of the EP covariance is, and the key that sets its prior
+_SOURCE_KEYS = {"fix": ("the fixes' noise", "fix_sigma_m"),
+                "current": ("the current estimate", "current_kn"),
+                "current change": ("the change of the current", "current_kn"),
+                "heading": ("the compass and leeway error", "compass_bias_deg"),
+                "log scale": ("the log scale error", "log_scale"),
+                "noise": ("short-term log and compass noise", "log_noise_kn")}
+
+
+def _dominant_source(est, cons, tr, fix_s) -> tuple[str, str] | None:
+    """The part of the EP covariance largest at the epochs that missed (or, when none did,
+    at every scored epoch), with the [dead_reckoning] key of its prior."""
+    if not cons.n_epochs:
+        return None
+    idx = np.searchsorted(tr.time_s, cons.time_s)
+    miss = ~cons.inside
+    pick = idx[miss] if miss.any() else idx
+    parts = {k: float(np.nanmean(v[pick])) for k, v in est.forecast.components_m2.items()}
+    name = max(parts, key=parts.get)
+    return _SOURCE_KEYS[name]
+
+
+def _learned_summary(est, cfg: DeadReckoningConfig) -> dict:
+    """The model learned over the whole voyage (final grid weights) and a ready
+    [dead_reckoning] block that reuses it where there is no reference (learn = false)."""
+    m = est.model
+    hp = m.hyper
+    w = m.final_weights
+    j = int(np.argmax(w))
+    x = w @ m.final_x
+    Pm = np.einsum("m,mij->ij", w, m.final_P + (m.final_x - x)[:, :, None] * (m.final_x - x)[:, None, :])
+    cbar = x[2:4]
+    drift = float(np.hypot(*cbar))
+    eps, s = float(x[8]), float(x[9])
+    s_eps, s_s = math.sqrt(max(Pm[8, 8], 0.0)), math.sqrt(max(Pm[9, 9], 0.0))
+    sig_c, tau_c = float(hp.current_sigma_mps[j]), float(hp.current_tau_s[j])
+    noise_kn, noise_tau = float(hp.noise_sigma_mps[j]) / KN_MPS, float(hp.noise_tau_s[j])
+    current_kn = math.sqrt(0.5 * drift**2 + sig_c**2) / KN_MPS
+    compass_deg = math.degrees(math.hypot(eps, s_eps))
+    scale = math.hypot(s, s_s)
+    fix_m = est.reference_sigma_m
+    block = "\n".join([
+        "[dead_reckoning]",
+        "learn = false",
+        f"compass_bias_deg = {{ sigma = {compass_deg:.3f}, tau_s = \"inf\" }}",
+        "compass_noise_deg = { sigma = 0.0, tau_s = 120 }",
+        "leeway_deg = { sigma = 0.0, tau_s = 1800 }",
+        f"log_scale = {{ sigma = {scale:.4f}, tau_s = \"inf\" }}",
+        "log_bias_kn = { sigma = 0.0, tau_s = \"inf\" }",
+        f"log_noise_kn = {{ sigma = {noise_kn:.3f}, tau_s = {noise_tau:g} }}",
+        f"current_kn = {{ sigma = {current_kn:.3f}, tau_s = {tau_c:g} }}",
+        f"fix_sigma_m = {fix_m:.1f}",
+    ]) + "\n"
+    return {
+        "current_set_deg": float(math.degrees(wrap_2pi(math.atan2(cbar[1], cbar[0])))),
+        "current_drift_kn": drift / KN_MPS,
+        "current_variation_kn": sig_c / KN_MPS,
+        "current_tau_s": tau_c,
+        "heading_correction_deg": math.degrees(eps), "heading_correction_sigma_deg": math.degrees(s_eps),
+        "log_scale_correction": s, "log_scale_correction_sigma": s_s,
+        "noise_kn": noise_kn, "noise_tau_s": noise_tau, "fix_sigma_m": fix_m,
+        "model_weight": float(w[j]), "n_models": int(hp.size), "filter_step_s": m.step_s,
+        "n_fixes_used": int(m.history.updated.sum()), "n_outliers": int(m.n_outliers),
+        "config_block": block,
+    }
+
+
 def _error_prior(cfg: DeadReckoningConfig, lat_rad: float, gyro: bool, speed_mps) -> ErrorPrior:
     """What the EP assumes before it has learned anything: the configured current as a
     persistent one, the compass bias (gyro: x sec phi, METHODS section 6) with the leeway,
@@ -749,9 +831,11 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
     ref_gap_s = _ref_gap_s(ft)
     time_s = (grid - grid[0]) / 1e9
     fix_s = (ft - grid[0]) / 1e9
+    reset_s, reset_label, epoch_s = dr_schedule(cfg, float(time_s[-1]))
     try:
         tr = dead_reckon(time_s, h_g, v_g, errors=cfg, fixes=(fix_s, flat, flon),
-                         transverse_mps=vy_g, mode=mode, covariance=not cfg.learn)
+                         transverse_mps=vy_g, mode=mode, covariance=not cfg.learn,
+                         reset_s=reset_s, epoch_interval_s=epoch_s)
     except InsufficientDataError as err:
         missing.append(f"dead reckoning not computed: {err}")
         return None, fixes, None, None
@@ -765,7 +849,7 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
         tr = est.track
         scored = est.learned_leg[np.maximum(tr.leg[tr.epoch_index], 0)] & (tr.leg[tr.epoch_index] >= 0)
         cons = dr_consistency(replace(tr, epoch_index=tr.epoch_index[scored]), fix_s, flat, flon,
-                              max_ref_gap_s=ref_gap_s)
+                              max_ref_gap_s=ref_gap_s, ref_sigma_m=est.reference_sigma_m)
     else:
         cons = dr_consistency(tr, fix_s, flat, flon, max_ref_gap_s=ref_gap_s)
     # the actual error at every sample (for the growth plot and the tables)
@@ -807,8 +891,21 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
                         "the track; it restarted at the next fix")
     if n_bridged:
         dr_notes.append(f"{n_bridged} short heading/speed gap(s) bridged by holding the last value")
-    dr_notes.append(f"heading and speed held onto a {DR_STEP_S:g} s grid; error sources as configured "
-                    "(Gauss-Markov, see docs/analyze.md)")
+    if est is not None:
+        n_prior = int(np.sum((tr.since_fix_s[tr.epoch_index] > 0)
+                             & ~est.learned_leg[np.maximum(tr.leg[tr.epoch_index], 0)]))
+        dr_notes.append(
+            f"estimated position: the water track plus the current and the compass and log "
+            f"corrections learned from the {fdesc} fixes before each leg's start fix (never later "
+            f"ones); scored out of sample: {cons.n_epochs} epochs of legs whose model had learned "
+            f"from at least {min(MIN_LEARNED_S, reset_s) / 60:g} min of fixes; {n_prior} epochs "
+            "of earlier legs (the prior only) are shown but not scored")
+        if est.model.n_outliers:
+            dr_notes.append(f"{est.model.n_outliers} fix(es) left out of the learning as outliers "
+                            f"(innovation beyond chi^2_2 = {OUTLIER_NIS:g} for every model)")
+    else:
+        dr_notes.append(f"heading and speed held onto a {DR_STEP_S:g} s grid; error sources as "
+                        "configured (learn = false; Gauss-Markov, see docs/dead-reckoning.md)")
     if 0 < cons.n_epochs < 10:
         dr_notes.append(f"only {cons.n_epochs} epochs scored: for a short log give a shorter "
                         "--epoch-interval (e.g. 1min)")
@@ -816,22 +913,35 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
         dr_notes.append(f"only {cons.n_legs} leg(s) scored, and each leg is one trial: the test "
                         "calls the circles too small only when the reference lies outside them "
                         "in most legs or far outside; a shorter --dr-reset gives more legs")
+    dominant = _dominant_source(est, cons, tr, fix_s) if est is not None else None
     if cons.n_epochs:
         consistent = cons.verdict in ("consistent", "conservative")
         verdict = (f"{cons.verdict}: reference inside 2M at {100 * cons.inside_fraction:.1f} % of "
                    f"{cons.n_epochs} epochs in {cons.n_legs} legs (a correct model gives "
                    f"{100 * cons.expected_inside_fraction:.1f} %); RMS error/M "
-                   f"{cons.rms_error_over_m:.2f} (1 expected)")
+                   f"{cons.rms_error_over_m:.2f} (1 expected); NEES {cons.nees_statistic:.1f} "
+                   f"(chi^2 {cons.nees_lower:.1f}-{cons.nees_upper:.1f})")
+        if dominant is not None and cons.verdict != "consistent":
+            verdict += (f"; the circle is dominated by {dominant[0]} (key [dead_reckoning] "
+                        f"{dominant[1]})")
     else:
         consistent = None
-        verdict = "undetermined: no reference position at any DR epoch after a fix"
+        verdict = ("undetermined: no epoch of a leg whose model was learned from earlier fixes "
+                   "has a reference position" if est is not None else
+                   "undetermined: no reference position at any DR epoch after a fix")
     section = DRSection(
-        heading_source=hdg_desc, speed_source=spd_desc, reset=str(cfg.reset),
-        epoch_interval_s=float(cfg.epoch_interval_s), track=full, epochs=epochs, legs=tuple(legs),
+        heading_source=hdg_desc, speed_source=spd_desc, reset=reset_label,
+        epoch_interval_s=float(epoch_s), track=full, epochs=epochs, legs=tuple(legs),
         reference_role=fdesc, containment_2m=cons.inside_fraction, n_scored=cons.n_epochs,
         expected_inside=cons.expected_inside_fraction, error_over_m_rms=cons.rms_error_over_m,
         consistent=consistent, verdict=verdict, n_gaps_bridged=int(n_bridged),
-        n_breaks=int(tr.n_breaks), notes=tuple(dr_notes))
+        n_breaks=int(tr.n_breaks), notes=tuple(dr_notes),
+        mean_nees=cons.mean_nees, nees_statistic=cons.nees_statistic, nees_lower=cons.nees_lower,
+        nees_upper=cons.nees_upper, leg_checks=cons.legs,
+        dominant_source=dominant[0] if dominant else None,
+        dominant_key=dominant[1] if dominant else None,
+        learned=_learned_summary(est, cfg) if est is not None else None,
+        reference_sigma_m=cons.reference_sigma_m, scored_out_of_sample=est is not None)
     # course and speed through the water for the calibration: leeway (B5) and speed (B1)
     # from a two-component log, as the DR used them
     if vy_g is not None:
@@ -840,11 +950,40 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
     else:
         course_w, speed_w = h_g, v_g
     inputs = _DRInputs(t0_ns=int(grid[0]), time_s=time_s, vn_mps=water.vn_mps, ve_mps=water.ve_mps,
-                       heading_rad=course_w, speed_mps=speed_w, ref_gap_s=ref_gap_s, mode=mode)
+                       heading_rad=course_w, speed_mps=speed_w, ref_gap_s=ref_gap_s, mode=mode,
+                       epoch_interval_s=epoch_s, estimated=est)
     return section, fixes, cons, inputs
 
 
 # ------------------------------------------------------------------------- current
+
+
+def _current_learned(dr: _DRInputs, fixes) -> CurrentSection | None:
+    """Set and drift as the estimated position uses them: the filter of dracc.ep (persistent
+    current plus its Gauss-Markov variation), mixed over its grid of models, after its first
+    fix."""
+    h = dr.estimated.model.history
+    upd = np.flatnonzero(h.updated)
+    if upd.size < 2:
+        return None
+    keep = slice(int(upd[0]) + 1, None)
+    cn, ce = h.current_ne_mps[keep, 0], h.current_ne_mps[keep, 1]
+    sig = h.current_sigma_mps[keep]
+    mean_n, mean_e = float(np.mean(cn)), float(np.mean(ce))
+    drift = math.hypot(mean_n, mean_e)
+    set_rad = float(wrap_2pi(math.atan2(mean_e, mean_n)))
+    sigma_d = float(np.sqrt(np.mean(sig**2)))
+    note = (f"the current the estimated position uses: filtered causally from the {fixes[3]} "
+            f"fixes every {dr.estimated.model.step_s:g} s ({upd.size} updates), a persistent "
+            "current plus its Gauss-Markov variation, with the compass and log corrections "
+            "estimated beside it; voyage figures are the mean of the filtered current; sigma: "
+            "its RMS 1-sigma (not reduced by averaging)")
+    return CurrentSection(
+        set_deg=Estimate(math.degrees(set_rad), math.degrees(sigma_d / drift) if drift > 0 else math.nan),
+        drift_kn=Estimate(drift / KN_MPS, sigma_d / KN_MPS),
+        time_ns=(h.time_s[keep] * 1e9).astype(np.int64) + dr.t0_ns,
+        set_rad=wrap_2pi(np.arctan2(ce, cn)), drift_mps=np.hypot(cn, ce), drift_sigma_mps=sig,
+        n_updates=int(upd.size), notes=(note,))
 
 
 def _current(dr: _DRInputs, fixes, cfg: DeadReckoningConfig, missing: list[str]) -> CurrentSection | None:
@@ -873,7 +1012,7 @@ def _current(dr: _DRInputs, fixes, cfg: DeadReckoningConfig, missing: list[str])
         if sel.size < 2:
             continue
         # one fix per epoch interval (the first at or after each multiple)
-        grid = np.arange(ts[0], ts[-1], cfg.epoch_interval_s)
+        grid = np.arange(ts[0], ts[-1], dr.epoch_interval_s)
         pick = np.unique(np.searchsorted(fix_s, grid, side="left"))
         pick = pick[(pick < fix_s.size)]
         pick = pick[(fix_s[pick] >= ts[0]) & (fix_s[pick] <= ts[-1])]
@@ -912,7 +1051,7 @@ def _current(dr: _DRInputs, fixes, cfg: DeadReckoningConfig, missing: list[str])
     sigma_d = float(np.sqrt(np.mean(s_d**2)))
     sigma_set = sigma_d / drift if drift > 0 else math.nan
     note = (f"voyage figures: the mean of the filtered current over {cn.size} filter epochs "
-            f"({CURRENT_STEP_S:g} s grid, a {fdesc} fix every {cfg.epoch_interval_s:g} s); sigma: "
+            f"({CURRENT_STEP_S:g} s grid, a {fdesc} fix every {dr.epoch_interval_s:g} s); sigma: "
             "the filter's RMS 1-sigma (not reduced by averaging). Over a leg the filter cannot tell "
             "current from a constant log or compass error: both are in these figures")
     return CurrentSection(
