@@ -62,6 +62,7 @@ __all__ = [
     "deviation_curve_rad",
     "deviation_table_rad",
     "dr_consistency",
+    "covered_span_s",
     "dr_schedule",
     "error_ellipse",
     "error_processes",
@@ -686,26 +687,37 @@ def parse_reset_s(text: str | float) -> float:
 _AUTO_RESETS_S = (30.0, 60.0, 120.0, 300.0, 600.0, 900.0, 1200.0, 1800.0, 3600.0)
 
 
-def dr_schedule(cfg: DeadReckoningConfig, span_s: float) -> tuple[float, str, float]:
+def dr_schedule(cfg: DeadReckoningConfig, span_s: float,
+                reset: str | float | None = None) -> tuple[float, str, float]:
     """(reset_s, label, epoch_interval_s) for a DR over ``span_s`` seconds.
+
+    ``reset`` overrides ``cfg.reset`` (a duration, "watch", "never" or "auto").
 
     ``reset = "auto"``: every hour on a log of 8 h or more; on a shorter one the largest of
     30 s, 1, 2, 5, 10, 15, 20, 30 min giving at least 8 legs, so that the consistency test
     has legs to learn from and to score.  ``epoch_interval_s`` unset: 10 min, or a sixth of
     the reset interval where that is shorter (at least 5 s).
     """
-    if str(cfg.reset).strip().lower() == "auto":
+    rule = cfg.reset if reset is None else reset
+    if str(rule).strip().lower() == "auto":
         fits = [r for r in _AUTO_RESETS_S if r <= span_s / 8.0]
         reset_s = fits[-1] if fits else _AUTO_RESETS_S[0]
         label = f"auto ({_duration_label(reset_s)})"
     else:
-        reset_s = parse_reset_s(cfg.reset)
-        label = str(cfg.reset)
+        reset_s = parse_reset_s(rule)
+        label = str(rule)
     if cfg.epoch_interval_s is not None:
         epoch_s = float(cfg.epoch_interval_s)
     else:
         epoch_s = 600.0 if not math.isfinite(reset_s) else float(np.clip(reset_s / 6.0, 5.0, 600.0))
     return reset_s, label, epoch_s
+
+
+def covered_span_s(time_s, max_gap_s: float) -> float:
+    """The time the samples cover: the sum of the steps no longer than ``max_gap_s`` (a
+    stray record years away adds nothing)."""
+    dt = np.diff(np.asarray(time_s, float))
+    return float(dt[dt <= max_gap_s].sum())
 
 
 def _duration_label(s: float) -> str:
@@ -869,10 +881,8 @@ def dead_reckon(
     if mode == "ground" and current_ne_mps is not None:
         raise ValueError("a current applies to a water (relative) log only")
     max_gap = float(cfg.max_gap_s if max_gap_s is None else max_gap_s)
-    t_span = float(np.ptp(time_s)) if np.size(time_s) else 0.0
-    auto_reset, _, auto_epoch = dr_schedule(cfg, t_span)
+    reset, _, auto_epoch = dr_schedule(cfg, covered_span_s(time_s, max_gap), reset_s)
     epoch_dt = float(auto_epoch if epoch_interval_s is None else epoch_interval_s)
-    reset = auto_reset if reset_s is None else parse_reset_s(reset_s)
     if not max_gap > 0 or not epoch_dt > 0:
         raise ConfigError(
             f"[dead_reckoning] max_gap_s ({max_gap}) and epoch_interval_s ({epoch_dt}) "

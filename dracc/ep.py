@@ -53,7 +53,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .current import _current_noise, transition
-from .deadreckoning import DRTrack, error_ellipse
+from .deadreckoning import DRTrack, covered_span_s, error_ellipse
 from .geodesy import add_offset_ne, interp_position, offset_ne_m
 from .units import KN_MPS
 
@@ -78,7 +78,7 @@ EPS, SCALE, DELTA = 8, 9, 10
 #: the heading-dependent error delta decorrelates over this change of course (rad)
 TURN_DECORRELATION_RAD = 1.0
 #: the sensor priors (IMO limits) are widened by this factor: real logs are often worse
-PRIOR_WIDENING = 2.0
+PRIOR_WIDENING = 3.0
 #: a step whose water track broke: the water-track error p is re-anchored by the next fix
 _REANCHOR_M2 = 1e14
 #: an innovation that even the widest grid point finds this improbable (NIS, 2 dof) is an
@@ -131,6 +131,32 @@ def hyperparameter_grid(fix_sigma_m: float = 10.0) -> Hyperparameters:
             np.array([0.03, 0.1, 0.3]) * KN_MPS, np.array([60.0, 600.0]),
             np.array([0.0, 1.5]) * math.pi / 180.0, np.array([0.1, 0.3, 1.0, 3.0]) * fix_sigma_m)
     return Hyperparameters(*(a.ravel() for a in np.meshgrid(*axes, indexing="ij")))
+
+
+#: the sensitivities J are taken from the water velocity averaged over this window
+SENSITIVITY_WINDOW_S = 900.0
+
+
+def _smooth_velocity(time_s, vn, ve, window_s: float = SENSITIVITY_WINDOW_S):
+    """The water velocity averaged over ``window_s`` (centred, in time).
+
+    The sensitivities must not carry the log's and compass's own noise: J_s = v_w with the
+    log noise in it correlates with the very error it is regressed on (the noise is in the
+    water track too), and the scale estimate runs away along a straight leg (errors in
+    variables).  Averaged over 15 min the noise (correlated over minutes) is mostly gone
+    while turns and speed changes stay."""
+    t = np.asarray(time_s, float)
+    if t.size < 3:
+        return vn, ve
+    dt = np.diff(t)
+    out = []
+    for v in (vn, ve):
+        area = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
+        lo = np.interp(t - 0.5 * window_s, t, area)
+        hi = np.interp(t + 0.5 * window_s, t, area)
+        span = np.minimum(t + 0.5 * window_s, t[-1]) - np.maximum(t - 0.5 * window_s, t[0])
+        out.append(np.where(span > 0, (hi - lo) / np.where(span > 0, span, 1.0), v))
+    return out[0], out[1]
 
 
 def sensitivities(vn_w_mps, ve_w_mps):
@@ -227,14 +253,18 @@ def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_r
     W = np.zeros((n, 2))
     W[1:, 0] = np.cumsum(np.where(good, vn[:-1], 0.0) * dt)
     W[1:, 1] = np.cumsum(np.where(good, ve[:-1], 0.0) * dt)
-    J = sensitivities(vn[:-1], ve[:-1]) * np.where(good, dt, 0.0)[:, None, None]
+    J = sensitivities(*_smooth_velocity(t, vn, ve))[:-1] * np.where(good, dt, 0.0)[:, None, None]
     JI = np.concatenate([np.zeros((1, 2, 2)), np.cumsum(J, axis=0)])
     bad_before = np.concatenate([[0], np.cumsum(~good)])  # broken steps before sample k
 
     starts = np.asarray(leg_start_s, float)
-    grid = np.arange(t[0], t[-1] + 1e-9, step_s)
-    kf = np.clip(np.searchsorted(t, np.concatenate([grid, starts, [t[-1]]]), side="left"), 0, n - 1)
-    kf = np.unique(kf)
+    # filter steps: the first sample of every step_s from the first leg's start (nothing is
+    # learned before it: no fix), each leg start and the last sample; silences get no steps
+    t_first = starts[0] if starts.size else t[0]
+    after = np.flatnonzero(t >= t_first)
+    bins = np.floor((t[after] - t_first) / step_s)
+    firsts = after[np.r_[True, bins[1:] != bins[:-1]]] if after.size else after
+    kf = np.unique(np.concatenate([firsts, np.searchsorted(t, starts), [n - 1]]).clip(0, n - 1))
     tf = t[kf]
     rlat, rlon = interp_position(np.asarray(ref_time_s, float), ref_lat_rad, ref_lon_rad, tf,
                                  ref_max_gap_s)
@@ -437,7 +467,7 @@ def forecast_legs(time_s, vn_w_mps, ve_w_mps, leg_of, model: LearnedModel, *,
     vn = np.nan_to_num(np.asarray(vn_w_mps, float))
     ve = np.nan_to_num(np.asarray(ve_w_mps, float))
     dt = np.diff(t)
-    J = sensitivities(vn[:-1], ve[:-1]) * dt[:, None, None]
+    J = sensitivities(*_smooth_velocity(t, vn, ve))[:-1] * dt[:, None, None]
     JI = np.concatenate([np.zeros((1, 2, 2)), np.cumsum(J, axis=0)])
     leg_of = np.asarray(leg_of)
     # for the heading-dependent error: course per sample and, per leg, its start course
@@ -478,7 +508,10 @@ def forecast_legs(time_s, vn_w_mps, ve_w_mps, leg_of, model: LearnedModel, *,
                 + np.minimum(leg_nees[j][has], INFLATION_LEG_CAP)
             acc_den[has] = INFLATION_PRIOR_LEGS + INFLATION_FORGET * (acc_den[has] - INFLATION_PRIOR_LEGS) + 1.0
             leg_end[j] = np.nan  # folded in
-        inflation[leg] = np.clip(acc_num / acc_den, *INFLATION_BOUNDS)
+        # the factor has an inverse-gamma posterior (shape acc_den: one per leg, whose mean
+        # NEES/2 is Exp(1) when the model is right; scale acc_num); the position's
+        # predictive is then Student-t with the variance acc_num / (acc_den - 1)
+        inflation[leg] = np.clip(acc_num / (acc_den - 1.0), *INFLATION_BOUNDS)
         if sel.size == 0:
             continue
         k0 = sel[0]
@@ -605,7 +638,7 @@ def estimate_position(track: DRTrack, ref_time_s, ref_lat_rad, ref_lon_rad, prio
     (at least 100 steps, at least 5 s).
     """
     t = track.time_s
-    span = float(t[-1] - t[0]) if t.size else 0.0
+    span = covered_span_s(t, 60.0)
     if step_s is None:
         step_s = float(np.clip(span / 100.0, 5.0, 300.0))
     model = learn_error_model(t, track.vn_mps, track.ve_mps, step_ok_of(track), ref_time_s,

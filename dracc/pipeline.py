@@ -31,6 +31,7 @@ from .config import Config, DeadReckoningConfig
 from .current import CurrentModel, estimate_current
 from .deadreckoning import (
     course_magnetic_rad,
+    covered_span_s,
     dead_reckon,
     dr_schedule,
     deviation_table_rad,
@@ -831,7 +832,7 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
     ref_gap_s = _ref_gap_s(ft)
     time_s = (grid - grid[0]) / 1e9
     fix_s = (ft - grid[0]) / 1e9
-    reset_s, reset_label, epoch_s = dr_schedule(cfg, float(time_s[-1]))
+    reset_s, reset_label, epoch_s = dr_schedule(cfg, covered_span_s(time_s, cfg.max_gap_s))
     try:
         tr = dead_reckon(time_s, h_g, v_g, errors=cfg, fixes=(fix_s, flat, flon),
                          transverse_mps=vy_g, mode=mode, covariance=not cfg.learn,

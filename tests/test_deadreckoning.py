@@ -567,7 +567,7 @@ def test_covariance_on_a_coarser_grid_matches_the_exact_propagation():
     per-sample propagation after the first 10 s (before, within 0.05 m^2: linear
     interpolation of a quadratic start), and exact for a bias at the grid points."""
     t, c, v = _winding_track(10.0, hours=1.0)
-    procs = error_processes(DeadReckoningConfig())
+    procs = error_processes(DeadReckoningConfig(current_kn=ErrorSource(0.3, 3600.0)))
     exact = honest_covariance_m2(t, v, c, procs)
     coarse = honest_covariance_m2(t, v, c, procs, step_s=1.0)
     tr_exact = np.trace(exact, axis1=1, axis2=2)[1:]

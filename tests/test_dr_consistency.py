@@ -23,7 +23,8 @@ DT_S = 5.0
 HOURS = 6
 LAT0, LON0 = 57.7 * DEG_RAD, 11.5 * DEG_RAD
 FIX_SIGMA_M = 10.0
-CFG = DeadReckoningConfig(fix_sigma_m=FIX_SIGMA_M)
+#: the configured (learn = false) model under test, with the current of earlier defaults
+CFG = DeadReckoningConfig(fix_sigma_m=FIX_SIGMA_M, current_kn=ErrorSource(0.3, 3600.0))
 
 
 def _gauss_markov(rng, runs, n, sigma, tau_s, dt_s):
@@ -226,7 +227,7 @@ def test_real_yacht_log_hakefjord_dr_against_gps(real_dir):
     heading = np.mod(per_second(hdg_a) * DEG_RAD + 3.0 * DEG_RAD, 2 * math.pi)
     speed = per_second(vhw_a) * KN_MPS
     tr = dead_reckon(t, heading, speed, fixes=(ref_a[:, 0], ref_a[:, 1], ref_a[:, 2]),
-                     reset_s="10min", epoch_interval_s=60.0, max_gap_s=10.0)
+                     reset_s="10min", epoch_interval_s=60.0, max_gap_s=10.0, errors=CFG)
     assert tr.n_legs == 3 and tr.n_breaks == 0
     c = dr_consistency(tr, ref_a[:, 0], ref_a[:, 1], ref_a[:, 2], max_ref_gap_s=10.0)
     assert c.n_epochs == 22
