@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import distributions as dist
+from .arrays import unique_sorted
 from .config import DeadReckoningConfig, ErrorSource
 from .errors import ConfigError, InsufficientDataError
 from .geodesy import interp_position, k_lambda, k_phi, offset_ne_m, wrap_2pi, wrap_pi
@@ -588,7 +589,7 @@ def _sensitivity_mps(acts_on: str, speed_mps, course_rad):
 def _coarse_grid(t, step_s):
     """Indices of the samples at or after each multiple of ``step_s`` from t_0, plus the last."""
     marks = np.arange(t[0], t[-1], step_s)
-    idx = np.unique(np.r_[np.searchsorted(t, marks, side="left"), t.size - 1])
+    idx = unique_sorted(np.r_[np.searchsorted(t, marks, side="left"), t.size - 1])
     return idx
 
 
@@ -1053,7 +1054,7 @@ def dead_reckon(
     ei = np.searchsorted(t, grid, side="left")
     inside = ei < n
     ei, grid = ei[inside], grid[inside]
-    ei = np.unique(ei[(t[ei] - grid <= max_gap) & np.isfinite(lat[ei])])
+    ei = unique_sorted(ei[(t[ei] - grid <= max_gap) & np.isfinite(lat[ei])])
     return DRTrack(
         time_s=t, lat_rad=lat, lon_rad=lon,
         vn_mps=np.where(leg_of >= 0, vn, np.nan), ve_mps=np.where(leg_of >= 0, ve, np.nan),

@@ -52,6 +52,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .arrays import unique_sorted
 from .current import _current_noise, transition
 from .deadreckoning import DRTrack, covered_span_s, error_ellipse
 from .geodesy import add_offset_ne, interp_position, offset_ne_m
@@ -264,7 +265,7 @@ def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_r
     after = np.flatnonzero(t >= t_first)
     bins = np.floor((t[after] - t_first) / step_s)
     firsts = after[np.r_[True, bins[1:] != bins[:-1]]] if after.size else after
-    kf = np.unique(np.concatenate([firsts, np.searchsorted(t, starts), [n - 1]]).clip(0, n - 1))
+    kf = unique_sorted(np.concatenate([firsts, np.searchsorted(t, starts), [n - 1]]).clip(0, n - 1))
     tf = t[kf]
     rlat, rlon = interp_position(np.asarray(ref_time_s, float), ref_lat_rad, ref_lon_rad, tf,
                                  ref_max_gap_s)
@@ -517,7 +518,7 @@ def forecast_legs(time_s, vn_w_mps, ve_w_mps, leg_of, model: LearnedModel, *,
         k0 = sel[0]
         t0 = t[k0]
         step = min(horizon_step_s, max((t[sel[-1]] - t0) / 20.0, 1.0))
-        th = np.unique(np.concatenate([np.arange(0.0, t[sel[-1]] - t0, step), [t[sel[-1]] - t0]]))
+        th = unique_sorted(np.concatenate([np.arange(0.0, t[sel[-1]] - t0, step), [t[sel[-1]] - t0]]))
         kh = np.clip(np.searchsorted(t, t0 + th), 0, n - 1)
         G = JI[kh] - JI[k0]  # (H, 2, 2)
         keep = _significant(model.weights[leg])

@@ -27,6 +27,7 @@ import numpy as np
 import pandas as pd
 
 from . import __version__
+from .arrays import unique_sorted
 from .config import Config, DeadReckoningConfig
 from .current import CurrentModel, estimate_current
 from .deadreckoning import (
@@ -700,7 +701,7 @@ def _dr_grid(th: np.ndarray, tv: np.ndarray, t_first: int, t_last: int, step_ns:
     ``t_last``, leaving out silences of both heading and speed longer than ``silence_ns``
     (the track breaks over them anyway).  One stray record dated years away used to make
     a grid of years (126 million points; fuzz).  Returns (grid, skipped (from, to) pairs)."""
-    u = np.union1d(th, tv)
+    u = unique_sorted(np.concatenate([th, tv]))
     u = u[(u >= t_first) & (u <= t_last)]
     cut = np.flatnonzero(np.diff(u) > silence_ns)
     starts = np.concatenate(([u[0]], u[cut + 1]))
@@ -1014,7 +1015,7 @@ def _current(dr: _DRInputs, fixes, cfg: DeadReckoningConfig, missing: list[str])
             continue
         # one fix per epoch interval (the first at or after each multiple)
         grid = np.arange(ts[0], ts[-1], dr.epoch_interval_s)
-        pick = np.unique(np.searchsorted(fix_s, grid, side="left"))
+        pick = unique_sorted(np.searchsorted(fix_s, grid, side="left"))
         pick = pick[(pick < fix_s.size)]
         pick = pick[(fix_s[pick] >= ts[0]) & (fix_s[pick] <= ts[-1])]
         if pick.size < 2:
