@@ -250,6 +250,40 @@ class NightFacts:
     log_scale: float | None  #: fraction of speed
     log_scale_sigma: float | None
     missing: tuple[str, ...]
+    #: the analysis' DR verdict word: 'consistent', 'conservative', 'inconsistent',
+    #: 'undetermined', or None (no DR section, or a document without a verdict)
+    dr_verdict: str | None = None
+    dr_verdict_text: str | None = None  #: the verdict sentence as the analysis wrote it
+    dr_consistent: bool | None = None  #: True consistent/conservative, False inconsistent
+    dr_nees: float | None = None  #: NEES statistic (chi-square over the scored legs)
+    dr_nees_lower: float | None = None
+    dr_nees_upper: float | None = None
+    dr_dominant_source: str | None = None  #: what the 2M is mostly made of where it fails
+    dr_dominant_key: str | None = None  #: the [dead_reckoning] key that sets its prior
+
+
+#: the words a ``dead_reckoning.verdict`` sentence starts with (dracc.analysis/1)
+DR_VERDICTS = ("consistent", "conservative", "inconsistent", "undetermined")
+
+
+def dr_verdict_word(text) -> str | None:
+    """The verdict word of a DR verdict sentence ("inconsistent (circle too small): …" ->
+    'inconsistent'); None for anything else."""
+    if not isinstance(text, str):
+        return None
+    head = text.split(":", 1)[0].strip().lower()
+    for word in DR_VERDICTS:  # "inconsistent" is not read as "consistent": whole first word
+        if head == word or head.startswith(word + " ") or head.startswith(word + "("):
+            return word
+    return None
+
+
+def _bool(x) -> bool | None:
+    return x if isinstance(x, bool) else None
+
+
+def _text(x) -> str | None:
+    return x if isinstance(x, str) and x.strip() else None
 
 
 def _sources_by_role(sources) -> dict[str, str]:
@@ -302,6 +336,11 @@ def facts_from_analysis(doc: Mapping) -> NightFacts:
     ce, ce_s = _estimate(cal.get("compass_error_deg"))
     ls, ls_s = _estimate(cal.get("log_scale"))
     missing = doc.get("missing") or []
+    if not isinstance(dr, Mapping):
+        dr = {}
+    nees = dr.get("nees")
+    nees = nees if isinstance(nees, Mapping) else {}
+    verdict_text = _text(dr.get("verdict"))
     return NightFacts(
         period_start_utc=period.get("start_utc"), period_end_utc=period.get("end_utc"),
         inputs=tuple(str(i.get("path", "")) for i in inputs), lines=lines, rejected=rejected,
@@ -309,7 +348,12 @@ def facts_from_analysis(doc: Mapping) -> NightFacts:
         channels=tuple(channels), dr_containment_2m=_num(dr.get("containment_2m")),
         dr_n_scored=(int(dr["n_scored"]) if _num(dr.get("n_scored")) is not None else None),
         compass_error_deg=ce, compass_error_sigma_deg=ce_s, log_scale=ls, log_scale_sigma=ls_s,
-        missing=tuple(str(m) for m in missing) if isinstance(missing, list) else (str(missing),))
+        missing=tuple(str(m) for m in missing) if isinstance(missing, list) else (str(missing),),
+        dr_verdict=dr_verdict_word(verdict_text), dr_verdict_text=verdict_text,
+        dr_consistent=_bool(dr.get("consistent")), dr_nees=_num(nees.get("statistic")),
+        dr_nees_lower=_num(nees.get("lower")), dr_nees_upper=_num(nees.get("upper")),
+        dr_dominant_source=_text(dr.get("dominant_source")),
+        dr_dominant_key=_text(dr.get("dominant_key")))
 
 
 def analyse_voyage(paths: Sequence[Path], cfg: Config, progress=None):
@@ -333,8 +377,8 @@ def analysis_document(paths: Sequence[Path], cfg: Config, progress=None) -> dict
 class Finding:
     """One value outside its limit.  ``value`` and ``limit`` in the unit named by ``measure``."""
 
-    kind: str  #: 'limit', 'dr_containment', 'compass_error', 'log_scale', 'rejected_rate',
-    #: 'missing_source', 'apriori_raised'
+    kind: str  #: 'limit', 'dr_inconsistent', 'dr_containment', 'compass_error', 'log_scale',
+    #: 'rejected_rate', 'missing_source', 'apriori_raised'
     subject: str  #: e.g. 'ins2 lon', 'DR', 'compass', 'log', 'inputs', 'gnss'
     value: float | None
     limit: float | None
@@ -360,12 +404,20 @@ def evaluate(facts: NightFacts, acfg: AuditConfig) -> tuple[tuple[Finding, ...],
             found.append(Finding("limit", f"{c.unit} {c.channel}", c.limit_error, lim, c.measure,
                                  f"{c.unit} {c.channel}: limiting error {c.limit_error:.4g} {c.measure}"
                                  f" > {lim:.4g} {c.measure}"))
-    if facts.dr_containment_2m is None:
+    below = (facts.dr_containment_2m is not None
+             and facts.dr_containment_2m < acfg.dr_containment_min)
+    if facts.dr_verdict == "inconsistent":
+        # the analysis' own verdict (what `dracc analyze` says); one finding for one cause:
+        # a containment below the audit's minimum is said in the same finding
+        found.append(_dr_inconsistent(facts, acfg, below))
+    elif facts.dr_containment_2m is None:
         skipped.append("DR consistency: no reference position or no DR track")
-    elif facts.dr_containment_2m < acfg.dr_containment_min:
+    elif below:
         found.append(Finding("dr_containment", "DR", facts.dr_containment_2m, acfg.dr_containment_min,
                              "fraction", f"DR: reference inside 2M at {100 * facts.dr_containment_2m:.1f} %"
                              f" of epochs < {100 * acfg.dr_containment_min:.1f} %"))
+    if facts.dr_verdict == "undetermined":
+        skipped.append(f"DR verdict: {facts.dr_verdict_text}")
     if facts.compass_error_deg is None:
         skipped.append("compass error: not estimated (no heading or no reference)")
     elif abs(facts.compass_error_deg) > acfg.compass_error_max_deg:
@@ -385,6 +437,20 @@ def evaluate(facts: NightFacts, acfg: AuditConfig) -> tuple[tuple[Finding, ...],
                              f"{facts.rejected} of {facts.lines} lines rejected "
                              f"({100 * facts.rejected_rate:.2f} % > {acfg.rejected_rate_max_pct:.2f} %)"))
     return tuple(found), tuple(skipped)
+
+
+def _dr_inconsistent(facts: NightFacts, acfg: AuditConfig, below: bool) -> Finding:
+    """The analysis called the DR inconsistent: its verdict sentence is the message;
+    value/limit are the NEES statistic and its upper chi-square bound where given."""
+    msg = f"DR: {facts.dr_verdict_text}"
+    if facts.dr_dominant_source and facts.dr_dominant_source not in msg:
+        key = f" (key [dead_reckoning] {facts.dr_dominant_key})" if facts.dr_dominant_key else ""
+        msg += f"; the circle is dominated by {facts.dr_dominant_source}{key}"
+    if below:
+        msg += (f"; {100 * facts.dr_containment_2m:.1f} % inside 2M is below the audit's minimum "
+                f"of {100 * acfg.dr_containment_min:.1f} %")
+    return Finding("dr_inconsistent", "DR", facts.dr_nees, facts.dr_nees_upper,
+                   "NEES" if facts.dr_nees is not None else "", msg)
 
 
 # --------------------------------------------------------------- choosing the logs
@@ -516,7 +582,9 @@ def audit_document(doc: Mapping, *, store: StateStore, acfg: AuditConfig,
         dr_n_scored=facts.dr_n_scored, compass_error_deg=facts.compass_error_deg,
         compass_error_sigma_deg=facts.compass_error_sigma_deg, log_scale=facts.log_scale,
         log_scale_sigma=facts.log_scale_sigma, findings=tuple(asdict(f) for f in findings),
-        missing=facts.missing, channels=facts.channels)
+        missing=facts.missing, channels=facts.channels, dr_verdict=facts.dr_verdict,
+        dr_verdict_text=facts.dr_verdict_text, dr_consistent=facts.dr_consistent,
+        dr_nees=facts.dr_nees)
     with store.transaction():
         old = store.night(vessel, night)
         if (old is not None and old.content_sha256 == content_hash

@@ -25,8 +25,27 @@ The water-velocity errors n_v (log and compass noise, each (sigma, tau) Gauss-Ma
 enter as white noise of the equivalent power spectral density 2 sigma^2 tau, along
 track for the log and across track (V sigma_C) for the compass, rotated to north/east
 as in (B26)-(B28) (corrected (B28)); the covariance growth therefore does not depend on
-the logging rate.  Biases (tau = inf) are not in this model: over a leg a constant
-log or compass error is indistinguishable from current and is absorbed by it.
+the logging rate.
+
+Every (sigma, tau) form that ``[dead_reckoning]`` accepts is a valid model here:
+
+* ``tau = inf`` (a bias, e.g. ``current_kn = 0.42``): the current is a random constant,
+  ``phi = 1``, ``F_pc = dt``, no driving noise (``Q = 0``, the limit of the formulas above
+  as tau -> inf); its uncertainty is the prior ``sigma^2`` at the start, which the fixes
+  shrink.  A constant log or compass error (``log_noise_kn`` / ``compass_noise_deg``
+  with ``tau = inf``) is, over a leg, a constant velocity error the filter cannot tell
+  from current: it adds no white noise, and its variance (``sigma^2`` along track,
+  ``(V sigma_C)^2`` across, at the first epoch's course and speed) is added to the
+  prior of the current, which absorbs it.
+* ``tau = 0`` (white noise): a value independent from one second to the next
+  (``WHITE_NOISE_STEP_S``; the DR's (B23) form takes it per logged step, but the filter
+  runs on its own grid and needs a rate that does not depend on it), i.e. white noise of
+  power spectral density ``sigma^2 * 1 s``: ``Q_pp = sigma^2 (1 s) dt``, the same growth
+  as a Gauss-Markov process with tau = 0.5 s.  A white current has nothing
+  to carry over: ``phi = 0``, ``F_pc = 0``, ``Q_pc = 0``, ``Q_cc = sigma^2`` (its value at an
+  instant, unrelated to the position), so its estimate stays at the prior mean.  White
+  log or compass noise enters the position the same way (PSD ``sigma^2 * 1 s`` instead
+  of ``2 sigma^2 tau``).
 
 Updates: every observation of :mod:`dracc.fusion` (``PositionFix``, ``RangeLOP``,
 ``BearingLOP``, ``LineLOP``, ``PierLine``, ``NadirCircle``) linearised at the predicted
@@ -41,6 +60,7 @@ All functions broadcast over a leading axis of independent runs (Monte Carlo).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -51,10 +71,26 @@ from .fusion import Ellipse, Observation, PositionFix, error_ellipse
 from .geodesy import add_offset_ne, k_lambda, k_phi, offset_ne_m, wrap_2pi, wrap_pi
 from .units import DEG_RAD, KN_MPS
 
+#: tau = 0 (white noise) means a value independent from one WHITE_NOISE_STEP_S to the next
+WHITE_NOISE_STEP_S = 1.0
+
+
+def _psd(sigma, tau_s):
+    """Power spectral density of a (sigma, tau) process seen as white noise at long
+    horizons: 2 sigma^2 tau; sigma^2 WHITE_NOISE_STEP_S for tau = 0; 0 for a bias (tau = inf,
+    which is not white noise at all: see the module doc)."""
+    tau = float(tau_s)
+    if math.isinf(tau):
+        return 0.0
+    if tau == 0.0:
+        return sigma**2 * WHITE_NOISE_STEP_S
+    return 2.0 * sigma**2 * tau
+
 
 @dataclass(frozen=True)
 class CurrentModel:
-    """Error model of the filter (sigmas 1-sigma; tau in seconds, > 0 and finite).
+    """Error model of the filter (sigmas 1-sigma, >= 0; tau in seconds, 0 <= tau <= inf:
+    ``inf`` a bias, ``0`` white noise independent per second; see the module doc).
 
     ``current_*``: the Gauss-Markov current, per axis.  ``speed_*``: the speed log's
     noise; ``heading_*``: the compass noise (course through the water).
@@ -71,24 +107,45 @@ class CurrentModel:
     initial_current_sigma_mps: float | None = None
 
     def __post_init__(self):
-        for name in ("current_sigma_mps", "current_tau_s", "speed_tau_s", "heading_tau_s"):
+        for name in ("current_tau_s", "speed_tau_s", "heading_tau_s"):
             v = getattr(self, name)
-            if not np.isfinite(v) or v <= 0:
-                raise InsufficientDataError(f"CurrentModel.{name} must be finite and > 0, got {v!r}")
-        for name in ("speed_sigma_mps", "heading_sigma_rad"):
+            if not v >= 0:  # also NaN; inf is a bias, 0 white noise
+                raise InsufficientDataError(f"CurrentModel.{name} must be >= 0 (inf: a bias, "
+                                            f"0: white noise), got {v!r}")
+        for name in ("current_sigma_mps", "speed_sigma_mps", "heading_sigma_rad"):
             v = getattr(self, name)
             if not np.isfinite(v) or v < 0:
                 raise InsufficientDataError(f"CurrentModel.{name} must be finite and >= 0, got {v!r}")
+        s0 = self.initial_current_sigma_mps
+        if s0 is not None and (not np.isfinite(s0) or s0 < 0):
+            raise InsufficientDataError(f"CurrentModel.initial_current_sigma_mps must be finite and "
+                                        f">= 0, got {s0!r}")
 
     @property
     def current0_sigma_mps(self) -> float:
         s = self.initial_current_sigma_mps
         return self.current_sigma_mps if s is None else s
 
+    def water_bias_cov(self, course_rad, speed_mps):
+        """(..., 2, 2) north/east covariance (m^2/s^2) of the log and compass errors that
+        are biases (tau = inf): sigma^2 along track, (V sigma_C)^2 across; zero otherwise."""
+        course = np.nan_to_num(np.asarray(course_rad, float))  # a lone last epoch may lack them
+        speed = np.nan_to_num(np.asarray(speed_mps, float))
+        along = self.speed_sigma_mps**2 if math.isinf(self.speed_tau_s) else 0.0
+        across = ((speed * self.heading_sigma_rad) ** 2 if math.isinf(self.heading_tau_s)
+                  else np.zeros(speed.shape))
+        c, s = np.cos(course), np.sin(course)
+        out = np.empty(np.broadcast_shapes(np.shape(c), np.shape(across)) + (2, 2))
+        out[..., 0, 0] = along * c**2 + across * s**2
+        out[..., 1, 1] = along * s**2 + across * c**2
+        out[..., 0, 1] = out[..., 1, 0] = (along - across) * s * c
+        return out
+
     @classmethod
     def from_config(cls, cfg) -> CurrentModel:
         """From a :class:`dracc.config.DeadReckoningConfig`: its ``current_kn``,
-        ``log_noise_kn`` and ``compass_noise_deg`` error sources."""
+        ``log_noise_kn`` and ``compass_noise_deg`` error sources, in any of their forms
+        (a number or ``tau_s = "inf"``: a bias; ``tau_s = 0``: white noise)."""
         return cls(
             current_sigma_mps=cfg.current_kn.sigma * KN_MPS,
             current_tau_s=cfg.current_kn.tau_s,
@@ -102,17 +159,41 @@ class CurrentModel:
 # ------------------------------------------------------------------------ kernels
 
 
-def transition(dt_s, tau_s: float):
+def _regular(tau) -> bool:
+    """Every tau finite and > 0 (the closed forms apply as written)."""
+    t = np.asarray(tau, float)
+    return bool(np.all(np.isfinite(t) & (t > 0)))
+
+
+def transition(dt_s, tau_s):
     """Exact discretisation of the integrated Gauss-Markov current: (F_pc, phi).
 
     F = [[I, F_pc I], [0, phi I]], F_pc = tau (1 - exp(-dt/tau)), phi = exp(-dt/tau).
+    ``tau_s`` may be an array; tau = inf (a random constant): F_pc = dt, phi = 1;
+    tau = 0 (white): F_pc = 0, phi = 0 for dt > 0 (1 at dt = 0).
     """
-    x = np.asarray(dt_s, float) / tau_s
-    return -tau_s * np.expm1(-x), np.exp(-x)
+    if _regular(tau_s):
+        x = np.asarray(dt_s, float) / tau_s
+        return -tau_s * np.expm1(-x), np.exp(-x)
+    dt = np.asarray(dt_s, float)
+    tau = np.asarray(tau_s, float)
+    inf, white = np.isinf(tau), tau == 0.0
+    safe = np.where(inf | white, 1.0, tau)
+    x = dt / safe
+    f_pc = np.where(inf, dt, np.where(white, 0.0, -safe * np.expm1(-x)))
+    phi = np.where(inf, 1.0, np.where(white, np.where(dt > 0, 0.0, 1.0), np.exp(-x)))
+    return f_pc, phi
 
 
 def _current_noise(dt_s, model: CurrentModel):
-    """(q_pp, q_pc, q_cc) of the integrated Gauss-Markov current over dt (module doc)."""
+    """(q_pp, q_pc, q_cc) of the integrated Gauss-Markov current over dt (module doc).
+
+    ``model`` needs ``current_sigma_mps`` and ``current_tau_s`` (arrays broadcast);
+    tau = inf: no driving noise (0, 0, 0); tau = 0: white, independent per
+    WHITE_NOISE_STEP_S: (sigma^2 WHITE_NOISE_STEP_S dt, 0, sigma^2 for dt > 0).
+    """
+    if not _regular(model.current_tau_s):
+        return _current_noise_special(dt_s, model.current_sigma_mps, model.current_tau_s)
     dt = np.asarray(dt_s, float)
     tau, s2 = model.current_tau_s, model.current_sigma_mps**2
     x = dt / tau
@@ -127,12 +208,39 @@ def _current_noise(dt_s, model: CurrentModel):
     return q_pp, q_pc, q_cc
 
 
+def _current_noise_special(dt_s, sigma, tau_s):
+    """_current_noise where some tau is inf or 0 (the regular ones by the closed form)."""
+    dt = np.asarray(dt_s, float)
+    tau = np.asarray(tau_s, float)
+    s2 = np.asarray(sigma, float) ** 2
+    inf, white = np.isinf(tau), tau == 0.0
+    safe = np.where(inf | white, 1.0, tau)
+    q_pp, q_pc, q_cc = _current_noise(dt, _Process(np.sqrt(s2), safe))
+    zero = np.zeros(np.broadcast_shapes(q_pp.shape, white.shape))
+    q_pp = np.where(inf, zero, np.where(white, s2 * WHITE_NOISE_STEP_S * dt + zero, q_pp))
+    q_pc = np.where(inf | white, zero, q_pc)
+    q_cc = np.where(inf, zero, np.where(white, np.where(dt > 0, s2, 0.0) + zero, q_cc))
+    return q_pp, q_pc, q_cc
+
+
+class _Process:
+    """sigma and tau of one process, in the two names _current_noise reads."""
+
+    def __init__(self, sigma, tau):
+        self.current_sigma_mps = sigma
+        self.current_tau_s = tau
+
+
 def _water_noise(dt_s, course_rad, speed_mps, model: CurrentModel):
     """(v_nn, v_ee, v_ne): position noise from the water velocity over dt, white noise of
-    PSD 2 sigma^2 tau along track (log) and across track (V sigma_C, compass)."""
+    PSD 2 sigma^2 tau along track (log) and across track (V sigma_C, compass); sigma^2 * 1 s
+    for tau = 0, none for a bias (tau = inf: absorbed by the current, module doc)."""
     dt = np.asarray(dt_s, float)
-    psd_along = 2.0 * model.speed_sigma_mps**2 * model.speed_tau_s
-    psd_across = 2.0 * (np.asarray(speed_mps, float) * model.heading_sigma_rad) ** 2 * model.heading_tau_s
+    psd_along = _psd(model.speed_sigma_mps, model.speed_tau_s)
+    if _regular(model.heading_tau_s):
+        psd_across = 2.0 * (np.asarray(speed_mps, float) * model.heading_sigma_rad) ** 2 * model.heading_tau_s
+    else:
+        psd_across = np.asarray(speed_mps, float) ** 2 * _psd(model.heading_sigma_rad, model.heading_tau_s)
     c, s = np.cos(course_rad), np.sin(course_rad)
     v_nn = (psd_along * c**2 + psd_across * s**2) * dt  # (B26) in metres, PSD form
     v_ee = (psd_along * s**2 + psd_across * c**2) * dt  # (B27)
@@ -370,6 +478,8 @@ def estimate_current(
     p0 = np.zeros((runs, 4, 4))
     p0[:, :2, :2] = start.cov_m2
     p0[:, 2, 2] = p0[:, 3, 3] = sc2
+    if math.isinf(model.speed_tau_s) or math.isinf(model.heading_tau_s):
+        p0[:, 2:, 2:] += model.water_bias_cov(course[:, 0], speed[:, 0])  # absorbed by the current
     st = _State(
         np.broadcast_to(lat0, (runs,)).copy(),
         np.broadcast_to(np.atleast_1d(np.asarray(start.lon_rad, float)), (runs,)).copy(),

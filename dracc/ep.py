@@ -149,13 +149,16 @@ def _smooth_velocity(time_s, vn, ve, window_s: float = SENSITIVITY_WINDOW_S):
     t = np.asarray(time_s, float)
     if t.size < 3:
         return vn, ve
+    # time as covered by samples: a silence (a step over a minute) counts as none
     dt = np.diff(t)
+    dt = np.where(dt <= 60.0, dt, 0.0)
+    u = np.concatenate([[0.0], np.cumsum(dt)])
     out = []
     for v in (vn, ve):
         area = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
-        lo = np.interp(t - 0.5 * window_s, t, area)
-        hi = np.interp(t + 0.5 * window_s, t, area)
-        span = np.minimum(t + 0.5 * window_s, t[-1]) - np.maximum(t - 0.5 * window_s, t[0])
+        lo = np.interp(u - 0.5 * window_s, u, area)
+        hi = np.interp(u + 0.5 * window_s, u, area)
+        span = np.minimum(u + 0.5 * window_s, u[-1]) - np.maximum(u - 0.5 * window_s, u[0])
         out.append(np.where(span > 0, (hi - lo) / np.where(span > 0, span, 1.0), v))
     return out[0], out[1]
 
@@ -216,7 +219,7 @@ def _weights(loglik):
 
 
 def _step_matrices(d: float, hp: Hyperparameters):
-    """F entries and Q (M, 10, 10) over a step d for the two Gauss-Markov processes."""
+    """F entries and Q (M, 11, 11) over a step d for the two Gauss-Markov processes."""
     M = hp.size
     Q = np.zeros((M, N_STATE, N_STATE))
     f = []

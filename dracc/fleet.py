@@ -48,15 +48,17 @@ from .audit import (
 from .config import Config
 from .errors import ConfigError, DraccError, IngestError
 
-CACHE_SCHEMA = "dracc.fleet.cache/1"
+#: /2: the summary's "dr" carries the verdict word and the NEES statistic (a /1 entry is
+#: analysed again)
+CACHE_SCHEMA = "dracc.fleet.cache/2"
 
 #: columns of the fleet table, in order (units in the names or in ``measure``)
 TABLE_COLUMNS = (
     "vessel", "log", "sha256", "status", "error", "period_start_utc", "period_end_utc", "day",
     "unit", "channel", "measure", "n", "m_u", "m_y", "kurtosis", "limit", "apriori_before",
     "apriori_after", "apriori_verdict", "dr_containment_2m", "dr_n_scored", "dr_consistent",
-    "compass_error_deg", "compass_error_sigma_deg", "log_scale_pct", "log_scale_sigma_pct",
-    "rejected_rate_pct", "lines",
+    "dr_verdict", "dr_nees", "compass_error_deg", "compass_error_sigma_deg", "log_scale_pct",
+    "log_scale_sigma_pct", "rejected_rate_pct", "lines",
 )
 TREND_COLUMNS = ("vessel", "day", "unit", "channel", "measure", "logs", "n", "m_y", "apriori_after",
                  "dr_containment_2m")
@@ -197,7 +199,6 @@ def discover(inputs: Iterable[str | Path], pattern: str = "**/*") -> list[LogTas
 def summarise(doc: Mapping) -> dict:
     """The part of an analysis document the fleet keeps (small: no samples, no epochs)."""
     facts = facts_from_analysis(doc)
-    dr = doc.get("dead_reckoning") or {}
     return {
         "schema": doc.get("schema"),
         "period": {"start_utc": facts.period_start_utc, "end_utc": facts.period_end_utc},
@@ -205,7 +206,8 @@ def summarise(doc: Mapping) -> dict:
         "sources": facts.sources,
         "channels": [asdict(c) for c in facts.channels],
         "dr": {"containment_2m": facts.dr_containment_2m, "n_scored": facts.dr_n_scored,
-               "consistent": dr.get("consistent")},
+               "consistent": facts.dr_consistent, "verdict": facts.dr_verdict,
+               "nees": facts.dr_nees},
         "calibration": {"compass_error_deg": facts.compass_error_deg,
                         "compass_error_sigma_deg": facts.compass_error_sigma_deg,
                         "log_scale": facts.log_scale, "log_scale_sigma": facts.log_scale_sigma},
@@ -406,7 +408,8 @@ def fleet_table(tasks: Sequence[LogTask], summaries: Mapping[str, dict], failure
         common = {**base, "status": "ok", "error": None, "period_start_utc": per["start_utc"],
                   "period_end_utc": per["end_utc"], "day": _day(per["start_utc"], per["end_utc"]),
                   "dr_containment_2m": s["dr"]["containment_2m"], "dr_n_scored": s["dr"]["n_scored"],
-                  "dr_consistent": s["dr"]["consistent"],
+                  "dr_consistent": s["dr"]["consistent"], "dr_verdict": s["dr"].get("verdict"),
+                  "dr_nees": s["dr"].get("nees"),
                   "compass_error_deg": cal["compass_error_deg"],
                   "compass_error_sigma_deg": cal["compass_error_sigma_deg"],
                   "log_scale_pct": _pct(cal["log_scale"]),
@@ -429,8 +432,8 @@ def fleet_table(tasks: Sequence[LogTask], summaries: Mapping[str, dict], failure
 
 def _typed(df: pd.DataFrame) -> pd.DataFrame:
     floats = ["m_u", "m_y", "kurtosis", "limit", "apriori_before", "apriori_after",
-              "dr_containment_2m", "compass_error_deg", "compass_error_sigma_deg", "log_scale_pct",
-              "log_scale_sigma_pct", "rejected_rate_pct"]
+              "dr_containment_2m", "dr_nees", "compass_error_deg", "compass_error_sigma_deg",
+              "log_scale_pct", "log_scale_sigma_pct", "rejected_rate_pct"]
     ints = ["n", "dr_n_scored", "lines"]
     strings = [c for c in TABLE_COLUMNS if c not in floats + ints + ["dr_consistent"]]
     for c in floats:

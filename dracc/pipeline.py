@@ -34,9 +34,9 @@ from .deadreckoning import (
     course_magnetic_rad,
     covered_span_s,
     dead_reckon,
-    dr_schedule,
     deviation_table_rad,
     dr_consistency,
+    dr_schedule,
     interp_deviation_rad,
     leeway_from_log_rad,
     speed_from_components_mps,
@@ -961,31 +961,42 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
 
 
 def _current_learned(dr: _DRInputs, fixes) -> CurrentSection | None:
-    """Set and drift as the estimated position uses them: the filter of dracc.ep (persistent
-    current plus its Gauss-Markov variation), mixed over its grid of models, after its first
-    fix."""
-    h = dr.estimated.model.history
+    """Set and drift as the estimated position uses them (dracc.ep).
+
+    The voyage figures are the persistent current learned from every fix (the filter's
+    final posterior of cbar, mixed over its grid of models), with its 1-sigma; the series
+    for the plot is the filtered current (cbar plus its variation) at each filter step,
+    causal, after the first fix.
+    """
+    m = dr.estimated.model
+    h = m.history
     upd = np.flatnonzero(h.updated)
     if upd.size < 2:
         return None
-    keep = slice(int(upd[0]) + 1, None)
-    cn, ce = h.current_ne_mps[keep, 0], h.current_ne_mps[keep, 1]
-    sig = h.current_sigma_mps[keep]
-    mean_n, mean_e = float(np.mean(cn)), float(np.mean(ce))
+    w = m.final_weights
+    x = w @ m.final_x
+    dev = m.final_x[:, 2:4] - x[2:4]
+    P = np.einsum("m,mij->ij", w, m.final_P[:, 2:4, 2:4] + dev[:, :, None] * dev[:, None, :])
+    mean_n, mean_e = float(x[2]), float(x[3])
     drift = math.hypot(mean_n, mean_e)
     set_rad = float(wrap_2pi(math.atan2(mean_e, mean_n)))
-    sigma_d = float(np.sqrt(np.mean(sig**2)))
-    note = (f"the current the estimated position uses: filtered causally from the {fixes[3]} "
-            f"fixes every {dr.estimated.model.step_s:g} s ({upd.size} updates), a persistent "
-            "current plus its Gauss-Markov variation, with the compass and log corrections "
-            "estimated beside it; voyage figures are the mean of the filtered current; sigma: "
-            "its RMS 1-sigma (not reduced by averaging)")
+    u = np.array([mean_n, mean_e]) / drift if drift > 0 else np.array([1.0, 0.0])
+    sigma_d = math.sqrt(max(float(u @ P @ u), 0.0))  # along the drift
+    v = np.array([-u[1], u[0]])
+    sigma_set = math.sqrt(max(float(v @ P @ v), 0.0)) / drift if drift > 0 else math.nan
+    keep = slice(int(upd[0]) + 1, None)
+    cn, ce = h.current_ne_mps[keep, 0], h.current_ne_mps[keep, 1]
+    note = (f"the current the estimated position uses: a persistent current plus its "
+            f"Gauss-Markov variation, filtered causally from the {fixes[3]} fixes every "
+            f"{m.step_s:g} s ({upd.size} updates) with the compass and log corrections beside "
+            "it; voyage figures: the persistent current learned from every fix, with its "
+            "1-sigma; the plot: the filtered current at each step")
     return CurrentSection(
-        set_deg=Estimate(math.degrees(set_rad), math.degrees(sigma_d / drift) if drift > 0 else math.nan),
+        set_deg=Estimate(math.degrees(set_rad), math.degrees(sigma_set)),
         drift_kn=Estimate(drift / KN_MPS, sigma_d / KN_MPS),
         time_ns=(h.time_s[keep] * 1e9).astype(np.int64) + dr.t0_ns,
-        set_rad=wrap_2pi(np.arctan2(ce, cn)), drift_mps=np.hypot(cn, ce), drift_sigma_mps=sig,
-        n_updates=int(upd.size), notes=(note,))
+        set_rad=wrap_2pi(np.arctan2(ce, cn)), drift_mps=np.hypot(cn, ce),
+        drift_sigma_mps=h.current_sigma_mps[keep], n_updates=int(upd.size), notes=(note,))
 
 
 def _current(dr: _DRInputs, fixes, cfg: DeadReckoningConfig, missing: list[str]) -> CurrentSection | None:

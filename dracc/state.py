@@ -4,8 +4,9 @@ What is kept
 ------------
 ``nights``
     One row per vessel and night (``UNIQUE(vessel, night)``), with the SHA-256 of the
-    night's log content and of the analysis settings, the period, the DR consistency,
-    the calibration, the rejected-line rate, the sources and the findings.
+    night's log content and of the analysis settings, the period, the DR consistency
+    (containment and the analysis' verdict), the calibration, the rejected-line rate,
+    the sources and the findings.
 ``unit_stats``
     Per night, unit (``ins1``..``ins3``) and channel (``lat``, ``lon``, ``course``):
     ``n``, ``m_u``, ``m_y``, kurtosis and limiting error in the channel's unit
@@ -22,6 +23,15 @@ The database runs in WAL mode with a busy timeout; every change is one
 file queue up instead of failing, readers never block the writer, and a process killed
 half-way leaves the previous state intact (SQLite rolls the open transaction back).
 
+Schema versions
+---------------
+1. the first release.
+2. ``nights`` gained ``dr_verdict`` (the verdict word), ``dr_verdict_text`` (the
+   sentence), ``dr_consistent`` (1/0/NULL) and ``dr_nees``.  A version-1 file is migrated
+   in place when opened (the columns are added, NULL for the nights already stored), in
+   the same ``BEGIN IMMEDIATE`` transaction as the check, so two audits opening an old
+   file at once migrate it once.
+
 This module stores and reads; the rules (what the a priori becomes, what is a finding)
 live in :mod:`dracc.audit`.
 """
@@ -37,7 +47,11 @@ from pathlib import Path
 
 from .errors import ConfigError, DraccError
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+
+#: columns added to ``nights`` after version 1: (name, SQL type), in order
+_NIGHT_COLUMNS_V2 = (("dr_verdict", "TEXT"), ("dr_verdict_text", "TEXT"),
+                     ("dr_consistent", "INTEGER"), ("dr_nees", "REAL"))
 
 #: channels in the paper's order (latitude, longitude, course), for ORDER BY
 _CHANNEL_ORDER = "CASE channel WHEN 'lat' THEN 0 WHEN 'lon' THEN 1 WHEN 'course' THEN 2 ELSE 3 END"
@@ -72,6 +86,10 @@ CREATE TABLE IF NOT EXISTS nights (
     log_scale_sigma         REAL,
     findings_json     TEXT NOT NULL,
     missing_json      TEXT NOT NULL,
+    dr_verdict        TEXT,                    -- consistent/conservative/inconsistent/undetermined
+    dr_verdict_text   TEXT,
+    dr_consistent     INTEGER,                 -- 1, 0 or NULL (undetermined)
+    dr_nees           REAL,
     UNIQUE (vessel, night)
 );
 CREATE TABLE IF NOT EXISTS unit_stats (
@@ -153,6 +171,11 @@ class NightRecord:
     findings: tuple[dict, ...]
     missing: tuple[str, ...]
     channels: tuple[ChannelRow, ...]
+    #: the analysis' DR verdict word (None for nights stored before schema 2)
+    dr_verdict: str | None = None
+    dr_verdict_text: str | None = None
+    dr_consistent: bool | None = None
+    dr_nees: float | None = None
 
 
 @dataclass(frozen=True)
@@ -247,9 +270,25 @@ class StateStore:
             row = c.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()
             if row is None:
                 c.execute("INSERT INTO meta (key, value) VALUES ('schema', ?)", (str(SCHEMA_VERSION),))
-            elif int(row[0]) != SCHEMA_VERSION:
+                return
+            try:
+                version = int(row[0])
+            except ValueError:
+                version = -1
+            if version == 1:
+                self._migrate_1_to_2(c)
+            elif version != SCHEMA_VERSION:
                 raise StateError(f"{self.path}: audit database schema {row[0]} is not the supported "
                                  f"{SCHEMA_VERSION}")
+
+    @staticmethod
+    def _migrate_1_to_2(c: sqlite3.Connection) -> None:
+        """Add the DR verdict columns to ``nights`` (inside the open transaction)."""
+        have = {r[1] for r in c.execute("PRAGMA table_info(nights)")}
+        for name, sql_type in _NIGHT_COLUMNS_V2:
+            if name not in have:
+                c.execute(f"ALTER TABLE nights ADD COLUMN {name} {sql_type}")
+        c.execute("UPDATE meta SET value = ? WHERE key = 'schema'", (str(SCHEMA_VERSION),))
 
     # -- reads ---------------------------------------------------------------------
 
@@ -316,7 +355,10 @@ class StateStore:
             compass_error_sigma_deg=r["compass_error_sigma_deg"],
             log_scale=r["log_scale"], log_scale_sigma=r["log_scale_sigma"],
             findings=tuple(json.loads(r["findings_json"])), missing=tuple(json.loads(r["missing_json"])),
-            channels=self._channels(r["id"]),
+            channels=self._channels(r["id"]), dr_verdict=r["dr_verdict"],
+            dr_verdict_text=r["dr_verdict_text"],
+            dr_consistent=None if r["dr_consistent"] is None else bool(r["dr_consistent"]),
+            dr_nees=r["dr_nees"],
         )
 
     # -- writes (call inside :meth:`transaction`) ------------------------------------
@@ -332,15 +374,19 @@ class StateStore:
             "INSERT INTO nights (vessel, night, content_sha256, settings_sha256, audited_utc, "
             "period_start_utc, period_end_utc, inputs_json, sources_json, lines, rejected, "
             "rejected_rate, dr_containment_2m, dr_n_scored, compass_error_deg, "
-            "compass_error_sigma_deg, log_scale, log_scale_sigma, findings_json, missing_json) "
-            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            "compass_error_sigma_deg, log_scale, log_scale_sigma, findings_json, missing_json, "
+            "dr_verdict, dr_verdict_text, dr_consistent, dr_nees) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             (rec.vessel, rec.night, rec.content_sha256, rec.settings_sha256, rec.audited_utc,
              rec.period_start_utc, rec.period_end_utc, json.dumps(list(rec.inputs)),
              json.dumps(rec.sources, sort_keys=True), rec.lines, rec.rejected,
              _none_if_nan(rec.rejected_rate), _none_if_nan(rec.dr_containment_2m), rec.dr_n_scored,
              _none_if_nan(rec.compass_error_deg), _none_if_nan(rec.compass_error_sigma_deg),
              _none_if_nan(rec.log_scale), _none_if_nan(rec.log_scale_sigma),
-             json.dumps(list(rec.findings), sort_keys=True), json.dumps(list(rec.missing))))
+             json.dumps(list(rec.findings), sort_keys=True), json.dumps(list(rec.missing)),
+             rec.dr_verdict, rec.dr_verdict_text,
+             None if rec.dr_consistent is None else int(bool(rec.dr_consistent)),
+             _none_if_nan(rec.dr_nees)))
         night_id = int(cur.lastrowid)
         self.conn.executemany(
             "INSERT INTO unit_stats (night_id, unit, channel, measure, n, m_u, m_y, kurtosis, "

@@ -135,6 +135,65 @@ def test_missing_figures_are_not_checked_and_said_so():
     assert "ins1 lat" in text
 
 
+# ------------------------------------------------- the DR verdict of the analysis
+
+INCONSISTENT = ("inconsistent (circle too small): reference inside 2M at 93.3 % of 45 epochs in "
+                "9 legs (a correct model gives 95.6 %); RMS error/M 1.16 (1 expected); NEES 80.2 "
+                "(chi^2 6.3-37.2)")
+
+
+@pytest.mark.parametrize("text, word", [
+    ("consistent: reference inside 2M at 100.0 %", "consistent"),
+    ("conservative: every epoch inside", "conservative"),
+    (INCONSISTENT, "inconsistent"),
+    ("Inconsistent: upper case", "inconsistent"),
+    ("undetermined: no epoch of a leg whose model was learned", "undetermined"),
+    ("inconsistently worded", None), ("", None), (None, None), (3, None),
+])
+def test_dr_verdict_word(text, word):
+    from dracc.audit import dr_verdict_word
+
+    assert dr_verdict_word(text) == word
+
+
+def test_inconsistent_dr_is_a_finding_even_with_containment_above_the_minimum():
+    """Issue: the audit passed a log that analyze called inconsistent (90 % containment
+    met, the analysis' NEES test failed)."""
+    doc = make_doc(containment=0.933, verdict=INCONSISTENT, nees=(80.2, 6.3, 37.2))
+    facts = facts_from_analysis(doc)
+    assert (facts.dr_verdict, facts.dr_consistent, facts.dr_nees) == ("inconsistent", False, 80.2)
+    found, skipped = evaluate(facts, AuditConfig())
+    (f,) = found
+    assert (f.kind, f.subject, f.value, f.limit, f.measure) == ("dr_inconsistent", "DR", 80.2, 37.2, "NEES")
+    assert f.message == f"DR: {INCONSISTENT}" and skipped == ()
+
+
+def test_inconsistent_dr_below_the_minimum_is_one_finding():
+    doc = make_doc(containment=0.5, verdict=INCONSISTENT, dominant=("the current", "current_kn"))
+    (f,) = evaluate(facts_from_analysis(doc), AuditConfig())[0]
+    assert f.kind == "dr_inconsistent" and f.measure == "" and f.value is None  # no NEES given
+    assert "the circle is dominated by the current (key [dead_reckoning] current_kn)" in f.message
+    assert f.message.endswith("; 50.0 % inside 2M is below the audit's minimum of 90.0 %")
+    # the dominant source already in the sentence is not said twice
+    said = INCONSISTENT + "; the circle is dominated by the current (key [dead_reckoning] current_kn)"
+    (g,) = evaluate(facts_from_analysis(make_doc(verdict=said, dominant=("the current", "current_kn"))),
+                    AuditConfig())[0]
+    assert g.message == f"DR: {said}"
+
+
+@pytest.mark.parametrize("verdict", ["consistent: inside at 97.8 %", "conservative: every epoch inside"])
+def test_consistent_or_conservative_dr_keeps_the_containment_check(verdict):
+    assert evaluate(facts_from_analysis(make_doc(verdict=verdict)), AuditConfig()) == ((), ())
+    (f,) = evaluate(facts_from_analysis(make_doc(verdict=verdict, containment=0.8)), AuditConfig())[0]
+    assert f.kind == "dr_containment"
+
+
+def test_undetermined_dr_is_not_checked_and_said_so():
+    text = "undetermined: no epoch of a leg whose model was learned from earlier fixes"
+    found, skipped = evaluate(facts_from_analysis(make_doc(verdict=text)), AuditConfig())
+    assert found == () and skipped == (f"DR verdict: {text}",)
+
+
 def test_not_an_analysis_document():
     with pytest.raises(InsufficientDataError, match="not a dracc analysis"):
         facts_from_analysis({"schema": "something/1"})
@@ -227,6 +286,22 @@ def test_exit_code_follows_findings(tmp_path):
         bad = _audit(store, make_doc("2026-11-20", containment=0.5))
         assert ok.exit_code == ExitCode.OK and bad.exit_code == ExitCode.FINDINGS
         assert [f["kind"] for f in store.night("Aurora", "2026-11-20").findings] == ["dr_containment"]
+
+
+def test_inconsistent_night_exits_1_and_is_stored_with_its_verdict(tmp_path):
+    with StateStore(tmp_path / "s.sqlite") as store:
+        ok = _audit(store, make_doc("2026-11-19", verdict="consistent: fine", nees=(9.0, 5.1, 34.3)))
+        bad = _audit(store, make_doc("2026-11-20", verdict=INCONSISTENT, nees=(80.2, 6.3, 37.2)))
+        assert ok.exit_code == ExitCode.OK and bad.exit_code == ExitCode.FINDINGS
+        assert [f.kind for f in bad.findings] == ["dr_inconsistent"]
+        rec = store.night("Aurora", "2026-11-20")
+        assert [f["kind"] for f in rec.findings] == ["dr_inconsistent"]
+        assert (rec.dr_verdict, rec.dr_consistent, rec.dr_nees) == ("inconsistent", False, 80.2)
+        assert rec.dr_verdict_text == INCONSISTENT
+        assert store.night("Aurora", "2026-11-19").dr_consistent is True
+        # audited again unchanged: the finding is evaluated again, nothing written
+        again = _audit(store, make_doc("2026-11-20", verdict=INCONSISTENT, nees=(80.2, 6.3, 37.2)))
+        assert again.status == "unchanged" and again.exit_code == ExitCode.FINDINGS
 
 
 def test_apriori_raise_as_finding_when_configured(tmp_path):

@@ -247,3 +247,61 @@ def test_summary_text_by_hand(tmp_path):
     assert "not checked: log scale: not estimated (no speed log or no reference)" in lines
     assert "calibration: compass error +0.20 ± 0.05 deg" in lines
     assert lines[-1] == "exit 1 (findings)"
+
+
+INCONSISTENT = ("inconsistent (circle too small): reference inside 2M at 93.3 % of 45 epochs in "
+                "9 legs (a correct model gives 95.6 %); RMS error/M 1.16 (1 expected); NEES 80.2 "
+                "(chi^2 6.3-37.2); the circle is dominated by the current (key [dead_reckoning] "
+                "current_kn)")
+
+
+def test_summary_carries_the_dr_verdict(tmp_path):
+    from test_audit_helpers import make_doc
+
+    from dracc.audit import AuditConfig, audit_document
+    from dracc.cli.audit_cmd import format_summary
+    from dracc.state import StateStore
+
+    with StateStore(tmp_path / "s.sqlite") as store:
+        def run(night, **kw):
+            return audit_document(make_doc(night, **kw), store=store, acfg=AuditConfig(), seeds={},
+                                  vessel="Aurora", night=None, content_hash=night, settings_hash="s")
+        good = format_summary(run("2026-11-19", verdict="consistent: reference inside 2M at 97.5 %"))
+        bad = format_summary(run("2026-11-20", containment=0.933, verdict=INCONSISTENT,
+                                 nees=(80.2, 6.3, 37.2), dominant=("the current", "current_kn")))
+        old = format_summary(run("2026-11-21"))  # a document without a verdict
+    assert "DR: consistent: reference inside 2M at 97.5 %" in good.splitlines()
+    assert good.rstrip().endswith("exit 0 (ok)")
+    lines = bad.splitlines()
+    assert lines[0] == "dracc audit: Aurora, night 2026-11-20: 1 finding"
+    assert f"  - DR: {INCONSISTENT}" in lines  # the finding: analyze's sentence, said once
+    assert f"DR: {INCONSISTENT}" in lines
+    assert lines[-1] == "exit 1 (findings)"
+    assert "DR: reference inside 2M at 95.0 % of 120 epochs" in old.splitlines()
+
+
+def test_cli_exit_1_when_the_analysis_calls_the_dr_inconsistent(run_cli, ship, tmp_path, monkeypatch):
+    """End to end through `dracc audit` with the analysis document replaced by a hand-built
+    one: 'inconsistent' -> a dr_inconsistent finding, exit 1, the JSON history carries it."""
+    from test_audit_helpers import make_doc
+
+    import dracc.report.json_report as json_report
+
+    doc = make_doc("2026-11-18", verdict=INCONSISTENT, nees=(80.2, 6.3, 37.2))
+    monkeypatch.setattr(audit_mod, "analyse_voyage", lambda paths, cfg, progress=None: object())
+    monkeypatch.setattr(json_report, "to_dict", lambda analysis: doc)
+    db = tmp_path / "s.sqlite"
+    code, out, err = run_cli("audit", ship / "nav-2026-11-18.nmea", "--db", db, "--config",
+                             _cfg(tmp_path, LOOSE))
+    assert code == ExitCode.FINDINGS, err
+    assert f"  - DR: {INCONSISTENT}" in out.splitlines() and out.rstrip().endswith("exit 1 (findings)")
+    code, out, _ = run_cli("audit", "history", "--db", db, "--json")
+    (night,) = json.loads(out)["nights"]
+    assert (night["dr_verdict"], night["dr_consistent"], night["dr_nees"]) == ("inconsistent", False, 80.2)
+    assert [f["kind"] for f in night["findings"]] == ["dr_inconsistent"]
+    # the same log called consistent (a fresh database): exit 0
+    doc = make_doc("2026-11-18", verdict="consistent: reference inside 2M at 97.5 %")
+    monkeypatch.setattr(json_report, "to_dict", lambda analysis: doc)
+    code, out, err = run_cli("audit", ship / "nav-2026-11-18.nmea", "--db", tmp_path / "t.sqlite",
+                             "--config", _cfg(tmp_path, LOOSE))
+    assert code == ExitCode.OK, err

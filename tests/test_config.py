@@ -57,5 +57,8 @@ def test_example_config_loads_and_states_the_defaults():
                  "current_kn", "leeway_deg"):
         assert getattr(e, name).sigma == pytest.approx(getattr(d, name).sigma, rel=2e-3), name
         assert getattr(e, name).tau_s == getattr(d, name).tau_s, name
+    for name in ("learn", "reset", "fix_role", "max_gap_s", "epoch_interval_s", "variation_deg",
+                 "deviation_table", "fix_sigma_m"):
+        assert getattr(e, name) == getattr(d, name), name
     assert example.deviation == Config().deviation
     assert example.ingest == Config().ingest

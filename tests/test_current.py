@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -97,10 +99,92 @@ def test_from_config_converts_units():
     from dracc.config import DeadReckoningConfig
 
     m = CurrentModel.from_config(DeadReckoningConfig())
-    assert m.current_sigma_mps == pytest.approx(0.3 * 1852 / 3600)
-    assert m.current_tau_s == 3600.0
+    assert m.current_sigma_mps == pytest.approx(0.7 * 1852 / 3600)  # current_kn = { 0.7, 6 h }
+    assert m.current_tau_s == 21600.0
     assert m.heading_sigma_rad == pytest.approx(np.deg2rad(0.2))
     assert m.speed_sigma_mps == pytest.approx(0.1 * 0.514444, rel=1e-5)
+
+
+# ------------------------------------------- bias and white-noise forms (tau = inf, 0)
+
+
+def test_bias_current_is_the_limit_of_long_correlation_times():
+    """tau = inf: a random constant (phi = 1, F_pc = dt, no driving noise), the limit of
+    the closed forms as tau grows; finite everywhere, also at dt = 0."""
+    from dracc.current import _current_noise
+
+    dt = np.array([0.0, 1e-3, 60.0, 3600.0])
+    f_pc, phi = transition(dt, np.inf)
+    assert np.array_equal(f_pc, dt) and np.all(phi == 1.0)
+    f_long, phi_long = transition(dt, 1e12)
+    assert np.allclose(f_pc, f_long, rtol=1e-6) and np.allclose(phi, phi_long, rtol=1e-6)
+    m = CurrentModel(current_tau_s=np.inf, speed_sigma_mps=0.0, heading_sigma_rad=0.0)
+    assert all(np.all(q == 0.0) for q in _current_noise(dt, m))
+    q = process_noise(dt, 0.3, 5.0, m)
+    assert np.all(np.isfinite(q)) and np.all(q == 0.0)
+
+
+def test_white_current_is_independent_per_second():
+    """tau = 0: no memory (phi = 0, F_pc = 0 for dt > 0, identity at dt = 0), position
+    variance sigma^2 * 1 s * dt, the current's own variance sigma^2."""
+    dt = np.array([0.0, 0.5, 60.0, 3600.0])
+    f_pc, phi = transition(dt, 0.0)
+    assert np.all(f_pc == 0.0) and np.array_equal(phi, [1.0, 0.0, 0.0, 0.0])
+    m = CurrentModel(current_sigma_mps=0.2, current_tau_s=0.0, speed_sigma_mps=0.0, heading_sigma_rad=0.0)
+    q = process_noise(dt, 0.3, 5.0, m)
+    assert np.all(np.isfinite(q))
+    assert np.allclose(q[:, 0, 0], 0.04 * dt) and np.allclose(q[:, 1, 1], 0.04 * dt)
+    assert np.allclose(q[:, 2, 2], [0.0, 0.04, 0.04, 0.04]) and np.all(q[:, 0, 2] == 0.0)
+
+
+def test_mixed_taus_broadcast_like_the_regular_ones():
+    """dracc.ep passes arrays of tau: a grid with inf, 0 and finite taus gives, for the
+    finite ones, exactly what the closed form gives alone."""
+    from dracc.current import _current_noise
+    from dracc.ep import _Process
+
+    dt = np.array([[0.0], [10.0], [600.0]])
+    taus = np.array([[0.0, np.inf, 600.0]])
+    f_pc, phi = transition(dt, taus)
+    q = _current_noise(dt, _Process(np.array([[0.3, 0.3, 0.3]]), taus))
+    f1, p1 = transition(dt[:, 0], 600.0)
+    q1 = _current_noise(dt[:, 0], _Process(0.3, 600.0))
+    assert np.array_equal(f_pc[:, 2], f1) and np.array_equal(phi[:, 2], p1)
+    assert all(np.array_equal(a[:, 2], b) for a, b in zip(q, q1, strict=True))
+    assert all(np.all(np.isfinite(a)) for a in (f_pc, phi, *q))
+
+
+@pytest.mark.parametrize("kw", [dict(current_tau_s=np.inf), dict(current_tau_s=0.0),
+                                dict(speed_tau_s=0.0, heading_tau_s=0.0),
+                                dict(speed_tau_s=np.inf, heading_tau_s=np.inf),
+                                dict(current_sigma_mps=0.0)])
+def test_every_form_runs_and_does_not_depend_on_the_step(kw):
+    """Bias, white noise and zero sigma: a finite covariance that does not depend on the
+    epoch spacing (the spans are exact discretisations), through a fix."""
+    model = CurrentModel(**kw)
+    start = PositionFix.from_sigma(LAT0, LON0, 10.0)
+    ends = []
+    for dt in (1.0, 60.0, 3600.0):
+        t = np.arange(0.0, 3600.0 + dt / 2, dt)
+        tr = estimate_current(t, np.full(t.size, 0.7), np.full(t.size, 6.0), start,
+                              [(1800.0, PositionFix.from_sigma(LAT0, LON0, 10.0))], model)
+        assert np.all(np.isfinite(tr.cov)) and np.all(np.isfinite(tr.lat_rad))
+        ends.append(tr.cov[-1])
+    assert np.allclose(ends[0], ends[1], rtol=1e-6) and np.allclose(ends[0], ends[2], rtol=1e-6)
+
+
+def test_log_and_compass_biases_widen_the_current_prior():
+    """A constant log/compass error is absorbed by the current: its variance (along track
+    sigma^2, across (V sigma_C)^2) is added to the current's prior; no white noise."""
+    s, h, v = 0.05, 0.01, 6.0
+    biased = CurrentModel(speed_sigma_mps=s, speed_tau_s=np.inf, heading_sigma_rad=h, heading_tau_s=np.inf)
+    t = np.arange(0.0, 601.0, 60.0)
+    start = PositionFix.from_sigma(LAT0, LON0, 10.0)
+    tr = estimate_current(t, np.zeros(t.size), np.full(t.size, v), start, (), biased)
+    sc2 = biased.current_sigma_mps**2
+    assert tr.cov[0, 2, 2] == pytest.approx(sc2 + s**2) and tr.cov[0, 3, 3] == pytest.approx(sc2 + (v * h) ** 2)
+    assert np.all(process_noise(60.0, 0.0, v, biased)[:2, :2] == process_noise(
+        60.0, 0.0, v, CurrentModel(speed_sigma_mps=0.0, heading_sigma_rad=0.0))[:2, :2])
 
 
 def test_fix_between_epochs_equals_the_fix_time_inserted_as_an_epoch():
@@ -319,7 +403,11 @@ def test_bad_inputs_raise_dracc_errors():
     with pytest.raises(InsufficientDataError, match="non-decreasing"):
         estimate_current(t[::-1], np.zeros(t.size), np.ones(t.size), start)
     with pytest.raises(InsufficientDataError, match="current_tau_s"):
-        CurrentModel(current_tau_s=np.inf)
+        CurrentModel(current_tau_s=-1.0)
+    with pytest.raises(InsufficientDataError, match="speed_tau_s"):
+        CurrentModel(speed_tau_s=np.nan)
+    with pytest.raises(InsufficientDataError, match="current_sigma_mps"):
+        CurrentModel(current_sigma_mps=np.inf)
 
 
 # ------------------------------------------------------------------ real log
@@ -369,3 +457,37 @@ def test_real_log_hakefjord_blended_beats_dr(real_dir):
     assert rms(err_b) < 0.8 * rms(err_r) < 0.8 * rms(err_o)  # measured 9.7, 15.1, 166 m
     assert np.mean(err_b < cmp.blended.two_drms_m[scored]) > 0.95
     assert cmp.blended.drift_kn[-1] < 1.0  # a fjord: a few tenths of a knot at most
+
+
+# ------------------------------------- every configured form through `dracc analyze`
+
+SAMPLE_MCAP = Path(__file__).resolve().parents[1] / "sample_logs" / "voyage.mcap"
+#: a sensible sigma per key (a number alone is a bias of that sigma)
+_FORM_SIGMAS = {"current_kn": 0.42, "compass_bias_deg": 0.5, "log_scale": 0.01, "log_noise_kn": 0.1}
+_FORMS = {"number": "{s}", "bias": '{{ sigma = {s}, tau_s = "inf" }}', "white": "{{ sigma = {s}, tau_s = 0 }}",
+          "gauss-markov": "{{ sigma = {s}, tau_s = 600 }}"}
+
+
+@pytest.mark.skipif(not SAMPLE_MCAP.exists(), reason="sample_logs not generated")
+@pytest.mark.parametrize("learn", ["true", "false"])
+@pytest.mark.parametrize("form", list(_FORMS))
+def test_analyze_accepts_every_form_of_an_error_source(run_cli, tmp_path, learn, form):
+    """Regression (issue: `current_kn = 0.42` made analyze exit 3 with learn = false):
+    a number, tau_s = "inf", tau_s = 0 and a finite tau_s, for the current, the compass
+    bias, the log scale and the log noise, learned or not: exit 0 and a DR verdict."""
+    import json
+
+    from dracc.config import load_config
+
+    lines = ["[dead_reckoning]", f"learn = {learn}"]
+    lines += [f"{key} = {_FORMS[form].format(s=s)}" for key, s in _FORM_SIGMAS.items()]
+    cfg = tmp_path / "dracc.toml"
+    cfg.write_text("\n".join(lines) + "\n")
+    dr_cfg = load_config(cfg).dead_reckoning
+    want_tau = {"number": np.inf, "bias": np.inf, "white": 0.0, "gauss-markov": 600.0}[form]
+    assert all(getattr(dr_cfg, key).tau_s == want_tau for key in _FORM_SIGMAS)
+    code, out, err = run_cli("analyze", SAMPLE_MCAP, "--config", cfg, "--json", "-")
+    assert code == 0, err
+    dr = json.loads(out)["dead_reckoning"]
+    assert dr is not None and dr["verdict"].split(":")[0] in (
+        "consistent", "conservative", "inconsistent (circle too small)", "undetermined")

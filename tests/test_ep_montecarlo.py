@@ -22,12 +22,12 @@ longer voyages is ``benchmarks/bench_ep_consistency.py``.
 from __future__ import annotations
 
 import numpy as np
+from test_pipeline import voyage_from_sim
 
 from dracc.config import Config
 from dracc.geodesy import offset_ne_m
 from dracc.pipeline import analyse_voyage
 from dracc.sim import GM, SimParams, simulate
-from test_pipeline import voyage_from_sim
 
 N_VOYAGES = 40
 HOURS = 6.0

@@ -34,11 +34,18 @@ def fake_analyser(path: str, cfg) -> dict:
     p = json.loads(text)
     doc = make_doc(p["night"], m_y={"ins1": {"lat": p["lat"], "lon": 200.0},
                                     "ins2": {"lat": 90.0, "lon": 210.0}},
-                   containment=p.get("containment", 0.95))
+                   containment=p.get("containment", 0.95), verdict=p.get("verdict"),
+                   nees=p.get("nees"))
     # record that a worker really ran (resumability is checked through these marks)
     with open(Path(path).parent.parent / "calls.log", "a", encoding="utf-8") as fh:
         fh.write(Path(path).name + "\n")
     return {"ok": True, "summary": summarise(doc)}
+
+
+#: the DR verdict of the fake logs, per night (none on 2026-11-18: an older document)
+DR = {"2026-11-19": {"verdict": "consistent: reference inside 2M at 97.5 %", "nees": [9.5, 5.1, 34.3]},
+      "2026-11-20": {"verdict": "inconsistent (circle too small): NEES 80.2 (chi^2 6.3-37.2)",
+                     "nees": [80.2, 6.3, 37.2]}}
 
 
 def _fleet(tmp_path: Path) -> Path:
@@ -49,7 +56,7 @@ def _fleet(tmp_path: Path) -> Path:
         d = root / vessel
         d.mkdir(parents=True)
         for night, lat in nights:
-            (d / f"{night}.nmea").write_text(json.dumps({"night": night, "lat": lat}))
+            (d / f"{night}.nmea").write_text(json.dumps({"night": night, "lat": lat, **DR.get(night, {})}))
         (d / ".hidden.nmea").write_text("BAD hidden files are skipped")
     (root / "Borealis" / "broken.nmea").write_text("BAD")
     return root
@@ -94,6 +101,16 @@ def test_fleet_run_table_rule_failures_and_resume(tmp_path):
     lon = t[(t["vessel"] == "Aurora") & (t["unit"] == "ins2") & (t["channel"] == "lon")]
     assert lon["apriori_verdict"].tolist() == ["established", "within", "within"]
     assert set(t["measure"].dropna()) == {"m"} and len(t) == 5 * 4 + 1
+    # the DR verdict of each log, on every row of it, beside dr_consistent
+    per_log = t[t["status"] == "ok"].drop_duplicates(["vessel", "log"]).set_index(["vessel", "log"])
+    assert per_log.loc[("Aurora", "2026-11-18.nmea"), "dr_verdict"] is pd.NA
+    assert pd.isna(per_log.loc[("Aurora", "2026-11-18.nmea"), "dr_nees"])
+    for vessel in ("Aurora", "Borealis"):
+        ok, bad = per_log.loc[(vessel, "2026-11-19.nmea")], per_log.loc[(vessel, "2026-11-20.nmea")]
+        assert (ok["dr_verdict"], bool(ok["dr_consistent"]), ok["dr_nees"]) == ("consistent", True, 9.5)
+        assert (bad["dr_verdict"], bool(bad["dr_consistent"]), bad["dr_nees"]) == ("inconsistent", False, 80.2)
+    assert t["dr_nees"].dtype == "float64" and t["dr_verdict"].dtype == "string"
+    assert t.groupby(["vessel", "log"])["dr_verdict"].nunique(dropna=False).max() == 1
     assert t["day"].dropna().iloc[0] == "2026-11-18"
 
     written = write_tables(res, out)
@@ -213,6 +230,20 @@ def test_cache_of_another_dracc_version_is_redone(tmp_path):
     entry = sorted((out / "cache").rglob("*.json"))[0]
     doc = json.loads(entry.read_text())
     doc["dracc_version"] = "0.0.1"
+    entry.write_text(json.dumps(doc))
+    assert run_fleet(tasks, CFG, out, workers=1, analyser=fake_analyser).analysed == 1
+
+
+def test_cache_of_the_first_summary_schema_is_redone(tmp_path):
+    # a /1 summary has no DR verdict: the log is analysed again rather than shown without one
+    root = _fleet(tmp_path)
+    out = tmp_path / "out"
+    tasks = discover([root / "Aurora"])
+    run_fleet(tasks, CFG, out, workers=1, analyser=fake_analyser)
+    entry = sorted((out / "cache").rglob("*.json"))[0]
+    doc = json.loads(entry.read_text())
+    doc["schema"] = "dracc.fleet.cache/1"
+    del doc["summary"]["dr"]["verdict"], doc["summary"]["dr"]["nees"]
     entry.write_text(json.dumps(doc))
     assert run_fleet(tasks, CFG, out, workers=1, analyser=fake_analyser).analysed == 1
 

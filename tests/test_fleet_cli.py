@@ -60,6 +60,13 @@ def test_local_pool_tables_failures_and_pages(local_run):
     ok = t[t["status"] == "ok"]
     assert len(ok) == 4 * 9 and set(ok["unit"]) == {"ins1", "ins2", "ins3"}
     assert ok["m_y"].gt(0).all() and ok["apriori_verdict"].isin(["established", "within", "raised"]).all()
+    # the DR verdict word of `dracc analyze`, and dr_consistent agreeing with it
+    assert ok["dr_verdict"].notna().all()
+    assert ok["dr_verdict"].isin(["consistent", "conservative", "inconsistent", "undetermined"]).all()
+    judged = ok[ok["dr_verdict"] != "undetermined"]
+    assert (judged["dr_consistent"] == (judged["dr_verdict"] != "inconsistent")).all()
+    assert ok.loc[ok["dr_verdict"] == "undetermined", "dr_consistent"].isna().all()
+    assert ok.loc[ok["dr_verdict"] != "undetermined", "dr_nees"].notna().all()
     first = ok.groupby(["vessel", "unit", "channel"]).head(1)
     assert (first["apriori_verdict"] == "established").all()  # no a priori configured
     csv = pd.read_csv(out / "fleet.csv")

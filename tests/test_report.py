@@ -7,6 +7,7 @@ Regenerate the golden files with ``DRACC_UPDATE_GOLDEN=1 python -m pytest tests/
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import math
@@ -19,7 +20,9 @@ import pandas as pd
 import pytest
 
 from dracc.config import DeviationConfig
+from dracc.deadreckoning import LegConsistency
 from dracc.deviation import UnitSeries, analyse_deviations
+from dracc.distributions import chi2_ppf
 from dracc.geodesy import add_offset_ne
 from dracc.pipeline import (
     SCHEMA,
@@ -73,10 +76,39 @@ def _dr_track(n: int, step_s: float, with_ref: bool) -> DRTrack:
     lat = np.radians(54.0) + np.arange(n) * step_s * 5.0 / 6_371_000.0
     lon = np.radians(10.0) + np.arange(n) * step_s * 3.0 / 3_750_000.0
     r2m = 20.0 + 0.02 * since
+    # the water track: the estimated position without a current of 0.25 m/s towards the
+    # north-east that the EP learned (it starts at each leg's fix as the EP does)
+    water_lat = lat - since * 0.25 * math.cos(math.radians(45.0)) / 6_371_000.0
+    water_lon = lon - since * 0.25 * math.sin(math.radians(45.0)) / 3_750_000.0
     return DRTrack(time_ns=t, lat_rad=lat, lon_rad=lon, since_fix_s=since, radius_2m_m=r2m,
                    semi_major_m=0.6 * r2m, semi_minor_m=0.3 * r2m,
                    orientation_rad=np.full(n, np.radians(30.0)),
-                   ref_error_m=0.5 * r2m if with_ref else np.full(n, np.nan), leg=leg)
+                   ref_error_m=0.5 * r2m if with_ref else np.full(n, np.nan), leg=leg,
+                   water_lat_rad=water_lat, water_lon_rad=water_lon,
+                   # leg 0 has only the prior (no earlier fix to learn from): not scored
+                   scored=(leg >= 1) & (since > 0))
+
+
+#: DRSection.learned as dracc.pipeline._learned_summary makes it
+LEARNED = {
+    "current_set_deg": 45.0, "current_drift_kn": 0.49, "current_variation_kn": 0.15,
+    "current_tau_s": 1800.0, "heading_correction_deg": 0.31, "heading_correction_sigma_deg": 0.12,
+    "log_scale_correction": -0.0171, "log_scale_correction_sigma": 0.0023, "noise_kn": 0.1,
+    "noise_tau_s": 600.0, "fix_sigma_m": 3.0, "model_weight": 0.93, "n_models": 576,
+    "filter_step_s": 300.0, "n_fixes_used": 288, "n_outliers": 1,
+    "config_block": ("[dead_reckoning]\nlearn = false\n"
+                     'compass_bias_deg = { sigma = 0.333, tau_s = "inf" }\n'
+                     "current_kn = { sigma = 0.397, tau_s = 1800 }\nfix_sigma_m = 3.0\n"),
+}
+
+
+def _leg_checks() -> tuple[LegConsistency, ...]:
+    """Legs 1-24 scored (leg 0 had nothing to learn from), five epochs each."""
+    return tuple(LegConsistency(leg=i, start_s=3600.0 * i, n_epochs=5, n_inside=4 if i % 5 == 0 else 5,
+                                inside_fraction=0.8 if i % 5 == 0 else 1.0, rms_error_over_m=0.7,
+                                max_error_m=45.0, mean_nees=1.5 + 0.1 * (i % 4),
+                                last_nees=1.0 + 0.5 * (i % 3), nees_upper=9.21)
+                 for i in range(1, 25))
 
 
 def make_analysis(kind: str = "full") -> Analysis:
@@ -125,15 +157,22 @@ def make_analysis(kind: str = "full") -> Analysis:
     track = _dr_track(25 * 360, 10.0, with_ref=True)
     pick = np.arange(0, len(track.time_ns), 60)
     epochs = DRTrack(**{f: getattr(track, f)[pick] for f in track.__dataclass_fields__})
+    checks = _leg_checks()
     legs = tuple(DRLeg(index=i, start_ns=T0_NS + i * H_NS, end_ns=T0_NS + (i + 1) * H_NS,
-                       fix_source="gnss", containment_2m=1.0 if i % 5 else 0.8, n_scored=5,
-                       max_error_m=45.0) for i in range(25))
+                       fix_source="gnss", containment_2m=(1.0 if i % 5 else 0.8) if i else math.nan,
+                       n_scored=5 if i else 0, max_error_m=45.0 if i else math.nan) for i in range(25))
+    nees_sum = sum(c.last_nees for c in checks)
     dr = DRSection(heading_source="compass HE (HDT, true)", speed_source="log VW (VHW, through water)",
                    reset="1h", epoch_interval_s=600.0, track=track, epochs=epochs, legs=legs,
-                   reference_role="gnss", containment_2m=0.96, n_scored=125, expected_inside=0.975,
+                   reference_role="gnss", containment_2m=0.96, n_scored=120, expected_inside=0.975,
                    error_over_m_rms=0.71, consistent=True,
-                   verdict="consistent: 96.0 % inside 2M (expected 95-98 %)", n_gaps_bridged=2,
-                   n_breaks=0, notes=("heading and speed held onto a 1 s grid",))
+                   verdict=f"consistent: 96.0 % inside 2M (expected 95-98 %); NEES {nees_sum:.1f}",
+                   n_gaps_bridged=2, n_breaks=0, notes=("heading and speed held onto a 1 s grid",),
+                   mean_nees=float(np.mean([c.mean_nees for c in checks])), nees_statistic=nees_sum,
+                   nees_lower=float(chi2_ppf(0.005, 2 * len(checks))),
+                   nees_upper=float(chi2_ppf(0.995, 2 * len(checks))), leg_checks=checks,
+                   dominant_source="the change of the current", dominant_key="current_kn",
+                   learned=dict(LEARNED), reference_sigma_m=3.0, scored_out_of_sample=True)
     cal = CalibrationSection(reference_role="gnss", compass_error_deg=Estimate(0.31, 0.04),
                              log_scale=Estimate(0.029, 0.002), log_offset_kn=Estimate(0.05, 0.02), n=140,
                              segment_s=600.0, residual_rms_kn=0.08)
@@ -174,6 +213,59 @@ def test_schema_rejects_a_broken_report(validator):
     bad = json.loads(json.dumps(doc))
     bad["deviation"]["units"]["ins4"] = bad["deviation"]["units"]["ins1"]
     assert list(validator.iter_errors(bad))
+    # the estimated-position keys are typed; the learned model and the NEES are complete
+    for path in (("nees", "upper"), ("learned_model", "config_block"), ("learned_model", "n_models")):
+        bad = json.loads(json.dumps(doc))
+        node = bad["dead_reckoning"]
+        for k in path[:-1]:
+            node = node[k]
+        del node[path[-1]]
+        assert list(validator.iter_errors(bad)), f"{path} may be missing"
+    for path, value in ((("epochs", 3, "scored"), 1), (("learned_model", "config_block"), ["x"]),
+                        (("learned_model", "current_drift_kn"), "0.5 kn"), (("nees", "statistic"), "36"),
+                        (("learned_model",), "none"), (("legs", 0, "mean_nees"), "-")):
+        bad = json.loads(json.dumps(doc))
+        node = bad["dead_reckoning"]
+        for k in path[:-1]:
+            node = node[k]
+        node[path[-1]] = value
+        assert list(validator.iter_errors(bad)), f"{path} = {value!r} accepted"
+
+
+#: keys added with the estimated position: optional in the schema (reports written before
+#: them stay dracc.analysis/1), always written
+EP_KEYS = {"dead_reckoning": ("mean_nees", "nees", "dominant_source", "dominant_key", "learned_model",
+                              "reference_sigma_m", "scored_out_of_sample"),
+           "epoch": ("water_lat_deg", "water_lon_deg", "scored"),
+           "leg": ("mean_nees", "last_nees", "nees_upper")}
+
+
+@pytest.mark.parametrize("kind", ["full", "hostile"])
+def test_json_writes_every_key_the_schema_declares(kind):
+    """Nothing optional is left out: the DR section, each epoch and each leg carry every
+    property of the schema, the estimated-position keys included."""
+    defs = json_report.load_schema()["$defs"]
+    dr = json_report.to_dict(make_analysis(kind))["dead_reckoning"]
+    assert set(dr) == set(defs["dead_reckoning"]["properties"])
+    assert all(set(e) == set(defs["epoch"]["properties"]) for e in dr["epochs"])
+    assert all(set(leg) == set(defs["leg"]["properties"]) for leg in dr["legs"])
+    assert set(dr["learned_model"]) == set(defs["learned_model"]["properties"])
+    for where, keys in EP_KEYS.items():
+        assert set(keys) <= set(defs[where]["properties"]), where
+
+
+def test_schema_accepts_a_report_written_before_the_estimated_position(validator):
+    doc = json.loads(json_report.dumps(make_analysis("full")))
+    dr = doc["dead_reckoning"]
+    for k in EP_KEYS["dead_reckoning"]:
+        del dr[k]
+    for e in dr["epochs"]:
+        for k in EP_KEYS["epoch"]:
+            del e[k]
+    for leg in dr["legs"]:
+        for k in EP_KEYS["leg"]:
+            del leg[k]
+    assert not list(validator.iter_errors(doc))
 
 
 def test_json_content_and_units():
@@ -211,11 +303,65 @@ def test_json_content_and_units():
     assert e1["ellipse"]["orientation_deg"] == pytest.approx(30.0)
     assert e1["lat_deg"] == pytest.approx(math.degrees(math.radians(54.0) + 600.0 * 5 / 6_371_000))
     assert dr["containment_2m"] == 0.96
+    # the estimated position: epochs carry the water track and whether they were scored
+    want_water_lat = math.degrees(math.radians(54.0) + 600.0 * 5 / 6_371_000
+                                  - 600.0 * 0.25 * math.cos(math.radians(45.0)) / 6_371_000)
+    assert e1["water_lat_deg"] == pytest.approx(want_water_lat, abs=1e-12)
+    assert e1["water_lat_deg"] < e1["lat_deg"] and e1["water_lon_deg"] < e1["lon_deg"]
+    assert e1["scored"] is False  # leg 0: the prior only
+    e7 = dr["epochs"][7]
+    assert e7["leg"] == 1 and e7["since_fix_s"] == 600.0 and e7["scored"] is True
+    assert dr["epochs"][6]["scored"] is False  # at the fix
+    assert sum(e["scored"] for e in dr["epochs"]) == 24 * 5
+    assert dr["scored_out_of_sample"] is True and dr["n_scored"] == 120
+    checks = a.dead_reckoning.leg_checks
+    assert dr["nees"] == {"statistic": pytest.approx(sum(c.last_nees for c in checks)),
+                          "lower": pytest.approx(a.dead_reckoning.nees_lower),
+                          "upper": pytest.approx(a.dead_reckoning.nees_upper)}
+    assert dr["nees"]["lower"] < dr["nees"]["statistic"] < dr["nees"]["upper"]
+    assert dr["mean_nees"] == pytest.approx(np.mean([c.mean_nees for c in checks]))
+    leg0, leg2 = dr["legs"][0], dr["legs"][2]
+    assert leg0["n_scored"] == 0 and leg0["mean_nees"] is None and leg0["last_nees"] is None \
+        and leg0["nees_upper"] is None
+    assert leg2["mean_nees"] == pytest.approx(1.7) and leg2["last_nees"] == pytest.approx(2.0) \
+        and leg2["nees_upper"] == 9.21
+    assert dr["dominant_source"] == "the change of the current" and dr["dominant_key"] == "current_kn"
+    assert dr["reference_sigma_m"] == 3.0
+    assert dr["learned_model"] == LEARNED
+    assert isinstance(dr["learned_model"]["config_block"], str)
+    assert dr["learned_model"]["config_block"].startswith("[dead_reckoning]\nlearn = false\n")
+    assert isinstance(dr["learned_model"]["n_models"], int)
     assert doc["calibration"]["compass_error_deg"] == {"value": 0.31, "sigma": 0.04}
     cur = doc["current"]
     assert cur["set_deg"]["value"] == 168.0
     assert cur["series"][0]["drift_kn"] == pytest.approx(0.2 * 3600 / 1852)
     assert cur["series"][0]["set_deg"] == pytest.approx(168.0)
+
+
+def _not_learned(a: Analysis) -> Analysis:
+    """The same analysis as with ``learn = false``: the DR is the water track, nothing
+    learned, every epoch after a fix scored, no NEES over legs."""
+    dr = a.dead_reckoning
+    tr = dataclasses.replace(dr.track, water_lat_rad=dr.track.lat_rad, water_lon_rad=dr.track.lon_rad,
+                             scored=dr.track.since_fix_s > 0)
+    ep = dataclasses.replace(dr.epochs, water_lat_rad=dr.epochs.lat_rad, water_lon_rad=dr.epochs.lon_rad,
+                             scored=dr.epochs.since_fix_s > 0)
+    return dataclasses.replace(a, dead_reckoning=dataclasses.replace(
+        dr, track=tr, epochs=ep, learned=None, scored_out_of_sample=False, dominant_source=None,
+        dominant_key=None, leg_checks=(), mean_nees=math.nan, nees_statistic=math.nan,
+        nees_lower=math.nan, nees_upper=math.nan, reference_sigma_m=0.0))
+
+
+def test_json_without_a_learned_model(validator):
+    doc = json.loads(json_report.dumps(_not_learned(make_analysis("full"))))
+    assert not list(validator.iter_errors(doc))
+    dr = doc["dead_reckoning"]
+    assert dr["learned_model"] is None and dr["scored_out_of_sample"] is False
+    assert dr["nees"] == {"statistic": None, "lower": None, "upper": None} and dr["mean_nees"] is None
+    assert dr["dominant_source"] is None and dr["dominant_key"] is None
+    assert all(leg["mean_nees"] is None for leg in dr["legs"])
+    e1 = dr["epochs"][1]
+    assert e1["water_lat_deg"] == e1["lat_deg"] and e1["scored"] is True
 
 
 def test_json_bare_says_what_is_missing():
@@ -244,12 +390,35 @@ def test_terminal_summary_golden(kind):
 def test_terminal_summary_content():
     text = terminal.render_text(make_analysis("full"))
     for needle in ("2026-03-01 00:00Z → 2026-03-02 01:00Z (25 h 00 min)", "rejected 12 lines: checksum 10",
-                   "inside 2M at 96.0 % of 125 epochs", "excess", "neg. var.", "1.76 -",
+                   "2M       of the estimated position, largest 80 m: reference (gnss) inside 2M at 96.0 %",
+                   "scored   120 epochs out of sample", "5 prior-only epochs unscored",
+                   "NEES     36.0 over 24 legs (chi² 26.5-77.0)",
+                   "learned  current set 45 ° drift 0.49 kn; corrections: heading +0.31 ± 0.12 °, "
+                   "log scale -1.71 ± 0.23 %", "excess", "neg. var.", "1.76 -",
                    "exceeds→178.6", "compass error 0.31 ± 0.04 °", "log scale 2.90 ± 0.20 %",
                    "set 168 ± 12 ° (towards), drift 0.40 ± 0.10 kn"):
         assert needle in text, needle
     bare = terminal.render_text(make_analysis("bare"))
     assert "no INS triple" in bare and "no heading" in bare and bare.count("not computed (see Missing)") == 4
+
+
+def test_terminal_dominant_source_only_when_not_consistent():
+    a = make_analysis("full")
+    assert "dominant" not in terminal.render_text(a)  # consistent: nothing to blame
+    for verdict in ("inconsistent (circle too small): reference inside 2M at 80.0 %",
+                    "conservative: reference inside 2M at 100.0 %"):
+        dr = dataclasses.replace(a.dead_reckoning, verdict=verdict, consistent=verdict[0] == "c")
+        text = terminal.render_text(dataclasses.replace(a, dead_reckoning=dr))
+        line = next(ln for ln in text.splitlines() if ln.startswith("dominant"))
+        assert line == "dominant the change of the current ([dead_reckoning] current_kn)"
+
+
+def test_terminal_without_a_learned_model():
+    text = terminal.render_text(_not_learned(make_analysis("full")))
+    assert "2M       of the DR water track, largest 80 m" in text
+    assert "scored   120 epochs after a fix, error model as configured (learn = false)" in text
+    assert "NEES     -; RMS error/M 0.71" in text
+    assert "learned " not in text and "estimated position" not in text
 
 
 def test_terminal_does_not_interpret_markup():
@@ -271,6 +440,17 @@ def test_tables_roundtrip(tmp_path):
     csv = pd.read_csv(tmp_path / "dr_track.csv")
     assert csv["time_utc"].iloc[1] == "2026-03-01T00:00:10.000000Z"
     np.testing.assert_allclose(csv["radius_2m_m"], a.dead_reckoning.track.radius_2m_m)
+    # the water track and the scored flag, in both formats
+    for df in (track, csv):
+        assert list(df.columns)[-3:] == ["water_lat_deg", "water_lon_deg", "scored"]
+        np.testing.assert_allclose(df["water_lat_deg"], np.degrees(a.dead_reckoning.track.water_lat_rad))
+        np.testing.assert_allclose(df["water_lon_deg"], np.degrees(a.dead_reckoning.track.water_lon_rad))
+        assert df["scored"].dtype == bool
+        np.testing.assert_array_equal(df["scored"], a.dead_reckoning.track.scored)
+    assert not track["scored"].iloc[:360].any() and track["scored"].iloc[361]
+    epochs = pd.read_parquet(tmp_path / "dr_epochs.parquet")
+    assert len(epochs) == 150 and int(epochs["scored"].sum()) == 120
+    np.testing.assert_allclose(epochs["water_lon_deg"], np.degrees(a.dead_reckoning.epochs.water_lon_rad))
     samples = pd.read_parquet(tmp_path / "deviation_samples.parquet")
     assert list(samples.columns)[:4] == ["time_utc", "ins1_lat_m", "ins1_lon_m", "ins1_course_deg"]
     assert samples["ins1_lat_m"].iloc[3] == pytest.approx(440.0 * math.sin(2.1) / 3.0, rel=1e-4)

@@ -10,6 +10,7 @@ When ``CI=true`` the test must not skip: a missing browser is a failure there.
 
 from __future__ import annotations
 
+import html as html_lib
 import json
 import os
 import re
@@ -17,9 +18,13 @@ import shutil
 import subprocess
 from pathlib import Path
 
+import matplotlib.pyplot as plt
+import numpy as np
 import pytest
-from test_report import HOSTILE, make_analysis
+from test_report import HOSTILE, _not_learned, make_analysis
 
+from dracc.geodesy import offset_ne_m
+from dracc.report import plots
 from dracc.report.html import CSP, render_html, write_html
 
 pytestmark = pytest.mark.slow
@@ -99,6 +104,71 @@ def test_html_in_real_browser(tmp_path):
     assert not any("example.com" in u for u in urls)
     # the hostile text shows as text, it did not become markup
     assert HOSTILE in data["body"]
+    # the estimated position: the learned model with its config block, NEES, the water track
+    assert "Learned model" in heads
+    body = data["body"]
+    assert "NEES\t36.0 over 24 legs" in body
+    assert "[dead_reckoning]\nlearn = false\n" in body
+    assert "water track (heading and log only, thin dashed)" in body
+
+
+def test_html_dead_reckoning_shows_nees_and_the_learned_model():
+    a = make_analysis("full")
+    text = render_html(a)
+    dr_part = text.split('<section id="dead-reckoning">', 1)[1].split("</section>", 1)[0]
+    assert "<td>NEES</td><td>36.0 over 24 legs (χ² bounds 26.5–77.0); mean per epoch 1.65" in dr_part
+    assert "out of sample" in dr_part and "5 epochs of earlier legs (prior only) not scored" in dr_part
+    assert "<td>largest part of the 2M</td><td>the change of the current (prior: [dead_reckoning] " \
+           "current_kn)</td>" in dr_part
+    assert "<td>heading correction</td><td>+0.31 ± 0.12°" in dr_part
+    assert "<td>log scale correction</td><td>-1.71 ± 0.23 %" in dr_part
+    assert "set 45° (towards), drift 0.49 kn" in dr_part
+    # the config block verbatim (escaped) in a <pre>
+    block = html_lib.escape(a.dead_reckoning.learned["config_block"], quote=True)
+    assert f'<pre class="config">{block}</pre>' in dr_part
+    # per leg: NEES where scored, '-' for leg 0 (prior only)
+    assert "<th>mean NEES</th><th>last NEES</th><th>NEES bound</th>" in dr_part
+    assert "<td>0</td><td>-</td><td>-</td><td>-</td><td>-</td></tr>" in dr_part
+    assert "<td>45</td><td>1.70</td><td>2.00</td><td>9.21</td></tr>" in dr_part
+
+
+def test_html_without_a_learned_model_says_so():
+    text = render_html(_not_learned(make_analysis("full")))
+    assert "Learned model" not in text and "<pre" not in text
+    assert "nothing learned" in text and "the dead-reckoning track (the water track" in text
+
+
+def test_track_plot_draws_the_water_track_and_the_estimated_position():
+    a = make_analysis("full")
+    fig, ax = plots.track_figure(a)
+    try:
+        lines = {ln.get_label(): ln for ln in ax.get_lines()}
+        water, ep = lines[plots.WATER_LABEL], lines[plots.EP_LABEL]
+        assert water.get_linestyle() == "--" and water.get_linewidth() < ep.get_linewidth()
+        assert ep.get_linestyle() == "-"
+        tr = a.dead_reckoning.track
+        lat0, lon0 = float(tr.lat_rad[0]), float(tr.lon_rad[0])
+        for line, (lat, lon) in ((water, (tr.water_lat_rad, tr.water_lon_rad)), (ep, (tr.lat_rad, tr.lon_rad))):
+            n, e = offset_ne_m(lat, lon, lat0, lon0)
+            x, y = (np.asarray(v, float) for v in line.get_data())
+            ok = np.isfinite(x)  # NaN breaks at the restarts
+            assert ok.sum() == len(n) and np.isnan(x).sum() == 24
+            np.testing.assert_allclose(x[ok], e / 1e3)
+            np.testing.assert_allclose(y[ok], n / 1e3)
+        # the two tracks differ (by the learned current: 0.25 m/s for up to an hour)
+        wx, ex = np.asarray(water.get_xdata(), float), np.asarray(ep.get_xdata(), float)
+        assert np.nanmax(np.abs(ex - wx)) > 0.5
+        assert "2M: each hour since the fix, and at each restart" in [p.get_label() for p in ax.patches]
+    finally:
+        plt.close(fig)
+    # learn = false: the DR is the water track, drawn once
+    fig, ax = plots.track_figure(_not_learned(a))
+    try:
+        labels = [ln.get_label() for ln in ax.get_lines()]
+        assert plots.DR_LABEL in labels and plots.WATER_LABEL not in labels and plots.EP_LABEL not in labels
+    finally:
+        plt.close(fig)
+    assert plots.track_plot(a) != plots.track_plot(_not_learned(a))
 
 
 def test_html_bare_shows_missing_and_only_the_track():

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import sqlite3
+from dataclasses import replace
 
 import pytest
 
@@ -98,3 +99,57 @@ def test_newer_schema_is_refused(tmp_path):
     con.close()
     with pytest.raises(StateError, match="schema 99"):
         StateStore(db)
+
+
+def _v1_database(db) -> None:
+    """A state file as schema 1 wrote it (nights without the DR verdict columns), one night."""
+    import re
+
+    from dracc import state
+
+    v2_only = "|".join(name for name, _ in state._NIGHT_COLUMNS_V2)
+    ddl = "\n".join(line for line in state._DDL.splitlines()
+                    if not re.match(rf"\s+({v2_only})\s", line))
+    con = sqlite3.connect(db)
+    con.executescript(ddl)
+    con.execute("INSERT INTO meta (key, value) VALUES ('schema', '1')")
+    con.execute("INSERT INTO nights (vessel, night, content_sha256, settings_sha256, audited_utc, "
+                "inputs_json, sources_json, dr_containment_2m, findings_json, missing_json) "
+                "VALUES ('Aurora', '2026-11-19', 'c', 's', '2026-11-20T00:20:00Z', '[]', '{}', 0.97, "
+                "'[]', '[]')")
+    con.commit()
+    con.close()
+
+
+def test_schema_1_database_is_migrated_in_place(tmp_path):
+    db = tmp_path / "old.sqlite"
+    _v1_database(db)
+    cols = {r[1] for r in sqlite3.connect(db).execute("PRAGMA table_info(nights)")}
+    assert "dr_verdict" not in cols
+    with StateStore(db) as store:
+        old = store.night("Aurora", "2026-11-19")
+        assert old.dr_containment_2m == 0.97 and (old.dr_verdict, old.dr_consistent, old.dr_nees) == (None,) * 3
+        with store.transaction():
+            store.insert_night(replace(_record("2026-11-20"), dr_verdict="inconsistent",
+                                       dr_verdict_text="inconsistent (circle too small): x",
+                                       dr_consistent=False, dr_nees=80.2))
+    con = sqlite3.connect(db)
+    assert con.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()[0] == "2"
+    cols = [r[1] for r in con.execute("PRAGMA table_info(nights)")]
+    assert cols[-4:] == ["dr_verdict", "dr_verdict_text", "dr_consistent", "dr_nees"]
+    con.close()
+    with StateStore(db) as store:  # opening it again changes nothing
+        new = store.night("Aurora", "2026-11-20")
+        assert (new.dr_verdict, new.dr_consistent, new.dr_nees) == ("inconsistent", False, 80.2)
+        assert [r.night for r in store.nights()] == ["2026-11-19", "2026-11-20"]
+
+
+def test_verdict_round_trip_and_null(tmp_path):
+    with StateStore(tmp_path / "s.sqlite") as store:
+        with store.transaction():
+            store.insert_night(replace(_record("2026-11-19"), dr_verdict="conservative",
+                                       dr_consistent=True, dr_nees=math.nan))
+            store.insert_night(_record("2026-11-20"))
+        a, b = store.night("Aurora", "2026-11-19"), store.night("Aurora", "2026-11-20")
+    assert (a.dr_verdict, a.dr_consistent, a.dr_nees) == ("conservative", True, None)
+    assert (b.dr_verdict, b.dr_consistent, b.dr_nees) == (None, None, None)

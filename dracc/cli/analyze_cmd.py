@@ -82,9 +82,10 @@ def build_config(config: Path | None, *, interval: str | None = None, window: st
     dr = cfg.dead_reckoning
     if dr_reset is not None:
         try:
-            parse_reset_s(dr_reset)
+            if dr_reset.strip().lower() != "auto":
+                parse_reset_s(dr_reset)
         except ConfigError as e:
-            raise ConfigError(f"--dr-reset {dr_reset!r}: expected 1h, 4h, 30min, watch or never") from e
+            raise ConfigError(f"--dr-reset {dr_reset!r}: expected auto, 1h, 4h, 30min, watch or never") from e
         dr = replace(dr, reset=dr_reset)
     if epoch_interval is not None:
         dr = replace(dr, epoch_interval_s=parse_duration_s(epoch_interval, "--epoch-interval"))
@@ -110,15 +111,16 @@ def analyze(
     html_path: Path | None = typer.Option(None, "--html", help="Write one self-contained offline HTML report."),
     interval: str | None = typer.Option(None, "--interval", help="INS sampling interval: 1h (default), 2h, 3600 ..."),
     window: str | None = typer.Option(None, "--window", help="Statistics window: 24h (default), 2d ..."),
-    dr_reset: str | None = typer.Option(None, "--dr-reset", help="Restart the DR from a fix: 1h "
-                                        "(default), 4h, 30min, watch, never."),
+    dr_reset: str | None = typer.Option(None, "--dr-reset", help="Restart the DR from a fix: auto "
+                                        "(default: 1h on logs of 8 h or more, shorter on short logs), "
+                                        "1h, 4h, 30min, watch, never."),
     probability: float | None = typer.Option(None, "--probability", help="Probability of limiting errors (K8), default 0.95."),
     role: list[str] = typer.Option([], "--role", help="Map a source to a role, KEY=ROLE (repeatable), "
                                    "e.g. --role INS2=ins2 --role II=compass."),
     date: str | None = typer.Option(None, "--date", help="YYYY-MM-DD for logs that carry no date."),
     strict: bool = typer.Option(False, "--strict", help="Fail on the first rejected line."),
     ignore_checksum: bool = typer.Option(False, "--ignore-checksum", help="Accept lines with wrong checksums (still counted)."),
-    epoch_interval: str | None = typer.Option(None, "--epoch-interval", help="Spacing of reported DR epochs: 10min (default)."),
+    epoch_interval: str | None = typer.Option(None, "--epoch-interval", help="Spacing of reported DR epochs: 10min, or a sixth of a shorter reset (default)."),
     variation: float | None = typer.Option(None, "--variation", help="Magnetic variation in degrees, east +, where the compass sends none."),
     fix_role: str | None = typer.Option(None, "--fix-role", help="DR restart fixes from gnss (default) or ins_mean."),
 ) -> None:

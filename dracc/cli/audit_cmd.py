@@ -94,7 +94,9 @@ def format_summary(o: AuditOutcome, probability: float | None = None) -> str:
         d = _digits(measure)
         lines.append(f"a priori raised: {e.unit} {e.channel} {_f(e.previous, d, measure)} -> "
                      f"{_f(e.value, d, measure)} (tonight's m_y is larger)")
-    if r.dr_containment_2m is not None:
+    if r.dr_verdict_text:  # the analysis' verdict: the same sentence as `dracc analyze`
+        lines.append(f"DR: {r.dr_verdict_text}")
+    elif r.dr_containment_2m is not None:
         lines.append(f"DR: reference inside 2M at {100 * r.dr_containment_2m:.1f} % of "
                      f"{_f(r.dr_n_scored, 0)} epochs")
     cal = []
@@ -201,6 +203,7 @@ def history_document(store: StateStore, vessel=None, unit=None, channel=None) ->
                                               "apriori_before", "apriori_after", "verdict")})
     nights = [{"vessel": r.vessel, "night": r.night, "audited_utc": r.audited_utc,
                "content_sha256": r.content_sha256, "dr_containment_2m": r.dr_containment_2m,
+               "dr_verdict": r.dr_verdict, "dr_consistent": r.dr_consistent, "dr_nees": r.dr_nees,
                "compass_error_deg": r.compass_error_deg, "log_scale": r.log_scale,
                "rejected_rate": r.rejected_rate, "findings": list(r.findings)}
               for v in ([vessel] if vessel else store.vessels()) for r in store.nights(v)]

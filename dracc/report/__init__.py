@@ -61,6 +61,12 @@ def fmt(x, digits: int = 1, none: str = "-") -> str:
     return f"{v:,.{digits}f}"
 
 
+def fmt_signed(x, digits: int = 2) -> str:
+    """A correction with its sign ('+0.31', '-0.02'); '-' for None/NaN."""
+    text = fmt(x, digits)
+    return text if text == "-" or text.startswith("-") else "+" + text
+
+
 def fmt_pct(x, digits: int = 1) -> str:
     """A fraction as a percentage; '-' for None/NaN."""
     if x is None or not np.isfinite(x):

@@ -9,11 +9,12 @@ from the logs goes through :func:`html.escape` as well.
 from __future__ import annotations
 
 import html
+import math
 from pathlib import Path
 
 from .. import atomic
 from ..pipeline import CHANNELS, Analysis, Estimate
-from . import fmt, fmt_duration, fmt_pct, iso_utc, short_utc
+from . import fmt, fmt_duration, fmt_pct, fmt_signed, iso_utc, short_utc
 from .page import CSP, data_uri  # one policy and one data URI for every page
 from .rows import EXCEEDS, WITHIN, channel_rows, unit_rows
 
@@ -34,6 +35,8 @@ figure img { max-width: 100%; height: auto; border: 1px solid #ddd; }
 figcaption { font-size: 0.9em; color: #555; }
 .kv td:first-child { text-align: left; color: #555; }
 .kv td { text-align: left; white-space: normal; }
+pre.config { background: #f6f6f6; border: 1px solid #ddd; padding: 0.5em 1em; font-size: 0.85em;
+             overflow-x: auto; }
 """
 
 
@@ -126,23 +129,95 @@ def _units(a: Analysis) -> str:
     return intro + table + notes + windows
 
 
+def _nees(dr) -> str:
+    if dr.nees_statistic is None or not math.isfinite(dr.nees_statistic):
+        return "-"
+    return (f"{fmt(dr.nees_statistic, 1)} over {len(dr.leg_checks)} legs (χ² bounds "
+            f"{fmt(dr.nees_lower, 1)}–{fmt(dr.nees_upper, 1)}); mean per epoch "
+            f"{fmt(dr.mean_nees, 2)} (2 expected)")
+
+
+def _learned(m: dict | None) -> str:
+    """The model learned from the fixes, and its [dead_reckoning] block in a <pre>."""
+    if m is None:
+        return ""
+
+    def g(key, digits, scale=1.0):
+        v = m.get(key)
+        return fmt(None if v is None else scale * v, digits)
+
+    def sg(key, digits, scale=1.0):
+        v = m.get(key)
+        return fmt_signed(None if v is None else scale * v, digits)
+
+    rows = [
+        ("current (persistent)", f"set {g('current_set_deg', 0)}° (towards), drift "
+                                 f"{g('current_drift_kn', 2)} kn"),
+        ("current variation", f"σ {g('current_variation_kn', 2)} kn per axis, τ "
+                              f"{fmt_duration(m.get('current_tau_s') or math.nan)}"),
+        ("heading correction", f"{sg('heading_correction_deg', 2)} ± "
+                               f"{g('heading_correction_sigma_deg', 2)}° (add to the DR course)"),
+        ("log scale correction", f"{sg('log_scale_correction', 2, 100.0)} ± "
+                                 f"{g('log_scale_correction_sigma', 2, 100.0)} % "
+                                 "(V<sub>true</sub> = (1 + s) V<sub>log</sub>)"),
+        ("short-term noise", f"σ {g('noise_kn', 2)} kn per axis, τ "
+                             f"{fmt_duration(m.get('noise_tau_s') or math.nan)}"),
+        ("fix noise", f"{g('fix_sigma_m', 1)} m per axis"),
+        ("model", f"the best of {_e(m.get('n_models', '-'))} grid models, weight "
+                  f"{g('model_weight', 3)}; filter step {g('filter_step_s', 0)} s; "
+                  f"{_e(m.get('n_fixes_used', '-'))} fixes used, {_e(m.get('n_outliers', '-'))} "
+                  "outliers left out"),
+    ]
+    kv = "".join(f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in rows)
+    block = m.get("config_block")
+    pre = ("" if not block else
+           "<p>To reuse this model where there is no reference, put this block in the "
+           f'configuration (<code>--config</code>):</p><pre class="config">{_e(block)}</pre>')
+    return f'<h3>Learned model</h3><table class="kv" id="dr-learned">{kv}</table>{pre}'
+
+
 def _dr(a: Analysis) -> str:
     dr = a.dead_reckoning
     if dr is None:
         return '<p class="missing">Dead reckoning not computed (see Missing).</p>'
+    position = ("estimated position: the water track plus the current and the compass and log "
+                "corrections learned from earlier fixes" if dr.scored_out_of_sample else
+                "the water track (heading and log; error model as configured, nothing learned)")
+    scored = f"{dr.n_scored} epochs after a fix"
+    if dr.scored_out_of_sample:
+        prior = int(sum((dr.epochs.since_fix_s > 0) & ~dr.epochs.scored.astype(bool)))
+        scored += (", out of sample (each leg's model learned only from fixes before it)"
+                   + (f"; {prior} epochs of earlier legs (prior only) not scored" if prior else ""))
     rows = [("heading", _e(dr.heading_source)), ("speed", _e(dr.speed_source)),
             ("restart", _e(dr.reset)), ("legs", str(len(dr.legs))),
             ("reference", _e(dr.reference_role or "none")),
+            ("position and 2M", _e(position)),
+            ("scored", _e(scored)),
             ("2M containment", f"{fmt_pct(dr.containment_2m)} of {dr.n_scored} epochs after a fix "
                                f"(a correct model: {fmt_pct(dr.expected_inside)})"),
-            ("RMS error / M", fmt(dr.error_over_m_rms, 2)), ("verdict", _e(dr.verdict))]
+            ("RMS error / M", fmt(dr.error_over_m_rms, 2)),
+            ("NEES", _nees(dr)),
+            ("reference σ", f"{fmt(dr.reference_sigma_m, 1)} m per axis (added to P for the comparison)")]
+    if dr.dominant_source:
+        key = f" (prior: [dead_reckoning] {_e(dr.dominant_key)})" if dr.dominant_key else ""
+        rows.append(("largest part of the 2M", f"{_e(dr.dominant_source)}{key}"))
+    rows.append(("verdict", _e(dr.verdict)))
     kv = "".join(f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in rows)
-    legs = _table(["leg", "start", "end", "fix", "inside 2M", "scored", "max error [m]"],
+    checks = {int(lc.leg): lc for lc in dr.leg_checks}
+
+    def nees(leg, field, digits):
+        lc = checks.get(int(leg.index))
+        return "-" if lc is None else fmt(getattr(lc, field), digits)
+
+    legs = _table(["leg", "start", "end", "fix", "inside 2M", "scored", "max error [m]",
+                   "mean NEES", "last NEES", "NEES bound"],
                   [[str(leg.index), _e(iso_utc(leg.start_ns)), _e(iso_utc(leg.end_ns)),
                     _e(leg.fix_source), fmt_pct(leg.containment_2m), str(leg.n_scored),
-                    fmt(leg.max_error_m, 0)] for leg in dr.legs], left=4)
+                    fmt(leg.max_error_m, 0), nees(leg, "mean_nees", 2), nees(leg, "last_nees", 2),
+                    nees(leg, "nees_upper", 2)] for leg in dr.legs], left=4)
     notes = "".join(f"<p>{_e(n)}</p>" for n in dr.notes)
-    return f'<table class="kv">{kv}</table>{notes}<details><summary>Legs</summary>{legs}</details>'
+    return (f'<table class="kv">{kv}</table>{notes}{_learned(dr.learned)}'
+            f"<details><summary>Legs</summary>{legs}</details>")
 
 
 def _calibration_current(a: Analysis) -> str:
@@ -191,11 +266,17 @@ def render_html(a: Analysis) -> str:
                  + "".join(f"<li>{_e(n)}</li>" for n in a.notes) + "</ul></section>")
     from . import plots  # matplotlib loads only when a page is drawn
 
+    dr = a.dead_reckoning
+    if dr is not None and dr.scored_out_of_sample:
+        track_caption = ("Track of every source, the estimated position with its 2M circles (each hour "
+                         "since the fix, and just before each restart) and the water track (heading "
+                         "and log only, thin dashed)")
+    else:
+        track_caption = ("Track of every source, the dead-reckoning track (the water track: heading "
+                         "and log only) and its 2M circles (each hour since the fix, and just before "
+                         "each restart)")
     figures = "".join([
-        _figure(plots.track_plot(a), "track plot",
-                "Track of every source, the dead-reckoning track and its 2M circles (each hour since "
-                "the fix, and just before each restart)",
-                "fig-track"),
+        _figure(plots.track_plot(a), "track plot", track_caption, "fig-track"),
         _figure(plots.deviation_plot(a), "deviation plot",
                 "Hourly deviations from the mean per unit and channel (the paper's Figure 1)",
                 "fig-deviations"),

@@ -55,6 +55,8 @@ def _deviation(a: Analysis) -> dict:
 def _epochs(t: DRTrack) -> list[dict]:
     lat_deg = np.degrees(t.lat_rad)
     lon_deg = np.degrees(t.lon_rad)
+    water_lat_deg = np.degrees(t.water_lat_rad)
+    water_lon_deg = np.degrees(t.water_lon_rad)
     orient_deg = np.degrees(t.orientation_rad)
     out = []
     for i in range(len(t.time_ns)):
@@ -69,7 +71,44 @@ def _epochs(t: DRTrack) -> list[dict]:
                         "orientation_deg": _num(orient_deg[i])},
             "ref_error_m": _num(t.ref_error_m[i]),
             "leg": int(t.leg[i]),
+            "water_lat_deg": _num(water_lat_deg[i]),
+            "water_lon_deg": _num(water_lon_deg[i]),
+            "scored": bool(t.scored[i]),
         })
+    return out
+
+
+def _learned(learned: dict | None) -> dict | None:
+    """The model learned from the voyage's fixes (``DRSection.learned``): numbers (NaN ->
+    null), counts and the ``config_block`` text as they are."""
+    if learned is None:
+        return None
+    out: dict[str, Any] = {}
+    for k, v in learned.items():
+        if isinstance(v, str) or v is None:
+            out[str(k)] = v
+        elif isinstance(v, (bool, np.bool_)):
+            out[str(k)] = bool(v)
+        elif isinstance(v, (int, np.integer)):
+            out[str(k)] = int(v)
+        else:
+            out[str(k)] = _num(v)
+    return out
+
+
+def _legs(dr: DRSection) -> list[dict]:
+    """The legs; the NEES figures where the leg was scored (``dr.leg_checks``), else null."""
+    checks = {int(lc.leg): lc for lc in dr.leg_checks}
+    out = []
+    for leg in dr.legs:
+        lc = checks.get(int(leg.index))
+        out.append({"index": leg.index, "start_utc": iso_utc(leg.start_ns),
+                    "end_utc": iso_utc(leg.end_ns), "fix_source": leg.fix_source,
+                    "containment_2m": _num(leg.containment_2m), "n_scored": int(leg.n_scored),
+                    "max_error_m": _num(leg.max_error_m),
+                    "mean_nees": None if lc is None else _num(lc.mean_nees),
+                    "last_nees": None if lc is None else _num(lc.last_nees),
+                    "nees_upper": None if lc is None else _num(lc.nees_upper)})
     return out
 
 
@@ -89,11 +128,16 @@ def _dead_reckoning(dr: DRSection) -> dict:
         "breaks": int(dr.n_breaks),
         "consistent": dr.consistent,
         "verdict": dr.verdict,
-        "legs": [{"index": leg.index, "start_utc": iso_utc(leg.start_ns),
-                  "end_utc": iso_utc(leg.end_ns), "fix_source": leg.fix_source,
-                  "containment_2m": _num(leg.containment_2m), "n_scored": int(leg.n_scored),
-                  "max_error_m": _num(leg.max_error_m)} for leg in dr.legs],
+        "legs": _legs(dr),
         "notes": list(dr.notes),
+        "mean_nees": _num(dr.mean_nees),
+        "nees": {"statistic": _num(dr.nees_statistic), "lower": _num(dr.nees_lower),
+                 "upper": _num(dr.nees_upper)},
+        "dominant_source": dr.dominant_source,
+        "dominant_key": dr.dominant_key,
+        "learned_model": _learned(dr.learned),
+        "reference_sigma_m": _num(dr.reference_sigma_m),
+        "scored_out_of_sample": bool(dr.scored_out_of_sample),
     }
 
 

@@ -93,8 +93,28 @@ def _origin(a: Analysis) -> tuple[float, float] | None:
     return None
 
 
-def track_plot(a: Analysis) -> bytes | None:
-    """Every source's track, the DR track and its 2M circles at each hour (km from the start)."""
+#: legend labels of the track plot (tests find the lines by them)
+EP_LABEL = "estimated position (EP)"
+DR_LABEL = "DR (water track)"
+WATER_LABEL = "water track (heading and log only)"
+
+
+def _by_leg(n_m, e_m, leg) -> tuple[np.ndarray, np.ndarray]:
+    """km east and north, thinned for the line, with a break (NaN) at each restart so no
+    line joins two legs."""
+    k = _stride(len(n_m))
+    ns, es, legs = n_m[::k], e_m[::k], leg[::k]
+    jumps = np.flatnonzero(np.diff(legs) != 0) + 1
+    return np.insert(es / 1e3, jumps, np.nan), np.insert(ns / 1e3, jumps, np.nan)
+
+
+def track_figure(a: Analysis):
+    """The track plot as a matplotlib (figure, axes), or None with nothing to plot.
+
+    Every source's track; the estimated position (solid black) with its 2M circles at each
+    hour since the fix and at each restart; the water track (heading and log only: thin,
+    dashed), where it differs from the estimated position (with ``learn = false`` the DR is
+    the water track).  Kilometres north/east of the start."""
     origin = _origin(a)
     if origin is None:
         return None
@@ -109,13 +129,13 @@ def track_plot(a: Analysis) -> bytes | None:
     if dr is not None and len(dr.track.time_ns):
         tr = dr.track
         n, e = offset_ne_m(tr.lat_rad, tr.lon_rad, lat0, lon0)
-        # break the line between legs so restarts do not draw jumps
-        k = _stride(len(n))
-        ns, es, legs = n[::k], e[::k], tr.leg[::k]
-        jumps = np.flatnonzero(np.diff(legs) != 0) + 1
-        e_km = np.insert(es / 1e3, jumps, np.nan)
-        n_km = np.insert(ns / 1e3, jumps, np.nan)
-        ax.plot(e_km, n_km, lw=1.4, color="black", label="DR")
+        wn, we = offset_ne_m(tr.water_lat_rad, tr.water_lon_rad, lat0, lon0)
+        learned = bool(dr.scored_out_of_sample)
+        differs = bool(np.any(np.hypot(wn - n, we - e) > 0.5))  # metres
+        if differs:
+            ax.plot(*_by_leg(wn, we, tr.leg), lw=0.7, ls="--", color="#7f7f7f", label=WATER_LABEL)
+        ax.plot(*_by_leg(n, e, tr.leg), lw=1.4, color="black",
+                label=EP_LABEL if learned or differs else DR_LABEL)
         # 2M at each whole hour since the fix and at the end of every leg (just before the
         # restart, where the circle is largest)
         hour = np.floor(tr.since_fix_s / 3600.0)
@@ -131,8 +151,21 @@ def track_plot(a: Analysis) -> bytes | None:
                                     if first else None))
                 first = False
     ax.set_aspect("equal", adjustable="datalim")
-    return _finish(fig, ax, "east of start [km]", "north of start [km]",
-                   "Tracks, dead reckoning and 2M circles", "best")
+    title = ("Tracks, estimated position, water track and 2M circles"
+             if dr is not None and dr.scored_out_of_sample else "Tracks, dead reckoning and 2M circles")
+    ax.set_xlabel("east of start [km]")
+    ax.set_ylabel("north of start [km]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(title)
+    return fig, ax
+
+
+def track_plot(a: Analysis) -> bytes | None:
+    """Every source's track, the estimated position with its 2M circles at each hour and the
+    water track (km from the start); PNG bytes."""
+    drawn = track_figure(a)
+    return None if drawn is None else png_bytes(drawn[0])
 
 
 def deviation_plot(a: Analysis) -> bytes | None:

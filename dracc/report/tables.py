@@ -3,7 +3,10 @@
 ``--out DIR`` writes, each as ``.csv`` and ``.parquet``:
 
 ``dr_track``         the full-rate DR track (time_utc, lat_deg, lon_deg, since_fix_s,
-                     radius_2m_m, semi_major_m, semi_minor_m, orientation_deg, ref_error_m, leg)
+                     radius_2m_m, semi_major_m, semi_minor_m, orientation_deg, ref_error_m, leg,
+                     water_lat_deg, water_lon_deg, scored): lat/lon and the 2M are those of the
+                     estimated position, water_* the water track (heading and log only), scored
+                     whether the row is scored out of sample
 ``dr_epochs``        the same columns at the reporting epochs
 ``deviation_samples`` one row per instant: time_utc and ``<unit>_lat_m``, ``<unit>_lon_m``,
                      ``<unit>_course_deg``
@@ -44,6 +47,9 @@ def dr_frame(t: DRTrack) -> pd.DataFrame:
         "orientation_deg": np.degrees(t.orientation_rad),
         "ref_error_m": t.ref_error_m,
         "leg": np.asarray(t.leg, dtype="int64"),
+        "water_lat_deg": np.degrees(t.water_lat_rad),
+        "water_lon_deg": np.degrees(t.water_lon_rad),
+        "scored": np.asarray(t.scored, dtype=bool),
     })
 
 

@@ -14,7 +14,7 @@ from rich.table import Table
 from rich.text import Text
 
 from ..pipeline import CHANNELS, Analysis, DeviationResult, Estimate
-from . import fmt, fmt_duration, fmt_pct, short_utc
+from . import fmt, fmt_duration, fmt_pct, fmt_signed, short_utc
 from .rows import EXCEEDS, unit_rows
 
 
@@ -88,18 +88,58 @@ def _notes(notes) -> list:
     return [Text(f"note: {note}") for note in notes]
 
 
+def _verdict_word(dr) -> str:
+    """'consistent', 'inconsistent (circle too small)', 'conservative', 'undetermined'."""
+    return dr.verdict.partition(":")[0].strip()
+
+
+def _learned_line(m: dict) -> Text:
+    """The learned current and corrections in one line (DRSection.learned)."""
+    scale, scale_sigma = m.get("log_scale_correction"), m.get("log_scale_correction_sigma")
+    return Text(f"learned  current set {fmt(m.get('current_set_deg'), 0)} ° drift "
+                f"{fmt(m.get('current_drift_kn'), 2)} kn; corrections: heading "
+                f"{fmt_signed(m.get('heading_correction_deg'), 2)} ± "
+                f"{fmt(m.get('heading_correction_sigma_deg'), 2)} °, log scale "
+                f"{fmt_signed(None if scale is None else 100.0 * scale, 2)} ± "
+                f"{fmt(None if scale_sigma is None else 100.0 * scale_sigma, 2)} %")
+
+
 def _dr_body(dr) -> list:
     body = [Text(f"heading  {dr.heading_source}; speed {dr.speed_source}; "
                  f"restart {dr.reset}; {len(dr.legs)} leg{'s' if len(dr.legs) != 1 else ''}")]
+    # the 2M is of the estimated position (water track + what was learned), or, with
+    # learn = false, of the water track itself
+    r2m = dr.epochs.radius_2m_m
+    max2m = fmt(float(np.nanmax(r2m)) if np.isfinite(r2m).any() else None, 0)
+    of = (f"2M       of the {'estimated position' if dr.scored_out_of_sample else 'DR water track'}, "
+          f"largest {max2m} m")
     if not dr.n_scored:
-        body.append(Text("no reference: consistency not scored"))
+        body.append(Text(f"{of}: " + ("no reference: consistency not scored" if dr.reference_role is None
+                                      else "no epoch scored against the reference")))
     else:
-        r2m = dr.epochs.radius_2m_m
-        max2m = fmt(float(np.nanmax(r2m)) if len(r2m) else None, 0)
-        body.append(Text(f"2M       reference ({dr.reference_role}) inside 2M at "
-                         f"{fmt_pct(dr.containment_2m)} of {dr.n_scored} epochs after a fix "
-                         f"(model: {fmt_pct(dr.expected_inside)}); RMS error/M "
-                         f"{fmt(dr.error_over_m_rms, 2)}; largest 2M {max2m} m"))
+        body.append(Text(f"{of}: reference ({dr.reference_role}) inside 2M at "
+                         f"{fmt_pct(dr.containment_2m)} (model: {fmt_pct(dr.expected_inside)})"))
+        if dr.scored_out_of_sample:
+            ep = dr.epochs
+            prior = int(np.sum((ep.since_fix_s > 0) & ~np.asarray(ep.scored, dtype=bool)))
+            scored = f"scored   {dr.n_scored} epochs out of sample (model learned from earlier fixes only)"
+            if prior:
+                scored += f"; {prior} prior-only epochs unscored"
+        else:
+            scored = f"scored   {dr.n_scored} epochs after a fix, error model as configured (learn = false)"
+        body.append(Text(scored))
+        nees = "-"
+        if np.isfinite(dr.nees_statistic):
+            n_legs = len(dr.leg_checks)
+            nees = (f"{fmt(dr.nees_statistic, 1)} over {n_legs} leg{'s' if n_legs != 1 else ''} "
+                    f"(chi² {fmt(dr.nees_lower, 1)}-{fmt(dr.nees_upper, 1)}), mean per epoch "
+                    f"{fmt(dr.mean_nees, 2)} (2 expected)")
+        body.append(Text(f"NEES     {nees}; RMS error/M {fmt(dr.error_over_m_rms, 2)} (1 expected)"))
+    if dr.learned is not None:
+        body.append(_learned_line(dr.learned))
+    if dr.dominant_source and _verdict_word(dr) != "consistent":
+        key = f" ([dead_reckoning] {dr.dominant_key})" if dr.dominant_key else ""
+        body.append(Text(f"dominant {dr.dominant_source}{key}"))
     body.append(Text(f"verdict  {dr.verdict}"))
     return body + _notes(dr.notes)
 
