@@ -960,6 +960,11 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
 # ------------------------------------------------------------------------- current
 
 
+def _drift_and_set(north_mps: float, east_mps: float) -> tuple[float, float]:
+    """Drift (m/s) and set (towards, rad in [0, 2 pi)) of a current (north, east)."""
+    return math.hypot(north_mps, east_mps), float(wrap_2pi(math.atan2(east_mps, north_mps)))
+
+
 def _current_learned(dr: _DRInputs, fixes) -> CurrentSection | None:
     """Set and drift as the estimated position uses them (dracc.ep).
 
@@ -978,8 +983,7 @@ def _current_learned(dr: _DRInputs, fixes) -> CurrentSection | None:
     dev = m.final_x[:, 2:4] - x[2:4]
     P = np.einsum("m,mij->ij", w, m.final_P[:, 2:4, 2:4] + dev[:, :, None] * dev[:, None, :])
     mean_n, mean_e = float(x[2]), float(x[3])
-    drift = math.hypot(mean_n, mean_e)
-    set_rad = float(wrap_2pi(math.atan2(mean_e, mean_n)))
+    drift, set_rad = _drift_and_set(mean_n, mean_e)
     u = np.array([mean_n, mean_e]) / drift if drift > 0 else np.array([1.0, 0.0])
     sigma_d = math.sqrt(max(float(u @ P @ u), 0.0))  # along the drift
     v = np.array([-u[1], u[0]])
@@ -1058,9 +1062,7 @@ def _current(dr: _DRInputs, fixes, cfg: DeadReckoningConfig, missing: list[str])
     cn = np.concatenate(cn_all)
     ce = np.concatenate(ce_all)
     s_d = np.concatenate(sig)
-    mean_n, mean_e = float(np.mean(cn)), float(np.mean(ce))
-    drift = math.hypot(mean_n, mean_e)
-    set_rad = float(wrap_2pi(math.atan2(mean_e, mean_n)))
+    drift, set_rad = _drift_and_set(float(np.mean(cn)), float(np.mean(ce)))
     sigma_d = float(np.sqrt(np.mean(s_d**2)))
     sigma_set = sigma_d / drift if drift > 0 else math.nan
     note = (f"voyage figures: the mean of the filtered current over {cn.size} filter epochs "

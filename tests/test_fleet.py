@@ -222,28 +222,25 @@ def test_an_unexpected_error_in_one_log_is_reported_not_raised(monkeypatch, tmp_
     assert not res["ok"] and res["error"].startswith("internal error (AssertionError")
 
 
-def test_cache_of_another_dracc_version_is_redone(tmp_path):
-    root = _fleet(tmp_path)
-    out = tmp_path / "out"
-    tasks = discover([root / "Aurora"])
-    run_fleet(tasks, CFG, out, workers=1, analyser=fake_analyser)
-    entry = sorted((out / "cache").rglob("*.json"))[0]
-    doc = json.loads(entry.read_text())
+def _another_version(doc):
     doc["dracc_version"] = "0.0.1"
-    entry.write_text(json.dumps(doc))
-    assert run_fleet(tasks, CFG, out, workers=1, analyser=fake_analyser).analysed == 1
 
 
-def test_cache_of_the_first_summary_schema_is_redone(tmp_path):
+def _first_summary_schema(doc):
     # a /1 summary has no DR verdict: the log is analysed again rather than shown without one
-    root = _fleet(tmp_path)
-    out = tmp_path / "out"
-    tasks = discover([root / "Aurora"])
-    run_fleet(tasks, CFG, out, workers=1, analyser=fake_analyser)
-    entry = sorted((out / "cache").rglob("*.json"))[0]
-    doc = json.loads(entry.read_text())
     doc["schema"] = "dracc.fleet.cache/1"
     del doc["summary"]["dr"]["verdict"], doc["summary"]["dr"]["nees"]
+
+
+@pytest.mark.parametrize("tamper", [_another_version, _first_summary_schema])
+def test_cache_of_another_version_or_schema_is_redone(tmp_path, tamper):
+    root = _fleet(tmp_path)
+    out = tmp_path / "out"
+    tasks = discover([root / "Aurora"])
+    run_fleet(tasks, CFG, out, workers=1, analyser=fake_analyser)
+    entry = sorted((out / "cache").rglob("*.json"))[0]
+    doc = json.loads(entry.read_text())
+    tamper(doc)
     entry.write_text(json.dumps(doc))
     assert run_fleet(tasks, CFG, out, workers=1, analyser=fake_analyser).analysed == 1
 
