@@ -73,3 +73,19 @@ def test_truth_inside_2m_out_of_sample_on_random_voyages_default_config():
     assert 0.93 <= pooled <= 0.995, pooled
     assert np.mean(per_voyage >= 0.90) >= 0.90, np.round(per_voyage, 3)
     assert np.mean((median_ratio >= 0.4) & (median_ratio <= 1.4)) >= 0.90, np.round(median_ratio, 2)
+
+
+def test_shipped_sample_and_simulate_seed_11_are_judged_consistent():
+    """The issue's two cases, default configuration: the shipped day at sea and the voyage
+    `dracc simulate --seed 11` writes (its defaults: 4 h), against their GNSS."""
+    from pathlib import Path
+
+    from dracc.pipeline import analyse
+
+    sample = Path(__file__).resolve().parents[1] / "sample_logs" / "day" / "voyage_day.mcap"
+    for a in (analyse([sample], Config()),
+              analyse_voyage(voyage_from_sim(simulate(SimParams(seed=11))), Config())):
+        dr = a.dead_reckoning
+        assert dr.scored_out_of_sample and dr.n_scored >= 30
+        assert dr.verdict.startswith("consistent"), dr.verdict
+        assert dr.containment_2m >= 0.9
