@@ -23,6 +23,7 @@ from ..config import load_config, validate
 from ..deadreckoning import parse_reset_s
 from ..errors import ConfigError, DraccError
 from ..ingest.frames import ROLES
+from ..ingest.sources import keys_must_match
 from .app import QUICK_EXIT, ConfigOption, LogsArgument, app, err, out, paths_exist, progress
 
 _DURATION = re.compile(r"^\s*([0-9]*\.?[0-9]+)\s*(s|sec|min|m|h|hr|d)?\s*$", re.IGNORECASE)
@@ -147,7 +148,8 @@ def analyze(
                     advance(target - state["done"])
                     state["done"] = target
 
-            result = analyse(logs, cfg, progress=on_progress, total_bytes=total)
+            with keys_must_match(parse_roles(role)):  # a --role key that matches nothing: error
+                result = analyse(logs, cfg, progress=on_progress, total_bytes=total)
         _write_reports(result, json_path, html_path, out_dir)
     QUICK_EXIT["on"] = True
 

@@ -20,7 +20,7 @@ from ..config import load_config, with_overrides
 from ..ingest import detect_format, read_file
 from ..ingest.frames import Rejects, TimeEvents
 from ..ingest.nmea import StreamState, iter_nmea_blocks
-from ..ingest.sources import assign_roles, summarize
+from ..ingest.sources import assign_roles, merge_infos, separate_files, summarize
 from ..ingest.timebase import EventCounter
 from .app import ConfigOption, LogsArgument, app, err, out, paths_exist, progress
 
@@ -35,7 +35,8 @@ def _iso(ns: int | None) -> str | None:
 
 def inspect_logs(paths: list[Path], cfg, show_progress: bool = True) -> dict:
     """The inspection report as a JSON-ready dict (the library side of the command)."""
-    sources: dict = {}
+    per_file: list[tuple[str, dict]] = []  # each file's sources: a key two files share is
+    per_file_events: list[tuple[str, dict]] = []  # one source only if separate_files says so
     rejects = Rejects()
     te = TimeEvents()
     events: dict[str, dict] = {}
@@ -47,6 +48,8 @@ def inspect_logs(paths: list[Path], cfg, show_progress: bool = True) -> dict:
     with progress("inspect", total if show_progress else None) as advance:
         for p in paths:
             fmt = detect_format(p)
+            sources: dict = {}
+            per_file.append((str(p), sources))
             if fmt == "nmea":
                 st = StreamState(str(p))
                 for block in iter_nmea_blocks(p, cfg, st, progress=advance):
@@ -78,15 +81,21 @@ def inspect_logs(paths: list[Path], cfg, show_progress: bool = True) -> dict:
             te.decisions.extend(f"{p.name}: {d}" for d in tev.decisions)
             te.examples.extend(tev.examples[:6])
             notes.extend(f"{p.name}: {n}" for n in nts)
-            for key, ev in per_src.items():
-                agg = events.setdefault(key, {"duplicates": 0, "backsteps": 0, "gaps": 0, "max_gap_s": 0.0})
-                for k in ("duplicates", "backsteps", "gaps"):
-                    agg[k] += ev[k]
-                agg["max_gap_s"] = max(agg["max_gap_s"], ev["max_gap_s"])
+            per_file_events.append((str(p), per_src))
             inputs.append({"path": str(p), "format": fmt, "lines": n_lines,
                            "records": records if records is not None else
                            sum(s.records for s in sources.values() if str(p) in s.files),
                            "rejected": dict(rej.counts)})
+    renames, identity_notes = separate_files(per_file) if len(per_file) > 1 else ({}, [])
+    sources = merge_infos(per_file, renames)
+    for f, per_src in per_file_events:
+        for key, ev in per_src.items():
+            key = renames.get(f, {}).get(key, key)
+            agg = events.setdefault(key, {"duplicates": 0, "backsteps": 0, "gaps": 0, "max_gap_s": 0.0})
+            for k in ("duplicates", "backsteps", "gaps"):
+                agg[k] += ev[k]
+            agg["max_gap_s"] = max(agg["max_gap_s"], ev["max_gap_s"])
+    te.decisions.extend(identity_notes)
     role_notes = assign_roles(sources, dict(cfg.sources))
     src_out = {}
     for key in sorted(sources):

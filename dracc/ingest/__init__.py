@@ -9,6 +9,10 @@ Public API::
     nmea.parse_sentences(lines, time_ns, source, file, cfg) -> FileResult
     nmea.iter_nmea_blocks(path, cfg, state=None) -> Iterator[Block]   (streaming, bounded memory)
     sources.assign_roles(sources, mapping) -> list[str]
+    sources.separate_files(per_file) -> (renames, notes)   (one key in several files)
+
+A key that several files carry is one source only where the files follow each other in
+time; overlapping, each file's key becomes ``<file id>:<key>`` (see docs/ingest.md).
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ import pandas as pd
 from ..errors import IngestError
 from .frames import KINDS, FileResult, Rejects, SourceInfo, TimeEvents, Voyage, empty_frame
 from .nmea import check_readable
-from .sources import assign_roles, summarize
+from .sources import assign_roles, merge_infos, rename_sources, separate_files, summarize
 
 if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
     from ..config import IngestConfig
@@ -168,10 +172,14 @@ def read_logs(paths: list[Path], cfg: IngestConfig, progress=None) -> Voyage:
     if not paths:
         raise IngestError("no log files given")
     results = [read_file(p, cfg, progress=progress) for p in paths]
-    frames = _merge_frames(results)
-    sources: dict = {}
+    # a source is its file and its key: a key two files share is one source only where
+    # the files follow each other in time (separate_files says which, in the notes)
+    per_file = [(r.path, summarize_frames(r.frames, r.path)) for r in results]
+    renames, identity_notes = separate_files(per_file) if len(results) > 1 else ({}, [])
     for r in results:
-        summarize_frames(r.frames, r.path, into=sources)
+        rename_sources(r.frames, renames.get(r.path, {}))
+    sources = merge_infos(per_file, renames)
+    frames = _merge_frames(results)
     rejects = Rejects()
     te = TimeEvents()
     inputs = []
@@ -188,6 +196,7 @@ def read_logs(paths: list[Path], cfg: IngestConfig, progress=None) -> Voyage:
         te.examples.extend(e.examples[:10])
         inputs.append({"path": r.path, "format": r.format, "lines": r.lines, "records": r.records,
                        "rejected": dict(Counter(r.rejects.counts))})
+    te.decisions.extend(identity_notes)
     te.decisions.extend(assign_roles(sources, dict(cfg.sources)))
     return Voyage(frames=frames, sources=sources, rejects=rejects, time_events=te, inputs=inputs,
                   lines=sum(r.lines for r in results))

@@ -43,6 +43,7 @@ from ..config import IngestConfig
 from ..errors import IngestError
 from .csv_quantities import (
     QUANTITIES,
+    REF_QUANTITIES,
     UNITLESS_HINTS,
     add_rejects,
     build_frames,
@@ -346,7 +347,7 @@ def _read_long_pass(p: Path, cols: list[str], declared: dict, rejects: Rejects, 
         if empty.any():
             add_rejects(rejects, "empty value", file, lines[empty], [str(q) for q in qname[empty][:5]])
         keep = ok & known & ~empty
-        isref = qmapped == "reference"
+        isref = np.isin(qmapped, list(REF_QUANTITIES))
         num = np.full(len(val), np.nan)
         nr = keep & ~isref
         if nr.any():
@@ -399,7 +400,7 @@ def _records(t_ns, sc, qc, num, lines, ref, sources: _Labels, quantities: _Label
         m = qc == code
         r = rec[m]  # distinct within a quantity, by construction of the key
         q = str(qlabels[code])
-        if q == "reference":
+        if q in REF_QUANTITIES:
             arr = np.full(nrec, None, dtype=object)
             arr[r] = ref[m]
         else:
@@ -455,7 +456,7 @@ def _read_wide(p: Path, cols: list[str], declared: dict, rejects: Rejects, notes
         vals = {}
         for c, qname in qcols.items():
             text = data[c][ok]
-            if qname == "reference":
+            if qname in REF_QUANTITIES:
                 vals[qname] = np.where(text == "", None, text)
             else:
                 vals[qname] = _numbers(text, lines[ok], c, rejects, file)

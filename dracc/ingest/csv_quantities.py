@@ -19,7 +19,8 @@ quality, hdop      position  quality, hdop           (none)
 heading            heading   heading_rad             deg, rad
 deviation          heading   deviation_rad           deg, rad
 variation          heading   variation_rad           deg, rad (east positive)
-reference          heading   reference               (none; 'T' or 'M')
+reference          heading   reference               (none; 'T'/'M', 'true'/'magnetic' ...)
+is_true ...        heading   reference               (none; boolean, see vocabulary.py)
 cog                ground    cog_rad                 deg, rad
 sog                ground    sog_mps                 kn, mps, kmh
 stw                water     stw_mps                 kn, mps, kmh
@@ -48,6 +49,7 @@ import pandas as pd
 
 from ..units import DEG_RAD, KMH_MPS, KN_MPS, NMI_M
 from .frames import KIND_COLUMNS, Rejects, make_frame
+from .vocabulary import BOOLEAN_FIELDS, REJECT_REASON, normalize_boolean, normalize_reference
 
 _ANGLE = {"deg": DEG_RAD, "rad": 1.0}
 _SPEED = {"kn": KN_MPS, "mps": 1.0, "kmh": KMH_MPS}
@@ -92,11 +94,16 @@ def _build_table() -> dict[str, Quantity]:
             table[name] = Quantity(name, kind, column, factor)
     for name, kind in (("quality", "position"), ("hdop", "position"), ("reference", "heading")):
         table[name] = Quantity(name, kind, name, 1.0)
+    for name in BOOLEAN_FIELDS:  # 'is_true' etc.: a boolean that gives the reference
+        table[name] = Quantity(name, "heading", "reference", 1.0)
     return table
 
 
 #: every quantity name dracc understands, e.g. QUANTITIES['stw_kn'].factor == 1852/3600
 QUANTITIES: dict[str, Quantity] = _build_table()
+
+#: the quantity names whose values are a heading reference (text or boolean), not numbers
+REF_QUANTITIES = frozenset(n for n, q in QUANTITIES.items() if q.column == "reference")
 
 #: names that look like a physical quantity but carry no unit: a hint for the user
 UNITLESS_HINTS = {"lat", "lon", "latitude", "longitude", "heading", "hdg", "course", "cog",
@@ -193,9 +200,22 @@ def build_frames(time_ns: np.ndarray, source, line: np.ndarray, sentence,
         q = QUANTITIES[name]
         cols = by_kind.setdefault(q.kind, {})
         if q.column == "reference":
-            ref = np.asarray(arr, dtype=object)
-            ref = np.where(pd.isna(ref) | (ref == ""), None, ref)
+            ref, bad = (normalize_boolean(arr, BOOLEAN_FIELDS[name]) if name in BOOLEAN_FIELDS
+                        else normalize_reference(arr))
+            if "reference" in cols:  # two fields give it: they must agree
+                prev = cols["reference"]
+                clash = (prev != None) & (ref != None) & (prev != ref)  # noqa: E711
+                bad |= clash
+                ref = np.where(prev != None, prev, ref)  # noqa: E711
+                bad_prev = cols.pop("_ref_bad")
+                bad |= bad_prev
             cols["reference"] = ref
+            cols["_ref_bad"] = bad
+            if bad.any():
+                idx = np.flatnonzero(bad)
+                raw = np.asarray(arr, dtype=object)
+                add_rejects(rejects, REJECT_REASON, file, line[idx],
+                            [f"{name}={raw[i]!r}" for i in idx[:5]])
             continue
         v = np.asarray(arr, dtype=np.float64) * q.factor
         if q.column in cols:
@@ -214,6 +234,7 @@ def build_frames(time_ns: np.ndarray, source, line: np.ndarray, sentence,
     src, sen = _labels(source, n), _labels(sentence, n)
     tal = _labels("" if talker is None else talker, n)
     for kind, cols in by_kind.items():
+        ref_bad = cols.pop("_ref_bad", None)
         numeric = {c: v for c, v in cols.items() if c != "reference"}
         present = np.zeros(n, dtype=bool)
         for v in numeric.values():
@@ -237,6 +258,8 @@ def build_frames(time_ns: np.ndarray, source, line: np.ndarray, sentence,
                 add_rejects(rejects, f"{c} out of range", file, line[idx],
                             [f"{c}={v[i]:.6g} (canonical unit)" for i in idx[:5]])
                 keep &= ~bad
+        if ref_bad is not None:
+            keep &= ~ref_bad  # counted above: never read as true or magnetic by accident
         if not keep.any():
             continue
         idx = np.flatnonzero(keep)

@@ -70,9 +70,10 @@ import pandas as pd
 
 from ..config import IngestConfig
 from ..errors import IngestError
-from .csv_quantities import add_rejects, build_frames, check_declared, lookup
+from .csv_quantities import REF_QUANTITIES, add_rejects, build_frames, check_declared, lookup
 from .frames import FileResult, Rejects
 from .mcap_cdr import CdrError, compile_schema, decode_channel, scalar_paths, string_paths
+from .vocabulary import ASCII_CODES, ros_constants
 
 MAGIC = b"\x89MCAP0\r\n"
 _PIECE = 1 << 20
@@ -554,6 +555,9 @@ class _Reader:
                     want[p] = q.name
         if "reference" in paths:
             want["reference"] = "_reference_code"
+            # the definition's own constants (compass_msgs/Azimuth: REFERENCE_MAGNETIC=0,
+            # REFERENCE_GEOGRAPHIC=1, REFERENCE_UTM=2) win over dracc's ASCII codes 84/77
+            ch.state["ref_codes"] = ros_constants(ch.schema.data.decode("utf-8", "replace"))
         text_path = None
         if short == "Sentence" and "sentence" in strs:
             text_path = "sentence"
@@ -615,7 +619,14 @@ class _Reader:
                 # NavSatStatus -1 no fix, 0 fix, 1 SBAS, 2 GBAS -> GGA-style quality 0, 1, 2, 4
                 out["quality"] = np.select([v == -1, v == 0, v == 1, v == 2], [0.0, 1.0, 2.0, 4.0], np.nan)
             elif q == "_reference_code":
-                out["reference"] = np.where(v == 77, "M", np.where(v == 84, "T", None)).astype(object)
+                codes = ch.state.get("ref_codes") or {}
+                if codes:  # declared constants: a declared code dracc cannot use is not understood
+                    ref = np.array([None if c != c else (codes.get(int(c)) or f"code {int(c)}")
+                                    for c in v.tolist()], dtype=object)
+                else:  # dracc's uint8 reference: 84 'T', 77 'M', 0 not given
+                    ref = np.array([None if (c != c or c == 0) else ASCII_CODES.get(int(c), f"code {int(c)}")
+                                    for c in v.tolist()], dtype=object)
+                out["reference"] = ref
             elif not q.startswith("_"):
                 out[q] = v
         if "_qw" in want.values():
@@ -786,11 +797,10 @@ class _Reader:
                                  np.asarray(kk, np.int64))
             return
         out = {q: np.array([getattr(m, f) if m is not None else np.nan for m in msgs], dtype=np.float64)
-               for f, q in plan["fields"].items() if q != "reference"}
-        if "reference" in plan["fields"].values():
-            f = next(k for k, q in plan["fields"].items() if q == "reference")
-            out["reference"] = np.array([(getattr(m, f) or None) if m is not None else None for m in msgs],
-                                        dtype=object)
+               for f, q in plan["fields"].items() if q not in REF_QUANTITIES}
+        for f, q in plan["fields"].items():
+            if q in REF_QUANTITIES:  # text or boolean, normalised by build_frames
+                out[q] = np.array([getattr(m, f) if m is not None else None for m in msgs], dtype=object)
         self._add_part(ch, t[good], nums[good], {k: v[good] for k, v in out.items()})
 
     def _proto_plan(self, ch: _Channel, msg) -> dict | None:
@@ -1207,7 +1217,7 @@ def _json_columns(joined: bytes, n: int, plan: dict) -> dict[str, np.ndarray] | 
     (``benchmarks/bench_mcap.py``)."""
     import pyarrow as pa
     import pyarrow.json as pj
-    fields = [pa.field(k, pa.string() if q == "reference" else pa.float64()) for k, q in plan["fields"].items()]
+    fields = [pa.field(k, pa.string() if q == "reference" else pa.bool_() if q in REF_QUANTITIES else pa.float64()) for k, q in plan["fields"].items()]
     st = plan["stamp"]
     if st:
         inner = pa.struct([pa.field(st[1], pa.float64()), pa.field(st[2], pa.float64())])
@@ -1230,7 +1240,7 @@ def _json_columns(joined: bytes, n: int, plan: dict) -> dict[str, np.ndarray] | 
     cols: dict[str, np.ndarray] = {"_ok": np.ones(n, dtype=bool)}
     for k, q in plan["fields"].items():
         c = table.column(k)
-        if q == "reference":
+        if q in REF_QUANTITIES:
             cols[q] = np.asarray(c.to_pylist(), dtype=object)
         else:
             cols[q] = c.to_numpy(zero_copy_only=False).astype(np.float64)
@@ -1257,7 +1267,7 @@ def _num(v) -> float:
 
 def _json_columns_slow(payloads: list[bytes], plan: dict) -> dict[str, np.ndarray]:
     n = len(payloads)
-    cols: dict[str, np.ndarray] = {q: (np.full(n, None, dtype=object) if q == "reference" else np.full(n, np.nan))
+    cols: dict[str, np.ndarray] = {q: (np.full(n, None, dtype=object) if q in REF_QUANTITIES else np.full(n, np.nan))
                                    for q in plan["fields"].values()}
     ok = np.ones(n, dtype=bool)
     st = plan["stamp"]
@@ -1270,7 +1280,7 @@ def _json_columns_slow(payloads: list[bytes], plan: dict) -> dict[str, np.ndarra
             obj = json.loads(p)
             for k, q in plan["fields"].items():
                 v = obj.get(k)
-                if q == "reference":
+                if q in REF_QUANTITIES:
                     cols[q][i] = v
                 else:
                     cols[q][i] = _num(v)

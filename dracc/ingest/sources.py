@@ -15,9 +15,10 @@ Role assignment (:func:`assign_roles`), in this order:
 3. content, only where unambiguous: talker families (GP/GN/GA/GL/GB -> gnss; exactly
    three INS-type talkers or keys (IN, II, IR, or names containing 'INS') with
    positions -> ins1..3 in sorted order); the only source with heading sentences and
-   no positions -> compass (where there is none, the only source with heading sentences
-   at all; where there are several, the only one giving true heading, HDT/THS); the only
-   source with VHW/VBW -> log.  An instrument bus (e.g. 'II' with HDG + VHW) may be compass and log.
+   no positions -> compass (where there is none, the only instrument bus with heading
+   sentences; where there are several, the only one giving true heading, HDT/THS); a
+   source of fixes without log sentences (an INS, a GNSS compass) is never made the
+   compass by content; the only source with VHW/VBW -> log.  An instrument bus (e.g. 'II' with HDG + VHW) may be compass and log.
 4. Otherwise the role stays free and a note names the candidates; where the data
    clearly need a role that two sources claim, :class:`AmbiguousSourceError` is for
    the caller that requires it (``require_role``).
@@ -27,6 +28,9 @@ from __future__ import annotations
 
 import re
 from collections import Counter
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 
 import numpy as np
 import pandas as pd
@@ -82,6 +86,23 @@ def summarize(frames: dict[str, pd.DataFrame], file: str,
     return out
 
 
+#: mapping keys that must match a source (``--role KEY=ROLE`` on the command line: a key
+#: that matches nothing is a mistake there, while a fleet's [ingest.sources] may name
+#: units a given log lacks)
+_MUST_MATCH: ContextVar[frozenset[str]] = ContextVar("dracc_role_keys_must_match", default=frozenset())
+
+
+@contextmanager
+def keys_must_match(keys) -> Iterator[None]:
+    """Within the block, :func:`assign_roles` raises :class:`ConfigError` for a mapping key
+    in ``keys`` that matches no source (naming the keys that exist)."""
+    token = _MUST_MATCH.set(frozenset(keys))
+    try:
+        yield
+    finally:
+        _MUST_MATCH.reset(token)
+
+
 def _talker(info: SourceInfo) -> str | None:
     """The dominant talker of a source, if any."""
     if not info.talkers:
@@ -124,6 +145,11 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
         if not hits:
             hits = [s for s in sources.values() if _talker(s) == key or key in s.talkers]
         if not hits:
+            if key in _MUST_MATCH.get():
+                known = ", ".join(sorted(sources)) or "none"
+                talkers = sorted({t for x in sources.values() for t in x.talkers} - set(sources))
+                raise ConfigError(f"--role {key}={role}: no source has the key {key!r}; the sources are "
+                                  f"{known}" + (f" (talkers {', '.join(talkers)})" if talkers else ""))
             notes.append(f"[ingest.sources] {key!r} matches no source in the data")
         for s in hits:
             give(s, role, "configuration")
@@ -172,6 +198,20 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
     if "compass" not in taken:
         cands = [s for s in sources.values() if has(s, HEADING_SENTENCES)
                  and not any(r in INS_ROLES or r == "gnss" for r in s.roles)]
+        # what a sentence type can be: a source of fixes (GGA/GLL/RMC/GNS) that gives heading
+        # too is an INS or a GNSS compass (a lone IN, a skytraq GN with HDT), not the ship's
+        # compass; only an instrument bus (fixes beside speed-log sentences, e.g. II with
+        # RMC + HDG + VHW) may still be.  The pipeline takes heading from such a source, and
+        # says so, only where no compass exists.
+        devices = [s for s in cands if has(s, POSITION_SENTENCES) and not has(s, LOG_SENTENCES)]
+        if devices:
+            cands = [s for s in cands if s not in devices]
+            for s in sorted(devices, key=lambda s: s.key):
+                hs = "/".join(x for x in sorted(HEADING_SENTENCES) if s.sentences.get(x))
+                ps = "/".join(x for x in sorted(POSITION_SENTENCES) if s.sentences.get(x))
+                notes.append(f"{s.key} not given the compass role: it sends fixes ({ps}) as well as "
+                             f"heading ({hs}), so it is an INS or a GNSS compass; map it "
+                             f"(--role {s.key}=compass) if it is the ship's compass")
         pure = [s for s in cands if not has(s, POSITION_SENTENCES)]  # heading sentences only
         if pure:
             cands = pure
@@ -216,3 +256,124 @@ def sentence_counts(infos: dict[str, SourceInfo]) -> Counter:
     for s in infos.values():
         c.update(s.sentences)
     return c
+
+
+# ------------------------------------------------------------ one key in several files
+#: two files' records of one key overlapping in time by more than this are two sources
+FILE_OVERLAP_S = 60.0
+_SEP = re.compile(r"[_\-. ]")
+
+
+def file_ids(files: list[str]) -> dict[str, str]:
+    """A short, distinct name per file: the file stems without what all of them share at
+    the start and the end, cut at a separator (``NBP1406_seap-2014-08-01`` and
+    ``NBP1406_gp02-2014-08-01`` -> ``seap``, ``gp02``); the whole stems where that leaves
+    nothing or no longer tells the files apart."""
+    from os.path import commonprefix
+    from pathlib import Path
+
+    stems = {f: Path(f).name.rsplit(".", 1)[0] if "." in Path(f).name[1:] else Path(f).name for f in files}
+    names = list(dict.fromkeys(stems.values()))
+    ids = dict(stems)
+    if len(names) > 1:
+        pre = commonprefix(names)
+        cut = max((m.end() for m in _SEP.finditer(pre)), default=0)
+        suf = commonprefix([n[::-1] for n in names])[::-1]
+        cut_end = min((m.start() for m in _SEP.finditer(suf)), default=len(suf))
+        tail = len(suf) - cut_end
+        short = {f: s[cut:len(s) - tail if tail else None] for f, s in stems.items()}
+        if all(short.values()) and len(set(short.values())) == len(names):
+            ids = short
+    seen: Counter = Counter()
+    out = {}
+    for f in files:  # the same name in two folders: numbered
+        seen[ids[f]] += 1
+        out[f] = ids[f] if seen[ids[f]] == 1 else f"{ids[f]}~{seen[ids[f]]}"
+    return out
+
+
+def _span(info: SourceInfo) -> str:
+    import datetime as dt
+
+    def hm(ns):
+        return dt.datetime.fromtimestamp(ns / 1e9, tz=dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
+    return f"{hm(info.first_ns)}-{hm(info.last_ns)[11:]}" if info.first_ns is not None else "no times"
+
+
+def separate_files(per_file: list[tuple[str, dict[str, SourceInfo]]],
+                   overlap_s: float = FILE_OVERLAP_S) -> tuple[dict[str, dict[str, str]], list[str]]:
+    """Decide, for every source key that several files carry, whether it is one source.
+
+    A source is its file *and* its key (TAG ``s:``, topic, CSV source or talker): two
+    GPS receivers logged to two files both say ``GP``.  Where the files' records of a key
+    overlap in time by more than ``overlap_s`` they are two instruments: each file's key
+    becomes ``<file id>:<key>`` (:func:`file_ids`).  Where they follow each other in
+    time (one recorder's consecutive files) they are one source.  Either way a note says
+    so.  Returns ({file: {old key: new key}}, notes); a key found in one file only keeps
+    its name, so single-file keys never change.
+    """
+    by_key: dict[str, list[tuple[str, SourceInfo]]] = {}
+    for f, infos in per_file:
+        for k, s in infos.items():
+            by_key.setdefault(k, []).append((f, s))
+    renames: dict[str, dict[str, str]] = {f: {} for f, _ in per_file}
+    notes: list[str] = []
+    ids = None
+    from pathlib import Path
+
+    for key, lst in by_key.items():
+        if len(lst) < 2:
+            continue
+        timed = [(f, s) for f, s in lst if s.first_ns is not None]
+        overlap = max((min(a.last_ns, b.last_ns) - max(a.first_ns, b.first_ns)
+                       for i, (_, a) in enumerate(timed) for _, b in timed[i + 1:]), default=-1)
+        where = ", ".join(f"{Path(f).name} {_span(s)}" for f, s in lst)
+        if overlap > overlap_s * 1e9:
+            if ids is None:
+                ids = file_ids([f for f, _ in per_file])
+            new = {f: f"{ids[f]}:{key}" for f, _ in lst}
+            for f, n in new.items():
+                renames[f][key] = n
+            notes.append(f"{key}: in {len(lst)} files whose times overlap by {overlap / 1e9:.0f} s ({where}): "
+                         f"{len(lst)} instruments, kept apart as {', '.join(new.values())}")
+        else:
+            notes.append(f"{key}: one source over {len(lst)} files that follow each other in time "
+                         f"({where}); merged")
+    return renames, notes
+
+
+def merge_infos(per_file: list[tuple[str, dict[str, SourceInfo]]],
+                renames: dict[str, dict[str, str]]) -> dict[str, SourceInfo]:
+    """The per-file summaries under their decided keys, merged where a key is shared."""
+    out: dict[str, SourceInfo] = {}
+    for f, infos in per_file:
+        for k, s in infos.items():
+            key = renames.get(f, {}).get(k, k)
+            m = out.setdefault(key, SourceInfo(key=key))
+            m.talkers.update(s.talkers)
+            m.sentences.update(s.sentences)
+            m.records += s.records
+            if s.first_ns is not None:
+                m.first_ns = s.first_ns if m.first_ns is None else min(m.first_ns, s.first_ns)
+                m.last_ns = s.last_ns if m.last_ns is None else max(m.last_ns, s.last_ns)
+            m.files |= s.files
+    return out
+
+
+def rename_sources(frames: dict[str, pd.DataFrame], mapping: dict[str, str]) -> None:
+    """Rename source keys in a file's frames, in place (categoricals keep their codes)."""
+    if not mapping:
+        return
+    for df in frames.values():
+        if df is None or "source" not in df:
+            continue
+        col = df["source"]
+        if isinstance(col.dtype, pd.CategoricalDtype):
+            cats = [str(c) for c in col.cat.categories]
+            new = [mapping.get(c, c) for c in cats]
+            if new != cats and len(set(new)) == len(new):
+                df["source"] = col.cat.rename_categories(new)
+            elif new != cats:
+                df["source"] = pd.Categorical(col.astype(str).map(lambda x: mapping.get(x, x)))
+        else:
+            df["source"] = col.astype(str).map(lambda x: mapping.get(x, x))
