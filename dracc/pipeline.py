@@ -573,15 +573,30 @@ def _heading_series(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
                      "[dead_reckoning] deviation_table: deviation taken as 0 there")
         dev = np.where(np.isfinite(dev), dev, 0.0)
     n_var = int(np.sum(~np.isfinite(var)))
-    if n_var:
-        if cfg.variation_deg is not None:
-            var = np.where(np.isfinite(var), var, cfg.variation_deg * DEG_RAD)
-            desc += f", variation {cfg.variation_deg:g}° from the configuration"
-        else:
-            missing.append(f"magnetic variation: the compass sends none at {n_var} of {var.size} "
-                           "samples and none is configured; the DR takes it as 0 there, so its "
-                           "course is off by the local variation (give --variation DEG)")
-            var = np.where(np.isfinite(var), var, 0.0)
+    # many compasses send a zero placeholder (HDG ...,0.0,E): a configured variation
+    # (--variation, [dead_reckoning] variation_deg) wins over a zero field, never over a
+    # non-zero one; the notes say which was used where
+    n_zero = int(np.sum(var == 0.0))
+    n_own = int(np.sum(np.isfinite(var) & (var != 0.0)))
+    if cfg.variation_deg is not None and (n_var or n_zero):
+        fill = ~np.isfinite(var) | (var == 0.0)
+        var = np.where(fill, cfg.variation_deg * DEG_RAD, var)
+        desc += f", variation {cfg.variation_deg:g}° from the configuration"
+        what = " and ".join(x for x in (f"none at {n_var}" if n_var else "",
+                                        f"0.0 (a placeholder) at {n_zero}" if n_zero else "") if x)
+        notes.append(f"magnetic variation: the configured {cfg.variation_deg:g}° used at "
+                     f"{n_var + n_zero} of {var.size} compass samples (the compass sent {what})"
+                     + (f"; the compass's own non-zero variation kept at {n_own}" if n_own else ""))
+        n_var = 0
+    elif n_zero and cfg.variation_deg is None:
+        notes.append(f"magnetic variation: the compass sends 0.0 at {n_zero} of {var.size} samples "
+                     "(often a placeholder); it is used as sent (give --variation DEG if the local "
+                     "variation is not zero)")
+    if n_var:  # none sent, none configured
+        missing.append(f"magnetic variation: the compass sends none at {n_var} of {var.size} "
+                       "samples and none is configured; the DR takes it as 0 there, so its "
+                       "course is off by the local variation (give --variation DEG)")
+        var = np.where(np.isfinite(var), var, 0.0)
     desc += ")"
     return t, wrap_2pi(course_magnetic_rad(kk, var, dev)), desc  # (B2)
 
