@@ -92,6 +92,9 @@ class DeviationConfig:
     hat_confidence: float = 0.90  #: three-cornered-hat bootstrap interval
     hat_draws: int = 1000  #: bootstrap draws
     seed: int = 0  #: bootstrap seed (reproducible reports)
+    #: a unit whose nearer reading is further than this from an instant follows its own
+    #: ground velocity (VTG/RMC) between its readings (the sag of the turn) instead of a line
+    velocity_min_gap_s: float = 0.1
 
 
 @dataclass(frozen=True)

@@ -36,13 +36,15 @@ def test_two_real_receivers_as_two_units(palmer):
     res = analyse_deviations(palmer, cfg)
     assert res.channels["lat"].mode == "two" and res.factors["lat"] == pytest.approx(math.sqrt(2))
     assert any("only two units (ins1, ins2)" in m for m in res.messages)
-    # gp02 runs 00:00:00.3-00:27:46, seap 00:00:00.7-00:11:54: instants 00:00..00:11
-    # have both (00:00 from the first readings, within max_interp_gap_s)
-    assert res.time_ns[0] == 1406851200 * 10**9
+    # gp02 runs 00:00:00.3-00:27:46, seap 00:00:00.7-00:11:54: instants 00:01..00:11
+    # have both (00:00 precedes both units' data: not an instant; no reading is held)
+    assert res.time_ns[0] == 1406851260 * 10**9
     lat1 = res.samples["ins1"]["lat"]
     both = ~np.isnan(lat1)
-    assert both.sum() == 12 and np.all(both[:12])
-    assert res.missing["ins2"]["lat"] == len(res.time_ns) - 12
+    assert both.sum() == 11 and np.all(both[:11])
+    assert res.missing["ins2"]["lat"] == len(res.time_ns) - 11
+    # the instants after seap's end are skipped, with their reason
+    assert res.skipped["lat"] == {"outside unit span": len(res.time_ns) - 11, "gap too long": 0}
     # deviations from the mean of two are half the difference: opposite and equal
     np.testing.assert_allclose(res.samples["ins2"]["lat"][both], -lat1[both], atol=1e-9)
     # independent check: GeographicLib distance between the two receivers' positions at
@@ -60,7 +62,7 @@ def test_two_real_receivers_as_two_units(palmer):
     assert 0.1 < stats["lat"].m_u < 100 and 0.1 < stats["lon"].m_u < 100
     # heading: the gyro against the Seapath, on the circle, within a few degrees
     crs = res.samples["ins1"]["course"]
-    assert np.sum(~np.isnan(crs)) >= 12 and np.nanmax(np.abs(crs)) < 5.0
+    assert np.sum(~np.isnan(crs)) >= 11 and np.nanmax(np.abs(crs)) < 5.0
     assert res.whole.units["ins1"].hat == {}
     # ten minutes against a 5 h correlation time: no limiting error, and the reason given;
     # the receivers' offset is nearly constant: (K6) falls below -2, noted
@@ -73,4 +75,31 @@ def test_two_real_receivers_as_two_units(palmer):
                                                       max_interp_gap_s=5.0,
                                                       correlation_time_s=0.0))
     lat0 = res0.whole.units["ins1"].channels["lat"]
-    assert lat0.n_eff == 12 and lat0.limit == pytest.approx(lat0.k_hm * lat0.m_y)
+    assert lat0.n_eff == 11 and lat0.limit == pytest.approx(lat0.k_hm * lat0.m_y)
+
+
+def test_a_unit_ending_early_invents_no_deviation(palmer):
+    """seap stops at 00:11:54, gp02 runs on to 00:27: with the default 120 s gap no
+    instant outside the two units' common span gets a deviation (holding seap's last fix
+    for 00:12 and 00:13 invented deviations of tens of metres), and every deviation is
+    half the receivers' true disagreement at that instant, never more."""
+    res = analyse_deviations(palmer, DeviationConfig(interval_s=60.0, window_s=3600.0))
+    spans = [u.span_ns() for u in palmer.values()]
+    pos_spans = [(int(u.pos_time_ns.min()), int(u.pos_time_ns.max())) for u in palmer.values()]
+    lo, hi = max(s[0] for s in pos_spans), min(s[1] for s in pos_spans)
+    used = ~np.isnan(res.samples["ins1"]["lat"])
+    assert used.sum() == 11
+    assert np.all((res.time_ns[used] >= lo) & (res.time_ns[used] <= hi))
+    assert res.skipped["lat"]["outside unit span"] >= 2  # 00:12 and 00:13 at least
+    assert any("outside unit span" in m for m in res.messages)
+    assert all(s is not None for s in spans)
+    # the true disagreement: distance between the receivers' fixes nearest in time
+    geod = geographiclib.Geodesic.WGS84
+    a, b = palmer["ins1"], palmer["ins2"]
+    for t, n, e in zip(res.time_ns[used], res.samples["ins1"]["lat"][used],
+                       res.samples["ins1"]["lon"][used], strict=True):
+        ia = np.argsort(np.abs(a.pos_time_ns - t))[:2]
+        ib = np.argsort(np.abs(b.pos_time_ns - t))[:2]
+        dist = max(geod.Inverse(*np.degrees([a.lat_rad[i], a.lon_rad[i], b.lat_rad[k],
+                                             b.lon_rad[k]]))["s12"] for i in ia for k in ib)
+        assert 2 * math.hypot(n, e) <= dist + 0.05

@@ -87,7 +87,8 @@ def voyage(rms_m, rms_course_deg, days=7, step_s=10.0, gnss_sigma_m=3.0, seed=0)
     ee = ins_errors(t_s, rms_m, rng)[0]
     ec = ins_errors(t_s, rms_course_deg, rng)[0]
     units, truth = {}, {}
-    hours = np.arange(0.0, days * DAY_S + 1, 3600.0)  # 00:00 is 0.37 s before the first reading
+    # 00:00 is 0.37 s before the first reading: outside the units' data, not an instant
+    hours = np.arange(3600.0, days * DAY_S + 1, 3600.0)
     for j, name in enumerate(("ins1", "ins2", "ins3")):
         lat, lon = add_offset_ne(true_lat, true_lon, en[j], ee[j])
         units[name] = UnitSeries(t_ns, lat, lon, t_ns, wrap_2pi(true_hdg + np.radians(ec[j])))
@@ -102,18 +103,18 @@ def test_reference_rms_matches_the_truth_within_2_percent():
     rms = (150.0, 400.0, 250.0)
     units, ref, truth = voyage(rms, (0.05, 0.15, 0.1), days=7, seed=11)
     res = analyse_deviations(units, DeviationConfig(), reference=ref)
-    assert np.array_equal(res.time_ns, T0 + np.arange(0, 7 * 24 + 1) * 3600 * NS)
+    assert np.array_equal(res.time_ns, T0 + np.arange(1, 7 * 24 + 1) * 3600 * NS)
     for name in units:
         for c, true_err in zip(("lat", "lon", "course"), truth[name], strict=True):
             r = res.whole.units[name].reference[c]
             true_rms = math.sqrt(np.mean(true_err**2))
-            assert r.n == 7 * 24 + 1
+            assert r.n == 7 * 24
             assert r.rmse == pytest.approx(true_rms, rel=0.02), (name, c)
             assert r.k_star == pytest.approx(r.m_x / r.m_u)
             # the weighted average over days (Table 1, last row): the days' sums of squares
             # pooled over their (n - 1.45); the last day holds one instant and is skipped
             days = [w.units[name].reference[c] for w in res.windows]
-            assert [d.n for d in days] == [24, 24, 24, 24, 24, 24, 24, 1]
+            assert [d.n for d in days] == [23, 24, 24, 24, 24, 24, 24, 1]
             pooled = sum(d.m_x**2 * (d.n - 1.45) for d in days[:-1]) / sum(
                 d.n - 1.45 for d in days[:-1])
             avg = res.reference_average[name][c]
