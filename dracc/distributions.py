@@ -59,3 +59,15 @@ def binom_cdf(k, n, p):
     n = np.asarray(n, dtype=np.int64)
     inner = special.bdtr(np.clip(k, 0, np.maximum(n - 1, 0)).astype(np.int64), n, p)
     return np.where(k >= n, 1.0, np.where(k < 0, 0.0, inner))
+
+
+def f_ppf(q, dfn, dfd):
+    """Fisher F(dfn, dfd) quantile, the inverse of :func:`f_cdf` (``special.fdtri``; in terms
+    of the regularised incomplete beta I, F = dfd x / (dfn (1 - x)) with x = I^-1_q(dfn/2,
+    dfd/2)).  Real degrees of freedom allowed."""
+    return special.fdtri(np.asarray(dfn, dtype=float), np.asarray(dfd, dtype=float), q)
+
+
+def f_cdf(x, dfn, dfd):
+    """Fisher F(dfn, dfd) CDF  P(F <= x) = I_{dfn x / (dfn x + dfd)}(dfn/2, dfd/2), x >= 0."""
+    return special.fdtr(dfn, dfd, x)

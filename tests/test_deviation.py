@@ -121,6 +121,10 @@ def test_fisher_bound_of_the_conclusions():
     k_fd = sps.f.ppf(0.95, 40, 40)
     assert round(k_fd, 2) == 1.69
     assert round(1.32 * k_fd, 2) == 2.23
+    # dracc's K_FD: the variance-ratio reading reproduces the printed figure; the paper's
+    # stated P = 0.99 for a ratio of RMS gives sqrt(F_0.99(40, 40)) = 1.454 (tests/test_seed001.py)
+    assert S.k_fd(0.95, 40, squared=True) == pytest.approx(k_fd, rel=1e-12)
+    assert S.k_fd(0.99, 40) == pytest.approx(math.sqrt(sps.f.ppf(0.99, 40, 40)), rel=1e-12)
 
 
 # ------------------------------------------------------------ hand-computed example

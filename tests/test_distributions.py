@@ -67,3 +67,21 @@ def test_binomial_cdf_against_scipy_stats_and_edges():
     # hand value: P(K <= 1), K ~ B(3, 1/2) = (1 + 3) / 8
     assert float(dist.binom_cdf(1, 3, 0.5)) == pytest.approx(0.5, rel=1e-15)
     assert float(dist.binom_cdf(2.7, 3, 0.5)) == pytest.approx(7 / 8, rel=1e-15)
+
+
+@pytest.mark.parametrize("dfn, dfd", [(1, 1), (2, 7), (5, 5), (40, 40), (32, 48), (2.5, 123.25)])
+def test_f_against_scipy_stats(dfn, dfd):
+    q = np.array([1e-6, 0.01, 0.05, 0.5, 0.95, 0.99, 1 - 1e-6])
+    np.testing.assert_allclose(dist.f_ppf(q, dfn, dfd), stats.f.ppf(q, dfn, dfd), rtol=1e-10)
+    x = np.array([0.0, 0.1, 1.0, 2.0, 10.0, 100.0])
+    np.testing.assert_allclose(dist.f_cdf(x, dfn, dfd), stats.f.cdf(x, dfn, dfd), rtol=1e-12,
+                               atol=1e-300)
+
+
+def test_f_hand_values():
+    # F(2, 2): P(F <= x) = x / (1 + x), so F^-1(q) = q / (1 - q): 0.99 -> 99
+    assert float(dist.f_ppf(0.99, 2, 2)) == pytest.approx(99.0, rel=1e-12)
+    assert float(dist.f_cdf(3.0, 2, 2)) == pytest.approx(0.75, rel=1e-14)
+    # the printed table values F_0.95(40, 40) = 1.69, F_0.99(40, 40) = 2.11
+    assert round(float(dist.f_ppf(0.95, 40, 40)), 2) == 1.69
+    assert round(float(dist.f_ppf(0.99, 40, 40)), 2) == 2.11

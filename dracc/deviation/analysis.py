@@ -29,7 +29,16 @@ from ..units import finite_or_none as _f
 from . import stats
 from .hat import three_cornered_hat
 from .reference import course_errors_rad, k_star_mark, kurtosis_mark, position_errors_m
-from .sampling import DAY_NS, SampledUnit, UnitSeries, sample_unit, sampling_instants
+from .sampling import (
+    DAY_NS,
+    GAP_TOO_LONG,
+    OUTSIDE_SPAN,
+    REASONS,
+    SAMPLED,
+    UnitSeries,
+    sample_unit,
+    sampling_instants,
+)
 
 CHANNELS = ("lat", "lon", "course")
 #: the sample key of each channel (JSON ``deviation.samples``) and the a priori config key
@@ -239,6 +248,9 @@ class DeviationResult:
     #: unit -> channel -> weighted average over the windows (Table 1, last row)
     reference_average: dict[str, dict[str, ReferenceAverage]]
     messages: tuple[str, ...] = field(default_factory=tuple)
+    #: channel -> reason ('outside unit span', 'gap too long') -> sampling instants (from the
+    #: first reading of any unit to the last) not used in the channel for that reason
+    skipped: dict[str, dict[str, int]] = field(default_factory=dict)
 
     @property
     def factors(self) -> dict[str, float]:
@@ -298,6 +310,7 @@ class DeviationResult:
             "channels": {c: m.to_dict() for c, m in self.channels.items()},
             "units_present": list(self.units),
             "missing": self.missing,
+            "skipped": self.skipped,
             "samples": samples,
             "units": units,
             "hat": {u: {c: h.to_dict() for c, h in s.hat.items()}
@@ -329,6 +342,8 @@ def check_config(cfg: DeviationConfig) -> None:
                               f"{type(default).__name__ if not isinstance(default, float) else 'a finite number'}")
     if cfg.interval_s <= 0 or cfg.window_s <= 0:
         raise ConfigError("[deviation] interval_s and window_s must be positive")
+    if cfg.velocity_min_gap_s < 0:
+        raise ConfigError(f"[deviation] velocity_min_gap_s must be >= 0, got {cfg.velocity_min_gap_s}")
     if cfg.max_interp_gap_s < 0:
         raise ConfigError(f"[deviation] max_interp_gap_s must be >= 0, got {cfg.max_interp_gap_s}")
     for name in ("confidence", "hat_confidence"):
@@ -435,24 +450,45 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
     names = [u for u in INS_ROLES if u in units]
     spans = [s for s in (units[u].span_ns() for u in names) if s is not None]
     if spans:
-        # an instant up to max_interp_gap_s before the first (after the last) reading can
-        # still take that reading (a log started at 00:00:00.3 has its 00:00 sample)
-        gap_ns = int(round(cfg.max_interp_gap_s * 1e9))
-        instants = sampling_instants(min(s[0] for s in spans) - gap_ns,
-                                     max(s[1] for s in spans) + gap_ns,
+        # candidate instants over the readings of all units; whether a channel may use
+        # an instant is decided below from each unit's own span and gaps (never widened:
+        # a reading is not held past the end of a unit's data, nor before its start)
+        instants = sampling_instants(min(s[0] for s in spans), max(s[1] for s in spans),
                                      cfg.interval_s, cfg.offset_s)
     else:
         instants = np.empty(0, np.int64)
-    sampled = {u: sample_unit(units[u], instants, cfg.max_interp_gap_s) for u in names}
+    sampled = {u: sample_unit(units[u], instants, cfg.max_interp_gap_s, cfg.velocity_min_gap_s)
+               for u in names}
+    # which units each channel has (any reading at all), and why an instant is not used
+    # in a channel: outside the span of one of its units, or a gap too long in one
+    chan_units = {"lat": [u for u in names if len(_valid_times(units[u], "pos"))],
+                  "course": [u for u in names if len(_valid_times(units[u], "hdg"))]}
+    chan_units["lon"] = chan_units["lat"]
+    chan_reason = {}
+    for c in CHANNELS:
+        rs = [sampled[u].pos_reason if c != "course" else sampled[u].hdg_reason
+              for u in chan_units[c]]
+        if rs:
+            rs = np.vstack(rs)
+            chan_reason[c] = np.where(np.any(rs == OUTSIDE_SPAN, axis=0), OUTSIDE_SPAN,
+                                      np.where(np.any(rs == GAP_TOO_LONG, axis=0),
+                                               GAP_TOO_LONG, SAMPLED))
+        else:
+            chan_reason[c] = np.full(len(instants), OUTSIDE_SPAN, np.int8)
     # an instant at which no unit has a reading (a pause in the recording, or a stray
-    # record days away) is not an instant of the method: left out, not counted as missing
-    recording = np.zeros(len(instants), dtype=bool)
+    # record days away) is not an instant of the method: left out, not counted as missing.
+    # An instant some unit has is listed (its readings are real), but a channel uses it
+    # only where every unit of the channel is sampled there (inside its data, no long
+    # gap): outside the common span its deviations are NaN, never a held reading.
+    keep = np.zeros(len(instants), dtype=bool)
     for su in sampled.values():
-        recording |= ~np.isnan(su.lat_rad) | ~np.isnan(su.heading_rad)
-    if not recording.all():
-        instants = instants[recording]
-        sampled = {u: SampledUnit(lat_rad=su.lat_rad[recording], lon_rad=su.lon_rad[recording],
-                                  heading_rad=su.heading_rad[recording]) for u, su in sampled.items()}
+        keep |= ~np.isnan(su.lat_rad) | ~np.isnan(su.heading_rad)
+    # every candidate instant a channel does not use, by its reason
+    skipped = {c: {REASONS[k]: int(np.sum(chan_reason[c] == k)) for k in (OUTSIDE_SPAN, GAP_TOO_LONG)}
+               for c in CHANNELS if chan_units[c]}
+    if not keep.all():
+        instants = instants[keep]
+        sampled = {u: su.select(keep) for u, su in sampled.items()}
     n_inst = len(instants)
     nan = np.full(n_inst, np.nan)
 
@@ -483,7 +519,7 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
     # reference errors at the instants (Table 1)
     err: dict[str, dict[str, np.ndarray]] = {}
     if reference is not None and n_inst:
-        ref = sample_unit(reference, instants, cfg.max_interp_gap_s)
+        ref = sample_unit(reference, instants, cfg.max_interp_gap_s, cfg.velocity_min_gap_s)
         for u in present:
             xn, xe = position_errors_m(sampled[u].lat_rad, sampled[u].lon_rad,
                                        ref.lat_rad, ref.lon_rad)
@@ -538,7 +574,7 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
                         e_u = float(stats.excess_kurtosis_k6(ub))
                         refs[c] = ReferenceStats(
                             n=int(both.sum()), rmse=float(stats.rms_plain(xb)), m_x=m_x, m_u=m_uu,
-                            k_star=ks, k=m.factor, mark=k_star_mark(ks, m.factor),
+                            k_star=ks, k=m.factor, mark=k_star_mark(ks, m.factor, c),
                             kurtosis_error=e_x, kurtosis_deviation=e_u,
                             kurtosis_mark=kurtosis_mark(e_x, e_u, cfg.kurtosis_tol))
             cov, r = (stats.lat_lon_covariance(dev[u]["lat"][sel], dev[u]["lon"][sel])
@@ -553,7 +589,8 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
                 continue
             y = np.vstack([dev[u][c][sel] for u in m.units])
             h = three_cornered_hat(y, circular=False, confidence=cfg.hat_confidence, block=block,
-                                   draws=cfg.hat_draws, seed=cfg.seed)
+                                   draws=cfg.hat_draws, seed=cfg.seed,
+                                   corr_instants=cfg.correlation_time_s / cfg.interval_s)
             for j, u in enumerate(m.units):
                 m_y = out[u].channels[c].m_y
                 lo, hi = h.var_lower[j], h.var_upper[j]
@@ -602,13 +639,27 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
         for c, k in missing[u].items():
             if k and u in modes[c].units:
                 messages.append(f"{u} {c}: missing at {k} of {n_inst} instants "
-                                f"(no reading within {cfg.max_interp_gap_s:g} s)")
+                                f"(outside its data, or no reading within "
+                                f"{cfg.max_interp_gap_s:g} s on each side)")
+    for c, why in skipped.items():
+        if sum(why.values()) and modes[c].mode in ("three", "two"):
+            messages.append(f"{c}: instants not used: " + ", ".join(
+                f"{k} {n}" for k, n in why.items() if n))
     return DeviationResult(
         interval_s=cfg.interval_s, offset_s=cfg.offset_s, probability=cfg.probability,
         confidence=cfg.confidence, units=present, channels=modes, time_ns=instants,
-        samples=dev, missing=missing, lat_mean_rad=lat_mean, whole=whole, windows=windows,
+        samples=dev, missing=missing, skipped=skipped, lat_mean_rad=lat_mean, whole=whole, windows=windows,
         kurtosis_windows=kwin,
         kurtosis_upper=kup, reference_average=ref_avg, messages=tuple(dedupe(messages)))
+
+
+def _valid_times(unit: UnitSeries, part: str) -> np.ndarray:
+    """Times of a unit's valid (non-NaN) position ('pos') or heading ('hdg') readings."""
+    if part == "pos":
+        ok = ~np.isnan(np.asarray(unit.lat_rad, float)) & ~np.isnan(np.asarray(unit.lon_rad, float))
+        return np.asarray(unit.pos_time_ns, np.int64)[ok]
+    ok = ~np.isnan(np.asarray(unit.heading_rad, float))
+    return np.asarray(unit.hdg_time_ns, np.int64)[ok]
 
 
 def dedupe(items):

@@ -249,6 +249,117 @@ def limiting_error(m_y, probability, kurtosis, confidence, n_eff):
     kh = k_hm(confidence, n_eff)
     return kp * kh * np.asarray(m_y, dtype=float), kp, kh  # (K8)
 
+# ------------------------------------- beside the fixed factors: (3a)-(5b) and K_FD
+
+
+def r_deviation_mean_k4(m_u, m_y_star):
+    """Correlation of a unit's deviation u with the mean of three y*, as the paper takes it  (4):
+
+    r_{u,y*} = m_o6^2 / (m_u m_y*),   m_o6^2 ~ (1/3) m_y*^2   ->   r = m_y* / (3 m_u)
+
+    (the paper's m_o6 is the RMS of the part common to u and y*, "taking into account
+    (1, b)").  Note: for three independent equal errors the true correlation is 0
+    (cov(x_1 - x*, x*) = sigma^2/3 - sigma^2/3), which is why (5a) is exact then.
+    """
+    m_u = np.asarray(m_u, dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.asarray(m_y_star, dtype=float) / (3.0 * m_u)  # (4)
+
+
+def m_y_k3a(m_u, r, cross: float = 2.0, mean_share: float = 1.0 / 3.0):
+    """RMS error m_y solving (3a) for a given correlation r:
+
+    m_y^2 = m_u^2 + m_y*^2 + cross * r * m_u * m_y*                 (3, a), cross = 2 as printed
+    m_y*^2 = mean_share * m_y^2 = (1/3) m_y^2                       (the relation of (5, a))
+
+    a quadratic in m_y:  (1 - s) m_y^2 - cross r sqrt(s) m_u m_y - m_u^2 = 0  (s = mean_share),
+    m_y = m_u [cross r sqrt(s) + sqrt(cross^2 r^2 s + 4 (1 - s))] / (2 (1 - s)).
+    r = 0 gives (5a), m_y = sqrt(3/2) m_u.  ``cross = 1`` is the reading in which the paper's
+    own arithmetic enters the cross term once.  Broadcasts.
+    """
+    m_u = np.asarray(m_u, dtype=float)
+    r = np.asarray(r, dtype=float)
+    s = float(mean_share)
+    b = cross * r * math.sqrt(s)
+    k = (b + np.sqrt(b * b + 4.0 * (1.0 - s))) / (2.0 * (1.0 - s))  # (3, a) solved
+    out = k * m_u
+    return out if out.ndim else float(out)
+
+
+def k_second_approximation(r=None, cross: float = 2.0, iterations: int = 1):
+    """Factor k = m_y / m_u of the paper's second approximation (5b), from its text:
+
+    "determine the correlation coefficient r plugging the obtained values [of (5a)] in (4)
+    and make the second approximation for m_y with respect to (3, a)" (seeds/001).
+
+    With ``r`` None: start from (5a), k_0 = sqrt(3/2); each iteration takes r from (4) at
+    the current k (m_y* = k m_u / sqrt 3, so r = k / (3 sqrt 3)) and solves (3a)
+    (:func:`m_y_k3a`).  One iteration is the paper's second approximation:
+
+    - cross = 2, (3a) as printed: r = sqrt(2)/6 = 0.2357, k = (sqrt 2 + sqrt 74)/(4 sqrt 3) = 1.4458;
+    - cross = 1: k = (sqrt 6 + sqrt 870)/24 = 1.3311.
+    Iterated to the fixed point, k^2 = 9/(6 - cross): 1.5 (cross 2), sqrt(9/5) = 1.342 (cross 1).
+
+    The paper states k = sqrt(1/0.57) = 1.32 (0.57 = 0.67 - 0.10), which none of these
+    readings of its formulas gives (METHODS section 7: 1.32 cannot be recomputed from
+    the text); dracc's default factor stays the stated 1.32 (:data:`K_SECOND_APPROX`).
+    With a given ``r`` (e.g. measured against a reference) the factor is (3a) solved
+    once for that r.
+    """
+    if r is not None:
+        return m_y_k3a(1.0, r, cross)
+    k = K_FIRST_APPROX_THREE  # (5, a)
+    for _ in range(int(iterations)):
+        r_k = float(r_deviation_mean_k4(1.0, k / math.sqrt(3.0)))  # (4) at the current k
+        k = m_y_k3a(1.0, r_k, cross)  # (3, a)
+    return k
+
+
+def m_y_second_approximation(m_u, r=None, cross: float = 2.0, iterations: int = 1):
+    """m_y = k m_u with k from :func:`k_second_approximation` (3a), (4), (5b).  Broadcasts."""
+    out = k_second_approximation(r, cross, iterations) * np.asarray(m_u, dtype=float)
+    return out if np.ndim(out) else float(out)
+
+
+def k_fd(probability, n1, n2=None, squared: bool = False):
+    """Fisher factor K_FD: upper confidence bound at ``probability`` of the ratio of two
+    RMS estimated from n1 and n2 independent samples, relative to the true ratio
+    (seeds/001, analysis of Table 1: "the upper confidence bound for the RMS ratio is
+    assigned by Fisher distribution").
+
+    (m_1/sigma_1)^2 / (m_2/sigma_2)^2 ~ F(n1, n2), so  K_FD = sqrt(F_P(n1, n2))  for the
+    ratio of RMS (``squared`` True: F_P(n1, n2) itself, for the ratio of variances).
+    n2 defaults to n1 (Table 1: errors and deviations over the same instants).
+
+    The paper: P = 0.99, N = 40 (eight days hourly, correlation interval 4-6 h), and it
+    states K_FD = 1.69, k_it = 1.32 * 1.69 = 2.23.  By the formula, sqrt(F_0.99(40, 40))
+    = sqrt(2.114) = 1.454 (k_it = 1.92); F_0.99(40, 40) = 2.114 for variances.  The
+    stated 1.69 is F_0.95(40, 40) = 1.693, the variance ratio at P = 0.95 (METHODS
+    section 7: not recomputable from the text as stated).  Either way k* = 1.49 lies
+    below the bound, the paper's conclusion.  NaN where a count is <= 0.
+    """
+    n1 = np.asarray(n1, dtype=float)
+    n2 = n1 if n2 is None else np.asarray(n2, dtype=float)
+    ok = (n1 > 0) & (n2 > 0)
+    f = np.where(ok, dist.f_ppf(probability, np.where(ok, n1, 1.0), np.where(ok, n2, 1.0)),
+                 np.nan)
+    out = f if squared else np.sqrt(f)
+    return out if out.ndim else float(out)
+
+
+def k_upper_fisher(k, n, interval_s, correlation_time_s, probability: float = 0.99,
+                   squared: bool = False):
+    """Upper confidence bound of the factor, k_it = k * K_FD(P; N, N), with N the number
+    of independent samples among n taken every ``interval_s``: N = n dt / tau
+    (:func:`effective_samples`, tau the INS error correlation time, 4-6 h).
+
+    Returns (k_it, K_FD, N).  The paper: n = 192 (8 days hourly), tau = 4.8 h: N = 40
+    (tau 4 h: 48; 6 h: 32).  A k* above k_it contradicts the factor k at P.
+    """
+    n_eff = effective_samples(n, interval_s, correlation_time_s)
+    kf = k_fd(probability, n_eff, squared=squared)
+    return k * kf, kf, float(n_eff) if np.ndim(n_eff) == 0 else n_eff
+
 
 # ------------------------------------------------------------ windows and averages
 
