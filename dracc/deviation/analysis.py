@@ -28,7 +28,13 @@ from ..units import ARCMIN_RAD
 from ..units import finite_or_none as _f
 from . import stats
 from .hat import three_cornered_hat
-from .reference import course_errors_rad, k_star_mark, kurtosis_mark, position_errors_m
+from .reference import (
+    course_errors_rad,
+    k_star_mark,
+    kurtosis_mark,
+    position_errors_m,
+    table1_mark_k,
+)
 from .sampling import (
     DAY_NS,
     GAP_TOO_LONG,
@@ -101,7 +107,8 @@ class HatStats:
     """Three-cornered hat for one unit and channel, beside the factor method's m_y.
 
     ``variance`` may be negative (``negative``): reported, never clamped; ``sigma`` is
-    then NaN.  ``var_lower``/``var_upper``: bootstrap bounds of the variance.
+    then NaN.  ``var_lower``/``var_upper``: generalized-pivot (Wishart) bounds of the
+    variance, with ``dof`` degrees of freedom (fewer than n where errors are correlated).
     ``disagree``: the factor method's m_y^2 lies outside those bounds (None without bounds).
     """
 
@@ -113,12 +120,13 @@ class HatStats:
     negative: bool
     m_y_factor: float
     disagree: bool | None
+    dof: float = math.nan
 
     def to_dict(self) -> dict:
         return {"n": int(self.n), "variance": _f(self.variance), "sigma": _f(self.sigma),
                 "var_lower": _f(self.var_lower), "var_upper": _f(self.var_upper),
                 "negative": bool(self.negative), "m_y_factor": _f(self.m_y_factor),
-                "disagree": self.disagree}
+                "disagree": self.disagree, "dof": _f(self.dof)}
 
 
 @dataclass(frozen=True)
@@ -135,13 +143,22 @@ class ReferenceStats:
     kurtosis_error: float  #: excess kurtosis of the errors (K6)
     kurtosis_deviation: float  #: excess kurtosis of the deviations (K6), same instants
     kurtosis_mark: str  #: '<', '>', '=': E_dev against E_err
+    mark_k: float = math.nan  #: the threshold of the mark (1.5 for the paper's 1.49)
+    #: Fisher upper bound of the factor, k_it = k K_FD(0.99; N, N), N independent samples
+    k_upper: float = math.nan
+    k_fd: float = math.nan
+    n_independent: float = math.nan
 
     def to_dict(self) -> dict:
         return {"n": int(self.n), "rmse": _f(self.rmse), "m_x": _f(self.m_x), "m_u": _f(self.m_u),
                 "k_star": _f(self.k_star), "k": _f(self.k), "mark": self.mark,
                 "kurtosis_error": _f(self.kurtosis_error),
                 "kurtosis_deviation": _f(self.kurtosis_deviation),
-                "kurtosis_mark": self.kurtosis_mark}
+                "kurtosis_mark": self.kurtosis_mark, "mark_k": _f(self.mark_k),
+                "k_upper_fisher": _f(self.k_upper), "k_fd": _f(self.k_fd),
+                "n_independent": _f(self.n_independent),
+                "within_fisher": None if math.isnan(self.k_star) or math.isnan(self.k_upper)
+                else bool(self.k_star <= self.k_upper)}
 
 
 @dataclass(frozen=True)
@@ -307,6 +324,7 @@ class DeviationResult:
             "interval_s": self.interval_s, "offset_s": self.offset_s,
             "probability": self.probability, "confidence": self.confidence,
             "factors": {c: _f(k) for c, k in self.factors.items()},
+            "factor_alternatives": factor_alternatives(),
             "channels": {c: m.to_dict() for c, m in self.channels.items()},
             "units_present": list(self.units),
             "missing": self.missing,
@@ -322,6 +340,20 @@ class DeviationResult:
 
 
 # ---------------------------------------------------------------------- the method
+
+#: probability of the Fisher upper bound on the factor k (seeds/001: P = 0.99)
+FISHER_PROBABILITY = 0.99
+
+
+def factor_alternatives() -> dict:
+    """The factors beside the fixed ones (seeds/001), for the reader to compare: (K5a)'s
+    first approximation sqrt(3/2); the second approximation through r from (K4) and (K3a)
+    as printed, and with its cross term once; the paper's stated 1.32."""
+    return {"first_approximation": math.sqrt(1.5),
+            "second_approximation_r": float(stats.k_second_approximation()),
+            "second_approximation_r_cross_once": float(stats.k_second_approximation(cross=1)),
+            "paper_stated_second": 1.32, "paper_stated_longitude": 1.49}
+
 
 
 def check_config(cfg: DeviationConfig) -> None:
@@ -572,11 +604,16 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
                         ks = m_x / m_uu if m_uu > 0 else math.nan
                         e_x = float(stats.excess_kurtosis_k6(xb))
                         e_u = float(stats.excess_kurtosis_k6(ub))
+                        k_it, k_fd, n_ind = stats.k_upper_fisher(
+                            m.factor, int(both.sum()), cfg.interval_s, cfg.correlation_time_s,
+                            FISHER_PROBABILITY)
                         refs[c] = ReferenceStats(
                             n=int(both.sum()), rmse=float(stats.rms_plain(xb)), m_x=m_x, m_u=m_uu,
                             k_star=ks, k=m.factor, mark=k_star_mark(ks, m.factor, c),
                             kurtosis_error=e_x, kurtosis_deviation=e_u,
-                            kurtosis_mark=kurtosis_mark(e_x, e_u, cfg.kurtosis_tol))
+                            kurtosis_mark=kurtosis_mark(e_x, e_u, cfg.kurtosis_tol),
+                            mark_k=table1_mark_k(m.factor, c), k_upper=float(k_it),
+                            k_fd=float(k_fd), n_independent=float(n_ind))
             cov, r = (stats.lat_lon_covariance(dev[u]["lat"][sel], dev[u]["lon"][sel])
                       if "lat" in chans else (math.nan, math.nan))  # (K7)
             out[u] = UnitStats(channels=chans, cov_lat_lon_m2=float(cov), r_lat_lon=float(r),
@@ -599,7 +636,7 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
                 out[u].hat[c] = HatStats(n=h.n, variance=float(h.variance[j]),
                                          sigma=float(h.sigma[j]), var_lower=float(lo),
                                          var_upper=float(hi), negative=bool(h.negative[j]),
-                                         m_y_factor=m_y, disagree=disagree)
+                                         m_y_factor=m_y, disagree=disagree, dof=float(h.dof))
         return WindowStats(label, start_ns, end_ns, out)
 
     if n_inst:
