@@ -186,16 +186,21 @@ def transition(dt_s, tau_s):
 
 
 def _current_noise(dt_s, model: CurrentModel):
-    """(q_pp, q_pc, q_cc) of the integrated Gauss-Markov current over dt (module doc).
+    """(q_pp, q_pc, q_cc) of the integrated Gauss-Markov current over dt (module doc)."""
+    return gauss_markov_noise(dt_s, model.current_sigma_mps, model.current_tau_s)
 
-    ``model`` needs ``current_sigma_mps`` and ``current_tau_s`` (arrays broadcast);
+
+def gauss_markov_noise(dt_s, sigma, tau_s):
+    """(q_pp, q_pc, q_cc): the driving noise over dt of a first-order Gauss-Markov process
+    (sigma, tau) and of its integral (module doc), arrays broadcast.
+
     tau = inf: no driving noise (0, 0, 0); tau = 0: white, independent per
     WHITE_NOISE_STEP_S: (sigma^2 WHITE_NOISE_STEP_S dt, 0, sigma^2 for dt > 0).
     """
-    if not _regular(model.current_tau_s):
-        return _current_noise_special(dt_s, model.current_sigma_mps, model.current_tau_s)
+    if not _regular(tau_s):
+        return _gauss_markov_noise_special(dt_s, sigma, tau_s)
     dt = np.asarray(dt_s, float)
-    tau, s2 = model.current_tau_s, model.current_sigma_mps**2
+    tau, s2 = tau_s, np.asarray(sigma, float) ** 2
     x = dt / tau
     one_m_phi = -np.expm1(-x)  # 1 - phi, exact for small dt
     one_m_phi2 = -np.expm1(-2.0 * x)  # 1 - phi^2
@@ -208,27 +213,19 @@ def _current_noise(dt_s, model: CurrentModel):
     return q_pp, q_pc, q_cc
 
 
-def _current_noise_special(dt_s, sigma, tau_s):
-    """_current_noise where some tau is inf or 0 (the regular ones by the closed form)."""
+def _gauss_markov_noise_special(dt_s, sigma, tau_s):
+    """gauss_markov_noise where some tau is inf or 0 (the regular ones by the closed form)."""
     dt = np.asarray(dt_s, float)
     tau = np.asarray(tau_s, float)
     s2 = np.asarray(sigma, float) ** 2
     inf, white = np.isinf(tau), tau == 0.0
     safe = np.where(inf | white, 1.0, tau)
-    q_pp, q_pc, q_cc = _current_noise(dt, _Process(np.sqrt(s2), safe))
+    q_pp, q_pc, q_cc = gauss_markov_noise(dt, np.sqrt(s2), safe)
     zero = np.zeros(np.broadcast_shapes(q_pp.shape, white.shape))
     q_pp = np.where(inf, zero, np.where(white, s2 * WHITE_NOISE_STEP_S * dt + zero, q_pp))
     q_pc = np.where(inf | white, zero, q_pc)
     q_cc = np.where(inf, zero, np.where(white, np.where(dt > 0, s2, 0.0) + zero, q_cc))
     return q_pp, q_pc, q_cc
-
-
-class _Process:
-    """sigma and tau of one process, in the two names _current_noise reads."""
-
-    def __init__(self, sigma, tau):
-        self.current_sigma_mps = sigma
-        self.current_tau_s = tau
 
 
 def _water_noise(dt_s, course_rad, speed_mps, model: CurrentModel):

@@ -22,7 +22,7 @@ A Kalman filter with the state ``x = [p, cbar, c, n, eps, s]`` (p: the integral 
 step dt, for each Gauss-Markov process g = c, n (phi = exp(-dt/tau))::
 
     p+ = p + dt cbar + tau_c (1 - phi_c) c + tau_n (1 - phi_n) n + G [eps, s],  G = int J dt
-    g+ = phi g,  Q: the integrated Gauss-Markov process (dracc.current._current_noise)
+    g+ = phi g,  Q: the integrated Gauss-Markov process (dracc.current.gauss_markov_noise)
 
 The hyper-parameters ``(sigma_c, tau_c, sigma_n, tau_n)``, the fixes' noise and a widening
 of the sensor priors are not known: the filter runs for every point of a grid of them at
@@ -53,9 +53,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .arrays import unique_sorted
-from .current import _current_noise, transition
+from .current import gauss_markov_noise, transition
 from .deadreckoning import DRTrack, covered_span_s, error_ellipse
-from .geodesy import add_offset_ne, interp_position, offset_ne_m
+from .geodesy import add_offset_ne, interp_position, offset_ne_m, wrap_pi
 from .units import KN_MPS
 
 __all__ = [
@@ -163,6 +163,11 @@ def _smooth_velocity(time_s, vn, ve, window_s: float = SENSITIVITY_WINDOW_S):
     return out[0], out[1]
 
 
+def _sensitivity_steps(t, vn, ve, dt):
+    """(n-1, 2, 2): J dt over each step, J from the smoothed water velocity held over it."""
+    return sensitivities(*_smooth_velocity(t, vn, ve))[:-1] * dt[:, None, None]
+
+
 def sensitivities(vn_w_mps, ve_w_mps):
     """(n, 2, 2): d v / d[eps, s] per sample, columns J_eps = (-v_E, v_N), J_s = (v_N, v_E)."""
     vn = np.asarray(vn_w_mps, float)
@@ -204,14 +209,6 @@ class LearnedModel:
     history: FilterHistory
 
 
-class _Process:
-    """sigma and tau of one Gauss-Markov process, in the two names _current_noise reads."""
-
-    def __init__(self, sigma, tau):
-        self.current_sigma_mps = sigma
-        self.current_tau_s = tau
-
-
 def _weights(loglik):
     """Grid weights from cumulative log-likelihoods (..., M), uniform prior over the grid."""
     w = np.exp(loglik - loglik.max(axis=-1, keepdims=True))
@@ -226,7 +223,7 @@ def _step_matrices(d: float, hp: Hyperparameters):
     for (sig, tau), j in (((hp.current_sigma_mps, hp.current_tau_s), 4),
                           ((hp.noise_sigma_mps, hp.noise_tau_s), 6)):
         f_pc, phi = transition(d, tau)
-        q_pp, q_pc, q_cc = _current_noise(d, _Process(sig, tau))
+        q_pp, q_pc, q_cc = gauss_markov_noise(d, sig, tau)
         Q[:, 0, 0] += q_pp
         Q[:, 1, 1] += q_pp
         Q[:, 0, j] = Q[:, j, 0] = Q[:, 1, j + 1] = Q[:, j + 1, 1] = q_pc
@@ -252,14 +249,11 @@ def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_r
     ve = np.nan_to_num(np.asarray(ve_w_mps, float))
     good = np.asarray(step_ok, bool) & np.isfinite(np.asarray(vn_w_mps, float)[:-1]) \
         & np.isfinite(np.asarray(ve_w_mps, float)[:-1])
-    dt = np.diff(t)
     # water track W (metres) and int J dt, from the velocity held over each step (B20)
-    W = np.zeros((n, 2))
-    W[1:, 0] = np.cumsum(np.where(good, vn[:-1], 0.0) * dt)
-    W[1:, 1] = np.cumsum(np.where(good, ve[:-1], 0.0) * dt)
-    J = sensitivities(*_smooth_velocity(t, vn, ve))[:-1] * np.where(good, dt, 0.0)[:, None, None]
-    JI = np.concatenate([np.zeros((1, 2, 2)), np.cumsum(J, axis=0)])
-    bad_before = np.concatenate([[0], np.cumsum(~good)])  # broken steps before sample k
+    dt_good = np.where(good, np.diff(t), 0.0)
+    W = _prefix_sum(np.column_stack([vn[:-1], ve[:-1]]) * dt_good[:, None])
+    JI = _prefix_sum(_sensitivity_steps(t, vn, ve, dt_good))
+    bad_before = _prefix_sum(~good)  # broken steps before sample k
 
     starts = np.asarray(leg_start_s, float)
     # filter steps: the first sample of every step_s from the first leg's start (nothing is
@@ -409,6 +403,11 @@ def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_r
                         history=hist)
 
 
+def _prefix_sum(a):
+    """Cumulative sums along axis 0 with a leading zero: sums over [i, k) are S[k] - S[i]."""
+    return np.concatenate([np.zeros((1,) + a.shape[1:]), np.cumsum(a, axis=0)])
+
+
 def _significant(w, mass: float = 1.0 - 1e-4):
     """Indices of the largest weights that together hold ``mass`` of the total."""
     order = np.argsort(w)[::-1]
@@ -470,26 +469,11 @@ def forecast_legs(time_s, vn_w_mps, ve_w_mps, leg_of, model: LearnedModel, *,
     n = t.size
     vn = np.nan_to_num(np.asarray(vn_w_mps, float))
     ve = np.nan_to_num(np.asarray(ve_w_mps, float))
-    dt = np.diff(t)
-    J = sensitivities(*_smooth_velocity(t, vn, ve))[:-1] * dt[:, None, None]
-    JI = np.concatenate([np.zeros((1, 2, 2)), np.cumsum(J, axis=0)])
+    J = _sensitivity_steps(t, vn, ve, np.diff(t))
+    JI = _prefix_sum(J)
     leg_of = np.asarray(leg_of)
-    # for the heading-dependent error: course per sample and, per leg, its start course
-    course = np.arctan2(ve, vn)
-    n_legs_ = model.start_s.size
-    first = np.full(n_legs_, -1)
-    on = leg_of >= 0
-    idx_on = np.flatnonzero(on)
-    if idx_on.size:
-        legs_on = leg_of[idx_on]
-        uniq, pos = np.unique(legs_on, return_index=True)
-        first[uniq[uniq < n_legs_]] = idx_on[pos[uniq < n_legs_]]
-    c0 = np.where(leg_of >= 0, course[np.maximum(first[np.clip(leg_of, 0, n_legs_ - 1)], 0)], course)
-    dpsi = np.abs(np.angle(np.exp(1j * (course - c0))))
-    rho = np.exp(-dpsi / TURN_DECORRELATION_RAD)
+    course = np.arctan2(ve, vn)  # for the heading-dependent error
     J_eps = J[:, :, 0]
-    JRI = np.concatenate([np.zeros((1, 2)), np.cumsum(J_eps * rho[:-1, None], axis=0)])
-    JNI = np.concatenate([np.zeros((1, 2)), np.cumsum(J_eps * np.sqrt(1 - rho[:-1, None] ** 2), axis=0)])
     off = np.full((n, 2), np.nan)
     Pout = np.full((n, 2, 2), np.nan)
     names = ("fix", "current", "current change", "heading", "log scale", "noise")
@@ -498,28 +482,28 @@ def forecast_legs(time_s, vn_w_mps, ve_w_mps, leg_of, model: LearnedModel, *,
     nb = INFLATION_BINS
     inflation = np.ones((n_legs, nb))
     leg_nees = np.full((n_legs, nb), np.nan)
-    leg_end = np.full(n_legs, np.inf)
+    leg_end = model.start_s.astype(float).copy()  # a leg without samples ends at its start
     acc_num = np.full(nb, INFLATION_PRIOR_LEGS)
     acc_den = np.full(nb, INFLATION_PRIOR_LEGS)
+    folded = 0
     for leg in range(n_legs):
         sel = np.flatnonzero(leg_of == leg)
-        # the legs that ended before this one started, in order: fold them in
-        for j in range(leg):
-            if not leg_end[j] <= model.start_s[leg]:
-                continue
-            has = np.isfinite(leg_nees[j])
+        # the legs that ended before this one started (legs run in time order): fold them in
+        while folded < leg and leg_end[folded] <= model.start_s[leg]:
+            has = np.isfinite(leg_nees[folded])
             acc_num[has] = INFLATION_PRIOR_LEGS + INFLATION_FORGET * (acc_num[has] - INFLATION_PRIOR_LEGS) \
-                + np.minimum(leg_nees[j][has], INFLATION_LEG_CAP)
+                + np.minimum(leg_nees[folded][has], INFLATION_LEG_CAP)
             acc_den[has] = INFLATION_PRIOR_LEGS + INFLATION_FORGET * (acc_den[has] - INFLATION_PRIOR_LEGS) + 1.0
-            leg_end[j] = np.nan  # folded in
+            folded += 1
         # the factor has an inverse-gamma posterior (shape acc_den: one per leg, whose mean
         # NEES/2 is Exp(1) when the model is right; scale acc_num); the position's
         # predictive is then Student-t with the variance acc_num / (acc_den - 1)
         inflation[leg] = np.clip(acc_num / (acc_den - 1.0), *INFLATION_BOUNDS)
         if sel.size == 0:
             continue
-        k0 = sel[0]
+        k0, k1 = sel[0], sel[-1]
         t0 = t[k0]
+        leg_end[leg] = t[k1]
         step = min(horizon_step_s, max((t[sel[-1]] - t0) / 20.0, 1.0))
         th = unique_sorted(np.concatenate([np.arange(0.0, t[sel[-1]] - t0, step), [t[sel[-1]] - t0]]))
         kh = np.clip(np.searchsorted(t, t0 + th), 0, n - 1)
@@ -533,8 +517,9 @@ def forecast_legs(time_s, vn_w_mps, ve_w_mps, leg_of, model: LearnedModel, *,
         H, m = th.size, keep.size
         # the heading-dependent error: its value at the start counts as far as the course
         # stays near the start course (Gr), a new one takes over as it turns away (Gn)
-        Gr = JRI[kh] - JRI[k0]
-        Gn = JNI[kh] - JNI[k0]
+        rho = np.exp(-np.abs(wrap_pi(course[k0:k1] - course[k0])) / TURN_DECORRELATION_RAD)
+        Gr = _prefix_sum(J_eps[k0:k1] * rho[:, None])[kh - k0]
+        Gn = _prefix_sum(J_eps[k0:k1] * np.sqrt(1.0 - rho**2)[:, None])[kh - k0]
         A = np.zeros((H, m, 2, 9))
         A[:, :, 0, 0] = A[:, :, 1, 1] = th[:, None]
         A[:, :, 0, 2] = A[:, :, 1, 3] = fc
@@ -546,10 +531,10 @@ def forecast_legs(time_s, vn_w_mps, ve_w_mps, leg_of, model: LearnedModel, *,
         mu = np.matmul(A, xs[None, :, :, None])[..., 0]  # (H, m, 2)
         AP = np.matmul(A, Ps[None])  # (H, m, 2, 9)
         S = np.matmul(AP, A.transpose(0, 1, 3, 2))
-        qc, _, _ = _current_noise(th[:, None], _Process(hp.current_sigma_mps[None, :],
-                                                        hp.current_tau_s[None, :]))
-        qn, _, _ = _current_noise(th[:, None], _Process(hp.noise_sigma_mps[None, :],
-                                                        hp.noise_tau_s[None, :]))
+        qc, _, _ = gauss_markov_noise(th[:, None], hp.current_sigma_mps[None, :],
+                                      hp.current_tau_s[None, :])
+        qn, _, _ = gauss_markov_noise(th[:, None], hp.noise_sigma_mps[None, :],
+                                      hp.noise_tau_s[None, :])
         R = hp.fix_sigma_m ** 2
         S[..., 0, 0] += qc + qn + R
         S[..., 1, 1] += qc + qn + R
@@ -584,7 +569,6 @@ def forecast_legs(time_s, vn_w_mps, ve_w_mps, leg_of, model: LearnedModel, *,
                 for q in range(nb):
                     if np.any(b == q):
                         leg_nees[leg, q] = float(np.mean(nees[b == q])) / 2.0
-                leg_end[leg] = t[sel[-1]]
         lam = _inflation_at(th, inflation[leg], model)
         S_mix = S_mix * lam[:, None, None]
         for j in range(2):

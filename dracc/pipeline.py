@@ -864,18 +864,19 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
                                 _error_prior(cfg, float(np.nanmedian(flat)), gyro, v_g),
                                 ref_max_gap_s=ref_gap_s)
         tr = est.track
-        scored = est.learned_leg[np.maximum(tr.leg[tr.epoch_index], 0)] & (tr.leg[tr.epoch_index] >= 0)
-        cons = dr_consistency(replace(tr, epoch_index=tr.epoch_index[scored]), fix_s, flat, flon,
-                              max_ref_gap_s=ref_gap_s, ref_sigma_m=est.reference_sigma_m)
-    else:
-        cons = dr_consistency(tr, fix_s, flat, flon, max_ref_gap_s=ref_gap_s)
+    # rows of legs whose model was learned from earlier fixes: the only ones scored
+    learned_leg = est.learned_leg if est is not None else np.ones(tr.n_legs, bool)
+    learned_row = (tr.leg >= 0) & learned_leg[np.maximum(tr.leg, 0)]
+    ei = np.asarray(tr.epoch_index, dtype=np.int64)
+    cons = dr_consistency(replace(tr, epoch_index=ei[learned_row[ei]]), fix_s, flat, flon,
+                          max_ref_gap_s=ref_gap_s,
+                          ref_sigma_m=est.reference_sigma_m if est is not None else 0.0)
     # the actual error at every sample (for the growth plot and the tables)
     rlat, rlon = interp_position(ft, flat, flon, grid, ref_gap_s * 1e9)
     dn, de = offset_ne_m(tr.lat_rad, tr.lon_rad, rlat, rlon)
     ref_err = np.hypot(dn, de)
     on = tr.leg >= 0
-    learned_leg = est.learned_leg if est is not None else np.ones(tr.n_legs, bool)
-    scored_row = (tr.leg >= 0) & learned_leg[np.maximum(tr.leg, 0)] & (tr.since_fix_s > 0)
+    scored_row = learned_row & (tr.since_fix_s > 0)
 
     def rows(idx):
         return DRTrack(time_ns=grid[idx], lat_rad=tr.lat_rad[idx], lon_rad=tr.lon_rad[idx],
@@ -886,7 +887,6 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
                        water_lon_rad=water.lon_rad[idx], scored=scored_row[idx])
 
     full = rows(on)
-    ei = np.asarray(tr.epoch_index, dtype=np.int64)
     epochs = rows(ei)
     by_leg = {lc.leg: lc for lc in cons.legs}
     legs = []
@@ -909,8 +909,7 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
     if n_bridged:
         dr_notes.append(f"{n_bridged} short heading/speed gap(s) bridged by holding the last value")
     if est is not None:
-        n_prior = int(np.sum((tr.since_fix_s[tr.epoch_index] > 0)
-                             & ~est.learned_leg[np.maximum(tr.leg[tr.epoch_index], 0)]))
+        n_prior = int(np.sum((tr.since_fix_s[ei] > 0) & ~learned_row[ei]))
         dr_notes.append(
             f"estimated position: the water track plus the current and the compass and log "
             f"corrections learned from the {fdesc} fixes before each leg's start fix (never later "

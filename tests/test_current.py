@@ -140,15 +140,14 @@ def test_white_current_is_independent_per_second():
 def test_mixed_taus_broadcast_like_the_regular_ones():
     """dracc.ep passes arrays of tau: a grid with inf, 0 and finite taus gives, for the
     finite ones, exactly what the closed form gives alone."""
-    from dracc.current import _current_noise
-    from dracc.ep import _Process
+    from dracc.current import gauss_markov_noise
 
     dt = np.array([[0.0], [10.0], [600.0]])
     taus = np.array([[0.0, np.inf, 600.0]])
     f_pc, phi = transition(dt, taus)
-    q = _current_noise(dt, _Process(np.array([[0.3, 0.3, 0.3]]), taus))
+    q = gauss_markov_noise(dt, np.array([[0.3, 0.3, 0.3]]), taus)
     f1, p1 = transition(dt[:, 0], 600.0)
-    q1 = _current_noise(dt[:, 0], _Process(0.3, 600.0))
+    q1 = gauss_markov_noise(dt[:, 0], 0.3, 600.0)
     assert np.array_equal(f_pc[:, 2], f1) and np.array_equal(phi[:, 2], p1)
     assert all(np.array_equal(a[:, 2], b) for a, b in zip(q, q1, strict=True))
     assert all(np.all(np.isfinite(a)) for a in (f_pc, phi, *q))
