@@ -21,9 +21,12 @@ DataFrame sorted by ``time_ns`` with these columns (and no others needed downstr
     time_ns, source, rot_radps
 
 Every table also carries ``talker`` (str: the NMEA talker ID, '' where none),
-``sentence`` (str, e.g. 'GGA', or the message type for MCAP/CSV) and ``line``
+``sentence`` (str, e.g. 'GGA', or the message type for MCAP/CSV), ``line``
 (int64, 1-based line or message number in its file, for tracing a value back to
-the input). The string columns may be pandas Categoricals (they repeat a few
+the input) and ``recv_ns`` (int64: the receive time -- TAG block ``c:``, logger
+prefix, MCAP log time -- of a record whose ``time_ns`` is its own time of fix, so
+``recv_ns - time_ns`` is its latency; ``MISSING_NS`` where the record has no time of
+fix or no receive time). The string columns may be pandas Categoricals (they repeat a few
 values millions of times). Missing fields are NaN, never zero.
 
 ``source`` is the source key: the TAG block ``s:`` value, the talker ID, an MCAP
@@ -48,7 +51,9 @@ INS_ROLES = ("ins1", "ins2", "ins3")
 REFERENCE_DTYPE = pd.CategoricalDtype(["M", "T"])
 
 COMMON_COLUMNS = {"time_ns": "int64", "source": "category", "talker": "category",
-                  "sentence": "category", "line": "int64"}
+                  "sentence": "category", "line": "int64", "recv_ns": "int64"}
+#: ``recv_ns`` where a record has no receive time distinct from its time of fix
+MISSING_NS = np.iinfo(np.int64).min
 
 KIND_COLUMNS: dict[str, dict[str, str]] = {
     "position": {"lat_rad": "float64", "lon_rad": "float64", "alt_m": "float64",
@@ -74,7 +79,7 @@ def make_frame(kind: str, data: dict[str, np.ndarray]) -> pd.DataFrame:
     """Build a canonical frame from column arrays; absent value columns become NaN.
 
     ``time_ns``, ``source``, ``sentence`` and ``line`` are required; ``talker``
-    defaults to ''.
+    defaults to '', ``recv_ns`` to ``MISSING_NS``.
     """
     n = len(data["time_ns"])
     cols = {**COMMON_COLUMNS, **KIND_COLUMNS[kind]}
@@ -93,6 +98,8 @@ def make_frame(kind: str, data: dict[str, np.ndarray]) -> pd.DataFrame:
                 out[c] = np.asarray(v).astype(t, copy=False)
         elif c == "talker":
             out[c] = pd.Categorical(np.full(n, "", dtype=object))
+        elif c == "recv_ns":
+            out[c] = np.full(n, MISSING_NS, dtype=np.int64)
         elif t == "float64":
             out[c] = np.full(n, np.nan)
         elif t == "int8":
@@ -217,8 +224,12 @@ class Voyage:
     sources: dict[str, SourceInfo]
     rejects: Rejects
     time_events: TimeEvents
-    inputs: list[dict]  #: per file: {"path", "format", "lines", "records", "rejected": {reason: n}}
+    inputs: list[dict]  #: per file: {"path", "format", "lines", "records", "rejected": {reason: n},
+    #: "ignored": {type: n}}
     lines: int = 0  #: lines (or messages) read in all files
+    #: valid lines or messages dracc does not use, by type ('GSV', 'VDM', 'comment', an MCAP
+    #: schema name, ...): counted, never rejected (only damaged input is rejected)
+    ignored: Counter = field(default_factory=Counter)
 
     def role_sources(self, role: str) -> list[str]:
         """Source keys assigned to ``role``."""

@@ -32,9 +32,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from .frames import MISSING_NS  # the "no time" marker in int64 time arrays
+
 DAY_NS = 86_400 * 1_000_000_000
 HALF_DAY_NS = DAY_NS // 2
-MISSING_NS = np.iinfo(np.int64).min  #: "no time" marker in int64 time arrays
 GPS_WEEK_ROLLOVER_DAYS = 1024 * 7
 _EPOCH_2000_DAYS = 10957  # 2000-01-01 in days since 1970-01-01
 
