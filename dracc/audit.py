@@ -74,6 +74,9 @@ class AuditConfig:
     rejected_rate_max_pct: float = 1.0  #: rejected lines, % of all lines
     required_sources: tuple[str, ...] = UNITS  #: roles that must be present in the logs
     apriori_raise_is_finding: bool = False  #: a raised a priori value is a finding (exit 1)
+    #: the limiting errors are judged over the nights of at least this many hours (seed 001
+    #: asks 72 h for a kurtosis that means something): a short night cannot raise a limit
+    accuracy_window_h: float = 72.0
 
     def limit_for(self, unit: str, channel: str) -> float | None:
         key = CHANNEL_KEYS[channel]
@@ -118,7 +121,7 @@ def audit_config(cfg: Config) -> AuditConfig:
                 raise ConfigError(f"[audit] {key} must be a non-empty string, got {table[key]!r}")
             kw[key] = table[key]
     for key in ("busy_timeout_s", "compass_error_max_deg", "log_scale_max_pct",
-                "rejected_rate_max_pct"):
+                "rejected_rate_max_pct", "accuracy_window_h"):
         if key in table:
             kw[key] = _number(table[key], f"audit.{key}")
     if "dr_containment_min" in table:
@@ -260,7 +263,15 @@ class NightFacts:
     dr_nees_upper: float | None = None
     dr_dominant_source: str | None = None  #: what the 2M is mostly made of where it fails
     dr_dominant_key: str | None = None  #: the [dead_reckoning] key that sets its prior
+    duration_s: float | None = None  #: the period the logs cover
+    ignored: Mapping[str, int] = field(default_factory=dict)  #: valid unused input, by type
+    #: the analysis' integrity checks (dracc.analysis/1 ``integrity.checks``), as dicts
+    integrity_checks: tuple[Mapping, ...] = ()
+    integrity_false_alarm: float | None = None  #: per-night bound of its statistical checks
 
+
+#: reject reasons of older documents that were valid input dracc does not use
+VALID_UNUSED = ("unsupported", "comment")
 
 #: the words a ``dead_reckoning.verdict`` sentence starts with (dracc.analysis/1)
 DR_VERDICTS = ("consistent", "conservative", "inconsistent", "undetermined")
@@ -315,7 +326,15 @@ def facts_from_analysis(doc: Mapping) -> NightFacts:
         raise InsufficientDataError("not a dracc analysis document (schema 'dracc.analysis/…' expected)")
     inputs = doc.get("inputs") or []
     lines = sum(int(i.get("lines") or 0) for i in inputs) if inputs else None
-    rejected = sum(sum(int(n) for n in (i.get("rejected") or {}).values()) for i in inputs) if inputs else None
+    # damaged lines only: documents written before 'ignored' counted valid unused
+    # sentences as the reasons 'unsupported' and 'comment'
+    rejected = sum(sum(int(n) for r, n in (i.get("rejected") or {}).items() if r not in VALID_UNUSED)
+                   for i in inputs) if inputs else None
+    ignored: dict[str, int] = {}
+    for i in inputs:
+        for k, n in {**(i.get("ignored") or {}),
+                     **{r: n for r, n in (i.get("rejected") or {}).items() if r in VALID_UNUSED}}.items():
+            ignored[str(k)] = ignored.get(str(k), 0) + int(n)
     rate = (rejected / lines) if lines else None
     period = doc.get("period") or {}
     channels: list[ChannelRow] = []
@@ -341,6 +360,7 @@ def facts_from_analysis(doc: Mapping) -> NightFacts:
     nees = dr.get("nees")
     nees = nees if isinstance(nees, Mapping) else {}
     verdict_text = _text(dr.get("verdict"))
+    integ = doc.get("integrity") if isinstance(doc.get("integrity"), Mapping) else {}
     return NightFacts(
         period_start_utc=period.get("start_utc"), period_end_utc=period.get("end_utc"),
         inputs=tuple(str(i.get("path", "")) for i in inputs), lines=lines, rejected=rejected,
@@ -353,7 +373,10 @@ def facts_from_analysis(doc: Mapping) -> NightFacts:
         dr_consistent=_bool(dr.get("consistent")), dr_nees=_num(nees.get("statistic")),
         dr_nees_lower=_num(nees.get("lower")), dr_nees_upper=_num(nees.get("upper")),
         dr_dominant_source=_text(dr.get("dominant_source")),
-        dr_dominant_key=_text(dr.get("dominant_key")))
+        dr_dominant_key=_text(dr.get("dominant_key")),
+        duration_s=_num(period.get("duration_s")), ignored=ignored,
+        integrity_checks=tuple(c for c in integ.get("checks") or [] if isinstance(c, Mapping)),
+        integrity_false_alarm=_num(integ.get("false_alarm_per_night")))
 
 
 def analyse_voyage(paths: Sequence[Path], cfg: Config, progress=None):
@@ -373,37 +396,89 @@ def analysis_document(paths: Sequence[Path], cfg: Config, progress=None) -> dict
 # ---------------------------------------------------------------------- findings
 
 
+#: the clause each audit-level check cites (the integrity checks carry their own)
+AUDIT_CLAUSES = {
+    "accuracy": "IMO MSC.252(83) 5.3 accuracy; INS deviations from the mean of three (seed 001, "
+                "K3b-K8): limiting error at the probability, over the accuracy window",
+    "input": "IEC 61162-1: sentences that fail their checksum or structure are damaged input",
+    "availability": "IMO MSC.252(83) 5.1.2: availability of the required sources",
+    "consistency": "IMO MSC.252(83) 5.4: consistency of the DR and its 2M with the position fixes",
+}
+
+
 @dataclass(frozen=True)
 class Finding:
-    """One value outside its limit.  ``value`` and ``limit`` in the unit named by ``measure``."""
+    """One check that failed.  ``value`` and ``limit`` in the unit named by ``measure``;
+    ``check`` is the family of the audit document (validity | plausibility | latency |
+    availability | consistency | accuracy | input)."""
 
-    kind: str  #: 'limit', 'dr_inconsistent', 'dr_containment', 'compass_error', 'log_scale',
-    #: 'rejected_rate', 'missing_source', 'apriori_raised'
-    subject: str  #: e.g. 'ins2 lon', 'DR', 'compass', 'log', 'inputs', 'gnss'
+    kind: str  #: e.g. 'jump', 'dropout', 'limit', 'dr_inconsistent', 'rejected_rate', ...
+    subject: str  #: e.g. 'ins2 lon', 'DR', 'compass', 'GNSS'
     value: float | None
     limit: float | None
     measure: str
     message: str
+    check: str = "accuracy"
+    source: str | None = None
+    role: str | None = None
+    clause: str = ""
+    statistic: Mapping = field(default_factory=dict)  #: {"name", "value", "unit"}
+    threshold: Mapping = field(default_factory=dict)  #: {"value", "unit", "rule"}
+    window: Mapping = field(default_factory=dict)  #: {"start_utc", "end_utc", ...}
+    evidence: tuple = ()
+    false_alarm: float | None = None  #: probability per night that a healthy source fails it
 
 
-def evaluate(facts: NightFacts, acfg: AuditConfig) -> tuple[tuple[Finding, ...], tuple[str, ...]]:
-    """Check one night against the limits: (findings, checks that could not be made)."""
+def _finding(check: str, kind: str, subject: str, value, limit, measure: str, message: str, *,
+             source=None, role=None, statistic_name: str = "", rule: str = "", window=None,
+             evidence=(), false_alarm=None) -> Finding:
+    return Finding(kind, subject, value, limit, measure, message, check=check, source=source,
+                   role=role, clause=AUDIT_CLAUSES.get(check, ""),
+                   statistic={"name": statistic_name or kind, "value": value, "unit": measure},
+                   threshold={"value": limit, "unit": measure, "rule": rule},
+                   window=dict(window or {}), evidence=tuple(evidence), false_alarm=false_alarm)
+
+
+def _not_checked(check: str, name: str, why: str, source=None, role=None) -> dict:
+    return {"check": check, "name": name, "source": source, "role": role, "why": why}
+
+
+def _integrity_finding(c: Mapping) -> Finding:
+    st = c.get("statistic") or {}
+    th = c.get("threshold") or {}
+    src = c.get("source")
+    return Finding(str(c.get("name")), str(src or c.get("role") or ""), _num(st.get("value")),
+                   _num(th.get("value")), str(st.get("unit") or ""), str(c.get("message") or ""),
+                   check=str(c.get("check")), source=src, role=c.get("role"),
+                   clause=str(c.get("clause") or ""), statistic=dict(st), threshold=dict(th),
+                   window=dict(c.get("window") or {}), evidence=tuple(c.get("evidence") or ()),
+                   false_alarm=_num(c.get("false_alarm")))
+
+
+def evaluate(facts: NightFacts, acfg: AuditConfig) -> tuple[tuple[Finding, ...], tuple[dict, ...]]:
+    """Check one night: (findings, checks that could not be made, each with why).
+
+    The integrity checks of the analysis (validity, plausibility, latency, availability,
+    consistency of every source) are read as they failed; the audit adds the required
+    sources, the DR against the fixes, the compass and log calibration against their
+    limits and the damaged input.  The limiting errors are judged over the accuracy
+    window by :func:`accuracy_findings`, not one night at a time.
+    """
     found: list[Finding] = []
-    skipped: list[str] = []
+    skipped: list[dict] = []
+    window = {"start_utc": facts.period_start_utc, "end_utc": facts.period_end_utc}
     for role in acfg.required_sources:
         if role not in facts.sources:
-            found.append(Finding("missing_source", role, None, None, "",
-                                 f"required source {role} is missing from the logs"))
-    for c in facts.channels:
-        lim = acfg.limit_for(c.unit, c.channel)
-        if lim is None:
-            continue
-        if c.limit_error is None:
-            skipped.append(f"{c.unit} {c.channel}: no limiting error (n = {c.n})")
-        elif c.limit_error > lim:
-            found.append(Finding("limit", f"{c.unit} {c.channel}", c.limit_error, lim, c.measure,
-                                 f"{c.unit} {c.channel}: limiting error {c.limit_error:.4g} {c.measure}"
-                                 f" > {lim:.4g} {c.measure}"))
+            found.append(_finding("availability", "missing_source", role, None, None, "",
+                                  f"required source {role} is missing from the logs", role=role,
+                                  rule="[audit] required_sources", window=window, false_alarm=0.0))
+    for c in facts.integrity_checks:
+        if c.get("status") == "fail":
+            found.append(_integrity_finding(c))
+        elif c.get("status") == "not_checked":
+            skipped.append(_not_checked(str(c.get("check")), str(c.get("name")),
+                                        str(c.get("why_not") or c.get("message") or ""),
+                                        c.get("source"), c.get("role")))
     below = (facts.dr_containment_2m is not None
              and facts.dr_containment_2m < acfg.dr_containment_min)
     if facts.dr_verdict == "inconsistent":
@@ -411,31 +486,45 @@ def evaluate(facts: NightFacts, acfg: AuditConfig) -> tuple[tuple[Finding, ...],
         # a containment below the audit's minimum is said in the same finding
         found.append(_dr_inconsistent(facts, acfg, below))
     elif facts.dr_containment_2m is None:
-        skipped.append("DR consistency: no reference position or no DR track")
+        skipped.append(_not_checked("consistency", "dr", "no reference position or no DR track"))
     elif below:
-        found.append(Finding("dr_containment", "DR", facts.dr_containment_2m, acfg.dr_containment_min,
-                             "fraction", f"DR: reference inside 2M at {100 * facts.dr_containment_2m:.1f} %"
-                             f" of epochs < {100 * acfg.dr_containment_min:.1f} %"))
+        found.append(_finding("consistency", "dr_containment", "DR", facts.dr_containment_2m,
+                              acfg.dr_containment_min, "fraction",
+                              f"DR: reference inside 2M at {100 * facts.dr_containment_2m:.1f} %"
+                              f" of epochs < {100 * acfg.dr_containment_min:.1f} %",
+                              statistic_name="containment_2m", rule="[audit] dr_containment_min",
+                              window=window))
     if facts.dr_verdict == "undetermined":
-        skipped.append(f"DR verdict: {facts.dr_verdict_text}")
+        skipped.append(_not_checked("consistency", "dr", f"DR verdict: {facts.dr_verdict_text}"))
     if facts.compass_error_deg is None:
-        skipped.append("compass error: not estimated (no heading or no reference)")
+        skipped.append(_not_checked("accuracy", "compass_error",
+                                    "compass error not estimated (no heading or no reference)",
+                                    role="compass"))
     elif abs(facts.compass_error_deg) > acfg.compass_error_max_deg:
-        found.append(Finding("compass_error", "compass", facts.compass_error_deg,
-                             acfg.compass_error_max_deg, "deg",
-                             f"compass error {facts.compass_error_deg:+.2f}° exceeds "
-                             f"±{acfg.compass_error_max_deg:.2f}°"))
+        found.append(_finding("accuracy", "compass_error", "compass", facts.compass_error_deg,
+                              acfg.compass_error_max_deg, "deg",
+                              f"compass error {facts.compass_error_deg:+.2f}° exceeds "
+                              f"±{acfg.compass_error_max_deg:.2f}°", role="compass",
+                              rule="[audit] compass_error_max_deg", window=window))
     if facts.log_scale is None:
-        skipped.append("log scale: not estimated (no speed log or no reference)")
+        skipped.append(_not_checked("accuracy", "log_scale",
+                                    "log scale not estimated (no speed log or no reference)",
+                                    role="log"))
     elif 100 * abs(facts.log_scale) > acfg.log_scale_max_pct:
-        found.append(Finding("log_scale", "log", 100 * facts.log_scale, acfg.log_scale_max_pct, "%",
-                             f"log scale error {100 * facts.log_scale:+.2f} % exceeds "
-                             f"±{acfg.log_scale_max_pct:.2f} %"))
+        found.append(_finding("accuracy", "log_scale", "log", 100 * facts.log_scale,
+                              acfg.log_scale_max_pct, "%",
+                              f"log scale error {100 * facts.log_scale:+.2f} % exceeds "
+                              f"±{acfg.log_scale_max_pct:.2f} %", role="log",
+                              rule="[audit] log_scale_max_pct", window=window))
     if facts.rejected_rate is not None and 100 * facts.rejected_rate > acfg.rejected_rate_max_pct:
-        found.append(Finding("rejected_rate", "inputs", 100 * facts.rejected_rate,
-                             acfg.rejected_rate_max_pct, "%",
-                             f"{facts.rejected} of {facts.lines} lines rejected "
-                             f"({100 * facts.rejected_rate:.2f} % > {acfg.rejected_rate_max_pct:.2f} %)"))
+        found.append(_finding("input", "rejected_rate", "inputs", 100 * facts.rejected_rate,
+                              acfg.rejected_rate_max_pct, "%",
+                              f"{facts.rejected} of {facts.lines} lines damaged "
+                              f"({100 * facts.rejected_rate:.2f} % > {acfg.rejected_rate_max_pct:.2f} %)",
+                              rule="[audit] rejected_rate_max_pct: damaged lines (checksum, "
+                              "truncated, malformed) as % of all lines; valid sentences dracc "
+                              "does not use are ignored, not rejected", window=window,
+                              false_alarm=0.0))
     return tuple(found), tuple(skipped)
 
 
@@ -449,14 +538,147 @@ def _dr_inconsistent(facts: NightFacts, acfg: AuditConfig, below: bool) -> Findi
     if below:
         msg += (f"; {100 * facts.dr_containment_2m:.1f} % inside 2M is below the audit's minimum "
                 f"of {100 * acfg.dr_containment_min:.1f} %")
-    return Finding("dr_inconsistent", "DR", facts.dr_nees, facts.dr_nees_upper,
-                   "NEES" if facts.dr_nees is not None else "", msg)
+    return _finding("consistency", "dr_inconsistent", "DR", facts.dr_nees, facts.dr_nees_upper,
+                    "NEES" if facts.dr_nees is not None else "", msg, statistic_name="nees",
+                    rule="chi-square bounds of the NEES over the scored legs (alpha 0.01)",
+                    window={"start_utc": facts.period_start_utc, "end_utc": facts.period_end_utc},
+                    false_alarm=DR_FALSE_ALARM)
+
+
+#: the NEES test of dracc.deadreckoning.dr_consistency: two-sided at alpha = 0.01
+DR_FALSE_ALARM = 0.01
+
+
+# ------------------------------------------------------------------ the accuracy window
+
+
+@dataclass(frozen=True)
+class PooledChannel:
+    """One unit channel over the accuracy window: the nights' deviations pooled."""
+
+    unit: str
+    channel: str
+    nights: tuple[str, ...]
+    hours: float
+    n: int
+    m_u: float
+    m_y: float
+    kurtosis: float
+    n_eff: float
+    limit_error: float  #: (K8) K_PIE K_hm m_y over the window
+    limit: float | None  #: the configured limit
+    measure: str
+
+
+def pool_channels(nights: Sequence[tuple[str, float, Sequence[ChannelRow]]], dev_cfg) -> list[PooledChannel]:
+    """Pool (night, hours, channel rows) per unit and channel: m_u^2 weighted by n (K3b over
+    the union of the nights' deviations), kurtosis weighted by n, independent samples
+    summed; the limiting error (K8) from those."""
+    from .deviation import stats
+
+    acc: dict[tuple[str, str], dict] = {}
+    for night, hours, rows in nights:
+        for c in rows:
+            if c.m_u is None or not math.isfinite(c.m_u) or c.n <= 0:
+                continue
+            a = acc.setdefault((c.unit, c.channel), {"nights": [], "hours": 0.0, "n": 0, "ss": 0.0,
+                                                     "kn": 0.0, "neff": 0.0, "k": None,
+                                                     "measure": c.measure})
+            a["nights"].append(night)
+            a["hours"] += hours
+            a["n"] += c.n
+            a["ss"] += c.n * c.m_u ** 2
+            if c.kurtosis is not None and math.isfinite(c.kurtosis):
+                a["kn"] += c.n * c.kurtosis
+            a["neff"] += float(stats.effective_samples(c.n, dev_cfg.interval_s, dev_cfg.correlation_time_s))
+            if c.m_y is not None and c.m_u and math.isfinite(c.m_y):
+                a["k"] = c.m_y / c.m_u
+    out = []
+    for (unit, channel), a in sorted(acc.items()):
+        m_u = math.sqrt(a["ss"] / a["n"])
+        k = a["k"] if a["k"] is not None else stats.K_FIRST_APPROX_THREE
+        m_y = k * m_u
+        e = a["kn"] / a["n"]
+        kp = 1.0 if e <= stats.KURTOSIS_MIN else float(stats.k_pie(dev_cfg.probability, e))
+        kh = float(stats.k_hm(dev_cfg.confidence, a["neff"])) if a["neff"] >= 1 else math.nan
+        out.append(PooledChannel(unit, channel, tuple(a["nights"]), a["hours"], a["n"], m_u, m_y, e,
+                                 a["neff"], kp * kh * m_y, None, a["measure"]))
+    return out
+
+
+def accuracy_findings(store: StateStore, vessel: str, night: str, acfg: AuditConfig, dev_cfg,
+                      tonight: tuple[float, Sequence[ChannelRow]] | None = None
+                      ) -> tuple[tuple[Finding, ...], tuple[dict, ...], dict]:
+    """The limiting errors over the accuracy window ending with ``night``: the stored
+    nights up to it, newest first, until they cover ``accuracy_window_h``.  Findings
+    where a pooled limiting error exceeds its limit; not checked while the window is short.
+    ``tonight``: (hours, channel rows) of ``night`` not yet stored (it replaces a stored one).
+    Returns (findings, not_checked, the window as a JSON-ready dict)."""
+    candidates = [(r.night, _hours(r), r.channels) for r in store.nights(vessel)
+                  if r.night < night or (r.night == night and tonight is None)]
+    if tonight is not None:
+        candidates.append((night, float(tonight[0]), tuple(tonight[1])))
+    chosen, hours = [], 0.0
+    for n, h, rows in sorted(candidates, key=lambda c: c[0], reverse=True):
+        if not rows or h <= 0:
+            continue
+        chosen.append((n, h, rows))
+        hours += h
+        if hours >= acfg.accuracy_window_h:
+            break
+    doc = {"window_h": acfg.accuracy_window_h, "hours": hours,
+           "nights": [n for n, _, _ in reversed(chosen)], "channels": []}
+    if not chosen:
+        return (), (_not_checked("accuracy", "limit", "no INS deviation statistics in the stored "
+                                 "nights"),), doc
+    pooled = pool_channels(list(reversed(chosen)), dev_cfg)
+    found, skipped = [], []
+    complete = hours >= acfg.accuracy_window_h
+    for p in pooled:
+        lim = acfg.limit_for(p.unit, p.channel)
+        doc["channels"].append({"unit": p.unit, "channel": p.channel, "measure": p.measure,
+                                "n": p.n, "n_eff": _num(p.n_eff), "m_u": _num(p.m_u),
+                                "m_y": _num(p.m_y), "kurtosis": _num(p.kurtosis),
+                                "limit_error": _num(p.limit_error), "limit": lim})
+        if lim is None:
+            continue
+        if not complete:
+            continue
+        if not math.isfinite(p.limit_error):
+            skipped.append(_not_checked("accuracy", "limit", f"{p.unit} {p.channel}: no limiting "
+                                        f"error over the window (N_eff {p.n_eff:.2f})", role=p.unit))
+        elif p.limit_error > lim:
+            found.append(_finding(
+                "accuracy", "limit", f"{p.unit} {p.channel}", p.limit_error, lim, p.measure,
+                f"{p.unit} {p.channel}: limiting error {p.limit_error:.4g} {p.measure} over "
+                f"{hours:.0f} h ({len(p.nights)} nights) > {lim:.4g} {p.measure}", role=p.unit,
+                statistic_name="limiting_error", rule="[audit.limits]: K8 limiting error at the "
+                "configured probability, pooled over the accuracy window",
+                window={"nights": list(p.nights), "hours": p.hours},
+                evidence=({"m_y": p.m_y, "m_u": p.m_u, "n": p.n, "n_eff": p.n_eff,
+                           "kurtosis": p.kurtosis},)))
+    if not complete:
+        skipped.append(_not_checked("accuracy", "limit", f"the limiting errors are judged over "
+                                    f"{acfg.accuracy_window_h:g} h of logs; {hours:.1f} h over "
+                                    f"{len(chosen)} night(s) so far ([audit] accuracy_window_h)"))
+    doc["complete"] = complete
+    return tuple(found), tuple(skipped), doc
+
+
+def _hours(rec: NightRecord) -> float:
+    if not rec.period_start_utc or not rec.period_end_utc:
+        return 0.0
+    return (_parse_utc(rec.period_end_utc) - _parse_utc(rec.period_start_utc)).total_seconds() / 3600.0
 
 
 # --------------------------------------------------------------- choosing the logs
 
 
 _DATE_FORMS = ("%Y-%m-%d", "%Y%m%d", "%Y_%m_%d")
+
+
+class NoLogsError(IngestError):
+    """A folder holds no log for the night: the night is recorded without data (exit 3)."""
 
 
 def parse_night(text: str) -> str:
@@ -499,7 +721,7 @@ def select_logs(inputs: Sequence[Path], night: str | None, pattern: str) -> list
                 found.append(f)
             if not found:
                 what = f" for {night}" if night else ""
-                raise IngestError(f"{p}: no log files{what} matching {pattern!r}")
+                raise NoLogsError(f"no logs{what} matching {pattern!r} in {p}")
             chosen.extend(found)
         else:
             raise IngestError(f"{p}: no such file or folder")
@@ -549,19 +771,30 @@ class AuditOutcome:
 
     record: NightRecord  #: as stored (with the a priori verdicts of this night)
     findings: tuple[Finding, ...]
-    not_checked: tuple[str, ...]
+    not_checked: tuple[dict, ...]  #: {check, name, source, role, why}
     status: str  #: 'recorded' (new night), 'unchanged' (same content: nothing written), 'replaced'
     apriori_events: tuple[AprioriEvent, ...]  #: established or raised on this night
+    accuracy: Mapping = field(default_factory=dict)  #: the accuracy window (JSON-ready)
+    false_alarm_per_night: float | None = None  #: bound for the statistical checks made
+    no_data: bool = False  #: no logs for the night: recorded as a night without data
+    ignored: Mapping[str, int] = field(default_factory=dict)  #: valid unused input, by type
+
+    @property
+    def verdict(self) -> str:
+        """'no data', 'findings' or 'ok'."""
+        return "no data" if self.no_data else ("findings" if self.findings else "ok")
 
     @property
     def exit_code(self) -> ExitCode:
+        if self.no_data:
+            return ExitCode.INPUT
         return ExitCode.FINDINGS if self.findings else ExitCode.OK
 
 
 def audit_document(doc: Mapping, *, store: StateStore, acfg: AuditConfig,
                    seeds: Mapping[tuple[str, str], float], vessel: str, night: str | None,
                    content_hash: str, settings_hash: str,
-                   now: Callable[[], dt.datetime] | None = None) -> AuditOutcome:
+                   now: Callable[[], dt.datetime] | None = None, dev_cfg=None) -> AuditOutcome:
     """Audit one night given its analysis document, and record it in ``store``.
 
     Idempotent on (vessel, night, content hash, settings hash): the same night with the
@@ -569,37 +802,21 @@ def audit_document(doc: Mapping, *, store: StateStore, acfg: AuditConfig,
     whose content changed replaces the stored one in the same transaction
     (``'replaced'``).  The a priori chain of the vessel is recomputed in that transaction.
     """
+    from .config import DeviationConfig
+
+    dev_cfg = dev_cfg or DeviationConfig()
     facts = facts_from_analysis(doc)
     night = night or night_of(facts)
     findings, not_checked = evaluate(facts, acfg)
     clock = now or (lambda: dt.datetime.now(dt.timezone.utc))
-    record = NightRecord(
-        vessel=vessel, night=night, content_sha256=content_hash, settings_sha256=settings_hash,
-        audited_utc=clock().strftime("%Y-%m-%dT%H:%M:%SZ"),
-        period_start_utc=facts.period_start_utc, period_end_utc=facts.period_end_utc,
-        inputs=facts.inputs, sources=facts.sources, lines=facts.lines, rejected=facts.rejected,
-        rejected_rate=facts.rejected_rate, dr_containment_2m=facts.dr_containment_2m,
-        dr_n_scored=facts.dr_n_scored, compass_error_deg=facts.compass_error_deg,
-        compass_error_sigma_deg=facts.compass_error_sigma_deg, log_scale=facts.log_scale,
-        log_scale_sigma=facts.log_scale_sigma, findings=tuple(asdict(f) for f in findings),
-        missing=facts.missing, channels=facts.channels, dr_verdict=facts.dr_verdict,
-        dr_verdict_text=facts.dr_verdict_text, dr_consistent=facts.dr_consistent,
-        dr_nees=facts.dr_nees)
+    hours = (facts.duration_s or 0.0) / 3600.0
     with store.transaction():
-        old = store.night(vessel, night)
-        if (old is not None and old.content_sha256 == content_hash
-                and old.settings_sha256 == settings_hash):
-            status = "unchanged"
-        else:
-            status = "replaced" if old is not None else "recorded"
-            store.delete_night(vessel, night)
-            store.insert_night(record)
-            _recompute_chain(store, vessel, seeds)
-            sleep_s = os.environ.get(TEST_SLEEP_ENV)
-            if sleep_s:  # test hook: a run killed here must leave no partial night
-                print(f"dracc audit: test hook: sleeping {sleep_s} s inside the transaction",
-                      file=sys.stderr, flush=True)
-                time.sleep(float(sleep_s))
+        acc_found, acc_skipped, acc_doc = accuracy_findings(store, vessel, night, acfg, dev_cfg,
+                                                            tonight=(hours, facts.channels))
+        findings += acc_found
+        not_checked += acc_skipped
+        record = _record(vessel, night, content_hash, settings_hash, clock, facts, findings)
+        status = _store_night(store, record, seeds)
         stored = store.night(vessel, night)
         events = tuple(e for e in store.apriori_events(vessel) if e.night == night)
     assert stored is not None
@@ -608,10 +825,84 @@ def audit_document(doc: Mapping, *, store: StateStore, acfg: AuditConfig,
         for e in events:
             if e.reason == "raised":
                 measure = CHANNEL_KEYS[e.channel].rsplit("_", 1)[1]
-                extra.append(Finding("apriori_raised", f"{e.unit} {e.channel}", e.value, e.previous,
-                                     measure, f"{e.unit} {e.channel}: a priori RMS raised from "
-                                     f"{e.previous:.4g} to {e.value:.4g} {measure}"))
-    return AuditOutcome(stored, findings + tuple(extra), not_checked, status, events)
+                extra.append(_finding("accuracy", "apriori_raised", f"{e.unit} {e.channel}", e.value,
+                                      e.previous, measure, f"{e.unit} {e.channel}: a priori RMS raised "
+                                      f"from {e.previous:.4g} to {e.value:.4g} {measure}", role=e.unit,
+                                      rule="[audit] apriori_raise_is_finding"))
+    fa = [f for f in (facts.integrity_false_alarm,) if f is not None]
+    if facts.dr_verdict in ("consistent", "conservative", "inconsistent"):
+        fa.append(DR_FALSE_ALARM)
+    return AuditOutcome(stored, findings + tuple(extra), not_checked, status, events, acc_doc,
+                        min(1.0, sum(fa)) if fa else None, ignored=dict(facts.ignored))
+
+
+def _record(vessel, night, content_hash, settings_hash, clock, facts: NightFacts, findings) -> NightRecord:
+    return NightRecord(
+        vessel=vessel, night=night, content_sha256=content_hash, settings_sha256=settings_hash,
+        audited_utc=clock().strftime("%Y-%m-%dT%H:%M:%SZ"),
+        period_start_utc=facts.period_start_utc, period_end_utc=facts.period_end_utc,
+        inputs=facts.inputs, sources=facts.sources, lines=facts.lines, rejected=facts.rejected,
+        rejected_rate=facts.rejected_rate, dr_containment_2m=facts.dr_containment_2m,
+        dr_n_scored=facts.dr_n_scored, compass_error_deg=facts.compass_error_deg,
+        compass_error_sigma_deg=facts.compass_error_sigma_deg, log_scale=facts.log_scale,
+        log_scale_sigma=facts.log_scale_sigma, findings=tuple(_finding_dict(f) for f in findings),
+        missing=facts.missing, channels=facts.channels, dr_verdict=facts.dr_verdict,
+        dr_verdict_text=facts.dr_verdict_text, dr_consistent=facts.dr_consistent,
+        dr_nees=facts.dr_nees)
+
+
+def _finding_dict(f: Finding) -> dict:
+    d = asdict(f)
+    d["evidence"] = list(d["evidence"])
+    return json.loads(json.dumps(d, default=str, allow_nan=True).replace("NaN", "null"))
+
+
+def _store_night(store: StateStore, record: NightRecord, seeds) -> str:
+    """Insert or replace ``record`` (inside the caller's transaction): its status word."""
+    old = store.night(record.vessel, record.night)
+    if (old is not None and old.content_sha256 == record.content_sha256
+            and old.settings_sha256 == record.settings_sha256):
+        return "unchanged"
+    store.delete_night(record.vessel, record.night)
+    store.insert_night(record)
+    _recompute_chain(store, record.vessel, seeds)
+    sleep_s = os.environ.get(TEST_SLEEP_ENV)
+    if sleep_s:  # test hook: a run killed here must leave no partial night
+        print(f"dracc audit: test hook: sleeping {sleep_s} s inside the transaction",
+              file=sys.stderr, flush=True)
+        time.sleep(float(sleep_s))
+    return "replaced" if old is not None else "recorded"
+
+
+#: the content hash of a night recorded without logs
+NO_DATA_SHA256 = hashlib.sha256(b"dracc: no logs for this night").hexdigest()
+
+
+def record_no_data(store: StateStore, *, vessel: str, night: str, why: str, settings_hash: str,
+                   seeds: Mapping[tuple[str, str], float],
+                   now: Callable[[], dt.datetime] | None = None) -> AuditOutcome:
+    """Record ``night`` as a night without data (no logs were found): its one finding is
+    the absence, so ``audit history`` shows the gap.  A night already audited with logs
+    is left as it is (its logs may have been moved away since)."""
+    clock = now or (lambda: dt.datetime.now(dt.timezone.utc))
+    f = _finding("availability", "no_logs", "logs", None, None, "", why,
+                 rule="logs for the night in the folder, matching the pattern", false_alarm=0.0)
+    with store.transaction():
+        old = store.night(vessel, night)
+        if old is not None and old.content_sha256 != NO_DATA_SHA256:
+            record, status = old, "unchanged"
+        else:
+            record = NightRecord(vessel=vessel, night=night, content_sha256=NO_DATA_SHA256,
+                                 settings_sha256=settings_hash,
+                                 audited_utc=clock().strftime("%Y-%m-%dT%H:%M:%SZ"),
+                                 period_start_utc=None, period_end_utc=None, inputs=(), sources={},
+                                 lines=0, rejected=0, rejected_rate=None, dr_containment_2m=None,
+                                 dr_n_scored=None, compass_error_deg=None,
+                                 compass_error_sigma_deg=None, log_scale=None, log_scale_sigma=None,
+                                 findings=(_finding_dict(f),), missing=(why,), channels=())
+            status = _store_night(store, record, seeds)
+            record = store.night(vessel, night) or record
+    return AuditOutcome(record, (f,), (), status, (), no_data=True)
 
 
 def _recompute_chain(store: StateStore, vessel: str, seeds: Mapping[tuple[str, str], float]) -> None:
@@ -655,11 +946,12 @@ def run_audit(inputs: Sequence[Path], cfg: Config, *, db: str | Path | None = No
               progress=None, now: dt.datetime | None = None):
     """The whole nightly audit: choose the logs, analyse them, check, record.
 
-    Returns ``(outcome, analysis)``, the analysis for the JSON and HTML reports.
-    Raises IngestError/InsufficientDataError (exit 3) when no usable logs are found and
-    ConfigError (exit 4) for a bad ``[audit]`` section or no database path.  Without
-    ``night`` and with a folder among the inputs, the night is
-    yesterday (UTC): cron runs the audit after midnight.
+    Returns ``(outcome, analysis)``, the analysis for the reports (None for a night
+    without logs: a folder holding no log for the night is recorded as a night without
+    data, ``outcome.no_data``, exit 3).  Raises IngestError/InsufficientDataError (exit 3)
+    for given files that hold no usable logs and ConfigError (exit 4) for a bad ``[audit]``
+    section or no database path.  Without ``night`` and with a folder among the inputs,
+    the night is yesterday (UTC): cron runs the audit after midnight.
     """
     acfg = audit_config(cfg)
     seeds = apriori_seeds(cfg)
@@ -671,14 +963,23 @@ def run_audit(inputs: Sequence[Path], cfg: Config, *, db: str | Path | None = No
         night = parse_night(night)
     elif has_dir:
         night = yesterday_utc(now)
-    paths = select_logs(inputs, night, pattern or acfg.pattern)
+    name = vessel_name(cfg, acfg, vessel)
+    try:
+        paths = select_logs(inputs, night, pattern or acfg.pattern)
+    except NoLogsError as e:
+        if night is None:
+            raise
+        with StateStore(db_path, busy_timeout_s=acfg.busy_timeout_s) as store:
+            outcome = record_no_data(store, vessel=name, night=night, why=str(e),
+                                     settings_hash=settings_sha256(cfg), seeds=seeds)
+        return outcome, None
     content_hash = content_sha256(paths)
     analysis = analyse_voyage(paths, cfg, progress=progress)
     from .report import json_report
 
     doc = json_report.to_dict(analysis)
     with StateStore(db_path, busy_timeout_s=acfg.busy_timeout_s) as store:
-        outcome = audit_document(doc, store=store, acfg=acfg, seeds=seeds,
-                                 vessel=vessel_name(cfg, acfg, vessel), night=night,
-                                 content_hash=content_hash, settings_hash=settings_sha256(cfg))
+        outcome = audit_document(doc, store=store, acfg=acfg, seeds=seeds, vessel=name, night=night,
+                                 content_hash=content_hash, settings_hash=settings_sha256(cfg),
+                                 dev_cfg=cfg.deviation)
     return outcome, analysis

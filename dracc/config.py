@@ -113,11 +113,30 @@ class FaultsConfig:
 
 
 @dataclass(frozen=True)
+class IntegrityConfig:
+    """Integrity checks of every source (dracc.integrity): the ``[integrity]`` table."""
+
+    #: false-alarm probability of each statistical check, per source and night
+    false_alarm: float = 1e-3
+    latency_max_s: float = 1.0  #: |receive time - time of fix| beyond this is late ...
+    spell_min_s: float = 30.0  #: ... for this long (also: invalid-flag spells)
+    dropout_cadences: float = 10.0  #: a gap of this many of the source's own intervals ...
+    dropout_min_s: float = 60.0  #: ... and at least this long is a drop-out
+    frozen_min_s: float = 120.0  #: bit-identical positions (or heading) this long while moving
+    consistency_interval_s: float = 10.0  #: instants at which sources are compared
+    consistency_max_gap_s: float = 5.0  #: a source is interpolated across gaps up to this
+    #: the heading consistency gate is never below this (a gyro's settle-point error is
+    #: allowed 0.75 deg sec(lat) by IMO A.424(XI); 1 deg covers it to 41 deg latitude)
+    heading_gate_min_deg: float = 1.0
+
+
+@dataclass(frozen=True)
 class Config:
     ingest: IngestConfig = IngestConfig()
     dead_reckoning: DeadReckoningConfig = DeadReckoningConfig()
     deviation: DeviationConfig = DeviationConfig()
     faults: FaultsConfig = FaultsConfig()
+    integrity: IntegrityConfig = IntegrityConfig()
     #: further sections (audit, fleet, report) as plain tables, validated by their owners
     extra: dict[str, Any] = field(default_factory=dict)
 
@@ -181,6 +200,13 @@ def validate(cfg: Config) -> Config:
     for f in ("factor_lat", "factor_lon", "factor_course"):
         if getattr(d, f) <= 0:
             raise ConfigError(f"[deviation] {f} must be positive")
+    for f in fields(IntegrityConfig):
+        v = getattr(cfg.integrity, f.name)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+            raise ConfigError(f"[integrity] {f.name} must be a positive number, got {v!r}")
+    if not cfg.integrity.false_alarm < 0.5:
+        raise ConfigError(f"[integrity] false_alarm is a probability below 0.5, got "
+                          f"{cfg.integrity.false_alarm}")
     return cfg
 
 
@@ -206,7 +232,7 @@ def load_config(path: str | Path | None = None) -> Config:
 def config_from_dict(data: dict, where: str = "config") -> Config:
     """Build a validated Config from a parsed TOML document."""
     sections = {"ingest": IngestConfig, "dead_reckoning": DeadReckoningConfig, "deviation": DeviationConfig,
-                "faults": FaultsConfig}
+                "faults": FaultsConfig, "integrity": IntegrityConfig}
     unknown = set(data) - set(sections) - _KNOWN_EXTRA
     if unknown:
         raise ConfigError(f"{where}: unknown section(s): {', '.join(sorted(unknown))}")

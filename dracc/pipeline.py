@@ -49,6 +49,7 @@ from .faults import SensorFault, detect_faults, exclude_faults
 from .fusion import PositionFix
 from .geodesy import circmean, interp_position, offset_ne_m, wrap_2pi, wrap_pi
 from .ingest.frames import INS_ROLES, Voyage
+from .integrity import IntegrityResult, check_night
 from .units import DEG_RAD, KN_MPS, NS_PER_S
 
 SCHEMA = "dracc.analysis/1"
@@ -72,6 +73,8 @@ class InputFile:
     lines: int
     records: int
     rejected: dict[str, int]
+    #: valid lines or messages dracc does not use, by type (never rejected)
+    ignored: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -257,6 +260,10 @@ class Analysis:
     settings: dict[str, object] = field(default_factory=dict)
     #: sensor faults (dracc.faults), found in the raw records; always reported
     faults: tuple[SensorFault, ...] = ()
+    #: valid input dracc does not use, by type (GSV, VDM, comment, ...): counted, not rejected
+    ignored: dict[str, int] = field(default_factory=dict)
+    #: integrity checks of every source (dracc.integrity), None when not run
+    integrity: IntegrityResult | None = None
 
     @property
     def duration_s(self) -> float:
@@ -319,7 +326,8 @@ def analyse_voyage(voyage: Voyage, cfg: Config | None = None,
     notes: list[str] = []
 
     inputs = tuple(InputFile(path=str(f["path"]), format=str(f["format"]), lines=int(f["lines"]),
-                             records=int(f["records"]), rejected=dict(f.get("rejected", {})))
+                             records=int(f["records"]), rejected=dict(f.get("rejected", {})),
+                             ignored={str(k): int(v) for k, v in f.get("ignored", {}).items()})
                    for f in voyage.inputs)
     sources = tuple(SourceRow(key=str(k), roles=tuple(s.roles), records=int(s.records),
                               sentences={str(a): int(b) for a, b in s.sentences.items()},
@@ -357,6 +365,9 @@ def analyse_voyage(voyage: Voyage, cfg: Config | None = None,
                      + "; assign one with --role KEY=ROLE")
 
     tracks = _tracks(voyage)
+    report("integrity checks", 0.0)
+    integrity = check_night(voyage, cfg.integrity)
+    report("integrity checks", 1.0)
     report("sensor faults", 0.0)
     faults, voyage = _sensor_faults(voyage, cfg, notes)
     report("sensor faults", 1.0)
@@ -403,7 +414,10 @@ def analyse_voyage(voyage: Voyage, cfg: Config | None = None,
         time=time, start_ns=int(min(firsts)), end_ns=int(max(lasts)), lines=int(voyage.lines),
         tracks=tracks, deviation=deviation, dead_reckoning=dr, calibration=calibration,
         current=current, deviation_reference=dev_ref, missing=tuple(missing), notes=tuple(notes),
-        settings=settings, faults=faults)
+        settings=settings, faults=faults,
+        ignored={str(k): int(v) for k, v in getattr(voyage, "ignored", {}).items()},
+        integrity=integrity)
+
 
 
 # -------------------------------------------------------------------- sensor faults

@@ -54,27 +54,45 @@ _STATUS = {
 }
 
 
+def _finding_line(f) -> str:
+    who = f.source or f.subject
+    role = f" ({f.role})" if f.role and f.role != who else ""
+    return f"  - [{f.check}] {who}{role}: {f.message}"
+
+
 def format_summary(o: AuditOutcome, probability: float | None = None) -> str:
-    """The plain-text summary (e-mail or log): verdict first, then the evidence."""
+    """The plain-text summary (e-mail or log): the verdict and the findings first, then
+    what was not checked and the evidence."""
     r = o.record
     n = len(o.findings)
-    head = "all within limits" if n == 0 else f"{n} finding{'s' if n > 1 else ''}"
+    if o.no_data:
+        lines = [f"dracc audit: {r.vessel}, night {r.night}: NO DATA: {r.missing[0] if r.missing else ''}",
+                 f"state: {_STATUS[o.status]}; recorded as a night without data"]
+        lines.append(f"exit {int(o.exit_code)} (no logs)")
+        return "\n".join(lines) + "\n"
+    head = "all checks passed" if n == 0 else f"{n} finding{'s' if n > 1 else ''}"
     if o.not_checked:
         k = len(o.not_checked)
         head += f" ({k} check{'s' if k > 1 else ''} could not be made: see 'not checked')"
-    lines = [f"dracc audit: {r.vessel}, night {r.night}: {head}",
-             f"state: {_STATUS[o.status]}"]
-    rate = "-" if r.rejected_rate is None else f"{100 * r.rejected_rate:.2f} %"
-    lines.append(f"logs: {len(r.inputs)} file(s), {_f(r.lines, 0)} lines, {_f(r.rejected, 0)} "
-                 f"rejected ({rate}); period {r.period_start_utc or '-'} to {r.period_end_utc or '-'}")
-    if r.sources:
-        lines.append("sources: " + ", ".join(f"{k}={v}" for k, v in sorted(r.sources.items())))
+    lines = [f"dracc audit: {r.vessel}, night {r.night}: {head}"]
     if o.findings:
         lines.append("findings:")
-        lines += [f"  - {f.message}" for f in o.findings]
+        lines += [_finding_line(f) for f in o.findings]
+    lines.append(f"state: {_STATUS[o.status]}")
+    rate = "-" if r.rejected_rate is None else f"{100 * r.rejected_rate:.2f} %"
+    lines.append(f"logs: {len(r.inputs)} file(s), {_f(r.lines, 0)} lines, {_f(r.rejected, 0)} "
+                 f"damaged ({rate}); period {r.period_start_utc or '-'} to {r.period_end_utc or '-'}")
+    if o.ignored:
+        shown = ", ".join(f"{k} {v}" for k, v in sorted(o.ignored.items(), key=lambda kv: -kv[1])[:8])
+        lines.append(f"ignored (valid, not used): {sum(o.ignored.values())} ({shown})")
+    if r.sources:
+        lines.append("sources: " + ", ".join(f"{k}={v}" for k, v in sorted(r.sources.items())))
+    if o.false_alarm_per_night is not None:
+        lines.append(f"false-alarm probability of tonight's statistical checks: at most "
+                     f"{100 * o.false_alarm_per_night:.2f} %")
     if r.channels:
         p = f" at P = {probability:g}" if probability else ""
-        lines.append(f"INS (m_y = k m_u; limiting error{p}; the larger of a priori and m_y "
+        lines.append(f"INS tonight (m_y = k m_u; limiting error{p}; the larger of a priori and m_y "
                      "becomes the a priori):")
         lines.append(f"  {'unit':<5} {'chan':<6} {'n':>4} {'m_y':>12} {'limit':>12} "
                      f"{'a priori':>12}  verdict")
@@ -83,6 +101,11 @@ def format_summary(o: AuditOutcome, probability: float | None = None) -> str:
             lines.append(f"  {c.unit:<5} {c.channel:<6} {c.n:>4} {_f(c.m_y, d, c.measure):>12} "
                          f"{_f(c.limit_error, d, c.measure):>12} "
                          f"{_f(c.apriori_after, d, c.measure):>12}  {c.verdict or '-'}")
+    acc = o.accuracy or {}
+    if acc.get("channels"):
+        lines.append(f"accuracy window: {acc['hours']:.1f} h of {acc['window_h']:g} h over "
+                     f"{len(acc['nights'])} night(s)"
+                     + ("" if acc.get("complete") else " (limits judged once the window is full)"))
     established = [e for e in o.apriori_events if e.reason == "established"]
     if established:
         lines.append(f"a priori established for {len(established)} unit channel(s) without a "
@@ -107,8 +130,9 @@ def format_summary(o: AuditOutcome, probability: float | None = None) -> str:
         cal.append(f"log scale {100 * r.log_scale:+.2f} ± {sig} %")
     if cal:
         lines.append("calibration: " + "; ".join(cal))
-    for s in o.not_checked:
-        lines.append(f"not checked: {s}")
+    for nc in o.not_checked:
+        who = f" {nc['source']}" if nc.get("source") else (f" {nc['role']}" if nc.get("role") else "")
+        lines.append(f"not checked: {nc['check']} {nc['name']}{who}: {nc['why']}")
     for m in r.missing:
         lines.append(f"missing: {m}")
     code = o.exit_code
@@ -141,8 +165,11 @@ def audit_run(
                                          "([audit] vessel, else [vessel] name, else 'default')."),
     db: Path | None = typer.Option(None, "--db", help="SQLite state file ([audit] db)."),
     config: Path | None = ConfigOption,
-    json_out: Path | None = typer.Option(None, "--json", help="Write the analysis JSON report."),
-    html_out: Path | None = typer.Option(None, "--html", help="Write the analysis HTML report."),
+    json_out: Path | None = typer.Option(None, "--json", help="Write the audit document "
+                                            "(schema dracc.audit/1: verdict, findings, not "
+                                            "checked, and the analysis it rests on)."),
+    html_out: Path | None = typer.Option(None, "--html", help="Write the audit page: the verdict "
+                                            "and findings first, then the analysis report."),
     summary_out: Path | None = typer.Option(None, "--summary", help="Write the plain-text "
                                                "summary to this file instead of stdout."),
 ) -> int:
@@ -162,14 +189,21 @@ def audit_run(
 
         outcome, analysis = run_audit(logs, cfg, db=db, vessel=vessel, night=date, pattern=pattern,
                                       progress=report)
-    if json_out is not None:
+    from ..report import audit_json
+
+    analysis_doc = None
+    if analysis is not None:
         from ..report import json_report
 
-        json_report.write_json(analysis, json_out)
+        analysis_doc = json_report.to_dict(analysis)
+    if json_out is not None:
+        audit_json.write_json(outcome, analysis_doc, json_out)
     if html_out is not None:
         from ..report import html as html_report
+        from ..report.audit_html import night_html
 
-        html_report.write_html(analysis, html_out)
+        body, css = html_report.render_sections(analysis) if analysis is not None else ("", "")
+        atomic.write_text(html_out, night_html(audit_json.to_dict(outcome, analysis_doc), body, css))
     text = format_summary(outcome, cfg.deviation.probability)
     if summary_out is not None:
         atomic.write_text(summary_out, text)

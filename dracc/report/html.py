@@ -311,6 +311,14 @@ def render_html(a: Analysis) -> str:
 """
 
 
+def render_sections(a: Analysis) -> tuple[str, str]:
+    """(body, css) of the report without its page: for the audit page to embed."""
+    page = render_html(a)
+    body = page.split("<body>", 1)[1].rsplit("</body>", 1)[0]
+    body = body.split("</h1>", 1)[1] if "</h1>" in body else body
+    return body, _CSS
+
+
 def write_html(a: Analysis, path: str | Path) -> None:
     """Write the report atomically to ``path``."""
     atomic.write_text(path, render_html(a))

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from .. import atomic
+from ..integrity import Check, IntegrityResult
 from ..pipeline import (
     Analysis,
     CalibrationSection,
@@ -188,10 +189,12 @@ def to_dict(a: Analysis) -> dict:
         "dracc_version": a.dracc_version,
         "settings": _plain(a.settings),
         "inputs": [{"path": f.path, "format": f.format, "lines": int(f.lines),
-                    "records": int(f.records), "rejected": {k: int(v) for k, v in f.rejected.items()}}
+                    "records": int(f.records), "rejected": {k: int(v) for k, v in f.rejected.items()},
+                    "ignored": {k: int(v) for k, v in f.ignored.items()}}
                    for f in a.inputs],
         "lines": int(a.lines),
         "rejected": {k: int(v) for k, v in a.rejected.items()},
+        "ignored": {k: int(v) for k, v in a.ignored.items()},
         "reject_examples": {k: [{"file": f, "line": int(n), "text": t} for f, n, t in v]
                             for k, v in a.reject_examples.items()},
         "time_events": {"duplicates": a.time.duplicates, "backsteps": a.time.backsteps,
@@ -212,7 +215,31 @@ def to_dict(a: Analysis) -> dict:
         "missing": list(a.missing),
         "notes": list(a.notes),
         "faults": [f.to_dict() for f in a.faults],
+        "integrity": None if a.integrity is None else integrity_dict(a.integrity),
     }
+
+
+def check_dict(c: Check) -> dict:
+    """One integrity check (dracc.integrity) as plain JSON types."""
+    window = {"start_utc": iso_utc(c.window.get("start_ns")), "end_utc": iso_utc(c.window.get("end_ns"))}
+    return {"check": c.check, "name": c.name, "source": c.source, "role": c.role,
+            "status": c.status, "clause": c.clause, "statistic": _plain(c.statistic),
+            "threshold": _plain(c.threshold), "window": window,
+            "false_alarm": _num(c.false_alarm), "message": c.message,
+            "evidence": [_plain(e) for e in c.evidence], "why_not": c.why_not,
+            "detail": _plain(c.detail)}
+
+
+def integrity_dict(r: IntegrityResult) -> dict:
+    """The integrity section: every check of every source, and the per-source figures."""
+    return {"false_alarm_per_check": _num(r.alpha),
+            "false_alarm_per_night": _num(r.false_alarm_per_night),
+            "period": {"start_utc": iso_utc(r.start_ns), "end_utc": iso_utc(r.end_ns)},
+            "checks": [check_dict(c) for c in r.checks],
+            "sources": {s.source: {"role": s.role, "records": s.records, "cadence_s": _num(s.cadence_s),
+                                   "availability": _num(s.availability),
+                                   "latency_s": None if s.latency_s is None else _plain(s.latency_s)}
+                        for s in r.sources}}
 
 
 def dumps(a: Analysis, indent: int | None = 1) -> str:
