@@ -112,13 +112,20 @@ def simulate_cmd(
     segment_hours: float = typer.Option(6.0, "--segment-hours",
                                         help="NMEA: simulate and write in segments of this "
                                              "length, so memory does not grow with --hours."),
+    fault: list[str] = typer.Option([], "--fault", metavar="KIND[:SOURCE][@START][+DURATION][=SIZE]",
+                                    help="Seed a sensor fault (repeatable): KIND jump, freeze, "
+                                         "dropout, drift, latency or invalid, e.g. "
+                                         "jump:GNSS@2h=670m, freeze:INS2@1.5h+40min, "
+                                         "dropout:INS3+25min, drift:INS1=1kn, latency:GNSS=3s, "
+                                         "invalid:GNSS+10min (docs/simulate.md)."),
 ) -> None:
     """Simulate a voyage with known truth; write its log, truth.csv, errors.csv, params.json.
 
     The log is OUT/<name>.nmea (or .csv, .mcap); truth.csv and errors.csv hold the true
     track and every true sensor error (measured - true) at --truth-hz; params.json the
-    parameters, the source roles and each INS unit's true error RMS.
+    parameters, the source roles, each INS unit's true error RMS and the seeded faults.
     """
+    from ..sim.faults import fault_table, parse_fault, resolve_faults
     from ..sim.model import SimParams, generated_legs, simulate, simulate_segments, start_ns
 
     if fmt not in FORMATS:
@@ -144,6 +151,10 @@ def simulate_cmd(
         # whole seconds would give every sub-second sentence its neighbour's time
         tag_time = "ms" if max(compass_hz, log_hz, ins_hz, gnss_hz, aux_hz) > 1.0 else "s"
     params = replace(params, legs=generated_legs(params))
+    specs = list(fault or [])
+    params = replace(params, faults=resolve_faults([parse_fault(f) for f in specs],
+                                                   params.duration_s, params.seed,
+                                                   params.compass, labels=specs))
     base_hz = max(compass_hz, log_hz, ins_hz, gnss_hz, aux_hz)
     t0_ns = start_ns(params.start_utc)
     log_path = out_dir / f"{name}.{EXT[fmt]}"
@@ -180,12 +191,16 @@ def simulate_cmd(
         "roles": roles,
         "unit_rms": unit_rms,
         "records": dict(records),
+        "faults": fault_table(params.faults, t0_ns, params.duration_s, roles),
         "params": params_dict(params),
     }
     write_text(out_dir / "params.json", json.dumps(info, indent=2) + "\n")
     size = log_path.stat().st_size
+    faults_txt = (f"; faults: {', '.join(f.describe() for f in params.faults)}"
+                  if params.faults else "")
     err.print(f"simulated {hours:g} h and wrote {log_path} ({size / 1e6:.1f} MB), truth.csv, "
-              f"errors.csv, params.json in {t1 - t0:.1f} s", highlight=False)
+              f"errors.csv, params.json in {t1 - t0:.1f} s{faults_txt}", highlight=False,
+              markup=False, emoji=False)
 
 
 def _tables_and_tallies(v, i, ft, fe, truth_hz, base_hz, t0_ns, records, sq, count) -> None:

@@ -3,7 +3,9 @@
 One channel per source and kind, topic ``/<source>/<leaf>`` (leaf: position ``fix``,
 heading ``heading``, ground ``velocity``, water ``water``, distance ``distance``, rot
 ``rot``; raw NMEA ``nmea``), so the reader's source key is the source again.  Log and
-publish times are the record's ``time_ns``; messages are written in time order.
+publish times are the record's receive time (``recv_ns`` where set, e.g. a simulated
+latency, else ``time_ns``); message stamps are ``time_ns`` (the time of fix); messages are
+written in log-time order.
 
 Encodings
     ``json``: positions as ``foxglove.LocationFix`` (``timestamp {sec, nsec}``,
@@ -30,7 +32,7 @@ import pandas as pd
 
 from ..atomic import atomic_path
 from ..ingest.csv_quantities import frame_quantities
-from ..ingest.frames import KIND_COLUMNS, KINDS
+from ..ingest.frames import KIND_COLUMNS, KINDS, MISSING_NS
 from ..ingest.mcap_cdr import compile_schema, encode_fixed
 
 LEAF = {"position": "fix", "heading": "heading", "ground": "velocity", "water": "water",
@@ -241,6 +243,15 @@ def _proto_messages(kind: str, src: str, df: pd.DataFrame, protos) -> tuple[str,
     return f"dracc.{TYPE[kind]}", sets[kind], msgs
 
 
+def _log_times(df: pd.DataFrame) -> np.ndarray:
+    """Log (receive) time of each record: ``recv_ns`` where set, else ``time_ns``."""
+    t = df["time_ns"].to_numpy(dtype=np.int64)
+    if "recv_ns" not in df:
+        return t
+    r = df["recv_ns"].to_numpy(dtype=np.int64)
+    return np.where(r != MISSING_NS, r, t)
+
+
 def write_mcap(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None, path,
                encoding: str = "json", chunk_size: int = 1 << 20, compression: str | None = "zstd",
                indexed: bool = True) -> Path:
@@ -283,8 +294,8 @@ def write_mcap(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None, pa
                 name, sdata, msgs = _proto_messages(kind, src, df, protos)
                 senc, menc = "protobuf", "protobuf"
             streams.append((f"/{src.strip('/')}/{LEAF[kind]}", name, senc, sdata, menc,
-                            df["time_ns"].to_numpy(dtype=np.int64), msgs))
-    # one global time order over all channels
+                            _log_times(df), msgs))
+    # one global log-time order over all channels (a recorder writes in arrival order)
     t_all = np.concatenate([s[5] for s in streams]) if streams else np.zeros(0, np.int64)
     ch_all = np.repeat(np.arange(len(streams)), [len(s[5]) for s in streams])
     row_all = np.concatenate([np.arange(len(s[5])) for s in streams]) if streams else np.zeros(0, np.int64)

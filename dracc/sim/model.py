@@ -45,6 +45,7 @@ from ..errors import ConfigError
 from ..geodesy import add_offset_ne, angdiff, k_lambda, k_phi, wrap_2pi, wrap_pi
 from ..ingest.frames import KINDS, empty_frame, make_frame
 from ..units import DEG_RAD, KN_MPS, NMI_M
+from .faults import SimFault, apply_error_faults, apply_frame_faults, resolve_faults
 
 MAX_SAMPLES = 3e6  #: truth samples in one simulate() call (~1.7 kB each at peak)
 SCHULER_PERIOD_S = 84.4 * 60.0  #: Schuler period 2 pi sqrt(R/g) = 84.4 min
@@ -195,6 +196,9 @@ class SimParams:
     gnss_white_m: float = 0.3
     gnss_speed_white_kn: float = 0.03
     gnss_hdop: float = 0.8
+    #: seeded sensor faults (:mod:`dracc.sim.faults`); unresolved fields take the kind's
+    #: defaults, drawn from the seed over the whole voyage
+    faults: tuple[SimFault, ...] = ()
     # segments of a long voyage (see dracc.sim.model.simulate_segments)
     t0_s: float = 0.0  #: time of this segment's first sample from the voyage start
     segment: int = 0  #: segment number (its own random streams; phases are shared)
@@ -227,7 +231,7 @@ class SimParams:
         def conv(v):
             if isinstance(v, GM):
                 return {"sigma": conv(v.sigma), "tau_s": conv(v.tau_s)}
-            if isinstance(v, InsErrorParams):
+            if isinstance(v, (InsErrorParams, SimFault)):
                 return {f.name: conv(getattr(v, f.name)) for f in fields(v)}
             if isinstance(v, (tuple, list)):
                 return [conv(x) for x in v]
@@ -499,6 +503,10 @@ def simulate(params: SimParams) -> SimVoyage:
     log_ground_noise_transverse_mps, leeway_rad (true leeway: a DR error when ignored),
     current_n_mps, current_e_mps, insJ_north_m, insJ_east_m, insJ_heading_rad, insJ_vn_mps,
     insJ_ve_mps (J = 1..3), gnss_north_m, gnss_east_m, gnss_vn_mps, gnss_ve_mps.
+
+    ``params.faults`` (:mod:`dracc.sim.faults`) are resolved over the voyage (the result's
+    ``params.faults`` holds them resolved) and applied to the errors and frames; without
+    faults nothing of this runs.
     """
     p = params
     base_hz = _check(p)
@@ -518,9 +526,16 @@ def simulate(params: SimParams) -> SimVoyage:
         state_out[key] = float(x[-1]) if n else state_in.get(key)
         return x
 
+    # faults: resolved over the whole voyage (simulate_segments passes its length on)
+    voyage_s = float(state_in.get("voyage_s", p.t0_s + p.duration_s))
+    faults = resolve_faults(p.faults, voyage_s, p.seed, p.compass) if p.faults else ()
+    v0_ns = start_ns(p.start_utc)  # the voyage's start (t0_ns is this segment's)
+
     # ---- truth
     legs = p.legs if p.legs is not None else _generated_legs(p)
     p = replace(p, legs=tuple((float(a), float(b)) for a, b in legs))  # explicit in the result
+    if faults:
+        p = replace(p, faults=faults)
     psi_steer, rot_steer = _heading_profile(t_s, legs, p.initial_heading_deg,
                                             p.turn_rate_deg_s * DEG_RAD)
     wy = 2 * np.pi / p.yaw_period_s if p.yaw_period_s > 0 else 0.0
@@ -609,6 +624,8 @@ def simulate(params: SimParams) -> SimVoyage:
                              + p.gnss_white_m * r.standard_normal(n))
     errors["gnss_vn_mps"] = p.gnss_speed_white_kn * KN_MPS * r.standard_normal(n)
     errors["gnss_ve_mps"] = p.gnss_speed_white_kn * KN_MPS * r.standard_normal(n)
+    if faults:  # jumps and drifts are position errors: frames and errors.csv agree
+        errors = apply_error_faults(faults, errors, time_ns, t_s, v0_ns)
     err = pd.DataFrame(errors)
 
     # ---- sentences (what each source writes, at which samples)
@@ -741,6 +758,13 @@ def simulate(params: SimParams) -> SimVoyage:
     roles = {s: SOURCES[s][0] for s, _, _ in plan if not (s == "MAG" and p.compass == "both")}
     zda = pd.DataFrame({"time_ns": time_ns[ig], "source": np.full(len(ig), "GNSS", dtype=object),
                         "line": lines[("GNSS", "ZDA")]})
+    if faults:
+        frames, zda, err, fstate = apply_frame_faults(faults, frames, zda, err, truth, v0_ns,
+                                                      state_in)
+        state_out.update(fstate)
+        if "voyage_s" in state_in:
+            state_out["voyage_s"] = voyage_s
+        unit_rms = _unit_rms(frames, time_ns, lat, lon, psi)
     state_out.update(lat_rad=float(lat[-1]), lon_rad=float(lon[-1]), t0_s=float(t_s[-1]),
                      segment=seg)
     if p.skip_first:
@@ -748,6 +772,27 @@ def simulate(params: SimParams) -> SimVoyage:
         err = err.iloc[1:].reset_index(drop=True)
     return SimVoyage(truth=truth, frames=frames, roles=roles, errors=err, unit_rms=unit_rms,
                      params=p, zda=zda, state=state_out)
+
+
+def _unit_rms(frames: dict[str, pd.DataFrame], time_ns: np.ndarray, lat: np.ndarray,
+              lon: np.ndarray, psi: np.ndarray) -> dict[str, dict[str, float]]:
+    """RMS of each INS unit's written errors, from the frames (as :func:`simulate` computes
+    it from the readings; used when faults changed the frames)."""
+    def rms(x: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(x ** 2))) if len(x) else float("nan")
+
+    out = {}
+    pos, hd = frames["position"], frames["heading"]
+    for j in (1, 2, 3):
+        f = pos[(pos["source"] == f"INS{j}").to_numpy(bool)]
+        k = np.searchsorted(time_ns, f["time_ns"].to_numpy(np.int64))
+        en = (f["lat_rad"].to_numpy(float) - lat[k]) / k_phi(lat[k])
+        ee = angdiff(f["lon_rad"].to_numpy(float), lon[k]) / k_lambda(lat[k])
+        h = hd[(hd["source"] == f"INS{j}").to_numpy(bool)]
+        kh = np.searchsorted(time_ns, h["time_ns"].to_numpy(np.int64))
+        eh = angdiff(h["heading_rad"].to_numpy(float), psi[kh])
+        out[f"ins{j}"] = {"lat_m": rms(en), "lon_m": rms(ee), "course_deg": rms(eh) / DEG_RAD}
+    return out
 
 
 def generated_legs(params: SimParams) -> tuple[tuple[float, float], ...]:
@@ -765,18 +810,23 @@ def simulate_segments(params: SimParams, segment_s: float = 6 * 3600.0):
     from the segment's own streams.  The first sample of every later segment repeats the
     previous segment's last one and is dropped.  The result therefore differs from one
     :func:`simulate` of the whole voyage only in its random draws, not in its statistics.
-    Line numbers in each segment's frames restart at 1.
+    Line numbers in each segment's frames restart at 1.  Faults are resolved over the
+    whole voyage and applied by absolute time in every segment they touch.
     """
     if not segment_s > 0:
         raise ConfigError(f"segment length must be positive, got {segment_s} s")
     legs = generated_legs(params)
     total = params.duration_s
     t0, k, state = 0.0, 0, None
+    if params.faults:  # resolved over the whole voyage; each segment applies its part
+        params = replace(params, faults=resolve_faults(params.faults, total, params.seed,
+                                                       params.compass))
+        state = {"voyage_s": total}
     while True:
         seg_len = min(segment_s, total - t0)
         p = replace(params, legs=legs, duration_s=seg_len, t0_s=t0, segment=k,
                     skip_first=k > 0, state=state)
-        if state is not None:
+        if state is not None and "lat_rad" in state:
             p = replace(p, start_lat_deg=state["lat_rad"] / DEG_RAD,
                         start_lon_deg=state["lon_rad"] / DEG_RAD)
         v = simulate(p)

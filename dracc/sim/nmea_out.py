@@ -27,6 +27,13 @@ simulator are reproduced exactly.  Line forms:
 ``tag``     ``\\s:INS2,c:1772323200*hh\\$INGGA,...*hh`` (IEC 61162-450 TAG block; ``c:`` in
             Unix seconds, or milliseconds with ``tag_time='ms'``)
 ``prefix``  ``2026-03-01T00:00:00.000Z $INGGA,...*hh`` (ISO 8601 UTC, milliseconds)
+
+The TAG ``c:`` and the prefix carry the receive time: a frame's ``recv_ns`` where it is not
+``MISSING_NS`` (a simulated latency), else its ``time_ns``; the sentences' own time fields
+(GGA, RMC, ZDA) are always ``time_ns``, the time of fix.  Lines stay in time-of-fix order.
+Validity comes from the position frame's ``quality``: GGA writes it as the fix quality,
+RMC writes status ``V`` and mode ``N`` where it is 0, and a VTG is written with mode ``N``
+where its source's position record at the same time has quality 0.
 """
 
 from __future__ import annotations
@@ -38,6 +45,7 @@ import pandas as pd
 
 from ..atomic import atomic_path
 from ..errors import DraccError
+from ..ingest.frames import MISSING_NS
 from ..units import DEG_RAD, KN_MPS, NMI_M
 from .model import ALT_DEC, ANGLE_DEC, DIST_DEC, HDOP_DEC, ROT_DEC, SPEED_DEC
 
@@ -262,7 +270,8 @@ def _vlw(r, d):
 def _vtg(r, d):
     r.num(_angle_deg(d["cog_rad"]), ANGLE_DEC).lit(b",T,,M,")
     r.num(d["sog_mps"] / KN_MPS, SPEED_DEC).lit(b",N,").num(d["sog_mps"] / KMH_MPS, SPEED_DEC)
-    r.lit(b",K,A")
+    valid = d["valid"] if "valid" in d else np.ones(r.n, bool)
+    r.lit(b",K,").choice(valid, b"A", b"N")
 
 
 _LAYOUT = {"GGA": _gga, "RMC": _rmc, "ZDA": _zda, "HDT": _hdt_like(b"T"),
@@ -288,7 +297,9 @@ def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | No
         out = pd.DataFrame({"time_ns": df["time_ns"].to_numpy(np.int64),
                             "source": df["source"].astype(str).to_numpy(object),
                             "line": (df["line"].to_numpy(np.int64) if "line" in df
-                                     else np.zeros(len(df), np.int64))})
+                                     else np.zeros(len(df), np.int64)),
+                            "recv_ns": (df["recv_ns"].to_numpy(np.int64) if "recv_ns" in df
+                                        else np.full(len(df), MISSING_NS, np.int64))})
         talker = (df["talker"].astype(str).to_numpy(object) if "talker" in df
                   else np.full(len(df), "", object))
         empty = talker == ""
@@ -333,14 +344,16 @@ def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | No
         vtg = gnd[~is_rmc]
         rmc_gnd = gnd[is_rmc]
         if len(vtg):
-            tables.append(("VTG", table(vtg, "ground", ("cog_rad", "sog_mps"))))
+            b = table(vtg, "ground", ("cog_rad", "sog_mps"))
+            b["valid"] = _fix_valid(pos, b)
+            tables.append(("VTG", b))
     if len(rmc_pos) or len(rmc_gnd):
         bp = table(rmc_pos, "position", ("lat_rad", "lon_rad")) if len(rmc_pos) else None
         if bp is not None:
             bp["quality"] = (rmc_pos["quality"].to_numpy(np.int64) if "quality" in rmc_pos
                              else np.ones(len(rmc_pos), np.int64))
         bg = table(rmc_gnd, "ground", ("cog_rad", "sog_mps")) if len(rmc_gnd) else None
-        keys = ["time_ns", "source", "line", "talker", "sub"]
+        keys = ["time_ns", "source", "line", "talker", "sub", "recv_ns"]
         if bp is None:
             rmc = bg.assign(lat_rad=np.nan, lon_rad=np.nan, quality=1)
         elif bg is None:
@@ -392,7 +405,7 @@ def _arrays(tb: pd.DataFrame) -> dict[str, np.ndarray]:
     for c in tb.columns:
         if c in ("source", "talker"):
             out[c] = tb[c].astype(str).to_numpy(dtype=object).astype("S")
-        elif c in ("time_ns", "line", "sub", "quality"):
+        elif c in ("time_ns", "line", "sub", "quality", "recv_ns", "valid"):
             out[c] = tb[c].to_numpy(dtype=np.int64)
         else:
             out[c] = tb[c].to_numpy(dtype=float, na_value=np.nan)
@@ -400,15 +413,17 @@ def _arrays(tb: pd.DataFrame) -> dict[str, np.ndarray]:
 
 
 def _order(tables):
-    """Global time order: (time_ns, line, sub, type order); returns (type_id, row) per line."""
+    """Global time order: (time_ns, line, sub, type order); returns (type_id, row, receive
+    time) per line."""
     t = np.concatenate([tb["time_ns"] for _, tb in tables])
+    rcv = np.concatenate([_received(tb) for _, tb in tables])
     ln = np.concatenate([tb["line"] for _, tb in tables])
     sub = np.concatenate([tb["sub"] for _, tb in tables])
     sizes = [len(tb["time_ns"]) for _, tb in tables]
     tid = np.repeat(np.arange(len(tables)), sizes)
     row = np.concatenate([np.arange(k) for k in sizes])
     o = np.lexsort((tid, sub, ln, t))
-    return tid[o], row[o], t[o]
+    return tid[o], row[o], rcv[o]
 
 
 def _format_block(typ: str, d: dict[str, np.ndarray], form: str, tag_time: str,
@@ -416,15 +431,16 @@ def _format_block(typ: str, d: dict[str, np.ndarray], form: str, tag_time: str,
     """Byte matrix and mask of complete lines (with terminator) for the rows of ``d``."""
     n = len(d["time_ns"])
     head = _Row(n)
+    stamp = _received(d)  # what the logger stamps: the receive time where there is one
     if form == "tag":
         tag = _Row(n).lit(b"s:").strs(d["source"]).lit(b",c:")
         unit = 1_000_000_000 if tag_time == "s" else 1_000_000
-        tag.uint(d["time_ns"] // unit, _width(d["time_ns"] // unit))
+        tag.uint(stamp // unit, _width(stamp // unit))
         tm, tk = tag.build()
         head.lit(b"\\").add(tm, tk).lit(b"*").add(_hex2(checksum(tm, tk)),
                                                    np.ones((n, 2), bool)).lit(b"\\")
     elif form == "prefix":
-        iso = np.datetime_as_string(d["time_ns"].astype("datetime64[ns]").astype("datetime64[ms]"),
+        iso = np.datetime_as_string(stamp.astype("datetime64[ns]").astype("datetime64[ms]"),
                                     unit="ms")
         head.strs(iso).lit(b"Z ")
     body = _Row(n).strs(d["talker"]).lit(typ.encode() + b",")
@@ -432,6 +448,32 @@ def _format_block(typ: str, d: dict[str, np.ndarray], form: str, tag_time: str,
     bm, bk = body.build()
     head.lit(b"$").add(bm, bk).lit(b"*").add(_hex2(checksum(bm, bk)), np.ones((n, 2), bool))
     return head.lit(newline).build()
+
+
+def _received(d: dict[str, np.ndarray]) -> np.ndarray:
+    """The receive time of each row: ``recv_ns`` where set, else ``time_ns``."""
+    t = d["time_ns"]
+    if "recv_ns" not in d:
+        return t
+    r = d["recv_ns"]
+    return np.where(r != MISSING_NS, r, t)
+
+
+def _fix_valid(pos: pd.DataFrame | None, vtg: pd.DataFrame) -> np.ndarray:
+    """VTG rows whose source's position fix at the same time is not flagged invalid
+    (``quality`` 0 there: VTG mode N).  All valid when no position record is invalid."""
+    ok = np.ones(len(vtg), np.int64)
+    if pos is None or not len(pos) or "quality" not in pos:
+        return ok
+    bad = pos["quality"].to_numpy(np.int64) == 0
+    if not bad.any():
+        return ok
+    keys = pd.MultiIndex.from_arrays([pos["source"].astype(str).to_numpy(object)[bad],
+                                      pos["time_ns"].to_numpy(np.int64)[bad]])
+    mine = pd.MultiIndex.from_arrays([vtg["source"].to_numpy(object),
+                                      vtg["time_ns"].to_numpy(np.int64)])
+    ok[mine.isin(keys)] = 0
+    return ok
 
 
 def _width(v: np.ndarray) -> int:
@@ -448,8 +490,10 @@ def _check_form(form: str, tag_time: str) -> None:
 def iter_blocks(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None = None,
                 form: str = "bare", tag_time: str = "s", newline: bytes = b"\r\n",
                 chunk_rows: int = CHUNK_ROWS):
-    """Yield ``(time_ns, source, bytes)`` blocks of complete, time-ordered lines
-    (``source`` as an ASCII bytes array)."""
+    """Yield ``(time_ns, source, bytes)`` blocks of complete lines in time-of-fix order
+    (``source`` as an ASCII bytes array; ``time_ns`` the time a logger stamps each line:
+    ``recv_ns`` where set, else ``time_ns``).  TAG ``c:`` and prefix times are those
+    receive times; the sentences' own time fields are the time of fix."""
     _check_form(form, tag_time)
     tables = [(typ, _arrays(tb)) for typ, tb in _sentence_tables(frames, roles)]
     if not tables:
@@ -479,7 +523,8 @@ def iter_blocks(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None = 
 
 def frames_to_lines(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None = None):
     """Bare sentences with checksums, time-ordered: ``(time_ns int64, source str array,
-    lines list[bytes])`` (no line terminators)."""
+    lines list[bytes])`` (no line terminators; ``time_ns`` the receive time, as
+    :func:`iter_blocks`)."""
     ts, srcs, lines = [], [], []
     for t, src, blob in iter_blocks(frames, roles, form="bare", newline=b"\n"):
         ts.append(t)

@@ -1,0 +1,427 @@
+"""Seeded sensor faults for simulated voyages: what the nightly integrity audit must find.
+
+Pure functions (numpy/pandas, no I/O).  A :class:`SimFault` names a kind, a source, a
+window and a size; :func:`parse_fault` reads the CLI spec
+``KIND[:SOURCE][@START][+DURATION][=SIZE]``, :func:`resolve_faults` fills in the defaults
+(start and direction drawn from the seed) and checks the fault against the voyage, and
+:func:`apply_error_faults` / :func:`apply_frame_faults` change the simulated true errors
+and canonical frames.  Outside its window a fault changes nothing and other sources are
+never touched (but a dropout closes up the line numbers of every later record).
+
+Kinds (window ``[start, start + duration)`` in absolute voyage time; a window reaching
+the end of the voyage includes its last sample):
+
+``jump``     the source's positions displaced by ``size`` metres in a fixed direction
+             (position frame and the true position error; velocities unchanged).
+``freeze``   the source's latitude/longitude (a compass: its heading, and HDG's deviation)
+             repeat bit-identically the last value before the start; records keep coming.
+``dropout``  every record of the source removed (line numbers closed up).
+``drift``    the position error gains ``size * (t - start)`` (m/s) in a fixed direction;
+             back to normal after the window.
+``latency``  records *received* in the window carry their time of fix ``size`` seconds
+             earlier: ``recv_ns = time_ns + size``, values those of the time of fix.
+``invalid``  the source's position records flagged invalid (``quality`` 0), values kept.
+
+Jump and drift change the true errors (``errors`` holds measured - true) before the
+frames are made, so frames and errors agree; freeze changes the errors in its window to
+the frozen reading minus the truth.  Dropout, latency and invalid leave the errors alone
+(the error process of the sensor goes on; the record's values are of its time of fix).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+import pandas as pd
+
+from ..errors import ConfigError
+from ..geodesy import angdiff, offset_ne_m
+from ..units import KN_MPS
+
+FAULT_KINDS = ("jump", "freeze", "dropout", "drift", "latency", "invalid")
+#: every source key the simulator can write (as :data:`dracc.sim.model.SOURCES`)
+ALL_SOURCES = ("GYRO", "MAG", "LOG", "INS1", "INS2", "INS3", "GNSS")
+POSITION_SOURCES = ("INS1", "INS2", "INS3", "GNSS")
+COMPASS_SOURCES = ("GYRO", "MAG")
+#: kind -> the sources it can hit
+KIND_SOURCES = {"jump": POSITION_SOURCES, "freeze": POSITION_SOURCES + COMPASS_SOURCES,
+                "dropout": ALL_SOURCES, "drift": POSITION_SOURCES, "latency": ALL_SOURCES,
+                "invalid": POSITION_SOURCES}
+DEFAULT_SOURCE = {"jump": "GNSS", "freeze": "INS2", "dropout": "INS3", "drift": "INS1",
+                  "latency": "GNSS", "invalid": "GNSS"}
+#: default window lengths in seconds (inf: to the end of the voyage)
+DEFAULT_DURATION_S = {"jump": 600.0, "freeze": 2400.0, "dropout": 1500.0, "drift": math.inf,
+                      "latency": 3600.0, "invalid": 600.0}
+#: default sizes in SI (jump m, drift m/s, latency s); kinds without a size are absent
+DEFAULT_SIZE = {"jump": 670.0, "drift": 1.0 * KN_MPS, "latency": 3.0}
+SIZE_UNIT = {"jump": "m", "drift": "m/s", "latency": "s"}
+#: the default start is drawn uniformly in this fraction of the voyage
+START_RANGE = (0.2, 0.5)
+RNG_COMPONENT = 60  #: random stream of the fault draws (see dracc.sim.model._rng)
+SPEC_GRAMMAR = "KIND[:SOURCE][@START][+DURATION][=SIZE]"
+
+_TIME_UNITS = {"": 1.0, "s": 1.0, "min": 60.0, "h": 3600.0}
+_SIZE_UNITS = {"jump": {"": 1.0, "m": 1.0, "km": 1000.0},
+               "drift": {"": KN_MPS, "kn": KN_MPS, "m/s": 1.0},
+               "latency": {"": 1.0, "s": 1.0, "ms": 1e-3, "min": 60.0}}
+_SPEC = re.compile(r"(?P<kind>[A-Za-z_]+)(?::(?P<source>[^@+=]*))?(?:@(?P<start>[^+=]*))?"
+                   r"(?:\+(?P<duration>[^=]*))?(?:=(?P<size>.*))?")
+_NUM = re.compile(r"(?P<num>[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE]-?[0-9]+)?)\s*(?P<unit>[A-Za-z/]*)")
+
+
+@dataclass(frozen=True)
+class SimFault:
+    """One seeded sensor fault.  ``None`` fields take the kind's default when resolved
+    (:func:`resolve_faults`).
+
+    ``start_s`` from the voyage start; ``duration_s`` (``inf``: to the end); ``size`` in SI:
+    metres (jump), m/s (drift), seconds (latency), ``None`` for freeze, dropout and
+    invalid; ``direction_deg`` (true, towards) of a jump or drift.
+    """
+
+    kind: str
+    source: str | None = None
+    start_s: float | None = None
+    duration_s: float | None = None
+    size: float | None = None
+    direction_deg: float | None = None
+
+    def window_ns(self, voyage_start_ns: int) -> tuple[int, int | None]:
+        """``[lo, hi)`` in UTC ns of a resolved fault (``hi`` None: to the end)."""
+        lo = int(voyage_start_ns) + int(round(self.start_s * 1e9))
+        hi = None if math.isinf(self.duration_s) else lo + int(round(self.duration_s * 1e9))
+        return lo, hi
+
+    def to_dict(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def describe(self) -> str:
+        """The spec of a resolved fault, e.g. ``jump:GNSS@1234s+600s=670m``."""
+        s = f"{self.kind}:{self.source}@{self.start_s:g}s"
+        s += "+end" if math.isinf(self.duration_s) else f"+{self.duration_s:g}s"
+        if self.size is not None:
+            unit = "kn" if self.kind == "drift" else SIZE_UNIT[self.kind]
+            s += f"={self.size / KN_MPS if self.kind == 'drift' else self.size:g}{unit}"
+        return s
+
+
+# --------------------------------------------------------------------------- parsing
+
+def _number(text: str, units: dict[str, float], what: str, spec: str, example: str) -> float:
+    m = _NUM.fullmatch(text.strip())
+    if m is None or m.group("unit") not in units:
+        names = ", ".join(u for u in units if u) or "none"
+        raise ConfigError(f"--fault {spec!r}: {what} {text!r} is not a number with a unit "
+                          f"({names}; bare number: {next(u for u in units if u)}), e.g. "
+                          f"{example}")
+    v = float(m.group("num")) * units[m.group("unit")]
+    if not math.isfinite(v):
+        raise ConfigError(f"--fault {spec!r}: {what} {text!r} is not finite")
+    return v
+
+
+def parse_fault(spec: str) -> SimFault:
+    """A ``--fault`` spec ``KIND[:SOURCE][@START][+DURATION][=SIZE]`` as an unresolved
+    :class:`SimFault` (omitted parts None).  START and DURATION: a number with ``s``,
+    ``min`` or ``h`` (bare: seconds); DURATION ``end``: to the end of the voyage; SIZE: jump ``m``/``km`` (bare: m), drift ``kn``/``m/s``
+    (bare: kn), latency ``s``/``ms``/``min`` (bare: s); freeze, dropout and invalid take
+    none.  Kind and source are case-insensitive.  Raises :class:`ConfigError`."""
+    text = spec.strip()
+    m = _SPEC.fullmatch(text)
+    if m is None:
+        raise ConfigError(f"--fault {spec!r}: expected {SPEC_GRAMMAR}, e.g. jump:GNSS@2h=670m")
+    kind = m.group("kind").lower()
+    if kind not in FAULT_KINDS:
+        raise ConfigError(f"--fault {spec!r}: unknown kind {m.group('kind')!r}; expected one "
+                          f"of {', '.join(FAULT_KINDS)}")
+    source = m.group("source")
+    if source is not None:
+        source = source.strip().upper()
+        if source not in ALL_SOURCES:
+            raise ConfigError(f"--fault {spec!r}: unknown source {m.group('source')!r}; "
+                              f"expected one of {', '.join(KIND_SOURCES[kind])}")
+    start = dur = size = None
+    if m.group("start") is not None:
+        start = _number(m.group("start"), _TIME_UNITS, "START", spec, "@1.5h, @40min, @600")
+    if m.group("duration") is not None:
+        dur = (math.inf if m.group("duration").strip().lower() == "end" else
+               _number(m.group("duration"), _TIME_UNITS, "DURATION", spec, "+40min or +end"))
+    if m.group("size") is not None:
+        if kind not in _SIZE_UNITS:
+            raise ConfigError(f"--fault {spec!r}: {kind} takes no =SIZE; expected "
+                              f"{kind}[:SOURCE][@START][+DURATION]")
+        example = {"jump": "=670m", "drift": "=1kn or =0.5m/s", "latency": "=3s"}[kind]
+        size = _number(m.group("size"), _SIZE_UNITS[kind], "SIZE", spec, example)
+    return SimFault(kind, source, start, dur, size)
+
+
+# --------------------------------------------------------------------------- resolution
+
+def _fmt_s(x: float) -> str:
+    return f"{x / 3600:g} h" if x >= 3600 else f"{x:g} s"
+
+
+def resolve_faults(faults, voyage_s: float, seed: int, compass: str = "gyro",
+                   labels=None) -> tuple[SimFault, ...]:
+    """Every fault with its defaults filled in and checked against the voyage.
+
+    Source, duration and size default per kind (:data:`DEFAULT_SOURCE`,
+    :data:`DEFAULT_DURATION_S`, :data:`DEFAULT_SIZE`).  The start (whole seconds, uniform
+    in 20-50 % of ``voyage_s``) and the direction of a jump or drift (uniform 0-360 deg)
+    come from a stream of their own per (kind, source, occurrence), so adding a fault
+    changes neither the voyage's other draws nor another fault's.  A window reaching the
+    end becomes ``duration_s = inf``.  Idempotent.  ``labels``: the specs as typed, for
+    the messages.  Raises :class:`ConfigError`.
+    """
+    out = []
+    seen: dict[tuple[str, str], int] = {}
+    fitted = set(ALL_SOURCES)
+    if compass == "gyro":
+        fitted.discard("MAG")
+    elif compass == "magnetic":
+        fitted.discard("GYRO")
+    for i, f in enumerate(faults):
+        if not isinstance(f, SimFault):
+            raise ConfigError(f"faults must be SimFault, got {type(f).__name__}")
+        label = f"--fault {labels[i]!r}" if labels is not None else f"fault {f.kind}"
+        if f.kind not in FAULT_KINDS:
+            raise ConfigError(f"{label}: unknown kind {f.kind!r}; expected one of "
+                              f"{', '.join(FAULT_KINDS)}")
+        src = f.source if f.source is not None else DEFAULT_SOURCE[f.kind]
+        if src not in KIND_SOURCES[f.kind]:
+            raise ConfigError(f"{label}: {f.kind} cannot hit source {src!r}; expected one of "
+                              f"{', '.join(KIND_SOURCES[f.kind])}")
+        if src not in fitted:
+            raise ConfigError(f"{label}: the voyage has no source {src} (compass {compass!r}); "
+                              f"expected one of {', '.join(s for s in KIND_SOURCES[f.kind] if s in fitted)}")
+        occ = seen.get((f.kind, src), 0)
+        seen[(f.kind, src)] = occ + 1
+        rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, RNG_COMPONENT,
+                                     FAULT_KINDS.index(f.kind), ALL_SOURCES.index(src), occ])
+        u_start, u_dir = rng.uniform(0.0, 1.0, 2)  # both always drawn: stable streams
+        start = (f.start_s if f.start_s is not None
+                 else float(round((START_RANGE[0] + (START_RANGE[1] - START_RANGE[0]) * u_start)
+                                  * voyage_s)))
+        if not (math.isfinite(start) and 0.0 <= start < voyage_s):
+            raise ConfigError(f"{label}: start {_fmt_s(start)} is outside the voyage; expected "
+                              f"START in [0, {_fmt_s(voyage_s)})")
+        dur = f.duration_s if f.duration_s is not None else DEFAULT_DURATION_S[f.kind]
+        if math.isnan(dur) or dur <= 0:
+            raise ConfigError(f"{label}: duration {dur:g} s; expected DURATION > 0")
+        if start + dur >= voyage_s:
+            dur = math.inf
+        size = f.size
+        if f.kind in DEFAULT_SIZE:
+            size = size if size is not None else DEFAULT_SIZE[f.kind]
+            if not (math.isfinite(size) and size >= 0):
+                raise ConfigError(f"{label}: size {size:g} {SIZE_UNIT[f.kind]}; expected a "
+                                  f"finite SIZE >= 0")
+        elif size is not None:
+            raise ConfigError(f"{label}: {f.kind} takes no size, got {size!r}")
+        direction = None
+        if f.kind in ("jump", "drift"):
+            direction = f.direction_deg if f.direction_deg is not None else 360.0 * float(u_dir)
+            if not math.isfinite(direction):
+                raise ConfigError(f"{label}: direction {direction!r} is not finite")
+        elif f.direction_deg is not None:
+            raise ConfigError(f"{label}: {f.kind} takes no direction")
+        out.append(replace(f, source=src, start_s=float(start), duration_s=float(dur),
+                           size=None if size is None else float(size), direction_deg=direction))
+    return tuple(out)
+
+
+def fault_table(faults, voyage_start_ns: int, voyage_s: float, roles: dict | None = None) -> list[dict]:
+    """The resolved faults as JSON-ready dicts (params.json ``faults``): kind, source, role,
+    start_utc, end_utc (ISO 8601, ns, as truth.csv's time_utc; a fault to the end ends at
+    the voyage's end), start_s, duration_s (finite), size (SI), size_unit, direction_deg."""
+    roles = roles or {}
+    out = []
+    for f in faults:
+        lo, hi = f.window_ns(voyage_start_ns)
+        end_ns = hi if hi is not None else int(voyage_start_ns) + int(round(voyage_s * 1e9))
+        dur = f.duration_s if not math.isinf(f.duration_s) else voyage_s - f.start_s
+        out.append({"kind": f.kind, "source": f.source, "role": roles.get(f.source),
+                    "start_utc": _iso(lo), "end_utc": _iso(end_ns), "start_s": f.start_s,
+                    "duration_s": dur, "size": f.size, "size_unit": SIZE_UNIT.get(f.kind),
+                    "direction_deg": f.direction_deg})
+    return out
+
+
+def _iso(t_ns: int) -> str:
+    return str(np.datetime_as_string(np.datetime64(int(t_ns), "ns"), unit="ns")) + "Z"
+
+
+# --------------------------------------------------------------------------- application
+
+def _in(t: np.ndarray, lo: int, hi: int | None) -> np.ndarray:
+    return (t >= lo) & (t < hi) if hi is not None else t >= lo
+
+
+def error_columns(source: str) -> tuple[str, str]:
+    """The north and east position error columns of a position source."""
+    return ("gnss_north_m", "gnss_east_m") if source == "GNSS" else (
+        f"{source.lower()}_north_m", f"{source.lower()}_east_m")
+
+
+def apply_error_faults(faults, errors: dict[str, np.ndarray], time_ns: np.ndarray,
+                       t_s: np.ndarray, voyage_start_ns: int) -> dict[str, np.ndarray]:
+    """The true errors with the jumps and drifts of ``faults`` added (a new dict; the
+    arrays changed are new).  ``t_s``: seconds from the voyage start of each sample."""
+    out = dict(errors)
+    for f in faults:
+        if f.kind not in ("jump", "drift"):
+            continue
+        lo, hi = f.window_ns(voyage_start_ns)
+        w = _in(time_ns, lo, hi)
+        if not w.any():
+            continue
+        mag = np.where(w, f.size if f.kind == "jump" else f.size * (t_s - f.start_s), 0.0)
+        d = math.radians(f.direction_deg)
+        cn, ce = error_columns(f.source)
+        out[cn] = out[cn] + mag * math.cos(d)
+        out[ce] = out[ce] + mag * math.sin(d)
+    return out
+
+
+def _frozen_columns(source: str) -> tuple[str, tuple[str, ...]]:
+    if source in POSITION_SOURCES:
+        return "position", ("lat_rad", "lon_rad")
+    return "heading", ("heading_rad", "deviation_rad") if source == "MAG" else ("heading_rad",)
+
+
+def apply_frame_faults(faults, frames: dict[str, pd.DataFrame], zda: pd.DataFrame,
+                       errors: pd.DataFrame, truth: pd.DataFrame, voyage_start_ns: int,
+                       state_in: dict | None = None):
+    """Apply the freezes, dropouts, latencies and invalid flags of ``faults`` (in their
+    order) to the canonical frames of one simulated segment.
+
+    ``errors`` and ``truth`` share the segment's time base (a freeze sets the errors in
+    its window to the frozen reading minus the truth).  ``state_in``: what the previous
+    segment left (a freeze's held value).  Returns ``(frames, zda, errors, state_out)``,
+    new objects where anything changed; line numbers are closed up after a dropout.
+    """
+    state_in = state_in or {}
+    state_out: dict = {}
+    frames = dict(frames)
+    dropped = False
+    for i, f in enumerate(faults):
+        if f.kind in ("jump", "drift"):
+            continue
+        lo, hi = f.window_ns(voyage_start_ns)
+        if f.kind == "freeze":
+            kind, cols = _frozen_columns(f.source)
+            df = frames[kind]
+            t = df["time_ns"].to_numpy(np.int64)
+            sm = (df["source"] == f.source).to_numpy(bool)
+            win = sm & _in(t, lo, hi)
+            before = np.flatnonzero(sm & (t < lo))
+            key = f"fault{i}_held"
+            if len(before):
+                r = before[np.argmax(t[before])]
+                held = tuple(float(df[c].to_numpy(float)[r]) for c in cols)
+            elif key in state_in:
+                held = tuple(state_in[key])
+            elif win.any():  # nothing before the start: the first reading in the window
+                r = np.flatnonzero(win)[np.argmin(t[win])]
+                held = tuple(float(df[c].to_numpy(float)[r]) for c in cols)
+            else:
+                held = None
+            if held is None:
+                continue
+            state_out[key] = list(held)
+            if win.any():
+                df = df.copy()
+                for c, v in zip(cols, held, strict=True):
+                    a = df[c].to_numpy(float).copy()
+                    a[win] = v
+                    df[c] = a
+                frames[kind] = df
+            errors = _frozen_errors(f, held, errors, truth, lo, hi)
+        elif f.kind == "dropout":
+            for kind, df in list(frames.items()):
+                if not len(df):
+                    continue
+                t = df["time_ns"].to_numpy(np.int64)
+                gone = (df["source"] == f.source).to_numpy(bool) & _in(t, lo, hi)
+                if gone.any():
+                    frames[kind] = df[~gone].reset_index(drop=True)
+                    dropped = True
+            if len(zda):
+                gone = (zda["source"].to_numpy(object) == f.source) & _in(
+                    zda["time_ns"].to_numpy(np.int64), lo, hi)
+                if gone.any():
+                    zda = zda[~gone].reset_index(drop=True)
+                    dropped = True
+        elif f.kind == "invalid":
+            df = frames["position"]
+            t = df["time_ns"].to_numpy(np.int64)
+            win = (df["source"] == f.source).to_numpy(bool) & _in(t, lo, hi)
+            if win.any():
+                df = df.copy()
+                q = df["quality"].to_numpy(np.int8).copy()
+                q[win] = 0
+                df["quality"] = q
+                frames["position"] = df
+        elif f.kind == "latency":
+            lag = int(round(f.size * 1e9))
+            for kind, df in list(frames.items()):
+                if not len(df):
+                    continue
+                t = df["time_ns"].to_numpy(np.int64)
+                win = (df["source"] == f.source).to_numpy(bool) & _in(t + lag, lo, hi)
+                if win.any():
+                    df = df.copy()
+                    r = df["recv_ns"].to_numpy(np.int64).copy()
+                    r[win] = t[win] + lag
+                    df["recv_ns"] = r
+                    frames[kind] = df
+    if dropped:
+        frames, zda = renumber_lines(frames, zda)
+    return frames, zda, errors, state_out
+
+
+def _frozen_errors(f: SimFault, held, errors: pd.DataFrame, truth: pd.DataFrame, lo, hi):
+    """Errors in the freeze window: the held reading minus the truth at every sample."""
+    w = _in(errors["time_ns"].to_numpy(np.int64), lo, hi)
+    if not w.any():
+        return errors
+    errors = errors.copy()
+    if f.source in POSITION_SOURCES:
+        lat = truth["lat_rad"].to_numpy(float)[w]
+        lon = truth["lon_rad"].to_numpy(float)[w]
+        n, e = offset_ne_m(held[0], held[1], lat, lon)
+        for c, v in zip(error_columns(f.source), (n, e), strict=True):
+            a = errors[c].to_numpy(float).copy()
+            a[w] = v
+            errors[c] = a
+    else:
+        col, true = (("gyro_err_rad", "heading_rad") if f.source == "GYRO"
+                     else ("mag_err_rad", "compass_course_rad"))
+        a = errors[col].to_numpy(float).copy()
+        a[w] = angdiff(held[0], truth[true].to_numpy(float)[w])
+        errors[col] = a
+    return errors
+
+
+def renumber_lines(frames: dict[str, pd.DataFrame], zda: pd.DataFrame):
+    """Close up the line numbers (1..n in the old order) after records were removed: the
+    lines a reader of the written log numbers.  A line shared by two frames (RMC: position
+    and ground) keeps one number."""
+    parts = [df["line"].to_numpy(np.int64) for df in frames.values() if len(df)]
+    if len(zda):
+        parts.append(zda["line"].to_numpy(np.int64))
+    if not parts:
+        return frames, zda
+    u = np.unique(np.concatenate(parts))
+
+    def new(df):
+        if not len(df):
+            return df
+        df = df.copy()
+        df["line"] = np.searchsorted(u, df["line"].to_numpy(np.int64)).astype(np.int64) + 1
+        return df
+
+    return {k: new(df) for k, df in frames.items()}, new(zda)
