@@ -128,6 +128,8 @@ class IntegrityConfig:
     #: the heading consistency gate is never below this (a gyro's settle-point error is
     #: allowed 0.75 deg sec(lat) by IMO A.424(XI); 1 deg covers it to 41 deg latitude)
     heading_gate_min_deg: float = 1.0
+    #: the INS/GNSS velocity consistency gate: 3 x the 0.2 kn of IMO A.824(19)
+    velocity_gate_kn: float = 0.6
 
 
 @dataclass(frozen=True)

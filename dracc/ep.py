@@ -185,6 +185,13 @@ class FilterHistory:
     heading_error_rad: np.ndarray  #: (K,) eps: add to the DR course
     scale_error: np.ndarray  #: (K,) s: V_true = (1 + s) V_log
     updated: np.ndarray  #: (K,) bool: a fix was used at this step
+    #: (K,) the fix's innovation against the DR with its covariance, chi^2_2 for the most
+    #: favourable grid model (NaN where no fix or while re-anchoring); a fix above
+    #: OUTLIER_NIS is an outlier, left out
+    nis: np.ndarray | None = None
+    #: (K,) the smallest innovation (m, along the worst axis) the outlier gate can see:
+    #: sqrt(OUTLIER_NIS * largest eigenvalue of S) of the most favourable model
+    gate_m: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -302,6 +309,8 @@ def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_r
     h_eps = np.zeros(K_)
     h_s = np.zeros(K_)
     h_upd = np.zeros(K_, bool)
+    h_nis = np.full(K_, np.nan)
+    h_gate = np.full(K_, np.nan)
     d_all = np.diff(tf)
     G_all = JI[kf[1:]] - JI[kf[:-1]]
     # course change between consecutive filter steps (mean water course over each step)
@@ -351,6 +360,11 @@ def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_r
             nis = (Si[:, 0, 0] * nu[:, 0] ** 2 + 2 * Si[:, 0, 1] * nu[:, 0] * nu[:, 1]
                    + Si[:, 1, 1] * nu[:, 1] ** 2)
             reanchor = P[0, 0, 0] > 0.5 * _REANCHOR_M2
+            if not reanchor:
+                best = int(np.argmin(nis))
+                h_nis[i] = nis[best]
+                tr, dt_ = S[best, 0, 0] + S[best, 1, 1], det[best]
+                h_gate[i] = math.sqrt(OUTLIER_NIS * 0.5 * (tr + math.sqrt(max(tr * tr - 4 * dt_, 0.0))))
             if not reanchor and nis.min() > OUTLIER_NIS:
                 n_out += 1
             else:
@@ -396,7 +410,8 @@ def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_r
     fP = np.zeros((M_all, N_STATE, N_STATE))
     fw[active], fx[active], fP[active] = _weights(loglik), x, P
     hist = FilterHistory(time_s=tf, current_ne_mps=h_cur, current_sigma_mps=h_sig,
-                         heading_error_rad=h_eps, scale_error=h_s, updated=h_upd)
+                         heading_error_rad=h_eps, scale_error=h_s, updated=h_upd, nis=h_nis,
+                         gate_m=h_gate)
     return LearnedModel(hyper=hp_all, prior=prior, step_s=float(step_s), start_s=starts,
                         weights=weights, x=xs, P=Ps, learned_s=learned, n_updates=nu_before,
                         final_weights=fw, final_x=fx, final_P=fP, n_outliers=n_out,

@@ -49,7 +49,7 @@ from .faults import SensorFault, detect_faults, exclude_faults
 from .fusion import PositionFix
 from .geodesy import circmean, interp_position, offset_ne_m, wrap_2pi, wrap_pi
 from .ingest.frames import INS_ROLES, Voyage
-from .integrity import IntegrityResult, check_night
+from .integrity import IntegrityResult, check_night, dr_innovation_check, with_dr_check
 from .units import DEG_RAD, KN_MPS, NS_PER_S
 
 SCHEMA = "dracc.analysis/1"
@@ -185,6 +185,10 @@ class DRSection:
     learned: dict | None = None  #: the model learned from the voyage (see _learned_summary)
     reference_sigma_m: float = 0.0  #: the reference's noise, added to P in the comparison
     scored_out_of_sample: bool = False  #: only epochs after the data their model learned from
+    #: the reference fixes against the DR with its covariance (the estimated position's
+    #: filter): (time_ns, NIS chi^2_2, gate in m) at each fix epoch, NaN while re-anchoring
+    fix_innovations: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    fix_source_key: str | None = None  #: the source the reference fixes came from
 
 
 # ----------------------------------------------------------- calibration and current
@@ -376,6 +380,9 @@ def analyse_voyage(voyage: Voyage, cfg: Config | None = None,
     dr, fixes, ref, dr_inputs = _dead_reckoning(voyage, cfg.dead_reckoning, missing, notes)
     report("dead reckoning", 1.0)
 
+    if integrity is not None and dr is not None and dr.fix_innovations is not None:
+        integrity = with_dr_check(integrity, dr_innovation_check(
+            dr.fix_source_key, dr.reference_role, *dr.fix_innovations, cfg.integrity))
     report("current", 0.0)
     current = None
     if dr is not None and dr_inputs is not None and fixes is not None:
@@ -971,7 +978,8 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
         dominant_source=dominant[0] if dominant else None,
         dominant_key=dominant[1] if dominant else None,
         learned=_learned_summary(est, cfg) if est is not None else None,
-        reference_sigma_m=cons.reference_sigma_m, scored_out_of_sample=est is not None)
+        reference_sigma_m=cons.reference_sigma_m, scored_out_of_sample=est is not None,
+        fix_innovations=_fix_innovations(est, grid[0]), fix_source_key=_fix_key(voyage, fdesc))
     # course and speed through the water for the calibration: leeway (B5) and speed (B1)
     # from a two-component log, as the DR used them
     if vy_g is not None:
@@ -986,6 +994,25 @@ def _dead_reckoning(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str]
 
 
 # ------------------------------------------------------------------------- current
+
+
+def _fix_innovations(est, t0_ns: int):
+    """(time_ns, NIS, gate_m) of the fixes the estimated position's filter weighed, or None."""
+    h = est.model.history if est is not None else None
+    if h is None or h.nis is None:
+        return None
+    ok = np.isfinite(h.nis)
+    return (t0_ns + np.round(h.time_s[ok] * 1e9).astype(np.int64), h.nis[ok], h.gate_m[ok])
+
+
+def _fix_key(voyage: Voyage, fdesc: str) -> str | None:
+    """The source key of the reference fixes ('gnss': the first GNSS source)."""
+    if fdesc == "gnss":
+        keys = voyage.role_sources("gnss")
+        return keys[0] if keys else None
+    if fdesc == "ins_mean":
+        return None
+    return fdesc
 
 
 def _drift_and_set(north_mps: float, east_mps: float) -> tuple[float, float]:
