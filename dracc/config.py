@@ -123,6 +123,8 @@ class IntegrityConfig:
     dropout_cadences: float = 10.0  #: a gap of this many of the source's own intervals ...
     dropout_min_s: float = 60.0  #: ... and at least this long is a drop-out
     frozen_min_s: float = 120.0  #: bit-identical positions (or heading) this long while moving
+    #: a position step within this is not a jump (IMO A.1046(27): 10 m, 95 %, for a receiver)
+    jump_floor_m: float = 10.0
     consistency_interval_s: float = 10.0  #: instants at which sources are compared
     consistency_max_gap_s: float = 5.0  #: a source is interpolated across gaps up to this
     #: the heading consistency gate is never below this (a gyro's settle-point error is
