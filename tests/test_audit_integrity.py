@@ -79,16 +79,42 @@ def test_cron_line_under_env_i_mails_the_night_without_logs(tmp_path):
     assert len(nights) == 1 and nights[0]["findings"][0]["kind"] == "no_logs"
 
 
-def test_audit_json_and_html_lead_with_findings(tmp_path):
-    log = _simulate(tmp_path / "sim", "--fault", "jump:GNSS@1h=670m", "--fault",
+@pytest.fixture(scope="module")
+def faulted_audit(tmp_path_factory) -> Path:
+    """A night with a GNSS jump and an INS3 drop-out, audited with --json, --html, --summary."""
+    tmp = tmp_path_factory.mktemp("faulted")
+    log = _simulate(tmp / "sim", "--fault", "jump:GNSS@1h=670m", "--fault",
                     "dropout:INS3@1.5h+25min")
-    out = tmp_path / "out"
+    out = tmp / "out"
     out.mkdir()
     proc = subprocess.run([str(DRACC), "audit", str(log), "--db", str(out / "a.sqlite"),
                            "--date", "2026-11-30", "--json", str(out / "a.json"), "--html",
                            str(out / "a.html"), "--summary", str(out / "s.txt")],
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 1, proc.stderr
+    return out
+
+
+@pytest.mark.slow
+def test_audit_page_in_a_real_browser(faulted_audit, tmp_path):
+    """The audit page loads in Chromium with its sections in order, no script, no request."""
+    from test_report_html import _BROWSER_HOSTS, _probe
+
+    page = tmp_path / "a.html"
+    shutil.copy(faulted_audit / "a.html", page)
+    data, urls = _probe(tmp_path, page)
+    heads = data["heads"]
+    assert heads.index("Findings") < heads.index("Not checked") < heads.index("The analysis")
+    assert "Integrity per source" in heads
+    assert data["scripts"] == 0 and data["links"] == 0
+    assert all(i["complete"] and i["w"] > 300 for i in data["imgs"])
+    assert not [u for u in urls if not u.startswith(("file:", "data:"))
+                and not any(host in u.split("/")[2] for host in _BROWSER_HOSTS)]
+    assert "Verdict" in data["body"] and "GNSS" in data["body"]
+
+
+def test_audit_json_and_html_lead_with_findings(faulted_audit):
+    out = faulted_audit
     doc = json.loads((out / "a.json").read_text())
     jsonschema.validate(doc, load_schema())
     assert doc["schema"] == "dracc.audit/1" and doc["verdict"] == "findings"

@@ -73,7 +73,15 @@ def _summary(a: Analysis) -> str:
                                f"{f.records:,} records)" for f in a.inputs)),
         ("rejected lines", ", ".join(f"{_e(k)}: {v:,}" for k, v in sorted(a.rejected.items()))
          or "none"),
+        ("ignored (valid, unused)", ", ".join(f"{_e(k)}: {v:,}" for k, v in sorted(a.ignored.items()))
+         or "none"),
     ]
+    if a.integrity is not None:
+        failed = a.integrity.failed
+        text = (f'<span class="bad">{len(failed)} of {len(a.integrity.checks)} checks failed</span>: '
+                + "; ".join(_e(f"[{c.check}] {c.message}") for c in failed) if failed
+                else f'<span class="ok">all {len(a.integrity.checks)} checks passed</span>')
+        rows.append(("integrity", text))
     te = a.time
     rows.append(("time events", f"{te.duplicates} duplicates, {te.backsteps} back-steps, "
                  f"{te.gaps} gaps, {te.rollovers} midnight rollovers, "

@@ -180,6 +180,9 @@ def summary(a: Analysis) -> Group:
         parts.append(Text(f"rejected {rej:,} lines: {by}"))
     else:
         parts.append(Text("rejected none"))
+    if a.ignored:
+        by = ", ".join(f"{k} {v:,}" for k, v in sorted(a.ignored.items(), key=lambda kv: -kv[1])[:8])
+        parts.append(Text(f"ignored  {sum(a.ignored.values()):,} valid lines dracc does not use: {by}"))
     te = a.time
     events = [f"{n} {what}" for n, what in ((te.duplicates, "duplicates"), (te.backsteps, "back-steps"),
                                              (te.gaps, "gaps"), (te.rollovers, "midnight rollovers"),
@@ -196,6 +199,10 @@ def summary(a: Analysis) -> Group:
     parts += _section("Current", None if a.current is None else _current_body(a.current))
     # dracc.faults: shown whenever found, excluded or not
     parts += _bullets(f"Sensor faults ({len(a.faults)})", [f"{f.kind}: {f.message}" for f in a.faults])
+    if a.integrity is not None:
+        failed = a.integrity.failed
+        parts += _bullets(f"Integrity: {len(failed)} of {len(a.integrity.checks)} checks failed",
+                          [f"[{c.check}] {c.message}" for c in failed])
     parts += _bullets("Missing", a.missing)
     parts += _bullets("Notes", a.notes)
     return Group(*parts)
