@@ -201,7 +201,9 @@ def test_raw_logger_csv_goes_through_the_nmea_parser(tmp_path, real_dir):
     p.write_text("\n".join(rows) + "\n")
     r = read_csv(p, IngestConfig())
     assert r.format == "csv-raw"
-    assert r.rejects.counts["NMEA 2000 row (not decoded)"] == 1
+    # a row of a protocol dracc does not decode is valid input: ignored, not rejected
+    assert r.rejects.total == 0 and r.ignored == {"NMEA 2000": 1}
+    assert r.ignored_examples["NMEA 2000"] == [(str(p), 22, "0x1234")]
     pos = r.frames["position"]
     assert len(pos) == 20  # 10 RMC + 10 GGA
     assert set(pos["source"].astype(str)) == {"GNSS"}
@@ -210,6 +212,9 @@ def test_raw_logger_csv_goes_through_the_nmea_parser(tmp_path, real_dir):
     assert math.degrees(gga["lat_rad"]) == pytest.approx(48 + 46.4008666 / 60, abs=1e-12)
     assert math.degrees(gga["lon_rad"]) == pytest.approx(8 + 54.7249096 / 60, abs=1e-12)
     assert gga["quality"] == 4
+    # the logger's receive time (09:25:42.25) is the GGA's receive time; its fix 09:25:42.00
+    assert gga["recv_ns"] == pd.Timestamp("2020-04-20T09:25:42.25Z").value
+    assert gga["recv_ns"] - gga["time_ns"] == 250_000_000
 
 
 def test_raw_csv_rejects_name_csv_lines(tmp_path):

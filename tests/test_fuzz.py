@@ -5,7 +5,8 @@ Invariants checked on every mutated log (``check_mutated``):
 
 1. no exception other than :class:`~dracc.errors.DraccError` (zero tracebacks);
 2. every rejected line is counted under a known reason (``nmea.REASONS``), and every
-   non-blank line that gave no record and carries no ZDA is counted at least once;
+   non-blank line that gave no record and carries no ZDA is counted at least once, as
+   rejected or as ignored (a valid sentence dracc does not use);
 3. differential: every untouched line gives the same records as in the clean log (same
    values; same time and source where the line carries its own time: TAG ``c:`` or a
    timestamp prefix).
@@ -280,9 +281,12 @@ def check_mutated(clean_lines: list[bytes], timed: bool, mut: Mutated, clean_rec
     mlines = mut.data.split(b"\n")
     silent = [i + 1 for i, ln in enumerate(mlines) if ln.strip(b"\r \t")
               and (i + 1) not in with_record and b"ZDA," not in ln]
-    if len(silent) > res.rejects.total:
+    # a line gives a record, or is rejected (damaged), or is ignored (valid, unused: GSV, AIS,
+    # a comment ...); blank lines are ignored too but are not among the silent ones
+    counted = res.rejects.total + sum(res.ignored.values()) - res.ignored.get("blank", 0)
+    if len(silent) > counted:
         raise InvariantError(f"{len(silent)} non-blank lines gave no record but only "
-                             f"{res.rejects.total} rejects were counted (e.g. line {silent[0]})")
+                             f"{counted} rejected or ignored lines were counted (e.g. line {silent[0]})")
     # differential: untouched lines give the same records
     lost_date = res.rejects.counts.get("no_date", 0) > clean_recs.get(NO_DATE, 0)
     for kind, d in clean_recs.items():

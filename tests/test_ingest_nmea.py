@@ -7,6 +7,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -220,7 +221,7 @@ def test_line_forms_mixed_in_one_file(tmp_path):
     ]
     r = read_text(tmp_path, "\r\n".join(lines[:4]) + "\n" + "\n".join(lines[4:]) + "\r\n")
     h = r.frames["heading"]
-    assert r.rejects.counts["unsupported"] == 1 and r.rejects.total == 1
+    assert r.rejects.total == 0 and r.ignored == {"VDM": 1}  # AIS: valid, not used: ignored
     by_line = {int(a): b for a, b in zip(h["line"], h["time_ns"], strict=True)}
     assert by_line[2] == T0 * 10**9 + 250_000_000
     assert by_line[3] == (T0 + 1) * 10**9 + 500_000_000
@@ -277,7 +278,11 @@ def test_each_kind_of_corrupt_line_counted_valid_kept(tmp_path):
     c = r.rejects.counts
     assert c["checksum"] >= 1 and c["binary"] == 2 and c["bad_address"] == 1
     assert c["implausible_talker"] == 1 and c["field_count"] == 1 and c["malformed_field"] == 2
-    assert c["not_nmea"] == 1 and c["comment"] == 1 and c["unsupported"] == 1 and c["truncated"] == 1
+    assert c["not_nmea"] == 1 and c["truncated"] == 1
+    assert "comment" not in c and "unsupported" not in c  # valid lines dracc does not use: ignored
+    assert r.ignored == {"comment": 1, "MWV": 1, "blank": 1}
+    assert r.ignored_examples["MWV"] == [(str(tmp_path / "log.nmea"), 13, nmea("IIMWV,322,R,05.8,N,A"))]
+    assert r.ignored_examples["comment"][0][1:] == (12, "# a comment")
     h = r.frames["heading"]
     assert list(h["heading_rad"] / D) == pytest.approx([10.0, 11.0])
     ex = r.rejects.examples["implausible_talker"][0]
@@ -497,3 +502,189 @@ def test_regression_reader_parses_alone_inside_a_daemonic_process():
     allowed = q.get(timeout=60)
     p.join(timeout=60)
     assert allowed is False
+
+
+# -------------------------------------------------------------- receive time (recv_ns)
+MISSING = np.iinfo(np.int64).min
+FIX = "221320.00"  # T0's time of day: 22:13:20
+
+
+def _by_line(df) -> dict[int, int]:
+    """line -> recv_ns - time_ns (the latency), MISSING where there is no receive time."""
+    return {int(ln): MISSING if r == MISSING else int(r - t)
+            for ln, r, t in zip(df["line"], df["recv_ns"], df["time_ns"], strict=True)}
+
+
+@pytest.mark.parametrize("engine", ["c", "numpy"])
+@pytest.mark.parametrize("form", ["tag_ms", "tag_s", "iso", "unix", "openrvdas", "signalk"])
+def test_recv_ns_is_the_external_time_of_records_with_their_own_fix(tmp_path, monkeypatch, form, engine):
+    """A GGA fixed at 22:13:20.00 and received 1.5 s later (2 s for TAG c: in seconds) has
+    recv_ns - time_ns = its latency; the RMC's ground row too; an HDT and a VTG (no time
+    of fix) have none, nor a fix without an external time."""
+    from dracc.ingest import nmea as mod
+
+    monkeypatch.setattr(mod, "ENGINE", engine)
+    lag = 2.0 if form == "tag_s" else 1.5
+
+    def stamped(sentence: str, src: str) -> str:
+        t = T0 + lag
+        if form == "tag_ms":
+            return tag(f"s:{src},c:{int(t * 1000)}", sentence)
+        if form == "tag_s":
+            return tag(f"s:{src},c:{int(t)}", sentence)
+        iso = pd.Timestamp(t * 10**9, unit="ns", tz="UTC").strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+        if form == "iso":
+            return f"{iso} {sentence}"
+        if form == "openrvdas":
+            return f"{src.lower()} {iso} {sentence}"
+        if form == "signalk":
+            return f"{int(t * 1000)};A;{sentence}"
+        return f"{t:.3f} {sentence}"
+
+    lines = [
+        nmea("GPZDA,221319.00,14,11,2023,00,00"),                                        # 1 date only
+        stamped(nmea(f"GPGGA,{FIX},5436.0,N,01847.0,E,1,10,0.8,25.0,M,,M,,"), "GNSS"),    # 2
+        stamped(nmea(f"GPRMC,{FIX},A,5436.0,N,01847.0,E,5.0,90.0,141123,,,A"), "GNSS"),   # 3
+        stamped(nmea("HEHDT,60.0,T"), "GYRO"),                                           # 4 no fix time
+        stamped(nmea("GPVTG,90.0,T,,M,5.0,N,9.3,K,A"), "GNSS"),                          # 5 no fix time
+        nmea("GPGGA,221321.00,5436.0,N,01847.0,E,1,10,0.8,25.0,M,,M,,"),                 # 6 no external time
+        stamped(nmea("GPGSV,1,1,01,05,40,083,46"), "GNSS"),                              # 7 ignored
+    ]
+    r = read_text(tmp_path, "\r\n".join(lines) + "\r\n")
+    assert r.rejects.total == 0 and r.ignored == {"GSV": 1}
+    lat = round(lag * 1e9)
+    assert _by_line(r.frames["position"]) == {2: lat, 3: lat, 6: MISSING}
+    assert _by_line(r.frames["ground"]) == {3: lat, 5: MISSING}
+    assert _by_line(r.frames["heading"]) == {4: MISSING}
+    for f in r.frames.values():
+        assert f["recv_ns"].dtype == np.int64
+    pos = r.frames["position"]
+    assert pos.loc[pos["line"] == 2, "time_ns"].iloc[0] == T0 * 10**9  # the fix time, not the receive time
+
+
+def test_recv_ns_not_from_an_implausible_external_time(tmp_path):
+    """A TAG c: before 2000 is not used by the time base: no receive time either."""
+    lines = [nmea("GPZDA,221319.00,14,11,2023,00,00"),
+             tag("s:GNSS,c:946684000", nmea(f"GPGGA,{FIX},5436.0,N,01847.0,E,1,10,0.8,25.0,M,,M,,"))]
+    r = read_text(tmp_path, "\n".join(lines) + "\n")
+    p = one(r, "position")
+    assert p["recv_ns"] == MISSING and p["time_ns"] == T0 * 10**9
+
+
+def test_recv_ns_through_sentence_stream_with_separate_receive_times():
+    """parse_sentences (CSV raw, MCAP): the given time is the receive time; a SentenceStream
+    given ``recv_ns`` (MCAP log times beside message stamps) reports those instead, while
+    the fix is still anchored to the given time."""
+    from dracc.ingest.nmea import SentenceStream
+
+    lines = [nmea(f"INGGA,{FIX},5436.0,N,01847.0,E,1,,,25.0,M,,M,,").encode(), nmea("HEHDT,1.0,T").encode()]
+    t = np.array([T0 * 10**9 + 700_000_000, T0 * 10**9 + 800_000_000])
+    r = parse_sentences(lines, t, ["ins1", "gyro"], "bag.mcap", IngestConfig())
+    assert r.frames["position"]["recv_ns"].tolist() == [T0 * 10**9 + 700_000_000]
+    assert r.frames["heading"]["recv_ns"].tolist() == [MISSING]
+    s = SentenceStream("bag.mcap", IngestConfig())
+    frames = s.add(lines, t, ["ins1", "gyro"], numbers=np.array([7, 9]), recv_ns=t + 10**9)
+    res = s.result(frames + s.finish())
+    p = res.frames["position"].iloc[0]
+    assert p["time_ns"] == T0 * 10**9 and p["recv_ns"] == T0 * 10**9 + 1_700_000_000 and p["line"] == 7
+    assert res.frames["heading"]["recv_ns"].tolist() == [MISSING]
+
+
+def test_recv_ns_survives_blocks_and_workers(tmp_path):
+    """The receive time is carried by every decoding path: the kernel and the numpy path,
+    small blocks, and the worker processes' file hand-over, then the concatenation."""
+    p = tmp_path / "sim.nmea"
+    p.write_text(_sim_lines(300))
+    whole = read_nmea(p, IngestConfig(), workers=1)
+    pos = whole.frames["position"]
+    assert (pos["recv_ns"] == pos["time_ns"]).all()  # c: is the second of the fix: latency 0
+    assert (whole.frames["heading"]["recv_ns"] == MISSING).all()
+    for blocks in (list(iter_nmea_blocks(p, IngestConfig(), block_bytes=7000, workers=1)),
+                   list(iter_nmea_blocks(p, IngestConfig(), block_bytes=20000, workers=2))):
+        for kind in ("position", "heading", "water"):
+            got = pd.concat([b.frames[kind] for b in blocks if kind in b.frames], ignore_index=True)
+            got = got.sort_values(["time_ns", "line"], kind="stable").reset_index(drop=True)
+            ref = whole.frames[kind].sort_values(["time_ns", "line"], kind="stable").reset_index(drop=True)
+            np.testing.assert_array_equal(got["recv_ns"].to_numpy(), ref["recv_ns"].to_numpy())
+
+
+# ------------------------------------------------------------- ignored, not rejected
+def test_valid_unused_lines_are_ignored_by_type_and_never_fail_strict(tmp_path):
+    """Valid sentences dracc does not use, comments and blank lines are not rejected (only
+    damaged lines are) and do not make --strict fail: they are counted by type."""
+    lines = [
+        "# logged by gpsd",
+        nmea("GPZDA,201500.00,14,11,2023,00,00"),
+        nmea("GPGSV,1,1,01,05,40,083,46"),
+        nmea("GPGSV,1,1,01,05,40,083,46"),
+        nmea("IIMWV,322,R,05.8,N,A"),
+        nmea("SDDBT,8.1,f,2.4,M,1.3,F"),
+        nmea("PGRME,15.0,M,45.0,M,25.0,M"),
+        nmea("PSRFTXT,Version 2.2"),  # a long proprietary address: its first 5 characters
+        "!AIVDM,1,1,,B,13u=gHP3CWPlvs2Q8sHW:5fD0h6a,0*1B",
+        "!AIVDO,1,1,,,B3uBrjP0=0=Kjm8BoS`AcwUUwP06,0*75",  # VDRplayer/Hakefjord.txt
+        "",
+        nmea("HEHDT,10.0,T"),
+    ]
+    p = tmp_path / "log.nmea"
+    p.write_text("\n".join(lines) + "\n")
+    r = read_nmea(p, IngestConfig(strict=True))
+    assert r.rejects.total == 0 and len(r.frames["heading"]) == 1
+    assert r.ignored == {"comment": 1, "GSV": 2, "MWV": 1, "DBT": 1, "PGRME": 1, "PSRFT": 1,
+                         "VDM": 1, "VDO": 1, "blank": 1}
+    assert [e[1] for e in r.ignored_examples["GSV"]] == [3, 4]
+    from dracc.ingest import read_logs
+
+    v = read_logs([p], IngestConfig())
+    assert v.ignored == r.ignored and v.inputs[0]["ignored"] == dict(r.ignored)
+    assert v.inputs[0]["rejected"] == {} and v.rejects.total == 0
+
+
+def test_ignored_counts_are_the_same_from_every_engine_and_block_size(tmp_path, monkeypatch):
+    from dracc.ingest import nmea as mod
+
+    body = "\n".join(["# c", nmea("GPGSV,1,1,01,05,40,083,46"), nmea("PGRME,15.0,M,45.0,M,25.0,M"),
+                      "!AIVDM,1,1,,B,13u=gHP3CWPlvs2Q8sHW:5fD0h6a,0*1B", "", nmea("HEHDT,10.0,T")])
+    p = tmp_path / "log.nmea"
+    p.write_text((body + "\n") * 400)
+    want = {"comment": 400, "GSV": 400, "PGRME": 400, "VDM": 400, "blank": 400}
+    for engine in ("c", "numpy"):
+        monkeypatch.setattr(mod, "ENGINE", engine)
+        for kw in ({"workers": 1}, {"workers": 1, "block_bytes": 3000}, {"workers": 2, "block_bytes": 20000}):
+            st_ = mod.StreamState(str(p))
+            list(iter_nmea_blocks(p, IngestConfig(), st_, **kw))
+            assert st_.ignored == want, (engine, kw)
+            assert [e[1] for e in st_.ignored_examples["GSV"]] == [2, 8, 14], (engine, kw)
+
+
+def test_an_rmc_without_a_date_is_one_no_date_line(tmp_path):
+    """An RMC gives a position and a ground record; without any date it is one line
+    rejected as no_date, not two."""
+    r = read_text(tmp_path, nmea("GPRMC,221320.00,A,5436.0,N,01847.0,E,5.0,90.0,,,,A") + "\n"
+                  + nmea("GPGGA,221321.00,5436.0,N,01847.0,E,1,10,0.8,25.0,M,,M,,") + "\n")
+    assert r.rejects.counts == {"no_date": 2} and r.records == 0
+    assert [e[1] for e in r.rejects.examples["no_date"]] == [1, 2]
+
+
+def test_recv_ns_stays_with_its_rows_when_files_merge(tmp_path):
+    """read_logs sorts the records of several files by time: each keeps its receive time."""
+    from dracc.ingest import read_logs
+
+    paths = []
+    for name, src, lag_ms, off in (("a.nmea", "GNSS1", 1500, 0), ("b.nmea", "GNSS2", 500, 0.5)):
+        lines = [nmea("GPZDA,221319.00,14,11,2023,00,00")]
+        for k in range(20):
+            t = T0 + k + off
+            tod = f"2213{20 + k:02d}.{int(off * 100):02d}"
+            lines.append(tag(f"s:{src},c:{int(t * 1000) + lag_ms}",
+                             nmea(f"GPGGA,{tod},5436.0,N,01847.0,E,1,10,0.8,25.0,M,,M,,")))
+            lines.append(tag(f"s:{src},c:{int(t * 1000) + lag_ms}", nmea("HEHDT,10.0,T")))
+        p = tmp_path / name
+        p.write_text("\n".join(lines) + "\n")
+        paths.append(p)
+    v = read_logs(paths, IngestConfig())
+    pos = v.frames["position"]
+    assert len(pos) == 40 and (np.diff(pos["time_ns"]) > 0).all()  # interleaved by time
+    lag = (pos["recv_ns"] - pos["time_ns"]).groupby(pos["source"].astype(str)).unique()
+    assert {k: list(x) for k, x in lag.items()} == {"GNSS1": [1_500_000_000], "GNSS2": [500_000_000]}
+    assert (v.frames["heading"]["recv_ns"] == MISSING).all()

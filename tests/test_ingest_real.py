@@ -44,8 +44,8 @@ def test_real_file_ingests_with_a_sensible_account(real_dir, rel):
     assert rep["lines"] == n_lines and rep["rejected"] == dict(voyage.rejects.counts)
     for key, s in rep["sources"].items():
         assert s["records"] > 0 and s["first_utc"] <= s["last_utc"], key
-    # every line is accounted for: used, rejected by a reason, or blank
-    assert n_records > 0 or voyage.rejects.total > 0
+    # every line is accounted for: used, rejected by a reason, or ignored (valid, unused)
+    assert n_records > 0 or voyage.rejects.total > 0 or sum(voyage.ignored.values()) > 0
 
 
 def _tpv(chk: Path) -> list[tuple[dict, str]]:
@@ -155,3 +155,60 @@ def test_random_binary_is_counted_not_a_traceback(tmp_path):
     p.write_bytes(np.random.default_rng(1).integers(0, 256, 200_000, dtype=np.uint8).tobytes())
     v = read_logs([p], IngestConfig())
     assert v.rejects.total > 0 and set(v.rejects.counts) <= set(REASONS)
+
+
+# ------------------------------------------------ rejected = damaged; ignored = valid, unused
+ALL_FILES = sorted(p.relative_to(REAL).as_posix() for p in REAL.rglob("*")
+                   if p.is_file() and p.suffix not in {".chk", ".json", ".md"}) if REAL.is_dir() else []
+
+
+def _outcomes(data: bytes) -> int:
+    """What the reader must account for, counted independently of it: one per sentence
+    (a '$'/'!' not followed by another: '$$GPGGA' is one), one per line without a
+    sentence (comments, blank, noise)."""
+    lines = data.split(b"\n")
+    if data.endswith(b"\n"):
+        lines.pop()
+    n = 0
+    for ln in lines:
+        ln = ln[:-1] if ln.endswith(b"\r") else ln
+        starts = 0 if ln.startswith(b"#") else sum(
+            1 for i, c in enumerate(ln) if c in b"$!" and not (i + 1 < len(ln) and ln[i + 1] in b"$!"))
+        n += max(starts, 1)
+    return n
+
+
+@pytest.mark.parametrize("rel", ALL_FILES)
+def test_real_file_rejects_only_damage_and_accounts_for_every_line(real_dir, rel):
+    """Valid lines dracc does not use are ignored by type, never rejected ('unsupported' and
+    'comment' are no reject reasons); used + rejected + ignored = every sentence and every
+    line without one (NMEA text), every message (MCAP files without navigation data)."""
+    from dracc.ingest.nmea import StreamState, iter_nmea_blocks
+
+    path = real_dir / rel
+    v = read_logs([path], IngestConfig())
+    assert not {"unsupported", "comment"} & set(v.rejects.counts)
+    assert v.inputs[0]["ignored"] == dict(v.ignored)
+    assert v.inputs[0]["rejected"] == dict(v.rejects.counts)
+    assert all(isinstance(k, str) and k and n > 0 for k, n in v.ignored.items())
+    if detect_format(path) == "mcap":
+        if v.inputs[0]["records"] == 0:
+            assert sum(v.ignored.values()) + v.rejects.total == v.lines
+        return
+    st = StreamState(str(path))
+    for _ in iter_nmea_blocks(path, IngestConfig(), st, workers=1):
+        pass
+    assert st.ignored == v.ignored and st.rejects.counts == v.rejects.counts
+    used = sum(st.sentences.values()) - st.rejects.counts["no_date"]  # decoded, dated
+    assert used + v.rejects.total + sum(v.ignored.values()) == _outcomes(path.read_bytes())
+
+
+def test_bundg_zeus_rejects_nothing_and_ignores_2519_lines_by_type(real_dir):
+    """gpsd's B&G Zeus log: once 10 'comment' and 2509 'unsupported' rejects; every one is
+    valid, so none is rejected now, and the 2519 are ignored by type."""
+    v = read_logs([real_dir / "gpsd" / "bundg_zeus_9.log"], IngestConfig())
+    assert v.rejects.total == 0
+    assert sum(v.ignored.values()) == 2519
+    assert v.ignored == {"comment": 10, "GSA": 144, "RMB": 147, "APB": 147, "GLC": 146, "BOD": 149,
+                         "MWD": 150, "XTE": 149, "AAM": 147, "XDR": 148, "DBT": 148, "DPT": 149,
+                         "GSV": 436, "MWV": 300, "MTW": 149}

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from dracc.distributions import binom_cdf
+from dracc.ingest.frames import KINDS, Rejects, SourceInfo, TimeEvents, Voyage, empty_frame
 from dracc.integrity import check_night
 from dracc.sim import SimParams, simulate
 from dracc.sim.faults import parse_fault
-from dracc.ingest.frames import KINDS, Rejects, SourceInfo, TimeEvents, Voyage, empty_frame
 
 HOURS = 3.5
 

@@ -21,7 +21,10 @@ ROLES = {"INS2": "ins2", "GYRO": "compass", "LOG": "log"}
 
 
 def _expected(fr, encoding):
-    """What each encoding carries: NavSatFix has no HDOP, and its status maps quality."""
+    """What each encoding carries: NavSatFix has no HDOP, and its status maps quality.
+    Every message dracc writes is timed by its own stamp, logged at that time: its
+    receive time (the log time) is its time."""
+    fr = {k: f.assign(recv_ns=f["time_ns"]) for k, f in fr.items()}
     if encoding == "ros2":
         fr = dict(fr)
         p = fr["position"].copy()
@@ -219,8 +222,11 @@ def test_real_keelson_raw_nmea_in_protobuf(real_dir):
     r = read_mcap(real_dir / "keelson" / "4a625f9" / "test.mcap", CFG)
     assert r.lines == 2172
     assert any("nmea0183" in n and "raw NMEA" in n for n in r.notes)
-    # the 1451 NMEA messages reach the NMEA parser (AIS and VSI: not navigation sentences it decodes)
-    assert r.rejects.total >= 1451
+    # the 1451 NMEA messages reach the NMEA parser (AIS and VSI: valid sentences it does not
+    # use, so ignored by type, not rejected); the 721 JSON messages: ignored by schema
+    assert r.rejects.total == 0
+    assert r.ignored == {"VDM": 703, "VDO": 41, "VSI": 707, "keelson.primitives.TimestampedBytes": 721}
+    assert sum(r.ignored.values()) == r.lines
     assert any("not used" in n and "JSON" in n for n in r.notes)
 
 
@@ -241,6 +247,7 @@ def test_real_keelson_empty_file_says_so(real_dir):
 def test_real_rosbag2_files_report_channels_and_no_navigation_data(real_dir, name, channels):
     r = read_mcap(real_dir / "rosbag2" / name, CFG)
     assert r.records == 0 and r.rejects.total == 0
+    assert sum(r.ignored.values()) == r.lines > 0  # every message: valid, of a type not used
     text = "\n".join(r.notes)
     for c in channels:
         assert f"channel {c} [" in text
@@ -560,3 +567,102 @@ def test_frames_do_not_depend_on_piece_and_queue_sizes(tmp_path, monkeypatch, en
     assert want.frames.keys() == got.frames.keys() and want.notes == got.notes
     for kind, f in want.frames.items():
         pd.testing.assert_frame_equal(f, got.frames[kind])
+
+
+# ----------------------------------------------------------------- receive time, ignored
+MISSING = np.iinfo(np.int64).min
+T0_NS = 1_700_000_000_000_000_000  # 2023-11-14T22:13:20Z
+GGA_T0 = "$GPGGA,221320.00,5436.0,N,01847.0,E,1,10,0.8,25.0,M,,M,,*"
+NMEA_SENTENCE = ("std_msgs/Header header\nstring sentence\n" + "=" * 80 +
+                 "\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n")
+
+
+def _cs(sentence: str) -> str:
+    x = 0
+    for b in sentence[1:-1].encode():
+        x ^= b
+    return f"{sentence}{x:02X}"
+
+
+def test_recv_ns_is_the_log_time_of_stamped_messages(tmp_path):
+    """NavSatFix timed by its header stamp, logged 1.5 s later: recv_ns is the log time; a
+    message with a zero stamp is timed by its log time and has no receive time."""
+    msgs = []
+    for i in range(4):
+        stamp = {"sec": 1_700_000_000 + i, "nanosec": 0} if i != 2 else {"sec": 0, "nanosec": 0}
+        msgs.append((T0_NS + i * 10**9 + 1_500_000_000, {
+            "header": {"stamp": stamp, "frame_id": "gps"}, "status": {"status": 0, "service": 1},
+            "latitude": 54.0, "longitude": -18.5, "altitude": 10.0,
+            "position_covariance": [0.0] * 9, "position_covariance_type": 0}))
+    p = tmp_path / "fix.mcap"
+    _ros2_writer(p, "sensor_msgs/msg/NavSatFix", NAVSATFIX, "/gps/fix", msgs)
+    f = read_mcap(p, CFG).frames["position"].sort_values("line")
+    assert f["time_ns"].tolist() == [T0_NS, T0_NS + 10**9, T0_NS + 3_500_000_000, T0_NS + 3 * 10**9]
+    assert f["recv_ns"].tolist() == [T0_NS + 1_500_000_000, T0_NS + 2_500_000_000, MISSING,
+                                     T0_NS + 4_500_000_000]
+
+
+def test_recv_ns_of_json_messages_with_their_own_time(tmp_path):
+    objs = [json.dumps({"timestamp": {"sec": 1_699_999_999, "nsec": 0}, "latitude": 10.5,
+                        "longitude": 20.25}).encode()]
+    p = tmp_path / "j.mcap"
+    _json_file(p, "/gnss/fix", objs)  # logged at T0
+    f = read_mcap(p, CFG).frames["position"]
+    assert f["time_ns"].tolist() == [T0_NS - 10**9] and f["recv_ns"].tolist() == [T0_NS]
+    objs = [json.dumps({"time_ns": T0_NS - 250_000_000, "stw_kn": 10.0}).encode(),
+            json.dumps({"stw_kn": 11.0}).encode()]
+    p = tmp_path / "w.mcap"
+    _json_file(p, "/log/water", objs, schema_name="dracc.WaterSpeed")
+    w = read_mcap(p, CFG).frames["water"].sort_values("line")
+    assert w["time_ns"].tolist() == [T0_NS - 250_000_000, T0_NS + 10**9]
+    assert w["recv_ns"].tolist() == [T0_NS, MISSING]  # the second: timed by its log time
+
+
+def test_recv_ns_of_raw_nmea_is_the_log_time(tmp_path):
+    """Raw sentences: the fix is anchored as before (to the message stamp where there is
+    one); the receive time is the MCAP log time.  A sentence without a time of fix has none."""
+    p = tmp_path / "s.mcap"
+    _json_file(p, "/gnss/nmea", [json.dumps({"sentence": _cs(GGA_T0)}).encode(),
+                                 json.dumps({"sentence": _cs("$HEHDT,10.0,T*")}).encode()])
+    r = read_mcap(p, CFG)  # logged at T0 and T0 + 1 s
+    pos = r.frames["position"]
+    assert pos["time_ns"].tolist() == [T0_NS] and pos["recv_ns"].tolist() == [T0_NS]
+    assert r.frames["heading"]["recv_ns"].tolist() == [MISSING]
+    msgs = [(T0_NS + 1_500_000_000, {"header": {"stamp": {"sec": 1_700_000_001, "nanosec": 200_000_000},
+                                                "frame_id": "gps"}, "sentence": _cs(GGA_T0)})]
+    p2 = tmp_path / "cdr.mcap"
+    _ros2_writer(p2, "nmea_msgs/msg/Sentence", NMEA_SENTENCE, "/gps/nmea", msgs)
+    pos = read_mcap(p2, CFG).frames["position"]
+    assert pos["time_ns"].tolist() == [T0_NS] and pos["recv_ns"].tolist() == [T0_NS + 1_500_000_000]
+
+
+def test_channels_not_decoded_are_ignored_by_schema(tmp_path):
+    """Messages on a channel dracc does not decode (JSON without navigation fields, an
+    unknown encoding) are valid input: ignored by schema name, not rejected; unused raw
+    sentences by sentence type."""
+    from mcap.writer import Writer
+
+    p = tmp_path / "m.mcap"
+    with open(p, "wb") as fh:
+        w = Writer(fh)
+        w.start()
+        s1 = w.register_schema(name="acme.Camera", encoding="jsonschema", data=b"{}")
+        c1 = w.register_channel(topic="/camera", message_encoding="json", schema_id=s1)
+        s2 = w.register_schema(name="acme.Blob", encoding="flatbuffer", data=b"")
+        c2 = w.register_channel(topic="/blob", message_encoding="flatbuffer", schema_id=s2)
+        c3 = w.register_channel(topic="/gps/nmea", message_encoding="nmea0183", schema_id=0)
+        for i in range(3):
+            t = T0_NS + i * 10**9
+            w.add_message(c1, log_time=t, data=json.dumps({"exposure": i}).encode(), publish_time=t)
+            w.add_message(c2, log_time=t, data=b"\x00\x01", publish_time=t)
+            w.add_message(c3, log_time=t, data=_cs("$GPGSV,1,1,01,05,40,083,46*").encode(), publish_time=t)
+        w.add_message(c3, log_time=T0_NS, data=_cs(GGA_T0).encode(), publish_time=T0_NS)
+        w.finish()
+    r = read_mcap(p, CFG)
+    assert r.rejects.total == 0 and len(r.frames["position"]) == 1
+    assert r.ignored == {"acme.Camera": 3, "acme.Blob": 3, "GSV": 3}
+    from dracc.ingest import read_logs
+
+    v = read_logs([p], CFG)
+    assert v.ignored == r.ignored and v.inputs[0]["ignored"] == dict(r.ignored)
+    assert read_mcap(p, IngestConfig(strict=True)).ignored == r.ignored  # never a --strict failure

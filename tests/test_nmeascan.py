@@ -35,7 +35,7 @@ from test_fuzz import load_corpus, mutate  # noqa: E402  (tests/ is on sys.path)
 REPO = Path(__file__).resolve().parents[1]
 SAMPLES = REPO / "sample_logs"
 FIELDS = ("n_lines", "n_blank", "kinds", "clock", "reject_counts", "reject_examples",
-          "first_fatal", "stats", "source_names")
+          "first_fatal", "stats", "source_names", "ignored", "ignored_examples")
 MAX_BYTES = 1_500_000  #: the first bytes of each real log (the test stays fast)
 
 

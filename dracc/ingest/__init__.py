@@ -167,7 +167,8 @@ def read_logs(paths: list[Path], cfg: IngestConfig, progress=None) -> Voyage:
 
     ``progress(n_bytes)`` is called as bytes are read (NMEA text files).  A missing
     file, a directory, an empty file or a known non-log raises :class:`IngestError`;
-    bad lines inside a log are counted in ``Voyage.rejects``.
+    damaged lines inside a log are counted in ``Voyage.rejects``, valid ones dracc does
+    not use (GSV, AIS, proprietary sentences, comments ...) in ``Voyage.ignored`` by type.
     """
     if not paths:
         raise IngestError("no log files given")
@@ -181,10 +182,12 @@ def read_logs(paths: list[Path], cfg: IngestConfig, progress=None) -> Voyage:
     sources = merge_infos(per_file, renames)
     frames = _merge_frames(results)
     rejects = Rejects()
+    ignored: Counter = Counter()
     te = TimeEvents()
     inputs = []
     for r in results:
         rejects.merge(r.rejects)
+        ignored.update(r.ignored)
         e = r.time_events
         te.duplicates += e.duplicates
         te.backsteps += e.backsteps
@@ -195,8 +198,9 @@ def read_logs(paths: list[Path], cfg: IngestConfig, progress=None) -> Voyage:
         te.decisions.extend(f"{Path(r.path).name}: {n}" for n in r.notes)
         te.examples.extend(e.examples[:10])
         inputs.append({"path": r.path, "format": r.format, "lines": r.lines, "records": r.records,
-                       "rejected": dict(Counter(r.rejects.counts))})
+                       "rejected": dict(Counter(r.rejects.counts)),
+                       "ignored": dict(Counter(r.ignored))})
     te.decisions.extend(identity_notes)
     te.decisions.extend(assign_roles(sources, dict(cfg.sources)))
     return Voyage(frames=frames, sources=sources, rejects=rejects, time_events=te, inputs=inputs,
-                  lines=sum(r.lines for r in results))
+                  lines=sum(r.lines for r in results), ignored=ignored)

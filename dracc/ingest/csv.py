@@ -16,7 +16,8 @@ raw (``csv-raw``)
     a time column (``received_at``, ``time_utc``, ``timestamp`` ...) and a column of raw
     NMEA 0183 sentences (``raw_data``, ``raw``, ``nmea``, ``raw_sentence``); an optional
     ``source`` column gives the source key; rows whose ``protocol`` names NMEA 2000 are
-    counted, not decoded.  Sentences go through :func:`dracc.ingest.nmea.parse_sentences`.
+    counted as ignored (``"NMEA 2000"``), not decoded; sentences dracc does not use are
+    ignored by type as in NMEA text.  Sentences go through :func:`dracc.ingest.nmea.parse_sentences`.
 
 Times: a ``time_ns`` column holds integer nanoseconds since the Unix epoch; any other
 time column holds ISO 8601 text (a zone-less time is UTC, as the column name says) or
@@ -480,15 +481,19 @@ def _read_raw(p: Path, cols: list[str], cfg: IngestConfig, rejects: Rejects, not
     sources: list[np.ndarray] = []
     file_lines: list[np.ndarray] = []
     rows = 0
+    n2k_rows = 0
+    n2k_examples: list[tuple[str, int, str]] = []
     for data, lines in _iter_blocks(p, cols, rejects, file):
         rows += len(lines)
         data, lines = _drop_blank(data, lines, rejects, file)
         keep = np.ones(len(lines), dtype=bool)
-        if pcol:
+        if pcol:  # valid rows of a protocol dracc does not decode: ignored, not rejected
             n2k = np.char.find(np.char.lower(data[pcol].astype(str)), "2000") >= 0
             if n2k.any():
-                add_rejects(rejects, "NMEA 2000 row (not decoded)", file, lines[n2k],
-                            [str(x) for x in data[rcol][n2k][:5]])
+                n2k_rows += int(n2k.sum())
+                for ln, x in zip(lines[n2k][:max(0, 3 - len(n2k_examples))].tolist(),
+                                 data[rcol][n2k][:3].tolist(), strict=False):
+                    n2k_examples.append((file, int(ln), str(x)[:120]))
             keep &= ~n2k
         empty = keep & (data[rcol] == "")
         if empty.any():
@@ -514,6 +519,11 @@ def _read_raw(p: Path, cols: list[str], cfg: IngestConfig, rejects: Rejects, not
             f["line"] = where[f["line"].to_numpy(dtype=np.int64) - 1]
             res.frames[kind] = f
     renumber_examples(res.rejects, where)
+    res.ignored_examples = {k: [(f, int(where[ln - 1]) if 1 <= ln <= len(where) else ln, t) for f, ln, t in ex]
+                            for k, ex in res.ignored_examples.items()}
+    if n2k_rows:
+        res.ignored["NMEA 2000"] += n2k_rows
+        res.ignored_examples["NMEA 2000"] = n2k_examples
     res.rejects.merge(rejects)
     res.format = "csv-raw"
     res.lines = rows

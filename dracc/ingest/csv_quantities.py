@@ -182,7 +182,7 @@ def _labels(x, n: int):
 
 def build_frames(time_ns: np.ndarray, source, line: np.ndarray, sentence,
                  values: dict[str, np.ndarray], file: str, rejects: Rejects,
-                 talker=None) -> dict[str, pd.DataFrame]:
+                 talker=None, recv_ns: np.ndarray | None = None) -> dict[str, pd.DataFrame]:
     """Canonical frames from records given as quantity columns.
 
     ``values`` maps quantity names (``lat_deg``, ``stw_kn``, ...) to float arrays (or, for
@@ -193,6 +193,8 @@ def build_frames(time_ns: np.ndarray, source, line: np.ndarray, sentence,
     implausible values reject the record from that kind (counted by reason with the
     line number).  Two quantities naming the same canonical column (``stw_kn`` and
     ``stw_mps``) in one file are an error of the file, rejected where both are present.
+    ``recv_ns`` (aligned with ``time_ns``; default all ``MISSING_NS``): the receive time of
+    records timed by their own time of fix (an MCAP message's stamp).
     """
     n = len(time_ns)
     by_kind: dict[str, dict[str, np.ndarray]] = {}
@@ -279,6 +281,8 @@ def build_frames(time_ns: np.ndarray, source, line: np.ndarray, sentence,
             data["reference"] = np.full(len(idx), "T", dtype=object)
         if kind == "position" and "quality" not in numeric:
             data["quality"] = np.ones(len(idx), dtype=np.int8)
+        if recv_ns is not None:
+            data["recv_ns"] = np.asarray(recv_ns, dtype=np.int64)[idx]
         frames[kind] = make_frame(kind, data)
     return frames
 

@@ -210,6 +210,12 @@ class FileResult:
     rejects: Rejects = field(default_factory=Rejects)
     time_events: TimeEvents = field(default_factory=TimeEvents)
     notes: list[str] = field(default_factory=list)  #: what the reader decided or could not use
+    #: valid lines or messages the file holds that dracc does not use, by type (NMEA
+    #: sentence type 'GSV', 'VDM', proprietary address 'PGRME', 'comment', 'blank'; MCAP
+    #: schema name; CSV 'NMEA 2000'): counted, not rejected
+    ignored: Counter = field(default_factory=Counter)
+    #: type -> the first few (file, line or message number, text) of each ignored type
+    ignored_examples: dict[str, list[tuple[str, int, str]]] = field(default_factory=dict)
 
     @property
     def records(self) -> int:

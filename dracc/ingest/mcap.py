@@ -37,7 +37,11 @@ Message types understood (field -> quantity; see ``docs/mcap-csv.md``)
       these go through :func:`dracc.ingest.nmea.parse_sentences`.
 Times
     The message's own stamp where it has one (``header.stamp``, ``timestamp``,
-    ``time_ns``) and it is not zero, else the MCAP log time; both int64 ns UTC.
+    ``time_ns``) and it is not zero, else the MCAP log time; both int64 ns UTC.  A record
+    timed by its own stamp has the log time as ``recv_ns`` (its receive time; none where
+    the log time is implausible, e.g. 0); one timed by its log time has ``MISSING_NS``.
+    Raw sentences are anchored to the message's stamp (else its log time) and have the
+    log time as ``recv_ns`` where they carry a time of fix (the NMEA rule).
 Source keys
     The topic without its leading '/' and without a trailing standard leaf (``fix``,
     ``position``, ``heading``, ``velocity``, ``water``, ``distance``, ``rot``, ``nmea``,
@@ -49,7 +53,9 @@ Damage
     A file that ends early yields every complete message before the cut, and a note
     says at which byte it ended; a damaged chunk keeps its messages before the damage;
     unusable channels (unknown encoding, no navigation fields) are listed in the notes
-    with their message counts.  A valid file without navigation data returns empty
+    with their message counts, and their messages (valid input dracc does not use) are
+    counted in ``FileResult.ignored`` by schema name, never rejected; so are raw
+    sentences of types dracc does not read, by sentence type (``GSV``, ``VDM``).  A valid file without navigation data returns empty
     frames and a note saying so (the caller raises InsufficientDataError when no input
     at all holds data); a file that is not MCAP raises IngestError.
 """
@@ -71,8 +77,9 @@ import pandas as pd
 from ..config import IngestConfig
 from ..errors import IngestError
 from .csv_quantities import REF_QUANTITIES, add_rejects, build_frames, check_declared, lookup
-from .frames import FileResult, Rejects
+from .frames import MISSING_NS, FileResult, Rejects
 from .mcap_cdr import CdrError, compile_schema, decode_channel, scalar_paths, string_paths
+from .timebase import drop_implausible_ext
 from .vocabulary import ASCII_CODES, ros_constants
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -167,6 +174,7 @@ class _Reader:
         # time, parsed by ``nmea`` (a SentenceStream) when full, its frames into the stores
         self.nmea_lines: list[bytes] = []
         self.nmea_time: list[int] = []
+        self.nmea_recv: list[int] = []  #: the MCAP log time of each sentence (its receive time)
         self.nmea_src: list[str] = []
         self.nmea_no: list[int] = []
         self.nmea = None
@@ -491,7 +499,7 @@ class _Reader:
                 self._protobuf(ch, buf, starts, ends, times, nums)
             elif ch.mode == "text":
                 for s, e, t, k in zip(starts.tolist(), ends.tolist(), times.tolist(), nums.tolist(), strict=False):
-                    self._nmea_text(ch, buf[s:e], t, k)
+                    self._nmea_text(ch, buf[s:e], t, k, t)
         except (CdrError, ValueError, TypeError, KeyError) as err:
             ch.bad += len(starts)
             add_rejects(self.rejects, f"message does not decode ({ch.type_name})", self.file, nums,
@@ -575,18 +583,20 @@ class _Reader:
         ch.state["want"] = want
         ch.mode = "cdr"
 
-    def _stamp(self, sec: np.ndarray, nsec: np.ndarray, log_time: np.ndarray) -> np.ndarray:
-        """Stamp times where the message has a stamp (not zero), else the log time; a stamp
-        outside int64 nanoseconds or with nanoseconds outside [0, 1e9) is counted and the
-        log time used."""
+    def _stamp(self, sec: np.ndarray, nsec: np.ndarray, log_time: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(time, recv): stamp times where the message has a stamp (not zero), else the log
+        time; a stamp outside int64 nanoseconds or with nanoseconds outside [0, 1e9) is
+        counted and the log time used.  ``recv`` is the log time where the stamp was used
+        (the receive time of a record timed by its own stamp), MISSING_NS elsewhere."""
         have = ~np.isnan(sec) & ~np.isnan(nsec) & ((sec != 0) | (nsec != 0))
         ok = (np.abs(sec) < 9.2e9) & (nsec >= 0) & (nsec < 1e9)
         self.bad_stamps += int((have & ~ok).sum())
         have &= ok
         t = np.asarray(log_time, dtype=np.int64).copy()
+        recv = np.where(have, t, MISSING_NS)
         if have.any():
             t[have] = sec[have].astype(np.int64) * 1_000_000_000 + nsec[have].astype(np.int64)
-        return t
+        return t, recv
 
     def _cdr(self, ch: _Channel, buf, starts, ends, times, nums) -> None:
         fields = ch.state["fields"]
@@ -598,9 +608,10 @@ class _Reader:
             add_rejects(self.rejects, f"message does not match its schema ({ch.type_name})", self.file,
                         nums[~ok], [ch.topic] * 5)
         if "header.stamp.sec" in want:
-            t = self._stamp(vals["header.stamp.sec"], vals["header.stamp.nanosec"], times)
+            t, recv = self._stamp(vals["header.stamp.sec"], vals["header.stamp.nanosec"], times)
         else:
             t = np.asarray(times, dtype=np.int64)
+            recv = np.full(len(t), MISSING_NS, dtype=np.int64)
         if tp:
             if "nmea" not in ch.state:
                 first = next((strs[tp][i] for i in np.flatnonzero(ok) if strs[tp][i]), "")
@@ -610,7 +621,8 @@ class _Reader:
             for i in np.flatnonzero(ok):
                 text = strs[tp][i]
                 if text is not None:
-                    self._nmea_text(ch, text.encode("utf-8", "replace"), int(t[i]), int(nums[i]))
+                    self._nmea_text(ch, text.encode("utf-8", "replace"), int(t[i]), int(nums[i]),
+                                    int(times[i]))
             return
         out: dict[str, np.ndarray] = {}
         for path, q in want.items():
@@ -635,7 +647,7 @@ class _Reader:
             yaw_rad = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))  # ENU yaw (REP 103)
             out["heading_rad"] = np.mod(math.pi / 2 - yaw_rad, 2 * math.pi)  # from north, clockwise
         keep = ok
-        self._add_part(ch, t[keep], nums[keep], {k: v[keep] for k, v in out.items()})
+        self._add_part(ch, t[keep], nums[keep], {k: v[keep] for k, v in out.items()}, recv[keep])
 
     def _json_queue(self, ch: _Channel, joined: bytes, n: int, times, nums) -> None:
         """Collect a channel's JSON payloads (one per line, see :func:`_join_lines`); parse
@@ -682,7 +694,7 @@ class _Reader:
             for p, t, k in zip(payloads, times.tolist(), nums.tolist(), strict=False):
                 try:
                     obj = json.loads(p)
-                    self._nmea_text(ch, str(obj["sentence"]).encode("utf-8", "replace"), t, k)
+                    self._nmea_text(ch, str(obj["sentence"]).encode("utf-8", "replace"), t, k, t)
                 except (ValueError, KeyError, TypeError):
                     ch.bad += 1
                     add_rejects(self.rejects, "bad JSON message", self.file, np.array([k]), [ch.topic])
@@ -700,13 +712,15 @@ class _Reader:
         sec, nsec = cols.pop("_sec", None), cols.pop("_nsec", None)
         tns = cols.pop("_time_ns", None)
         t = np.asarray(times, dtype=np.int64)
+        recv = np.full(len(t), MISSING_NS, dtype=np.int64)
         if sec is not None:
-            t = self._stamp(sec, nsec, t)
-        elif tns is not None:
+            t, recv = self._stamp(sec, nsec, t)
+        elif tns is not None:  # the record's own time (dracc's JSON messages)
             have = tns >= 0
+            recv = np.where(have, t, MISSING_NS)
             t = t.copy()
             t[have] = tns[have]
-        self._add_part(ch, t[good], nums[good], {k: v[good] for k, v in cols.items()})
+        self._add_part(ch, t[good], nums[good], {k: v[good] for k, v in cols.items()}, recv[good])
 
     def _quantities_of(self, names) -> dict[str, str]:
         """Field name -> quantity name (unit in the name) for the fields dracc reads:
@@ -763,6 +777,7 @@ class _Reader:
         if plan is None:
             return
         t = np.asarray(times, dtype=np.int64).copy()
+        recv = np.full(len(t), MISSING_NS, dtype=np.int64)
         if plan["stamp"]:
             for i, m in enumerate(msgs):
                 if m is not None and m.HasField(plan["stamp"]):
@@ -770,12 +785,14 @@ class _Reader:
                     if ts.seconds or ts.nanos:
                         v = ts.seconds * 1_000_000_000 + ts.nanos
                         if abs(v) < 2**63:
+                            recv[i] = t[i]  # the log time of a message timed by its stamp
                             t[i] = v
                         else:
                             self.bad_stamps += 1
         if plan["bytes"]:
             fld = plan["bytes"]
-            payloads, tt, kk = [], [], []
+            payloads, tt, kk, ll = [], [], [], []
+            log_times = np.asarray(times, dtype=np.int64)
             for i, m in enumerate(msgs):
                 if m is None:
                     continue
@@ -784,11 +801,12 @@ class _Reader:
                 payloads.append(v)
                 tt.append(t[i])
                 kk.append(nums[i])
+                ll.append(log_times[i])
             if not payloads:
                 return
             if payloads[0][:1] in _NMEA_START:
-                for p, ti, k in zip(payloads, tt, kk, strict=False):
-                    self._nmea_text(ch, p, int(ti), int(k))
+                for p, ti, k, lt in zip(payloads, tt, kk, ll, strict=False):
+                    self._nmea_text(ch, p, int(ti), int(k), int(lt))
             else:
                 sub_t = np.asarray(tt, np.int64)
                 lens = np.fromiter((len(x) for x in payloads), dtype=np.int64, count=len(payloads))
@@ -801,7 +819,7 @@ class _Reader:
         for f, q in plan["fields"].items():
             if q in REF_QUANTITIES:  # text or boolean, normalised by build_frames
                 out[q] = np.array([getattr(m, f) if m is not None else None for m in msgs], dtype=object)
-        self._add_part(ch, t[good], nums[good], {k: v[good] for k, v in out.items()})
+        self._add_part(ch, t[good], nums[good], {k: v[good] for k, v in out.items()}, recv[good])
 
     def _proto_plan(self, ch: _Channel, msg) -> dict | None:
         desc = msg.DESCRIPTOR
@@ -824,13 +842,17 @@ class _Reader:
         ch.mode, ch.why = "skip", "protobuf message without navigation fields"
         return None
 
-    def _nmea_text(self, ch: _Channel, text: bytes, t: int, k: int) -> None:
+    def _nmea_text(self, ch: _Channel, text: bytes, t: int, k: int, log_time: int) -> None:
+        """Gather the sentences of one message: ``t`` the external time the NMEA time base
+        anchors them to (the message's stamp, else its log time), ``log_time`` the MCAP
+        log time (their receive time, ``recv_ns``), ``k`` the message number."""
         for line in text.splitlines():
             line = line.strip()
             if not line:
                 continue
             self.nmea_lines.append(line)
             self.nmea_time.append(t)
+            self.nmea_recv.append(log_time)
             self.nmea_src.append(ch.key)
             self.nmea_no.append(k)
         ch.state["nmea"] = ch.state.get("nmea", 0) + 1
@@ -846,8 +868,10 @@ class _Reader:
 
             self.nmea = SentenceStream(self.file, self.cfg)
         released = self.nmea.add(self.nmea_lines, np.asarray(self.nmea_time, dtype=np.int64),
-                                 self.nmea_src, numbers=np.asarray(self.nmea_no, dtype=np.int64))
+                                 self.nmea_src, numbers=np.asarray(self.nmea_no, dtype=np.int64),
+                                 recv_ns=np.asarray(self.nmea_recv, dtype=np.int64))
         self.nmea_lines, self.nmea_time, self.nmea_src, self.nmea_no = [], [], [], []
+        self.nmea_recv = []
         self._nmea_store(released)
 
     def _nmea_store(self, released: list) -> None:
@@ -857,10 +881,11 @@ class _Reader:
                     self.stores.setdefault(kind, _KindStore()).add(f)
 
     # ---------------------------------------------------------------- result
-    def _add_part(self, ch: _Channel, t, nums, qs: dict) -> None:
-        """Keep decoded columns of a channel; turn them into compact frame pieces once
+    def _add_part(self, ch: _Channel, t, nums, qs: dict, recv) -> None:
+        """Keep decoded columns of a channel (``recv``: the receive time of records timed
+        by their own stamp, MISSING_NS elsewhere); turn them into compact frame pieces once
         enough have gathered, so the pending columns stay bounded."""
-        ch.parts.append((t, nums, qs))
+        ch.parts.append((t, nums, qs, recv))
         ch.state["pending"] = ch.state.get("pending", 0) + len(t)
         self.pending += len(t)
         if ch.state["pending"] >= _PIECE_RECORDS:
@@ -874,13 +899,14 @@ class _Reader:
         t = np.concatenate([p[0] for p in ch.parts])
         k = np.concatenate([p[1] for p in ch.parts])
         qs = {q: np.concatenate([p[2][q] for p in ch.parts]) for q in ch.parts[0][2]}
+        recv, _ = drop_implausible_ext(np.concatenate([p[3] for p in ch.parts]))
         ch.parts = []
         self.pending -= ch.state["pending"]
         ch.state["pending"] = 0
         n = len(t)
         sentence = ch.type_name.split("/")[-1].split(".")[-1]
         frames = build_frames(t, _const_cat(ch.key, n), k, _const_cat(sentence, n), qs, self.file,
-                              self.rejects, talker=_const_cat("", n))
+                              self.rejects, talker=_const_cat("", n), recv_ns=recv)
         ch.state["records"] = ch.state.get("records", 0) + sum(len(f) for f in frames.values())
         for kind, f in frames.items():
             self.stores.setdefault(kind, _KindStore()).add(f)
@@ -903,6 +929,8 @@ class _Reader:
             self._nmea_store(self.nmea.finish())
             nres = self.nmea.result([])
             res.rejects.merge(nres.rejects)
+            res.ignored.update(nres.ignored)  # raw sentences dracc does not use: GSV, VDM ...
+            res.ignored_examples.update(nres.ignored_examples)
             res.time_events = nres.time_events
             res.notes.extend(nres.notes)
         for kind in list(self.stores):
@@ -912,6 +940,10 @@ class _Reader:
             del store
         _trim_heap()
         res.notes[:0] = self.notes + self._channel_notes()
+        for ch in self.channels.values():  # valid messages on channels dracc does not decode
+            n = ch.messages - ch.bad
+            if ch.mode in ("skip", "pending") and n > 0:
+                res.ignored[ch.type_name] += n
         if self.bad_stamps:
             res.notes.append(f"{self.file}: {self.bad_stamps} message stamp(s) out of range; their log "
                              f"time was used")

@@ -26,7 +26,9 @@ Field conversions (edges of the SI world, units per ``dracc.units``):
 
 Sentences read: HDT, HDG, HDM, THS, ROT (heading/rot); VHW, VBW (water), VLW
 (distance); GGA, GLL, RMC, GNS (position; RMC also ground), VTG (ground); ZDA (time
-only).  Other well-formed sentences are counted as ``unsupported`` (not an error).
+only).  Other well-formed sentences, ``#`` comments and blank lines are not rejected
+but *ignored*: counted by type (the sentence type, e.g. ``GSV``, ``VDM``; the first 5
+characters of a proprietary address, e.g. ``PGRME``; ``comment``; ``blank``).
 """
 
 from __future__ import annotations
@@ -61,7 +63,14 @@ from .frames import (
     make_frame,
 )
 from .tagblock import FORMS, HEX, parse_numbers, parse_prefixes
-from .timebase import MISSING_NS, EventCounter, TimeBase, days_from_civil, valid_civil
+from .timebase import (
+    MISSING_NS,
+    EventCounter,
+    TimeBase,
+    days_from_civil,
+    drop_implausible_ext,
+    valid_civil,
+)
 
 if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
     from ..config import IngestConfig
@@ -86,8 +95,10 @@ SENTENCES = tuple(FIELD_COUNTS)
 #: talkers of satellite receivers: they cannot measure magnetic heading nor water speed
 GNSS_TALKERS = frozenset({"GP", "GN", "GL", "GA", "GB", "GI", "GQ", "BD"})
 NO_GNSS = frozenset({"HDG", "HDM", "VHW", "VBW", "VLW"})
-#: reasons that do not make --strict fail (the line is fine, dracc just does not use it)
-NON_FATAL = frozenset({"unsupported", "comment"})
+#: reasons that do not make --strict fail: ``no_date`` is counted when the times are
+#: resolved and reported at the end (valid lines dracc does not use are not rejected at
+#: all: they are *ignored*, counted by type, see :data:`IGNORED`)
+NON_FATAL = frozenset({"no_date"})
 
 REASONS = {
     "checksum": "checksum does not match",
@@ -99,10 +110,20 @@ REASONS = {
     "malformed_field": "a field is not a number / out of range / bad hemisphere",
     "bad_tag": "TAG block unreadable or with a wrong checksum",
     "not_nmea": "no sentence on the line",
-    "comment": "comment line ('#')",
-    "unsupported": "valid sentence of a type dracc does not use",
     "no_date": "time of day with no date anywhere in the log (use --date)",
 }
+
+#: what the names counted as *ignored* (valid input dracc does not use; never rejected,
+#: never a --strict failure) mean.  Besides these: the sentence type of a well-formed
+#: standard sentence dracc does not read (``GSV``, ``MWV``, ``DBT``, ``XDR`` ...; also
+#: ``VDM``/``VDO`` for AIS ``!AIVDM``/``!AIVDO``), and the address of a proprietary
+#: sentence, its first 5 characters (``PGRME``, ``PUHAW``, ``PSRFT`` for ``$PSRFTXT``).
+IGNORED = {
+    "comment": "comment line ('#')",
+    "blank": "empty line",
+}
+#: examples kept per ignored type (the first in the file)
+IGNORED_EXAMPLES = 3
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -345,6 +366,10 @@ class ParsedBlock:
     stats: Counter = field(default_factory=Counter)
     #: names for the 'tag_source' codes (TAG s: / given source keys; '' = none)
     source_names: list[str] = field(default_factory=list)
+    #: valid sentences and lines dracc does not use, by type (GSV, VDM, PGRME, comment)
+    ignored: Counter = field(default_factory=Counter)
+    #: type -> the first few (line, text) of each ignored type
+    ignored_examples: dict[str, list[tuple[int, str]]] = field(default_factory=dict)
 
 
 def _parse_numpy(data: bytes, ignore_checksum: bool = False, at_eof: bool = True,
@@ -394,6 +419,33 @@ def _parse_numpy(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
             fatal.append((int(lines_idx[j]) + 1, reason, bytes(buf[starts[j]:min(ends[j], starts[j] + 120)])
                           .decode("ascii", "replace")))
 
+    ignored: Counter = Counter()
+    ign_examples: dict[str, list[tuple[int, str]]] = {}
+
+    def ignore(names: np.ndarray, lines_idx: np.ndarray, starts: np.ndarray, ends: np.ndarray):
+        """Count valid lines/sentences dracc does not use by type: ``names`` an (n, 8)
+        uint8 matrix, the type's ASCII name zero-padded.  One sort over the n rows (as
+        integers), a loop over the distinct types only."""
+        if len(lines_idx) == 0:
+            return
+        keys = np.ascontiguousarray(names, dtype=np.uint8).view("<u8").ravel()
+        u, inv, cnt = np.unique(keys, return_inverse=True, return_counts=True)
+        inv = inv.ravel()
+        order = np.argsort(inv, kind="stable")  # the rows of each type, in stream order
+        g0 = np.cumsum(cnt) - cnt
+        for j, key in enumerate(u.tolist()):
+            name = int(key).to_bytes(8, "little").rstrip(b"\0").decode("ascii", "replace")
+            ignored[name] += int(cnt[j])
+            ex = ign_examples.setdefault(name, [])
+            for r in order[g0[j]:g0[j] + min(max(0, IGNORED_EXAMPLES - len(ex)), int(cnt[j]))].tolist():
+                ex.append((int(lines_idx[r]) + 1, bytes(buf[starts[r]:min(ends[r], starts[r] + 120)])
+                           .decode("ascii", "replace")))
+
+    def named(name: str, n: int) -> np.ndarray:
+        m = np.zeros((n, 8), dtype=np.uint8)
+        m[:, :len(name)] = np.frombuffer(name.encode(), dtype=np.uint8)
+        return m
+
     # sentence starts: '$' or '!' not immediately followed by another start ('$$GPGGA')
     isstart = (buf == 36) | (buf == 33)
     st = np.flatnonzero(isstart)
@@ -422,13 +474,15 @@ def _parse_numpy(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
     if len(noseg):
         isbin = _ranges_any(cum_bad, line_start[noseg], line_end[noseg])
         iscom = comment_line[noseg]
-        for reason, m in (("binary", isbin & ~iscom), ("comment", iscom),
-                          ("not_nmea", ~isbin & ~iscom)):
+        for reason, m in (("binary", isbin & ~iscom), ("not_nmea", ~isbin & ~iscom)):
             sel = noseg[m]
             reject(reason, sel, line_start[sel], line_end[sel])
+        sel = noseg[iscom]
+        ignore(named("comment", len(sel)), sel, line_start[sel], line_end[sel])
     if nseg == 0:
         return (ParsedBlock(n_lines, int(blank.sum()), {}, {}, counts, examples,
-                            min(fatal) if fatal else None, stats), np.full(n_lines, "", dtype=object))
+                            min(fatal) if fatal else None, stats, ignored=ignored,
+                            ignored_examples=ign_examples), np.full(n_lines, "", dtype=object))
 
     cum_xor = np.bitwise_xor.accumulate(buf)
     commas = np.flatnonzero(buf == 44)
@@ -514,14 +568,30 @@ def _parse_numpy(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
     proprietary = amat[:, 0] == 80  # 'P'
     good_addr = (addr_len == 5) & alnum.all(axis=1) & np.all((amat[:, 2:] >= 65) & (amat[:, 2:] <= 90), axis=1)
     ais = buf[st] == 33
-    drop("unsupported", (proprietary & (addr_len >= 2)) | ais)
+
+    def drop_ignored(mask, width):
+        """Valid sentences dracc does not use: counted by their first ``width`` address
+        characters (from the talker on; 'GSV' for the type: width 3 from index 2)."""
+        idx = np.flatnonzero(mask & alive)
+        if len(idx) == 0:
+            return
+        m = np.zeros((len(idx), 8), dtype=np.uint8)
+        if width == 3:  # the sentence type
+            m[:, :3] = amat[idx, 2:5]
+        else:  # a proprietary address, up to its first 5 characters
+            m[:, :5] = np.where(np.arange(5) < addr_len[idx, None], amat[idx], 0)
+        ignore(m, seg_line[idx], st[idx], seg_end[idx])
+        alive[idx] = False
+
+    drop_ignored(proprietary & (addr_len >= 2), 5)
+    drop_ignored(ais & good_addr, 3)  # AIS: 'VDM', 'VDO' (an unreadable address is damage)
     drop("bad_address", ~good_addr)
     addr = np.ascontiguousarray(amat).view("S5").ravel()
     stype_b = np.ascontiguousarray(amat[:, 2:]).view("S3").ravel()
     talker_b = np.ascontiguousarray(amat[:, :2]).view("S2").ravel()
     known_types = np.array([s.encode() for s in SENTENCES], dtype="S3")
     is_known = np.isin(stype_b, known_types)
-    drop("unsupported", ~is_known)
+    drop_ignored(~is_known, 3)
     gnss_t = np.isin(talker_b, np.array([t.encode() for t in GNSS_TALKERS], dtype="S2"))
     no_gnss = np.isin(stype_b, np.array([t.encode() for t in NO_GNSS], dtype="S3"))
     drop("implausible_talker", gnss_t & no_gnss)
@@ -573,7 +643,7 @@ def _parse_numpy(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
         kinds_np[k] = {c: v[order] for c, v in cat.items()}
     clock_np = {c: np.concatenate(v) for c, v in clock.items()}
     return (ParsedBlock(n_lines, int(blank.sum()), kinds_np, clock_np, counts, examples,
-                        min(fatal) if fatal else None, stats, src_names), line_src)
+                        min(fatal) if fatal else None, stats, src_names, ignored, ign_examples), line_src)
 
 
 # ------------------------------------------------------------- compiled scanning kernel
@@ -711,8 +781,11 @@ def _parse_c(data: bytes, ignore_checksum: bool, at_eof: bool) -> ParsedBlock:
     stats["blank"] += r["n_blank"]
     if r["n_tag"]:
         stats["prefix_tag"] += r["n_tag"]
+    ign_examples = {k: [(int(fb_lines[ln - 1]) + 1, tx) for ln, tx in v]
+                    for k, v in pbs.ignored_examples.items()}
     return ParsedBlock(n_lines, r["n_blank"] + pbs.n_blank, kinds, clock, Counter(pbs.reject_counts),
-                       examples, fatal, stats, [str(x) for x in names])
+                       examples, fatal, stats, [str(x) for x in names], Counter(pbs.ignored),
+                       ign_examples)
 
 
 def _merge_parts(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
@@ -796,6 +869,9 @@ class StreamState:
     blank: int = 0
     bytes: int = 0
     rejects: Rejects = field(default_factory=Rejects)
+    #: valid lines/sentences not used, by type (see :data:`IGNORED`), and their first examples
+    ignored: Counter = field(default_factory=Counter)
+    ignored_examples: dict = field(default_factory=dict)
     stats: Counter = field(default_factory=Counter)
     timebase: TimeBase = field(default_factory=TimeBase)
     events: EventCounter = field(default_factory=EventCounter)
@@ -836,6 +912,13 @@ class StreamState:
             self.rejects.counts[reason] += c
             ex = self.rejects.examples.setdefault(reason, [])
             for ln, text in pb.reject_examples.get(reason, [])[: max(0, 5 - len(ex))]:
+                ex.append((self.path, num(ln, line0), text))
+        self.ignored.update(pb.ignored)
+        if pb.n_blank:
+            self.ignored["blank"] += pb.n_blank
+        for kind, exs in pb.ignored_examples.items():
+            ex = self.ignored_examples.setdefault(kind, [])
+            for ln, text in exs[: max(0, IGNORED_EXAMPLES - len(ex))]:
                 ex.append((self.path, num(ln, line0), text))
         if strict and pb.first_fatal is not None:
             ln, reason, text = pb.first_fatal
@@ -1027,11 +1110,14 @@ def _assemble(pb: ParsedBlock, times: list[np.ndarray], state: StreamState, file
         missing = t == MISSING_NS
         if missing.any():
             idx = np.flatnonzero(missing)
-            state.rejects.counts["no_date"] += len(idx)
-            ex = state.rejects.examples.setdefault("no_date", [])
-            for j in idx[: max(0, 5 - len(ex))]:
-                ex.append((file, int(line[j]),
-                           f"{SENTENCES[cols['sentence'][j]]} time of day without date"))
+            if kind == "ground":  # an RMC is one line: counted once, in its position row
+                idx = idx[cols["sentence"][idx] != SENTENCES.index("RMC")]
+            if len(idx):
+                state.rejects.counts["no_date"] += len(idx)
+                ex = state.rejects.examples.setdefault("no_date", [])
+                for j in idx[: max(0, 5 - len(ex))]:
+                    ex.append((file, int(line[j]),
+                               f"{SENTENCES[cols['sentence'][j]]} time of day without date"))
             keep = ~missing
             cols = {c: v[keep] for c, v in cols.items()}
             t, line = t[keep], line[keep]
@@ -1046,13 +1132,23 @@ def _assemble(pb: ParsedBlock, times: list[np.ndarray], state: StreamState, file
         data = {c: v for c, v in cols.items()
                 if c not in ("seq", "tag_source", "dec", "tod_ns", "date_days", "ext_ns", "talker",
                              "sentence")}
-        data.update(talker=tal, source=src, sentence=sent, time_ns=t, line=line)
+        data.update(talker=tal, source=src, sentence=sent, time_ns=t, line=line,
+                    recv_ns=_recv_ns(cols["tod_ns"], cols["ext_ns"]))
         if "reference" in data:
             data["reference"] = _reference_categorical(data["reference"])
         df = make_frame(kind, data)
         state.events.add(kind, src, t, own, line, file, sent)
         frames[kind] = df
     return frames
+
+
+def _recv_ns(tod_ns: np.ndarray, ext_ns: np.ndarray) -> np.ndarray:
+    """The receive time of records with their own time of fix: the external time (TAG
+    ``c:``, logger prefix, MCAP log time) the time base used, i.e. after
+    :func:`~dracc.ingest.timebase.drop_implausible_ext`; ``MISSING_NS`` where the record
+    has no time of fix (HDT, VTG ...) or no usable external time."""
+    ext, _ = drop_implausible_ext(ext_ns)
+    return np.where((tod_ns >= 0) & (ext != MISSING_NS), ext, MISSING_NS).astype(np.int64, copy=False)
 
 
 def _time_arrays(pb: ParsedBlock):
@@ -1244,7 +1340,8 @@ def read_nmea(path: str | Path, cfg: IngestConfig, progress=None, workers: int |
     blocks = [b.frames for b in iter_nmea_blocks(path, cfg, st, progress=progress, workers=workers)]
     frames = concat_blocks(blocks)
     res = FileResult(path=str(path), format="nmea", frames=frames, lines=st.lines,
-                     rejects=st.rejects, time_events=st.time_events(), notes=st.notes())
+                     rejects=st.rejects, time_events=st.time_events(), notes=st.notes(),
+                     ignored=st.ignored, ignored_examples=st.ignored_examples)
     res.notes.extend(f"{k}: {v}" for k, v in st.events.per_source.items() if v["backsteps"] or v["gaps"])
     return res
 
@@ -1270,11 +1367,17 @@ class SentenceStream:
         self._held: list = []
 
     def add(self, lines: Sequence[bytes], time_ns: np.ndarray, source: Sequence[str],
-            numbers: np.ndarray | None = None) -> list[dict[str, pd.DataFrame]]:
+            numbers: np.ndarray | None = None,
+            recv_ns: np.ndarray | None = None) -> list[dict[str, pd.DataFrame]]:
+        """Parse one chunk.  ``time_ns``: each line's external time (the time base anchors
+        its time of fix to it); ``recv_ns``: each line's receive time where it differs
+        (an MCAP log time beside a message stamp), else ``time_ns`` is its receive time:
+        the ``recv_ns`` of its records that have their own time of fix."""
         clean = [bytes(x).replace(b"\r", b"").replace(b"\n", b" ") for x in lines]
         t = np.asarray(time_ns, dtype=np.int64)
         src = np.asarray(list(source), dtype=object)
-        if not (len(t) == len(src) == len(clean)) or (numbers is not None and len(numbers) != len(clean)):
+        if not (len(t) == len(src) == len(clean)) or (numbers is not None and len(numbers) != len(clean)) \
+                or (recv_ns is not None and len(recv_ns) != len(clean)):
             raise ValueError(f"SentenceStream: {len(clean)} lines, {len(t)} times, {len(src)} sources")
         if not clean:
             return []
@@ -1285,7 +1388,8 @@ class SentenceStream:
         line0 = st.count_block(pb, self.cfg.strict, label="{path}: message {n}",
                                number=None if nos is None else (lambda ln, first: int(nos[ln - 1])))
         tod, date, ext, split = _time_arrays(pb)
-        self._held.append((pb, split, line0, nos))
+        recv = None if recv_ns is None else drop_implausible_ext(np.asarray(recv_ns, dtype=np.int64))[0]
+        self._held.append((pb, split, line0, nos, recv))
         return self._release(st.timebase.feed(tod, date, ext))
 
     def finish(self) -> list[dict[str, pd.DataFrame]]:
@@ -1295,11 +1399,15 @@ class SentenceStream:
     def _release(self, done) -> list[dict[str, pd.DataFrame]]:
         out = []
         for t in done:
-            pb, split, line0, nos = self._held.pop(0)
+            pb, split, line0, nos, recv = self._held.pop(0)
             frames = _assemble(pb, split(t), self.st, self.file, line0, self.cfg)
-            if nos is not None:
-                for f in frames.values():
-                    f["line"] = nos[f["line"].to_numpy(np.int64) - line0]
+            for f in frames.values():
+                at = f["line"].to_numpy(np.int64) - line0  # the line of each record in the chunk
+                if recv is not None:  # a record with a receive time gets the one given
+                    has = f["recv_ns"].to_numpy() != MISSING_NS
+                    f["recv_ns"] = np.where(has, recv[at], MISSING_NS)
+                if nos is not None:
+                    f["line"] = nos[at]
             out.append(frames)
         return out
 
@@ -1308,7 +1416,8 @@ class SentenceStream:
         time) with the counts, rejects, time events and notes of every chunk."""
         st = self.st
         return FileResult(path=self.file, format="nmea", frames=concat_blocks(frames), lines=st.lines,
-                          rejects=st.rejects, time_events=st.time_events(), notes=st.notes())
+                          rejects=st.rejects, time_events=st.time_events(), notes=st.notes(),
+                          ignored=st.ignored, ignored_examples=st.ignored_examples)
 
 
 def parse_sentences(lines: Sequence[bytes], time_ns: np.ndarray, source: Sequence[str], file: str,
