@@ -10,7 +10,8 @@ The checks and their rules (thresholds in :class:`dracc.config.IntegrityConfig`)
 validity / ``invalid_flag``
     the source's own flags: position records flagged invalid (GGA quality 0, RMC/GLL
     status V or mode N, GNS mode N: ``quality == 0``), heading records with an empty
-    heading field.  Flagged spells of at least ``spell_min_s`` fail.  Rule on recorded
+    heading field, course/speed records without either (VTG mode N and RMC status V
+    leave them empty).  Flagged spells of at least ``spell_min_s`` fail.  Rule on recorded
     flags: a healthy source cannot trigger it (false-alarm probability 0).
 validity / ``contradiction``
     a source flagging fixes valid while they fail a plausibility check.
@@ -234,6 +235,9 @@ def _validity(voyage: Voyage, cfg: IntegrityConfig) -> list[Check]:
         parts.setdefault(key, []).append(("position", g, g["quality"].to_numpy() == 0))
     for key, g in _by_source(voyage.frames["heading"]):
         parts.setdefault(key, []).append(("heading", g, ~np.isfinite(g["heading_rad"].to_numpy(float))))
+    for key, g in _by_source(voyage.frames["ground"]):  # VTG mode N, RMC status V: no velocity
+        parts.setdefault(key, []).append(("ground", g, ~np.isfinite(g["cog_rad"].to_numpy(float))
+                                          & ~np.isfinite(g["sog_mps"].to_numpy(float))))
     for key in sorted(parts):
         evidence, n_flag, n_all, longest = [], 0, 0, 0.0
         t_first, t_last = None, None

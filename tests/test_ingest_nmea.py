@@ -688,3 +688,33 @@ def test_recv_ns_stays_with_its_rows_when_files_merge(tmp_path):
     lag = (pos["recv_ns"] - pos["time_ns"]).groupby(pos["source"].astype(str)).unique()
     assert {k: list(x) for k, x in lag.items()} == {"GNSS1": [1_500_000_000], "GNSS2": [500_000_000]}
     assert (v.frames["heading"]["recv_ns"] == MISSING).all()
+
+
+def test_invalid_velocity_flags_leave_the_velocity_empty(tmp_path):
+    """VTG mode N and RMC status V carry no valid course and speed: NaN in the ground frame
+    (both engines), so no DR uses them and the integrity audit counts them as flagged."""
+    from dracc.config import IngestConfig
+    from dracc.ingest import nmea as nm
+    def s(body: str) -> str:
+        cs = 0
+        for ch in body.encode():
+            cs ^= ch
+        return f"${body}*{cs:02X}\n"
+
+    text = "".join([s("GPRMC,120000.00,A,5436.000,N,01848.000,E,12.0,045.0,010326,,,A"),
+                    s("GPRMC,120001.00,V,5436.001,N,01848.001,E,12.0,045.0,010326,,,N"),
+                    s("GPVTG,045.0,T,,M,12.0,N,22.2,K,A"),
+                    s("GPVTG,045.0,T,,M,12.0,N,22.2,K,N")])
+    log = tmp_path / "v.nmea"
+    log.write_text(text)
+    for engine in ("numpy", "c"):
+        if engine == "c" and nm._nmeascan is None:
+            continue
+        old = nm.ENGINE
+        nm.ENGINE = engine
+        try:
+            g = nm.read_nmea(log, IngestConfig()).frames["ground"]
+        finally:
+            nm.ENGINE = old
+        sog = g["sog_mps"].to_numpy()
+        assert np.isfinite(sog[0]) and np.isnan(sog[1]) and np.isfinite(sog[2]) and np.isnan(sog[3]), engine

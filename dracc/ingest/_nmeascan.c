@@ -331,11 +331,13 @@ static int decode(int t, Fields *F, Row *r) {
         r->date = ymd_days(F, yyyy, mo, dd);
         int mode = fchar(F, 12);
         r->code = quality_fix(st, mode);
+        if (r->code == 0) r->v[4] = r->v[5] = NAN;  /* status V / mode N: no valid velocity */
         break;
     }
     case T_VTG:
         r->v[0] = angle(F, 1);
         r->v[1] = speed(F, 5, 7);
+        if (fchar(F, 9) == 'N') r->v[0] = r->v[1] = NAN;  /* mode N: data not valid */
         break;
     case T_ZDA: {
         r->tod = tod(F, 1);

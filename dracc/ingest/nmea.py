@@ -337,9 +337,12 @@ def _decode(stype: str, F: _Fields) -> tuple[dict[str, dict[str, np.ndarray]], d
         mode = F.char(12)
         q = np.where((st == 65) & (mode != 78), 1, np.where(st == 0, -1, 0)).astype(np.int8)
         out["position"] = {"lat_rad": lat, "lon_rad": lon, "alt_m": nanv, "hdop": nanv, "quality": q}
-        out["ground"] = {"cog_rad": cog, "sog_mps": sog}
+        bad = q == 0  # status V or mode N: the velocity is not valid either
+        out["ground"] = {"cog_rad": np.where(bad, np.nan, cog), "sog_mps": np.where(bad, np.nan, sog)}
     elif stype == "VTG":
-        out["ground"] = {"cog_rad": _angle(F, 1), "sog_mps": _speed(F, 5, 7)}
+        bad = F.char(9) == 78  # mode N: data not valid
+        out["ground"] = {"cog_rad": np.where(bad, np.nan, _angle(F, 1)),
+                         "sog_mps": np.where(bad, np.nan, _speed(F, 5, 7))}
     elif stype == "ZDA":
         tod = _tod(F, 1)
         d, _ = F.num(2)
