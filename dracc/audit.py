@@ -120,6 +120,9 @@ def audit_config(cfg: Config) -> AuditConfig:
             if not isinstance(table[key], str) or not table[key].strip():
                 raise ConfigError(f"[audit] {key} must be a non-empty string, got {table[key]!r}")
             kw[key] = table[key]
+    if "pattern" in kw and (Path(kw["pattern"]).is_absolute() or Path(kw["pattern"]).drive):
+        raise ConfigError(f"[audit] pattern must be a glob relative to the log folder "
+                          f"(e.g. \"*.nmea\" or \"**/*.nmea\"), got {kw['pattern']!r}")
     for key in ("busy_timeout_s", "compass_error_max_deg", "log_scale_max_pct",
                 "rejected_rate_max_pct", "accuracy_window_h"):
         if key in table:
@@ -570,6 +573,10 @@ class PooledChannel:
     measure: str
 
 
+def _usable(c: ChannelRow) -> bool:
+    return c.m_u is not None and math.isfinite(c.m_u) and c.n > 0
+
+
 def pool_channels(nights: Sequence[tuple[str, float, Sequence[ChannelRow]]], dev_cfg) -> list[PooledChannel]:
     """Pool (night, hours, channel rows) per unit and channel: m_u^2 weighted by n (K3b over
     the union of the nights' deviations), kurtosis weighted by n, independent samples
@@ -579,7 +586,7 @@ def pool_channels(nights: Sequence[tuple[str, float, Sequence[ChannelRow]]], dev
     acc: dict[tuple[str, str], dict] = {}
     for night, hours, rows in nights:
         for c in rows:
-            if c.m_u is None or not math.isfinite(c.m_u) or c.n <= 0:
+            if not _usable(c):
                 continue
             a = acc.setdefault((c.unit, c.channel), {"nights": [], "hours": 0.0, "n": 0, "ss": 0.0,
                                                      "kn": 0.0, "neff": 0.0, "k": None,
@@ -620,7 +627,7 @@ def accuracy_findings(store: StateStore, vessel: str, night: str, acfg: AuditCon
         candidates.append((night, float(tonight[0]), tuple(tonight[1])))
     chosen, hours = [], 0.0
     for n, h, rows in sorted(candidates, key=lambda c: c[0], reverse=True):
-        if not rows or h <= 0:
+        if h <= 0 or not any(_usable(c) for c in rows):  # no INS statistics: no hours to add
             continue
         chosen.append((n, h, rows))
         hours += h
@@ -666,9 +673,13 @@ def accuracy_findings(store: StateStore, vessel: str, night: str, acfg: AuditCon
 
 
 def _hours(rec: NightRecord) -> float:
-    if not rec.period_start_utc or not rec.period_end_utc:
+    return _period_hours(rec.period_start_utc, rec.period_end_utc)
+
+
+def _period_hours(start_utc: str | None, end_utc: str | None) -> float:
+    if not start_utc or not end_utc:
         return 0.0
-    return (_parse_utc(rec.period_end_utc) - _parse_utc(rec.period_start_utc)).total_seconds() / 3600.0
+    return (_parse_utc(end_utc) - _parse_utc(start_utc)).total_seconds() / 3600.0
 
 
 # --------------------------------------------------------------- choosing the logs
@@ -809,7 +820,10 @@ def audit_document(doc: Mapping, *, store: StateStore, acfg: AuditConfig,
     night = night or night_of(facts)
     findings, not_checked = evaluate(facts, acfg)
     clock = now or (lambda: dt.datetime.now(dt.timezone.utc))
-    hours = (facts.duration_s or 0.0) / 3600.0
+    # the hours tonight adds to the accuracy window: as a stored night is counted (its
+    # period), from the period where the document gives no duration
+    hours = (facts.duration_s / 3600.0 if facts.duration_s is not None
+             else _period_hours(facts.period_start_utc, facts.period_end_utc))
     with store.transaction():
         acc_found, acc_skipped, acc_doc = accuracy_findings(store, vessel, night, acfg, dev_cfg,
                                                             tonight=(hours, facts.channels))

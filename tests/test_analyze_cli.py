@@ -99,9 +99,9 @@ def test_json_to_stdout_is_only_json(run_cli, validator):
     (["--date", "1/3/2026"], "--date"),
     (["--fix-role", "moon"], "--fix-role"),
 ])
-def test_bad_options_are_one_line_config_errors(run_cli, args, needle):
+def test_bad_options_are_one_line_usage_errors(run_cli, args, needle):
     code, out, err = run_cli("analyze", SAMPLE, *args)
-    assert code == ExitCode.CONFIG
+    assert code == ExitCode.USAGE  # a bad option value, not a bad configuration file
     assert err.startswith("error:") and needle in err and len(err.strip().splitlines()) == 1
     assert out == ""
 

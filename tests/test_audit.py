@@ -10,6 +10,7 @@ from test_audit_helpers import make_doc
 
 from dracc.audit import (
     AuditConfig,
+    NoLogsError,
     apriori_chain,
     apriori_seeds,
     audit_config,
@@ -105,34 +106,133 @@ def test_no_findings_within_limits():
 
 
 def test_each_threshold_triggers_just_above_not_at():
-    a = AuditConfig(limits={"all": {"lat_m": 200.0, "lon_m": 300.0, "course_deg": 0.2}},
+    # the per-night checks; the limiting errors are judged over the accuracy window
+    # (test_accuracy_window_limit_just_above_not_at)
+    a = AuditConfig(limits={"all": {"lat_m": 1.0, "lon_m": 1.0, "course_deg": 0.001}},
                     dr_containment_min=0.9, compass_error_max_deg=1.0, log_scale_max_pct=2.0,
                     rejected_rate_max_pct=1.0)
-    at = make_doc(m_y={"ins1": {"lat": 100.0, "lon": 150.0, "course": 0.1}}, limit_factor=2.0,
-                  containment=0.9, compass_deg=-1.0, log_scale=-0.02, lines=10000, rejected=100,
+    at = make_doc(containment=0.9, compass_deg=-1.0, log_scale=-0.02, lines=10000, rejected=100,
                   roles=("ins1", "ins2", "ins3"))
     assert evaluate(facts_from_analysis(at), a)[0] == ()
-    above = make_doc(m_y={"ins1": {"lat": 100.1, "lon": 150.0, "course": 0.1001}}, limit_factor=2.0,
-                     containment=0.8999, compass_deg=-1.01, log_scale=0.0201, lines=10000,
+    above = make_doc(containment=0.8999, compass_deg=-1.01, log_scale=0.0201, lines=10000,
                      rejected=101, roles=("ins1", "ins3"))
     found, _ = evaluate(facts_from_analysis(above), a)
-    assert _kinds(found) == ["compass_error", "dr_containment", "limit", "limit", "log_scale",
-                             "missing_source", "rejected_rate"]
+    assert _kinds(found) == ["compass_error", "dr_containment", "log_scale", "missing_source",
+                             "rejected_rate"]
     by = {f.subject: f for f in found}
-    assert by["ins1 lat"].value == pytest.approx(200.2) and by["ins1 lat"].limit == 200.0
-    assert by["ins1 course"].measure == "deg" and by["ins2"].kind == "missing_source"
+    assert by["ins2"].kind == "missing_source" and by["ins2"].check == "availability"
+    assert by["DR"].value == 0.8999 and by["DR"].limit == 0.9 and by["DR"].check == "consistency"
+    assert by["compass"].value == -1.01 and by["compass"].measure == "deg"
     assert by["log"].value == pytest.approx(2.01) and by["log"].measure == "%"
-    assert "101 of 10000 lines" in by["inputs"].message
+    assert "101 of 10000 lines damaged" in by["inputs"].message and by["inputs"].check == "input"
+    # a single night's limiting errors, however large, are not judged night by night
+    assert "limit" not in _kinds(found)
 
 
-def test_missing_figures_are_not_checked_and_said_so():
+def _window_nights(store, lat, *, acfg, hours=24.0):
+    """Audit one night per value of ``lat`` (ins1 lat m_y), each ``hours`` long."""
+    outs = []
+    for i, v in enumerate(lat):
+        night = f"2026-11-{17 + i}"
+        doc = make_doc(night, m_y={"ins1": {"lat": v}})
+        end = dt.datetime.fromisoformat(f"{night}T00:00:00+00:00") + dt.timedelta(hours=hours)
+        doc["period"]["end_utc"] = end.strftime("%Y-%m-%dT%H:%M:%SZ")
+        outs.append(_audit(store, doc, acfg=acfg))
+    return outs
+
+
+def _pooled_limit(lat, n=24, k=1.32):
+    """The (K8) limiting error of the pooled deviations, from the seed-001 formulas."""
+    from dracc.config import DeviationConfig
+    from dracc.deviation import stats
+
+    d = DeviationConfig()
+    m_u = math.sqrt(sum(n * (v / k) ** 2 for v in lat) / (n * len(lat)))
+    n_eff = len(lat) * float(stats.effective_samples(n, d.interval_s, d.correlation_time_s))
+    return float(stats.limiting_error(k * m_u, d.probability, -0.3, d.confidence, n_eff)[0])
+
+
+def _accuracy_skips(out):
+    return [nc for nc in out.not_checked if (nc["check"], nc["name"]) == ("accuracy", "limit")]
+
+
+@pytest.mark.parametrize("factor, expect", [(1 / 1.001, True), (1.001, False)])
+def test_accuracy_window_limit_just_above_not_at(tmp_path, factor, expect):
+    lat = (100.0, 120.0, 140.0)
+    pooled = _pooled_limit(lat)
+    acfg = AuditConfig(limits={"ins1": {"lat_m": pooled * factor}}, accuracy_window_h=60.0)
+    with StateStore(tmp_path / "s.sqlite") as store:
+        outs = _window_nights(store, lat, acfg=acfg)
+    # 24 h and 48 h: the window is not full, the limit is not judged and it is said so
+    for out, hours in zip(outs[:2], (24.0, 48.0), strict=True):
+        assert [f for f in out.findings if f.kind == "limit"] == []
+        (nc,) = _accuracy_skips(out)
+        assert "60 h" in nc["why"] and f"{hours:.1f} h" in nc["why"]
+        assert out.accuracy["complete"] is False
+    last = outs[2]
+    assert _accuracy_skips(last) == [] and last.accuracy["complete"] is True
+    assert last.accuracy["nights"] == ["2026-11-17", "2026-11-18", "2026-11-19"]
+    (row,) = last.accuracy["channels"]
+    assert row["limit_error"] == pytest.approx(pooled, rel=1e-9)
+    limits = [f for f in last.findings if f.kind == "limit"]
+    if not expect:
+        assert limits == [] and last.exit_code == ExitCode.OK
+        return
+    (f,) = limits
+    assert (f.check, f.subject, f.role, f.measure) == ("accuracy", "ins1 lat", "ins1", "m")
+    assert f.value == pytest.approx(pooled, rel=1e-9) and f.limit == pytest.approx(pooled / 1.001)
+    assert f.window["nights"] == ["2026-11-17", "2026-11-18", "2026-11-19"]
+    assert f.window["hours"] == pytest.approx(72.0)
+    assert "72 h (3 nights)" in f.message and last.exit_code == ExitCode.FINDINGS
+
+
+def test_accuracy_window_short_nights_are_not_checked(tmp_path):
+    # the same nights and the same limiting error, 12 h each: 36 h < 60 h, not judged
+    lat = (100.0, 120.0, 140.0)
+    acfg = AuditConfig(limits={"ins1": {"lat_m": _pooled_limit(lat) / 1.001}}, accuracy_window_h=60.0)
+    with StateStore(tmp_path / "s.sqlite") as store:
+        outs = _window_nights(store, lat, acfg=acfg, hours=12.0)
+    assert all(f.kind != "limit" for o in outs for f in o.findings)
+    (nc,) = _accuracy_skips(outs[-1])
+    assert "36.0 h over 3 night(s)" in nc["why"] and outs[-1].exit_code == ExitCode.OK
+    # a fourth and a fifth night fill the window (60 h): the five nights are pooled and judged
+    lat5 = lat + (140.0, 140.0)
+    acfg = AuditConfig(limits={"ins1": {"lat_m": _pooled_limit(lat5) / 1.001}}, accuracy_window_h=60.0)
+    with StateStore(tmp_path / "s.sqlite") as store:
+        outs = _window_nights(store, lat5, acfg=acfg, hours=12.0)
+    assert [o.status for o in outs] == ["unchanged"] * 3 + ["recorded"] * 2
+    assert _accuracy_skips(outs[3]) != [] and all(f.kind != "limit" for f in outs[3].findings)
+    last = outs[-1]
+    assert last.accuracy["nights"] == [f"2026-11-{d}" for d in range(17, 22)]
+    assert _accuracy_skips(last) == [] and [f.kind for f in last.findings] == ["limit"]
+    assert last.findings[0].value == pytest.approx(_pooled_limit(lat5), rel=1e-9)
+
+
+def test_accuracy_window_without_duration_counts_the_period(tmp_path):
+    # a document without period.duration_s (older ones) counts its period, as stored nights do
+    acfg = AuditConfig(accuracy_window_h=20.0)
+    with StateStore(tmp_path / "s.sqlite") as store:
+        out = _audit(store, make_doc("2026-11-20"), acfg=acfg)
+    assert out.accuracy["nights"] == ["2026-11-20"] and out.accuracy["complete"] is True
+    assert out.accuracy["hours"] == pytest.approx(24.0, abs=0.01) and _accuracy_skips(out) == []
+
+
+def test_missing_figures_are_not_checked_and_said_so(tmp_path):
     doc = make_doc(containment=None, compass_deg=None, log_scale=None,
                    m_y={"ins1": {"lat": math.nan}})
     found, skipped = evaluate(facts_from_analysis(doc), AuditConfig())
     assert found == ()
-    text = " | ".join(skipped)
-    assert "DR consistency" in text and "compass" in text and "log scale" in text
-    assert "ins1 lat" in text
+    assert [(d["check"], d["name"], d["role"]) for d in skipped] == [
+        ("consistency", "dr", None), ("accuracy", "compass_error", "compass"),
+        ("accuracy", "log_scale", "log")]
+    why = {d["name"]: d["why"] for d in skipped}
+    assert "no DR track" in why["dr"] and "compass error not estimated" in why["compass_error"]
+    assert "log scale not estimated" in why["log_scale"]
+    # no INS statistics: the limiting errors cannot be judged over the window either
+    with StateStore(tmp_path / "s.sqlite") as store:
+        out = _audit(store, doc)
+    (nc,) = _accuracy_skips(out)
+    assert "no INS deviation statistics" in nc["why"] and out.exit_code == ExitCode.OK
 
 
 # ------------------------------------------------- the DR verdict of the analysis
@@ -191,7 +291,8 @@ def test_consistent_or_conservative_dr_keeps_the_containment_check(verdict):
 def test_undetermined_dr_is_not_checked_and_said_so():
     text = "undetermined: no epoch of a leg whose model was learned from earlier fixes"
     found, skipped = evaluate(facts_from_analysis(make_doc(verdict=text)), AuditConfig())
-    assert found == () and skipped == (f"DR verdict: {text}",)
+    assert found == () and skipped == ({"check": "consistency", "name": "dr", "source": None,
+                                        "role": None, "why": f"DR verdict: {text}"},)
 
 
 def test_not_an_analysis_document():
@@ -337,8 +438,11 @@ def test_select_logs_by_date_in_name(tmp_path):
     assert [p.name for p in got] == ["nav-2026-11-20.nmea", "nav-20261120-b.nmea", "nav_2026_11_20.log"]
     got = select_logs([tmp_path], "2026-11-20", "**/*.nmea")
     assert [p.name for p in got] == ["nav-2026-11-20.nmea", "nav-20261120-b.nmea", "ins-2026-11-20.nmea"]
-    with pytest.raises(IngestError, match="no log files for 2026-11-18"):
+    with pytest.raises(NoLogsError, match=r"no logs for 2026-11-18 matching '\*' in "):
         select_logs([tmp_path], "2026-11-18", "*")
+    with pytest.raises(NoLogsError, match=r"no logs for 2026-11-20 matching '\*\.csv' in "):
+        select_logs([tmp_path], "2026-11-20", "*.csv")
+    assert issubclass(NoLogsError, IngestError)  # exit 3 where it is not a night without data
     with pytest.raises(IngestError, match="no such file"):
         select_logs([tmp_path / "nope"], None, "*")
 

@@ -7,12 +7,14 @@ import json
 import re
 import sqlite3
 
+import jsonschema
 import numpy as np
 import pytest
 
 import dracc.audit as audit_mod
 from dracc.cli.main import main
 from dracc.errors import ExitCode
+from dracc.report.audit_json import load_schema
 
 NIGHTS = (("2026-11-18", 11, 1.0), ("2026-11-19", 12, 2.5), ("2026-11-20", 13, 0.7))
 
@@ -68,37 +70,87 @@ def test_exit_0_within_limits_with_reports(run_cli, ship, tmp_path):
     assert code == ExitCode.OK, err
     assert out == ""
     text = (tmp_path / "s.txt").read_text()
-    assert text.startswith("dracc audit: Aurora, night 2026-11-18: all within limits")
+    assert text.startswith("dracc audit: Aurora, night 2026-11-18: all checks passed")
+    assert "findings:" not in text
     assert "state: recorded" in text and text.rstrip().endswith("exit 0 (ok)")
+    # one 8 h night: the limiting errors wait for the 72 h accuracy window, and it is said
+    assert re.search(r"not checked: accuracy limit: the limiting errors are judged over 72 h of "
+                     r"logs; [0-9.]+ h over 1 night\(s\) so far", text)
     doc = json.loads((tmp_path / "r.json").read_text())
-    assert doc["schema"] == "dracc.analysis/1" and doc["deviation"]["units"]["ins1"]["lat"]["n"] > 0
-    assert "<html" in (tmp_path / "r.html").read_text().lower()
+    jsonschema.validate(doc, load_schema())
+    assert doc["schema"] == "dracc.audit/1" and doc["verdict"] == "ok" and doc["exit_code"] == 0
+    assert (doc["vessel"], doc["night"], doc["state"], doc["findings"]) == (
+        "Aurora", "2026-11-18", "recorded", [])
+    assert doc["accuracy"]["complete"] is False and doc["accuracy"]["window_h"] == 72.0
+    assert doc["analysis"]["schema"] == "dracc.analysis/1"
+    assert doc["analysis"]["deviation"]["units"]["ins1"]["lat"]["n"] > 0
+    page = (tmp_path / "r.html").read_text()
+    assert "<html" in page.lower() and "all checks passed" in page
+    assert page.index("id='verdict'") < page.index("id='findings'") < page.index("id='analysis'")
     assert not list(tmp_path.glob(".*.part"))  # atomic writes leave no temporary files
 
 
 def test_exit_1_findings(run_cli, ship, tmp_path):
+    # an accuracy window of 6 h: one 8 h night fills it, its limiting errors are judged
     code, out, _ = run_cli("audit", ship / "nav-2026-11-18.nmea", "--db", tmp_path / "s.sqlite",
-                           "--config", _cfg(tmp_path, TIGHT))
+                           "--config", _cfg(tmp_path, TIGHT + "accuracy_window_h = 6.0\n"))
     assert code == ExitCode.FINDINGS
-    assert re.search(r"night 2026-11-18: \d+ findings", out)
-    assert "limiting error" in out and out.rstrip().endswith("exit 1 (findings)")
+    lines = out.splitlines()
+    assert re.fullmatch(r"dracc audit: default, night 2026-11-18: \d+ findings.*", lines[0])
+    assert lines[1] == "findings:"
+    assert re.search(r"^  - \[accuracy\] ins1 lat \(ins1\): limiting error [0-9.]+ m over 8 h "
+                     r"\(1 nights\) > 1 m$", out, re.M)
+    assert "not checked: accuracy limit" not in out and out.rstrip().endswith("exit 1 (findings)")
     row = sqlite3.connect(tmp_path / "s.sqlite").execute("SELECT vessel, findings_json FROM nights").fetchone()
-    assert row[0] == "default" and json.loads(row[1])[0]["kind"] == "limit"
+    stored = [f for f in json.loads(row[1]) if f["kind"] == "limit"]
+    assert row[0] == "default" and len(stored) == 9  # every unit channel is far above 1 m / 0.0001°
+    assert {f["check"] for f in stored} == {"accuracy"} and {f["role"] for f in stored} == {
+        "ins1", "ins2", "ins3"}
+    # the default window (72 h): the same night judges no limit, and says why
+    code, out, _ = run_cli("audit", ship / "nav-2026-11-18.nmea", "--db", tmp_path / "t.sqlite",
+                           "--config", _cfg(tmp_path, TIGHT))
+    assert "): limiting error" not in out and "not checked: accuracy limit" in out
 
 
 def test_exit_3_no_usable_logs(run_cli, tmp_path):
     (tmp_path / "logs").mkdir()
-    code, out, err = run_cli("audit", tmp_path / "logs", "--date", "2026-11-20", "--db", tmp_path / "s.sqlite")
-    assert code == ExitCode.INPUT and "no log files for 2026-11-20" in err
-    assert len(err.strip().splitlines()) == 1 and out == ""
     junk = tmp_path / "logs" / "junk-2026-11-20.nmea"
     junk.write_bytes(b"\x00\x01 no sentences here\n" * 50)
     code, out, err = run_cli("audit", tmp_path / "logs", "--date", "2026-11-20", "--db", tmp_path / "s.sqlite")
     assert code == ExitCode.INPUT and err.startswith("error:") and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1 and out == ""
     code, _, err = run_cli("audit", tmp_path / "logs", "--date", "20-11-2026", "--db", tmp_path / "s.sqlite")
     assert code == ExitCode.USAGE and "YYYY-MM-DD" in err  # a bad option value is a usage error
     # nothing was recorded: the database is not even opened before the logs are analysed
     assert not (tmp_path / "s.sqlite").exists()
+
+
+def test_exit_3_folder_without_the_nights_logs_is_a_night_without_data(run_cli, tmp_path):
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    (logs / "nav-2026-11-19.nmea").write_text("")  # another night's log
+    db = tmp_path / "s.sqlite"
+    code, out, err = run_cli("audit", logs, "--date", "2026-11-20", "--db", db, "--json",
+                             tmp_path / "a.json", "--html", tmp_path / "a.html")
+    assert code == ExitCode.INPUT and err == ""
+    lines = out.splitlines()
+    assert lines[0] == (f"dracc audit: default, night 2026-11-20: NO DATA: no logs for 2026-11-20 "
+                        f"matching '*' in {logs}")
+    assert "state: recorded (a new night); recorded as a night without data" in lines
+    assert lines[-1] == "exit 3 (no logs)"
+    doc = json.loads((tmp_path / "a.json").read_text())
+    jsonschema.validate(doc, load_schema())
+    assert (doc["verdict"], doc["exit_code"], doc["analysis"]) == ("no data", 3, None)
+    assert "NO DATA" in (tmp_path / "a.html").read_text() or "no logs" in (tmp_path / "a.html").read_text()
+    (row,) = sqlite3.connect(db).execute("SELECT night, content_sha256, findings_json FROM nights")
+    assert row[:2] == ("2026-11-20", audit_mod.NO_DATA_SHA256)
+    assert [f["kind"] for f in json.loads(row[2])] == ["no_logs"]
+    # the same again: recorded once; history shows the gap
+    code, out, _ = run_cli("audit", logs, "--date", "2026-11-20", "--db", db)
+    assert code == ExitCode.INPUT and "state: unchanged" in out
+    code, out, _ = run_cli("audit", "history", "--db", db, "--json")
+    (night,) = json.loads(out)["nights"]
+    assert night["night"] == "2026-11-20" and night["findings"][0]["kind"] == "no_logs"
 
 
 def test_exit_4_config_errors(run_cli, ship, tmp_path):
@@ -116,11 +168,14 @@ def test_exit_4_config_errors(run_cli, ship, tmp_path):
 def test_rule_over_nights_idempotence_and_history(run_cli, ship, tmp_path):
     db = tmp_path / "s.sqlite"
     cfg = _cfg(tmp_path, LOOSE + "[deviation.apriori]\nins1 = { lat_m = 400.0 }\n")
-    for night, _, _ in NIGHTS:  # a folder and --date: the files carrying the date in their name
+    for i, (night, _, _) in enumerate(NIGHTS):  # a folder and --date: the files carrying the date in their name
         code, out, err = run_cli("audit", ship, "--date", night, "--db", db, "--config", cfg,
                                  "--vessel", "Søren")
         assert code == ExitCode.OK, err
-        assert f"night {night}" in out and "state: recorded" in out
+        assert f"night {night}: all checks passed" in out and "state: recorded" in out
+        # three 8 h nights fill the 72 h accuracy window up to 24 h: the limits wait
+        assert re.search(rf"accuracy window: [0-9.]+ h of 72 h over {i + 1} night\(s\) \(limits "
+                         r"judged once the window is full\)", out)
     code, out, _ = run_cli("audit", ship, "--date", "2026-11-19", "--db", db, "--config", cfg,
                            "--vessel", "Søren")
     assert code == ExitCode.OK and "state: unchanged" in out
@@ -169,7 +224,9 @@ def test_rule_over_nights_idempotence_and_history(run_cli, ship, tmp_path):
 def test_folder_without_date_audits_yesterday(run_cli, ship, tmp_path, monkeypatch):
     monkeypatch.setattr(audit_mod, "yesterday_utc", lambda now=None: "2026-11-19")
     code, out, _ = run_cli("audit", ship, "--db", tmp_path / "s.sqlite", "--config", _cfg(tmp_path, LOOSE))
-    assert code == ExitCode.OK and "night 2026-11-19" in out and "1 file(s)" in out
+    assert code == ExitCode.OK and "night 2026-11-19: all checks passed" in out and "1 file(s)" in out
+    assert "nav-2026-11-19" in json.loads(sqlite3.connect(tmp_path / "s.sqlite").execute(
+        "SELECT inputs_json FROM nights").fetchone()[0])[0]
 
 
 def test_history_without_database(run_cli, tmp_path):
@@ -193,12 +250,20 @@ def test_real_log_without_ins(run_cli, real_dir, tmp_path):
     assert "night 2015-07-20" in out
     for unit in ("ins1", "ins2", "ins3"):
         assert f"required source {unit} is missing" in out
-    assert "lines rejected" in out and "missing: no INS" in out
+    assert "missing: no INS" in out
+    # the sentences dracc does not use are valid input: ignored and counted, not damaged
+    assert re.search(r"^logs: 1 file\(s\), [0-9,]+ lines, 0 damaged \(0\.00 %\)", out, re.M)
+    ignored = re.search(r"^ignored \(valid, not used\): (\d+) \(VDM 2669, ", out, re.M)
+    assert ignored and int(ignored.group(1)) > 10000
+    assert "[input]" not in out
     cfg = _cfg(tmp_path, "[audit]\nrequired_sources = [\"compass\", \"log\"]\nrejected_rate_max_pct = 100.0\n")
-    code, out, _ = run_cli("audit", log, "--db", tmp_path / "s.sqlite", "--vessel", "Hakefjord",
-                           "--config", cfg)
+    code, out2, _ = run_cli("audit", log, "--db", tmp_path / "s.sqlite", "--vessel", "Hakefjord",
+                            "--config", cfg)
     # the limits are not analysis settings: the night stays as recorded, today's limits decide
-    assert code == ExitCode.OK and "state: unchanged" in out
+    assert "state: unchanged" in out2 and "required source" not in out2
+    first = [s for s in out.splitlines() if s.startswith("  - ") and "required source" not in s]
+    assert [s for s in out2.splitlines() if s.startswith("  - ")] == first
+    assert code == (ExitCode.FINDINGS if first else ExitCode.OK)
 
 
 def test_calibration_checks_against_known_sensor_errors(run_cli, tmp_path):
@@ -235,16 +300,27 @@ def test_summary_text_by_hand(tmp_path):
                                   vessel="Aurora", night=None, content_hash=night, settings_hash="s")
         first = format_summary(run("2026-11-19", 100.0), 0.95)
         second = format_summary(run("2026-11-20", 150.0, containment=0.5, log_scale=None), 0.95)
-    assert first.splitlines()[0] == "dracc audit: Aurora, night 2026-11-19: all within limits"
+    lines = first.splitlines()
+    # the limiting errors wait for the accuracy window (72 h): the one check not made
+    assert lines[0] == ("dracc audit: Aurora, night 2026-11-19: all checks passed (1 check could not "
+                        "be made: see 'not checked')")
+    assert "findings:" not in lines
+    assert ("not checked: accuracy limit: the limiting errors are judged over 72 h of logs; 24.0 h "
+            "over 1 night(s) so far ([audit] accuracy_window_h)") in lines
+    assert "logs: 1 file(s), 10,000 lines, 10 damaged (0.10 %); period 2026-11-19T00:00:00Z to " \
+           "2026-11-19T23:59:59Z" in lines
     assert "a priori established for 2 unit channel(s)" in first
     assert first.rstrip().endswith("exit 0 (ok)")
     lines = second.splitlines()
-    assert lines[0] == ("dracc audit: Aurora, night 2026-11-20: 1 finding (1 check could not be made: "
-                        "see 'not checked')")
-    assert "  - DR: reference inside 2M at 50.0 % of epochs < 90.0 %" in lines
+    assert lines[0] == ("dracc audit: Aurora, night 2026-11-20: 1 finding (2 checks could not be "
+                        "made: see 'not checked')")
+    assert lines[1:3] == ["findings:", "  - [consistency] DR: reference inside 2M at 50.0 % of "
+                          "epochs < 90.0 %"]
     assert "a priori raised: ins1 lat 100.0 m -> 150.0 m (tonight's m_y is larger)" in lines
     assert "  ins1  lat      24      150.0 m      300.0 m      150.0 m  raised" in lines
-    assert "not checked: log scale: not estimated (no speed log or no reference)" in lines
+    assert ("not checked: accuracy log_scale log: log scale not estimated (no speed log or no "
+            "reference)") in lines
+    assert "accuracy window: 48.0 h of 72 h over 2 night(s) (limits judged once the window is full)" in lines
     assert "calibration: compass error +0.20 ± 0.05 deg" in lines
     assert lines[-1] == "exit 1 (findings)"
 
@@ -273,8 +349,9 @@ def test_summary_carries_the_dr_verdict(tmp_path):
     assert "DR: consistent: reference inside 2M at 97.5 %" in good.splitlines()
     assert good.rstrip().endswith("exit 0 (ok)")
     lines = bad.splitlines()
-    assert lines[0] == "dracc audit: Aurora, night 2026-11-20: 1 finding"
-    assert f"  - DR: {INCONSISTENT}" in lines  # the finding: analyze's sentence, said once
+    assert lines[0] == ("dracc audit: Aurora, night 2026-11-20: 1 finding (1 check could not be "
+                        "made: see 'not checked')")
+    assert lines[1:3] == ["findings:", f"  - [consistency] DR: {INCONSISTENT}"]  # analyze's sentence, once
     assert f"DR: {INCONSISTENT}" in lines
     assert lines[-1] == "exit 1 (findings)"
     assert "DR: reference inside 2M at 95.0 % of 120 epochs" in old.splitlines()
@@ -294,7 +371,8 @@ def test_cli_exit_1_when_the_analysis_calls_the_dr_inconsistent(run_cli, ship, t
     code, out, err = run_cli("audit", ship / "nav-2026-11-18.nmea", "--db", db, "--config",
                              _cfg(tmp_path, LOOSE))
     assert code == ExitCode.FINDINGS, err
-    assert f"  - DR: {INCONSISTENT}" in out.splitlines() and out.rstrip().endswith("exit 1 (findings)")
+    assert f"  - [consistency] DR: {INCONSISTENT}" in out.splitlines()
+    assert out.rstrip().endswith("exit 1 (findings)")
     code, out, _ = run_cli("audit", "history", "--db", db, "--json")
     (night,) = json.loads(out)["nights"]
     assert (night["dr_verdict"], night["dr_consistent"], night["dr_nees"]) == ("inconsistent", False, 80.2)
@@ -305,3 +383,44 @@ def test_cli_exit_1_when_the_analysis_calls_the_dr_inconsistent(run_cli, ship, t
     code, out, err = run_cli("audit", ship / "nav-2026-11-18.nmea", "--db", tmp_path / "t.sqlite",
                              "--config", _cfg(tmp_path, LOOSE))
     assert code == ExitCode.OK, err
+
+
+@pytest.fixture
+def recorded(run_cli, tmp_path):
+    """A database holding two vessels' nights without data."""
+    logs = tmp_path / "empty"
+    logs.mkdir()
+    db = tmp_path / "h.sqlite"
+    for vessel in ("Aurora", "Nordlys"):
+        code, _, _ = run_cli("audit", logs, "--date", "2026-11-20", "--db", db, "--vessel", vessel)
+        assert code == ExitCode.INPUT
+    return db
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--unit", "ins4"], ["--unit 'ins4'", "ins1, ins2, ins3"]),
+    (["--unit", "INS1"], ["--unit 'INS1'", "ins1, ins2, ins3"]),
+    (["--channel", "speed"], ["--channel 'speed'", "lat, lon, course"]),
+    (["--vessel", "Søren"], ["--vessel 'Søren'", "Aurora, Nordlys"]),
+])
+def test_history_rejects_an_unknown_selection(run_cli, recorded, args, words):
+    code, out, err = run_cli("audit", "history", "--db", recorded, *args)
+    assert code == ExitCode.USAGE and out == ""
+    assert err.startswith("error:") and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert all(w in err for w in words), err
+
+
+def test_history_known_selection_and_an_empty_database(run_cli, recorded, tmp_path):
+    code, out, _ = run_cli("audit", "history", "--db", recorded, "--vessel", "Nordlys", "--unit",
+                           "ins2", "--channel", "lon", "--json")
+    assert code == ExitCode.OK
+    assert [n["vessel"] for n in json.loads(out)["nights"]] == ["Nordlys"]
+    from dracc.state import StateStore
+
+    with StateStore(tmp_path / "empty.sqlite"):
+        pass
+    code, _, err = run_cli("audit", "history", "--db", tmp_path / "empty.sqlite", "--vessel", "Aurora")
+    assert code == ExitCode.USAGE and "no vessel is recorded in this database yet" in err
+    # an unknown unit is a usage error before the database is looked for
+    code, _, err = run_cli("audit", "history", "--db", tmp_path / "none.sqlite", "--unit", "ins9")
+    assert code == ExitCode.USAGE and "--unit" in err

@@ -69,7 +69,7 @@ def test_strict_and_missing_and_bad_date(run_cli, tmp_path):
     code, _, err = run_cli("inspect", tmp_path / "nope.nmea")
     assert code == ExitCode.INPUT and "no such file" in err
     code, _, err = run_cli("inspect", _log(tmp_path), "--date", "2023-02-30")
-    assert code == ExitCode.INPUT and "YYYY-MM-DD" in err
+    assert code == ExitCode.USAGE and "YYYY-MM-DD" in err  # a bad option value
 
 
 def test_date_option_places_a_dateless_log(run_cli, tmp_path, real_dir):

@@ -606,7 +606,7 @@ def test_cli_faults_in_params_json(tmp_path, capsys):
 
 def test_cli_rejects_bad_fault_specs(tmp_path, capsys):
     for spec in ("jmp", "jump:GNSS@5h", "jump=-3m", "freeze:MAG", "drift=1knot", "dropout:LOG=1s"):
-        assert _run("simulate", "--hours", "1", "--out", tmp_path / "x", "--fault", spec) == 4
+        assert _run("simulate", "--hours", "1", "--out", tmp_path / "x", "--fault", spec) == 2  # usage
     assert not (tmp_path / "x").exists()
 
 

@@ -24,7 +24,18 @@ from ..deadreckoning import parse_reset_s
 from ..errors import ConfigError, DraccError
 from ..ingest.frames import ROLES
 from ..ingest.sources import keys_must_match
-from .app import QUICK_EXIT, ConfigOption, LogsArgument, app, err, out, paths_exist, progress
+from .app import (
+    QUICK_EXIT,
+    ConfigOption,
+    LogsArgument,
+    app,
+    check_date,
+    err,
+    option_values,
+    out,
+    paths_exist,
+    progress,
+)
 
 _DURATION = re.compile(r"^\s*([0-9]*\.?[0-9]+)\s*(s|sec|min|m|h|hr|d)?\s*$", re.IGNORECASE)
 _UNIT_S = {None: 1.0, "s": 1.0, "sec": 1.0, "min": 60.0, "m": 60.0, "h": 3600.0, "hr": 3600.0,
@@ -62,12 +73,23 @@ def build_config(config: Path | None, *, interval: str | None = None, window: st
                  roles: list[str] | None = None, date: str | None = None, strict: bool = False,
                  ignore_checksum: bool = False, epoch_interval: str | None = None,
                  variation_deg: float | None = None, fix_role: str | None = None):
-    """The configuration file with the command-line options applied on top."""
-    cfg = load_config(config)
+    """The configuration file with the command-line options applied on top.
+
+    An error of the file is a ConfigError (exit 4); a bad option value, or one the
+    validated file's settings cannot take, an OptionError (exit 2)."""
+    cfg = load_config(config)  # validated: what fails below comes from the options
+    with option_values():
+        return _apply_options(cfg, interval=interval, window=window, dr_reset=dr_reset,
+                              probability=probability, roles=roles, date=date, strict=strict,
+                              ignore_checksum=ignore_checksum, epoch_interval=epoch_interval,
+                              variation_deg=variation_deg, fix_role=fix_role)
+
+
+def _apply_options(cfg, *, interval, window, dr_reset, probability, roles, date, strict,
+                   ignore_checksum, epoch_interval, variation_deg, fix_role):
     ing = cfg.ingest
     sources = {**ing.sources, **parse_roles(roles or [])}
-    if date is not None and not re.fullmatch(r"\d{4}-\d{2}-\d{2}", date):
-        raise ConfigError(f"--date {date!r}: expected YYYY-MM-DD")
+    date = check_date(date)
     ing = replace(ing, sources=sources, strict=ing.strict or strict,
                   ignore_checksum=ing.ignore_checksum or ignore_checksum,
                   date=date if date is not None else ing.date)

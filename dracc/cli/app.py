@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+import datetime as dt
+import functools
+import re
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
-from pathlib import Path
+from pathlib import Path, PurePath
 
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from .. import __version__
+from ..errors import ConfigError, OptionError
 
 app = typer.Typer(
     name="dracc",
@@ -83,3 +88,69 @@ def paths_exist(paths: list[Path]) -> list[Path]:
 
 
 OptionalPath = Path | None
+
+
+# ------------------------------------------------------------- bad option values: exit 2
+#
+# A value given on the command line that dracc cannot use is a usage error (exit 2,
+# README "Exit codes"), whichever check finds it: typer's own types and ranges (a click
+# usage error), a check of the CLI below (OptionError), or the validation of the
+# configuration the options were merged into (ConfigError, turned into OptionError by
+# option_values).  A bad configuration file stays exit 4, unreadable input exit 3.
+
+
+@contextmanager
+def option_values() -> Iterator[None]:
+    """Read the command-line option values inside this block: a :class:`ConfigError`
+    raised here names a bad option value and becomes an :class:`OptionError` (exit 2).
+    Load the configuration file before the block (its errors stay exit 4)."""
+    try:
+        yield
+    except ConfigError as e:
+        raise OptionError(str(e)) from e
+
+
+def options_only(command):
+    """Decorator for a command that reads no configuration file (``simulate``): every
+    :class:`ConfigError` it raises comes from its options, a usage error (exit 2)."""
+
+    @functools.wraps(command)
+    def run(*args, **kwargs):
+        with option_values():
+            return command(*args, **kwargs)
+
+    return run
+
+
+def check_choice(value: str | None, known: Iterable[str], option: str,
+                 none_known: str = "nothing to choose from") -> str | None:
+    """``value`` if it is one of ``known`` (or None); else an OptionError listing them
+    (``none_known`` says why the list is empty)."""
+    known = list(known)
+    if value is None or value in known:
+        return value
+    if not known:
+        raise OptionError(f"{option} {value!r}: {none_known}")
+    raise OptionError(f"{option} {value!r}: expected one of {', '.join(known)}")
+
+
+def check_date(value: str | None, option: str = "--date") -> str | None:
+    """A calendar date ``YYYY-MM-DD`` (or None); else an OptionError."""
+    if value is None:
+        return None
+    try:
+        if not re.fullmatch(r"\d{4}-\d{2}-\d{2}", value.strip()):
+            raise ValueError
+        return dt.date.fromisoformat(value.strip()).isoformat()
+    except ValueError:
+        raise OptionError(f"{option} {value!r}: expected a date YYYY-MM-DD") from None
+
+
+def check_pattern(value: str | None, option: str = "--pattern") -> str | None:
+    """A relative glob for the files inside a folder (``*.nmea``, ``**/*.nmea``) or None."""
+    if value is None:
+        return None
+    if not value.strip() or PurePath(value).is_absolute() or PurePath(value).drive:
+        raise OptionError(f"{option} {value!r}: expected a glob relative to the folder, "
+                          "e.g. '*.nmea' or '**/*.nmea'")
+    return value

@@ -2,7 +2,8 @@
 
 ``dracc audit LOG…|DIR`` (same as ``dracc audit run …``) analyses the last day's logs,
 checks them against the ``[audit]`` limits, records the night in the SQLite state and
-exits 0 (all within limits), 1 (findings), 3 (no usable logs) or 4 (config error).
+exits 0 (all checks passed), 1 (findings), 2 (bad option value), 3 (no logs for the night,
+or no usable logs) or 4 (config error).
 """
 
 from __future__ import annotations
@@ -15,14 +16,14 @@ from rich.table import Table
 from typer.core import TyperGroup
 
 from .. import atomic
-from ..audit import CHANNEL_KEYS, AuditOutcome, audit_config, parse_night, run_audit
+from ..audit import CHANNEL_KEYS, CHANNELS, UNITS, AuditOutcome, audit_config, run_audit
 from ..config import load_config
-from ..errors import ConfigError, DraccError, ExitCode
+from ..errors import ConfigError, ExitCode
 from ..report.audit_html import fmt_value as _f
 from ..report.audit_html import history_html
 from ..report.audit_html import measure_digits as _digits
 from ..state import StateError, StateStore
-from .app import ConfigOption, app, out, progress
+from .app import ConfigOption, app, check_choice, check_date, check_pattern, out, progress
 
 
 class _DefaultRun(TyperGroup):
@@ -38,7 +39,8 @@ audit_app = typer.Typer(
     cls=_DefaultRun, no_args_is_help=True,
     help="Nightly audit on board: analyse the last day's logs, check the limits, keep the "
          "state in SQLite (dracc audit LOG…|DIR), and show the trend (dracc audit history). "
-         "Exit codes: 0 within limits, 1 findings, 3 no usable logs, 4 configuration error.")
+         "Exit codes: 0 all checks passed, 1 findings, 2 bad option value, 3 no logs for the "
+         "night or no usable logs, 4 configuration error.")
 app.add_typer(audit_app, name="audit")
 
 
@@ -57,7 +59,12 @@ _STATUS = {
 def _finding_line(f) -> str:
     who = f.source or f.subject
     role = f" ({f.role})" if f.role and f.role != who else ""
-    return f"  - [{f.check}] {who}{role}: {f.message}"
+    msg = f.message
+    for name in dict.fromkeys((who, f.subject)):  # messages name their source: said once
+        if name and msg.startswith(f"{name}: "):
+            msg = msg[len(name) + 2:]
+            break
+    return f"  - [{f.check}] {who}{role}: {msg}"
 
 
 def format_summary(o: AuditOutcome, probability: float | None = None) -> str:
@@ -145,12 +152,7 @@ def format_summary(o: AuditOutcome, probability: float | None = None) -> str:
 
 def _check_date(value: str | None) -> str | None:
     """--date must be YYYY-MM-DD (a usage error, exit 2, otherwise)."""
-    if value is None:
-        return None
-    try:
-        return parse_night(value)
-    except DraccError as e:
-        raise typer.BadParameter(str(e)) from e
+    return check_date(value, "--date")
 
 
 @audit_app.command("run")
@@ -173,11 +175,12 @@ def audit_run(
     summary_out: Path | None = typer.Option(None, "--summary", help="Write the plain-text "
                                                "summary to this file instead of stdout."),
 ) -> int:
-    """Audit one night: analyse, check the limits, record the night; exit 0/1/3/4.
+    """Audit one night: analyse, check the limits, record the night; exit 0/1/2/3/4.
 
     Same as 'dracc audit LOG…'.  Auditing the same night again with the same logs records
     it once; with changed logs the night is replaced.
     """
+    pattern = check_pattern(pattern, "--pattern")
     cfg = load_config(config)
     with progress("audit: analysing", total=100.0) as advance:
         last = [0.0]
@@ -260,9 +263,10 @@ def audit_history(
     config: Path | None = ConfigOption,
 ) -> int:
     """The trend per vessel, unit and channel: m_y, limiting error, a priori and verdict per night."""
-    if channel is not None and channel not in CHANNEL_KEYS:
-        raise ConfigError(f"--channel {channel!r}: expected lat, lon or course")
+    check_choice(unit, UNITS, "--unit")
+    check_choice(channel, CHANNELS, "--channel")
     with _open_existing(db, config) as store:
+        check_choice(vessel, store.vessels(), "--vessel", "no vessel is recorded in this database yet")
         doc = history_document(store, vessel, unit, channel)
     if html_out is not None:
         atomic.write_text(html_out, history_html(doc))

@@ -10,13 +10,13 @@ from rich.table import Table
 
 from .. import atomic
 from ..config import load_config
-from ..errors import ConfigError, ExitCode
+from ..errors import ConfigError, ExitCode, OptionError
 from ..fleet import FleetResult, discover, fleet_config, inside, run_fleet, write_tables
 from ..report.fleet_html import cell_text as _s
 from ..report.fleet_html import fleet_html, latest
 from ..report.fleet_html import fmt_num as _f
 from ..report.fleet_html import fmt_num_unit as _fu
-from .app import ConfigOption, app, err, out, progress
+from .app import ConfigOption, app, check_pattern, err, out, progress
 
 
 def print_table(res: FleetResult) -> None:
@@ -40,6 +40,26 @@ def print_table(res: FleetResult) -> None:
     out.print(t)
 
 
+def check_scheduler(address: str | None, where: str, error: type[Exception]) -> None:
+    """A Dask scheduler address must name a port (tcp://host:8786, host:8786): Dask says
+    ValueError otherwise, deep inside the client.  Not checked without Dask (the batch then
+    says what is missing)."""
+    if not address:
+        return
+    try:
+        from distributed.comm.addressing import parse_address, parse_host_port
+        from distributed.comm.registry import get_backend
+    except ImportError:
+        return
+    try:
+        scheme, loc = parse_address(address)
+        get_backend(scheme)  # an unknown scheme
+        if scheme in ("tcp", "tls", "ws", "wss"):
+            parse_host_port(loc)
+    except ValueError as e:
+        raise error(f"{where} {address!r}: {e}; expected an address such as tcp://host:8786") from None
+
+
 @app.command("fleet")
 def fleet_cmd(
     inputs: list[str] = typer.Argument(..., help="Vessel folders (one per vessel) or log files / "
@@ -60,10 +80,13 @@ def fleet_cmd(
     A re-run skips logs already analysed (same bytes, same settings) unless --force; a log
     that fails is listed and the batch goes on (exit 3 when any failed, else 0).
     """
+    if scheduler and workers:
+        raise OptionError("--workers is for the local pool; with --scheduler the Dask workers run the logs")
+    check_scheduler(scheduler, "--scheduler", OptionError)
+    pattern = check_pattern(pattern, "--pattern")
     cfg = load_config(config)
     fc = fleet_config(cfg)
-    if scheduler and workers:
-        raise ConfigError("--workers is for the local pool; with --scheduler the Dask workers run the logs")
+    check_scheduler(fc.scheduler, "[fleet] scheduler", ConfigError)
     target = Path(out_dir or fc.out or "fleet-report")
     tasks = discover(inputs, pattern or fc.pattern)
     with progress(f"fleet: {len(tasks)} logs", total=len(tasks)) as advance:

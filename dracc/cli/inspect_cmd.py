@@ -22,7 +22,17 @@ from ..ingest.frames import Rejects, TimeEvents
 from ..ingest.nmea import StreamState, iter_nmea_blocks
 from ..ingest.sources import assign_roles, merge_infos, separate_files, summarize
 from ..ingest.timebase import EventCounter
-from .app import ConfigOption, LogsArgument, app, err, out, paths_exist, progress
+from .app import (
+    ConfigOption,
+    LogsArgument,
+    app,
+    check_date,
+    err,
+    option_values,
+    out,
+    paths_exist,
+    progress,
+)
 
 
 def _iso(ns: int | None) -> str | None:
@@ -171,8 +181,9 @@ def inspect_cmd(
     """Show what a log holds: sources and roles, sentence counts, rates, time span and gaps,
     rejected lines by reason with examples, and the time-base decisions."""
     cfg = load_config(config)
-    cfg = with_overrides(cfg, "ingest", strict=strict or None, ignore_checksum=ignore_checksum or None,
-                         date=date)
+    with option_values():
+        cfg = with_overrides(cfg, "ingest", strict=strict or None,
+                             ignore_checksum=ignore_checksum or None, date=check_date(date))
     paths_exist(logs)
     rep = inspect_logs(logs, cfg.ingest)
     if as_json:

@@ -16,7 +16,7 @@ import typer
 from .. import __version__
 from ..atomic import atomic_path, write_text
 from ..errors import ConfigError, DraccError
-from .app import app, err
+from .app import app, err, options_only
 
 FORMATS = ("nmea", "csv-long", "csv-wide", "mcap-json", "mcap-ros2", "mcap-protobuf",
            "mcap-nmea")
@@ -67,6 +67,7 @@ def decimate(df: pd.DataFrame, truth_hz: float, base_hz: float, start_ns: int) -
 
 
 @app.command("simulate")
+@options_only  # no configuration file: a ConfigError here is a bad option value (exit 2)
 def simulate_cmd(
     out_dir: Path = typer.Option(..., "--out", "-o", help="Output folder (created if missing)."),
     hours: float = typer.Option(4.0, "--hours", help="Duration of the voyage in hours."),
