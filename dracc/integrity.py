@@ -417,8 +417,9 @@ def _contradictions(voyage: Voyage, checks: Sequence[Check], faults: Sequence[Se
         out.append(Check("validity", "contradiction", key, _role(voyage, key), "fail",
                          _stat("implausible_records_flagged_valid", len(events), "count"),
                          _thr(0, "count", "a record the source flags valid must pass plausibility"),
-                         {}, 0.0, f"{key}: flagged valid {len(events)} record(s) that fail "
-                         f"plausibility ({', '.join(sorted({e['what'] for e in events}))})",
+                         {}, 0.0, f"{key}: flagged as valid what fails plausibility: "
+                         + ", ".join(f"{w} x{sum(e['what'] == w for e in events)}"
+                                     for w in sorted({e["what"] for e in events})),
                          tuple(events[:MAX_EVIDENCE])))
     return out
 
