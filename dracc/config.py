@@ -45,6 +45,14 @@ class IngestConfig:
     #: CSV column / JSON field name -> quantity with unit (e.g. {"Speed (kn)": "stw_kn"}), for
     #: logs whose names do not carry the unit; see dracc.ingest.csv_quantities
     quantities: dict[str, str] = field(default_factory=dict)
+    #: a line (NMEA sentence, CSV row) longer than this is cut and counted (reason
+    #: 'too_long'): a damaged file costs memory bounded by this, not by its content
+    max_line_bytes: int = 65536
+    #: an MCAP chunk or record that inflates beyond this (or beyond its declared size) is
+    #: rejected and counted, the rest of the file read (a decompression bomb)
+    max_chunk_bytes: int = 64 * 1024 * 1024
+    #: the peak memory dracc aims to stay under on damaged input (documented, benchmarked)
+    memory_cap_mb: int = 512
 
 
 @dataclass(frozen=True)
