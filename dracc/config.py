@@ -2,15 +2,26 @@
 
 Every section is optional; defaults are documented in the README and in
 ``docs/dracc.example.toml``.  Unknown keys are an error (a typo must not be
-silently ignored).  Angles and speeds are given in the units navigators use
-(degrees, knots) with the unit in the key name, and converted here.
+silently ignored), and so is a value of the wrong type or out of range: every key
+of every section is checked when the file is read (:func:`validate`), against the type
+its dataclass field is annotated with (a TOML boolean for ``bool``, a number for
+``float``, an integer for ``int`` ...) and the range in ``_RULES``, and a wrong one is a
+ConfigError (exit 4) naming ``[section] key``.  Angles and speeds are given in the units
+navigators use (degrees, knots) with the unit in the key name, and converted here.
 """
 
 from __future__ import annotations
 
+import datetime as _dt
+import functools
+import json
 import math
+import re
 import sys
-from dataclasses import dataclass, field, fields, is_dataclass, replace
+import types
+import typing
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +31,8 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 from .errors import ConfigError
-from .ingest.frames import ROLES
+from .ingest.csv_quantities import QUANTITIES
+from .ingest.frames import INS_ROLES, ROLES
 
 
 @dataclass(frozen=True)
@@ -149,77 +161,448 @@ class Config:
     deviation: DeviationConfig = DeviationConfig()
     faults: FaultsConfig = FaultsConfig()
     integrity: IntegrityConfig = IntegrityConfig()
-    #: further sections (audit, fleet, report) as plain tables, validated by their owners
+    #: further sections (audit, fleet, report, vessel) as plain tables, validated by their
+    #: owners (dracc.audit.audit_config, dracc.fleet.fleet_config); here only: each is a table
     extra: dict[str, Any] = field(default_factory=dict)
 
 
 _KNOWN_EXTRA = {"audit", "fleet", "report", "vessel"}
+_SECTIONS: dict[str, type] = {"ingest": IngestConfig, "dead_reckoning": DeadReckoningConfig,
+                              "deviation": DeviationConfig, "faults": FaultsConfig,
+                              "integrity": IntegrityConfig}
 
 
 def _build(cls, table: dict, where: str):
-    """Build dataclass ``cls`` from a TOML table, rejecting unknown keys."""
+    """Dataclass ``cls`` from a TOML table, rejecting unknown keys; the values are checked
+    and converted by :func:`validate` (the one place that knows the schema)."""
     if not isinstance(table, dict):
-        raise ConfigError(f"[{where}] must be a table, got {type(table).__name__}")
-    known = {f.name: f for f in fields(cls)}
+        raise ConfigError(f"[{where}] must be a table, got {_kind(table)}")
+    _no_unknown(table, [f.name for f in fields(cls)], where)
+    return cls(**table)
+
+
+def _no_unknown(table: dict, known, where: str) -> None:
     unknown = set(table) - set(known)
     if unknown:
-        raise ConfigError(f"[{where}] unknown key(s): {', '.join(sorted(unknown))}; known: {', '.join(sorted(known))}")
-    kwargs = {}
-    for name, value in table.items():
-        default = getattr(cls(), name) if _has_defaults(cls) else None
-        if isinstance(default, ErrorSource):
-            kwargs[name] = _error_source(value, f"{where}.{name}")
-        elif isinstance(default, tuple):
-            kwargs[name] = tuple(float(v) for v in value)
-        elif is_dataclass(default):
-            kwargs[name] = _build(type(default), value, f"{where}.{name}")
-        else:
-            kwargs[name] = value
+        raise ConfigError(f"[{where}] unknown key(s): {', '.join(sorted(map(str, unknown)))}; "
+                          f"known: {', '.join(sorted(known))}")
+
+
+# --------------------------------------------------------------------------------------
+# The schema: each field's type comes from its annotation, its range from _RULES
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Range:
+    """Closed or open bounds of a number; ``text`` says them in a message."""
+
+    text: str
+    lo: float = -math.inf
+    hi: float = math.inf
+    lo_open: bool = False
+    hi_open: bool = False
+
+    def holds(self, v: float) -> bool:
+        above = v > self.lo if self.lo_open else v >= self.lo
+        below = v < self.hi if self.hi_open else v <= self.hi
+        return above and below
+
+
+_POSITIVE = _Range("positive", 0.0, lo_open=True)
+_NON_NEGATIVE = _Range(">= 0", 0.0)
+_AT_LEAST_1 = _Range(">= 1", 1.0)
+_FINITE = _Range("finite")
+_HALF_TO_ONE = _Range("in [0.5, 1)", 0.5, 1.0, hi_open=True)
+
+
+@dataclass(frozen=True)
+class _Rule:
+    """What a field accepts beyond its annotated type.
+
+    ``range``: bounds of the number (of each element of an array, each value of a table);
+    ``check(value, section, key) -> value``: a rule on the typed value (names, forms);
+    ``before(value) -> value``: a conversion of the raw TOML value before the type check."""
+
+    range: _Range | None = None
+    check: Callable[[Any, str, str], Any] | None = None
+    before: Callable[[Any], Any] | None = None
+
+
+_TYPE_ONLY = _Rule()
+_POS = _Rule(_POSITIVE)
+
+
+def _key(k) -> str:
+    """A key as TOML writes it: bare where it can be, else quoted."""
+    k = str(k)
+    return k if re.fullmatch(r"[A-Za-z0-9_-]+(\[[0-9]+\])?", k) else json.dumps(k, ensure_ascii=False)
+
+
+def _show(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _kind(value) -> str:
+    """The TOML name of a value's type, for 'got ...'."""
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, int):
+        return "an integer"
+    if isinstance(value, float):
+        return "a float"
+    if isinstance(value, str):
+        return "a string"
+    if isinstance(value, (list, tuple)):
+        return "an array"
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, _dt.datetime):
+        return "a date-time"
+    if isinstance(value, _dt.date):
+        return "a date"
+    if isinstance(value, _dt.time):
+        return "a time"
+    return type(value).__name__
+
+
+def _fail(section: str, key: str, value, what: str) -> ConfigError:
+    return ConfigError(f"[{section}] {_key(key)} = {_show(value)}: {what}")
+
+
+def _wrong(section: str, key: str, value, expected: str) -> ConfigError:
+    return _fail(section, key, value, f"expected {expected}, got {_kind(value)}")
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _number(value, section: str, key: str, rng: _Range | None) -> float:
+    if not _is_number(value):
+        raise _wrong(section, key, value, "a number")
+    v = float(value)
+    if not math.isfinite(v):
+        raise _fail(section, key, value, "must be a finite number")
+    if rng is not None and not rng.holds(v):
+        raise _fail(section, key, value, f"must be {rng.text}")
+    return v
+
+
+def _integer(value, section: str, key: str, rng: _Range | None) -> int:
+    if isinstance(value, float) and math.isfinite(value) and value.is_integer():
+        value = int(value)  # 1e3 is an integer; 1.5 is not
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise _wrong(section, key, value, "an integer")
+    if rng is not None and not rng.holds(value):
+        raise _fail(section, key, value, f"must be {rng.text}")
+    return value
+
+
+def _tau(value, section: str, key: str) -> float:
+    if isinstance(value, str) and value.strip().lower() in ("inf", "infinity"):
+        return math.inf
+    if not _is_number(value):
+        raise _wrong(section, key, value, 'a correlation time in seconds (>= 0) or "inf"')
+    v = float(value)
+    if not v >= 0:  # NaN too; inf is a bias
+        raise _fail(section, key, value, 'must be >= 0 seconds (0: white noise, "inf": a bias)')
+    return v
+
+
+_SOURCE_FORM = 'a number (a bias) or a table {sigma = ..., tau_s = ... | "inf"}'
+
+
+def _error_source(value, section: str, key: str) -> ErrorSource:
+    """An ErrorSource from a number (a bias), a table {sigma, tau_s} or an ErrorSource."""
+    inner = f"{section}.{_key(key)}"
+    if _is_number(value):
+        return ErrorSource(_number(value, section, key, _Range(">= 0 (the sigma of a bias)", 0.0)),
+                           math.inf)
+    if isinstance(value, ErrorSource):
+        sigma, tau = value.sigma, value.tau_s
+    elif isinstance(value, dict):
+        _no_unknown(value, ("sigma", "tau_s"), inner)
+        if "sigma" not in value:
+            raise ConfigError(f"[{inner}] sigma is missing: expected {_SOURCE_FORM}")
+        sigma, tau = value["sigma"], value.get("tau_s", math.inf)
+    else:
+        raise _wrong(section, key, value, _SOURCE_FORM)
+    return ErrorSource(_number(sigma, inner, "sigma", _NON_NEGATIVE), _tau(tau, inner, "tau_s"))
+
+
+def _describe(tp) -> str:
+    if tp is bool:
+        return "true or false"
+    if tp is int:
+        return "an integer"
+    if tp is float:
+        return "a number"
+    if tp is str:
+        return "a string"
+    origin = typing.get_origin(tp)
+    if origin is dict:
+        return "a table"
+    if origin is tuple:
+        return f"an array of {_describe(typing.get_args(tp)[0])[2:]}s"
+    return tp.__name__
+
+
+def _typed(value, tp, section: str, key: str, rng: _Range | None):
+    """``value`` checked against the annotation ``tp`` (and numbers against ``rng``), converted
+    to it: an int where a float belongs becomes a float, an array a tuple."""
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        (inner,) = [a for a in args if a is not type(None)]
+        return _typed(value, inner, section, key, rng)
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise _wrong(section, key, value, "true or false")
+        return value
+    if tp is float:
+        return _number(value, section, key, rng)
+    if tp is int:
+        return _integer(value, section, key, rng)
+    if tp is str:
+        if not isinstance(value, str):
+            raise _wrong(section, key, value, "a string")
+        return value
+    if tp is ErrorSource:
+        return _error_source(value, section, key)
+    if origin is tuple:
+        if not isinstance(value, (list, tuple)):
+            raise _wrong(section, key, value, _describe(tp))
+        return tuple(_typed(v, args[0], section, f"{key}[{i}]", rng) for i, v in enumerate(value))
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise _wrong(section, key, value, _describe(tp))
+        inner = f"{section}.{_key(key)}"
+        return {k: _typed(v, args[1], inner, k, rng) for k, v in value.items()}
+    raise TypeError(f"no schema for {tp!r}")  # pragma: no cover - a new annotation
+
+
+# -------------------------------------------------------------- rules on names and forms
+
+
+def _toml_date(value):
+    """A TOML date (``date = 2026-03-01``, unquoted) is the date its text names."""
+    if isinstance(value, _dt.date) and not isinstance(value, _dt.datetime):
+        return value.isoformat()
+    return value
+
+
+def _check_date(value: str | None, section: str, key: str) -> str | None:
+    if value is None:
+        return None
     try:
-        return cls(**kwargs)
-    except (TypeError, ValueError) as err:
-        raise ConfigError(f"[{where}] {err}") from err
+        if not re.fullmatch(r"\d{4}-\d{2}-\d{2}", value.strip()):
+            raise ValueError
+        return _dt.date.fromisoformat(value.strip()).isoformat()
+    except ValueError:
+        raise _fail(section, key, value, 'expected a date "YYYY-MM-DD"') from None
 
 
-def _has_defaults(cls) -> bool:
-    try:
-        cls()
-        return True
-    except TypeError:
-        return False
+def _check_roles(table: dict[str, str], section: str, key: str) -> dict[str, str]:
+    for src, role in table.items():
+        if role not in ROLES:
+            raise ConfigError(f"[{section}.{key}] {src!r} = {role!r}: role must be one of "
+                              f"{', '.join(ROLES)}")
+    return table
 
 
-def _error_source(value, where: str) -> ErrorSource:
-    if isinstance(value, (int, float)):
-        return ErrorSource(float(value), math.inf)
-    if isinstance(value, dict) and set(value) <= {"sigma", "tau_s"} and "sigma" in value:
-        tau = value.get("tau_s", "inf")
-        tau_s = math.inf if tau in ("inf", "infinity", None) else float(tau)
-        return ErrorSource(float(value["sigma"]), tau_s)
-    raise ConfigError(f"[{where}] must be a number (a bias) or {{sigma = …, tau_s = … | \"inf\"}}")
+def _check_quantities(table: dict[str, str], section: str, key: str) -> dict[str, str]:
+    for col, q in table.items():
+        if q not in QUANTITIES:
+            raise ConfigError(f"[{section}.{key}] {_key(col)} = {q!r}: not a quantity name; "
+                              f"known: {', '.join(sorted(QUANTITIES))}")
+    return table
+
+
+WATCH_S = 4 * 3600.0  #: one watch
+_DURATION = re.compile(r"^\s*([0-9]*\.?[0-9]+)\s*(s|sec|min|m|h|hr|d)\s*$", re.IGNORECASE)
+_UNIT_S = {"s": 1.0, "sec": 1.0, "min": 60.0, "m": 60.0, "h": 3600.0, "hr": 3600.0, "d": 86400.0}
+
+
+def parse_reset_s(text: str | float) -> float:
+    """Restart interval in seconds: "1h", "30min", "90s", "watch" (4 h), "never" (inf).
+
+    The grammar of ``[dead_reckoning] reset`` (besides "auto", which depends on the log);
+    here so that the configuration is checked when it is read; dracc.deadreckoning uses it
+    (it imports this module, not the reverse).
+    """
+    if isinstance(text, (int, float)) and not isinstance(text, bool):
+        value = float(text)
+    else:
+        word = str(text).strip().lower()
+        if word == "never":
+            return math.inf
+        if word == "watch":
+            return WATCH_S
+        m = _DURATION.match(word)
+        if not m:
+            raise ConfigError(
+                f"[dead_reckoning] reset = {text!r}: expected a duration such as \"1h\", "
+                "\"30min\", \"90s\", or \"watch\" or \"never\""
+            )
+        value = float(m.group(1)) * _UNIT_S[m.group(2).lower()]
+    if not value > 0:
+        raise ConfigError(f"[dead_reckoning] reset = {text!r}: must be positive")
+    return value
+
+
+def _check_reset(value: str, section: str, key: str) -> str:
+    if value.strip().lower() != "auto":
+        try:
+            parse_reset_s(value)
+        except ConfigError:
+            raise _fail(section, key, value, 'expected "auto", "watch", "never" or a positive '
+                                             'duration such as "1h", "4h", "30min", "90s"') from None
+    return value
+
+
+def _one_of(*choices: str) -> Callable[[Any, str, str], Any]:
+    def check(value, section: str, key: str):
+        if value not in choices:
+            raise _fail(section, key, value, f"expected one of {', '.join(map(repr, choices))}")
+        return value
+    return check
+
+
+def _check_deviation_table(table: dict[str, float], section: str, key: str) -> dict[str, float]:
+    """Headings (the keys) are numbers of degrees in [0, 360], each heading once (0 and 360
+    are one heading); deviations (degrees, east +) within +-180 (the range checks them)."""
+    where = f"{section}.{key}"
+    seen: dict[float, tuple[str, float]] = {}
+    for heading, dev in table.items():
+        try:
+            h = float(heading)
+        except ValueError:
+            h = math.nan
+        if not 0.0 <= h <= 360.0:
+            raise ConfigError(f"[{where}] {_key(heading)} = {_show(dev)}: the key is a compass "
+                              "heading in degrees, a number in [0, 360]")
+        h %= 360.0
+        if h in seen and seen[h][1] != dev:
+            raise ConfigError(f"[{where}] heading {_key(heading)} given twice with different "
+                              f"deviations (as {_key(seen[h][0])}; 0 and 360 are the same heading)")
+        seen[h] = (heading, dev)
+    return table
+
+
+#: the channels of an a priori RMS (dracc.deviation.analysis.SAMPLE_KEYS; not imported: it
+#: imports this module)
+_APRIORI_KEYS = ("course_deg", "lat_m", "lon_m")
+
+
+def _check_apriori(table: dict[str, dict[str, float]], section: str, key: str):
+    for unit, values in table.items():
+        if unit not in INS_ROLES:
+            raise ConfigError(f"[{section}.{key}] {_key(unit)} = {_show(values)}: unit must be one "
+                              f"of {', '.join(INS_ROLES)}")
+        _no_unknown(values, _APRIORI_KEYS, f"{section}.{key}.{_key(unit)}")
+    return table
+
+
+#: every field of every section: its range and rules beyond its annotated type (a test
+#: checks that no field is missing here)
+_RULES: dict[type, dict[str, _Rule]] = {
+    IngestConfig: {
+        "strict": _TYPE_ONLY,
+        "ignore_checksum": _TYPE_ONLY,
+        "date": _Rule(check=_check_date, before=_toml_date),
+        "gap_s": _POS,
+        "backstep_tolerance_s": _Rule(_NON_NEGATIVE),
+        "sources": _Rule(check=_check_roles),
+        "quantities": _Rule(check=_check_quantities),
+        "max_line_bytes": _POS,
+        "max_chunk_bytes": _POS,
+        "memory_cap_mb": _POS,
+    },
+    DeadReckoningConfig: {
+        "learn": _TYPE_ONLY,
+        "reset": _Rule(check=_check_reset),
+        "fix_role": _Rule(check=_one_of("gnss", "ins_mean")),
+        "max_gap_s": _POS,
+        "epoch_interval_s": _POS,
+        "variation_deg": _Rule(_Range("within +-180 degrees (east +)", -180.0, 180.0)),
+        "deviation_table": _Rule(_Range("a deviation within +-180 degrees (east +)", -180.0, 180.0),
+                                 check=_check_deviation_table),
+        **dict.fromkeys(("compass_bias_deg", "compass_noise_deg", "log_scale", "log_bias_kn",
+                         "log_noise_kn", "current_kn", "leeway_deg"), _TYPE_ONLY),
+        "fix_sigma_m": _POS,
+    },
+    DeviationConfig: {
+        "interval_s": _POS,
+        "offset_s": _Rule(_FINITE),
+        "window_s": _POS,
+        "kurtosis_windows_s": _POS,
+        "max_interp_gap_s": _Rule(_NON_NEGATIVE),
+        "factor_lat": _POS,
+        "factor_lon": _POS,
+        "factor_course": _POS,
+        "probability": _Rule(_HALF_TO_ONE),
+        "apriori": _Rule(_POSITIVE, check=_check_apriori),
+        "first_approximation": _TYPE_ONLY,
+        "confidence": _Rule(_HALF_TO_ONE),
+        "correlation_time_s": _Rule(_NON_NEGATIVE),
+        "min_kurtosis_samples": _Rule(_AT_LEAST_1),
+        "kurtosis_tol": _Rule(_NON_NEGATIVE),
+        "hat_confidence": _Rule(_HALF_TO_ONE),
+        "hat_draws": _Rule(_Range(">= 100", 100.0)),
+        "seed": _Rule(_NON_NEGATIVE),
+        "velocity_min_gap_s": _Rule(_NON_NEGATIVE),
+    },
+    FaultsConfig: {
+        "exclude": _TYPE_ONLY,
+        **dict.fromkeys(("max_speed_kn", "jump_min_m", "frozen_min_s", "stuck_min_s",
+                         "moving_min_kn", "turn_min_deg", "max_rot_deg_per_min"), _POS),
+        "min_records": _Rule(_AT_LEAST_1),
+    },
+    IntegrityConfig: {
+        "false_alarm": _Rule(_Range("a probability in (0, 0.5)", 0.0, 0.5, True, True)),
+        **dict.fromkeys(("latency_max_s", "spell_min_s", "dropout_cadences", "dropout_min_s",
+                         "frozen_min_s", "jump_floor_m", "consistency_interval_s",
+                         "consistency_max_gap_s", "heading_gate_min_deg", "velocity_gate_kn"), _POS),
+    },
+}
+
+
+@functools.cache
+def _hints(cls) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+def _section(sec, name: str):
+    """A section's dataclass with every value checked and converted (see :func:`_typed`)."""
+    cls = type(sec)
+    rules, hints = _RULES[cls], _hints(cls)
+    values = {}
+    for f in fields(cls):
+        rule = rules[f.name]
+        value = getattr(sec, f.name)
+        if rule.before is not None:
+            value = rule.before(value)
+        value = _typed(value, hints[f.name], name, f.name, rule.range)
+        if rule.check is not None and value is not None:
+            value = rule.check(value, name, f.name)
+        values[f.name] = value
+    return cls(**values)
 
 
 def validate(cfg: Config) -> Config:
-    """Check cross-field rules; raise ConfigError naming the offending key."""
-    for key, role in cfg.ingest.sources.items():
-        if role not in ROLES:
-            raise ConfigError(f"[ingest.sources] {key!r} = {role!r}: role must be one of {', '.join(ROLES)}")
-    d = cfg.deviation
-    if d.interval_s <= 0 or d.window_s <= 0:
-        raise ConfigError("[deviation] interval_s and window_s must be positive")
-    if not 0.5 <= d.probability < 1.0:
-        raise ConfigError(f"[deviation] probability must be in [0.5, 1), got {d.probability}")
-    for f in ("factor_lat", "factor_lon", "factor_course"):
-        if getattr(d, f) <= 0:
-            raise ConfigError(f"[deviation] {f} must be positive")
-    for f in fields(IntegrityConfig):
-        v = getattr(cfg.integrity, f.name)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-            raise ConfigError(f"[integrity] {f.name} must be a positive number, got {v!r}")
-    if not cfg.integrity.false_alarm < 0.5:
-        raise ConfigError(f"[integrity] false_alarm is a probability below 0.5, got "
-                          f"{cfg.integrity.false_alarm}")
-    return cfg
+    """Check every key of every section against its type and range (and the few rules on
+    names and forms); raise ConfigError naming the key, else return the config with the
+    values converted (an integer where a number belongs is a float, an array a tuple)."""
+    sections = {name: _section(getattr(cfg, name), name) for name in _SECTIONS}
+    if not isinstance(cfg.extra, dict):
+        raise ConfigError(f"extra sections must be a table, got {_kind(cfg.extra)}")
+    for name, table in cfg.extra.items():
+        if not isinstance(table, dict):
+            raise ConfigError(f"[{name}] must be a table, got {_kind(table)}")
+    return replace(cfg, **sections)
 
 
 def load_config(path: str | Path | None = None) -> Config:
@@ -243,12 +626,12 @@ def load_config(path: str | Path | None = None) -> Config:
 
 def config_from_dict(data: dict, where: str = "config") -> Config:
     """Build a validated Config from a parsed TOML document."""
-    sections = {"ingest": IngestConfig, "dead_reckoning": DeadReckoningConfig, "deviation": DeviationConfig,
-                "faults": FaultsConfig, "integrity": IntegrityConfig}
-    unknown = set(data) - set(sections) - _KNOWN_EXTRA
+    unknown = set(data) - set(_SECTIONS) - _KNOWN_EXTRA
     if unknown:
-        raise ConfigError(f"{where}: unknown section(s): {', '.join(sorted(unknown))}")
-    kwargs: dict[str, Any] = {name: _build(cls, data[name], name) for name, cls in sections.items() if name in data}
+        raise ConfigError(f"{where}: unknown section(s): {', '.join(sorted(unknown))}; "
+                          f"known: {', '.join(sorted(set(_SECTIONS) | _KNOWN_EXTRA))}")
+    kwargs: dict[str, Any] = {name: _build(cls, data[name], name)
+                              for name, cls in _SECTIONS.items() if name in data}
     kwargs["extra"] = {k: v for k, v in data.items() if k in _KNOWN_EXTRA}
     return validate(Config(**kwargs))
 

@@ -35,7 +35,6 @@ Error model ("honest" covariance)
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -43,7 +42,7 @@ import numpy as np
 
 from . import distributions as dist
 from .arrays import unique_sorted
-from .config import DeadReckoningConfig, ErrorSource
+from .config import WATCH_S, DeadReckoningConfig, ErrorSource, parse_reset_s
 from .errors import ConfigError, InsufficientDataError
 from .geodesy import interp_position, k_lambda, k_phi, offset_ne_m, wrap_2pi, wrap_pi
 from .units import DEG_RAD, KN_MPS
@@ -85,7 +84,6 @@ __all__ = [
     "velocity_water_ne_mps",
 ]
 
-WATCH_S = 4 * 3600.0  #: one watch
 
 
 # --------------------------------------------------------------------------------------
@@ -657,32 +655,6 @@ def honest_covariance_m2(time_s, speed_mps, course_rad, processes, P0_m2=None, *
 # --------------------------------------------------------------------------------------
 # The dead-reckoning entry point
 # --------------------------------------------------------------------------------------
-
-_DURATION = re.compile(r"^\s*([0-9]*\.?[0-9]+)\s*(s|sec|min|m|h|hr|d)\s*$", re.IGNORECASE)
-_UNIT_S = {"s": 1.0, "sec": 1.0, "min": 60.0, "m": 60.0, "h": 3600.0, "hr": 3600.0, "d": 86400.0}
-
-
-def parse_reset_s(text: str | float) -> float:
-    """Restart interval in seconds from the config: "1h", "30min", "90s", "watch" (4 h), "never" (inf)."""
-    if isinstance(text, (int, float)) and not isinstance(text, bool):
-        value = float(text)
-    else:
-        word = str(text).strip().lower()
-        if word == "never":
-            return math.inf
-        if word == "watch":
-            return WATCH_S
-        m = _DURATION.match(word)
-        if not m:
-            raise ConfigError(
-                f"[dead_reckoning] reset = {text!r}: expected a duration such as \"1h\", "
-                "\"30min\", \"90s\", or \"watch\" or \"never\""
-            )
-        value = float(m.group(1)) * _UNIT_S[m.group(2).lower()]
-    if not value > 0:
-        raise ConfigError(f"[dead_reckoning] reset = {text!r}: must be positive")
-    return value
-
 
 #: where a reset of "auto" stops shrinking: a log of 8 h or more gets hourly legs
 _AUTO_RESETS_S = (30.0, 60.0, 120.0, 300.0, 600.0, 900.0, 1200.0, 1800.0, 3600.0)

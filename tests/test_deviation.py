@@ -4,6 +4,7 @@ handling, missing and fewer units, configuration and the JSON-ready structure.""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -12,7 +13,7 @@ import pytest
 from scipy import stats as sps
 
 import dracc.ingest  # noqa: F401  (import order: dracc.config <-> dracc.ingest)
-from dracc.config import DeviationConfig, config_from_dict
+from dracc.config import DeviationConfig
 from dracc.deviation import UnitSeries, analyse_deviations, sampling_instants, three_cornered_hat
 from dracc.deviation import stats as S
 from dracc.deviation.hat import hat_variances, pairwise_mean_squares
@@ -393,7 +394,7 @@ def test_apriori_monitoring_rule():
     ({"interval_s": float("nan")}, "interval_s = nan"),
 ])
 def test_config_errors_name_the_key(table, word):
-    cfg = config_from_dict({"deviation": table}).deviation
+    cfg = dataclasses.replace(DeviationConfig(), **table)
     with pytest.raises(ConfigError, match=word):
         analyse_deviations({}, cfg)
 
