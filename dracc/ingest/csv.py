@@ -29,12 +29,23 @@ Reading streams the file in blocks (pyarrow's incremental CSV reader), so memory
 one block of text plus the compact numeric columns.  Bad rows are counted by reason with
 their line numbers (line 1 is the header): wrong number of fields, blank line, bad time,
 unknown quantity, value not a number, empty value, implausible value.
+
+Hostile input: memory is bounded by ``[ingest] max_line_bytes``, not by the content.  A
+first pass over the file (:func:`_scan`, 4 MiB at a time, which also checks the UTF-8)
+finds every row longer than that; those rows are left out of what pyarrow reads and
+counted as ``too_long`` with their line numbers (a row of 10 MB used to fail the whole
+file: pyarrow cannot parse a row longer than its block).  Text cells stay Python strings
+in object arrays end to end: nothing builds a fixed-width ``<U..`` array, whose size
+would be the number of rows times the longest value (a 16 kB value in a long-form file
+of 30 000 rows took 3.8 GB).
 """
 
 from __future__ import annotations
 
 import codecs
 import functools
+import io
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -143,22 +154,132 @@ def _line_numbers(k0: int, n: int, invalid_lines: list[int]) -> np.ndarray:
     return k + 2 + np.searchsorted(before, k, side="right")
 
 
-def _utf8_or_replace(path: Path) -> str:
-    """'utf8' for a file of valid UTF-8, else a codec that decodes bad bytes to U+FFFD.
+@dataclass
+class _Scan:
+    """What the first pass over a CSV found: its codec and the rows too long to read."""
+
+    encoding: str = "utf8"
+    #: rows longer than the limit: (file line number, byte offset, end offset incl. the line
+    #: end, length without the line end, their first bytes)
+    long_rows: list[tuple[int, int, int, int, bytes]] = field(default_factory=list)
+    longest: int = 0  #: the longest row that is read (bytes)
+
+    @property
+    def drops(self) -> list[tuple[int, int]]:
+        return [(a, b) for _, a, b, _, _ in self.long_rows]
+
+    @property
+    def lines(self) -> list[int]:
+        return [ln for ln, *_ in self.long_rows]
+
+
+_HEAD = 40  #: bytes of a too-long row kept as its example
+
+
+def _scan(path: Path, max_line: int) -> _Scan:
+    """One pass over the file, a block at a time: is it valid UTF-8 (else a codec that
+    decodes bad bytes to U+FFFD; see below), and which rows are longer than ``max_line``
+    bytes.  A row ends at ``\\n``, ``\\r\\n`` or a lone ``\\r`` (as pyarrow reads it).
 
     pyarrow cannot hand a row with invalid UTF-8 to the invalid-row handler (it prints an
     ignored UnicodeDecodeError and fails the whole file); decoded with replacement, such
     a row is read and its bad cells are counted like any other unreadable value.
     """
+    out = _Scan()
     dec = codecs.getincrementaldecoder("utf-8")()
-    try:
-        with path.open("rb") as fh:
-            while chunk := fh.read(_BLOCK_BYTES):
-                dec.decode(chunk)
-        dec.decode(b"", final=True)
-    except UnicodeDecodeError:
-        return _REPLACE_CODEC
-    return "utf8"
+    utf8 = True
+    line = 1  #: number of the row being scanned
+    start = 0  #: its byte offset
+    head = b""  #: its first bytes
+    at = 0  #: file offset of ``buf``
+    carry = b""
+    with path.open("rb") as fh:
+        while True:
+            block = fh.read(_BLOCK_BYTES)
+            eof = not block
+            buf = carry + block
+            carry = b""
+            if not eof and buf.endswith(b"\r"):  # a CR LF may straddle the blocks
+                buf, carry = buf[:-1], b"\r"
+            if utf8:
+                try:
+                    dec.decode(block, final=eof)
+                except UnicodeDecodeError:
+                    utf8 = False
+            if not buf:
+                if eof:
+                    break
+                continue
+            b = np.frombuffer(buf, dtype=np.uint8)
+            nxt = np.empty_like(b)
+            nxt[:-1] = b[1:]
+            nxt[-1] = 0
+            ends = np.flatnonzero((b == 10) | ((b == 13) & (nxt != 10)))  # offsets in buf
+            if len(ends):
+                starts = np.empty(len(ends), dtype=np.int64)
+                starts[0] = start - at
+                starts[1:] = ends[:-1] + 1
+                crlf = (b[np.maximum(ends - 1, 0)] == 13) & (b[ends] == 10) & (ends > starts)
+                lens = ends - starts - crlf.astype(np.int64)  # without the line end
+                over = np.flatnonzero(lens > max_line)
+                ok = np.ones(len(lens), dtype=bool)
+                ok[over] = False
+                if ok.any():
+                    out.longest = max(out.longest, int(lens[ok].max()))
+                if start < at:  # the row that began in an earlier block ends here
+                    head += bytes(buf[:max(min(_HEAD - len(head), int(ends[0])), 0)])
+                for i in over.tolist():
+                    a = int(starts[i]) + at
+                    first = head if i == 0 and a < at else bytes(buf[a - at:a - at + _HEAD])
+                    out.long_rows.append((line + i, a, int(ends[i]) + at + 1, int(lens[i]), first))
+                line += len(ends)
+                start = int(ends[-1]) + 1 + at
+                head = bytes(buf[start - at:start - at + _HEAD])
+            elif start >= at:
+                head = bytes(buf[start - at:start - at + _HEAD])
+            elif len(head) < _HEAD:
+                head += bytes(buf[:_HEAD - len(head)])
+            at += len(buf)
+            if eof:
+                break
+        if start < at:  # a last row without a line end
+            n = at - start
+            if n > max_line:
+                out.long_rows.append((line, start, at, n, head))
+            else:
+                out.longest = max(out.longest, n)
+    if not utf8:
+        out.encoding = _REPLACE_CODEC
+    return out
+
+
+class _Without(io.RawIOBase):
+    """A file read without some byte ranges (sorted, disjoint): the rows too long to read."""
+
+    def __init__(self, path: Path, drops: list[tuple[int, int]]):
+        self.fh = path.open("rb")
+        self.drops = drops
+        self.i = 0
+        self.pos = 0
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, b) -> int:
+        while self.i < len(self.drops) and self.pos >= self.drops[self.i][0]:
+            self.pos = max(self.pos, self.drops[self.i][1])
+            self.i += 1
+            self.fh.seek(self.pos)
+        n = len(b)
+        if self.i < len(self.drops):
+            n = min(n, self.drops[self.i][0] - self.pos)
+        got = self.fh.readinto(memoryview(b)[:n])
+        self.pos += got
+        return got
+
+    def close(self) -> None:
+        self.fh.close()
+        super().close()
 
 
 _REPLACE_CODEC = "dracc-utf8-replace"
@@ -169,25 +290,33 @@ codecs.register(lambda name: codecs.CodecInfo(
     if name.replace("_", "-") == _REPLACE_CODEC else None)
 
 
-def _iter_blocks(path: Path, cols: list[str], rejects: Rejects, file: str):
-    """Yield (dict column -> object array, line numbers) per block of the CSV."""
+def _iter_blocks(path: Path, cols: list[str], rejects: Rejects, file: str, scan: _Scan):
+    """Yield (dict column -> object array, line numbers) per block of the CSV, the rows
+    ``scan`` found too long left out (counted by the caller)."""
     import pyarrow as pa
     import pyarrow.csv as pcsv
 
-    invalid: list[int] = []
+    invalid: list[int] = list(scan.lines)  #: file lines of rows not in the batches
+    # pyarrow numbers the rows of what it reads: its row s is file line s + (dropped rows
+    # before it); dropped row i (sorted) has d_i - i rows of pyarrow's before it, itself included
+    dropped = np.asarray(scan.lines, dtype=np.int64) - np.arange(len(scan.lines))
 
     def on_invalid(row) -> str:
         line = int(row.number) if row.number is not None else -1
+        if line > 0 and len(dropped):
+            line += int(np.searchsorted(dropped, line, side="right"))
         invalid.append(line)
         reason = f"wrong number of fields ({row.actual_columns}, header has {row.expected_columns})"
         rejects.add(reason, file, line, row.text or "")
         return "skip"
 
+    source = io.BufferedReader(_Without(path, scan.drops), 1 << 20) if scan.drops else str(path)
     try:
         reader = pcsv.open_csv(
-            str(path),
-            read_options=pcsv.ReadOptions(block_size=_BLOCK_BYTES, use_threads=False,
-                                          encoding=_utf8_or_replace(path)),
+            source,
+            # a row must fit in one block (pyarrow): the longest row read sets the least size
+            read_options=pcsv.ReadOptions(block_size=max(_BLOCK_BYTES, 2 * scan.longest + 64),
+                                          use_threads=False, encoding=scan.encoding),
             parse_options=pcsv.ParseOptions(invalid_row_handler=on_invalid, ignore_empty_lines=False,
                                             newlines_in_values=False),
             convert_options=pcsv.ConvertOptions(column_types={c: pa.string() for c in cols},
@@ -195,6 +324,8 @@ def _iter_blocks(path: Path, cols: list[str], rejects: Rejects, file: str):
             memory_pool=pa.system_memory_pool(),  # freed blocks go back to the C heap (see mcap)
         )
     except (pa.ArrowInvalid, OSError) as err:
+        if not isinstance(source, str):
+            source.close()
         raise IngestError(f"{file}: cannot read as CSV: {err}") from err
     k0 = 0
     try:
@@ -209,6 +340,9 @@ def _iter_blocks(path: Path, cols: list[str], rejects: Rejects, file: str):
             yield data, lines
     except pa.ArrowInvalid as err:
         raise IngestError(f"{file}: CSV damaged after line {k0 + 1 + len(invalid)}: {err}") from err
+    finally:
+        if not isinstance(source, str):
+            source.close()
 
 
 def _drop_blank(data: dict, lines: np.ndarray, rejects: Rejects, file: str) -> tuple[dict, np.ndarray]:
@@ -231,10 +365,23 @@ def _times(data: dict, lines: np.ndarray, tcol: str, rejects: Rejects, file: str
     return t_ns, ok
 
 
+def _nan_text(text: np.ndarray, where: np.ndarray) -> np.ndarray:
+    """True where ``text`` (an object array of strings) spells NaN in any case, looked at
+    only where ``where``: string by string, never as a fixed-width array (``astype(str)``,
+    ``np.char``), which would be the number of rows times the longest value in size."""
+    out = np.zeros(len(text), dtype=bool)
+    idx = np.flatnonzero(where)
+    if len(idx):
+        out[idx] = np.fromiter((isinstance(x, str) and len(x) == 3 and x.lower() == "nan"
+                                for x in text[idx].tolist()), dtype=bool, count=len(idx))
+    return out
+
+
 def _numbers(text: np.ndarray, lines: np.ndarray, name: str, rejects: Rejects, file: str) -> np.ndarray:
     """Floats from strings: '' is absent (NaN); anything else non-numeric is counted."""
     v = pd.to_numeric(pd.Series(text, dtype=object), errors="coerce").to_numpy(dtype=np.float64)
-    bad = np.isnan(v) & (text != "") & (np.char.lower(text.astype(str)) != "nan")
+    maybe = np.isnan(v) & (text != "")
+    bad = maybe & ~_nan_text(text, maybe)
     if bad.any():
         add_rejects(rejects, "value not a number", file, lines[bad],
                     [f"{name}={x}" for x in text[bad][:5]])
@@ -263,15 +410,35 @@ def read_csv(path, cfg: IngestConfig) -> FileResult:
                           f"time_utc, and quantity,value or quantity columns): {first!r}")
     if len(set(cols)) != len(cols):
         raise IngestError(f"{file}:1: repeated column name in header")
+    if len(head) == 65536 and b"\n" not in head and b"\r" not in head:
+        raise IngestError(f"{file}:1: header line longer than 65536 bytes: not a dracc CSV header")
     form = _form(cols)
     rejects = Rejects()
     notes: list[str] = []
+    limit = int(cfg.max_line_bytes)
+    try:
+        scan = _scan(p, limit)
+    except OSError as err:
+        raise IngestError(f"{file}: cannot read: {err}") from err
+    if scan.long_rows:
+        if scan.long_rows[0][0] == 1:
+            raise IngestError(f"{file}:1: header line of {scan.long_rows[0][3]} bytes, longer than "
+                              f"[ingest] max_line_bytes = {limit}")
+        for ln, _a, _b, n, first in scan.long_rows:
+            rejects.add("too_long", file, ln, f"{first.decode('utf-8', 'replace')}... ({n} bytes)")
+        notes.append(f"{file}: {len(scan.long_rows)} row(s) longer than [ingest] max_line_bytes = {limit} "
+                     f"bytes left out (too_long; the longest {max(r[3] for r in scan.long_rows)} bytes, "
+                     f"first at line {scan.long_rows[0][0]})")
+        if cfg.strict:
+            ln, n = scan.long_rows[0][0], scan.long_rows[0][3]
+            raise IngestError(f"{file}:{ln}: too_long: a row of {n} bytes, over [ingest] max_line_bytes = "
+                              f"{limit} (--strict)")
     if form == "csv-long":
-        frames, rows = _read_long(p, cols, declared, rejects, file)
+        frames, rows = _read_long(p, cols, declared, rejects, file, scan)
     elif form == "csv-wide":
-        frames, rows = _read_wide(p, cols, declared, rejects, notes, file)
+        frames, rows = _read_wide(p, cols, declared, rejects, notes, file, scan)
     else:
-        return _read_raw(p, cols, cfg, rejects, notes, file)
+        return _read_raw(p, cols, cfg, rejects, notes, file, scan)
     if cfg.strict and rejects.total:
         reason, ex = next(iter(rejects.examples.items()))
         f, line, text = ex[0]
@@ -302,7 +469,7 @@ class _Unsorted(Exception):
     sorted by time): the file is read again, all rows at once."""
 
 
-def _read_long(p: Path, cols: list[str], declared: dict, rejects: Rejects, file: str):
+def _read_long(p: Path, cols: list[str], declared: dict, rejects: Rejects, file: str, scan: _Scan):
     """One value per row: rows become records by (time, source, occurrence).
 
     In a file sorted by time, the rows of a time are complete once a later time is seen:
@@ -313,16 +480,16 @@ def _read_long(p: Path, cols: list[str], declared: dict, rejects: Rejects, file:
     whole file become records together.  Both give the same frames."""
     mine = Rejects()
     try:
-        frames, rows = _read_long_pass(p, cols, declared, mine, file, streaming=True)
+        frames, rows = _read_long_pass(p, cols, declared, mine, file, scan, streaming=True)
     except _Unsorted:
         mine = Rejects()  # what the first pass counted is counted again
-        frames, rows = _read_long_pass(p, cols, declared, mine, file, streaming=False)
+        frames, rows = _read_long_pass(p, cols, declared, mine, file, scan, streaming=False)
     rejects.merge(mine)
     return frames, rows
 
 
 def _read_long_pass(p: Path, cols: list[str], declared: dict, rejects: Rejects, file: str,
-                    streaming: bool):
+                    scan: _Scan, streaming: bool):
     tcol = _find(cols, TIME_COLUMNS)
     scol = _find(cols, ("source",))
     qcol = _find(cols, ("quantity",))
@@ -333,7 +500,7 @@ def _read_long_pass(p: Path, cols: list[str], declared: dict, rejects: Rejects, 
     done_upto: int | None = None  #: the latest time made into records (streaming)
     rows = 0
     stem = p.stem
-    for data, lines in _iter_blocks(p, cols, rejects, file):
+    for data, lines in _iter_blocks(p, cols, rejects, file, scan):
         rows += len(lines)
         data, lines = _drop_blank(data, lines, rejects, file)
         t_ns, ok = _times(data, lines, tcol, rejects, file)
@@ -353,7 +520,8 @@ def _read_long_pass(p: Path, cols: list[str], declared: dict, rejects: Rejects, 
         nr = keep & ~isref
         if nr.any():
             num[nr] = _numbers(val[nr], lines[nr], "value", rejects, file)
-            keep &= ~(nr & np.isnan(num) & (np.char.lower(val.astype(str)) != "nan"))
+            maybe = nr & np.isnan(num)
+            keep &= ~(maybe & ~_nan_text(val, maybe))
         src = data[scol] if scol else np.full(len(val), stem, dtype=object)
         k = np.flatnonzero(keep)
         if len(k) == 0:
@@ -428,7 +596,8 @@ def _sorted(frames: dict[str, pd.DataFrame]) -> dict[str, pd.DataFrame]:
             for k, f in frames.items()}
 
 
-def _read_wide(p: Path, cols: list[str], declared: dict, rejects: Rejects, notes: list[str], file: str):
+def _read_wide(p: Path, cols: list[str], declared: dict, rejects: Rejects, notes: list[str], file: str,
+               scan: _Scan):
     tcol = _find(cols, TIME_COLUMNS)
     scol = _find(cols, ("source",))
     qcols: dict[str, str] = {}
@@ -450,7 +619,7 @@ def _read_wide(p: Path, cols: list[str], declared: dict, rejects: Rejects, notes
                           f"columns: {', '.join(cols)}")
     parts: list[tuple] = []
     rows = 0
-    for data, lines in _iter_blocks(p, cols, rejects, file):
+    for data, lines in _iter_blocks(p, cols, rejects, file, scan):
         rows += len(lines)
         data, lines = _drop_blank(data, lines, rejects, file)
         t_ns, ok = _times(data, lines, tcol, rejects, file)
@@ -469,7 +638,7 @@ def _read_wide(p: Path, cols: list[str], declared: dict, rejects: Rejects, notes
 
 
 def _read_raw(p: Path, cols: list[str], cfg: IngestConfig, rejects: Rejects, notes: list[str],
-              file: str) -> FileResult:
+              file: str, scan: _Scan) -> FileResult:
     from .nmea import parse_sentences
 
     tcol = _find(cols, TIME_COLUMNS)
@@ -483,12 +652,12 @@ def _read_raw(p: Path, cols: list[str], cfg: IngestConfig, rejects: Rejects, not
     rows = 0
     n2k_rows = 0
     n2k_examples: list[tuple[str, int, str]] = []
-    for data, lines in _iter_blocks(p, cols, rejects, file):
+    for data, lines in _iter_blocks(p, cols, rejects, file, scan):
         rows += len(lines)
         data, lines = _drop_blank(data, lines, rejects, file)
         keep = np.ones(len(lines), dtype=bool)
         if pcol:  # valid rows of a protocol dracc does not decode: ignored, not rejected
-            n2k = np.char.find(np.char.lower(data[pcol].astype(str)), "2000") >= 0
+            n2k = np.fromiter(("2000" in x for x in data[pcol].tolist()), dtype=bool, count=len(lines))
             if n2k.any():
                 n2k_rows += int(n2k.sum())
                 for ln, x in zip(lines[n2k][:max(0, 3 - len(n2k_examples))].tolist(),
