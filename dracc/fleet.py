@@ -18,6 +18,14 @@ one row with empty unit and channel).  The a priori verdict applies the monitori
 with ``[deviation.apriori]``.  The per-day trend pools the RMS of the day's logs::
 
     m_y,day = sqrt( sum_i n_i m_y,i^2 / sum_i n_i )        (pooled RMS, weights n_i)
+
+Hostile inputs (issue 15): an input that is not a regular readable file (a FIFO, socket
+or device, a dangling link, an unreadable file, a folder where ``--pattern`` names
+files) and, inside a vessel folder, a symbolic link leading out of it, is a failed log
+with why; it is never opened (a FIFO's open blocks) and makes the exit code 3.  The
+outputs (tables, trends, per-vessel CSV, ``fleet.json``, ``fleet.html``) are written to a
+staging folder and published together by one rename (:func:`dracc.atomic.file_set`);
+CSV cells that a spreadsheet would read as a formula get a leading single quote.
 """
 
 from __future__ import annotations
@@ -26,12 +34,14 @@ import glob
 import hashlib
 import json
 import os
+import sys
+import time
 import unicodedata
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass
-from pathlib import Path
+from pathlib import Path, PurePath
 
 import numpy as np
 import pandas as pd
@@ -43,6 +53,8 @@ from .audit import (
     apriori_seeds,
     facts_from_analysis,
     file_sha256,
+    input_problem,
+    outside_link,
     settings_sha256,
 )
 from .config import Config
@@ -148,12 +160,16 @@ def inside(root: Path, *parts: str) -> Path:
 
 @dataclass(frozen=True)
 class LogTask:
-    """One log file of one vessel."""
+    """One log file of one vessel (or an input that cannot be read: ``error`` says why)."""
 
     vessel: str
     path: str  #: absolute
     log: str  #: as shown in tables: path relative to the vessel folder (or the file name)
-    sha256: str
+    sha256: str | None  #: of the bytes; None for an input that cannot be read
+    #: why the input cannot be read (a FIFO, socket or device, a dangling link, a folder
+    #: where a file is expected, unreadable, a link out of its vessel folder); listed as
+    #: failed without being opened or analysed
+    error: str | None = None
 
 
 _GLOB_CHARS = set("*?[")
@@ -161,18 +177,47 @@ _GLOB_CHARS = set("*?[")
 
 def _expand(item: str) -> list[Path]:
     p = Path(item)
-    if p.exists():
+    if os.path.lexists(item):  # a dangling link too: listed as failed, not "no such file"
         return [p]
     if _GLOB_CHARS & set(item):
         return [Path(x) for x in sorted(glob.glob(item, recursive=True))]
     raise IngestError(f"{item}: no such file or folder")
 
 
+def _names_files(pattern: str) -> bool:
+    """True when the last part of ``pattern`` names files by their extension
+    (``*.nmea``, ``2026-*.txt``): a folder it matches is a folder where a log was
+    expected.  ``*`` and ``**`` match folders as well as files."""
+    return "." in PurePath(pattern).name.strip("*")
+
+
+def _task(vessel: str, path: Path, log: str) -> LogTask:
+    """The task for one input: its hash, or why it cannot be read (never blocking:
+    :func:`dracc.audit.input_problem` opens nothing but a regular file)."""
+    absolute = os.path.abspath(path)
+    problem = input_problem(path)
+    if problem is None:
+        try:
+            return LogTask(vessel, str(Path(path).resolve()), log, file_sha256(path))
+        except IngestError as err:
+            return LogTask(vessel, absolute, log, None, str(err))
+    return LogTask(vessel, absolute, log, None, f"{path}: {problem}")
+
+
 def discover(inputs: Iterable[str | Path], pattern: str = "**/*") -> list[LogTask]:
     """The tasks for ``inputs``: a folder is one vessel (its name), holding log files
     matching ``pattern``; a file (or a glob's files) belongs to the vessel named by its
-    parent folder.  Hidden files and folders are skipped; a file listed twice counts once."""
+    parent folder.  Hidden files and folders are skipped; a file listed twice counts once.
+
+    An input that is not a regular readable file is a task with ``error`` set (listed as
+    failed, never opened): a FIFO, socket or device, a dangling link, an unreadable file,
+    a folder matching a pattern that names files (``*.nmea``), and, inside a vessel
+    folder, a symbolic link whose target lies outside that folder (not followed)."""
     tasks: dict[str, LogTask] = {}
+
+    def add(t: LogTask) -> None:
+        tasks.setdefault(t.path, t)
+
     for item in inputs:
         matches = _expand(str(item))
         if not matches:
@@ -180,14 +225,24 @@ def discover(inputs: Iterable[str | Path], pattern: str = "**/*") -> list[LogTas
         for m in matches:
             if m.is_dir():
                 vessel = m.resolve().name
-                found = [f for f in sorted(m.glob(pattern))
-                         if f.is_file() and not any(x.startswith(".") for x in f.relative_to(m).parts)]
-                for f in found:
-                    r = str(f.resolve())
-                    tasks.setdefault(r, LogTask(vessel, r, f.relative_to(m).as_posix(), file_sha256(f)))
-            elif m.is_file():
-                r = str(m.resolve())
-                tasks.setdefault(r, LogTask(m.resolve().parent.name, r, m.name, file_sha256(m)))
+                for f in sorted(m.glob(pattern)):
+                    rel = f.relative_to(m)
+                    if any(x.startswith(".") for x in rel.parts):
+                        continue
+                    target = outside_link(f, m)
+                    if target is not None:
+                        add(LogTask(vessel, os.path.abspath(f), rel.as_posix(), None,
+                                    f"{f}: symbolic link to {target}, outside the vessel folder "
+                                    f"{m}: not followed"))
+                    elif f.is_dir():
+                        if _names_files(pattern):
+                            add(LogTask(vessel, os.path.abspath(f), rel.as_posix(), None,
+                                        f"{f}: is a directory, not a log file"))
+                    else:
+                        add(_task(vessel, f, rel.as_posix()))
+            else:  # a file, or something in a file's place (FIFO, device, dangling link)
+                parent = m.resolve().parent if m.exists() else Path(os.path.abspath(m)).parent
+                add(_task(parent.name, m, m.name))
     if not tasks:
         raise IngestError("no log files found in the inputs")
     return sorted(tasks.values(), key=lambda t: (t.vessel, t.log, t.path))
@@ -275,6 +330,11 @@ def run_fleet(tasks: Sequence[LogTask], cfg: Config, out: Path, *, workers: int 
     failures: dict[str, str] = {}
     todo: list[LogTask] = []
     for t in tasks:
+        if t.error is not None:  # not a readable file: listed as failed, never opened
+            failures[t.path] = t.error
+            if progress:
+                progress(1)
+            continue
         s = None if force else _read_cache(cache_path(out, t, settings))
         if s is None:
             todo.append(t)
@@ -508,38 +568,72 @@ def count_logs(table: pd.DataFrame) -> int:
     return len(table.drop_duplicates(["vessel", "log", "sha256"]))
 
 
-def write_tables(result: FleetResult, out: Path) -> list[Path]:
-    """fleet.parquet/.csv, trends.parquet/.csv, failures in fleet.json, and per vessel
-    ``vessels/<safe name>/fleet.csv`` and ``trends.csv``; all written atomically."""
+#: test hook: seconds to sleep half-way through writing the outputs (interruption tests)
+TEST_SLEEP_ENV = "DRACC_FLEET_TEST_SLEEP_S"
+
+
+def csv_text(df: pd.DataFrame) -> str:
+    """``df`` as CSV for a spreadsheet: a text cell starting with ``=``, ``+``, ``-``,
+    ``@``, a tab or a CR (a vessel or file name, an error message) gets a leading single
+    quote, so that no cell is read as a formula (:func:`dracc.report.safe.csv_cell`).
+    Numbers are left alone (-0.5 stays a number); Parquet keeps the raw text."""
+    from .report.safe import csv_cell
+
+    safe = df.copy()
+    for col in safe.columns:
+        if not (pd.api.types.is_string_dtype(safe[col]) or safe[col].dtype == object):
+            continue
+        safe[col] = safe[col].map(csv_cell, na_action="ignore")
+    return safe.to_csv(index=False)
+
+
+def write_tables(result: FleetResult, out: Path, extra: Mapping[str, str] | None = None,
+                 published: list | None = None) -> list[Path]:
+    """fleet.parquet/.csv, trends.parquet/.csv, failures in fleet.json, per vessel
+    ``vessels/<safe name>/fleet.csv`` and ``trends.csv``, and the ``extra`` files
+    (name -> text, e.g. ``fleet.html``), published together (:func:`dracc.atomic.file_set`):
+    a reader, an interrupt or a kill at any moment finds the previous complete set in
+    ``out`` or the new complete set, never a mix (``published``: see
+    :func:`~dracc.atomic.file_set`).  Returns the paths of the outputs."""
     out = Path(out)
-    written = []
+    out.mkdir(parents=True, exist_ok=True)
+    rels: list[Path] = []
+    sleep_s = os.environ.get(TEST_SLEEP_ENV)
+    with atomic.file_set(out, published) as stage:
 
-    def put_df(df: pd.DataFrame, path: Path) -> None:
-        if path.suffix == ".parquet":
-            with atomic.atomic_path(path) as tmp:
-                df.to_parquet(tmp, index=False)
-        else:
-            atomic.write_text(path, df.to_csv(index=False))
-        written.append(path)
+        def put(rel: Path, data: str | pd.DataFrame) -> None:
+            path = inside(stage, *rel.parts)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            if isinstance(data, str):
+                path.write_text(data, encoding="utf-8")
+            elif path.suffix == ".parquet":
+                data.to_parquet(path, index=False)
+            else:
+                path.write_text(csv_text(data), encoding="utf-8")
+            rels.append(path.relative_to(stage.resolve()))
 
-    for name, df in (("fleet", result.table), ("trends", result.trends)):
-        put_df(df, inside(out, f"{name}.parquet"))
-        put_df(df, inside(out, f"{name}.csv"))
-    for vessel in sorted(result.table["vessel"].dropna().unique()):
-        put_df(result.table[result.table["vessel"] == vessel], inside(out, "vessels", vessel, "fleet.csv"))
-        put_df(result.trends[result.trends["vessel"] == vessel],
-               inside(out, "vessels", vessel, "trends.csv"))
-    summary = {"schema": "dracc.fleet/1", "dracc_version": __version__,
-               "logs": count_logs(result.table),
-               "vessels": sorted(result.table["vessel"].dropna().unique().tolist()),
-               "analysed": result.analysed, "cached": result.cached,
-               "failures": list(result.failures)}
-    p = inside(out, "fleet.json")
-    atomic.write_text(p, json.dumps(summary, indent=1, ensure_ascii=False) + "\n")
-    written.append(p)
-    return written
+        for name, df in (("fleet", result.table), ("trends", result.trends)):
+            put(Path(f"{name}.parquet"), df)
+            put(Path(f"{name}.csv"), df)
+        if sleep_s:  # test hook: a run interrupted here must leave the old set whole
+            print(f"dracc fleet: test hook: sleeping {sleep_s} s while writing the outputs",
+                  file=sys.stderr, flush=True)
+            time.sleep(float(sleep_s))
+        for vessel in sorted(result.table["vessel"].dropna().unique()):
+            put(Path("vessels", vessel, "fleet.csv"), result.table[result.table["vessel"] == vessel])
+            put(Path("vessels", vessel, "trends.csv"), result.trends[result.trends["vessel"] == vessel])
+        summary = {"schema": "dracc.fleet/1", "dracc_version": __version__,
+                   "logs": count_logs(result.table),
+                   "vessels": sorted(result.table["vessel"].dropna().unique().tolist()),
+                   "analysed": result.analysed, "cached": result.cached,
+                   "failures": list(result.failures)}
+        put(Path("fleet.json"), json.dumps(summary, indent=1, ensure_ascii=False) + "\n")
+        for name, text in (extra or {}).items():
+            put(Path(name), text)
+    root = out.resolve()
+    return [root / r for r in rels]
 
 
 __all__ = ["CHANNELS", "FleetConfig", "FleetError", "FleetResult", "LogTask", "analyse_log",
            "count_logs", "discover", "fleet_config", "fleet_table", "fleet_trends", "inside", "run_fleet",
-           "safe_name", "summarise", "write_tables"]
+           "safe_name", "summarise", "write_tables", "csv_text"]

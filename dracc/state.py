@@ -22,6 +22,10 @@ The database runs in WAL mode with a busy timeout; every change is one
 ``BEGIN IMMEDIATE`` transaction (:meth:`StateStore.transaction`), so two audits on one
 file queue up instead of failing, readers never block the writer, and a process killed
 half-way leaves the previous state intact (SQLite rolls the open transaction back).
+Creating a new file is as safe: the busy timeout is set first, the switch to WAL (which
+SQLite may refuse at once, without waiting, while another process switches the same new
+file) is retried with a randomised back-off up to the busy timeout, and the tables are
+created inside one ``BEGIN IMMEDIATE`` transaction.
 
 Schema versions
 ---------------
@@ -39,7 +43,9 @@ live in :mod:`dracc.audit`.
 from __future__ import annotations
 
 import json
+import random
 import sqlite3
+import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -192,6 +198,40 @@ class AprioriEvent:
     evidence: dict
 
 
+#: SQLite's primary result codes for "another connection holds the lock"
+_SQLITE_BUSY, _SQLITE_LOCKED = 5, 6
+
+
+def _is_busy(err: sqlite3.OperationalError) -> bool:
+    code = getattr(err, "sqlite_errorcode", None)  # Python >= 3.11
+    if code is not None:
+        return code & 0xFF in (_SQLITE_BUSY, _SQLITE_LOCKED)
+    text = str(err).lower()
+    return "locked" in text or "busy" in text
+
+
+def _retry_busy(step, deadline: float):
+    """``step()``, again after a short randomised wait while SQLite says the database is
+    busy or locked, until ``deadline`` (``time.monotonic``).  For the statements SQLite
+    may refuse without waiting for the busy timeout (``journal_mode = WAL`` on a new file,
+    a ``BEGIN IMMEDIATE`` that meets a WAL recovery)."""
+    wait_s = 0.002
+    while True:
+        try:
+            return step()
+        except StateError as err:  # transaction() wraps a refused BEGIN
+            cause = err.__cause__
+            if not (isinstance(cause, sqlite3.OperationalError) and _is_busy(cause)):
+                raise
+            if time.monotonic() >= deadline:
+                raise
+        except sqlite3.OperationalError as err:
+            if not _is_busy(err) or time.monotonic() >= deadline:
+                raise
+        time.sleep(min(wait_s * (0.5 + random.random()), max(0.0, deadline - time.monotonic())))
+        wait_s = min(2 * wait_s, 0.2)
+
+
 def _none_if_nan(x):
     if x is None:
         return None
@@ -210,6 +250,7 @@ class StateStore:
 
     def __init__(self, path: str | Path, busy_timeout_s: float = 60.0):
         self.path = Path(path)
+        self.busy_timeout_s = float(busy_timeout_s)
         if self.path.is_dir():
             raise ConfigError(f"audit database path is a directory: {self.path}")
         try:
@@ -218,12 +259,18 @@ class StateStore:
         except (OSError, sqlite3.DatabaseError) as err:
             raise StateError(f"{self.path}: cannot create the audit database: {err}") from err
         try:
-            self.conn.row_factory = sqlite3.Row
+            # the busy timeout before anything else touches the file
             self.conn.execute(f"PRAGMA busy_timeout = {int(busy_timeout_s * 1000)}")
-            mode = self.conn.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+            self.conn.row_factory = sqlite3.Row
+            deadline = time.monotonic() + self.busy_timeout_s
+            # Switching a new file to WAL takes an exclusive lock, and SQLite answers
+            # SQLITE_BUSY at once, without the busy handler, when another process holds
+            # it (two audits creating the same new database): retried until the deadline.
+            mode = _retry_busy(lambda: self.conn.execute("PRAGMA journal_mode = WAL").fetchone()[0],
+                               deadline)
             self.conn.execute("PRAGMA synchronous = FULL")
             self.conn.execute("PRAGMA foreign_keys = ON")
-            self._init_schema()
+            _retry_busy(self._init_schema, deadline)
         except BaseException as err:
             self.conn.close()
             if isinstance(err, sqlite3.DatabaseError):
@@ -250,7 +297,8 @@ class StateStore:
         state and then race to write (they wait for each other up to the busy timeout).
         """
         try:
-            self.conn.execute("BEGIN IMMEDIATE")
+            _retry_busy(lambda: self.conn.execute("BEGIN IMMEDIATE"),
+                        time.monotonic() + self.busy_timeout_s)
         except sqlite3.OperationalError as err:
             raise StateError(f"{self.path}: database busy or locked: {err}") from err
         try:
@@ -262,6 +310,8 @@ class StateStore:
             self.conn.execute("COMMIT")
 
     def _init_schema(self) -> None:
+        """Create the tables (or check and migrate them) in one ``BEGIN IMMEDIATE``
+        transaction: two audits creating a new file at once create it once."""
         with self.transaction() as c:
             # statement by statement: executescript() would COMMIT the open transaction
             for stmt in _DDL.split(";"):

@@ -50,3 +50,50 @@ def test_a_write_outside_together_is_renamed_at_once(tmp_path):
         pass
     write_text(tmp_path / "x", "1")
     assert (tmp_path / "x").read_text() == "1"
+
+
+def test_file_set_publishes_a_whole_set_by_one_link(tmp_path):
+    import signal
+
+    from dracc.atomic import CURRENT, RUNS, deferred_signals, file_set
+
+    out = tmp_path / "out"
+    done: list[str] = []
+    with file_set(out, done) as stage:
+        (stage / "a.csv").write_text("1")
+        (stage / "sub").mkdir()
+        (stage / "sub" / "b.csv").write_text("1")
+    assert len(done) == 1 and os.readlink(out / CURRENT) == os.path.join(RUNS, done[0])
+    assert (out / "a.csv").read_text() == "1" and (out / "sub" / "b.csv").read_text() == "1"
+    again: list[str] = []
+    with pytest.raises(KeyboardInterrupt):
+        with file_set(out, again) as stage:
+            (stage / "a.csv").write_text("2")
+            raise KeyboardInterrupt
+    assert again == [] and (out / "a.csv").read_text() == "1"
+    assert len(os.listdir(out / RUNS)) == 1  # the staging folder went with the interrupt
+    with file_set(out) as stage:  # a set without sub/: its link goes
+        (stage / "a.csv").write_text("3")
+    assert (out / "a.csv").read_text() == "3" and not os.path.lexists(out / "sub")
+    # SIGINT inside a critical section is held until its end, then acted on
+    with pytest.raises(KeyboardInterrupt):
+        with deferred_signals():
+            signal.raise_signal(signal.SIGINT)
+            reached = True
+    assert reached
+
+
+def test_a_device_or_fifo_target_is_written_in_place_not_replaced(tmp_path):
+    """Regression (issue 15): `--json /dev/null` as root renamed a regular file onto
+    /dev/null.  A target that is not a regular file is written as it is."""
+    import threading
+
+    fifo = tmp_path / "out.json"
+    os.mkfifo(fifo)
+    got = []
+    reader = threading.Thread(target=lambda: got.append(fifo.read_text()), daemon=True)
+    reader.start()
+    write_text(fifo, "{}")
+    reader.join(30)
+    assert got == ["{}"] and stat.S_ISFIFO(os.stat(fifo).st_mode)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.json"]

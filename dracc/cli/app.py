@@ -2,21 +2,96 @@
 
 from __future__ import annotations
 
-import datetime as dt
-import functools
-import re
-from collections.abc import Iterable, Iterator
-from contextlib import contextmanager
-from pathlib import Path, PurePath
+import os
+import signal
+import sys
 
-import typer
-from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+_STARTING = b"error: interrupted while starting; nothing was written\n"
 
-from .. import __version__
-from ..errors import ConfigError, OptionError
 
-app = typer.Typer(
+def _exit_while_starting(signum, frame) -> None:
+    """SIGTERM or SIGINT while the libraries load: nothing has been written, so the
+    process ends here, at once, with the documented exit 130 and one line.  Raising
+    KeyboardInterrupt in the middle of an import is not reliable: importlib may swallow
+    it ("Exception ignored in ... _ModuleLock"), and the run goes on as if no signal had
+    come; the default action for SIGTERM ends the process with 143."""
+    try:
+        os.write(2, _STARTING)
+    finally:
+        os._exit(130)
+
+
+def _raise_interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+def cli_process() -> bool:
+    """True in the ``dracc`` process itself (the ``dracc`` script, ``python -m dracc``),
+    False where a program (a test, a notebook) imports the CLI."""
+    spec = getattr(sys.modules.get("__main__"), "__spec__", None)
+    if spec is not None:
+        return spec.name in ("dracc", "dracc.__main__")
+    return os.path.basename(sys.argv[0] if sys.argv else "") in ("dracc", "dracc.exe")
+
+
+# The first thing the CLI does, before the libraries load (about a second on a busy
+# machine): a SIGTERM there used to kill the process by the signal (exit 143).  Once the
+# command starts (``root`` below), Ctrl-C raises KeyboardInterrupt again and SIGTERM
+# does the same (``main`` installs its handler), so that temporary files and open
+# transactions are cleaned up.
+if cli_process() and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
+    signal.signal(signal.SIGTERM, _exit_while_starting)
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _exit_while_starting)
+
+
+def started() -> None:
+    """The command starts: signals unwind (KeyboardInterrupt) from here on."""
+    if signal.getsignal(signal.SIGINT) is _exit_while_starting:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if signal.getsignal(signal.SIGTERM) is _exit_while_starting:
+        signal.signal(signal.SIGTERM, _raise_interrupt)
+
+
+def forget_caught_interrupt() -> None:
+    """CPython (3.11) remembers a KeyboardInterrupt that left an ``eval`` of a string
+    (``collections.namedtuple`` builds classes so, in many imports) as unhandled even
+    when dracc caught it afterwards, and then ends the process by SIGINT (exit -2)
+    whatever exit code ``sys.exit`` gave.  Every ``eval`` of a string starts by clearing
+    that memory: this one does only that."""
+    eval("None")  # noqa: S307 - a constant: clears CPython's "unhandled interrupt" flag
+
+
+import datetime as dt  # noqa: E402
+import functools  # noqa: E402
+import re  # noqa: E402
+from collections.abc import Iterable, Iterator  # noqa: E402
+from contextlib import contextmanager  # noqa: E402
+from pathlib import Path, PurePath  # noqa: E402
+
+import typer  # noqa: E402
+from rich.console import Console  # noqa: E402
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn  # noqa: E402
+
+from .. import __version__  # noqa: E402
+from ..errors import ConfigError, DraccError, ExitCode, OptionError  # noqa: E402
+
+
+class Interrupted(DraccError):
+    """Ctrl-C or SIGTERM, with what a command knows about its outputs at that moment
+    (``error: interrupted; …``, exit 130)."""
+
+    exit_code = ExitCode.INTERRUPTED
+
+class _Typer(typer.Typer):
+    def __call__(self, *args, **kwargs):
+        try:
+            return super().__call__(*args, **kwargs)
+        finally:  # interrupted or not: exit with the code main() says (see forget_caught_interrupt)
+            forget_caught_interrupt()
+
+
+app = _Typer(
     name="dracc",
     help="Voyage log analyser for ships: dead reckoning with honest 2M circles, "
     "INS accuracy from deviations from the mean of three, fix fusion and reports.",
@@ -26,9 +101,23 @@ app = typer.Typer(
     context_settings={"help_option_names": ["-h", "--help"]},
 )
 
+class _Console(Console):
+    """A rich console that never sends a control character it was given in a text to the
+    terminal: ESC (colours, cursor moves, OSC titles), CR, backspace, C1 controls from a
+    log's source keys or file names are printed as visible escapes (``\\x1b``); line
+    breaks stay.  Rich's own styling is added after this, at rendering.  Renderables
+    (Text, Table) are built with :func:`dracc.report.safe.printable` where they are made."""
+
+    def print(self, *objects, **kwargs) -> None:
+        from ..report.safe import printable
+
+        super().print(*(printable(o, keep="\n") if isinstance(o, str) else o for o in objects),
+                      **kwargs)
+
+
 #: data goes to stdout; messages, progress and errors to stderr
-out = Console(soft_wrap=True)
-err = Console(stderr=True, soft_wrap=True)
+out = _Console(soft_wrap=True)
+err = _Console(stderr=True, soft_wrap=True)
 
 VERBOSE = {"on": False}
 
@@ -50,6 +139,7 @@ def root(
 ) -> None:
     """dracc: voyage log analyser for ships."""
     VERBOSE["on"] = verbose
+    started()
 
 
 # Shared option definitions (one place for help texts and names).

@@ -7,16 +7,17 @@ from pathlib import Path
 import pandas as pd
 import typer
 from rich.table import Table
+from rich.text import Text
 
-from .. import atomic
 from ..config import load_config
 from ..errors import ConfigError, ExitCode, OptionError
-from ..fleet import FleetResult, discover, fleet_config, inside, run_fleet, write_tables
+from ..fleet import FleetResult, discover, fleet_config, run_fleet, write_tables
 from ..report.fleet_html import cell_text as _s
 from ..report.fleet_html import fleet_html, latest
 from ..report.fleet_html import fmt_num as _f
 from ..report.fleet_html import fmt_num_unit as _fu
-from .app import ConfigOption, app, check_pattern, err, out, progress
+from ..report.safe import printable
+from .app import ConfigOption, Interrupted, app, check_pattern, err, out, progress
 
 
 def print_table(res: FleetResult) -> None:
@@ -33,10 +34,13 @@ def print_table(res: FleetResult) -> None:
         c = r["dr_containment_2m"]
         unit = "-" if pd.isna(r["unit"]) else f"{r['unit']} {r['channel']}"
         measure = "" if pd.isna(r["measure"]) else r["measure"]
-        t.add_row(_s(r["vessel"]), unit, _fu(r["m_y"], d, measure),
-                  _f(r["kurtosis"], 1), _f(r["limit"], d), _f(r["apriori_after"], d),
-                  _s(r["apriori_verdict"]), "-" if pd.isna(c) else f"{100 * c:.0f}%",
-                  _fu(r["compass_error_deg"], 2, "°"), _fu(r["log_scale_pct"], 1, "%"))
+        # Text, not str: a vessel folder named '[red]x' is not markup; control
+        # characters from names are shown escaped, never sent to the terminal
+        t.add_row(*(Text(printable(x)) for x in (
+            _s(r["vessel"]), unit, _fu(r["m_y"], d, measure),
+            _f(r["kurtosis"], 1), _f(r["limit"], d), _f(r["apriori_after"], d),
+            _s(r["apriori_verdict"]), "-" if pd.isna(c) else f"{100 * c:.0f}%",
+            _fu(r["compass_error_deg"], 2, "°"), _fu(r["log_scale_pct"], 1, "%"))))
     out.print(t)
 
 
@@ -89,16 +93,28 @@ def fleet_cmd(
     check_scheduler(fc.scheduler, "[fleet] scheduler", ConfigError)
     target = Path(out_dir or fc.out or "fleet-report")
     tasks = discover(inputs, pattern or fc.pattern)
-    with progress(f"fleet: {len(tasks)} logs", total=len(tasks)) as advance:
-        res = run_fleet(tasks, cfg, target, workers=workers or fc.workers,
-                        scheduler=scheduler or fc.scheduler, force=force,
-                        connect_timeout_s=fc.connect_timeout_s, progress=advance)
-    write_tables(res, target)
-    atomic.write_text(inside(target, "fleet.html"), fleet_html(res))
-    print_table(res)
-    for f in res.failures:
-        err.print(f"failed: {f['vessel']}/{f['log']}: {f['error']}", markup=False, highlight=False)
-    err.print(f"fleet: {len(tasks)} logs, {res.analysed} analysed, {res.cached} from the cache, "
-              f"{len(res.failures)} failed; tables and fleet.html in {target}",
-              markup=False, highlight=False)
+    published: list[str] = []  # the new set's name, once it is out (see atomic.file_set)
+    try:
+        with progress(f"fleet: {len(tasks)} logs", total=len(tasks)) as advance:
+            res = run_fleet(tasks, cfg, target, workers=workers or fc.workers,
+                            scheduler=scheduler or fc.scheduler, force=force,
+                            connect_timeout_s=fc.connect_timeout_s, progress=advance)
+        # every output is rendered and written to a staging folder, then published as one
+        write_tables(res, target, extra={"fleet.html": fleet_html(res)}, published=published)
+    except KeyboardInterrupt:
+        if published:  # the new set went out whole before the interrupt
+            raise Interrupted(f"interrupted; the new fleet outputs were already complete in {target}") from None
+        what = (f"the fleet outputs in {target} are still those of the previous run"
+                if (target / "fleet.json").exists() else f"no fleet outputs in {target} yet")
+        raise Interrupted(f"interrupted; nothing partial was written: {what}; the logs finished so "
+                          "far are cached for the next run") from None
+    try:
+        print_table(res)
+        for f in res.failures:
+            err.print(Text(printable(f"failed: {f['vessel']}/{f['log']}: {f['error']}")))
+        err.print(Text(printable(f"fleet: {len(tasks)} logs, {res.analysed} analysed, {res.cached} "
+                                 f"from the cache, {len(res.failures)} failed; tables and fleet.html "
+                                 f"in {target}")))
+    except KeyboardInterrupt:
+        raise Interrupted(f"interrupted; the new fleet outputs were already complete in {target}") from None
     return int(ExitCode.INPUT if res.failures else ExitCode.OK)

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import typer
 from rich.table import Table
+from rich.text import Text
 
 from ..config import load_config, with_overrides
 from ..ingest import detect_format, read_file
@@ -22,6 +23,7 @@ from ..ingest.frames import Rejects, TimeEvents
 from ..ingest.nmea import StreamState, iter_nmea_blocks
 from ..ingest.sources import assign_roles, merge_infos, separate_files, summarize
 from ..ingest.timebase import EventCounter
+from ..report.safe import printable
 from .app import (
     ConfigOption,
     LogsArgument,
@@ -138,18 +140,25 @@ def inspect_logs(paths: list[Path], cfg, show_progress: bool = True) -> dict:
 
 
 def render(rep: dict) -> None:
-    """Rich tables on stdout."""
+    """Rich tables on stdout.  Every text from the log (source keys, talkers, sentence
+    types, file names, rejected lines, notes) is shown as Text, never markup, with its
+    control characters escaped (:func:`dracc.report.safe.printable`): a source key
+    holding ESC sequences cannot command the terminal."""
+    def cell(x) -> Text:
+        return Text(printable(x))
+
     t = Table(title=f"sources ({rep['lines']} lines read)")
     for c in ("source", "role", "talkers", "sentences", "records", "rate Hz", "first UTC", "last UTC",
               "gaps", "max gap s", "dup", "back"):
         t.add_column(c, justify="right" if c in ("records", "rate Hz", "gaps", "max gap s", "dup", "back")
                      else "left")
     for key, s in rep["sources"].items():
-        t.add_row(key, s["role"] or "-", " ".join(s["talkers"]) or "-",
-                  " ".join(f"{k}:{v}" for k, v in s["sentences"].items()), str(s["records"]),
-                  f"{s['rate_hz']:.2f}" if s["rate_hz"] else "-", s["first_utc"] or "-",
-                  s["last_utc"] or "-", str(s["gaps"]), f"{s['max_gap_s']:.1f}", str(s["duplicates"]),
-                  str(s["backsteps"]))
+        t.add_row(*(cell(x) for x in (
+            key, s["role"] or "-", " ".join(s["talkers"]) or "-",
+            " ".join(f"{k}:{v}" for k, v in s["sentences"].items()), str(s["records"]),
+            f"{s['rate_hz']:.2f}" if s["rate_hz"] else "-", s["first_utc"] or "-",
+            s["last_utc"] or "-", str(s["gaps"]), f"{s['max_gap_s']:.1f}", str(s["duplicates"]),
+            str(s["backsteps"]))))
     out.print(t)
     if rep["rejected"]:
         r = Table(title="lines not used, by reason")
@@ -157,15 +166,17 @@ def render(rep: dict) -> None:
             r.add_column(c)
         for reason, n in rep["rejected"].items():
             ex = rep["rejected_examples"].get(reason, [])[:2]
-            r.add_row(reason, str(n), "\n".join(f"{Path(e['file']).name}:{e['line']} {e['text'][:70]}"
-                                                for e in ex))
+            # one example per line: the escapes keep a line's own CR/LF from breaking it up
+            r.add_row(cell(reason), cell(str(n)),
+                      Text("\n".join(printable(f"{Path(e['file']).name}:{e['line']} {e['text'][:70]}")
+                                     for e in ex)))
         out.print(r)
     tm = rep["time"]
     out.print(f"time base: {tm['duplicates']} duplicates, {tm['backsteps']} back-steps, {tm['gaps']} gaps, "
               f"{tm['rollovers']} midnight rollovers, {tm['implausible_dates']} implausible dates",
               highlight=False, markup=False)
     for d in tm["decisions"] + rep["notes"] + rep["roles"]:
-        out.print(f"  - {d}", highlight=False, markup=False)
+        out.print(cell(f"  - {d}"), highlight=False)
 
 
 @app.command("inspect")

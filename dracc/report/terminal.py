@@ -2,8 +2,11 @@
 
 Sections, in the order a navigator reads them: period and inputs, sources and
 rejects, dead-reckoning consistency, the per-unit table, calibration, current, and
-what is missing.  Text from the logs (source keys, file names) is printed with
-rich markup disabled, so a log cannot style the terminal.
+what is missing.  Text from the logs (source keys, file names, and the notes and
+messages that quote them) is printed with rich markup disabled, so a log cannot style
+the terminal, and with every control character shown as an escape
+(:func:`dracc.report.safe.printable`: ESC as ``\\x1b``), so a log cannot send the
+terminal a command.  Every text of the summary goes through :func:`_text`.
 """
 
 from __future__ import annotations
@@ -16,6 +19,13 @@ from rich.text import Text
 from ..pipeline import CHANNELS, Analysis, DeviationResult, Estimate
 from . import fmt, fmt_duration, fmt_pct, fmt_signed, short_utc
 from .rows import EXCEEDS, unit_rows
+from .safe import printable
+
+
+def _text(text="", style: str = "") -> Text:
+    """A rich Text of ``text`` with control characters escaped (never markup)."""
+    return Text(printable(text), style=style)
+
 
 
 def _est(e: Estimate | None, unit: str, digits: int = 2) -> str:
@@ -25,7 +35,7 @@ def _est(e: Estimate | None, unit: str, digits: int = 2) -> str:
 
 
 def _heading(text: str) -> Text:
-    return Text(text, style="bold")
+    return _text(text, style="bold")
 
 
 def _sources_table(a: Analysis) -> Table:
@@ -38,7 +48,7 @@ def _sources_table(a: Analysis) -> Table:
     for s in a.sources:
         top = sorted(s.sentences.items(), key=lambda kv: (-kv[1], kv[0]))[:4]
         sent = " ".join(f"{k}:{v}" for k, v in top) + (" …" if len(s.sentences) > 4 else "")
-        t.add_row(Text(s.key), Text("+".join(s.roles) or "(none)"), f"{s.records:,}", Text(sent),
+        t.add_row(_text(s.key), _text("+".join(s.roles) or "(none)"), f"{s.records:,}", _text(sent),
                   short_utc(s.first_ns), short_utc(s.last_ns))
     return t
 
@@ -66,26 +76,26 @@ def _unit_table(d: DeviationResult) -> Table:
             else:
                 hat = r.hat_sigma
             # Text, not str: rich would read 'lat [m]' as markup and print 'lat'
-            t.add_row(*(Text(str(c)) for c in (name, r.channel_text, r.n, r.m_u, r.m_y, r.kurtosis,
+            t.add_row(*(_text(str(c)) for c in (name, r.channel_text, r.n, r.m_u, r.m_y, r.kurtosis,
                                                r.limit, r.apriori, verdict, hat, r.ref_rms, r.k_star)))
     return t
 
 
 def _section(title: str, body: list | None) -> list:
     """A blank line, the heading, then the body, or 'not computed' where there is none."""
-    return [Text(""), _heading(title), *(body if body is not None else
-                                         [Text("not computed (see Missing)")])]
+    return [_text(""), _heading(title), *(body if body is not None else
+                                         [_text("not computed (see Missing)")])]
 
 
 def _bullets(title: str, items) -> list:
     """A blank line, the heading and one '- item' line per item; nothing without items."""
     if not items:
         return []
-    return [Text(""), _heading(title), *(Text(f"- {item}") for item in items)]
+    return [_text(""), _heading(title), *(_text(f"- {item}") for item in items)]
 
 
 def _notes(notes) -> list:
-    return [Text(f"note: {note}") for note in notes]
+    return [_text(f"note: {note}") for note in notes]
 
 
 def _verdict_word(dr) -> str:
@@ -96,7 +106,7 @@ def _verdict_word(dr) -> str:
 def _learned_line(m: dict) -> Text:
     """The learned current and corrections in one line (DRSection.learned)."""
     scale, scale_sigma = m.get("log_scale_correction"), m.get("log_scale_correction_sigma")
-    return Text(f"learned  current set {fmt(m.get('current_set_deg'), 0)} ° drift "
+    return _text(f"learned  current set {fmt(m.get('current_set_deg'), 0)} ° drift "
                 f"{fmt(m.get('current_drift_kn'), 2)} kn; corrections: heading "
                 f"{fmt_signed(m.get('heading_correction_deg'), 2)} ± "
                 f"{fmt(m.get('heading_correction_sigma_deg'), 2)} °, log scale "
@@ -105,7 +115,7 @@ def _learned_line(m: dict) -> Text:
 
 
 def _dr_body(dr) -> list:
-    body = [Text(f"heading  {dr.heading_source}; speed {dr.speed_source}; "
+    body = [_text(f"heading  {dr.heading_source}; speed {dr.speed_source}; "
                  f"restart {dr.reset}; {len(dr.legs)} leg{'s' if len(dr.legs) != 1 else ''}")]
     # the 2M is of the estimated position (water track + what was learned), or, with
     # learn = false, of the water track itself
@@ -114,10 +124,10 @@ def _dr_body(dr) -> list:
     of = (f"2M       of the {'estimated position' if dr.scored_out_of_sample else 'DR water track'}, "
           f"largest {max2m} m")
     if not dr.n_scored:
-        body.append(Text(f"{of}: " + ("no reference: consistency not scored" if dr.reference_role is None
+        body.append(_text(f"{of}: " + ("no reference: consistency not scored" if dr.reference_role is None
                                       else "no epoch scored against the reference")))
     else:
-        body.append(Text(f"{of}: reference ({dr.reference_role}) inside 2M at "
+        body.append(_text(f"{of}: reference ({dr.reference_role}) inside 2M at "
                          f"{fmt_pct(dr.containment_2m)} (model: {fmt_pct(dr.expected_inside)})"))
         if dr.scored_out_of_sample:
             ep = dr.epochs
@@ -127,39 +137,39 @@ def _dr_body(dr) -> list:
                 scored += f"; {prior} prior-only epochs unscored"
         else:
             scored = f"scored   {dr.n_scored} epochs after a fix, error model as configured (learn = false)"
-        body.append(Text(scored))
+        body.append(_text(scored))
         nees = "-"
         if np.isfinite(dr.nees_statistic):
             n_legs = len(dr.leg_checks)
             nees = (f"{fmt(dr.nees_statistic, 1)} over {n_legs} leg{'s' if n_legs != 1 else ''} "
                     f"(chi² {fmt(dr.nees_lower, 1)}-{fmt(dr.nees_upper, 1)}), mean per epoch "
                     f"{fmt(dr.mean_nees, 2)} (2 expected)")
-        body.append(Text(f"NEES     {nees}; RMS error/M {fmt(dr.error_over_m_rms, 2)} (1 expected)"))
+        body.append(_text(f"NEES     {nees}; RMS error/M {fmt(dr.error_over_m_rms, 2)} (1 expected)"))
     if dr.learned is not None:
         body.append(_learned_line(dr.learned))
     if dr.dominant_source and _verdict_word(dr) != "consistent":
         key = f" ([dead_reckoning] {dr.dominant_key})" if dr.dominant_key else ""
-        body.append(Text(f"dominant {dr.dominant_source}{key}"))
-    body.append(Text(f"verdict  {dr.verdict}"))
+        body.append(_text(f"dominant {dr.dominant_source}{key}"))
+    body.append(_text(f"verdict  {dr.verdict}"))
     return body + _notes(dr.notes)
 
 
 def _deviation_body(d: DeviationResult) -> list:
     fac = ", ".join(f"{ch} {fmt(d.factors[ch], 3)}" for ch in CHANNELS)
-    return [Text(f"{len(d.units)} units, every {fmt_duration(d.interval_s)}, "
+    return [_text(f"{len(d.units)} units, every {fmt_duration(d.interval_s)}, "
                  f"{len(d.time_ns)} instants; k: {fac}; excess kurtosis (normal 0)"),
             _unit_table(d)] + _notes(d.messages)
 
 
 def _calibration_body(c) -> list:
     scale = c.log_scale and Estimate(100 * c.log_scale.value, 100 * c.log_scale.sigma)
-    return [Text(f"against {c.reference_role} ({c.n} segments of {c.segment_s:g} s): compass error "
+    return [_text(f"against {c.reference_role} ({c.n} segments of {c.segment_s:g} s): compass error "
                  f"{_est(c.compass_error_deg, '°')}; log scale {_est(scale, '%')}; "
                  f"log offset {_est(c.log_offset_kn, 'kn')}")] + _notes(c.notes)
 
 
 def _current_body(cur) -> list:
-    return [Text(f"set {_est(cur.set_deg, '°', 0)} (towards), drift {_est(cur.drift_kn, 'kn')}"
+    return [_text(f"set {_est(cur.set_deg, '°', 0)} (towards), drift {_est(cur.drift_kn, 'kn')}"
                  f" ({cur.n_updates} fix updates)")] + _notes(cur.notes)
 
 
@@ -168,27 +178,27 @@ def summary(a: Analysis) -> Group:
     parts: list = []
     files = len(a.inputs)
     parts.append(_heading("dracc analyze"))
-    parts.append(Text(f"period   {short_utc(a.start_ns)} → {short_utc(a.end_ns)} "
+    parts.append(_text(f"period   {short_utc(a.start_ns)} → {short_utc(a.end_ns)} "
                       f"({fmt_duration(a.duration_s)})"))
-    parts.append(Text(f"inputs   {files} file{'s' if files != 1 else ''}, {a.lines:,} lines, "
+    parts.append(_text(f"inputs   {files} file{'s' if files != 1 else ''}, {a.lines:,} lines, "
                       f"{sum(f.records for f in a.inputs):,} records"))
     for f in a.inputs:
-        parts.append(Text(f"         {f.path} ({f.format}, {f.lines:,} lines)"))
+        parts.append(_text(f"         {f.path} ({f.format}, {f.lines:,} lines)"))
     rej = sum(a.rejected.values())
     if rej:
         by = ", ".join(f"{k} {v:,}" for k, v in sorted(a.rejected.items(), key=lambda kv: -kv[1]))
-        parts.append(Text(f"rejected {rej:,} lines: {by}"))
+        parts.append(_text(f"rejected {rej:,} lines: {by}"))
     else:
-        parts.append(Text("rejected none"))
+        parts.append(_text("rejected none"))
     if a.ignored:
         by = ", ".join(f"{k} {v:,}" for k, v in sorted(a.ignored.items(), key=lambda kv: -kv[1])[:8])
-        parts.append(Text(f"ignored  {sum(a.ignored.values()):,} valid lines dracc does not use: {by}"))
+        parts.append(_text(f"ignored  {sum(a.ignored.values()):,} valid lines dracc does not use: {by}"))
     te = a.time
     events = [f"{n} {what}" for n, what in ((te.duplicates, "duplicates"), (te.backsteps, "back-steps"),
                                              (te.gaps, "gaps"), (te.rollovers, "midnight rollovers"),
                                              (te.implausible_dates, "implausible dates")) if n]
-    parts.append(Text("time     " + (", ".join(events) if events else "no time events")))
-    parts.append(Text(""))
+    parts.append(_text("time     " + (", ".join(events) if events else "no time events")))
+    parts.append(_text(""))
     parts.append(_heading("Sources"))
     parts.append(_sources_table(a))
 
