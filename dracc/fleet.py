@@ -575,9 +575,9 @@ TEST_SLEEP_ENV = "DRACC_FLEET_TEST_SLEEP_S"
 def csv_text(df: pd.DataFrame) -> str:
     """``df`` as CSV for a spreadsheet: a text cell starting with ``=``, ``+``, ``-``,
     ``@``, a tab or a CR (a vessel or file name, an error message) gets a leading single
-    quote, so that no cell is read as a formula (:func:`dracc.report.safe.csv_cell`).
+    quote, so that no cell is read as a formula (:func:`dracc.safetext.csv_cell`).
     Numbers are left alone (-0.5 stays a number); Parquet keeps the raw text."""
-    from .report.safe import csv_cell
+    from .safetext import csv_cell
 
     safe = df.copy()
     for col in safe.columns:

@@ -43,7 +43,7 @@ from dracc.audit import choose_logs, input_problem
 from dracc.cli.main import main
 from dracc.errors import ExitCode
 from dracc.fleet import TEST_SLEEP_ENV, discover, run_fleet, write_tables
-from dracc.report.safe import csv_cell, printable
+from dracc.safetext import csv_cell, printable
 
 WAIT_S = 120.0  #: bound on every wait for a process
 EVIL = "INS2\x1b]0;pwned\x07\x1b[2J\x9b31m"  #: OSC (window title), clear screen, C1 CSI
@@ -652,3 +652,18 @@ def test_audit_given_a_fifo_says_what_it_is(tmp_path, run_cli):
         code, _, err = run_cli("audit", fifo, "--db", tmp_path / "a.sqlite")
     assert code == ExitCode.INPUT
     assert "is a FIFO (named pipe), not a log file" in err
+
+
+def test_analyze_tables_csv_quote_formula_cells(tmp_path, monkeypatch):
+    """`analyze --out` CSVs: a source key that starts like a formula is quoted; numbers
+    (a negative one too) stay numbers; Parquet keeps the raw text."""
+    import pandas as pd
+
+    from dracc.report import tables
+
+    df = pd.DataFrame({"source": ['=HYPERLINK("x")', "GNSS"], "value": [-0.5, 1.0]})
+    monkeypatch.setattr(tables, "frames", lambda a: {"t": df})
+    tables.write_tables(None, tmp_path)
+    text = (tmp_path / "t.csv").read_text()
+    assert "'=HYPERLINK" in text and "-0.5" in text
+    assert pd.read_parquet(tmp_path / "t.parquet")["source"][0].startswith("=HYPERLINK")

@@ -106,10 +106,10 @@ class _Console(Console):
     terminal: ESC (colours, cursor moves, OSC titles), CR, backspace, C1 controls from a
     log's source keys or file names are printed as visible escapes (``\\x1b``); line
     breaks stay.  Rich's own styling is added after this, at rendering.  Renderables
-    (Text, Table) are built with :func:`dracc.report.safe.printable` where they are made."""
+    (Text, Table) are built with :func:`dracc.safetext.printable` where they are made."""
 
     def print(self, *objects, **kwargs) -> None:
-        from ..report.safe import printable
+        from ..safetext import printable
 
         super().print(*(printable(o, keep="\n") if isinstance(o, str) else o for o in objects),
                       **kwargs)

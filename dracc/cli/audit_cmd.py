@@ -22,6 +22,7 @@ from ..errors import ConfigError, ExitCode
 from ..report.audit_html import fmt_value as _f
 from ..report.audit_html import history_html
 from ..report.audit_html import measure_digits as _digits
+from ..safetext import printable
 from ..state import StateError, StateStore
 from .app import ConfigOption, app, check_choice, check_date, check_pattern, out, progress
 
@@ -208,8 +209,8 @@ def audit_run(
         body, css = html_report.render_sections(analysis) if analysis is not None else ("", "")
         atomic.write_text(html_out, night_html(audit_json.to_dict(outcome, analysis_doc), body, css))
     text = format_summary(outcome, cfg.deviation.probability)
-    if summary_out is not None:
-        atomic.write_text(summary_out, text)
+    if summary_out is not None:  # mailed: a log's control characters shown, not sent
+        atomic.write_text(summary_out, printable(text, keep="\n"))
     else:
         out.print(text, end="", markup=False, highlight=False)
     return int(outcome.exit_code)

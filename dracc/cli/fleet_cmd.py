@@ -16,7 +16,7 @@ from ..report.fleet_html import cell_text as _s
 from ..report.fleet_html import fleet_html, latest
 from ..report.fleet_html import fmt_num as _f
 from ..report.fleet_html import fmt_num_unit as _fu
-from ..report.safe import printable
+from ..safetext import printable
 from .app import ConfigOption, Interrupted, app, check_pattern, err, out, progress
 
 

@@ -23,7 +23,7 @@ from ..ingest.frames import Rejects, TimeEvents
 from ..ingest.nmea import StreamState, iter_nmea_blocks
 from ..ingest.sources import assign_roles, merge_infos, separate_files, summarize
 from ..ingest.timebase import EventCounter
-from ..report.safe import printable
+from ..safetext import printable
 from .app import (
     ConfigOption,
     LogsArgument,
@@ -142,7 +142,7 @@ def inspect_logs(paths: list[Path], cfg, show_progress: bool = True) -> dict:
 def render(rep: dict) -> None:
     """Rich tables on stdout.  Every text from the log (source keys, talkers, sentence
     types, file names, rejected lines, notes) is shown as Text, never markup, with its
-    control characters escaped (:func:`dracc.report.safe.printable`): a source key
+    control characters escaped (:func:`dracc.safetext.printable`): a source key
     holding ESC sequences cannot command the terminal."""
     def cell(x) -> Text:
         return Text(printable(x))

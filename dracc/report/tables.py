@@ -28,6 +28,7 @@ import pyarrow.csv as pa_csv
 from .. import atomic
 from ..deviation import WindowStats
 from ..pipeline import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS, Analysis, DRTrack
+from ..safetext import csv_cell
 
 
 def _times(time_ns) -> pd.DatetimeIndex:
@@ -133,6 +134,9 @@ def write_tables(a: Analysis, out_dir: str | Path) -> list[Path]:
         with atomic.atomic_path(csv_path) as tmp:
             csv = df.copy()
             for col in csv.columns:
+                if pd.api.types.is_string_dtype(csv[col]) or csv[col].dtype == object:
+                    # a source key like "=cmd|..." must not become a spreadsheet formula
+                    csv[col] = csv[col].map(csv_cell, na_action="ignore")
                 if isinstance(csv[col].dtype, pd.DatetimeTZDtype):
                     naive = csv[col].dt.tz_convert("UTC").dt.tz_localize(None).to_numpy("datetime64[us]")
                     csv[col] = np.char.add(np.datetime_as_string(naive, unit="us"), "Z")

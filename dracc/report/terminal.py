@@ -5,7 +5,7 @@ rejects, dead-reckoning consistency, the per-unit table, calibration, current, a
 what is missing.  Text from the logs (source keys, file names, and the notes and
 messages that quote them) is printed with rich markup disabled, so a log cannot style
 the terminal, and with every control character shown as an escape
-(:func:`dracc.report.safe.printable`: ESC as ``\\x1b``), so a log cannot send the
+(:func:`dracc.safetext.printable`: ESC as ``\\x1b``), so a log cannot send the
 terminal a command.  Every text of the summary goes through :func:`_text`.
 """
 
@@ -17,9 +17,9 @@ from rich.table import Table
 from rich.text import Text
 
 from ..pipeline import CHANNELS, Analysis, DeviationResult, Estimate
+from ..safetext import printable
 from . import fmt, fmt_duration, fmt_pct, fmt_signed, short_utc
 from .rows import EXCEEDS, unit_rows
-from .safe import printable
 
 
 def _text(text="", style: str = "") -> Text:
