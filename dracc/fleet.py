@@ -59,6 +59,7 @@ from .audit import (
 )
 from .config import Config
 from .errors import ConfigError, DraccError, IngestError
+from .workers import detach_worker
 
 #: /2: the summary's "dr" carries the verdict word and the NEES statistic (a /1 entry is
 #: analysed again)
@@ -390,7 +391,8 @@ def _preload() -> None:
 def _run_local(todo, cfg, workers, analyser, done) -> None:
     if analyser is analyse_log:
         _preload()
-    with ProcessPoolExecutor(max_workers=max(1, min(workers, len(todo)))) as pool:
+    with ProcessPoolExecutor(max_workers=max(1, min(workers, len(todo))), initializer=detach_worker,
+                             initargs=(os.getpid(),)) as pool:
         pending = {pool.submit(analyser, t.path, cfg): t for t in todo}
         try:
             while pending:

@@ -9,16 +9,22 @@ Invariants checked on every mutated log (``check_mutated``):
    rejected or as ignored (a valid sentence dracc does not use);
 3. differential: every untouched line gives the same records as in the clean log (same
    values; same time and source where the line carries its own time: TAG ``c:`` or a
-   timestamp prefix).
+   timestamp prefix), at the same line number as the clean log's line counted with the
+   line ends of the mutated log.
+
+A mutated log has its own line ends: CR LF, LF, a lone CR, CR CR LF, or a mix of them
+(line by line), and ends with one or without (a cut file).
 
 The same machinery drives ``benchmarks/fuzz_long.py`` (the long run before a release).
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 import os
 import random
+import re
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
@@ -50,13 +56,37 @@ CORPUS_FILES = (
 )
 WINDOW = 100  #: lines per fuzzed log
 
+#: a line end as dracc reads it: CR CR LF, CR LF, LF or a lone CR (leftmost, longest first)
+LINE_END = re.compile(rb"\r\r\n|\r\n|\n|\r")
+#: the line ends a mutated log is written with ("mixed": one drawn per line)
+LINE_ENDS = {"crlf": b"\r\n", "lf": b"\n", "cr": b"\r", "crcrlf": b"\r\r\n"}
+
+
+def line_starts(data: bytes) -> list[int]:
+    """Offsets where the lines of ``data`` start (a final line end starts no line)."""
+    out = [0] + [m.end() for m in LINE_END.finditer(data)]
+    if out[-1] == len(data) and len(out) > 1:
+        out.pop()
+    return out if data else []
+
+
+def split_lines(data: bytes) -> list[bytes]:
+    """The lines of ``data`` without their line ends, as dracc counts them."""
+    out, at = [], 0
+    for m in LINE_END.finditer(data):
+        out.append(data[at:m.start()])
+        at = m.end()
+    if at < len(data):
+        out.append(data[at:])
+    return out
+
 
 def load_corpus(max_lines: int = 6000) -> list[tuple[list[bytes], bool]]:
     """(lines without terminators, per-line time) for each corpus file present."""
     out = []
     for path, timed in CORPUS_FILES:
         if path.exists():
-            lines = path.read_bytes().replace(b"\r\n", b"\n").split(b"\n")[:max_lines]
+            lines = split_lines(path.read_bytes())[:max_lines]
             out.append(([ln for ln in lines if ln.strip()], timed))
     return out
 
@@ -111,7 +141,7 @@ class Mutator:
     """Seeded line mutations; each returns the new lines or None when it does not apply."""
 
     OPS = ("bit_flip", "truncate", "garbage", "nul", "wrong_checksum", "no_checksum", "fuse",
-           "huge", "non_ascii", "out_of_range", "swap_time_order", "insert_junk_line")
+           "huge", "long_field", "non_ascii", "out_of_range", "swap_time_order", "insert_junk_line")
 
     def __init__(self, rng: random.Random):
         self.rng = rng
@@ -151,10 +181,22 @@ class Mutator:
         return None if j < 0 else b[:j] + b[j + 3:]
 
     def huge(self, b: bytes) -> bytes:
-        n = self.rng.choice((2_000, 70_000, 300_000))
-        filler = self.rng.choice((b"0", b"1234567890,", b"A", b"$GPGGA,"))
+        """A long run inside the line: up to 300 kB (beyond ``max_line_bytes``: too_long)."""
+        n = self.rng.choice((2_000, 65_000, 70_000, 300_000))
+        filler = self.rng.choice((b"0", b"1234567890,", b"A", b"$GPGGA,", b"\x00"))
         i = self.rng.randrange(len(b) + 1)
         return b[:i] + (filler * (n // len(filler) + 1))[:n] + b[i:]
+
+    def long_field(self, b: bytes) -> bytes | None:
+        """One field of the sentence replaced by a long run of digits (checksum fixed)."""
+        sp = _sentence_span(b)
+        if sp is None:
+            return None
+        nf = b[sp[0]:sp[1]].count(b",")
+        if nf < 1:
+            return None
+        n = self.rng.choice((25, 500, 5_000, 70_000))
+        return _set_field(b, self.rng.randint(1, nf), (b"1234567890" * (n // 10 + 1))[:n])
 
     def non_ascii(self, b: bytes) -> bytes:
         i = self.rng.randrange(len(b) + 1)
@@ -175,7 +217,7 @@ class Mutator:
 
     def mutate_line(self, b: bytes) -> bytes | None:
         op = self.rng.choice(("bit_flip", "truncate", "garbage", "nul", "wrong_checksum",
-                              "no_checksum", "huge", "non_ascii", "out_of_range"))
+                              "no_checksum", "huge", "long_field", "non_ascii", "out_of_range"))
         if not b:
             return None
         return getattr(self, op)(b), op
@@ -222,10 +264,22 @@ def mutate(lines: list[bytes], rng: random.Random, n_mut: int) -> Mutated:
             cur[k] = (r[0], None)
             ops[r[1]] += 1
             touched += 1
-    data = b"\r\n".join(b for b, _ in cur)
-    if rng.random() < 0.5:
-        data += b"\r\n"  # else the log ends without a newline (a cut file)
-    untouched = {i: j for j, (_, i) in enumerate(cur) if i is not None}
+    style = rng.choice(sorted(LINE_ENDS) + ["mixed"])
+    seps = [LINE_ENDS[rng.choice(sorted(LINE_ENDS)) if style == "mixed" else style] for _ in cur]
+    parts, offsets, at = [], [], 0
+    for (b, _), sep in zip(cur, seps, strict=True):
+        offsets.append(at)
+        parts += [b, sep]
+        at += len(b) + len(sep)
+    if rng.random() >= 0.5:
+        parts.pop()  # the log ends without a line end (a cut file)
+    data = b"".join(parts)
+    ops[f"line_end_{style}"] += 1
+    # an untouched line's number in the mutated log: the lines before it, as dracc counts
+    # them (a mutation may add line ends; a lone CR before a CR LF makes an empty line)
+    starts = line_starts(data)
+    untouched = {i: bisect.bisect_right(starts, offsets[j]) - 1
+                 for j, (_, i) in enumerate(cur) if i is not None}
     return Mutated(data, untouched, ops, touched)
 
 
@@ -278,7 +332,7 @@ def check_mutated(clean_lines: list[bytes], timed: bool, mut: Mutated, clean_rec
         raise InvariantError(f"reject reasons not in nmea.REASONS: {unknown}")
     got = records_by_line(res.frames)
     with_record = {ln for d in got.values() for ln in d}
-    mlines = mut.data.split(b"\n")
+    mlines = split_lines(mut.data)
     silent = [i + 1 for i, ln in enumerate(mlines) if ln.strip(b"\r \t")
               and (i + 1) not in with_record and b"ZDA," not in ln]
     # a line gives a record, or is rejected (damaged), or is ignored (valid, unused: GSV, AIS,
@@ -613,8 +667,11 @@ def test_regression_tag_source_with_nul_or_300k_characters(tmp_path):
     nul = lines[0].replace(b"s:GY", b"s:G\x00\x00\x00Y", 1)  # XOR unchanged by NULs
     long = lines[0].replace(b"s:GY", b"s:G" + b"A" * 300_000 + b"Y", 1)  # even count: XOR unchanged
     short_long = lines[0].replace(b"s:GY", b"s:G" + b"A" * 80 + b"Y", 1)  # a row-path TAG block
-    res = read_nmea(_write(tmp_path, [nul, long, short_long] + lines[1:]), IngestConfig(), workers=1)
-    assert res.rejects.counts == Counter({"bad_tag": 3})
+    under_cap = lines[0].replace(b"s:GY", b"s:G" + b"A" * 60_000 + b"Y", 1)  # within max_line_bytes
+    res = read_nmea(_write(tmp_path, [nul, long, short_long, under_cap] + lines[1:]), IngestConfig(),
+                    workers=1)
+    # the 300 000 characters are beyond [ingest] max_line_bytes now: too_long, never parsed
+    assert res.rejects.counts == Counter({"bad_tag": 3, "too_long": 1})
     keys = {str(k) for f in res.frames.values() if len(f) for k in f["source"].unique()}
     assert keys <= {"GYRO", "MAG", "LOG", "INS1", "INS2", "INS3", "GNSS"}
 

@@ -35,7 +35,7 @@ from test_fuzz import load_corpus, mutate  # noqa: E402  (tests/ is on sys.path)
 REPO = Path(__file__).resolve().parents[1]
 SAMPLES = REPO / "sample_logs"
 FIELDS = ("n_lines", "n_blank", "kinds", "clock", "reject_counts", "reject_examples",
-          "first_fatal", "stats", "source_names", "ignored", "ignored_examples")
+          "first_fatal", "stats", "source_names", "ignored", "ignored_examples", "n_seg")
 MAX_BYTES = 1_500_000  #: the first bytes of each real log (the test stays fast)
 
 
@@ -125,10 +125,10 @@ def test_simulated_forms(voyage, tmp_path, form, tag_time):
     c, _ = both(data)
     r = nmea._scan_c(data)
     if form in ("tag", "bare"):  # every line clean: the kernel reads them all
-        assert not r["fallback"].any()
+        assert len(r["fb_line"]) == 0
         assert len(r["sentence"]) == c.n_lines
     else:  # ISO prefixes: left to the numpy path
-        assert r["fallback"].all()
+        assert len(r["fb_line"]) == r["n_lines"]
 
 
 def test_kernel_values_against_hand_calculation():
@@ -139,7 +139,7 @@ def test_kernel_values_against_hand_calculation():
     data = b"".join(b"%s*%02X\r\n" % (s, _xor(s[1:])) for s in lines)
     c, _ = both(data)
     r = nmea._scan_c(data)
-    assert not r["fallback"].any()
+    assert len(r["fb_line"]) == 0
     deg = math.pi / 180
     pos = c.kinds["position"]
     assert pos["lat_rad"][0] == pytest.approx((48 + 7.038 / 60) * deg, rel=1e-15)
@@ -219,6 +219,13 @@ EDGE = [
     _tag(b"s:GP1") + b" " + GOOD, _tag(b"s:GP$1") + GOOD, _tag(b"s:G\x01") + GOOD,
     b"\\" + GOOD, b"2024-01-01T00:00:00Z " + GOOD, b"1700000000.5 " + GOOD,
     b"1507112745025;A;" + GOOD, b"foo " + GOOD,
+    # line ends: a lone CR, CR CR LF, LF CR, runs of CR (each engine splits them alike)
+    GOOD + b"\r" + GOOD, GOOD + b"\r\r" + GOOD, GOOD + b"\r\r\n" + GOOD, GOOD + b"\n\r" + GOOD,
+    b"\r" * 10, b"\r\r\r\n", GOOD + b"\r\r\r\n\r\n", b"\r" + GOOD + b"\r", b"#c\r" + GOOD,
+    # lines longer than max_line_bytes: too_long, and the tail's last sentence read
+    b"A" * 65536, b"A" * 65537, b"\x00" * 70000 + GOOD, b"\x00" * 70000 + _tag(b"s:GP1,c:1700000000") + GOOD,
+    b"$GPGGA," * 10000 + GOOD, b"$GPGGA," * 10000, GOOD + b"x" * 70000, b"\\" * 70000 + GOOD,
+    b"\x00" * 70000 + b"$$" + GOOD[1:], b"\x00" * 70000 + b"\\" + GOOD,
 ]
 
 
@@ -243,13 +250,14 @@ def test_scan_checks_its_output_buffers():
     data = GOOD + b"\n"
     r = nmea._scan_c(data)
     assert r["n_lines"] == 1 and len(r["sentence"]) == 1
-    a = [np.empty(1, np.uint8)] * 14
+    assert _nmeascan.sizes(data) == (2, 1) and _nmeascan.sizes(b"a\rb\r\nc\r\r\n") == (5, 0)
+    a = [np.empty(1, np.uint8)] * 16
     with pytest.raises(ValueError, match="needs"):
-        _nmeascan.scan(data, 1, *a)
+        _nmeascan.scan(data, 1, 1, 100, *a)
     with pytest.raises(ValueError, match="cap_lines"):
-        _nmeascan.scan(data, 0, *a)
+        _nmeascan.scan(data, 0, 1, 100, *a)
     with pytest.raises(TypeError):
-        _nmeascan.scan("text", 1, *a)
+        _nmeascan.scan("text", 1, 1, 100, *a)
 
 
 # ------------------------------------------------------------------------------- fuzzing

@@ -17,6 +17,7 @@ time; overlapping, each file's key becomes ``<file id>:<key>`` (see docs/ingest.
 
 from __future__ import annotations
 
+import re
 from collections import Counter
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -39,17 +40,64 @@ _BINARY_MAGIC = {b"\xff\xd8\xff": "a JPEG image", b"\x89PNG": "a PNG image", b"P
 
 __all__ = ["read_logs", "read_file", "detect_format", "assign_roles", "MCAP_MAGIC"]
 
+#: what a transfer that treats a binary file as text does to the MCAP magic
+#: ``\x89MCAP0\r\n``: the bytes at the start of ``MCAP0`` and after it -> what happened
+_MAGIC_DAMAGE = {
+    b"\n": "CR bytes stripped: was it copied in text mode?",
+    b"\r\r\n": "LF bytes turned into CR LF: was it copied in text mode?",
+}
+#: the magic (intact or damaged as above) as the last bytes of a file (MCAP ends with it)
+_FOOTER_MAGIC = re.compile(rb"(?:\x89|\x09|\xc2\x89|\xef\xbf\xbd)MCAP0(?:\r\n|\n|\r\r\n)\Z")
+_LEAD_DAMAGE = {
+    b"\x09": "its first byte is 0x09, not 0x89: was it sent through a 7-bit channel?",
+    b"\xc2\x89": "its bytes were re-encoded as UTF-8 text",
+    b"\xef\xbf\xbd": "its bytes were decoded as text (replacement characters)",
+    b"": "its first byte is missing",
+}
+
+
+def _damaged_container(head: bytes, tail: bytes) -> str | None:
+    """What damage an MCAP file that is not one any more shows, or None: the magic
+    ``\x89MCAP0\r\n`` with its CR bytes stripped or its LF turned into CR LF (a copy in
+    text mode: FTP ASCII, a Windows text editor, ``unix2dos``), its first byte changed
+    (a 7-bit channel, a text re-encoding), or the magic at the end but not at the start."""
+    k = head.find(b"MCAP0", 0, 8)
+    lead = head[:max(k, 0)]
+    if k >= 0 and (lead in _LEAD_DAMAGE or lead == b"\x89" or (len(lead) == 1 and lead[0] >= 0x80)):
+        after = head[k + 5:k + 8]
+        if not lead and not after.startswith((b"\r\n", b"\n", b"\r\r\n")):
+            return None  # text that happens to start with 'MCAP0'
+        why = []
+        if lead != b"\x89":
+            why.append(_LEAD_DAMAGE.get(lead, f"its first byte is {lead!r}, not b'\\x89'"))
+        if not after.startswith(b"\r\n"):
+            why.append(next((w for a, w in _MAGIC_DAMAGE.items() if after.startswith(a)),
+                            f"the magic ends in {after!r}, not b'\\r\\n'"))
+        return "; ".join(why) or None
+    if _FOOTER_MAGIC.search(tail):
+        return "the MCAP magic is at its end but not at its start: its beginning is missing or damaged"
+    return None
+
 
 def detect_format(path: str | Path) -> str:
-    """'mcap', 'csv' or 'nmea' from the first bytes; IngestError for known non-logs."""
+    """'mcap', 'csv' or 'nmea' from the first bytes; IngestError for known non-logs and for
+    an MCAP file damaged in transfer (:func:`_damaged_container`), which would otherwise be
+    read as NMEA text and give nothing but rejected lines."""
     p = Path(path)
     check_readable(p)
     with p.open("rb") as fh:
         head = fh.read(65536)
-    if not head:
-        raise IngestError(f"{p}: empty file")
+        if not head:
+            raise IngestError(f"{p}: empty file")
+        size = fh.seek(0, 2)
+        fh.seek(max(0, size - 16))
+        tail = fh.read(16)
     if head.startswith(MCAP_MAGIC):
         return "mcap"
+    damage = _damaged_container(head, tail)
+    if damage is not None:
+        raise IngestError(f"{p}: not readable: looks like an MCAP file damaged in transfer ({damage}); "
+                          "copy the original again in binary mode")
     for magic, what in _BINARY_MAGIC.items():
         if head.startswith(magic):
             raise IngestError(f"{p}: not a log file: looks like {what}")
@@ -166,7 +214,9 @@ def read_logs(paths: list[Path], cfg: IngestConfig, progress=None) -> Voyage:
     """Read several logs of one voyage, merge them by time, build sources and roles.
 
     ``progress(n_bytes)`` is called as bytes are read (NMEA text files).  A missing
-    file, a directory, an empty file or a known non-log raises :class:`IngestError`;
+    file, a directory, an empty file, a known non-log or an MCAP file damaged in transfer
+    raises :class:`IngestError` naming it, whatever other files are given (one bad file
+    fails the run: it is never dropped in silence);
     damaged lines inside a log are counted in ``Voyage.rejects``, valid ones dracc does
     not use (GSV, AIS, proprietary sentences, comments ...) in ``Voyage.ignored`` by type.
     """

@@ -16,8 +16,16 @@
  * 2^53 and 10^f is exact (f <= 22): Clinger (1990), "How to read floating point numbers
  * accurately", fast path.  Other numbers send the line to the numpy path.
  *
+ * Lines end at LF, CR LF, CR CR LF (a CR LF written through a text-mode conversion) or a
+ * lone CR (old Mac loggers, serial capture tools), exactly as nmea._line_bounds splits
+ * them.  A line whose content is longer than max_line bytes is not scanned: it is listed
+ * (line index, content start and end) and rejected as 'too_long' by nmea._parse_c, and
+ * only its tail (from its last sentence start and TAG block in its last max_line bytes) goes
+ * to the numpy path, so a damaged block costs no memory beyond its own bytes.  Fallback
+ * lines are listed by their line index: no array per line of the block.
+ *
  * Safety: every index is checked against the line end; the input may hold any bytes
- * (NUL, huge lines, a final line without LF).  The scan runs without the GIL.
+ * (NUL, huge lines, a final line without a line end).  The scan runs without the GIL.
  * Build with -ffp-contract=off: no fused multiply-add, bit-equal to numpy.
  */
 #define PY_SSIZE_T_CLEAN
@@ -428,30 +436,59 @@ typedef struct {
     /* input */
     const uint8_t *b;
     Py_ssize_t n;
-    /* per line (capacity cap_lines) */
-    uint8_t *fallback;
-    int64_t *nseg;
+    Py_ssize_t max_line;
+    /* fallback lines (capacity cap_lines): their line index (8 bytes each, never per line) */
+    int64_t *fb_line;
     Py_ssize_t cap_lines;
+    /* lines too long (capacity cap_long): line index, content start, content end */
+    int64_t *long_line, *long_start, *long_end;
+    Py_ssize_t cap_long;
     /* side buffer (capacity n) */
     uint8_t *sub;
-    /* per row (capacity cap_lines) */
+    /* per row (capacity cap_rows) */
     int64_t *r_line, *r_seq, *r_ext, *r_tod, *r_date;
     uint16_t *r_talker;
     int8_t *r_stype, *r_dec, *r_code;
     int32_t *r_src;
     double *r_val;
+    Py_ssize_t cap_rows;
     /* output */
-    Py_ssize_t n_lines, n_blank, n_rows, sub_len, n_tag;
+    Py_ssize_t n_lines, n_blank, n_rows, n_fb, n_long, sub_len, n_tag;
+    int64_t n_seg;
     NameTable names;
     int overflow;
 } Scan;
 
-/* one line [ls, le) (le at the LF or the end), index li, segments before it seg0 */
-static int scan_line(Scan *S, Py_ssize_t ls, Py_ssize_t le, Py_ssize_t li, int64_t seg0,
+/* sentence starts in [ls, end) as numpy counts them: '$' or '!' not followed by another */
+static Py_ssize_t count_segs(const Scan *S, Py_ssize_t ls, Py_ssize_t end) {
+    const uint8_t *b = S->b;
+    Py_ssize_t nseg = 0;
+    for (Py_ssize_t j = ls; j < end; j++)
+        if ((b[j] == '$' || b[j] == '!') && !(j + 1 < S->n && (b[j + 1] == '$' || b[j + 1] == '!')))
+            nseg++;
+    return nseg;
+}
+
+/* where the tail [from, end) of a line too long is read from (nmea._tail_start): its last
+ * sentence start '$' or '!', with the TAG block just before it; end if it has none or if
+ * that TAG block is longer than TAG_MAX (damaged: its source and time are unknown) */
+static Py_ssize_t tail_start(const uint8_t *b, Py_ssize_t from, Py_ssize_t end) {
+    Py_ssize_t j, k;
+    for (j = end - 1; j >= from; j--)
+        if (b[j] == '$' || b[j] == '!') break;
+    if (j < from) return end;
+    if (j > from && b[j - 1] == '\\') {  /* after a TAG block: with it, or not at all */
+        for (k = j - 2; k >= from && k >= j - 1 - TAG_MAX; k--)
+            if (b[k] == '\\') return k;
+        return end;
+    }
+    return j;
+}
+
+/* one line, content [ls, end) (its line end excluded), index li, segments before it seg0 */
+static int scan_line(Scan *S, Py_ssize_t ls, Py_ssize_t end, Py_ssize_t li, int64_t seg0,
                      Py_ssize_t *nseg_out) {
     const uint8_t *b = S->b;
-    Py_ssize_t end = le;
-    if (end > ls && b[end - 1] == '\r') end--;
     /* one branch-free pass (vectorised by the compiler): sentence starts, bytes outside
      * printable ASCII; the segment count is exact (doubled starts '$$' count once) */
     size_t nstart = 0;
@@ -466,11 +503,7 @@ static int scan_line(Scan *S, Py_ssize_t ls, Py_ssize_t le, Py_ssize_t li, int64
     int printable = !bad;
     Py_ssize_t nseg = (Py_ssize_t)nstart;
     if (nstart > 1) {  /* several starts: count them as numpy does, for the seq numbers */
-        nseg = 0;
-        for (j = ls; j < end; j++)
-            if ((b[j] == '$' || b[j] == '!') &&
-                !(j + 1 < S->n && (b[j + 1] == '$' || b[j + 1] == '!')))
-                nseg++;
+        nseg = count_segs(S, ls, end);
     } else if (nstart == 1) {
         const uint8_t *d = memchr(b + ls, '$', (size_t)(end - ls));
         st = d ? (Py_ssize_t)(d - b) : -1;
@@ -525,6 +558,7 @@ static int scan_line(Scan *S, Py_ssize_t ls, Py_ssize_t le, Py_ssize_t li, int64
     if (F.nf < FMIN[t] || F.nf > FMAX[t]) return 1;
     Row r;
     if (decode(t, &F, &r)) return 1;
+    if (S->n_rows >= S->cap_rows) return 1;  /* cannot happen (rows <= '$' count): numpy reads it */
     int code = intern(&S->names, b, ss, sl, li);
     if (code < 0) return 1;
     Py_ssize_t k = S->n_rows++;
@@ -545,30 +579,69 @@ static int scan_line(Scan *S, Py_ssize_t ls, Py_ssize_t le, Py_ssize_t li, int64
 
 static void scan_all(Scan *S) {
     Py_ssize_t ls = 0, li = 0;
+    const Py_ssize_t n = S->n;
     int64_t seg = 0;
     const uint8_t *b = S->b;
-    while (ls < S->n) {
-        const uint8_t *nl = memchr(b + ls, '\n', (size_t)(S->n - ls));
-        Py_ssize_t le = nl ? (Py_ssize_t)(nl - b) : S->n;
-        Py_ssize_t next = nl ? le + 1 : S->n;
+    /* the next LF and the next CR at or after ls (n: none), each found once: a file with
+     * one kind of line end costs one memchr of the other kind for the whole block */
+    Py_ssize_t nlf = -1, ncr = -1;
+    while (ls < n) {
+        const uint8_t *p;
+        if (nlf < ls) {
+            p = memchr(b + ls, '\n', (size_t)(n - ls));
+            nlf = p ? (Py_ssize_t)(p - b) : n;
+        }
+        if (ncr < ls) {
+            p = memchr(b + ls, '\r', (size_t)(n - ls));
+            ncr = p ? (Py_ssize_t)(p - b) : n;
+        }
+        Py_ssize_t end = nlf < ncr ? nlf : ncr;  /* content end: the first byte of the line end */
+        Py_ssize_t next;
+        if (end == n)
+            next = n;  /* the last line, without a line end */
+        else if (b[end] == '\n')
+            next = end + 1;
+        else if (end + 1 < n && b[end + 1] == '\n')
+            next = end + 2;  /* CR LF */
+        else if (end + 2 < n && b[end + 1] == '\r' && b[end + 2] == '\n')
+            next = end + 3;  /* CR CR LF */
+        else
+            next = end + 1;  /* a lone CR */
         if (li >= S->cap_lines) {
             S->overflow = 1;
             return;
         }
-        Py_ssize_t nseg = 0;
-        int fb = scan_line(S, ls, le, li, seg, &nseg);
-        S->fallback[li] = (uint8_t)fb;
-        S->nseg[li] = (int64_t)nseg;
+        Py_ssize_t nseg = 0, from = ls;
+        int fb;
+        if (end - ls > S->max_line) {
+            /* too long: listed (rejected as 'too_long'), not scanned; only its tail, from
+             * its last sentence start (and TAG block) in its last max_line bytes, is copied
+             * for the numpy path (a sentence written after a run of NUL bytes is read) */
+            if (S->n_long >= S->cap_long) {
+                S->overflow = 1;
+                return;
+            }
+            S->long_line[S->n_long] = li;
+            S->long_start[S->n_long] = ls;
+            S->long_end[S->n_long] = end;
+            S->n_long++;
+            from = tail_start(b, end - S->max_line, end);
+            fb = from < end;
+            if (fb) nseg = count_segs(S, from, end);
+        } else {
+            fb = scan_line(S, ls, end, li, seg, &nseg);
+        }
         if (fb) {
-            memcpy(S->sub + S->sub_len, b + ls, (size_t)(next - ls));
-            S->sub_len += next - ls;
+            memcpy(S->sub + S->sub_len, b + from, (size_t)(next - from));
+            S->sub_len += next - from;
+            S->fb_line[S->n_fb++] = li;
         }
         seg += nseg;
         li++;
         ls = next;
-        if (!nl) break;
     }
     S->n_lines = li;
+    S->n_seg = seg;
 }
 
 static int get_w(PyObject *o, Py_buffer *v, Py_ssize_t min_bytes, const char *what) {
@@ -583,32 +656,38 @@ static int get_w(PyObject *o, Py_buffer *v, Py_ssize_t min_bytes, const char *wh
 }
 
 PyDoc_STRVAR(scan_doc,
-"scan(data, cap_lines, fallback, nseg, sub, r_line, r_seq, r_talker, r_stype, r_src,\n"
-"     r_ext, r_tod, r_date, r_dec, r_code, r_val)\n"
-"-> (n_lines, n_blank, n_rows, sub_len, n_tag, names, names_first_line)\n\n"
+"scan(data, cap_lines, cap_rows, max_line, fb_line, long_line, long_start, long_end, sub,\n"
+"     r_line, r_seq, r_talker, r_stype, r_src, r_ext, r_tod, r_date, r_dec, r_code, r_val)\n"
+"-> (n_lines, n_blank, n_rows, n_fb, n_long, sub_len, n_seg, n_tag, names, names_first_line)\n\n"
 "Scan a block of NMEA text into the given writable arrays (see nmea._scan_c).");
 
+#define NARR 16
+
 static PyObject *scan(PyObject *self, PyObject *args) {
-    PyObject *o[16];
-    Py_ssize_t cap;
-    if (!PyArg_ParseTuple(args, "OnOOOOOOOOOOOOOO", &o[0], &cap, &o[1], &o[2], &o[3], &o[4],
-                          &o[5], &o[6], &o[7], &o[8], &o[9], &o[10], &o[11], &o[12], &o[13],
-                          &o[14]))
+    PyObject *o[NARR + 1];
+    Py_ssize_t cap, cap_rows, max_line;
+    if (!PyArg_ParseTuple(args, "OnnnOOOOOOOOOOOOOOOO", &o[0], &cap, &cap_rows, &max_line,
+                          &o[1], &o[2], &o[3], &o[4], &o[5], &o[6], &o[7], &o[8], &o[9],
+                          &o[10], &o[11], &o[12], &o[13], &o[14], &o[15], &o[16]))
         return NULL;
-    if (cap < 1) {
-        PyErr_SetString(PyExc_ValueError, "_nmeascan.scan: cap_lines must be >= 1");
+    if (cap < 1 || cap_rows < 0 || max_line < 0) {
+        PyErr_SetString(PyExc_ValueError,
+                        "_nmeascan.scan: cap_lines must be >= 1, cap_rows and max_line >= 0");
         return NULL;
     }
-    Py_buffer in, v[14];
+    Py_buffer in, v[NARR];
     int nv = 0;
     if (PyObject_GetBuffer(o[0], &in, PyBUF_C_CONTIGUOUS) < 0) return NULL;
-    static const char *what[14] = {"fallback", "nseg", "sub", "r_line", "r_seq", "r_talker",
-                                   "r_stype", "r_src", "r_ext", "r_tod", "r_date", "r_dec",
-                                   "r_code", "r_val"};
-    const Py_ssize_t per[14] = {1, 8, 0, 8, 8, 2, 1, 4, 8, 8, 8, 1, 1, 8 * NVAL};
+    static const char *what[NARR] = {"fb_line", "long_line", "long_start", "long_end", "sub",
+                                     "r_line", "r_seq", "r_talker", "r_stype", "r_src", "r_ext",
+                                     "r_tod", "r_date", "r_dec", "r_code", "r_val"};
+    /* bytes per line (0), per long line (1-3), the side buffer (4), per row (5-15) */
+    const Py_ssize_t per[NARR] = {8, 8, 8, 8, 0, 8, 8, 2, 1, 4, 8, 8, 8, 1, 1, 8 * NVAL};
+    const Py_ssize_t cap_long = in.len / (max_line + 1) + 1;  /* each holds > max_line bytes */
     PyObject *res = NULL;
-    for (nv = 0; nv < 14; nv++) {
-        Py_ssize_t need = nv == 2 ? in.len : per[nv] * cap;
+    for (nv = 0; nv < NARR; nv++) {
+        Py_ssize_t need = nv < 1 ? per[nv] * cap : nv < 4 ? per[nv] * cap_long
+                          : nv == 4 ? in.len : per[nv] * cap_rows;
         if (get_w(o[nv + 1], &v[nv], need, what[nv]) < 0) goto done;
     }
     Scan *S = PyMem_Calloc(1, sizeof(Scan));
@@ -618,21 +697,26 @@ static PyObject *scan(PyObject *self, PyObject *args) {
     }
     S->b = in.buf;
     S->n = in.len;
+    S->max_line = max_line;
     S->cap_lines = cap;
-    S->fallback = v[0].buf;
-    S->nseg = v[1].buf;
-    S->sub = v[2].buf;
-    S->r_line = v[3].buf;
-    S->r_seq = v[4].buf;
-    S->r_talker = v[5].buf;
-    S->r_stype = v[6].buf;
-    S->r_src = v[7].buf;
-    S->r_ext = v[8].buf;
-    S->r_tod = v[9].buf;
-    S->r_date = v[10].buf;
-    S->r_dec = v[11].buf;
-    S->r_code = v[12].buf;
-    S->r_val = v[13].buf;
+    S->cap_long = cap_long;
+    S->cap_rows = cap_rows;
+    S->fb_line = v[0].buf;
+    S->long_line = v[1].buf;
+    S->long_start = v[2].buf;
+    S->long_end = v[3].buf;
+    S->sub = v[4].buf;
+    S->r_line = v[5].buf;
+    S->r_seq = v[6].buf;
+    S->r_talker = v[7].buf;
+    S->r_stype = v[8].buf;
+    S->r_src = v[9].buf;
+    S->r_ext = v[10].buf;
+    S->r_tod = v[11].buf;
+    S->r_date = v[12].buf;
+    S->r_dec = v[13].buf;
+    S->r_code = v[14].buf;
+    S->r_val = v[15].buf;
     Py_BEGIN_ALLOW_THREADS
     scan_all(S);
     Py_END_ALLOW_THREADS
@@ -648,8 +732,9 @@ static PyObject *scan(PyObject *self, PyObject *args) {
                 PyList_SET_ITEM(first, i, PyLong_FromSsize_t(nm->first_line));
             }
             if (!PyErr_Occurred())
-                res = Py_BuildValue("nnnnnOO", S->n_lines, S->n_blank, S->n_rows, S->sub_len,
-                                    S->n_tag, names, first);
+                res = Py_BuildValue("nnnnnnLnOO", S->n_lines, S->n_blank, S->n_rows, S->n_fb,
+                                    S->n_long, S->sub_len, (long long)S->n_seg, S->n_tag, names,
+                                    first);
         }
         Py_XDECREF(names);
         Py_XDECREF(first);
@@ -661,8 +746,39 @@ done:
     return res;
 }
 
+PyDoc_STRVAR(sizes_doc,
+"sizes(data) -> (cap_lines, cap_rows)\n\n"
+"Upper bounds for scan(): lines (each ends at an LF or at a CR not followed by an LF, the\n"
+"last one may have no end) and rows (each decoded sentence has its own '$').  One pass.");
+
+static PyObject *sizes(PyObject *self, PyObject *arg) {
+    Py_buffer in;
+    if (PyObject_GetBuffer(arg, &in, PyBUF_C_CONTIGUOUS) < 0) return NULL;
+    const uint8_t *b = in.buf;
+    const Py_ssize_t n = in.len;
+    size_t lf = 0, cr = 0, dollar = 0;
+    Py_ssize_t i;
+    Py_BEGIN_ALLOW_THREADS
+    for (i = 0; i + 1 < n; i++) {  /* branch-free: vectorised by the compiler */
+        uint8_t c = b[i];
+        lf += c == '\n';
+        cr += (c == '\r') & (b[i + 1] != '\n');
+        dollar += c == '$';
+    }
+    if (n > 0) {
+        lf += b[n - 1] == '\n';
+        cr += b[n - 1] == '\r';
+        dollar += b[n - 1] == '$';
+    }
+    Py_END_ALLOW_THREADS
+    PyBuffer_Release(&in);
+    size_t lines = lf + cr + 1;
+    return Py_BuildValue("nn", (Py_ssize_t)lines, (Py_ssize_t)(dollar < lines ? dollar : lines));
+}
+
 static PyMethodDef methods[] = {
     {"scan", scan, METH_VARARGS, scan_doc},
+    {"sizes", sizes, METH_O, sizes_doc},
     {NULL, NULL, 0, NULL},
 };
 

@@ -5,13 +5,18 @@ decodes the clean lines of a block and hands every other line to the numpy path 
 which is also the fallback without a compiler and the reference of the differential
 tests (tests/test_nmeascan.py).
 
-A block (tens of MB, cut at a newline) is read as one ``uint8`` array; line ends,
-sentence starts (``$``/``!``), commas and ``*`` are found with ``np.flatnonzero``;
+A block (tens of MB, cut after a line end: LF, CR LF, CR CR LF or a lone CR) is read as
+one ``uint8`` array, in pieces of bounded working memory; line ends, sentence starts
+(``$``/``!``), commas and ``*`` are found with ``np.flatnonzero``;
 checksums are XORs of ranges taken from one cumulative XOR; sentences are grouped by
 type and their fields gathered into fixed-width byte matrices converted with
 ``astype(float)``.  There is no Python loop over lines; loops run over sentence types
 and fields only.  Large files are parsed by two worker processes, block by block, with
-bounded look-ahead, so memory does not grow with the file (``iter_nmea_blocks``).
+bounded look-ahead, so memory does not grow with the file (``iter_nmea_blocks``); the
+workers die with their parent.  A line longer than ``[ingest] max_line_bytes`` is one
+``too_long`` reject, never held whole (only its tail's last sentence is read), so memory
+does not grow with the content either: a crashed logger's 256 MB of NUL bytes costs one
+line.
 
 Field conversions (edges of the SI world, units per ``dracc.units``):
 
@@ -83,6 +88,16 @@ MAIN_FIRST_BLOCK_BYTES = 4 * 1024 * 1024
 #: the later blocks: small enough that a worker reuses its memory (fresh pages are dear)
 BLOCK_BYTES = 8 * 1024 * 1024
 PARALLEL_MIN_BYTES = 32 * 1024 * 1024  #: files at least this large use two processes
+#: a line whose content (its line end excluded) is longer than this is not parsed: it is
+#: one rejected line, reason ``too_long`` (the default of ``[ingest] max_line_bytes``)
+MAX_LINE_BYTES = 65536
+#: the numpy path works on pieces of at most this many bytes and lines ...
+NUMPY_CHUNK_BYTES = 2 * 1024 * 1024
+NUMPY_CHUNK_LINES = 1 << 18
+#: ... and of at most this estimated working memory: ``8`` bytes per byte, ``200`` per
+#: sentence start and ``80`` per line (measured on dense junk: '$,' repeated, 2-byte lines)
+PIECE_BUDGET = 96 * 1024 * 1024
+_W_BYTE, _W_START, _W_LINE = 8, 200, 80
 
 #: sentence type -> (min, max) number of data fields after the address
 FIELD_COUNTS = {
@@ -110,6 +125,7 @@ REASONS = {
     "malformed_field": "a field is not a number / out of range / bad hemisphere",
     "bad_tag": "TAG block unreadable or with a wrong checksum",
     "not_nmea": "no sentence on the line",
+    "too_long": "line longer than [ingest] max_line_bytes (not read; e.g. a run of NUL bytes)",
     "no_date": "time of day with no date anywhere in the log (use --date)",
 }
 
@@ -373,35 +389,299 @@ class ParsedBlock:
     ignored: Counter = field(default_factory=Counter)
     #: type -> the first few (line, text) of each ignored type
     ignored_examples: dict[str, list[tuple[int, str]]] = field(default_factory=dict)
+    #: sentence starts in the block (the range of ``seq``)
+    n_seg: int = 0
+
+
+class _Marked:
+    """Where the bytes of one class (here: binary ones) lie in a buffer: their sorted
+    positions when they are few, else a boolean mask (one byte per byte, where positions
+    would take eight); :meth:`any` tells which ranges [a, b) hold one."""
+
+    def __init__(self, pos: np.ndarray | None = None, mask: np.ndarray | None = None):
+        self.pos, self.mask = pos, mask  # mask: one False more than the buffer
+
+    def any(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        if self.pos is not None:
+            return _ranges_any(self.pos, a, b)
+        out = np.zeros(len(a), dtype=bool)
+        ne = np.flatnonzero(b > a)
+        if len(ne):
+            idx = np.empty(2 * len(ne), dtype=np.int64)
+            idx[0::2], idx[1::2] = a[ne], b[ne]
+            out[ne] = np.logical_or.reduceat(self.mask, idx)[0::2]
+        return out
+
+
+def _line_bounds(buf: np.ndarray, bufp: np.ndarray):
+    """Lines of a buffer: (start, content end, ends with a line end, binary bytes).
+
+    A line ends at LF, CR LF, CR CR LF (CR LF through a text-mode conversion: one line
+    end, not an empty line) or a lone CR (old Mac loggers, serial capture tools); the
+    content excludes its line end.  ``bufp`` is ``buf`` with zero bytes after it.  One
+    pass finds the bytes outside printable ASCII, ``(b - 32) mod 256 > 94``; where they
+    are most of the buffer (a run of NUL bytes) no position array per byte is made."""
+    n = len(buf)
+    m = (buf - np.uint8(32)) > 94
+    if np.count_nonzero(m) * 8 <= n:  # text: positions (one line end or so per line)
+        ctl = np.flatnonzero(m)
+        del m
+        cb = buf[ctl]
+        isterm = (cb == 10) | (cb == 13)
+        term = ctl[isterm]
+        bad = _Marked(pos=ctl[~isterm & (cb != 9)])
+        del ctl, cb, isterm
+    else:  # mostly control bytes: line ends by position, binary bytes by mask if dense
+        tm = (buf == 10) | (buf == 13)
+        term = np.flatnonzero(tm)
+        m &= ~tm
+        m &= buf != 9
+        del tm
+        if np.count_nonzero(m) * 8 <= n:
+            bad = _Marked(pos=np.flatnonzero(m))
+        else:
+            bad = _Marked(mask=np.concatenate((m, np.zeros(1, dtype=bool))))
+        del m
+    # a CR followed by LF or by CR LF belongs to the line end at that LF
+    tb = buf[term]
+    nx1 = bufp[term + 1]
+    within = (tb == 13) & ((nx1 == 10) | ((nx1 == 13) & (bufp[term + 2] == 10)))
+    last = term[~within]  # the last byte of each line end
+    del term, tb, nx1, within
+    c1 = (buf[last] == 10) & (bufp[last - 1] == 13)  # bufp[-1], bufp[-2]: zero padding
+    c2 = c1 & (bufp[last - 2] == 13)
+    first = last - c1 - c2  # the first byte of each line end: the end of the content
+    ends = bool(len(last)) and int(last[-1]) == n - 1
+    line_end = first if ends else np.concatenate((first, [n]))
+    line_start = np.concatenate(([0], last[:-1] + 1)) if ends else np.concatenate(([0], last + 1))
+    return line_start.astype(np.int64, copy=False), line_end.astype(np.int64, copy=False), ends, bad
+
+
+def _too_long_block(text: bytes) -> ParsedBlock:
+    """The block of one line too long to parse (``text``: its first bytes)."""
+    tx = text[:120].decode("ascii", "replace")
+    return ParsedBlock(1, 0, {}, {}, Counter(too_long=1), {"too_long": [(1, tx)]},
+                       (1, "too_long", tx))
+
+
+def _tail_start(tail: bytes) -> int:
+    """Where the tail of a line too long is read from: its last sentence start ('$' or
+    '!'), with the TAG block right before it (``\\...\\``, at most 128 bytes), so that
+    one sentence is read and not a run of junk; ``len(tail)`` if it has none, or if the
+    TAG block before it is longer (damaged: the sentence's source and time are unknown).
+    As the kernel's tail_start."""
+    j = max(tail.rfind(b"$"), tail.rfind(b"!"))
+    if j < 0:
+        return len(tail)
+    if j > 0 and tail[j - 1] == 92:  # '\\': the end of a TAG block: with it, or not at all
+        k = tail.rfind(b"\\", max(0, j - 1 - 128), j - 1)
+        return k if k >= 0 else len(tail)  # a TAG block that long is damaged: source unknown
+    return j
+
+
+def _long_line_block(head: bytes, tail: bytes, line_end: bytes, ignore_checksum: bool, at_eof: bool,
+                     max_line_bytes: int, ext_ns=None, ext_src=None) -> tuple[ParsedBlock, dict[str, int]]:
+    """The block of one line longer than ``max_line_bytes``: one ``too_long`` reject (its
+    example the line's first bytes, ``head``), and the line's ``tail`` (its last
+    ``max_line_bytes`` bytes) read from its last sentence start (:func:`_tail_start`), so
+    that a sentence written right after a run of NUL bytes (a logger restarted after a
+    crash) is not lost; ``line_end``: the line's own line end (none at the end of a file)."""
+    k = _tail_start(tail)
+    if k == len(tail):
+        return _too_long_block(head), {"": 0}
+    pb, src = _parse_chunk(tail[k:] + line_end, ignore_checksum, at_eof, ext_ns, ext_src, 0,
+                           max_line_bytes, split=False)[0]
+    tx = head[:120].decode("ascii", "replace")
+    pb.reject_counts["too_long"] += 1
+    pb.reject_examples["too_long"] = [(1, tx)]
+    pb.first_fatal = min(x for x in (pb.first_fatal, (1, "too_long", tx)) if x is not None)
+    return pb, src
+
+
+def _concat_parsed(parts: list[tuple[ParsedBlock, dict[str, int]]]) -> tuple[ParsedBlock, dict[str, int]]:
+    """Blocks of consecutive pieces of a buffer as the block of the whole buffer: line
+    numbers and ``seq`` offset, TAG source codes in order of first appearance over all
+    lines (from each piece's first lines of its sources, see :func:`_parse_core`),
+    examples the first ones in stream order."""
+    if len(parts) == 1:
+        return parts[0]
+    firsts: dict[str, int] = {}
+    n_lines = 0
+    for pb, fs in parts:
+        for nm, i in fs.items():
+            if nm not in firsts:
+                firsts[nm] = i + n_lines
+        n_lines += pb.n_lines
+    names = {nm: k for k, nm in enumerate(sorted(firsts, key=firsts.__getitem__))}
+    n_lines = n_seg = n_blank = 0
+    kinds: dict[str, dict[str, list]] = {}
+    clock: dict[str, list] = {}
+    counts: Counter = Counter()
+    examples: dict[str, list] = {}
+    fatal = []
+    stats: Counter = Counter()
+    ignored: Counter = Counter()
+    ign_examples: dict[str, list] = {}
+    for pb, _ in parts:
+        lut = np.array([names[str(x)] for x in pb.source_names] or [0], dtype=np.int32)
+        groups = [(kinds.setdefault(k, {}), cols) for k, cols in pb.kinds.items()]
+        if pb.clock:
+            groups.append((clock, pb.clock))
+        for d, cols in groups:
+            for c, v in cols.items():
+                if c == "line":
+                    v = v + n_lines
+                elif c == "seq":
+                    v = v + n_seg
+                elif c == "tag_source":
+                    v = lut[v]
+                d.setdefault(c, []).append(v)
+        counts.update(pb.reject_counts)
+        for r, ex in pb.reject_examples.items():
+            examples.setdefault(r, []).extend((ln + n_lines, tx) for ln, tx in ex)
+        if pb.first_fatal is not None:
+            fatal.append((pb.first_fatal[0] + n_lines,) + tuple(pb.first_fatal[1:]))
+        stats.update(pb.stats)
+        ignored.update(pb.ignored)
+        for k, ex in pb.ignored_examples.items():
+            ign_examples.setdefault(k, []).extend((ln + n_lines, tx) for ln, tx in ex)
+        n_lines += pb.n_lines
+        n_seg += pb.n_seg
+        n_blank += pb.n_blank
+    cat = {k: {c: np.concatenate(v) for c, v in d.items()} for k, d in kinds.items()}
+    clock_np = {c: np.concatenate(v) for c, v in clock.items()}
+    pb = ParsedBlock(n_lines, n_blank, cat, clock_np, counts, {r: ex[:5] for r, ex in examples.items()},
+                     min(fatal) if fatal else None, stats, list(names) if n_seg else [], ignored,
+                     {k: ex[:IGNORED_EXAMPLES] for k, ex in ign_examples.items()}, n_seg)
+    return pb, firsts
+
+
+def _chunk_cuts(data: bytes, size: int, max_lines: int) -> list[tuple[int, int]]:
+    """[a, b) byte ranges of at most about ``size`` bytes and ``max_lines`` lines, each
+    ending after a line end (or at the end of ``data``)."""
+    n = len(data)
+    out, a = [], 0
+    while True:
+        b = min(a + size, n)
+        k = data.count(b"\n", a, b) + data.count(b"\r", a, b)  # at least the lines in [a, b)
+        if k > max_lines:
+            b = a + max(1, (b - a) * max_lines // k)
+        e = _end_of_line_at(data, b) if b < n else None
+        if e is None or e >= n:
+            out.append((a, n))
+            return out
+        out.append((a, e))
+        a = e
+
+
+def _end_of_line_at(data: bytes, pos: int) -> int | None:
+    """The offset after the first line end that starts at or after ``pos`` in ``data``."""
+    i, j = data.find(b"\n", pos), data.find(b"\r", pos)
+    q = i if j < 0 else j if i < 0 else min(i, j)
+    if q < 0:
+        return None
+    return q + _line_end_length(data[q:q + 3])
+
+
+def _line_end_length(b: bytes) -> int:
+    """Bytes of the line end at the start of ``b`` (LF, CR LF, CR CR LF, a lone CR)."""
+    if b[:1] == b"\r":
+        return 2 if b[1:2] == b"\n" else 3 if b[1:3] == b"\r\n" else 1
+    return 1
 
 
 def _parse_numpy(data: bytes, ignore_checksum: bool = False, at_eof: bool = True,
                  ext_line_ns: np.ndarray | None = None,
-                 ext_line_source: np.ndarray | None = None) -> tuple[ParsedBlock, np.ndarray]:
+                 ext_line_source: np.ndarray | None = None,
+                 max_line_bytes: int = MAX_LINE_BYTES) -> tuple[ParsedBlock, dict[str, int]]:
     """Parse a buffer of whole lines (the vectorised numpy core).
 
     ``ext_line_ns``/``ext_line_source`` give a receive time / source key per line (for
     :func:`parse_sentences`); otherwise they come from TAG blocks and prefixes.  Returns
-    the block and the source key of each line (object array, '' for none), from which
-    ``source_names`` are factorized in order of first appearance.
+    the block and the first line (0-based) of each source key over all lines ('' for
+    lines without one), the order of ``source_names``.
+
+    Memory is bounded by the piece, not by the content: the buffer is parsed in pieces
+    of at most :data:`NUMPY_CHUNK_BYTES` and :data:`NUMPY_CHUNK_LINES`, and within
+    :data:`PIECE_BUDGET` (estimated), cut at line ends, and merged
+    (:func:`_concat_parsed`); a line longer than ``max_line_bytes`` is one ``too_long``
+    reject and only its tail is read (:func:`_long_line_block`).
     """
+    data = data if isinstance(data, bytes) else bytes(data)
+    if not data:
+        return ParsedBlock(0, 0, {}, {}, Counter(), {}, None), {}
+    parts: list[tuple[ParsedBlock, dict[str, int]]] = []
+    line0 = 0
+    cuts = _chunk_cuts(data, NUMPY_CHUNK_BYTES, NUMPY_CHUNK_LINES)
+    for a, b in cuts:
+        chunk = data if len(cuts) == 1 else data[a:b]
+        for part in _parse_chunk(chunk, ignore_checksum, at_eof and b == len(data), ext_line_ns,
+                                 ext_line_source, line0, max_line_bytes):
+            parts.append(part)
+            line0 += part[0].n_lines
+    return _concat_parsed(parts)
+
+
+def _parse_chunk(data: bytes, ignore_checksum: bool, at_eof: bool, ext_ns, ext_src, line0: int,
+                 max_line_bytes: int, split: bool = True) -> list[tuple[ParsedBlock, dict[str, int]]]:
+    """:func:`_parse_numpy` of one chunk: its lines too long split off, the rest in pieces
+    within :data:`PIECE_BUDGET`; ``line0`` is the chunk's first line in ``ext_ns``/``ext_src``."""
+    n = len(data)
     # 64 zero bytes after the data let fields be gathered as fixed-width windows
-    bufp = np.frombuffer(bytes(data) + bytes(64), dtype=np.uint8)
-    buf = bufp[: len(data)]
-    if len(buf) == 0:
-        return ParsedBlock(0, 0, {}, {}, Counter(), {}, None), np.zeros(0, dtype=object)
-    ends_nl = buf[-1] == 10
-    # one pass finds the line feeds and the bytes outside printable ASCII:
-    # (b - 32) mod 256 > 94 for b < 32 or b > 126
-    ctl = np.flatnonzero((buf - np.uint8(32)) > 94)
-    ctl_b = buf[ctl]
-    nl = ctl[ctl_b == 10]
-    line_end = nl if ends_nl else np.concatenate((nl, [len(buf)]))
+    bufp = np.frombuffer(data + bytes(64), dtype=np.uint8)
+    buf = bufp[:n]
+    line_start, line_end, ends_nl, bad = _line_bounds(buf, bufp)
+    nl = len(line_start)
+    st = np.flatnonzero((buf == 36) | (buf == 33))
+    long = (line_end - line_start) > max_line_bytes
+
+    def ext(a: int, b: int):
+        return (None if ext_ns is None else np.asarray(ext_ns)[line0 + a:line0 + b],
+                None if ext_src is None else np.asarray(ext_src, dtype=object)[line0 + a:line0 + b])
+
+    if not split or (not long.any() and _W_BYTE * n + _W_START * len(st) + _W_LINE * nl <= PIECE_BUDGET):
+        e_ns, e_src = ext(0, nl)
+        return [_parse_core(bufp, buf, line_start, line_end, ends_nl, bad, st, ignore_checksum, at_eof,
+                            e_ns, e_src)]
+    w = np.empty(nl + 1, dtype=np.int64)  # estimated working memory before each line
+    w[:nl] = _W_BYTE * line_start + _W_START * np.searchsorted(st, line_start) + _W_LINE * np.arange(nl)
+    w[nl] = _W_BYTE * n + _W_START * len(st) + _W_LINE * nl
+    long_idx = np.flatnonzero(long).tolist()
+    spans, a = [], 0
+    for b in long_idx + [nl]:
+        while a < b:
+            j = int(np.searchsorted(w, w[a] + PIECE_BUDGET, side="right")) - 1
+            j = min(max(j, a + 1), b)
+            spans.append((False, a, j))
+            a = j
+        if b < nl:
+            spans.append((True, b, b + 1))
+            a = b + 1
+    at = line_start.tolist() + [n]
+    ends = {i: int(line_end[i]) for i in long_idx}
+    del bufp, buf, line_start, line_end, bad, st, long, w
+    out = []
+    for is_long, a, b in spans:
+        if is_long:
+            e = ends[a]
+            e_ns, e_src = ext(a, b)
+            out.append(_long_line_block(data[at[a]:at[a] + 120], data[max(at[a], e - max_line_bytes):e],
+                                        data[e:at[b]], ignore_checksum, at_eof and b == nl, max_line_bytes,
+                                        e_ns, e_src))
+        else:
+            e_ns, e_src = ext(a, b)
+            out.extend(_parse_chunk(data[at[a]:at[b]], ignore_checksum, at_eof and b == nl, e_ns, e_src,
+                                    0, max_line_bytes, split=False))
+    return out
+
+
+def _parse_core(bufp: np.ndarray, buf: np.ndarray, line_start: np.ndarray, line_end: np.ndarray,
+                ends_nl: bool, bad: _Marked, st: np.ndarray, ignore_checksum: bool, at_eof: bool,
+                ext_line_ns: np.ndarray | None,
+                ext_line_source: np.ndarray | None) -> tuple[ParsedBlock, dict[str, int]]:
+    """The vectorised parse of a piece without lines too long (see :func:`_parse_numpy`):
+    ``st`` the positions of its '$' and '!' bytes."""
     n_lines = len(line_end)
-    line_start = np.concatenate(([0], line_end[:-1] + 1))
-    last = np.maximum(line_end - 1, 0)
-    cr = (line_end > line_start) & (buf[last] == 13)
-    line_end = line_end - cr
     blank = line_end == line_start
     stats: Counter = Counter()
     stats["blank"] = int(blank.sum())
@@ -413,8 +693,8 @@ def _parse_numpy(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
         if len(lines_idx) == 0:
             return
         counts[reason] += len(lines_idx)
-        ex = examples.setdefault(reason, [])
-        for j in range(min(5 - len(ex), len(lines_idx))):
+        ex = examples.setdefault(reason, [])  # the first 5 of each call: sorted at the end
+        for j in range(min(5, len(lines_idx))):
             ex.append((int(lines_idx[j]) + 1, bytes(buf[starts[j]:min(ends[j], starts[j] + 120)])
                        .decode("ascii", "replace")))
         if reason not in NON_FATAL:
@@ -440,7 +720,7 @@ def _parse_numpy(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
             name = int(key).to_bytes(8, "little").rstrip(b"\0").decode("ascii", "replace")
             ignored[name] += int(cnt[j])
             ex = ign_examples.setdefault(name, [])
-            for r in order[g0[j]:g0[j] + min(max(0, IGNORED_EXAMPLES - len(ex)), int(cnt[j]))].tolist():
+            for r in order[g0[j]:g0[j] + min(IGNORED_EXAMPLES, int(cnt[j]))].tolist():
                 ex.append((int(lines_idx[r]) + 1, bytes(buf[starts[r]:min(ends[r], starts[r] + 120)])
                            .decode("ascii", "replace")))
 
@@ -450,14 +730,12 @@ def _parse_numpy(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
         return m
 
     # sentence starts: '$' or '!' not immediately followed by another start ('$$GPGGA')
-    isstart = (buf == 36) | (buf == 33)
-    st = np.flatnonzero(isstart)
     nxt_is = np.zeros(len(st), dtype=bool)
     nxt_is[:-1] = (st[1:] == st[:-1] + 1)
     stats["doubled_start"] = int(nxt_is.sum())
     st = st[~nxt_is]
     seg_line = np.searchsorted(line_start, st, side="right") - 1
-    # drop starts that sit in the CR/LF or in comment lines
+    # drop starts that sit in the line ends or in comment lines
     keep = st < line_end[seg_line]
     comment_line = ~blank & (buf[np.minimum(line_start, len(buf) - 1)] == 35)
     keep &= ~comment_line[seg_line]
@@ -471,11 +749,9 @@ def _parse_numpy(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
     # lines without sentences
     has_seg = np.zeros(n_lines, dtype=bool)
     has_seg[seg_line] = True
-    cum_bad = ctl[(ctl_b != 9) & (ctl_b != 10) & (ctl_b != 13)]  # binary bytes
-    del ctl, ctl_b
     noseg = np.flatnonzero(~has_seg & ~blank)
     if len(noseg):
-        isbin = _ranges_any(cum_bad, line_start[noseg], line_end[noseg])
+        isbin = bad.any(line_start[noseg], line_end[noseg])
         iscom = comment_line[noseg]
         for reason, m in (("binary", isbin & ~iscom), ("not_nmea", ~isbin & ~iscom)):
             sel = noseg[m]
@@ -483,9 +759,10 @@ def _parse_numpy(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
         sel = noseg[iscom]
         ignore(named("comment", len(sel)), sel, line_start[sel], line_end[sel])
     if nseg == 0:
-        return (ParsedBlock(n_lines, int(blank.sum()), {}, {}, counts, examples,
+        return (ParsedBlock(n_lines, int(blank.sum()), {}, {}, counts, _first_examples(examples, 5),
                             min(fatal) if fatal else None, stats, ignored=ignored,
-                            ignored_examples=ign_examples), np.full(n_lines, "", dtype=object))
+                            ignored_examples=_first_examples(ign_examples, IGNORED_EXAMPLES)),
+                {"": 0} if n_lines else {})
 
     cum_xor = np.bitwise_xor.accumulate(buf)
     commas = np.flatnonzero(buf == 44)
@@ -515,6 +792,9 @@ def _parse_numpy(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
     src_codes, src_names = pd.factorize(line_src)
     src_codes = src_codes.astype(np.int32)
     src_names = [str(x) for x in src_names]
+    _, src_first = np.unique(src_codes, return_index=True)  # codes in order of first appearance
+    firsts = dict(zip(src_names, src_first.tolist(), strict=True))
+    del line_src
 
     alive = np.ones(nseg, dtype=bool)
 
@@ -525,7 +805,7 @@ def _parse_numpy(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
 
     drop("bad_tag", line_bad[seg_line])
     # trim trailing blanks after the checksum
-    drop("binary", _ranges_any(cum_bad, st, seg_end))
+    drop("binary", bad.any(st, seg_end))
     seglen = seg_end - st
     star_ok = (seglen >= 4) & (buf[np.maximum(seg_end - 3, 0)] == 42)
     h1 = HEX[buf[np.maximum(seg_end - 2, 0)]]
@@ -645,8 +925,15 @@ def _parse_numpy(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
         order = np.argsort(cat["seq"], kind="stable")  # back to stream order
         kinds_np[k] = {c: v[order] for c, v in cat.items()}
     clock_np = {c: np.concatenate(v) for c, v in clock.items()}
-    return (ParsedBlock(n_lines, int(blank.sum()), kinds_np, clock_np, counts, examples,
-                        min(fatal) if fatal else None, stats, src_names, ignored, ign_examples), line_src)
+    return (ParsedBlock(n_lines, int(blank.sum()), kinds_np, clock_np, counts, _first_examples(examples, 5),
+                        min(fatal) if fatal else None, stats, src_names, ignored,
+                        _first_examples(ign_examples, IGNORED_EXAMPLES), nseg), firsts)
+
+
+def _first_examples(examples: dict[str, list[tuple[int, str]]], k: int) -> dict[str, list[tuple[int, str]]]:
+    """The first ``k`` examples of each reason or type in stream order (by line; on one
+    line in the order they were found): the same whatever pieces a buffer was cut into."""
+    return {r: sorted(ex, key=lambda e: e[0])[:k] for r, ex in examples.items()}
 
 
 # ------------------------------------------------------------- compiled scanning kernel
@@ -683,62 +970,72 @@ def engine_available() -> bool:
     return _nmeascan is not None and ENGINE == "c"
 
 
-def _scan_c(data: bytes) -> dict:
-    """Run the compiled kernel over ``data``; arrays trimmed to their lengths."""
-    cap = data.count(b"\n") + 1
+def _scan_c(data: bytes, max_line_bytes: int = MAX_LINE_BYTES) -> dict:
+    """Run the compiled kernel over ``data``; arrays trimmed to their lengths.  The arrays
+    are sized by one counting pass (lines, '$'); pages never written cost no memory."""
+    cap, cap_rows = _nmeascan.sizes(data)
+    cap_long = len(data) // (max_line_bytes + 1) + 1
     nval = _nmeascan.NVAL
-    a = {"fallback": np.empty(cap, np.uint8), "nseg": np.empty(cap, np.int64),
-         "sub": np.empty(len(data), np.uint8), "line": np.empty(cap, np.int64),
-         "seq": np.empty(cap, np.int64), "talker": np.empty(cap, np.uint16),
-         "sentence": np.empty(cap, np.int8), "src": np.empty(cap, np.int32),
-         "ext_ns": np.empty(cap, np.int64), "tod_ns": np.empty(cap, np.int64),
-         "date_days": np.empty(cap, np.int64), "dec": np.empty(cap, np.int8),
-         "code": np.empty(cap, np.int8), "val": np.empty((cap, nval), np.float64)}
-    n_lines, n_blank, n_rows, sub_len, n_tag, names, first = _nmeascan.scan(
-        data, cap, a["fallback"], a["nseg"], a["sub"], a["line"], a["seq"], a["talker"],
-        a["sentence"], a["src"], a["ext_ns"], a["tod_ns"], a["date_days"], a["dec"], a["code"],
-        a["val"])
-    out = {k: v[:n_rows] for k, v in a.items() if k not in ("fallback", "nseg", "sub")}
-    out.update(fallback=a["fallback"][:n_lines], nseg=a["nseg"][:n_lines],
-               sub=a["sub"][:sub_len].tobytes(), n_lines=n_lines, n_blank=n_blank, n_tag=n_tag,
-               names=names, first=first)
+    a = {"fb_line": np.empty(cap, np.int64), "long_line": np.empty(cap_long, np.int64),
+         "long_start": np.empty(cap_long, np.int64), "long_end": np.empty(cap_long, np.int64),
+         "sub": np.empty(len(data), np.uint8), "line": np.empty(cap_rows, np.int64),
+         "seq": np.empty(cap_rows, np.int64), "talker": np.empty(cap_rows, np.uint16),
+         "sentence": np.empty(cap_rows, np.int8), "src": np.empty(cap_rows, np.int32),
+         "ext_ns": np.empty(cap_rows, np.int64), "tod_ns": np.empty(cap_rows, np.int64),
+         "date_days": np.empty(cap_rows, np.int64), "dec": np.empty(cap_rows, np.int8),
+         "code": np.empty(cap_rows, np.int8), "val": np.empty((cap_rows, nval), np.float64)}
+    n_lines, n_blank, n_rows, n_fb, n_long, sub_len, n_seg, n_tag, names, first = _nmeascan.scan(
+        data, cap, cap_rows, max_line_bytes, a["fb_line"], a["long_line"],
+        a["long_start"], a["long_end"], a["sub"], a["line"], a["seq"], a["talker"], a["sentence"],
+        a["src"], a["ext_ns"], a["tod_ns"], a["date_days"], a["dec"], a["code"], a["val"])
+    fb = ("fb_line",)
+    lg = ("long_line", "long_start", "long_end")
+    out = {k: v[:n_rows] for k, v in a.items() if k not in fb + lg + ("sub",)}
+    out.update({k: a[k][:n_fb] for k in fb})  # views: the pages beyond were never written
+    out.update({k: a[k][:n_long] for k in lg})
+    out.update(sub=a["sub"][:sub_len].tobytes(), n_lines=n_lines, n_blank=n_blank, n_tag=n_tag,
+               n_seg=n_seg, names=names, first=first)
     return out
 
 
-def _parse_c(data: bytes, ignore_checksum: bool, at_eof: bool) -> ParsedBlock:
+def _parse_c(data: bytes, ignore_checksum: bool, at_eof: bool,
+             max_line_bytes: int = MAX_LINE_BYTES) -> ParsedBlock:
     """:func:`parse_buffer` with the compiled kernel: it decodes the clean lines and
     copies all others into a side buffer, parsed by :func:`_parse_numpy`; the two are
     merged back into stream order (line numbers, ``seq``, TAG source codes in order of
-    first appearance), so the result equals the numpy path's."""
-    r = _scan_c(data)
+    first appearance), so the result equals the numpy path's.  Lines too long are listed
+    by the kernel and rejected here (``too_long``), never copied."""
+    r = _scan_c(data, max_line_bytes)
     n_lines = r["n_lines"]
-    fb_lines = np.flatnonzero(r["fallback"])
-    pbs, src_sub = _parse_numpy(r["sub"], ignore_checksum, at_eof)
+    fb_lines = r["fb_line"]
+    pbs, firsts_sub = _parse_numpy(r["sub"], ignore_checksum, at_eof, max_line_bytes=max_line_bytes)
     if pbs.n_lines != len(fb_lines):  # pragma: no cover - an internal inconsistency
         raise AssertionError(f"_nmeascan: {len(fb_lines)} fallback lines, numpy read {pbs.n_lines}")
     # TAG source names, factorized over all lines in order of first appearance
     first = dict(zip(r["names"], r["first"], strict=True))
-    sub_codes, sub_names = pd.factorize(src_sub)
-    if len(sub_names):
-        _, idx = np.unique(sub_codes, return_index=True)
-        for nm, i in zip(sub_names.tolist(), fb_lines[idx].tolist(), strict=True):
-            first[nm] = min(first.get(nm, i), i)
+    long_line = r["long_line"]
+    if len(long_line):  # a line too long with no sentence in its tail has no source ('')
+        at = np.minimum(np.searchsorted(fb_lines, long_line), max(len(fb_lines) - 1, 0))
+        tailless = long_line[~(fb_lines[at] == long_line)] if len(fb_lines) else long_line
+        if len(tailless):
+            first[""] = min(first.get("", n_lines), int(tailless[0]))
+    for nm, i in firsts_sub.items():
+        i = int(fb_lines[i])
+        first[nm] = min(first.get(nm, i), i)
     names = sorted(first, key=first.__getitem__)
     code_of = {nm: i for i, nm in enumerate(names)}
     lut_c = np.array([code_of[nm] for nm in r["names"]] or [0], dtype=np.int32)
     lut_sub = np.array([code_of[str(nm)] for nm in pbs.source_names] or [0], dtype=np.int32)
-    nseg = r["nseg"]
-    if not nseg.any():
+    if not r["n_seg"]:
         names = []  # no sentence anywhere: the numpy path names no sources
-    seg_base = np.cumsum(nseg) - nseg
-    sub_nseg = nseg[fb_lines]
-    sub_base = np.cumsum(sub_nseg) - sub_nseg
 
     def from_sub(cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        # a row's seq: its seq in the side buffer (the segments of the fallback lines before
+        # it) plus the kernel's rows (one segment each) on the lines before its line
         out = dict(cols)
-        li = cols["line"] - 1
-        out["line"] = fb_lines[li] + 1
-        out["seq"] = seg_base[fb_lines[li]] + (cols["seq"] - sub_base[li])
+        line = fb_lines[cols["line"] - 1] + 1
+        out["line"] = line
+        out["seq"] = cols["seq"] + np.searchsorted(r["line"], line)
         out["tag_source"] = lut_sub[cols["tag_source"]]
         return out
 
@@ -780,15 +1077,23 @@ def _parse_c(data: bytes, ignore_checksum: bool, at_eof: bool) -> ParsedBlock:
     fatal = pbs.first_fatal
     if fatal is not None:
         fatal = (int(fb_lines[fatal[0] - 1]) + 1, fatal[1], fatal[2])
+    counts = Counter(pbs.reject_counts)
+    if len(r["long_line"]):
+        counts["too_long"] += len(r["long_line"])
+        examples["too_long"] = [(int(li) + 1, data[a:min(int(e), a + 120)].decode("ascii", "replace"))
+                                for li, a, e in zip(r["long_line"][:5].tolist(), r["long_start"][:5].tolist(),
+                                                    r["long_end"][:5].tolist(), strict=True)]
+        too_long = (examples["too_long"][0][0], "too_long", examples["too_long"][0][1])
+        fatal = too_long if fatal is None else min(fatal, too_long)
     stats = Counter(pbs.stats)
     stats["blank"] += r["n_blank"]
     if r["n_tag"]:
         stats["prefix_tag"] += r["n_tag"]
     ign_examples = {k: [(int(fb_lines[ln - 1]) + 1, tx) for ln, tx in v]
                     for k, v in pbs.ignored_examples.items()}
-    return ParsedBlock(n_lines, r["n_blank"] + pbs.n_blank, kinds, clock, Counter(pbs.reject_counts),
+    return ParsedBlock(n_lines, r["n_blank"] + pbs.n_blank, kinds, clock, counts,
                        examples, fatal, stats, [str(x) for x in names], Counter(pbs.ignored),
-                       ign_examples)
+                       ign_examples, int(r["n_seg"]))
 
 
 def _merge_parts(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
@@ -803,53 +1108,105 @@ def _merge_parts(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
 def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True,
                  ext_line_ns: np.ndarray | None = None,
                  ext_line_source: np.ndarray | None = None,
-                 engine: str | None = None) -> ParsedBlock:
+                 engine: str | None = None, max_line_bytes: int = MAX_LINE_BYTES) -> ParsedBlock:
     """Parse a buffer of whole lines.
 
     ``engine`` "c" uses the compiled kernel (:mod:`dracc.ingest._nmeascan`) where it is
     built, "numpy" the vectorised numpy core only; None follows :data:`ENGINE`.  Both
     give the same block (tests/test_nmeascan.py).  Lines with an external time/source
     (``ext_line_ns``/``ext_line_source``, for :func:`parse_sentences`) take the numpy core.
+    Lines end at LF, CR LF, CR CR LF or a lone CR; a line longer than ``max_line_bytes``
+    is one ``too_long`` reject (its bytes are never parsed).
     """
     use_c = (engine or ENGINE) == "c" and _nmeascan is not None
     if use_c and ext_line_ns is None and ext_line_source is None and len(data):
-        return _parse_c(data if isinstance(data, bytes) else bytes(data), ignore_checksum, at_eof)
-    return _parse_numpy(data, ignore_checksum, at_eof, ext_line_ns, ext_line_source)[0]
+        return _parse_c(data if isinstance(data, bytes) else bytes(data), ignore_checksum, at_eof,
+                        max_line_bytes)
+    return _parse_numpy(data, ignore_checksum, at_eof, ext_line_ns, ext_line_source, max_line_bytes)[0]
 
 
 # ------------------------------------------------------------------ streaming reader
-def _block_ranges(path: Path, block_bytes: int,
-                  first_bytes: int | None = None) -> Iterator[tuple[int, int]]:
-    """(offset, length) of blocks of whole lines: the first about ``first_bytes`` (default
-    ``block_bytes``), the others about ``block_bytes``."""
+def _block_ranges(path: Path, block_bytes: int, first_bytes: int | None = None,
+                  max_line_bytes: int = MAX_LINE_BYTES) -> Iterator[tuple[int, int, bool]]:
+    """(offset, length, too long) of blocks of whole lines: the first about ``first_bytes``
+    (default ``block_bytes``), the others about ``block_bytes``, each cut after a line end
+    (LF, CR LF, CR CR LF or a lone CR).  A line longer than ``max_line_bytes`` across a
+    cut is a block of its own, flagged too long: it is found by reading ahead, never held
+    (a block never exceeds its size plus ``max_line_bytes``, whatever the file holds)."""
     size = path.stat().st_size
-    with path.open("rb") as fh:
+    fd = os.open(path, os.O_RDONLY)
+    try:
         off = 0
         while off < size:
             end = off + ((first_bytes or block_bytes) if off == 0 else block_bytes)
             if end >= size:
-                yield off, size - off
+                yield off, size - off, False
                 return
-            fh.seek(end)
-            while True:
-                chunk = fh.read(65536)
-                if not chunk:
-                    end = size
-                    break
-                j = chunk.find(b"\n")
-                if j >= 0:
-                    end += j + 1
-                    break
-                end += len(chunk)
-            yield off, end - off
-            off = end
+            nxt = _next_line_end(fd, end, min(size, end + max_line_bytes + 3))
+            if nxt is not None:
+                yield off, nxt - off, False
+                off = nxt
+                continue
+            # the line across the cut is too long: the block ends where it starts
+            s = _line_start_before(fd, off, end)
+            if s > off:
+                yield off, s - off, False
+            nxt = _next_line_end(fd, end, size)
+            e = size if nxt is None else nxt
+            yield s, e - s, True
+            off = e
+    finally:
+        os.close(fd)
 
 
-def _parse_range(path: str, off: int, length: int, ignore_checksum: bool, at_eof: bool) -> ParsedBlock:
+_SCAN_BYTES = 1 << 20  #: bytes read at a time when looking for a line end
+
+
+def _next_line_end(fd: int, pos: int, limit: int) -> int | None:
+    """The offset after the first line end starting in [pos, limit), None if there is none."""
+    at = pos
+    while at < limit:
+        chunk = os.pread(fd, min(_SCAN_BYTES, limit - at), at)
+        if not chunk:
+            return None
+        i, j = chunk.find(b"\n"), chunk.find(b"\r")
+        q = i if j < 0 else j if i < 0 else min(i, j)
+        if q >= 0:
+            return at + q + _line_end_length(os.pread(fd, 3, at + q))
+        at += len(chunk)
+    return None
+
+
+def _line_start_before(fd: int, lo: int, hi: int) -> int:
+    """The start of the line holding byte ``hi - 1``: after the last CR or LF in [lo, hi),
+    else ``lo`` (the caller knows ``hi`` is neither, so that CR is a line end)."""
+    at = hi
+    while at > lo:
+        a = max(lo, at - _SCAN_BYTES)
+        chunk = os.pread(fd, at - a, a)
+        k = max(chunk.rfind(b"\n"), chunk.rfind(b"\r"))
+        if k >= 0:
+            return a + k + 1
+        at = a
+    return lo
+
+
+def _parse_range(path: str, off: int, length: int, ignore_checksum: bool, at_eof: bool,
+                 max_line_bytes: int = MAX_LINE_BYTES, too_long: bool = False) -> ParsedBlock:
+    """Parse one block of a file; a block flagged ``too_long`` (one line, see
+    :func:`_block_ranges`) is one ``too_long`` reject and only its first bytes are read."""
     with open(path, "rb") as fh:
         fh.seek(off)
+        if too_long:
+            head = fh.read(min(length, 120))
+            a = max(off, off + length - max_line_bytes - 3)
+            fh.seek(a)
+            tail = fh.read(off + length - a)
+            content = tail.rstrip(b"\r\n")  # a line's content holds no CR or LF
+            return _long_line_block(head, content[-max_line_bytes:], tail[len(content):], ignore_checksum,
+                                    at_eof, max_line_bytes)[0]
         data = fh.read(length)
-    return parse_buffer(data, ignore_checksum=ignore_checksum, at_eof=at_eof)
+    return parse_buffer(data, ignore_checksum=ignore_checksum, at_eof=at_eof, max_line_bytes=max_line_bytes)
 
 
 @dataclass
@@ -963,12 +1320,25 @@ def _pool_ok() -> bool:
     return (os.cpu_count() or 1) >= 2 and not multiprocessing.current_process().daemon
 
 
-def _worker_init() -> None:
-    """Keep freed memory in the worker's heap (glibc): every block allocates arrays of
-    the same sizes again, and returning them to the kernel after each block made the
-    next block pay for fresh, zero-filled pages (about a third of the workers' CPU time
-    was system time).  A worker's peak memory is unchanged: its heap never holds more
-    than one block's arrays.  Without glibc this does nothing."""
+def _worker_init(parent_pid: int | None = None) -> None:
+    """Set up a reader worker: it dies with its parent, holds none of its parent's
+    standard streams, and keeps its freed memory.
+
+    * A worker must not outlive the reader (a ``dracc analyze`` killed by SIGKILL, an
+      OOM kill): on Linux the kernel sends it SIGKILL when its parent dies
+      (``PR_SET_PDEATHSIG``); elsewhere, and for a parent that died before that was set,
+      a watchdog thread ends it once its parent is gone (``os.getppid()`` changes).
+    * Its stdin, stdout and stderr are ``/dev/null``: a caller waiting for the end of
+      dracc's output (cron mailing it, a pipe) is not held up by a worker's copy of it.
+      Results and errors go back through the pool.
+    * Freed memory stays in the worker's heap (glibc): every block allocates arrays of
+      the same sizes again, and returning them to the kernel after each block made the
+      next block pay for fresh, zero-filled pages (about a third of the workers' CPU time
+      was system time).  A worker's peak memory is unchanged: its heap never holds more
+      than one block's arrays.  Without glibc this does nothing."""
+    from ..workers import detach_worker
+
+    detach_worker(parent_pid)
     try:
         import ctypes
 
@@ -979,24 +1349,54 @@ def _worker_init() -> None:
         pass
 
 
+_HANDOVER_PREFIX = "dracc-ingest-"
+
 
 def _handover_dir(needed_bytes: int):
     """Where workers leave parsed blocks for the main process: shared memory (tmpfs), else
     the temporary directory, whichever has room for ``needed_bytes`` (a reader of a whole
     file keeps its blocks until the end; a container's /dev/shm may hold only 64 MB); a
-    context giving None where neither has: the blocks then come through the pool's pipe."""
+    context giving None where neither has: the blocks then come through the pool's pipe.
+    The folder's name carries this process's id: folders left by a reader that was killed
+    (SIGKILL cannot be caught) are removed by the next reader (:func:`_sweep_handover`)."""
     for base in ("/dev/shm", tempfile.gettempdir()):
         try:
             st = os.statvfs(base)
         except OSError:
             continue
-        if os.access(base, os.W_OK) and st.f_bavail * st.f_frsize >= needed_bytes:
-            return tempfile.TemporaryDirectory(prefix="dracc-ingest-", dir=base)
+        if os.access(base, os.W_OK):
+            _sweep_handover(base)
+            if st.f_bavail * st.f_frsize >= needed_bytes:
+                return tempfile.TemporaryDirectory(prefix=f"{_HANDOVER_PREFIX}{os.getpid()}-", dir=base)
     return contextlib.nullcontext(None)
 
 
+def _sweep_handover(base: str) -> None:
+    """Remove hand-over folders in ``base`` of this user whose reader process is gone."""
+    import shutil
+
+    try:
+        names = [n for n in os.listdir(base) if n.startswith(_HANDOVER_PREFIX)]
+    except OSError:
+        return
+    for name in names:
+        parts = name[len(_HANDOVER_PREFIX):].split("-", 1)
+        if len(parts) != 2 or not parts[0].isdigit():  # not <pid>-<random>: not ours to judge
+            continue
+        pid_s = parts[0]
+        path = os.path.join(base, name)
+        try:
+            if os.lstat(path).st_uid != os.getuid():
+                continue
+            os.kill(int(pid_s), 0)
+        except ProcessLookupError:  # the reader is gone: its folder is debris
+            shutil.rmtree(path, ignore_errors=True)
+        except (OSError, AttributeError):  # alive (or not ours to ask about)
+            continue
+
+
 def _parse_range_to_file(folder: str | None, i: int, path: str, off: int, length: int,
-                         ignore_checksum: bool, at_eof: bool):
+                         ignore_checksum: bool, at_eof: bool, max_line_bytes: int = MAX_LINE_BYTES):
     """:func:`_parse_range` in a worker, its arrays written to a file in ``folder``.
 
     A block's arrays (about 1.3x its text) sent through the pool's pipe cost the worker
@@ -1004,7 +1404,7 @@ def _parse_range_to_file(folder: str | None, i: int, path: str, off: int, length
     a file they are two copies.  Returns (pickle of the block without its arrays, the
     arrays' sizes, the file) for :func:`_load_parsed`; or the block itself where there is
     no folder or the file cannot be written (a full disk): it then goes through the pipe."""
-    pb = _parse_range(path, off, length, ignore_checksum, at_eof)
+    pb = _parse_range(path, off, length, ignore_checksum, at_eof, max_line_bytes)
     if folder is None:
         return pb
     buffers: list[pickle.PickleBuffer] = []
@@ -1191,9 +1591,11 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
     ``state`` (a :class:`StreamState`, created if None) accumulates rejections, time
     events and statistics while iterating; read it after the loop.  Files of at least
     ``PARALLEL_MIN_BYTES`` are parsed by up to two worker processes, at most four blocks
-    ahead, which hand their blocks over as files (:func:`_parse_range_to_file`); this
-    process parses the first block itself while they start, then resolves times and builds
-    frames in order.  ``block_bytes`` None: a first block of ``FIRST_BLOCK_BYTES``
+    ahead, which hand their blocks over as files (:func:`_parse_range_to_file`) and die
+    with this process (:func:`_worker_init`); this process parses the first block itself
+    while they start, then resolves times and builds frames in order.  Blocks are cut
+    after a line end; a line longer than ``cfg.max_line_bytes`` across a cut is a block of
+    its own, read only at its ends (:func:`_block_ranges`).  ``block_bytes`` None: a first block of ``FIRST_BLOCK_BYTES``
     (``MAIN_FIRST_BLOCK_BYTES`` with workers), then blocks of about ``BLOCK_BYTES``, as
     many as the workers share evenly (none waits alone at the end); a number: blocks of that
     size.  ``progress(n_bytes)`` is called as blocks finish.  Raises IngestError in
@@ -1215,8 +1617,9 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
     st.events.tolerance_s = cfg.backstep_tolerance_s
     size = path.stat().st_size
     nworkers = workers if workers is not None else (2 if size >= PARALLEL_MIN_BYTES and _pool_ok() else 1)
+    max_line = int(getattr(cfg, "max_line_bytes", MAX_LINE_BYTES))
     if block_bytes is not None:
-        ranges = list(_block_ranges(path, block_bytes))
+        ranges = list(_block_ranges(path, block_bytes, max_line_bytes=max_line))
     else:
         first_bytes = MAIN_FIRST_BLOCK_BYTES if nworkers > 1 else FIRST_BLOCK_BYTES
         rest = max(size - first_bytes, 0)
@@ -1224,8 +1627,9 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
         if n_rest % nworkers:  # the workers share the blocks after the first evenly
             n_rest += nworkers - n_rest % nworkers
         later = max(-(-rest // n_rest), 1) if n_rest else BLOCK_BYTES
-        ranges = list(_block_ranges(path, later, first_bytes))
+        ranges = list(_block_ranges(path, later, first_bytes, max_line))
     held: list = []
+    first_parsed = [True]  # talkers are fingerprinted in the first block read (not a line too long)
 
     def handle(pb: ParsedBlock, nbytes: int):
         line0 = st.count_block(pb, cfg.strict)
@@ -1235,10 +1639,12 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
                 else cols["sentence"]
             c = np.bincount(sc.astype(np.int64), minlength=len(SENTENCES))
             st.sentences.update({SENTENCES[i]: int(c[i]) for i in np.flatnonzero(c).tolist()})
-            if kind == "position" and not st.split_talkers and line0 == 1:
+            if kind == "position" and first_parsed[0] and not st.split_talkers:
                 _fingerprint(cols, st, pb.source_names)
         if pb.clock:
             st.sentences["ZDA"] += len(pb.clock["seq"])
+        if pb.n_lines and not (pb.n_lines == 1 and pb.reject_counts.get("too_long") == 1):
+            first_parsed[0] = False
         tod, date, ext, split = _time_arrays(pb)
         held.append((pb, split, line0, nbytes))
         done = st.timebase.feed(tod, date, ext)
@@ -1253,47 +1659,53 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
             yield Block(frames, pb.n_lines, line0, nbytes)
 
     at_eof = [i == len(ranges) - 1 for i in range(len(ranges))]
+
+    def local(i: int) -> ParsedBlock:
+        off, ln, too_long = ranges[i]
+        return _parse_range(file, off, ln, cfg.ignore_checksum, at_eof[i], max_line, too_long)
+
     if nworkers <= 1 or len(ranges) <= 1:
-        for i, (off, ln) in enumerate(ranges):
-            pb = _parse_range(file, off, ln, cfg.ignore_checksum, at_eof[i])
-            yield from handle(pb, ln)
+        for i, (_off, ln, _long) in enumerate(ranges):
+            yield from handle(local(i), ln)
     else:
         # at most nworkers + 2 blocks in flight; a broken pool (a worker killed, e.g. out of
         # memory) falls back to parsing the remaining blocks in this process
-        pending = list(enumerate(ranges))
+        pending = list(range(len(ranges)))
         broken = False
         with _handover_dir(2 * size) as folder, \
-                ProcessPoolExecutor(max_workers=nworkers, initializer=_worker_init) as ex:
+                ProcessPoolExecutor(max_workers=nworkers, initializer=_worker_init,
+                                    initargs=(os.getpid(),)) as ex:
             futures = []
 
             def submit():
-                i, (off, ln) = pending.pop(0)
-                futures.append((ex.submit(_parse_range_to_file, folder, i, file, off, ln,
-                                          cfg.ignore_checksum, at_eof[i]), i, off, ln))
+                i = pending.pop(0)
+                off, ln, too_long = ranges[i]
+                fut = None if too_long else ex.submit(_parse_range_to_file, folder, i, file, off, ln,
+                                                      cfg.ignore_checksum, at_eof[i], max_line)
+                futures.append((fut, i))  # None: read here (a line too long: a few bytes)
 
             # the first block is parsed here while the workers start and take the next ones
-            i0, (off0, ln0) = pending.pop(0)
+            i0 = pending.pop(0)
             while pending and len(futures) < nworkers + 2:
                 submit()
-            yield from handle(_parse_range(file, off0, ln0, cfg.ignore_checksum, at_eof[i0]), ln0)
+            yield from handle(local(i0), ranges[i0][1])
             while futures:
-                fut, i, off, ln = futures.pop(0)
+                fut, i = futures.pop(0)
                 try:
-                    pb = _load_parsed(fut.result()) if not broken else None
+                    pb = _load_parsed(fut.result()) if fut is not None and not broken else None
                 except BrokenProcessPool:
                     broken = True
                     pb = None
                 if pb is None:
-                    pb = _parse_range(file, off, ln, cfg.ignore_checksum, at_eof[i])
+                    pb = local(i)
                 if pending and not broken:
                     try:
                         submit()
                     except BrokenProcessPool:
                         broken = True
                 if broken and pending and not futures:
-                    i2, (off2, ln2) = pending.pop(0)
-                    futures.append((None, i2, off2, ln2))
-                yield from handle(pb, ln)
+                    futures.append((None, pending.pop(0)))
+                yield from handle(pb, ranges[i][1])
         if broken:
             st.stats["pool_fallback"] += 1
     yield from _release(st.timebase.finish())
@@ -1385,7 +1797,8 @@ class SentenceStream:
         if not clean:
             return []
         pb = parse_buffer(b"\n".join(clean) + b"\n", ignore_checksum=self.cfg.ignore_checksum,
-                          at_eof=False, ext_line_ns=t, ext_line_source=src)
+                          at_eof=False, ext_line_ns=t, ext_line_source=src,
+                          max_line_bytes=int(getattr(self.cfg, "max_line_bytes", MAX_LINE_BYTES)))
         nos = None if numbers is None else np.asarray(numbers, dtype=np.int64)
         st = self.st
         line0 = st.count_block(pb, self.cfg.strict, label="{path}: message {n}",
