@@ -547,3 +547,33 @@ def test_strict_fails_on_a_line_too_long(tmp_path):
     assert res.rejects.counts == Counter({"too_long": 1}) and res.lines == 4
     assert np.array_equal(np.sort(np.concatenate([df["line"].to_numpy() for df in res.frames.values()
                                                    if len(df)])), [1, 2, 3])
+
+
+def test_fleet_workers_die_when_dracc_fleet_is_killed(tmp_path):
+    """`dracc fleet --workers 2` killed by SIGKILL while its pool works: no fleet worker
+    (nor any reader worker of theirs) survives, and stdout/stderr reach EOF."""
+    src = _big_log(tmp_path, 48)
+    fleet = tmp_path / "fleet"
+    for v in ("V1", "V2"):
+        (fleet / v).mkdir(parents=True)
+        os.link(src, fleet / v / "nav.nmea")
+    proc = subprocess.Popen(_dracc() + ["fleet", str(fleet / "V1"), str(fleet / "V2"), "--workers",
+                                        "2", "--out", str(tmp_path / "out")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=_env())
+    try:
+        workers: set[int] = set()
+        deadline = time.monotonic() + 120
+        while proc.poll() is None and len(workers) < 2 and time.monotonic() < deadline:
+            workers |= _children(proc.pid)
+            time.sleep(0.01)
+        assert proc.poll() is None and len(workers) >= 2, "the fleet workers were never seen alive"
+        time.sleep(0.5)  # let them start their own reader workers
+        for w in list(workers):
+            workers |= _children(w)
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(10)
+        _assert_gone_with_eof(proc, workers)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
