@@ -1064,8 +1064,13 @@ def vessel_name(cfg: Config, acfg: AuditConfig, option: str | None) -> str:
         return option
     if acfg.vessel:
         return acfg.vessel
-    v = cfg.extra.get("vessel")
-    if isinstance(v, dict) and isinstance(v.get("name"), str) and v["name"].strip():
+    v = cfg.extra.get("vessel", {})
+    if not isinstance(v, dict):
+        raise ConfigError(f"[vessel] must be a table, got {type(v).__name__}")
+    _unknown(v, ("name",), "vessel")
+    if "name" in v:
+        if not isinstance(v["name"], str) or not v["name"].strip():
+            raise ConfigError(f"[vessel] name must be a non-empty string, got {v['name']!r}")
         return v["name"]
     return "default"
 

@@ -461,3 +461,15 @@ def test_content_hash_ignores_names_and_order(tmp_path):
 
 def test_yesterday_utc():
     assert yesterday_utc(dt.datetime(2026, 3, 1, 0, 30, tzinfo=dt.timezone.utc)) == "2026-02-28"
+
+
+@pytest.mark.parametrize("table, word", [({"name": 5}, "name"), ({"name": "  "}, "name"),
+                                         ({"nmae": "Aurora"}, "nmae")])
+def test_vessel_table_is_checked_not_silently_default(table, word):
+    from dracc.audit import AuditConfig, vessel_name
+    from dracc.config import Config
+    from dracc.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=word):
+        vessel_name(Config(extra={"vessel": table}), AuditConfig(), None)
+    assert vessel_name(Config(extra={"vessel": {"name": "Aurora"}}), AuditConfig(), None) == "Aurora"
