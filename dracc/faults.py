@@ -46,7 +46,7 @@ import pandas as pd
 
 from .config import FaultsConfig
 from .errors import ConfigError
-from .geodesy import angdiff, circmean, distance_m
+from .geodesy import angdiff, circmean, distance_m, offset_ne_m
 from .ingest.frames import Voyage
 from .units import DEG_RAD, KN_MPS, NMI_M, NS_PER_S
 
@@ -248,7 +248,13 @@ def _jumps(key, role, g, cfg: FaultsConfig, catch_up_from_ns: set[int]) -> list[
         a = i + 1  # first displaced row
         nxt = int(idx[n + 1]) if n + 1 < idx.size else None
         b = nxt if nxt is not None else len(t) - 1  # last displaced row
-        back = nxt is not None and bool(distance_m(lat[i], lon[i], lat[nxt + 1], lon[nxt + 1]) < d_m[i] / 2)
+        # the jump back undoes the jump: the two steps as vectors nearly cancel (the ship
+        # moved on meanwhile, so the positions before and after need not be close)
+        back = False
+        if nxt is not None:
+            out_n, out_e = offset_ne_m(lat[a], lon[a], lat[i], lon[i])
+            ret_n, ret_e = offset_ne_m(lat[nxt + 1], lon[nxt + 1], lat[nxt], lon[nxt])
+            back = bool(math.hypot(out_n + ret_n, out_e + ret_e) < d_m[i] / 2)
         tail = (f"back at {_fmt_t(t[nxt + 1])} UTC after {b - a + 1} record(s)" if back
                 else (f"jumped again at {_fmt_t(t[nxt + 1])} UTC" if nxt is not None
                       else "did not come back before its last record"))

@@ -303,3 +303,22 @@ def test_pipeline_reports_faults_and_excludes_only_when_told(faulty_voyage):
     # the plotted tracks keep the raw records either way
     ins2 = [t for t in dropped.tracks if t.source == "INS2"][0]
     assert np.unique(ins2.lat_rad).size < 0.6 * ins2.lat_rad.size  # half of it frozen
+
+
+def test_jump_and_return_of_a_moving_ship_is_one_fault():
+    """A GNSS displaced by 670 m for 10 min while the ship makes 12 kn: one jump fault that
+    comes back (the ship moved 3.7 km meanwhile, so the fixes before and after the fault
+    are far apart; the two steps still cancel)."""
+    from dracc.ingest.frames import KINDS, Rejects, SourceInfo, TimeEvents, Voyage, empty_frame
+    from dracc.sim import SimParams, simulate
+    from dracc.sim.faults import parse_fault
+
+    sv = simulate(SimParams(duration_s=3600.0, seed=2, compass_hz=1.0, aux_hz=0.0, speed_kn=12.0,
+                            faults=(parse_fault("jump:GNSS@20min+10min=670m"),)))
+    frames = {k: sv.frames.get(k, empty_frame(k)) for k in KINDS}
+    voyage = Voyage(frames, {k: SourceInfo(k, roles=[r]) for k, r in sv.roles.items()}, Rejects(),
+                    TimeEvents(), [])
+    jumps = [f for f in detect_faults(voyage) if f.kind == "jump"]
+    assert len(jumps) == 1 and jumps[0].source == "GNSS"
+    assert "back at" in jumps[0].message
+    assert abs(jumps[0].duration_s - 600.0) < 5.0
