@@ -980,10 +980,26 @@ def _record(vessel, night, content_hash, settings_hash, clock, facts: NightFacts
         dr_nees=facts.dr_nees)
 
 
+def jsonable(x):
+    """``x`` in JSON types: NaN and infinities become None, tuples lists, numpy scalars
+    Python numbers, anything else its text."""
+    if isinstance(x, Mapping):
+        return {str(k): jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [jsonable(v) for v in x]
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
+    if x is None or isinstance(x, (bool, int, str)):
+        return x
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return str(x)
+    return v if math.isfinite(v) else None
+
+
 def _finding_dict(f: Finding) -> dict:
-    d = asdict(f)
-    d["evidence"] = list(d["evidence"])
-    return json.loads(json.dumps(d, default=str, allow_nan=True).replace("NaN", "null"))
+    return jsonable(asdict(f))
 
 
 def _store_night(store: StateStore, record: NightRecord, seeds) -> str:

@@ -76,7 +76,7 @@ import pandas as pd
 
 from . import distributions as dist
 from .config import FaultsConfig, IntegrityConfig
-from .deviation.sampling import sample_unit, unit_series_from_voyage
+from .deviation.sampling import align_at, sample_unit, unit_series_from_voyage
 from .ep import OUTLIER_NIS
 from .faults import SensorFault, detect_faults
 from .geodesy import angdiff, circmean, offset_ne_m
@@ -217,6 +217,13 @@ def _by_source(df: pd.DataFrame):
         return
     for key, g in df.groupby("source", sort=True, observed=True):
         yield str(key), g
+
+
+def _not_checked(check: str, name: str, source: str | None, role: str | None, statistic: str,
+                 unit: str, rule: str, message: str, why: str) -> Check:
+    """A check that could not be made, with why."""
+    return Check(check, name, source, role, "not_checked", _stat(statistic, None, unit),
+                 _thr(None, unit, rule), {}, 0.0, message, why_not=why)
 
 
 def _role(voyage: Voyage, key: str) -> str | None:
@@ -633,20 +640,18 @@ def _heading_consistency(voyage: Voyage, cfg: IntegrityConfig, start_ns: int, en
     if not keys:
         return []
     rule = "compass true heading minus the INS mean heading, its constant part removed"
+
+    def skip(message: str, why: str) -> Check:
+        return _not_checked("consistency", "heading", ",".join(keys), "compass",
+                            "heading_disagreement", "deg", rule, message, why)
+
     if not ins:
-        return [Check("consistency", "heading", ",".join(keys), "compass", "not_checked",
-                      _stat("heading_disagreement", None, "deg"), _thr(None, "deg", rule), {}, 0.0,
-                      "compass: no INS heading to compare with", why_not="no INS unit")]
+        return [skip("compass: no INS heading to compare with", "no INS unit")]
     hd = voyage.frame("heading", "compass")
     hd = hd[(hd["reference"] == "T") & np.isfinite(hd["heading_rad"].to_numpy(float))]
     if len(hd) < 30:
-        return [Check("consistency", "heading", ",".join(keys), "compass", "not_checked",
-                      _stat("heading_disagreement", None, "deg"), _thr(None, "deg", rule), {}, 0.0,
-                      "compass: no true heading (HDT/THS, or HDG with variation) to compare",
-                      why_not="fewer than 30 true headings from the compass")]
+        return [skip("compass: no true heading (HDT/THS, or HDG with variation) to compare", "fewer than 30 true headings from the compass")]
     instants = np.arange(start_ns, end_ns, int(cfg.consistency_interval_s * NS_PER_S), dtype=np.int64)
-    from .deviation.sampling import align_at
-
     c, _ = align_at(hd["time_ns"].to_numpy(np.int64), hd["heading_rad"].to_numpy(float)[None, :],
                     instants, cfg.consistency_max_gap_s, circular=(True,))
     hs = [sample_unit(unit_series_from_voyage(voyage, r), instants, cfg.consistency_max_gap_s).heading_rad
@@ -655,10 +660,7 @@ def _heading_consistency(voyage: Voyage, cfg: IntegrityConfig, start_ns: int, en
     d = angdiff(c[0], m) / DEG_RAD
     ok = np.isfinite(d)
     if ok.sum() < 30:
-        return [Check("consistency", "heading", ",".join(keys), "compass", "not_checked",
-                      _stat("heading_disagreement", None, "deg"), _thr(None, "deg", rule), {}, 0.0,
-                      "compass: fewer than 30 instants with both compass and INS heading",
-                      why_not="fewer than 30 common instants")]
+        return [skip("compass: fewer than 30 instants with both compass and INS heading", "fewer than 30 common instants")]
     x = d - np.median(d[ok])
     s = _tail_sigma(x[ok])
     z = _z_two_sided(cfg.false_alarm, int(ok.sum()))
@@ -713,6 +715,11 @@ def _speed_consistency(voyage: Voyage, cfg: IntegrityConfig, start_ns: int, end_
         return []
     rule = ("log speed (its scale fitted) minus the ground speed less the current (1 h running "
             "median) along the heading")
+
+    def skip(message: str, why: str) -> Check:
+        return _not_checked("consistency", "speed", ",".join(keys), "log", "speed_disagreement",
+                            "kn", rule, message, why)
+
     wt = voyage.frame("water", "log")
     wt = wt[np.isfinite(wt["stw_mps"].to_numpy(float))]
     ref_roles = [r for r in ("gnss", *INS_ROLES) if len(voyage.frame("ground", r))]
@@ -720,11 +727,7 @@ def _speed_consistency(voyage: Voyage, cfg: IntegrityConfig, start_ns: int, end_
     if len(wt) < 30 or not ref_roles or not head_roles:
         why = ("no speed through the water" if len(wt) < 30 else
                "no ground velocity (VTG/RMC)" if not ref_roles else "no heading")
-        return [Check("consistency", "speed", ",".join(keys), "log", "not_checked",
-                      _stat("speed_disagreement", None, "kn"), _thr(None, "kn", rule), {}, 0.0,
-                      f"log: not checked: {why}", why_not=why)]
-    from .deviation.sampling import align_at
-
+        return [skip(f"log: not checked: {why}", why)]
     step_ns = int(cfg.consistency_interval_s * NS_PER_S)
     instants = np.arange(start_ns, end_ns, step_ns, dtype=np.int64)
     gap = cfg.consistency_max_gap_s
@@ -741,10 +744,7 @@ def _speed_consistency(voyage: Voyage, cfg: IntegrityConfig, start_ns: int, end_
     x = _log_residual(stw[0], vel, h[0], int(round(3600.0 / cfg.consistency_interval_s)))
     ok = np.isfinite(x)
     if ok.sum() < 30:
-        return [Check("consistency", "speed", ",".join(keys), "log", "not_checked",
-                      _stat("speed_disagreement", None, "kn"), _thr(None, "kn", rule), {}, 0.0,
-                      "log: fewer than 30 instants with log, ground speed and heading",
-                      why_not="fewer than 30 common instants")]
+        return [skip("log: fewer than 30 instants with log, ground speed and heading", "fewer than 30 common instants")]
     s = _tail_sigma(x[ok])
     z = _z_two_sided(cfg.false_alarm, int(ok.sum()))
     speed = float(np.nanmedian(stw[0]))

@@ -9,13 +9,12 @@ the accuracy window, and the analysis document (``dracc.analysis/1``) it rests o
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Mapping
 from dataclasses import asdict
 from pathlib import Path
 
 from .. import __version__, atomic
-from ..audit import AuditOutcome, Finding
+from ..audit import AuditOutcome, Finding, jsonable
 
 SCHEMA = "dracc.audit/1"
 SCHEMA_PATH = Path(__file__).with_name("audit.schema.json")
@@ -23,23 +22,6 @@ SCHEMA_PATH = Path(__file__).with_name("audit.schema.json")
 
 def load_schema() -> dict:
     return json.loads(SCHEMA_PATH.read_text(encoding="utf-8"))
-
-
-def _clean(x):
-    """JSON types: NaN and infinities become null, tuples lists."""
-    if isinstance(x, Mapping):
-        return {str(k): _clean(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
-    if isinstance(x, float):
-        return x if math.isfinite(x) else None
-    if x is None or isinstance(x, (bool, int, str)):
-        return x
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        return str(x)
-    return v if math.isfinite(v) else None
 
 
 def finding_dict(f: Finding) -> dict:
@@ -51,7 +33,7 @@ def finding_dict(f: Finding) -> dict:
     head["kind"] = d.pop("kind")
     head["subject"] = d.pop("subject")
     head["false_alarm"] = d.pop("false_alarm")
-    return _clean(head)
+    return jsonable(head)
 
 
 def to_dict(o: AuditOutcome, analysis: Mapping | None) -> dict:
@@ -89,7 +71,7 @@ def to_dict(o: AuditOutcome, analysis: Mapping | None) -> dict:
         "missing": list(r.missing),
         "analysis": analysis,
     }
-    return _clean(doc)
+    return jsonable(doc)
 
 
 def write_json(o: AuditOutcome, analysis: Mapping | None, path: str | Path) -> None:
