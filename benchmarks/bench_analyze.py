@@ -162,9 +162,9 @@ def interleaved(runs: dict[str, tuple[list[str], object]], repeat: int) -> dict[
 
 def stages(log: Path, workdir: Path) -> list[tuple[str, float]]:
     """Where the time goes, in this process (imports excluded)."""
-    from dracc import pipeline
-    from dracc.config import Config
+    from dracc.core.config import Config
     from dracc.ingest import read_logs
+    from dracc.pipeline import analysis as pipeline
     from dracc.report import html, json_report, tables, terminal
 
     cfg = Config()

@@ -21,7 +21,7 @@ from pathlib import Path
 
 _CHILD = r"""
 import sys, json, time
-from dracc.config import IngestConfig
+from dracc.core.config import IngestConfig
 from dracc.ingest.csv import read_csv
 def status_mib(key):
     for line in open("/proc/self/status"):

@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from dracc.deadreckoning import dead_reckon, integrate_ne
+from dracc.math.deadreckoning import dead_reckon, integrate_ne
 
 
 def main() -> None:

@@ -1,4 +1,4 @@
-"""Timing of the INS-deviation analysis (dracc.deviation.analyse_deviations).
+"""Timing of the INS-deviation analysis (dracc.math.deviation.analyse_deviations).
 
 Three INS and a GNSS reference, positions and headings at RATE_HZ for DAYS days
 (errors are simple sinusoids: this measures speed, not statistics).  Prints the
@@ -14,9 +14,9 @@ import time
 import numpy as np
 
 import dracc.ingest  # noqa: F401  (import order)
-from dracc.config import DeviationConfig
-from dracc.deviation import UnitSeries, analyse_deviations
-from dracc.geodesy import add_offset_ne
+from dracc.core.config import DeviationConfig
+from dracc.core.geodesy import add_offset_ne
+from dracc.math.deviation import UnitSeries, analyse_deviations
 
 NS = 1_000_000_000
 T0 = 1_700_006_400 * NS

@@ -27,10 +27,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from test_ep_montecarlo import random_voyage  # noqa: E402
 from test_pipeline import voyage_from_sim  # noqa: E402
 
-from dracc.config import Config  # noqa: E402
-from dracc.distributions import binom_cdf  # noqa: E402
-from dracc.geodesy import offset_ne_m  # noqa: E402
-from dracc.pipeline import analyse_voyage  # noqa: E402
+from dracc.core.config import Config  # noqa: E402
+from dracc.core.distributions import binom_cdf  # noqa: E402
+from dracc.core.geodesy import offset_ne_m  # noqa: E402
+from dracc.pipeline.analysis import analyse_voyage  # noqa: E402
 from dracc.sim import simulate  # noqa: E402
 from dracc.sim.model import generated_legs  # noqa: E402
 

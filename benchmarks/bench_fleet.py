@@ -3,7 +3,7 @@
     python benchmarks/bench_fleet.py [--logs 20] [--hours 6] [--workdir DIR] [--repeat N] [--no-dask]
 
 Simulates ``--logs`` voyages with ``dracc simulate`` (different seeds, five vessels),
-then runs the batch (:func:`dracc.fleet.run_fleet`, ``force=True`` so every log is
+then runs the batch (:func:`dracc.pipeline.fleet.run_fleet`, ``force=True`` so every log is
 analysed) on a local process pool of 1 and of 2 workers, and on a Dask scheduler with
 two single-threaded workers started on loopback.  Prints wall times, the speed-up and
 whether the Dask fleet table equals the local one.  The target (issue 7): 2 workers at
@@ -29,8 +29,8 @@ from pathlib import Path
 import pandas as pd
 
 from dracc.cli.main import main as dracc
-from dracc.config import Config
-from dracc.fleet import discover, run_fleet
+from dracc.core.config import Config
+from dracc.pipeline.fleet import discover, run_fleet
 
 VESSELS = ("Aurora", "Borealis", "Caledonia", "Dagny", "Eiderstedt")
 

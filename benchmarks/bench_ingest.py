@@ -87,7 +87,7 @@ def bench_pynmea2(path: Path, max_lines: int) -> tuple[int, float, int, float]:
 
 
 def bench_dracc(path: Path) -> tuple[int, float, int, float]:
-    from dracc.config import IngestConfig
+    from dracc.core.config import IngestConfig
     from dracc.ingest.nmea import read_nmea
 
     c0 = _cpu()
@@ -99,7 +99,7 @@ def bench_dracc(path: Path) -> tuple[int, float, int, float]:
 _MEM_CHILD = r"""
 import json, resource, sys, time
 from pathlib import Path
-from dracc.config import IngestConfig
+from dracc.core.config import IngestConfig
 from dracc.cli.inspect_cmd import inspect_logs
 t = time.perf_counter()
 rep = inspect_logs([Path(sys.argv[1])], IngestConfig(), show_progress=False)

@@ -25,8 +25,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from test_integrity import _params, voyage_from_sim  # noqa: E402
 
-from dracc.distributions import beta_ppf  # noqa: E402
-from dracc.integrity import check_night  # noqa: E402
+from dracc.core.distributions import beta_ppf  # noqa: E402
+from dracc.math.integrity import check_night  # noqa: E402
 from dracc.sim import simulate  # noqa: E402
 
 

@@ -36,7 +36,7 @@ from pathlib import Path
 
 _CHILD = r"""
 import sys, json
-from dracc.config import IngestConfig
+from dracc.core.config import IngestConfig
 from dracc.ingest.mcap import read_mcap
 import dracc.ingest.nmea  # noqa: F401  (import cost outside the measurement)
 def status_kib(key):  # VmHWM: peak RSS of this process image (ru_maxrss keeps the parent's across exec)
@@ -72,7 +72,7 @@ def make_files(hours: float, workdir: Path) -> dict[str, Path]:
 
 
 def time_dracc(path: Path) -> tuple[float, int]:
-    from dracc.config import IngestConfig
+    from dracc.core.config import IngestConfig
     from dracc.ingest.mcap import read_mcap
 
     t = time.perf_counter()

@@ -22,10 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
-from dracc.current import CurrentModel, estimate_current
-from dracc.fusion import PositionFix
-from dracc.geodesy import offset_ne_m
-from dracc.units import DEG_RAD, KN_MPS
+from dracc.core.geodesy import offset_ne_m
+from dracc.core.units import DEG_RAD, KN_MPS
+from dracc.math.current import CurrentModel, estimate_current
+from dracc.math.fusion import PositionFix
 
 LOG = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "VDRplayer" / "Hakefjord.txt"
 

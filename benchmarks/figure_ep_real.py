@@ -20,9 +20,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from dracc.config import Config  # noqa: E402
-from dracc.geodesy import interp_position, offset_ne_m  # noqa: E402
-from dracc.pipeline import analyse  # noqa: E402
+from dracc.core.config import Config  # noqa: E402
+from dracc.core.geodesy import interp_position, offset_ne_m  # noqa: E402
+from dracc.pipeline.analysis import analyse  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT = ROOT.parent / "shared/data/real/anemomind/psaros33_Banque_Sturdza/2014/20140821/NMEA0010.TXT"

@@ -22,7 +22,7 @@ Containers
 
 Pipeline
     whole logs (sample and real) with 1-10 % of their lines mutated, through
-    ``dracc.pipeline.analyse`` and every renderer (JSON checked against its schema,
+    ``dracc.pipeline.analysis.analyse`` and every renderer (JSON checked against its schema,
     HTML, terminal): a report or a one-line error, never another exception.  The
     address space is capped (``--max-memory-gb``) so a runaway allocation shows as a
     MemoryError instead of the kernel killing a process on a shared machine.
@@ -57,8 +57,8 @@ from test_fuzz import (  # noqa: E402  (the fuzzer lives with its tests)
     mutate,
 )
 
-from dracc.config import IngestConfig  # noqa: E402
-from dracc.errors import DraccError, IngestError  # noqa: E402
+from dracc.core.config import IngestConfig  # noqa: E402
+from dracc.core.errors import DraccError, IngestError  # noqa: E402
 from dracc.ingest import read_file  # noqa: E402
 
 CONFIGS = {
@@ -186,8 +186,8 @@ def run_pipeline(n: int, rng: random.Random, tmp: Path, crash_dir: Path) -> dict
     """Whole logs with 1-10 % of their lines mutated, through analyse() and every renderer."""
     import jsonschema
 
-    from dracc.config import Config
-    from dracc.pipeline import analyse
+    from dracc.core.config import Config
+    from dracc.pipeline.analysis import analyse
     from dracc.report import html as html_report
     from dracc.report import json_report, terminal
 

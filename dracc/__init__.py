@@ -7,9 +7,9 @@ Units
     ``_ns``, ``_m2``, ``_radps``.  Degrees (``_deg``), knots (``_kn``) and nautical
     miles (``_nmi``) appear only at the edges: ingest of raw sentences and reports.
 Angles
-    Radians inside.  Every angle difference goes through :func:`dracc.geodesy.angdiff`
+    Radians inside.  Every angle difference goes through :func:`dracc.core.geodesy.angdiff`
     into (-pi, pi]; means of angles are taken on the circle
-    (:func:`dracc.geodesy.circmean`).  Headings and courses are in [0, 2*pi).
+    (:func:`dracc.core.geodesy.circmean`).  Headings and courses are in [0, 2*pi).
 Time
     UTC as int64 nanoseconds since the Unix epoch (``time_ns``), as MCAP does.
     Math kernels take float seconds from an explicit epoch.

@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from dracc.cli.analyze_cmd import parse_duration_s, parse_roles
-from dracc.errors import ConfigError, ExitCode
+from dracc.core.errors import ConfigError, ExitCode
 from dracc.report.json_report import load_schema
 
 SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"

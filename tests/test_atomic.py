@@ -3,7 +3,7 @@ import stat
 
 import pytest
 
-from dracc.atomic import atomic_path, together, write_text
+from dracc.core.atomic import atomic_path, together, write_text
 
 
 def test_write_is_atomic_and_gets_umask_mode(tmp_path):
@@ -55,7 +55,7 @@ def test_a_write_outside_together_is_renamed_at_once(tmp_path):
 def test_file_set_publishes_a_whole_set_by_one_link(tmp_path):
     import signal
 
-    from dracc.atomic import CURRENT, RUNS, deferred_signals, file_set
+    from dracc.core.atomic import CURRENT, RUNS, deferred_signals, file_set
 
     out = tmp_path / "out"
     done: list[str] = []

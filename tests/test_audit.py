@@ -8,7 +8,9 @@ import math
 import pytest
 from test_audit_helpers import make_doc
 
-from dracc.audit import (
+from dracc.core.config import config_from_dict
+from dracc.core.errors import ConfigError, ExitCode, IngestError, InsufficientDataError
+from dracc.pipeline.audit import (
     AuditConfig,
     NoLogsError,
     apriori_chain,
@@ -22,9 +24,7 @@ from dracc.audit import (
     select_logs,
     yesterday_utc,
 )
-from dracc.config import config_from_dict
-from dracc.errors import ConfigError, ExitCode, IngestError, InsufficientDataError
-from dracc.state import StateStore
+from dracc.pipeline.state import StateStore
 
 # ------------------------------------------------------------------ the a priori rule
 
@@ -143,8 +143,8 @@ def _window_nights(store, lat, *, acfg, hours=24.0):
 
 def _pooled_limit(lat, n=24, k=1.32):
     """The (K8) limiting error of the pooled deviations, from the seed-001 formulas."""
-    from dracc.config import DeviationConfig
-    from dracc.deviation import stats
+    from dracc.core.config import DeviationConfig
+    from dracc.math.deviation import stats
 
     d = DeviationConfig()
     m_u = math.sqrt(sum(n * (v / k) ** 2 for v in lat) / (n * len(lat)))
@@ -251,7 +251,7 @@ INCONSISTENT = ("inconsistent (circle too small): reference inside 2M at 93.3 % 
     ("inconsistently worded", None), ("", None), (None, None), (3, None),
 ])
 def test_dr_verdict_word(text, word):
-    from dracc.audit import dr_verdict_word
+    from dracc.pipeline.audit import dr_verdict_word
 
     assert dr_verdict_word(text) == word
 
@@ -466,9 +466,9 @@ def test_yesterday_utc():
 @pytest.mark.parametrize("table, word", [({"name": 5}, "name"), ({"name": "  "}, "name"),
                                          ({"nmae": "Aurora"}, "nmae")])
 def test_vessel_table_is_checked_not_silently_default(table, word):
-    from dracc.audit import AuditConfig, vessel_name
-    from dracc.config import Config
-    from dracc.errors import ConfigError
+    from dracc.core.config import Config
+    from dracc.core.errors import ConfigError
+    from dracc.pipeline.audit import AuditConfig, vessel_name
 
     with pytest.raises(ConfigError, match=word):
         vessel_name(Config(extra={"vessel": table}), AuditConfig(), None)

@@ -11,9 +11,9 @@ import jsonschema
 import numpy as np
 import pytest
 
-import dracc.audit as audit_mod
+import dracc.pipeline.audit as audit_mod
 from dracc.cli.main import main
-from dracc.errors import ExitCode
+from dracc.core.errors import ExitCode
 from dracc.report.audit_json import load_schema
 
 NIGHTS = (("2026-11-18", 11, 1.0), ("2026-11-19", 12, 2.5), ("2026-11-20", 13, 0.7))
@@ -289,9 +289,9 @@ def test_calibration_checks_against_known_sensor_errors(run_cli, tmp_path):
 def test_summary_text_by_hand(tmp_path):
     from test_audit_helpers import make_doc
 
-    from dracc.audit import AuditConfig, audit_document
     from dracc.cli.audit_cmd import format_summary
-    from dracc.state import StateStore
+    from dracc.pipeline.audit import AuditConfig, audit_document
+    from dracc.pipeline.state import StateStore
 
     with StateStore(tmp_path / "s.sqlite") as store:
         def run(night, lat, **kw):
@@ -334,9 +334,9 @@ INCONSISTENT = ("inconsistent (circle too small): reference inside 2M at 93.3 % 
 def test_summary_carries_the_dr_verdict(tmp_path):
     from test_audit_helpers import make_doc
 
-    from dracc.audit import AuditConfig, audit_document
     from dracc.cli.audit_cmd import format_summary
-    from dracc.state import StateStore
+    from dracc.pipeline.audit import AuditConfig, audit_document
+    from dracc.pipeline.state import StateStore
 
     with StateStore(tmp_path / "s.sqlite") as store:
         def run(night, **kw):
@@ -415,7 +415,7 @@ def test_history_known_selection_and_an_empty_database(run_cli, recorded, tmp_pa
                            "ins2", "--channel", "lon", "--json")
     assert code == ExitCode.OK
     assert [n["vessel"] for n in json.loads(out)["nights"]] == ["Nordlys"]
-    from dracc.state import StateStore
+    from dracc.pipeline.state import StateStore
 
     with StateStore(tmp_path / "empty.sqlite"):
         pass

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from dracc.audit import TEST_SLEEP_ENV
 from dracc.cli.main import main
+from dracc.pipeline.audit import TEST_SLEEP_ENV
 
 pytestmark = pytest.mark.slow
 

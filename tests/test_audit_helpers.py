@@ -55,7 +55,7 @@ def make_doc(night: str = "2026-11-20", m_y: dict | None = None, *, limit_factor
 
 def test_helper_document_reads_back():
     # the hand-built document is read by the audit the way the tests assume
-    from dracc.audit import facts_from_analysis
+    from dracc.pipeline.audit import facts_from_analysis
 
     f = facts_from_analysis(make_doc(m_y={"ins1": {"lat": 132.0}}))
     (row,) = f.channels
@@ -65,7 +65,7 @@ def test_helper_document_reads_back():
 
 
 def test_helper_document_carries_the_dr_verdict():
-    from dracc.audit import facts_from_analysis
+    from dracc.pipeline.audit import facts_from_analysis
 
     f = facts_from_analysis(make_doc(verdict="inconsistent (circle too small): x", nees=(80.0, 5.1, 34.3),
                                      dominant=("the current", "current_kn")))

@@ -14,17 +14,17 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from dracc.calibration import (
+from dracc.core.errors import InsufficientDataError
+from dracc.core.geodesy import add_offset_ne, angdiff
+from dracc.core.units import DEG_RAD as D
+from dracc.core.units import KN_MPS as KN
+from dracc.math.calibration import (
     block_means,
     calibrate_from_track,
     compass_error_from_heading,
     deviation_from_heading,
 )
-from dracc.deadreckoning import deviation_curve_rad, integrate_ne
-from dracc.errors import InsufficientDataError
-from dracc.geodesy import add_offset_ne, angdiff
-from dracc.units import DEG_RAD as D
-from dracc.units import KN_MPS as KN
+from dracc.math.deadreckoning import deviation_curve_rad, integrate_ne
 
 
 def _gm(rng, n, sigma, tau_s, dt_s=1.0):
@@ -215,8 +215,8 @@ def test_regression_single_straight_leg_with_yaw_is_not_separable(tmp_path):
     """A simulated 3 h voyage on one course (yaw noise only) fitted a compass error of
     -0.3 +- 31 deg and a log scale of 175 +- 151 %: nearly singular, now reported as such."""
     from dracc.cli.main import main
-    from dracc.config import Config
-    from dracc.pipeline import analyse
+    from dracc.core.config import Config
+    from dracc.pipeline.analysis import analyse
 
     assert main(["simulate", "--out", str(tmp_path), "--hours", "3", "--seed", "105", "--name", "v",
                  "--compass-hz", "1", "--truth-hz", "0.01", "--legs", "0:60"]) == 0

@@ -10,7 +10,7 @@ import pytest
 import dracc.cli.main  # noqa: F401  (registers every command on app)
 from dracc import __version__
 from dracc.cli.app import app
-from dracc.errors import ExitCode
+from dracc.core.errors import ExitCode
 
 
 def _commands():

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from dracc.errors import ExitCode
+from dracc.core.errors import ExitCode
 
 HAS_DASK = importlib.util.find_spec("distributed") is not None
 

@@ -2,8 +2,8 @@ import math
 
 import pytest
 
-from dracc.config import Config, config_from_dict, load_config, with_overrides
-from dracc.errors import ConfigError
+from dracc.core.config import Config, config_from_dict, load_config, with_overrides
+from dracc.core.errors import ConfigError
 
 
 def test_defaults_from_imo_standards():

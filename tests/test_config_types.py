@@ -20,8 +20,8 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-from dracc import config as C
-from dracc.config import (
+from dracc.core import config as C
+from dracc.core.config import (
     Config,
     DeadReckoningConfig,
     ErrorSource,
@@ -30,7 +30,7 @@ from dracc.config import (
     validate,
     with_overrides,
 )
-from dracc.errors import ConfigError, ExitCode
+from dracc.core.errors import ConfigError, ExitCode
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "docs" / "dracc.example.toml"
@@ -299,8 +299,8 @@ def test_overrides_are_checked_too():
 
 def test_reset_grammar_is_the_dead_reckonings():
     """config.parse_reset_s checks [dead_reckoning] reset at load time; it must accept what
-    dracc.deadreckoning.parse_reset_s (which the DR uses) accepts, and reject the same."""
-    from dracc.deadreckoning import parse_reset_s
+    dracc.math.deadreckoning.parse_reset_s (which the DR uses) accepts, and reject the same."""
+    from dracc.math.deadreckoning import parse_reset_s
 
     for text in ("1h", "30min", "90s", "0.5h", "2hr", "1d", "45 m", "watch", "never", "WATCH",
                  120, 7200.0, "hourly", "-1h", "0h", "1 fortnight", "", "auto", "1h30min"):
@@ -314,8 +314,8 @@ def test_reset_grammar_is_the_dead_reckonings():
 
 
 def test_apriori_channels_are_the_deviation_analysis_channels():
-    from dracc.audit import CHANNEL_KEYS
-    from dracc.deviation.analysis import SAMPLE_KEYS
+    from dracc.math.deviation.analysis import SAMPLE_KEYS
+    from dracc.pipeline.audit import CHANNEL_KEYS
 
     assert set(C._APRIORI_KEYS) == set(SAMPLE_KEYS.values()) == set(CHANNEL_KEYS.values())
 

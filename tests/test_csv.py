@@ -8,11 +8,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from dracc.config import IngestConfig
-from dracc.errors import ConfigError, IngestError
+from dracc.core.config import IngestConfig
+from dracc.core.errors import ConfigError, IngestError
+from dracc.frames import make_frame
 from dracc.ingest.csv import looks_like_csv, parse_times, read_csv
 from dracc.ingest.csv_quantities import QUANTITIES
-from dracc.ingest.frames import make_frame
 from dracc.sim.csv_out import write_csv
 
 T0 = 1_700_000_000_000_000_000

@@ -10,7 +10,10 @@ import pytest
 from scipy import stats
 from scipy.linalg import expm
 
-from dracc.current import (
+from dracc.core.errors import InsufficientDataError
+from dracc.core.geodesy import add_offset_ne, offset_ne_m
+from dracc.core.units import DEG_RAD, KN_MPS
+from dracc.math.current import (
     CurrentModel,
     estimate_current,
     nees,
@@ -19,10 +22,7 @@ from dracc.current import (
     simulate_voyage,
     transition,
 )
-from dracc.errors import InsufficientDataError
-from dracc.fusion import LineLOP, PositionFix, RangeLOP
-from dracc.geodesy import add_offset_ne, offset_ne_m
-from dracc.units import DEG_RAD, KN_MPS
+from dracc.math.fusion import LineLOP, PositionFix, RangeLOP
 
 LAT0, LON0 = np.deg2rad(54.52), np.deg2rad(18.55)
 
@@ -96,7 +96,7 @@ def test_no_current_no_noise_dr_matches_geodesic():
 
 
 def test_from_config_converts_units():
-    from dracc.config import DeadReckoningConfig
+    from dracc.core.config import DeadReckoningConfig
 
     m = CurrentModel.from_config(DeadReckoningConfig())
     assert m.current_sigma_mps == pytest.approx(0.7 * 1852 / 3600)  # current_kn = { 0.7, 6 h }
@@ -111,7 +111,7 @@ def test_from_config_converts_units():
 def test_bias_current_is_the_limit_of_long_correlation_times():
     """tau = inf: a random constant (phi = 1, F_pc = dt, no driving noise), the limit of
     the closed forms as tau grows; finite everywhere, also at dt = 0."""
-    from dracc.current import _current_noise
+    from dracc.math.current import _current_noise
 
     dt = np.array([0.0, 1e-3, 60.0, 3600.0])
     f_pc, phi = transition(dt, np.inf)
@@ -138,9 +138,9 @@ def test_white_current_is_independent_per_second():
 
 
 def test_mixed_taus_broadcast_like_the_regular_ones():
-    """dracc.ep passes arrays of tau: a grid with inf, 0 and finite taus gives, for the
+    """dracc.math.ep passes arrays of tau: a grid with inf, 0 and finite taus gives, for the
     finite ones, exactly what the closed form gives alone."""
-    from dracc.current import gauss_markov_noise
+    from dracc.math.current import gauss_markov_noise
 
     dt = np.array([[0.0], [10.0], [600.0]])
     taus = np.array([[0.0, np.inf, 600.0]])
@@ -416,7 +416,7 @@ def test_real_log_hakefjord_blended_beats_dr(real_dir):
     """VDRplayer/Hakefjord.txt (yacht, 22 min): HDG (magnetic, +3.0 deg variation assumed,
     WMM-2015) and VHW drive the filter; the Garmin GGA gives a fix every 120 s and scores
     the EP at every other epoch (benchmarks/current_real_hakefjord.py prints the figures)."""
-    from dracc.config import IngestConfig
+    from dracc.core.config import IngestConfig
     from dracc.ingest import read_file
 
     frames = read_file(real_dir / "VDRplayer" / "Hakefjord.txt", IngestConfig()).frames
@@ -476,7 +476,7 @@ def test_analyze_accepts_every_form_of_an_error_source(run_cli, tmp_path, learn,
     bias, the log scale and the log noise, learned or not: exit 0 and a DR verdict."""
     import json
 
-    from dracc.config import load_config
+    from dracc.core.config import load_config
 
     lines = ["[dead_reckoning]", f"learn = {learn}"]
     lines += [f"{key} = {_FORMS[form].format(s=s)}" for key, s in _FORM_SIGMAS.items()]

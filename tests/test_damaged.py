@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from dracc.config import IngestConfig
-from dracc.errors import ExitCode
+from dracc.core.config import IngestConfig
+from dracc.core.errors import ExitCode
 from dracc.ingest import read_file
 
 REPO = Path(__file__).resolve().parents[1]

@@ -15,8 +15,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import brentq
 
-from dracc.config import DeadReckoningConfig, ErrorSource
-from dracc.deadreckoning import (
+from dracc.core.config import DeadReckoningConfig, ErrorSource
+from dracc.core.errors import ConfigError, InsufficientDataError
+from dracc.core.geodesy import A_M, E2, distance_m, k_lambda, k_phi
+from dracc.math.deadreckoning import (
     WATCH_S,
     course_gyro_rad,
     course_magnetic_rad,
@@ -43,8 +45,6 @@ from dracc.deadreckoning import (
     velocity_ground_ne_mps,
     velocity_water_ne_mps,
 )
-from dracc.errors import ConfigError, InsufficientDataError
-from dracc.geodesy import A_M, E2, distance_m, k_lambda, k_phi
 
 geographiclib = pytest.importorskip("geographiclib.geodesic")
 GEOD = geographiclib.Geodesic.WGS84

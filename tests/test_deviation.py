@@ -12,15 +12,20 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-import dracc.ingest  # noqa: F401  (import order: dracc.config <-> dracc.ingest)
-from dracc.config import DeviationConfig
-from dracc.deviation import UnitSeries, analyse_deviations, sampling_instants, three_cornered_hat
-from dracc.deviation import stats as S
-from dracc.deviation.hat import hat_variances, pairwise_mean_squares
-from dracc.deviation.reference import k_star_mark, kurtosis_mark
-from dracc.deviation.sampling import interpolate_at
-from dracc.errors import ConfigError
-from dracc.geodesy import add_offset_ne
+import dracc.ingest  # noqa: F401  (import order: dracc.core.config <-> dracc.ingest)
+from dracc.core.config import DeviationConfig
+from dracc.core.errors import ConfigError
+from dracc.core.geodesy import add_offset_ne
+from dracc.math.deviation import (
+    UnitSeries,
+    analyse_deviations,
+    sampling_instants,
+    three_cornered_hat,
+)
+from dracc.math.deviation import stats as S
+from dracc.math.deviation.hat import hat_variances, pairwise_mean_squares
+from dracc.math.deviation.reference import k_star_mark, kurtosis_mark
+from dracc.math.deviation.sampling import interpolate_at
 
 H = 3_600_000_000_000  # one hour in ns
 T0 = 1_700_006_400 * 1_000_000_000  # 2023-11-15T00:00:00Z, a UTC midnight
@@ -424,8 +429,8 @@ def test_to_dict_is_json_ready_with_the_report_keys():
 def test_unit_series_from_voyage_leaves_out_invalid_fixes_and_magnetic_headings():
     from collections import Counter
 
-    from dracc.deviation import unit_series_from_voyage
-    from dracc.ingest.frames import Rejects, SourceInfo, TimeEvents, Voyage, empty_frame, make_frame
+    from dracc.frames import Rejects, SourceInfo, TimeEvents, Voyage, empty_frame, make_frame
+    from dracc.math.deviation import unit_series_from_voyage
 
     t = np.array([T0, T0 + 1, T0 + 2], dtype=np.int64)
     pos = make_frame("position", {"time_ns": t, "source": ["INS1", "INS1", "GP"],
@@ -458,7 +463,7 @@ def test_interpolation_sorts_readings_and_ignores_nan_readings():
 
 def test_arc_minutes_against_geographiclib():
     geod = pytest.importorskip("geographiclib.geodesic").Geodesic.WGS84
-    from dracc.deviation.analysis import metres_to_arcmin
+    from dracc.math.deviation.analysis import metres_to_arcmin
 
     north_m = geod.Inverse(55.0, 12.0, 55.0 + 1 / 60, 12.0)["s12"]  # one arc-minute north
     east_m = geod.Inverse(55.0, 12.0, 55.0, 12.0 + 1 / 60)["s12"]  # one arc-minute east

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 import dracc.ingest as ingest
-from dracc.config import DeviationConfig, IngestConfig
-from dracc.deviation import analyse_deviations, sample_unit, unit_series_from_frames
+from dracc.core.config import DeviationConfig, IngestConfig
+from dracc.math.deviation import analyse_deviations, sample_unit, unit_series_from_frames
 
 geographiclib = pytest.importorskip("geographiclib.geodesic")
 

@@ -16,11 +16,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-import dracc.ingest  # noqa: F401  (import order: dracc.config <-> dracc.ingest)
-from dracc.config import DeviationConfig
-from dracc.deviation import analyse_deviations, unit_series_from_frames
-from dracc.deviation import stats as S
-from dracc.deviation.sampling import (
+import dracc.ingest  # noqa: F401  (import order: dracc.core.config <-> dracc.ingest)
+from dracc.core.config import DeviationConfig
+from dracc.core.geodesy import add_offset_ne, angdiff, k_lambda, k_phi
+from dracc.math.deviation import analyse_deviations, unit_series_from_frames
+from dracc.math.deviation import stats as S
+from dracc.math.deviation.sampling import (
     GAP_TOO_LONG,
     OUTSIDE_SPAN,
     SAMPLED,
@@ -29,7 +30,6 @@ from dracc.deviation.sampling import (
     interpolate_at,
     sample_unit,
 )
-from dracc.geodesy import add_offset_ne, angdiff, k_lambda, k_phi
 
 model = pytest.importorskip("dracc.sim.model")
 
@@ -278,7 +278,7 @@ def test_a_unit_ending_early_invents_no_deviation():
 
 
 def test_a_gap_too_long_is_counted_and_the_config_is_checked():
-    from dracc.errors import ConfigError
+    from dracc.core.errors import ConfigError
 
     t = T0 + np.arange(0, 3 * 3600 + 1, 10, dtype=np.int64) * NS
     lat0, lon0 = math.radians(54.0), math.radians(18.0)

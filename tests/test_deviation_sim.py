@@ -12,12 +12,12 @@ import math
 import numpy as np
 import pytest
 
-import dracc.ingest  # noqa: F401  (import order: dracc.config <-> dracc.ingest)
-from dracc.config import DeviationConfig
-from dracc.deviation import UnitSeries, analyse_deviations
-from dracc.deviation import stats as S
-from dracc.deviation.hat import hat_variances
-from dracc.geodesy import add_offset_ne, wrap_2pi
+import dracc.ingest  # noqa: F401  (import order: dracc.core.config <-> dracc.ingest)
+from dracc.core.config import DeviationConfig
+from dracc.core.geodesy import add_offset_ne, wrap_2pi
+from dracc.math.deviation import UnitSeries, analyse_deviations
+from dracc.math.deviation import stats as S
+from dracc.math.deviation.hat import hat_variances
 
 NS = 1_000_000_000
 T0 = 1_700_006_400 * NS  # 2023-11-15T00:00:00Z
@@ -231,7 +231,7 @@ def test_reference_rms_matches_the_project_simulators_truth():
     # white; unequal units) with its canonical frames as a perfect parser returns them:
     # the Table 1 reference RMS against GNSS matches the simulator's own per-unit RMS.
     model = pytest.importorskip("dracc.sim.model")
-    from dracc.deviation import unit_series_from_frames
+    from dracc.math.deviation import unit_series_from_frames
 
     sim = model.simulate(model.SimParams(duration_s=3 * DAY_S, seed=3, compass_hz=0.1,
                                          log_hz=0.1, ins_hz=0.1, gnss_hz=0.1, aux_hz=0.0))

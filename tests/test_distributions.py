@@ -1,4 +1,4 @@
-"""dracc.distributions against scipy.stats (the independent reference) and hand values."""
+"""dracc.core.distributions against scipy.stats (the independent reference) and hand values."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from dracc import distributions as dist
+from dracc.core import distributions as dist
 
 
 def test_normal_against_scipy_stats_and_hand_values():

@@ -1,8 +1,8 @@
-"""The estimated position and its learned error model (dracc.ep), against known truth.
+"""The estimated position and its learned error model (dracc.math.ep), against known truth.
 
 The voyages here are written in this file: a water track on chosen courses, a known
 current, compass and log errors, and fixes with known noise; dracc's dead reckoning
-runs on the measured heading and speed, dracc.ep learns from the fixes.
+runs on the measured heading and speed, dracc.math.ep learns from the fixes.
 """
 
 from __future__ import annotations
@@ -12,9 +12,11 @@ import math
 import numpy as np
 import pytest
 
-from dracc.config import DeadReckoningConfig
-from dracc.deadreckoning import covered_span_s, dead_reckon, dr_schedule, integrate_ne
-from dracc.ep import (
+from dracc.core.config import DeadReckoningConfig
+from dracc.core.geodesy import add_offset_ne, offset_ne_m
+from dracc.core.units import DEG_RAD, KN_MPS
+from dracc.math.deadreckoning import covered_span_s, dead_reckon, dr_schedule, integrate_ne
+from dracc.math.ep import (
     DELTA,
     EPS,
     SCALE,
@@ -26,8 +28,6 @@ from dracc.ep import (
     sensitivities,
     step_ok_of,
 )
-from dracc.geodesy import add_offset_ne, offset_ne_m
-from dracc.units import DEG_RAD, KN_MPS
 
 LAT0, LON0 = 50.0 * DEG_RAD, -4.0 * DEG_RAD
 PRIOR = ErrorPrior(current_sigma_mps=0.7 * KN_MPS, heading_sigma_rad=0.8 * DEG_RAD,

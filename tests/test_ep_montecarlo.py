@@ -24,9 +24,9 @@ from __future__ import annotations
 import numpy as np
 from test_pipeline import voyage_from_sim
 
-from dracc.config import Config
-from dracc.geodesy import offset_ne_m
-from dracc.pipeline import analyse_voyage
+from dracc.core.config import Config
+from dracc.core.geodesy import offset_ne_m
+from dracc.pipeline.analysis import analyse_voyage
 from dracc.sim import GM, SimParams, simulate
 
 N_VOYAGES = 40
@@ -80,7 +80,7 @@ def test_shipped_sample_and_simulate_seed_11_are_judged_consistent():
     `dracc simulate --seed 11` writes (its defaults: 4 h), against their GNSS."""
     from pathlib import Path
 
-    from dracc.pipeline import analyse
+    from dracc.pipeline.analysis import analyse
 
     sample = Path(__file__).resolve().parents[1] / "sample_logs" / "day" / "voyage_day.mcap"
     for a in (analyse([sample], Config()),

@@ -1,4 +1,4 @@
-"""Sensor faults (dracc.faults): each fault kind injected into a simulated voyage with known
+"""Sensor faults (dracc.math.faults): each fault kind injected into a simulated voyage with known
 truth is found with its times and raw values; clean simulated and real logs give none; the
 [faults] config; the pipeline reports faults and leaves them out only when told to."""
 
@@ -13,17 +13,17 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from dracc.config import Config, FaultsConfig, IngestConfig, config_from_dict, load_config
-from dracc.errors import ConfigError
-from dracc.faults import FAULT_KINDS, SensorFault, detect_faults, exclude_faults
-from dracc.geodesy import add_offset_ne
+from dracc.core.config import Config, FaultsConfig, IngestConfig, config_from_dict, load_config
+from dracc.core.errors import ConfigError
+from dracc.core.geodesy import add_offset_ne
+from dracc.core.units import DEG_RAD, KN_MPS, NMI_M, NS_PER_S
+from dracc.frames import Voyage
 from dracc.ingest import read_logs
-from dracc.ingest.frames import Voyage
-from dracc.pipeline import analyse_voyage
+from dracc.math.faults import FAULT_KINDS, SensorFault, detect_faults, exclude_faults
+from dracc.pipeline.analysis import analyse_voyage
 from dracc.report import html as html_report
 from dracc.report import json_report, terminal
 from dracc.sim import SimParams, simulate
-from dracc.units import DEG_RAD, KN_MPS, NMI_M, NS_PER_S
 
 REAL = Path("/work/shared/data/real")
 H = 3600 * NS_PER_S
@@ -309,7 +309,7 @@ def test_jump_and_return_of_a_moving_ship_is_one_fault():
     """A GNSS displaced by 670 m for 10 min while the ship makes 12 kn: one jump fault that
     comes back (the ship moved 3.7 km meanwhile, so the fixes before and after the fault
     are far apart; the two steps still cancel)."""
-    from dracc.ingest.frames import KINDS, Rejects, SourceInfo, TimeEvents, Voyage, empty_frame
+    from dracc.frames import KINDS, Rejects, SourceInfo, TimeEvents, Voyage, empty_frame
     from dracc.sim import SimParams, simulate
     from dracc.sim.faults import parse_fault
 

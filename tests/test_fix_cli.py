@@ -18,7 +18,7 @@ from dracc.cli.fix_cmd import (
     parse_distance_m,
     standardised_residuals,
 )
-from dracc.errors import ExitCode
+from dracc.core.errors import ExitCode
 
 geographiclib = pytest.importorskip("geographiclib.geodesic")
 GEOD = geographiclib.Geodesic.WGS84
@@ -420,7 +420,7 @@ def test_toml_file_gives_the_same_result_as_the_options(run_cli, tmp_path):
 def test_nadir_circles_fix_with_a_prior(run_cli):
     """Three nadir circles (seeds/002 (1)) about sub-points, radii from the ship's true
     position: the fix returns the ship (the circles are exact on WGS-84)."""
-    from dracc.fusion import NadirCircle
+    from dracc.math.fusion import NadirCircle
 
     ship = np.radians([35.0, 129.0])
     args = []

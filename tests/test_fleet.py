@@ -10,9 +10,9 @@ import pandas as pd
 import pytest
 from test_audit_helpers import make_doc
 
-from dracc.config import config_from_dict
-from dracc.errors import ConfigError, IngestError
-from dracc.fleet import (
+from dracc.core.config import config_from_dict
+from dracc.core.errors import ConfigError, IngestError
+from dracc.pipeline.fleet import (
     FleetError,
     discover,
     fleet_config,
@@ -158,7 +158,7 @@ def test_unreadable_cache_entry_is_redone(tmp_path):
 
 
 def test_trends_pool_rms_per_day():
-    from dracc.fleet import fleet_trends
+    from dracc.pipeline.fleet import fleet_trends
 
     t = pd.DataFrame({"vessel": ["V"] * 2, "log": ["a", "b"], "sha256": ["1", "2"],
                       "status": ["ok"] * 2, "day": ["d"] * 2,
@@ -211,13 +211,13 @@ def test_unreachable_scheduler_is_one_clear_error(tmp_path):
 def test_an_unexpected_error_in_one_log_is_reported_not_raised(monkeypatch, tmp_path):
     # (the reader's own pool inside a daemonic Dask worker used to raise here; the reader now
     # parses alone there: tests/test_ingest_nmea.py)
-    import dracc.audit
-    from dracc.fleet import analyse_log
+    import dracc.pipeline.audit
+    from dracc.pipeline.fleet import analyse_log
 
     def boom(paths, cfg, progress=None):
         raise AssertionError("an unforeseen state")
 
-    monkeypatch.setattr(dracc.audit, "analysis_document", boom)
+    monkeypatch.setattr(dracc.pipeline.audit, "analysis_document", boom)
     res = analyse_log(str(tmp_path / "big.nmea"), CFG)
     assert not res["ok"] and res["error"].startswith("internal error (AssertionError")
 
@@ -246,11 +246,11 @@ def test_cache_of_another_version_or_schema_is_redone(tmp_path, tamper):
 
 
 def test_table_rule_equals_the_reference_chain():
-    # the fleet table applies dracc.audit.apriori_chain per vessel, unit and channel
+    # the fleet table applies dracc.pipeline.audit.apriori_chain per vessel, unit and channel
     import numpy as np
 
-    from dracc.audit import apriori_chain
-    from dracc.fleet import LogTask, fleet_table
+    from dracc.pipeline.audit import apriori_chain
+    from dracc.pipeline.fleet import LogTask, fleet_table
 
     rng = np.random.default_rng(3)
     tasks, summaries = [], {}

@@ -18,7 +18,7 @@ import pandas as pd
 import pytest
 
 from dracc.cli.main import main
-from dracc.errors import ExitCode
+from dracc.core.errors import ExitCode
 
 pytestmark = pytest.mark.slow
 

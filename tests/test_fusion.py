@@ -8,8 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from dracc.errors import DraccError
-from dracc.fusion import (
+from dracc.core.errors import DraccError
+from dracc.core.geodesy import add_offset_ne, offset_ne_m
+from dracc.math.fusion import (
     OMEGA_E_RADPS,
     BearingLOP,
     GeometryError,
@@ -24,7 +25,6 @@ from dracc.fusion import (
     range_azimuth,
     stack_rows,
 )
-from dracc.geodesy import add_offset_ne, offset_ne_m
 
 LAT0, LON0 = np.deg2rad(54.52), np.deg2rad(18.55)  # Gdynia roads
 D = np.deg2rad

@@ -3,7 +3,7 @@ hypothesis properties.
 
 Invariants checked on every mutated log (``check_mutated``):
 
-1. no exception other than :class:`~dracc.errors.DraccError` (zero tracebacks);
+1. no exception other than :class:`~dracc.core.errors.DraccError` (zero tracebacks);
 2. every rejected line is counted under a known reason (``nmea.REASONS``), and every
    non-blank line that gave no record and carries no ZDA is counted at least once, as
    rejected or as ignored (a valid sentence dracc does not use);
@@ -34,8 +34,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from dracc.config import IngestConfig
-from dracc.ingest.frames import KIND_COLUMNS
+from dracc.core.config import IngestConfig
+from dracc.frames import KIND_COLUMNS
 from dracc.ingest.nmea import REASONS, parse_buffer, read_nmea
 from dracc.ingest.tagblock import parse_numbers
 
@@ -633,8 +633,8 @@ def test_mutated_voyage_through_the_whole_pipeline(tmp_path, seed):
     out-of-range SOG the mutations write is flagged as a sensor fault."""
     import jsonschema
 
-    from dracc.config import Config
-    from dracc.pipeline import analyse
+    from dracc.core.config import Config
+    from dracc.pipeline.analysis import analyse
     from dracc.report import html as html_report
     from dracc.report import json_report, terminal
 
@@ -682,8 +682,8 @@ def test_regression_stray_records_years_away_do_not_make_a_dr_grid_of_years(tmp_
     them) made the 1 s dead-reckoning grid span four years.  Silences of both heading and
     speed longer than an hour are now left out of the grid, with a note; the track is the
     same elsewhere."""
-    from dracc.config import Config
-    from dracc.pipeline import analyse
+    from dracc.core.config import Config
+    from dracc.pipeline.analysis import analyse
 
     lines = (SAMPLES / "voyage_prefix.nmea").read_bytes().split(b"\r\n")[:3000]
     hdt = next(ln for ln in lines if b"HEHDT" in ln)

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from dracc import geodesy as g
+from dracc.core import geodesy as g
 
 geographiclib = pytest.importorskip("geographiclib.geodesic")
 Geodesic = geographiclib.Geodesic.WGS84

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from dracc.deviation.hat import (
+from dracc.math.deviation.hat import (
     block_bootstrap_indices,
     gauss_markov_dof,
     hat_variances,

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from conftest import SAMPLES
 
-from dracc.config import Config, IngestConfig
+from dracc.core.config import Config, IngestConfig
+from dracc.frames import Rejects
 from dracc.ingest.csv import read_csv
 from dracc.ingest.csv_quantities import build_frames
-from dracc.ingest.frames import Rejects
 from dracc.ingest.mcap import read_mcap
-from dracc.ingest.vocabulary import (
+from dracc.ingest.references import (
     REJECT_REASON,
     normalize_boolean,
     normalize_reference,
@@ -175,7 +175,7 @@ def _rewrite_reference(src, dst, true_word: str, magnetic_word: str) -> None:
 def nmea_figures():
     from test_same_analysis_any_container import _figures
 
-    from dracc.pipeline import analyse
+    from dracc.pipeline.analysis import analyse
     from dracc.report.json_report import to_dict
 
     return _figures(to_dict(analyse([SAMPLES / "voyage_tag.nmea"], Config())))
@@ -187,7 +187,7 @@ def test_mcap_json_true_gives_the_statistics_of_the_nmea_form(tmp_path, nmea_fig
     heading but lost its course channel without a word."""
     from test_same_analysis_any_container import _figures
 
-    from dracc.pipeline import analyse
+    from dracc.pipeline.analysis import analyse
     from dracc.report.json_report import to_dict
 
     p = tmp_path / "v.mcap"
@@ -220,8 +220,8 @@ def _hdg_voyage(tmp_path, variation_fields: list[str]):
 
 @pytest.mark.parametrize("configured", [None, 5.0])
 def test_configured_variation_wins_over_a_zero_placeholder(tmp_path, configured):
-    from dracc.config import DeadReckoningConfig
-    from dracc.pipeline import _heading_series
+    from dracc.core.config import DeadReckoningConfig
+    from dracc.pipeline.analysis import _heading_series
 
     v = _hdg_voyage(tmp_path, ["0.0,E", "0.0,E", "2.0,W", ","])
     missing, notes = [], []
@@ -243,9 +243,9 @@ def test_configured_variation_wins_over_a_zero_placeholder(tmp_path, configured)
 def test_real_hakefjord_zero_variation_and_the_option(real_dir):
     from dataclasses import replace as dc_replace
 
-    from dracc.config import DeadReckoningConfig
+    from dracc.core.config import DeadReckoningConfig
     from dracc.ingest import read_logs
-    from dracc.pipeline import _heading_series
+    from dracc.pipeline.analysis import _heading_series
 
     v = read_logs([real_dir / "VDRplayer" / "Hakefjord.txt"], CFG)
     base = _heading_series(v, DeadReckoningConfig(), [], [])

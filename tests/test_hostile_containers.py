@@ -31,8 +31,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from dracc.config import IngestConfig
-from dracc.errors import IngestError
+from dracc.core.config import IngestConfig
+from dracc.core.errors import IngestError
 from dracc.ingest.csv import read_csv
 from dracc.ingest.mcap import read_mcap
 from dracc.sim.mcap_out import write_mcap

@@ -25,8 +25,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from dracc.config import IngestConfig
-from dracc.errors import ExitCode, IngestError
+from dracc.core.config import IngestConfig
+from dracc.core.errors import ExitCode, IngestError
 from dracc.ingest import detect_format, nmea, read_logs
 from dracc.ingest.nmea import StreamState, iter_nmea_blocks, parse_buffer, read_nmea
 
@@ -148,7 +148,7 @@ def _labels(df: pd.DataFrame) -> pd.DataFrame:
 
 def _read_blocks(path: Path, cfg: IngestConfig, block_bytes: int):
     """read_nmea's result, through the block streamer with blocks of ``block_bytes``."""
-    from dracc.ingest.frames import FileResult, concat_blocks
+    from dracc.frames import FileResult, concat_blocks
 
     st = StreamState(str(path))
     blocks = [b.frames for b in iter_nmea_blocks(path, cfg, st, block_bytes=block_bytes, workers=1)]
@@ -430,7 +430,7 @@ def _assert_gone_with_eof(proc: subprocess.Popen, workers: set[int], timeout: fl
 _DRIVER = textwrap.dedent("""
     import sys, time
     from pathlib import Path
-    from dracc.config import IngestConfig
+    from dracc.core.config import IngestConfig
     from dracc.ingest.nmea import StreamState, iter_nmea_blocks
     p = Path(sys.argv[1])
     it = iter_nmea_blocks(p, IngestConfig(), StreamState(str(p)), workers=2)

@@ -37,13 +37,13 @@ import pandas as pd
 import pytest
 from test_fleet import CFG, fake_analyser
 
-from dracc import atomic
-from dracc.audit import TEST_SLEEP_ENV as AUDIT_SLEEP_ENV
-from dracc.audit import choose_logs, input_problem
 from dracc.cli.main import main
-from dracc.errors import ExitCode
-from dracc.fleet import TEST_SLEEP_ENV, discover, run_fleet, write_tables
-from dracc.safetext import csv_cell, printable
+from dracc.core import atomic
+from dracc.core.errors import ExitCode
+from dracc.core.safetext import csv_cell, printable
+from dracc.pipeline.audit import TEST_SLEEP_ENV as AUDIT_SLEEP_ENV
+from dracc.pipeline.audit import choose_logs, input_problem
+from dracc.pipeline.fleet import TEST_SLEEP_ENV, discover, run_fleet, write_tables
 
 WAIT_S = 120.0  #: bound on every wait for a process
 EVIL = "INS2\x1b]0;pwned\x07\x1b[2J\x9b31m"  #: OSC (window title), clear screen, C1 CSI
@@ -248,7 +248,7 @@ def test_fleet_outputs_appear_together_or_not_at_all(tmp_path, monkeypatch):
             "vessels/Aurora/fleet.csv", "vessels/Aurora/trends.csv"} <= set(old)
     both = run_fleet(discover([root / "Aurora", root / "Borealis"]), CFG, out, workers=1,
                      analyser=fake_analyser)
-    import dracc.fleet as fleet_mod
+    import dracc.pipeline.fleet as fleet_mod
 
     real_csv = fleet_mod.csv_text
     calls = []
@@ -459,7 +459,7 @@ def test_sigterm_in_the_first_moments_exits_130(tmp_path, entry):
 
 
 def _open_new_db(path: str, barrier, results) -> None:
-    from dracc.state import StateStore
+    from dracc.pipeline.state import StateStore
 
     barrier.wait()
     try:
@@ -531,7 +531,7 @@ def test_printable_escapes_control_characters_and_keeps_text():
 
 def _hostile_mcap(tmp_path: Path) -> Path:
     """A simulated hour as MCAP whose INS2 topics carry terminal escape sequences."""
-    from dracc.config import IngestConfig
+    from dracc.core.config import IngestConfig
     from dracc.ingest.mcap import read_mcap
     from dracc.sim.mcap_out import write_mcap
 

@@ -20,7 +20,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as hs
 
-from dracc.config import IngestConfig
+from dracc.core.config import IngestConfig
 from dracc.ingest import read_file, summarize_frames, tagblock
 from dracc.ingest.sources import summarize
 from dracc.ingest.tagblock import (

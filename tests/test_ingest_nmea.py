@@ -12,9 +12,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from dracc.config import IngestConfig
-from dracc.errors import IngestError
-from dracc.ingest.frames import FileResult
+from dracc.core.config import IngestConfig
+from dracc.core.errors import IngestError
+from dracc.frames import FileResult
 from dracc.ingest.nmea import iter_nmea_blocks, parse_sentences, read_nmea
 
 D = math.pi / 180.0
@@ -693,7 +693,7 @@ def test_recv_ns_stays_with_its_rows_when_files_merge(tmp_path):
 def test_invalid_velocity_flags_leave_the_velocity_empty(tmp_path):
     """VTG mode N and RMC status V carry no valid course and speed: NaN in the ground frame
     (both engines), so no DR uses them and the integrity audit counts them as flagged."""
-    from dracc.config import IngestConfig
+    from dracc.core.config import IngestConfig
     from dracc.ingest import nmea as nm
     def s(body: str) -> str:
         cs = 0

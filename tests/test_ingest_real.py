@@ -14,8 +14,8 @@ import pandas as pd
 import pytest
 
 from dracc.cli.inspect_cmd import inspect_logs
-from dracc.config import IngestConfig
-from dracc.errors import IngestError
+from dracc.core.config import IngestConfig
+from dracc.core.errors import IngestError
 from dracc.ingest import detect_format, read_logs
 from dracc.ingest.nmea import REASONS, read_nmea
 

@@ -6,10 +6,10 @@ from collections import Counter
 
 import pytest
 
-from dracc.config import IngestConfig
-from dracc.errors import AmbiguousSourceError, ConfigError
+from dracc.core.config import IngestConfig
+from dracc.core.errors import AmbiguousSourceError, ConfigError
+from dracc.frames import SourceInfo
 from dracc.ingest import read_logs
-from dracc.ingest.frames import SourceInfo
 from dracc.ingest.sources import assign_roles, require_role
 
 

@@ -9,7 +9,7 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from dracc.config import IngestConfig
+from dracc.core.config import IngestConfig
 from dracc.ingest.nmea import read_nmea
 from dracc.ingest.timebase import (
     EventCounter,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from dracc.errors import ExitCode
+from dracc.core.errors import ExitCode
 
 
 def nmea(body: str) -> str:

@@ -1,4 +1,4 @@
-"""Integrity checks (dracc.integrity) on simulated nights with known truth.
+"""Integrity checks (dracc.math.integrity) on simulated nights with known truth.
 
 Each seeded fault kind of ``dracc simulate`` (jump, freeze, dropout, drift, latency,
 invalid) must fail the check made for it on the source it hit, and only there; over 40
@@ -13,9 +13,9 @@ import math
 import numpy as np
 import pytest
 
-from dracc.distributions import binom_cdf
-from dracc.ingest.frames import KINDS, Rejects, SourceInfo, TimeEvents, Voyage, empty_frame
-from dracc.integrity import check_night
+from dracc.core.distributions import binom_cdf
+from dracc.frames import KINDS, Rejects, SourceInfo, TimeEvents, Voyage, empty_frame
+from dracc.math.integrity import check_night
 from dracc.sim import SimParams, simulate
 from dracc.sim.faults import parse_fault
 

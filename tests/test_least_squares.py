@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import optimize
 
-from dracc.calibration import levenberg_marquardt
+from dracc.math.calibration import levenberg_marquardt
 
 
 def test_rosenbrock_reaches_its_minimum_from_the_textbook_start():

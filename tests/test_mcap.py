@@ -11,8 +11,8 @@ import pandas as pd
 import pytest
 from test_csv import assert_same_frames, voyage_frames
 
-from dracc.config import IngestConfig
-from dracc.errors import IngestError
+from dracc.core.config import IngestConfig
+from dracc.core.errors import IngestError
 from dracc.ingest.mcap import read_mcap, topic_role, topic_source
 from dracc.sim.mcap_out import NAVSATFIX, write_mcap
 

@@ -24,7 +24,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from dracc.config import IngestConfig
+from dracc.core.config import IngestConfig
 from dracc.ingest import nmea
 from dracc.ingest.nmea import ParsedBlock, parse_buffer, read_nmea
 

@@ -13,11 +13,11 @@ import math
 import numpy as np
 import pytest
 
-from dracc.config import Config
-from dracc.geodesy import offset_ne_m
-from dracc.ingest.frames import INS_ROLES, KINDS, Rejects, TimeEvents, Voyage, empty_frame
+from dracc.core.config import Config
+from dracc.core.geodesy import offset_ne_m
+from dracc.frames import INS_ROLES, KINDS, Rejects, TimeEvents, Voyage, empty_frame
 from dracc.ingest.sources import summarize
-from dracc.pipeline import SCHEMA, analyse, analyse_voyage
+from dracc.pipeline.analysis import SCHEMA, analyse, analyse_voyage
 from dracc.sim import GM, SimParams, simulate
 from dracc.sim.model import NO_INS_ERROR
 
@@ -199,7 +199,7 @@ def test_files_of_one_voyage_merge_by_time(tmp_path):
 def test_recording_spells_cut_where_no_frame_has_a_record():
     import pandas as pd
 
-    from dracc.pipeline import recording_spells
+    from dracc.pipeline.analysis import recording_spells
 
     h = 3_600_000_000_000
     frames = {"position": pd.DataFrame({"time_ns": np.array([0, h, 2 * h, 40 * 24 * h], np.int64)}),

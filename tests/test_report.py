@@ -19,12 +19,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from dracc.config import DeviationConfig
-from dracc.deadreckoning import LegConsistency
-from dracc.deviation import UnitSeries, analyse_deviations
-from dracc.distributions import chi2_ppf
-from dracc.geodesy import add_offset_ne
-from dracc.pipeline import (
+from dracc.core.config import DeviationConfig
+from dracc.core.distributions import chi2_ppf
+from dracc.core.geodesy import add_offset_ne
+from dracc.math.deadreckoning import LegConsistency
+from dracc.math.deviation import UnitSeries, analyse_deviations
+from dracc.pipeline.analysis import (
     SCHEMA,
     Analysis,
     CalibrationSection,
@@ -48,7 +48,7 @@ HOSTILE = '<script>alert("x")</script><img src="http://example.com/x.png">'
 
 @functools.lru_cache(maxsize=1)
 def _deviation():
-    """Deviations computed by dracc.deviation from three units with known, deterministic errors:
+    """Deviations computed by dracc.math.deviation from three units with known, deterministic errors:
     readings every minute for 25 h; errors are sinusoids of 6 h period with amplitudes
     (m north, m east, deg) 100/150/0.05 for ins1, 200/300/0.1 for ins2, 240/180/0.06 for ins3;
     ins3's latitude error is in phase with ins2's (a shared error), which the three-cornered
@@ -89,7 +89,7 @@ def _dr_track(n: int, step_s: float, with_ref: bool) -> DRTrack:
                    scored=(leg >= 1) & (since > 0))
 
 
-#: DRSection.learned as dracc.pipeline._learned_summary makes it
+#: DRSection.learned as dracc.pipeline.analysis._learned_summary makes it
 LEARNED = {
     "current_set_deg": 45.0, "current_drift_kn": 0.49, "current_variation_kn": 0.15,
     "current_tau_s": 1800.0, "heading_correction_deg": 0.31, "heading_correction_sigma_deg": 0.12,

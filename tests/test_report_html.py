@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from test_report import HOSTILE, _not_learned, make_analysis
 
-from dracc.geodesy import offset_ne_m
+from dracc.core.geodesy import offset_ne_m
 from dracc.report import plots
 from dracc.report.html import CSP, render_html, write_html
 

@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 
 from dracc.cli.main import main
-from dracc.config import load_config
-from dracc.errors import ConfigError, ExitCode
-from dracc.fleet import FleetError, inside, safe_name
+from dracc.core.config import load_config
+from dracc.core.errors import ConfigError, ExitCode
+from dracc.pipeline.fleet import FleetError, inside, safe_name
 
 REPO = Path(__file__).resolve().parents[1]
 SAMPLES = REPO / "sample_logs"
@@ -89,7 +89,7 @@ def test_fleet_names_cannot_escape_the_output_folder(tmp_path, name):
 
 
 def test_inside_refuses_an_escape_it_is_handed(tmp_path, monkeypatch):
-    import dracc.fleet as fleet
+    import dracc.pipeline.fleet as fleet
 
     monkeypatch.setattr(fleet, "safe_name", lambda s, max_len=100: s)  # a broken sanitiser
     with pytest.raises(FleetError, match="escape"):

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from conftest import SAMPLES
 
-from dracc.config import Config
-from dracc.pipeline import _dedupe_sorted, analyse
+from dracc.core.config import Config
+from dracc.pipeline.analysis import _dedupe_sorted, analyse
 from dracc.report.json_report import to_dict
 
 FILES = ["voyage_tag.nmea", "voyage_prefix.nmea", "voyage_long.csv", "voyage_wide.csv", "voyage.mcap"]

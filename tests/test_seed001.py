@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-import dracc.ingest  # noqa: F401  (import order: dracc.config <-> dracc.ingest)
-from dracc.config import DeviationConfig
-from dracc.deviation import UnitSeries, analyse_deviations
-from dracc.deviation import stats as S
-from dracc.deviation.reference import k_star_mark, table1_mark_k
-from dracc.geodesy import add_offset_ne
+import dracc.ingest  # noqa: F401  (import order: dracc.core.config <-> dracc.ingest)
+from dracc.core.config import DeviationConfig
+from dracc.core.geodesy import add_offset_ne
+from dracc.math.deviation import UnitSeries, analyse_deviations
+from dracc.math.deviation import stats as S
+from dracc.math.deviation.reference import k_star_mark, table1_mark_k
 
 H = 3_600_000_000_000
 T0 = 1_700_006_400 * 1_000_000_000  # 2023-11-15T00:00:00Z

@@ -9,9 +9,10 @@ import pandas as pd
 import pytest
 from geographiclib.geodesic import Geodesic
 
-from dracc.errors import ConfigError
-from dracc.geodesy import E2, angdiff, k_lambda, k_phi, offset_ne_m
-from dracc.ingest.frames import KIND_COLUMNS, KINDS
+from dracc.core.errors import ConfigError
+from dracc.core.geodesy import E2, angdiff, k_lambda, k_phi, offset_ne_m
+from dracc.core.units import DEG_RAD, KN_MPS, NMI_M
+from dracc.frames import KIND_COLUMNS, KINDS
 from dracc.sim import GM, InsErrorParams, SimParams, gauss_markov, simulate
 from dracc.sim.model import (
     SCHULER_PERIOD_S,
@@ -20,7 +21,6 @@ from dracc.sim.model import (
     ins_errors,
     integrate_track,
 )
-from dracc.units import DEG_RAD, KN_MPS, NMI_M
 
 SHORT = dict(duration_s=900.0, compass_hz=2.0)
 Q_ANGLE = 0.0005 * DEG_RAD + 1e-12  # half a unit of the 3rd decimal of a degree

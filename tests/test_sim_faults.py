@@ -15,11 +15,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from dracc.config import IngestConfig
-from dracc.errors import ConfigError, DraccError
-from dracc.geodesy import angdiff, offset_ne_m
+from dracc.core.config import IngestConfig
+from dracc.core.errors import ConfigError, DraccError
+from dracc.core.geodesy import angdiff, offset_ne_m
+from dracc.core.units import KN_MPS
+from dracc.frames import KINDS, MISSING_NS
 from dracc.ingest import read_logs
-from dracc.ingest.frames import KINDS, MISSING_NS
 from dracc.sim import SimFault, SimParams, parse_fault, resolve_faults, simulate
 from dracc.sim.faults import (
     ALL_SOURCES,
@@ -30,7 +31,6 @@ from dracc.sim.faults import (
 )
 from dracc.sim.model import SOURCES, simulate_segments, start_ns
 from dracc.sim.nmea_out import frames_to_lines, write_nmea
-from dracc.units import KN_MPS
 
 #: a short voyage, every sensor at 1 Hz, both compasses (so MAG exists)
 BASE = dict(duration_s=3600.0, seed=11, compass="both", compass_hz=1.0, aux_hz=1.0)

@@ -12,11 +12,11 @@ import pytest
 
 pynmea2 = pytest.importorskip("pynmea2")
 
-from dracc.errors import DraccError  # noqa: E402
-from dracc.ingest.frames import KINDS, MISSING_NS, make_frame  # noqa: E402
+from dracc.core.errors import DraccError  # noqa: E402
+from dracc.core.units import DEG_RAD, KN_MPS, NMI_M  # noqa: E402
+from dracc.frames import KINDS, MISSING_NS, make_frame  # noqa: E402
 from dracc.sim import SimParams, simulate  # noqa: E402
 from dracc.sim.nmea_out import frames_to_lines, write_nmea  # noqa: E402
-from dracc.units import DEG_RAD, KN_MPS, NMI_M  # noqa: E402
 
 KMH_MPS = 1000.0 / 3600.0
 
@@ -269,7 +269,7 @@ def test_dracc_ingest_reads_back_the_frames(tmp_path):
     """The contract: ``frames`` is what a perfect parser of the written log returns.  The
     project's own NMEA ingest reads the TAG form (c: in ms) back to the same frames."""
     ingest = pytest.importorskip("dracc.ingest")
-    from dracc.config import IngestConfig
+    from dracc.core.config import IngestConfig
 
     v = simulate(SimParams(duration_s=120.0, compass="both", compass_hz=2.0, seed=3))
     p = tmp_path / "rt.nmea"

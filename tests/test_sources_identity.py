@@ -10,10 +10,10 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from dracc.config import IngestConfig
-from dracc.errors import ConfigError, ExitCode
+from dracc.core.config import IngestConfig
+from dracc.core.errors import ConfigError, ExitCode
+from dracc.frames import SourceInfo
 from dracc.ingest import read_logs
-from dracc.ingest.frames import SourceInfo
 from dracc.ingest.sources import assign_roles, file_ids, keys_must_match, separate_files
 
 SEAP = "openrvdas/NBP1406_seap-2014-08-01"
@@ -121,8 +121,8 @@ def test_real_skytraq_gnss_compass_is_not_the_compass(real_dir):
     v = read_logs([real_dir / "gpsd/skytraq-PX1172RH_DS.log"], IngestConfig())
     assert "compass" not in v.sources["GN"].roles
     assert any("GN not given the compass role" in d for d in v.time_events.decisions)
-    from dracc.config import DeadReckoningConfig
-    from dracc.pipeline import _heading_series
+    from dracc.core.config import DeadReckoningConfig
+    from dracc.pipeline.analysis import _heading_series
 
     missing, notes = [], []
     got = _heading_series(v, DeadReckoningConfig(), missing, notes)
@@ -159,7 +159,7 @@ def test_cli_role_key_matching_nothing_exits_with_the_config_code(run_cli, tmp_p
 def test_real_two_receivers_analysed_as_two_units_by_their_new_keys(real_dir):
     """The split keys are usable: --role seap:GP=ins1 --role gp02:GP=ins2 gives two units."""
     from dracc.cli.analyze_cmd import build_config
-    from dracc.pipeline import analyse
+    from dracc.pipeline.analysis import analyse
     from dracc.report.json_report import to_dict
 
     cfg = build_config(None, interval="1min", window="1h", roles=["seap:GP=ins1", "gp02:GP=ins2"])

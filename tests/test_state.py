@@ -8,8 +8,8 @@ from dataclasses import replace
 
 import pytest
 
-from dracc.errors import ConfigError, ExitCode
-from dracc.state import AprioriEvent, ChannelRow, NightRecord, StateError, StateStore
+from dracc.core.errors import ConfigError, ExitCode
+from dracc.pipeline.state import AprioriEvent, ChannelRow, NightRecord, StateError, StateStore
 
 
 def _record(night: str = "2026-11-20", m_y: float = 100.0, vessel: str = "Aurora") -> NightRecord:
@@ -105,8 +105,7 @@ def _v1_database(db) -> None:
     """A state file as schema 1 wrote it (nights without the DR verdict columns), one night."""
     import re
 
-    from dracc import state
-
+    from dracc.pipeline import state
     v2_only = "|".join(name for name, _ in state._NIGHT_COLUMNS_V2)
     ddl = "\n".join(line for line in state._DDL.splitlines()
                     if not re.match(rf"\s+({v2_only})\s", line))

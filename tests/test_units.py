@@ -1,4 +1,4 @@
-"""dracc.units: edge conversions and the JSON-ready float."""
+"""dracc.core.units: edge conversions and the JSON-ready float."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from dracc import units
+from dracc.core import units
 
 
 def test_knots_exact():

@@ -1,4 +1,4 @@
-"""The command-line interface: a thin typer layer over :mod:`dracc.pipeline` and friends."""
+"""The command-line interface: a thin typer layer over :mod:`dracc.pipeline.analysis` and friends."""
 
 import os
 

@@ -1,6 +1,6 @@
 """``dracc analyze LOG...``: the main job — dead reckoning, INS deviations, current, reports.
 
-The command parses options into the configuration, calls :func:`dracc.pipeline.analyse`
+The command parses options into the configuration, calls :func:`dracc.pipeline.analysis.analyse`
 once, and hands the result to the renderers: a short summary on stdout (unless the JSON
 goes there), ``--json`` (file or ``-``), ``--html`` (one offline file) and ``--out``
 (CSV and Parquet tables).  Every file is written atomically.
@@ -18,13 +18,7 @@ from pathlib import Path
 
 import typer
 
-from .. import atomic
-from ..config import load_config, validate
-from ..deadreckoning import parse_reset_s
-from ..errors import ConfigError, DraccError
-from ..ingest.frames import ROLES
-from ..ingest.sources import keys_must_match
-from .app import (
+from dracc.cli.app import (
     QUICK_EXIT,
     ConfigOption,
     LogsArgument,
@@ -36,6 +30,12 @@ from .app import (
     paths_exist,
     progress,
 )
+from dracc.core import atomic
+from dracc.core.config import load_config, validate
+from dracc.core.errors import ConfigError, DraccError
+from dracc.frames import ROLES
+from dracc.ingest.sources import keys_must_match
+from dracc.math.deadreckoning import parse_reset_s
 
 _DURATION = re.compile(r"^\s*([0-9]*\.?[0-9]+)\s*(s|sec|min|m|h|hr|d)?\s*$", re.IGNORECASE)
 _UNIT_S = {None: 1.0, "s": 1.0, "sec": 1.0, "min": 60.0, "m": 60.0, "h": 3600.0, "hr": 3600.0,
@@ -148,7 +148,7 @@ def analyze(
     fix_role: str | None = typer.Option(None, "--fix-role", help="DR restart fixes from gnss (default) or ins_mean."),
 ) -> None:
     """Analyse a voyage: DR with honest 2M circles, INS deviations from the mean, current; reports."""
-    from ..pipeline import analyse
+    from dracc.pipeline.analysis import analyse
 
     paths_exist(logs)
     cfg = build_config(config, interval=interval, window=window, dr_reset=dr_reset,
@@ -203,10 +203,10 @@ def _writing(target) -> Iterator[None]:
 def _write_reports(result, json_path: str | None, html_path: Path | None, out_dir: Path | None) -> None:
     """The terminal summary (or the JSON on stdout), then the report files: each written in
     full to a temporary file and all renamed together at the end
-    (:func:`dracc.atomic.together`), so that an interrupt while the plots are drawn
+    (:func:`dracc.core.atomic.together`), so that an interrupt while the plots are drawn
     leaves every earlier report as it was, not a new JSON beside an old HTML."""
-    from ..report import html as html_report
-    from ..report import json_report, tables, terminal
+    from dracc.report import html as html_report
+    from dracc.report import json_report, tables, terminal
 
     said = []
     with _writing("the reports"), atomic.together():

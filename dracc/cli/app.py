@@ -73,8 +73,8 @@ import typer  # noqa: E402
 from rich.console import Console  # noqa: E402
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn  # noqa: E402
 
-from .. import __version__  # noqa: E402
-from ..errors import ConfigError, DraccError, ExitCode, OptionError  # noqa: E402
+from dracc import __version__  # noqa: E402
+from dracc.core.errors import ConfigError, DraccError, ExitCode, OptionError  # noqa: E402
 
 
 class Interrupted(DraccError):
@@ -106,10 +106,10 @@ class _Console(Console):
     terminal: ESC (colours, cursor moves, OSC titles), CR, backspace, C1 controls from a
     log's source keys or file names are printed as visible escapes (``\\x1b``); line
     breaks stay.  Rich's own styling is added after this, at rendering.  Renderables
-    (Text, Table) are built with :func:`dracc.safetext.printable` where they are made."""
+    (Text, Table) are built with :func:`dracc.core.safetext.printable` where they are made."""
 
     def print(self, *objects, **kwargs) -> None:
-        from ..safetext import printable
+        from dracc.core.safetext import printable
 
         super().print(*(printable(o, keep="\n") if isinstance(o, str) else o for o in objects),
                       **kwargs)
@@ -169,7 +169,7 @@ def progress(description: str, total: float | None):
 
 def paths_exist(paths: list[Path]) -> list[Path]:
     """Check input paths up front so the user gets one clear line, not a traceback."""
-    from ..errors import IngestError
+    from dracc.core.errors import IngestError
 
     for p in paths:
         if not p.exists():

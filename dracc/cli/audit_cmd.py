@@ -15,16 +15,23 @@ import typer
 from rich.table import Table
 from typer.core import TyperGroup
 
-from .. import atomic
-from ..audit import CHANNEL_KEYS, CHANNELS, UNITS, AuditOutcome, audit_config, run_audit
-from ..config import load_config
-from ..errors import ConfigError, ExitCode
-from ..report.audit_html import fmt_value as _f
-from ..report.audit_html import history_html
-from ..report.audit_html import measure_digits as _digits
-from ..safetext import printable
-from ..state import StateError, StateStore
-from .app import ConfigOption, app, check_choice, check_date, check_pattern, out, progress
+from dracc.cli.app import ConfigOption, app, check_choice, check_date, check_pattern, out, progress
+from dracc.core import atomic
+from dracc.core.config import load_config
+from dracc.core.errors import ConfigError, ExitCode
+from dracc.core.safetext import printable
+from dracc.pipeline.audit import (
+    CHANNEL_KEYS,
+    CHANNELS,
+    UNITS,
+    AuditOutcome,
+    audit_config,
+    run_audit,
+)
+from dracc.pipeline.state import StateError, StateStore
+from dracc.report.audit_html import fmt_value as _f
+from dracc.report.audit_html import history_html
+from dracc.report.audit_html import measure_digits as _digits
 
 
 class _DefaultRun(TyperGroup):
@@ -193,18 +200,18 @@ def audit_run(
 
         outcome, analysis = run_audit(logs, cfg, db=db, vessel=vessel, night=date, pattern=pattern,
                                       progress=report)
-    from ..report import audit_json
+    from dracc.report import audit_json
 
     analysis_doc = None
     if analysis is not None:
-        from ..report import json_report
+        from dracc.report import json_report
 
         analysis_doc = json_report.to_dict(analysis)
     if json_out is not None:
         audit_json.write_json(outcome, analysis_doc, json_out)
     if html_out is not None:
-        from ..report import html as html_report
-        from ..report.audit_html import night_html
+        from dracc.report import html as html_report
+        from dracc.report.audit_html import night_html
 
         body, css = html_report.render_sections(analysis) if analysis is not None else ("", "")
         atomic.write_text(html_out, night_html(audit_json.to_dict(outcome, analysis_doc), body, css))

@@ -1,6 +1,6 @@
 """``dracc fix``: fuse position fixes and lines of position at the chart table.
 
-A thin layer over :mod:`dracc.fusion` (LS (W1) / WLS (W3, W4), seeds/004; DOP in the
+A thin layer over :mod:`dracc.math.fusion` (LS (W1) / WLS (W3, W4), seeds/004; DOP in the
 trace form, METHODS §5).  This module parses the navigator's units (degrees and
 degrees-minutes, metres, nautical miles, cables) at the edge, builds the library's
 observations in radians and metres, picks the linearisation point, and renders the
@@ -24,9 +24,20 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from ..distributions import chi2_ppf
-from ..errors import ConfigError, ExitCode, IngestError
-from ..fusion import (
+from dracc.cli.app import app, out
+from dracc.core.distributions import chi2_ppf
+from dracc.core.errors import ConfigError, ExitCode, IngestError
+from dracc.core.geodesy import (
+    add_offset_ne,
+    circmean,
+    distance_m,
+    radius_meridian_m,
+    radius_prime_vertical_m,
+    wrap_pi,
+)
+from dracc.core.units import CABLE_M, NMI_M
+from dracc.core.units import finite_or_none as _finite
+from dracc.math.fusion import (
     BearingLOP,
     FixSolution,
     GeometryError,
@@ -41,17 +52,6 @@ from ..fusion import (
     stack_rows,
     to_metres,
 )
-from ..geodesy import (
-    add_offset_ne,
-    circmean,
-    distance_m,
-    radius_meridian_m,
-    radius_prime_vertical_m,
-    wrap_pi,
-)
-from ..units import CABLE_M, NMI_M
-from ..units import finite_or_none as _finite
-from .app import app, out
 
 try:  # Python >= 3.11
     import tomllib

@@ -9,15 +9,15 @@ import typer
 from rich.table import Table
 from rich.text import Text
 
-from ..config import load_config
-from ..errors import ConfigError, ExitCode, OptionError
-from ..fleet import FleetResult, discover, fleet_config, run_fleet, write_tables
-from ..report.fleet_html import cell_text as _s
-from ..report.fleet_html import fleet_html, latest
-from ..report.fleet_html import fmt_num as _f
-from ..report.fleet_html import fmt_num_unit as _fu
-from ..safetext import printable
-from .app import ConfigOption, Interrupted, app, check_pattern, err, out, progress
+from dracc.cli.app import ConfigOption, Interrupted, app, check_pattern, err, out, progress
+from dracc.core.config import load_config
+from dracc.core.errors import ConfigError, ExitCode, OptionError
+from dracc.core.safetext import printable
+from dracc.pipeline.fleet import FleetResult, discover, fleet_config, run_fleet, write_tables
+from dracc.report.fleet_html import cell_text as _s
+from dracc.report.fleet_html import fleet_html, latest
+from dracc.report.fleet_html import fmt_num as _f
+from dracc.report.fleet_html import fmt_num_unit as _fu
 
 
 def print_table(res: FleetResult) -> None:

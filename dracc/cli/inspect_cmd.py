@@ -17,14 +17,7 @@ import typer
 from rich.table import Table
 from rich.text import Text
 
-from ..config import load_config, with_overrides
-from ..ingest import detect_format, read_file
-from ..ingest.frames import Rejects, TimeEvents
-from ..ingest.nmea import StreamState, iter_nmea_blocks
-from ..ingest.sources import assign_roles, merge_infos, separate_files, summarize
-from ..ingest.timebase import EventCounter
-from ..safetext import printable
-from .app import (
+from dracc.cli.app import (
     ConfigOption,
     LogsArgument,
     app,
@@ -35,6 +28,13 @@ from .app import (
     paths_exist,
     progress,
 )
+from dracc.core.config import load_config, with_overrides
+from dracc.core.safetext import printable
+from dracc.frames import Rejects, TimeEvents
+from dracc.ingest import detect_format, read_file
+from dracc.ingest.nmea import StreamState, iter_nmea_blocks
+from dracc.ingest.sources import assign_roles, merge_infos, separate_files, summarize
+from dracc.ingest.timebase import EventCounter
 
 
 def _iso(ns: int | None) -> str | None:
@@ -142,7 +142,7 @@ def inspect_logs(paths: list[Path], cfg, show_progress: bool = True) -> dict:
 def render(rep: dict) -> None:
     """Rich tables on stdout.  Every text from the log (source keys, talkers, sentence
     types, file names, rejected lines, notes) is shown as Text, never markup, with its
-    control characters escaped (:func:`dracc.safetext.printable`): a source key
+    control characters escaped (:func:`dracc.core.safetext.printable`): a source key
     holding ESC sequences cannot command the terminal."""
     def cell(x) -> Text:
         return Text(printable(x))

@@ -8,16 +8,16 @@ import sys
 import traceback
 
 try:  # Ctrl-C while the libraries load (seconds on a busy machine): one line, no traceback
-    from ..errors import DraccError, ExitCode
-    from .app import QUICK_EXIT, VERBOSE, app, err
+    from dracc.cli.app import QUICK_EXIT, VERBOSE, app, err
+    from dracc.core.errors import DraccError, ExitCode
 
     # Commands register themselves on ``app`` when imported.
-    from . import inspect_cmd  # noqa: F401,E402  isort: skip
-    from . import simulate_cmd  # noqa: F401,E402  isort: skip
-    from . import analyze_cmd  # noqa: F401,E402  isort: skip
-    from . import audit_cmd  # noqa: F401,E402  isort: skip
-    from . import fleet_cmd  # noqa: F401,E402  isort: skip
-    from . import fix_cmd  # noqa: F401,E402  isort: skip
+    from dracc.cli import inspect_cmd  # noqa: F401,E402  isort: skip
+    from dracc.cli import simulate_cmd  # noqa: F401,E402  isort: skip
+    from dracc.cli import analyze_cmd  # noqa: F401,E402  isort: skip
+    from dracc.cli import audit_cmd  # noqa: F401,E402  isort: skip
+    from dracc.cli import fleet_cmd  # noqa: F401,E402  isort: skip
+    from dracc.cli import fix_cmd  # noqa: F401,E402  isort: skip
 except KeyboardInterrupt:
     sys.stderr.write("error: interrupted while starting; nothing was written\n")
     sys.exit(130)

@@ -13,10 +13,10 @@ import numpy as np
 import pandas as pd
 import typer
 
-from .. import __version__
-from ..atomic import atomic_path, write_text
-from ..errors import ConfigError, DraccError
-from .app import app, err, options_only
+from dracc import __version__
+from dracc.cli.app import app, err, options_only
+from dracc.core.atomic import atomic_path, write_text
+from dracc.core.errors import ConfigError, DraccError
 
 FORMATS = ("nmea", "csv-long", "csv-wide", "mcap-json", "mcap-ros2", "mcap-protobuf",
            "mcap-nmea")
@@ -27,18 +27,18 @@ EXT = {"nmea": "nmea", "csv-long": "csv", "csv-wide": "csv", "mcap-json": "mcap"
 def write_log(voyage, path: Path, fmt: str, form: str = "tag", tag_time: str = "s") -> None:
     """Write the voyage's log in ``fmt`` (one of :data:`FORMATS`) to ``path``."""
     if fmt == "nmea":
-        from ..sim.nmea_out import write_nmea
+        from dracc.sim.nmea_out import write_nmea
 
         write_nmea(voyage, path, form=form, tag_time=tag_time)
     elif fmt.startswith("csv-"):
         try:
-            from ..sim.csv_out import write_csv
+            from dracc.sim.csv_out import write_csv
         except ImportError as e:
             raise DraccError(f"CSV output is not available in this build ({e})") from e
         write_csv(voyage.frames, path, form=fmt[4:])
     elif fmt.startswith("mcap-"):
         try:
-            from ..sim.mcap_out import write_mcap
+            from dracc.sim.mcap_out import write_mcap
         except ImportError as e:
             raise DraccError(f"MCAP output is not available in this build ({e})") from e
         write_mcap(voyage.frames, voyage.roles, path, encoding=fmt[5:])
@@ -126,8 +126,8 @@ def simulate_cmd(
     track and every true sensor error (measured - true) at --truth-hz; params.json the
     parameters, the source roles, each INS unit's true error RMS and the seeded faults.
     """
-    from ..sim.faults import fault_table, parse_fault, resolve_faults
-    from ..sim.model import SimParams, generated_legs, simulate, simulate_segments, start_ns
+    from dracc.sim.faults import fault_table, parse_fault, resolve_faults
+    from dracc.sim.model import SimParams, generated_legs, simulate, simulate_segments, start_ns
 
     if fmt not in FORMATS:
         raise ConfigError(f"--format must be one of {', '.join(FORMATS)}, got {fmt!r}")
@@ -167,7 +167,7 @@ def simulate_cmd(
     with (atomic_path(out_dir / "truth.csv") as tt, atomic_path(out_dir / "errors.csv") as te,
           open(tt, "w", encoding="utf-8") as ft, open(te, "w", encoding="utf-8") as fe):
         if fmt == "nmea":
-            from ..sim.nmea_out import iter_blocks
+            from dracc.sim.nmea_out import iter_blocks
 
             with atomic_path(log_path) as tl, open(tl, "wb") as fl:
                 for i, v in enumerate(simulate_segments(params, segment_hours * 3600.0)):

@@ -25,13 +25,19 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
-from ..errors import IngestError
-from .frames import KINDS, FileResult, Rejects, SourceInfo, TimeEvents, Voyage, empty_frame
-from .nmea import check_readable
-from .sources import assign_roles, merge_infos, rename_sources, separate_files, summarize
+from dracc.core.errors import IngestError
+from dracc.frames import KINDS, FileResult, Rejects, SourceInfo, TimeEvents, Voyage, empty_frame
+from dracc.ingest.nmea import check_readable
+from dracc.ingest.sources import (
+    assign_roles,
+    merge_infos,
+    rename_sources,
+    separate_files,
+    summarize,
+)
 
 if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
-    from ..config import IngestConfig
+    from dracc.core.config import IngestConfig
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 _BINARY_MAGIC = {b"\xff\xd8\xff": "a JPEG image", b"\x89PNG": "a PNG image", b"PK\x03\x04": "a ZIP archive",
@@ -102,7 +108,7 @@ def detect_format(path: str | Path) -> str:
         if head.startswith(magic):
             raise IngestError(f"{p}: not a log file: looks like {what}")
     try:
-        from .csv import looks_like_csv
+        from dracc.ingest.csv import looks_like_csv
     except ImportError:  # pragma: no cover - the CSV reader is part of the package
         looks_like_csv = None
     if looks_like_csv is not None and looks_like_csv(head):
@@ -114,14 +120,14 @@ def read_file(path: str | Path, cfg: IngestConfig, progress=None) -> FileResult:
     """Read one log with the reader its format needs."""
     fmt = detect_format(path)
     if fmt == "mcap":
-        from .mcap import read_mcap
+        from dracc.ingest.mcap import read_mcap
 
         return read_mcap(Path(path), cfg)
     if fmt == "csv":
-        from .csv import read_csv
+        from dracc.ingest.csv import read_csv
 
         return read_csv(Path(path), cfg)
-    from .nmea import read_nmea
+    from dracc.ingest.nmea import read_nmea
 
     return read_nmea(path, cfg, progress=progress)
 

@@ -51,9 +51,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..config import IngestConfig
-from ..errors import IngestError
-from .csv_quantities import (
+from dracc.core.config import IngestConfig
+from dracc.core.errors import IngestError
+from dracc.frames import FileResult, Rejects, concat_blocks
+from dracc.ingest.csv_quantities import (
     QUANTITIES,
     REF_QUANTITIES,
     UNITLESS_HINTS,
@@ -63,7 +64,6 @@ from .csv_quantities import (
     lookup,
     renumber_examples,
 )
-from .frames import FileResult, Rejects, concat_blocks
 
 TIME_COLUMNS = ("time_utc", "time_ns", "received_at", "timestamp", "time", "datetime", "date_time",
                 "utc", "log_time")
@@ -639,7 +639,7 @@ def _read_wide(p: Path, cols: list[str], declared: dict, rejects: Rejects, notes
 
 def _read_raw(p: Path, cols: list[str], cfg: IngestConfig, rejects: Rejects, notes: list[str],
               file: str, scan: _Scan) -> FileResult:
-    from .nmea import parse_sentences
+    from dracc.ingest.nmea import parse_sentences
 
     tcol = _find(cols, TIME_COLUMNS)
     rcol = _find(cols, RAW_COLUMNS)

@@ -47,9 +47,14 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from ..units import DEG_RAD, KMH_MPS, KN_MPS, NMI_M
-from .frames import KIND_COLUMNS, Rejects, make_frame
-from .vocabulary import BOOLEAN_FIELDS, REJECT_REASON, normalize_boolean, normalize_reference
+from dracc.core.units import DEG_RAD, KMH_MPS, KN_MPS, NMI_M
+from dracc.frames import KIND_COLUMNS, Rejects, make_frame
+from dracc.ingest.references import (
+    BOOLEAN_FIELDS,
+    REJECT_REASON,
+    normalize_boolean,
+    normalize_reference,
+)
 
 _ANGLE = {"deg": DEG_RAD, "rad": 1.0}
 _SPEED = {"kn": KN_MPS, "mps": 1.0, "kmh": KMH_MPS}
@@ -126,7 +131,7 @@ def lookup(name: str, declared: dict[str, str] | None = None) -> Quantity | None
 
 def check_declared(declared: dict[str, str], where: str) -> None:
     """Raise ConfigError when a declared quantity name is unknown."""
-    from ..errors import ConfigError
+    from dracc.core.errors import ConfigError
 
     for col, q in declared.items():
         if q not in QUANTITIES:

@@ -87,13 +87,25 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..config import IngestConfig
-from ..errors import IngestError
-from .csv_quantities import REF_QUANTITIES, add_rejects, build_frames, check_declared, lookup
-from .frames import MISSING_NS, FileResult, Rejects
-from .mcap_cdr import CdrError, compile_schema, decode_channel, scalar_paths, string_paths
-from .timebase import drop_implausible_ext
-from .vocabulary import ASCII_CODES, ros_constants
+from dracc.core.config import IngestConfig
+from dracc.core.errors import IngestError
+from dracc.frames import MISSING_NS, FileResult, Rejects
+from dracc.ingest.csv_quantities import (
+    REF_QUANTITIES,
+    add_rejects,
+    build_frames,
+    check_declared,
+    lookup,
+)
+from dracc.ingest.mcap_cdr import (
+    CdrError,
+    compile_schema,
+    decode_channel,
+    scalar_paths,
+    string_paths,
+)
+from dracc.ingest.references import ASCII_CODES, ros_constants
+from dracc.ingest.timebase import drop_implausible_ext
 
 MAGIC = b"\x89MCAP0\r\n"
 _PIECE = 1 << 20
@@ -982,7 +994,7 @@ class _Reader:
         if not self.nmea_lines:
             return
         if self.nmea is None:
-            from .nmea import SentenceStream
+            from dracc.ingest.nmea import SentenceStream
 
             self.nmea = SentenceStream(self.file, self.cfg)
         released = self.nmea.add(self.nmea_lines, np.asarray(self.nmea_time, dtype=np.int64),

@@ -18,7 +18,7 @@ workers die with their parent.  A line longer than ``[ingest] max_line_bytes`` i
 does not grow with the content either: a crashed logger's 256 MB of NUL bytes costs one
 line.
 
-Field conversions (edges of the SI world, units per ``dracc.units``):
+Field conversions (edges of the SI world, units per ``dracc.core.units``):
 
 * ``ddmm.mmmm`` / ``dddmm.mmmm`` + hemisphere -> radians:
   ``deg = floor(v/100) + (v - 100 floor(v/100))/60``, S and W negative.
@@ -55,9 +55,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
-from ..errors import IngestError
-from ..units import KN_MPS, NMI_M
-from .frames import (
+from dracc.core.errors import IngestError
+from dracc.core.units import KN_MPS, NMI_M
+from dracc.frames import (
     KIND_COLUMNS,
     KINDS,
     REFERENCE_DTYPE,
@@ -67,8 +67,8 @@ from .frames import (
     concat_blocks,
     make_frame,
 )
-from .tagblock import FORMS, HEX, parse_numbers, parse_prefixes
-from .timebase import (
+from dracc.ingest.tagblock import FORMS, HEX, parse_numbers, parse_prefixes
+from dracc.ingest.timebase import (
     MISSING_NS,
     EventCounter,
     TimeBase,
@@ -78,7 +78,7 @@ from .timebase import (
 )
 
 if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
-    from ..config import IngestConfig
+    from dracc.core.config import IngestConfig
 
 DEG = np.pi / 180.0
 FIRST_BLOCK_BYTES = 16 * 1024 * 1024  #: the first block (where talkers are fingerprinted)
@@ -938,7 +938,7 @@ def _first_examples(examples: dict[str, list[tuple[int, str]]], k: int) -> dict[
 
 # ------------------------------------------------------------- compiled scanning kernel
 try:  # optional: built from _nmeascan.c when a C compiler was there at install time
-    from . import _nmeascan
+    from dracc.ingest import _nmeascan
 except ImportError:  # pragma: no cover - exercised on machines without a compiler
     _nmeascan = None
 
@@ -1336,7 +1336,7 @@ def _worker_init(parent_pid: int | None = None) -> None:
       next block pay for fresh, zero-filled pages (about a third of the workers' CPU time
       was system time).  A worker's peak memory is unchanged: its heap never holds more
       than one block's arrays.  Without glibc this does nothing."""
-    from ..workers import detach_worker
+    from dracc.core.workers import detach_worker
 
     detach_worker(parent_pid)
     try:

@@ -35,8 +35,8 @@ from contextvars import ContextVar
 import numpy as np
 import pandas as pd
 
-from ..errors import AmbiguousSourceError, ConfigError
-from .frames import INS_ROLES, ROLES, SourceInfo
+from dracc.core.errors import AmbiguousSourceError, ConfigError
+from dracc.frames import INS_ROLES, ROLES, SourceInfo
 
 GNSS_FAMILY = ("GP", "GN", "GA", "GL", "GB", "GI", "GQ", "BD")
 INS_TALKERS = ("IN", "II", "IR")

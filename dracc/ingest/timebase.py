@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from .frames import MISSING_NS  # the "no time" marker in int64 time arrays
+from dracc.frames import MISSING_NS  # the "no time" marker in int64 time arrays
 
 DAY_NS = 86_400 * 1_000_000_000
 HALF_DAY_NS = DAY_NS // 2

@@ -1,4 +1,4 @@
-"""Reports: render an :class:`~dracc.pipeline.Analysis`; never compute.
+"""Reports: render an :class:`~dracc.pipeline.analysis.Analysis`; never compute.
 
 ``terminal`` (rich summary), ``json_report`` (versioned JSON + schema), ``html`` with
 ``plots`` (one self-contained offline file), ``tables`` (CSV and Parquet).  This

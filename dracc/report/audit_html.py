@@ -10,7 +10,7 @@ from __future__ import annotations
 import html
 import math
 
-from .page import PAGE_END, img_tag, page_head
+from dracc.report.page import PAGE_END, img_tag, page_head
 
 _DPI = 90
 
@@ -31,7 +31,7 @@ def history_plot(doc: dict, vessel: str) -> bytes | None:
     """m_y per unit and the a priori (dashed steps) per channel over nights; PNG bytes."""
     import pandas as pd
 
-    from .plots import m_y_apriori_plot  # matplotlib loaded only when a page is drawn
+    from dracc.report.plots import m_y_apriori_plot  # matplotlib loaded only when a page is drawn
 
     series = [s for s in doc["series"] if s["vessel"] == vessel]
     if not series:

@@ -13,8 +13,9 @@ from collections.abc import Mapping
 from dataclasses import asdict
 from pathlib import Path
 
-from .. import __version__, atomic
-from ..audit import AuditOutcome, Finding, jsonable
+from dracc import __version__
+from dracc.core import atomic
+from dracc.pipeline.audit import AuditOutcome, Finding, jsonable
 
 SCHEMA = "dracc.audit/1"
 SCHEMA_PATH = Path(__file__).with_name("audit.schema.json")

@@ -1,6 +1,6 @@
 """The ``dracc fleet`` page: latest figures per vessel, DR containment and trend plots.
 
-Renders a :class:`~dracc.fleet.FleetResult`; nothing is estimated here.  The page is one
+Renders a :class:`~dracc.pipeline.fleet.FleetResult`; nothing is estimated here.  The page is one
 self-contained file (:mod:`dracc.report.page`); matplotlib loads only when a plot is drawn.
 The cell formatters and :func:`latest` are shared with the terminal table of ``dracc fleet``.
 """
@@ -12,8 +12,8 @@ import math
 
 import pandas as pd
 
-from ..fleet import FleetResult, count_logs
-from .page import PAGE_END, img_tag, page_head
+from dracc.pipeline.fleet import FleetResult, count_logs
+from dracc.report.page import PAGE_END, img_tag, page_head
 
 _DPI = 85
 
@@ -50,7 +50,7 @@ def latest(table: pd.DataFrame) -> pd.DataFrame:
 
 def trend_plot(trends: pd.DataFrame, vessel: str) -> bytes | None:
     """Per channel: the day's pooled m_y per unit and the a priori (dashed); PNG bytes."""
-    from .plots import m_y_apriori_plot  # matplotlib loaded only when a page is drawn
+    from dracc.report.plots import m_y_apriori_plot  # matplotlib loaded only when a page is drawn
 
     t = trends[trends["vessel"] == vessel]
     if t.empty:
@@ -69,7 +69,7 @@ def containment_plot(table: pd.DataFrame) -> bytes | None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .plots import png_bytes
+    from dracc.report.plots import png_bytes
 
     d = table[table["dr_containment_2m"].notna()].drop_duplicates(["vessel", "log"])
     if d.empty:

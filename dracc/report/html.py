@@ -12,11 +12,11 @@ import html
 import math
 from pathlib import Path
 
-from .. import atomic
-from ..pipeline import CHANNELS, Analysis, Estimate
-from . import fmt, fmt_duration, fmt_pct, fmt_signed, iso_utc, short_utc
-from .page import CSP, data_uri  # one policy and one data URI for every page
-from .rows import EXCEEDS, WITHIN, channel_rows, unit_rows
+from dracc.core import atomic
+from dracc.pipeline.analysis import CHANNELS, Analysis, Estimate
+from dracc.report import fmt, fmt_duration, fmt_pct, fmt_signed, iso_utc, short_utc
+from dracc.report.page import CSP, data_uri  # one policy and one data URI for every page
+from dracc.report.rows import EXCEEDS, WITHIN, channel_rows, unit_rows
 
 _CSS = """
 body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; margin: 1.5em auto;
@@ -261,7 +261,7 @@ def render_html(a: Analysis) -> str:
         missing = ('<section id="missing"><h2>Missing</h2><div class="missing"><ul>'
                    + "".join(f"<li>{_e(m)}</li>" for m in a.missing) + "</ul></div></section>")
     faults = ""
-    if a.faults:  # dracc.faults: shown whenever found, excluded or not
+    if a.faults:  # dracc.math.faults: shown whenever found, excluded or not
         faults = ('<section id="faults"><h2>Sensor faults</h2>'
                   + _table(["kind", "source", "role", "start (UTC)", "end (UTC)", "records", "what was seen"],
                            [[_e(f.kind), _e(f.source), _e(f.role or "-"), _e(short_utc(f.start_ns)),
@@ -272,7 +272,7 @@ def render_html(a: Analysis) -> str:
     if a.notes:
         notes = ("<section id=\"notes\"><h2>Notes</h2><ul>"
                  + "".join(f"<li>{_e(n)}</li>" for n in a.notes) + "</ul></section>")
-    from . import plots  # matplotlib loads only when a page is drawn
+    from dracc.report import plots  # matplotlib loads only when a page is drawn
 
     dr = a.dead_reckoning
     if dr is not None and dr.scored_out_of_sample:

@@ -1,6 +1,6 @@
 """The JSON report, schema ``dracc.analysis/1`` (``analysis.schema.json`` beside this file).
 
-:func:`to_dict` turns an :class:`~dracc.pipeline.Analysis` into plain JSON types; NaN
+:func:`to_dict` turns an :class:`~dracc.pipeline.analysis.Analysis` into plain JSON types; NaN
 and infinities become ``null``; times are ISO 8601 UTC strings (``*_utc``); angles in
 degrees and speeds in knots appear only here, with the unit in the key.
 """
@@ -14,9 +14,11 @@ from typing import Any
 
 import numpy as np
 
-from .. import atomic
-from ..integrity import Check, IntegrityResult
-from ..pipeline import (
+from dracc.core import atomic
+from dracc.core.units import finite_or_none as _num
+from dracc.core.units import mps_to_kn
+from dracc.math.integrity import Check, IntegrityResult
+from dracc.pipeline.analysis import (
     Analysis,
     CalibrationSection,
     CurrentSection,
@@ -24,9 +26,7 @@ from ..pipeline import (
     DRTrack,
     Estimate,
 )
-from ..units import finite_or_none as _num
-from ..units import mps_to_kn
-from . import iso_utc
+from dracc.report import iso_utc
 
 SCHEMA_PATH = Path(__file__).with_name("analysis.schema.json")
 
@@ -220,7 +220,7 @@ def to_dict(a: Analysis) -> dict:
 
 
 def check_dict(c: Check) -> dict:
-    """One integrity check (dracc.integrity) as plain JSON types."""
+    """One integrity check (dracc.math.integrity) as plain JSON types."""
     window = {"start_utc": iso_utc(c.window.get("start_ns")), "end_utc": iso_utc(c.window.get("end_ns"))}
     return {"check": c.check, "name": c.name, "source": c.source, "role": c.role,
             "status": c.status, "clause": c.clause, "statistic": _plain(c.statistic),

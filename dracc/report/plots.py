@@ -1,9 +1,9 @@
 """The report's plots, drawn with matplotlib (Agg) and returned as PNG bytes.
 
-Each function takes a part of an :class:`~dracc.pipeline.Analysis` and draws it;
+Each function takes a part of an :class:`~dracc.pipeline.analysis.Analysis` and draws it;
 nothing is estimated here.  The only arithmetic is the plotting projection: positions
 are shown as kilometres north/east of the first DR fix (or the first position), where
-the 2M circles are true circles (local tangent plane, :func:`dracc.geodesy.offset_ne_m`).
+the 2M circles are true circles (local tangent plane, :func:`dracc.core.geodesy.offset_ne_m`).
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Circle  # noqa: E402
 
-from ..geodesy import offset_ne_m  # noqa: E402
-from ..pipeline import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS, Analysis  # noqa: E402
+from dracc.core.geodesy import offset_ne_m  # noqa: E402
+from dracc.pipeline.analysis import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS, Analysis  # noqa: E402
 
 _DPI = 96
 #: lines are drawn through at most this many points (every k-th sample); circles and

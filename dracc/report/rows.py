@@ -1,7 +1,7 @@
 """The per-unit statistics table as plain row values, one model for every renderer.
 
 The terminal summary and the HTML report print the same figures of
-:class:`~dracc.deviation.UnitStats`: the same digits per channel (3 decimals in
+:class:`~dracc.math.deviation.UnitStats`: the same digits per channel (3 decimals in
 degrees, 1 in metres), the same verdict against the a priori RMS and the same
 three-cornered-hat figures.  They take them from here and only style them, so the two
 reports cannot drift apart.  Every text is plain (no markup, not escaped): the HTML
@@ -13,9 +13,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..deviation import UnitStats
-from ..pipeline import CHANNEL_UNITS, CHANNELS, DeviationResult
-from . import fmt
+from dracc.math.deviation import UnitStats
+from dracc.pipeline.analysis import CHANNEL_UNITS, CHANNELS, DeviationResult
+from dracc.report import fmt
 
 #: the verdict against the a priori RMS
 NO_APRIORI, EXCEEDS, WITHIN = "no a priori", "exceeds", "within"

@@ -25,10 +25,10 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.csv as pa_csv
 
-from .. import atomic
-from ..deviation import WindowStats
-from ..pipeline import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS, Analysis, DRTrack
-from ..safetext import csv_cell
+from dracc.core import atomic
+from dracc.core.safetext import csv_cell
+from dracc.math.deviation import WindowStats
+from dracc.pipeline.analysis import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS, Analysis, DRTrack
 
 
 def _times(time_ns) -> pd.DatetimeIndex:

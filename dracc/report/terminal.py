@@ -5,7 +5,7 @@ rejects, dead-reckoning consistency, the per-unit table, calibration, current, a
 what is missing.  Text from the logs (source keys, file names, and the notes and
 messages that quote them) is printed with rich markup disabled, so a log cannot style
 the terminal, and with every control character shown as an escape
-(:func:`dracc.safetext.printable`: ESC as ``\\x1b``), so a log cannot send the
+(:func:`dracc.core.safetext.printable`: ESC as ``\\x1b``), so a log cannot send the
 terminal a command.  Every text of the summary goes through :func:`_text`.
 """
 
@@ -16,10 +16,10 @@ from rich.console import Console, Group
 from rich.table import Table
 from rich.text import Text
 
-from ..pipeline import CHANNELS, Analysis, DeviationResult, Estimate
-from ..safetext import printable
-from . import fmt, fmt_duration, fmt_pct, fmt_signed, short_utc
-from .rows import EXCEEDS, unit_rows
+from dracc.core.safetext import printable
+from dracc.pipeline.analysis import CHANNELS, Analysis, DeviationResult, Estimate
+from dracc.report import fmt, fmt_duration, fmt_pct, fmt_signed, short_utc
+from dracc.report.rows import EXCEEDS, unit_rows
 
 
 def _text(text="", style: str = "") -> Text:
@@ -207,7 +207,7 @@ def summary(a: Analysis) -> Group:
                       None if a.deviation is None else _deviation_body(a.deviation))
     parts += _section("Calibration", None if a.calibration is None else _calibration_body(a.calibration))
     parts += _section("Current", None if a.current is None else _current_body(a.current))
-    # dracc.faults: shown whenever found, excluded or not
+    # dracc.math.faults: shown whenever found, excluded or not
     parts += _bullets(f"Sensor faults ({len(a.faults)})", [f"{f.kind}: {f.message}" for f in a.faults])
     if a.integrity is not None:
         failed = a.integrity.failed

@@ -5,16 +5,16 @@ precision, :mod:`dracc.sim.nmea_out` for the sentence layouts and line forms, an
 :mod:`dracc.sim.faults` for the seeded sensor faults (``SimParams(faults=...)``).
 """
 
-from .faults import FAULT_KINDS, SimFault, parse_fault, resolve_faults
-from .model import (
-    DEFAULT_INS,
-    GM,
-    InsErrorParams,
-    SimParams,
-    SimVoyage,
-    gauss_markov,
-    simulate,
-    simulate_segments,
+from dracc.sim.faults import FAULT_KINDS, SimFault, parse_fault, resolve_faults
+from dracc.sim.model import (
+           DEFAULT_INS,
+           GM,
+           InsErrorParams,
+           SimParams,
+           SimVoyage,
+           gauss_markov,
+           simulate,
+           simulate_segments,
 )
 
 __all__ = ["GM", "DEFAULT_INS", "FAULT_KINDS", "InsErrorParams", "SimFault", "SimParams",

@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..atomic import atomic_path
-from ..ingest.csv_quantities import frame_quantities
-from ..ingest.frames import KINDS
+from dracc.core.atomic import atomic_path
+from dracc.frames import KINDS
+from dracc.ingest.csv_quantities import frame_quantities
 
 
 def iso_utc(time_ns: np.ndarray) -> np.ndarray:

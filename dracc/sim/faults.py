@@ -37,9 +37,9 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 import pandas as pd
 
-from ..errors import ConfigError
-from ..geodesy import angdiff, offset_ne_m
-from ..units import KN_MPS
+from dracc.core.errors import ConfigError
+from dracc.core.geodesy import angdiff, offset_ne_m
+from dracc.core.units import KN_MPS
 
 FAULT_KINDS = ("jump", "freeze", "dropout", "drift", "latency", "invalid")
 #: every source key the simulator can write (as :data:`dracc.sim.model.SOURCES`)

@@ -30,10 +30,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..atomic import atomic_path
-from ..ingest.csv_quantities import frame_quantities
-from ..ingest.frames import KIND_COLUMNS, KINDS, MISSING_NS
-from ..ingest.mcap_cdr import compile_schema, encode_fixed
+from dracc.core.atomic import atomic_path
+from dracc.frames import KIND_COLUMNS, KINDS, MISSING_NS
+from dracc.ingest.csv_quantities import frame_quantities
+from dracc.ingest.mcap_cdr import compile_schema, encode_fixed
 
 LEAF = {"position": "fix", "heading": "heading", "ground": "velocity", "water": "water",
         "distance": "distance", "rot": "rot"}
@@ -273,7 +273,7 @@ def write_mcap(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None, pa
     path = Path(path)
     streams: list[tuple[str, str, str, bytes, str, np.ndarray, list[bytes]]] = []
     if encoding == "nmea":
-        from .nmea_out import frames_to_lines
+        from dracc.sim.nmea_out import frames_to_lines
 
         t, src, lines = frames_to_lines(frames, roles)
         src = np.asarray(src, dtype=object)

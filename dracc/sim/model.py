@@ -2,7 +2,7 @@
 
 Pure numpy; no I/O.  :func:`simulate` turns a :class:`SimParams` into a :class:`SimVoyage`
 holding the truth, every true error series, and the canonical frames
-(:mod:`dracc.ingest.frames`) that a perfect parser of the written log returns.
+(:mod:`dracc.frames`) that a perfect parser of the written log returns.
 
 Glossary (symbols of the dead-reckoning paper, METHODS.md §2)
     ``psi``    true heading KZ + pz of the ship (rad, [0, 2pi))
@@ -41,11 +41,11 @@ import pandas as pd
 from pandas.api.types import union_categoricals
 from scipy.signal import lfilter
 
-from ..errors import ConfigError
-from ..geodesy import add_offset_ne, angdiff, k_lambda, k_phi, wrap_2pi, wrap_pi
-from ..ingest.frames import KINDS, empty_frame, make_frame
-from ..units import DEG_RAD, KN_MPS, NMI_M
-from .faults import SimFault, apply_error_faults, apply_frame_faults, resolve_faults
+from dracc.core.errors import ConfigError
+from dracc.core.geodesy import add_offset_ne, angdiff, k_lambda, k_phi, wrap_2pi, wrap_pi
+from dracc.core.units import DEG_RAD, KN_MPS, NMI_M
+from dracc.frames import KINDS, empty_frame, make_frame
+from dracc.sim.faults import SimFault, apply_error_faults, apply_frame_faults, resolve_faults
 
 MAX_SAMPLES = 3e6  #: truth samples in one simulate() call (~1.7 kB each at peak)
 SCHULER_PERIOD_S = 84.4 * 60.0  #: Schuler period 2 pi sqrt(R/g) = 84.4 min

@@ -43,11 +43,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..atomic import atomic_path
-from ..errors import DraccError
-from ..ingest.frames import MISSING_NS
-from ..units import DEG_RAD, KN_MPS, NMI_M
-from .model import ALT_DEC, ANGLE_DEC, DIST_DEC, HDOP_DEC, ROT_DEC, SPEED_DEC
+from dracc.core.atomic import atomic_path
+from dracc.core.errors import DraccError
+from dracc.core.units import DEG_RAD, KN_MPS, NMI_M
+from dracc.frames import MISSING_NS
+from dracc.sim.model import ALT_DEC, ANGLE_DEC, DIST_DEC, HDOP_DEC, ROT_DEC, SPEED_DEC
 
 KMH_MPS = 1000.0 / 3600.0
 FORMS = ("tag", "prefix", "bare")

@@ -22,7 +22,7 @@ A Kalman filter with the state ``x = [p, cbar, c, n, eps, s]`` (p: the integral 
 step dt, for each Gauss-Markov process g = c, n (phi = exp(-dt/tau))::
 
     p+ = p + dt cbar + tau_c (1 - phi_c) c + tau_n (1 - phi_n) n + G [eps, s],  G = int J dt
-    g+ = phi g,  Q: the integrated Gauss-Markov process (dracc.current.gauss_markov_noise)
+    g+ = phi g,  Q: the integrated Gauss-Markov process (dracc.math.current.gauss_markov_noise)
 
 The hyper-parameters ``(sigma_c, tau_c, sigma_n, tau_n)``, the fixes' noise and a widening
 of the sensor priors are not known: the filter runs for every point of a grid of them at
@@ -52,11 +52,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .arrays import unique_sorted
-from .current import gauss_markov_noise, transition
-from .deadreckoning import DRTrack, covered_span_s, error_ellipse
-from .geodesy import add_offset_ne, interp_position, offset_ne_m, wrap_pi
-from .units import KN_MPS
+from dracc.core.arrays import unique_sorted
+from dracc.core.geodesy import add_offset_ne, interp_position, offset_ne_m, wrap_pi
+from dracc.core.units import KN_MPS
+from dracc.math.current import gauss_markov_noise, transition
+from dracc.math.deadreckoning import DRTrack, covered_span_s, error_ellipse
 
 __all__ = [
     "ErrorPrior",

@@ -37,7 +37,7 @@ Schema versions
    file at once migrate it once.
 
 This module stores and reads; the rules (what the a priori becomes, what is a finding)
-live in :mod:`dracc.audit`.
+live in :mod:`dracc.pipeline.audit`.
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import ConfigError, DraccError
+from dracc.core.errors import ConfigError, DraccError
 
 SCHEMA_VERSION = 2
 

@@ -26,8 +26,8 @@ import math
 
 import numpy as np
 
-from .. import distributions as dist
-from ..geodesy import angdiff, circmean, k_lambda, k_phi
+from dracc.core import distributions as dist
+from dracc.core.geodesy import angdiff, circmean, k_lambda, k_phi
 
 #: (K3b) the paper's Student-corrected number of deviations is n - 1.45
 N_CORRECTION = 1.45

@@ -30,9 +30,9 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-from .errors import ConfigError
-from .ingest.csv_quantities import QUANTITIES
-from .ingest.frames import INS_ROLES, ROLES
+from dracc.core.errors import ConfigError
+from dracc.frames import INS_ROLES, ROLES
+from dracc.ingest.csv_quantities import QUANTITIES
 
 
 @dataclass(frozen=True)
@@ -69,7 +69,7 @@ class IngestConfig:
 
 @dataclass(frozen=True)
 class DeadReckoningConfig:
-    learn: bool = True  #: learn the errors and the current from the reference, causally (dracc.ep)
+    learn: bool = True  #: learn the errors and the current from the reference, causally (dracc.math.ep)
     #: restart from a fix: "auto" (1 h on logs of 8 h or more, shorter on short logs), a
     #: duration ("1h", "4h", "30min"), "watch" (4 h) or "never"
     reset: str = "auto"
@@ -119,7 +119,7 @@ class DeviationConfig:
 
 @dataclass(frozen=True)
 class FaultsConfig:
-    """Sensor-fault detection (dracc.faults); faults are always reported, excluded only if asked."""
+    """Sensor-fault detection (dracc.math.faults); faults are always reported, excluded only if asked."""
 
     exclude: bool = False  #: keep flagged records out of the statistics (raw figures still shown)
     max_speed_kn: float = 60.0  #: a position step implying more than this is a jump ...
@@ -134,7 +134,7 @@ class FaultsConfig:
 
 @dataclass(frozen=True)
 class IntegrityConfig:
-    """Integrity checks of every source (dracc.integrity): the ``[integrity]`` table."""
+    """Integrity checks of every source (dracc.math.integrity): the ``[integrity]`` table."""
 
     #: false-alarm probability of each statistical check, per source and night
     false_alarm: float = 1e-3
@@ -162,7 +162,7 @@ class Config:
     faults: FaultsConfig = FaultsConfig()
     integrity: IntegrityConfig = IntegrityConfig()
     #: further sections (audit, fleet, report, vessel) as plain tables, validated by their
-    #: owners (dracc.audit.audit_config, dracc.fleet.fleet_config); here only: each is a table
+    #: owners (dracc.pipeline.audit.audit_config, dracc.pipeline.fleet.fleet_config); here only: each is a table
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -430,7 +430,7 @@ def parse_reset_s(text: str | float) -> float:
     """Restart interval in seconds: "1h", "30min", "90s", "watch" (4 h), "never" (inf).
 
     The grammar of ``[dead_reckoning] reset`` (besides "auto", which depends on the log);
-    here so that the configuration is checked when it is read; dracc.deadreckoning uses it
+    here so that the configuration is checked when it is read; dracc.math.deadreckoning uses it
     (it imports this module, not the reverse).
     """
     if isinstance(text, (int, float)) and not isinstance(text, bool):
@@ -492,7 +492,7 @@ def _check_deviation_table(table: dict[str, float], section: str, key: str) -> d
     return table
 
 
-#: the channels of an a priori RMS (dracc.deviation.analysis.SAMPLE_KEYS; not imported: it
+#: the channels of an a priori RMS (dracc.math.deviation.analysis.SAMPLE_KEYS; not imported: it
 #: imports this module)
 _APRIORI_KEYS = ("course_deg", "lat_m", "lon_m")
 

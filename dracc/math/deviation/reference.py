@@ -16,7 +16,7 @@ which the paper tabulates day by day (Table 1) with two marks:
   ``<`` where E_dev < E_err (the limiting error from the deviations is understated),
   ``>`` where E_dev > E_err, ``=`` where they agree to ``tol``.
 
-The last row of Table 1 averages over days: see :func:`dracc.deviation.stats.weighted_rms`.
+The last row of Table 1 averages over days: see :func:`dracc.math.deviation.stats.weighted_rms`.
 """
 
 from __future__ import annotations
@@ -25,8 +25,8 @@ import math
 
 import numpy as np
 
-from ..geodesy import angdiff, k_lambda, k_phi
-from .stats import K_EMPIRICAL_LON
+from dracc.core.geodesy import angdiff, k_lambda, k_phi
+from dracc.math.deviation.stats import K_EMPIRICAL_LON
 
 #: the paper's mark threshold k' for its longitude (and course) factor 1.49 (Table 1 notes)
 K_MARK_LON = 1.5

@@ -1,9 +1,9 @@
 """The nightly shipboard audit: thresholds, the a priori rule, findings.
 
 ``dracc audit`` runs after midnight over the last day's logs, analyses them with
-:func:`dracc.pipeline.analyse`, checks the results against the limits in the
+:func:`dracc.pipeline.analysis.analyse`, checks the results against the limits in the
 ``[audit]`` section of the configuration and keeps the state between nights in SQLite
-(:mod:`dracc.state`).
+(:mod:`dracc.pipeline.state`).
 
 The monitoring rule (INS-deviation paper, conclusions)
 ------------------------------------------------------
@@ -41,9 +41,9 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
-from .config import Config
-from .errors import ConfigError, ExitCode, IngestError, InsufficientDataError
-from .state import AprioriEvent, ChannelRow, NightRecord, StateStore
+from dracc.core.config import Config
+from dracc.core.errors import ConfigError, ExitCode, IngestError, InsufficientDataError
+from dracc.pipeline.state import AprioriEvent, ChannelRow, NightRecord, StateStore
 
 UNITS = ("ins1", "ins2", "ins3")
 CHANNELS = ("lat", "lon", "course")
@@ -384,15 +384,14 @@ def facts_from_analysis(doc: Mapping) -> NightFacts:
 
 
 def analyse_voyage(paths: Sequence[Path], cfg: Config, progress=None):
-    """Run the pipeline (:func:`dracc.pipeline.analyse`) over one voyage's logs."""
-    from . import pipeline
-
+    """Run the pipeline (:func:`dracc.pipeline.analysis.analyse`) over one voyage's logs."""
+    from dracc.pipeline import analysis as pipeline
     return pipeline.analyse([Path(p) for p in paths], cfg, progress=progress)
 
 
 def analysis_document(paths: Sequence[Path], cfg: Config, progress=None) -> dict:
     """Analyse one voyage's logs and return the JSON-ready analysis document."""
-    from .report import json_report
+    from dracc.report import json_report
 
     return json_report.to_dict(analyse_voyage(paths, cfg, progress=progress))
 
@@ -549,7 +548,7 @@ def _dr_inconsistent(facts: NightFacts, acfg: AuditConfig, below: bool) -> Findi
                     false_alarm=DR_FALSE_ALARM)
 
 
-#: the NEES test of dracc.deadreckoning.dr_consistency: two-sided at alpha = 0.01
+#: the NEES test of dracc.math.deadreckoning.dr_consistency: two-sided at alpha = 0.01
 DR_FALSE_ALARM = 0.01
 
 
@@ -582,7 +581,7 @@ def pool_channels(nights: Sequence[tuple[str, float, Sequence[ChannelRow]]], dev
     """Pool (night, hours, channel rows) per unit and channel: m_u^2 weighted by n (K3b over
     the union of the nights' deviations), kurtosis weighted by n, independent samples
     summed; the limiting error (K8) from those."""
-    from .deviation import stats
+    from dracc.math.deviation import stats
 
     acc: dict[tuple[str, str], dict] = {}
     for night, hours, rows in nights:
@@ -928,7 +927,7 @@ def audit_document(doc: Mapping, *, store: StateStore, acfg: AuditConfig,
     whose content changed replaces the stored one in the same transaction
     (``'replaced'``).  The a priori chain of the vessel is recomputed in that transaction.
     """
-    from .config import DeviationConfig
+    from dracc.core.config import DeviationConfig
 
     dev_cfg = dev_cfg or DeviationConfig()
     facts = facts_from_analysis(doc)
@@ -1126,7 +1125,7 @@ def run_audit(inputs: Sequence[Path], cfg: Config, *, db: str | Path | None = No
     paths = list(choice.paths)
     content_hash = content_sha256(paths)
     analysis = analyse_voyage(paths, cfg, progress=progress)
-    from .report import json_report
+    from dracc.report import json_report
 
     doc = json_report.to_dict(analysis)
     with StateStore(db_path, busy_timeout_s=acfg.busy_timeout_s) as store:

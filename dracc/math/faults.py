@@ -1,10 +1,10 @@
 """Sensor faults: physically impossible or dead readings found in the canonical frames.
 
-Pure functions over the frames of :mod:`dracc.ingest.frames` (no I/O).  Each fault is
+Pure functions over the frames of :mod:`dracc.frames` (no I/O).  Each fault is
 one :class:`SensorFault` naming the source key, its role, the kind, the first and last
 record concerned and the raw values, so a report can show exactly what was seen.
 
-Kinds and the rule that finds each (thresholds in :class:`dracc.config.FaultsConfig`):
+Kinds and the rule that finds each (thresholds in :class:`dracc.core.config.FaultsConfig`):
 
 ``jump``
     consecutive valid fixes of one position source a distance ``d`` apart in ``dt``
@@ -30,8 +30,8 @@ Kinds and the rule that finds each (thresholds in :class:`dracc.config.FaultsCon
     of turn beyond ``max_rot_deg_per_min``.  Consecutive records of one source and
     quantity form one fault.
 
-Distances use :func:`dracc.geodesy.distance_m`; angles are compared with
-:func:`dracc.geodesy.angdiff`.  Times are int64 UTC nanoseconds; degrees, knots and
+Distances use :func:`dracc.core.geodesy.distance_m`; angles are compared with
+:func:`dracc.core.geodesy.angdiff`.  Times are int64 UTC nanoseconds; degrees, knots and
 nautical miles appear only in the messages and the ``values`` shown to a reader.
 """
 
@@ -44,11 +44,11 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 import pandas as pd
 
-from .config import FaultsConfig
-from .errors import ConfigError
-from .geodesy import angdiff, circmean, distance_m, offset_ne_m
-from .ingest.frames import Voyage
-from .units import DEG_RAD, KN_MPS, NMI_M, NS_PER_S
+from dracc.core.config import FaultsConfig
+from dracc.core.errors import ConfigError
+from dracc.core.geodesy import angdiff, circmean, distance_m, offset_ne_m
+from dracc.core.units import DEG_RAD, KN_MPS, NMI_M, NS_PER_S
+from dracc.frames import Voyage
 
 __all__ = ["SensorFault", "FAULT_KINDS", "detect_faults", "exclude_faults", "check_config"]
 

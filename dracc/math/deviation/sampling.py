@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..geodesy import angdiff, k_lambda, k_phi, wrap_2pi, wrap_pi
+from dracc.core.geodesy import angdiff, k_lambda, k_phi, wrap_2pi, wrap_pi
 
 DAY_NS = 86_400 * 1_000_000_000
 #: reason codes of :func:`align_at` (0: sampled)
@@ -290,7 +290,7 @@ def unit_series_from_frames(position, heading, ground=None) -> UnitSeries:
 
 
 def unit_series_from_voyage(voyage, role: str) -> UnitSeries:
-    """Readings of ``role`` from a :class:`dracc.ingest.frames.Voyage`
+    """Readings of ``role`` from a :class:`dracc.frames.Voyage`
     (see :func:`unit_series_from_frames` for what is left out)."""
     return unit_series_from_frames(voyage.frame("position", role), voyage.frame("heading", role),
                                    voyage.frame("ground", role))

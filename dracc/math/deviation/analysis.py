@@ -20,22 +20,22 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from ..config import DeviationConfig
-from ..errors import ConfigError
-from ..geodesy import k_lambda, k_phi
-from ..ingest.frames import INS_ROLES
-from ..units import ARCMIN_RAD
-from ..units import finite_or_none as _f
-from . import stats
-from .hat import three_cornered_hat
-from .reference import (
+from dracc.core.config import DeviationConfig
+from dracc.core.errors import ConfigError
+from dracc.core.geodesy import k_lambda, k_phi
+from dracc.core.units import ARCMIN_RAD
+from dracc.core.units import finite_or_none as _f
+from dracc.frames import INS_ROLES
+from dracc.math.deviation import stats
+from dracc.math.deviation.hat import three_cornered_hat
+from dracc.math.deviation.reference import (
     course_errors_rad,
     k_star_mark,
     kurtosis_mark,
     position_errors_m,
     table1_mark_k,
 )
-from .sampling import (
+from dracc.math.deviation.sampling import (
     DAY_NS,
     GAP_TOO_LONG,
     OUTSIDE_SPAN,

@@ -1,11 +1,11 @@
 """Integrity checks of every source over one night: validity, plausibility, latency,
 availability and consistency (IMO MSC.252(83) section 5.3-5.4; IEC 61924-2 tests them).
 
-Pure functions over the canonical frames (:mod:`dracc.ingest.frames`); no I/O.  Each
+Pure functions over the canonical frames (:mod:`dracc.frames`); no I/O.  Each
 check of each source gives one :class:`Check`: ``pass``, ``fail`` (with its evidence) or
 ``not_checked`` (with why).  The nightly audit turns failed checks into findings.
 
-The checks and their rules (thresholds in :class:`dracc.config.IntegrityConfig`)
+The checks and their rules (thresholds in :class:`dracc.core.config.IntegrityConfig`)
 ------------------------------------------------------------------------------
 validity / ``invalid_flag``
     the source's own flags: position records flagged invalid (GGA quality 0, RMC/GLL
@@ -31,7 +31,7 @@ plausibility / ``dr_2m``
     each reference fix against the DR propagated from the earlier fixes with its
     covariance (:func:`dr_innovation_check`, made by the pipeline after the DR).
 plausibility / ``frozen``, ``stuck``, ``out_of_range``
-    :mod:`dracc.faults` with the integrity windows (``frozen_min_s``): bit-identical
+    :mod:`dracc.math.faults` with the integrity windows (``frozen_min_s``): bit-identical
     positions while the other sources show the ship moving, a heading repeating while
     they show it turning, values no sensor can produce.  Rules: probability 0.
 latency
@@ -74,14 +74,14 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pandas as pd
 
-from . import distributions as dist
-from .config import FaultsConfig, IntegrityConfig
-from .deviation.sampling import align_at, sample_unit, unit_series_from_voyage
-from .ep import OUTLIER_NIS
-from .faults import SensorFault, detect_faults
-from .geodesy import angdiff, circmean, offset_ne_m
-from .ingest.frames import INS_ROLES, MISSING_NS, Voyage
-from .units import DEG_RAD, KN_MPS, NS_PER_S
+from dracc.core import distributions as dist
+from dracc.core.config import FaultsConfig, IntegrityConfig
+from dracc.core.geodesy import angdiff, circmean, offset_ne_m
+from dracc.core.units import DEG_RAD, KN_MPS, NS_PER_S
+from dracc.frames import INS_ROLES, MISSING_NS, Voyage
+from dracc.math.deviation.sampling import align_at, sample_unit, unit_series_from_voyage
+from dracc.math.ep import OUTLIER_NIS
+from dracc.math.faults import SensorFault, detect_faults
 
 __all__ = ["Check", "SourceSummary", "IntegrityResult", "check_night", "dr_innovation_check",
            "with_dr_check", "CHECK_KINDS"]
@@ -354,7 +354,7 @@ def _jump(key: str, role: str | None, g: pd.DataFrame, frozen: Sequence[SensorFa
 
 def _fault_checks(voyage: Voyage, faults: Sequence[SensorFault], name: str, kinds: tuple[str, ...],
                   frames: tuple[str, ...], rule: str, cfg_value: float, unit: str) -> list[Check]:
-    """One pass/fail check per source of ``frames`` from :mod:`dracc.faults` results."""
+    """One pass/fail check per source of ``frames`` from :mod:`dracc.math.faults` results."""
     checks = []
     times: dict[str, list[np.ndarray]] = {}
     for frame in frames:
@@ -775,7 +775,7 @@ DR_GATE_NIS = OUTLIER_NIS
 def dr_innovation_check(source: str | None, role: str | None, time_ns: np.ndarray, nis: np.ndarray,
                         gate_m: np.ndarray, cfg: IntegrityConfig | None = None) -> Check:
     """plausibility / ``dr_2m``: each reference fix against the DR from the previous ones
-    with its covariance (the estimated position's filter, dracc.ep): the innovation
+    with its covariance (the estimated position's filter, dracc.math.ep): the innovation
     ``nu' S^-1 nu`` is chi-square with 2 degrees of freedom for a healthy fix; above
     :data:`DR_GATE_NIS` it is a jump the DR and its 2M cannot explain.  The smallest such
     jump, ``sqrt(gate * largest eigenvalue of S)``, is stated (its median over the fixes)."""

@@ -47,7 +47,7 @@ Every (sigma, tau) form that ``[dead_reckoning]`` accepts is a valid model here:
   log or compass noise enters the position the same way (PSD ``sigma^2 * 1 s`` instead
   of ``2 sigma^2 tau``).
 
-Updates: every observation of :mod:`dracc.fusion` (``PositionFix``, ``RangeLOP``,
+Updates: every observation of :mod:`dracc.math.fusion` (``PositionFix``, ``RangeLOP``,
 ``BearingLOP``, ``LineLOP``, ``PierLine``, ``NadirCircle``) linearised at the predicted
 position, ``H = [g, 0]``; extended Kalman update in Joseph form.  A single line of
 position has a 1x4 ``H``, so the position covariance shrinks only across the line.
@@ -66,10 +66,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InsufficientDataError
-from .fusion import Ellipse, Observation, PositionFix, error_ellipse
-from .geodesy import add_offset_ne, k_lambda, k_phi, offset_ne_m, wrap_2pi, wrap_pi
-from .units import DEG_RAD, KN_MPS
+from dracc.core.errors import InsufficientDataError
+from dracc.core.geodesy import add_offset_ne, k_lambda, k_phi, offset_ne_m, wrap_2pi, wrap_pi
+from dracc.core.units import DEG_RAD, KN_MPS
+from dracc.math.fusion import Ellipse, Observation, PositionFix, error_ellipse
 
 #: tau = 0 (white noise) means a value independent from one WHITE_NOISE_STEP_S to the next
 WHITE_NOISE_STEP_S = 1.0
@@ -143,7 +143,7 @@ class CurrentModel:
 
     @classmethod
     def from_config(cls, cfg) -> CurrentModel:
-        """From a :class:`dracc.config.DeadReckoningConfig`: its ``current_kn``,
+        """From a :class:`dracc.core.config.DeadReckoningConfig`: its ``current_kn``,
         ``log_noise_kn`` and ``compass_noise_deg`` error sources, in any of their forms
         (a number or ``tau_s = "inf"``: a bias; ``tau_s = 0``: white noise)."""
         return cls(

@@ -46,9 +46,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import distributions as dist
-from .errors import InsufficientDataError
-from .geodesy import angdiff, offset_ne_m, wrap_pi
+from dracc.core import distributions as dist
+from dracc.core.errors import InsufficientDataError
+from dracc.core.geodesy import angdiff, offset_ne_m, wrap_pi
 
 __all__ = [
     "CompassErrorEstimate",

@@ -13,7 +13,7 @@ Glossary (paper symbols, used inside the kernels)
     z      total leeway z = alpha + beta (drift + leeway angle)  ``leeway_rad``
     V      speed (Vw through the water, Vd over the ground)      ``speed_mps``
     Vp, Kp current drift and set (towards)                       ``current_*``
-    k_phi, k_lambda  (B18), (B19): radians per metre north / east (dracc.geodesy)
+    k_phi, k_lambda  (B18), (B19): radians per metre north / east (dracc.core.geodesy)
     P      position covariance; ``P_m2`` in metres north/east, ``P_rad2`` in (phi, lambda)
     M      mean position error (drms), the "2M circle" radius 2M (B30, B31)
 
@@ -40,12 +40,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import distributions as dist
-from .arrays import unique_sorted
-from .config import WATCH_S, DeadReckoningConfig, ErrorSource, parse_reset_s
-from .errors import ConfigError, InsufficientDataError
-from .geodesy import interp_position, k_lambda, k_phi, offset_ne_m, wrap_2pi, wrap_pi
-from .units import DEG_RAD, KN_MPS
+from dracc.core import distributions as dist
+from dracc.core.arrays import unique_sorted
+from dracc.core.config import WATCH_S, DeadReckoningConfig, ErrorSource, parse_reset_s
+from dracc.core.errors import ConfigError, InsufficientDataError
+from dracc.core.geodesy import interp_position, k_lambda, k_phi, offset_ne_m, wrap_2pi, wrap_pi
+from dracc.core.units import DEG_RAD, KN_MPS
 
 __all__ = [
     "WATCH_S",
@@ -846,7 +846,7 @@ def dead_reckon(
     about this step where the data are denser (see :func:`honest_covariance_m2`);
     None propagates at every sample (exact, slower at 10 Hz).  ``covariance=False`` skips
     the configured covariance (P, 2M and the ellipse are NaN): for a caller that forms its
-    own, as :func:`dracc.ep.estimate_position` does.
+    own, as :func:`dracc.math.ep.estimate_position` does.
     """
     cfg = errors if errors is not None else DeadReckoningConfig()
     if mode not in ("water", "ground"):

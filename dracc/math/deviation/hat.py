@@ -47,7 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geodesy import angdiff
+from dracc.core.geodesy import angdiff
 
 
 @dataclass(frozen=True, eq=False)  # holds arrays: identity, not elementwise ==

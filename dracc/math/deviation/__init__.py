@@ -11,7 +11,7 @@ Pure numpy/scipy; no I/O.
 
 from __future__ import annotations
 
-from .analysis import (
+from dracc.math.deviation.analysis import (
     CHANNELS,
     ChannelMode,
     ChannelStats,
@@ -25,8 +25,8 @@ from .analysis import (
     analyse_deviations,
     check_config,
 )
-from .hat import HatEstimate, three_cornered_hat
-from .sampling import (
+from dracc.math.deviation.hat import HatEstimate, three_cornered_hat
+from dracc.math.deviation.sampling import (
     UnitSeries,
     sample_unit,
     sampling_instants,

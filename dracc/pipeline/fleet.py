@@ -14,7 +14,7 @@ existing Dask distributed scheduler (``scheduler='tcp://host:port'``, through
 
 The fleet table has one row per log, unit and channel (a log without INS statistics has
 one row with empty unit and channel).  The a priori verdict applies the monitoring rule
-(:func:`dracc.audit.apriori_chain`) per vessel, unit and channel in time order, seeded
+(:func:`dracc.pipeline.audit.apriori_chain`) per vessel, unit and channel in time order, seeded
 with ``[deviation.apriori]``.  The per-day trend pools the RMS of the day's logs::
 
     m_y,day = sqrt( sum_i n_i m_y,i^2 / sum_i n_i )        (pooled RMS, weights n_i)
@@ -24,7 +24,7 @@ or device, a dangling link, an unreadable file, a folder where ``--pattern`` nam
 files) and, inside a vessel folder, a symbolic link leading out of it, is a failed log
 with why; it is never opened (a FIFO's open blocks) and makes the exit code 3.  The
 outputs (tables, trends, per-vessel CSV, ``fleet.json``, ``fleet.html``) are written to a
-staging folder and published together by one rename (:func:`dracc.atomic.file_set`);
+staging folder and published together by one rename (:func:`dracc.core.atomic.file_set`);
 CSV cells that a spreadsheet would read as a formula get a leading single quote.
 """
 
@@ -46,8 +46,12 @@ from pathlib import Path, PurePath
 import numpy as np
 import pandas as pd
 
-from . import __version__, atomic
-from .audit import (
+from dracc import __version__
+from dracc.core import atomic
+from dracc.core.config import Config
+from dracc.core.errors import ConfigError, DraccError, IngestError
+from dracc.core.workers import detach_worker
+from dracc.pipeline.audit import (
     CHANNELS,
     apriori_chain,
     apriori_seeds,
@@ -57,9 +61,6 @@ from .audit import (
     outside_link,
     settings_sha256,
 )
-from .config import Config
-from .errors import ConfigError, DraccError, IngestError
-from .workers import detach_worker
 
 #: /2: the summary's "dr" carries the verdict word and the NEES statistic (a /1 entry is
 #: analysed again)
@@ -194,7 +195,7 @@ def _names_files(pattern: str) -> bool:
 
 def _task(vessel: str, path: Path, log: str) -> LogTask:
     """The task for one input: its hash, or why it cannot be read (never blocking:
-    :func:`dracc.audit.input_problem` opens nothing but a regular file)."""
+    :func:`dracc.pipeline.audit.input_problem` opens nothing but a regular file)."""
     absolute = os.path.abspath(path)
     problem = input_problem(path)
     if problem is None:
@@ -276,7 +277,7 @@ def analyse_log(path: str, cfg: Config) -> dict:
 
     Never raises for a bad log: the batch goes on.
     """
-    from .audit import analysis_document
+    from dracc.pipeline.audit import analysis_document
 
     try:
         return {"ok": True, "summary": summarise(analysis_document([Path(path)], cfg))}
@@ -381,7 +382,7 @@ def _preload() -> None:
     """Import the pipeline in the parent so that forked workers start with it loaded."""
     import importlib
 
-    for name in ("dracc.pipeline", "dracc.ingest", "dracc.report.json_report"):
+    for name in ("dracc.pipeline.analysis", "dracc.ingest", "dracc.report.json_report"):
         try:
             importlib.import_module(name)
         except ImportError:  # pragma: no cover - the worker reports it per log
@@ -510,7 +511,7 @@ def _typed(df: pd.DataFrame) -> pd.DataFrame:
 
 def _apply_rule(df: pd.DataFrame, seeds: Mapping[tuple[str, str], float]) -> None:
     """The monitoring rule per vessel, unit and channel, log after log in time order
-    (:func:`dracc.audit.apriori_chain` on each series; one assignment per column)."""
+    (:func:`dracc.pipeline.audit.apriori_chain` on each series; one assignment per column)."""
     ok_pos = np.flatnonzero(((df["status"] == "ok") & df["unit"].notna()).to_numpy(dtype=bool))
     before = np.full(len(df), np.nan)
     after = np.full(len(df), np.nan)
@@ -577,9 +578,9 @@ TEST_SLEEP_ENV = "DRACC_FLEET_TEST_SLEEP_S"
 def csv_text(df: pd.DataFrame) -> str:
     """``df`` as CSV for a spreadsheet: a text cell starting with ``=``, ``+``, ``-``,
     ``@``, a tab or a CR (a vessel or file name, an error message) gets a leading single
-    quote, so that no cell is read as a formula (:func:`dracc.safetext.csv_cell`).
+    quote, so that no cell is read as a formula (:func:`dracc.core.safetext.csv_cell`).
     Numbers are left alone (-0.5 stays a number); Parquet keeps the raw text."""
-    from .safetext import csv_cell
+    from dracc.core.safetext import csv_cell
 
     safe = df.copy()
     for col in safe.columns:
@@ -593,10 +594,10 @@ def write_tables(result: FleetResult, out: Path, extra: Mapping[str, str] | None
                  published: list | None = None) -> list[Path]:
     """fleet.parquet/.csv, trends.parquet/.csv, failures in fleet.json, per vessel
     ``vessels/<safe name>/fleet.csv`` and ``trends.csv``, and the ``extra`` files
-    (name -> text, e.g. ``fleet.html``), published together (:func:`dracc.atomic.file_set`):
+    (name -> text, e.g. ``fleet.html``), published together (:func:`dracc.core.atomic.file_set`):
     a reader, an interrupt or a kill at any moment finds the previous complete set in
     ``out`` or the new complete set, never a mix (``published``: see
-    :func:`~dracc.atomic.file_set`).  Returns the paths of the outputs."""
+    :func:`~dracc.core.atomic.file_set`).  Returns the paths of the outputs."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rels: list[Path] = []

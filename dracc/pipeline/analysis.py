@@ -8,7 +8,7 @@ everything the reports show.  Everything is computed here, once; the renderers i
 What a log lacks (no INS triple, no heading, no speed log, no reference) is not an
 error: the section concerned is ``None``, and :attr:`Analysis.missing` says why in a
 sentence a navigator reads.  Only a log with nothing usable at all raises
-:class:`~dracc.errors.InsufficientDataError`.
+:class:`~dracc.core.errors.InsufficientDataError`.
 
 Units follow the package conventions: radians, metres, seconds and int64 UTC
 nanoseconds inside.  The deviation samples and statistics keep the units of the
@@ -26,11 +26,15 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import __version__
-from .arrays import unique_sorted
-from .config import Config, DeadReckoningConfig
-from .current import CurrentModel, estimate_current
-from .deadreckoning import (
+from dracc import __version__
+from dracc.core.arrays import unique_sorted
+from dracc.core.config import Config, DeadReckoningConfig
+from dracc.core.errors import InsufficientDataError
+from dracc.core.geodesy import circmean, interp_position, offset_ne_m, wrap_2pi, wrap_pi
+from dracc.core.units import DEG_RAD, KN_MPS, NS_PER_S
+from dracc.frames import INS_ROLES, Voyage
+from dracc.math.current import CurrentModel, estimate_current
+from dracc.math.deadreckoning import (
     course_magnetic_rad,
     covered_span_s,
     dead_reckon,
@@ -41,16 +45,18 @@ from .deadreckoning import (
     leeway_from_log_rad,
     speed_from_components_mps,
 )
-from .deviation import DeviationResult, analyse_deviations, unit_series_from_voyage
-from .deviation.analysis import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS
-from .ep import MIN_LEARNED_S, OUTLIER_NIS, ErrorPrior, estimate_position, heading_prior_rad
-from .errors import InsufficientDataError
-from .faults import SensorFault, detect_faults, exclude_faults
-from .fusion import PositionFix
-from .geodesy import circmean, interp_position, offset_ne_m, wrap_2pi, wrap_pi
-from .ingest.frames import INS_ROLES, Voyage
-from .integrity import IntegrityResult, check_night, dr_innovation_check, with_dr_check
-from .units import DEG_RAD, KN_MPS, NS_PER_S
+from dracc.math.deviation import DeviationResult, analyse_deviations, unit_series_from_voyage
+from dracc.math.deviation.analysis import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS
+from dracc.math.ep import (
+    MIN_LEARNED_S,
+    OUTLIER_NIS,
+    ErrorPrior,
+    estimate_position,
+    heading_prior_rad,
+)
+from dracc.math.faults import SensorFault, detect_faults, exclude_faults
+from dracc.math.fusion import PositionFix
+from dracc.math.integrity import IntegrityResult, check_night, dr_innovation_check, with_dr_check
 
 SCHEMA = "dracc.analysis/1"
 
@@ -179,7 +185,7 @@ class DRSection:
     nees_statistic: float = math.nan  #: sum over legs of the last epoch's NEES ~ chi^2(2 legs)
     nees_lower: float = math.nan
     nees_upper: float = math.nan
-    leg_checks: tuple = ()  #: dracc.deadreckoning.LegConsistency per scored leg
+    leg_checks: tuple = ()  #: dracc.math.deadreckoning.LegConsistency per scored leg
     dominant_source: str | None = None  #: what the 2M is mostly made of where it fails
     dominant_key: str | None = None  #: the [dead_reckoning] key that sets its prior
     learned: dict | None = None  #: the model learned from the voyage (see _learned_summary)
@@ -249,7 +255,7 @@ class Analysis:
     end_ns: int | None
     lines: int
     tracks: tuple[Track, ...]
-    #: INS deviation statistics (METHODS section 4), straight from :mod:`dracc.deviation`
+    #: INS deviation statistics (METHODS section 4), straight from :mod:`dracc.math.deviation`
     deviation: DeviationResult | None
     dead_reckoning: DRSection | None
     calibration: CalibrationSection | None
@@ -262,11 +268,11 @@ class Analysis:
     notes: tuple[str, ...] = ()
     #: the options that shaped the result, for the report header
     settings: dict[str, object] = field(default_factory=dict)
-    #: sensor faults (dracc.faults), found in the raw records; always reported
+    #: sensor faults (dracc.math.faults), found in the raw records; always reported
     faults: tuple[SensorFault, ...] = ()
     #: valid input dracc does not use, by type (GSV, VDM, comment, ...): counted, not rejected
     ignored: dict[str, int] = field(default_factory=dict)
-    #: integrity checks of every source (dracc.integrity), None when not run
+    #: integrity checks of every source (dracc.math.integrity), None when not run
     integrity: IntegrityResult | None = None
 
     @property
@@ -296,13 +302,13 @@ def analyse(paths: Sequence[str | Path], cfg: Config | None = None,
             progress: Progress | None = None, total_bytes: int | None = None) -> Analysis:
     """Read the logs ``paths`` (several files of one voyage merge by time) and analyse them.
 
-    ``cfg`` defaults to :class:`~dracc.config.Config` (); ``progress(stage, fraction)``
+    ``cfg`` defaults to :class:`~dracc.core.config.Config` (); ``progress(stage, fraction)``
     is called as the work goes on (reading as a fraction of ``total_bytes``, by default
-    the size of the files).  Raises :class:`~dracc.errors.IngestError` for unreadable
+    the size of the files).  Raises :class:`~dracc.core.errors.IngestError` for unreadable
     input and :class:`InsufficientDataError` when the logs hold no record at all;
     everything else that is missing is reported in :attr:`Analysis.missing`.
     """
-    from .ingest import read_logs  # the readers are heavy; import on use
+    from dracc.ingest import read_logs  # the readers are heavy; import on use
 
     cfg = cfg or Config()
     report = progress or _noop
@@ -323,7 +329,7 @@ def analyse(paths: Sequence[str | Path], cfg: Config | None = None,
 
 def analyse_voyage(voyage: Voyage, cfg: Config | None = None,
                    progress: Progress | None = None) -> Analysis:
-    """Analyse an ingested :class:`~dracc.ingest.frames.Voyage` (see :func:`analyse`)."""
+    """Analyse an ingested :class:`~dracc.frames.Voyage` (see :func:`analyse`)."""
     cfg = cfg or Config()
     report = progress or _noop
     missing: list[str] = []
@@ -431,7 +437,7 @@ def analyse_voyage(voyage: Voyage, cfg: Config | None = None,
 
 
 def _sensor_faults(voyage: Voyage, cfg: Config, notes: list[str]) -> tuple[tuple[SensorFault, ...], Voyage]:
-    """Sensor faults in the raw records (dracc.faults); their records are left out of
+    """Sensor faults in the raw records (dracc.math.faults); their records are left out of
     what follows only where ``[faults] exclude = true`` (the tracks keep the raw figures)."""
     faults = tuple(detect_faults(voyage, cfg.faults))
     if faults and cfg.faults.exclude:
@@ -541,7 +547,7 @@ class _DRInputs:
     ref_gap_s: float  #: reference positions are interpolated across gaps up to this
     mode: str  #: 'water' (relative log) or 'ground' (absolute log)
     epoch_interval_s: float = 600.0  #: the DR's epoch spacing (the old filter's fix spacing)
-    estimated: object = None  #: dracc.ep.EstimatedPosition where the model was learned
+    estimated: object = None  #: dracc.math.ep.EstimatedPosition where the model was learned
 
 
 def _heading_series(voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str],
@@ -1021,7 +1027,7 @@ def _drift_and_set(north_mps: float, east_mps: float) -> tuple[float, float]:
 
 
 def _current_learned(dr: _DRInputs, fixes) -> CurrentSection | None:
-    """Set and drift as the estimated position uses them (dracc.ep).
+    """Set and drift as the estimated position uses them (dracc.math.ep).
 
     The voyage figures are the persistent current learned from every fix (the filter's
     final posterior of cbar, mixed over its grid of models), with its 1-sigma; the series
@@ -1059,7 +1065,7 @@ def _current_learned(dr: _DRInputs, fixes) -> CurrentSection | None:
 
 
 def _current(dr: _DRInputs, fixes, cfg: DeadReckoningConfig, missing: list[str]) -> CurrentSection | None:
-    """Set and drift from the Kalman filter of the aided-DR paper (dracc.current).
+    """Set and drift from the Kalman filter of the aided-DR paper (dracc.math.current).
 
     The filter runs on a CURRENT_STEP_S grid over each stretch where the DR has a water
     velocity, updated by a fix every ``epoch_interval_s``.
@@ -1142,8 +1148,8 @@ CAL_OFFSET_SPREAD_KN = 2.0
 
 
 def _calibration(dr: _DRInputs, fixes, missing: list[str]) -> CalibrationSection | None:
-    """Compass error, log scale and offset against the reference positions (dracc.calibration)."""
-    from .calibration import calibrate_from_track
+    """Compass error, log scale and offset against the reference positions (dracc.math.calibration)."""
+    from dracc.math.calibration import calibrate_from_track
 
     ft, flat, flon, fdesc = fixes
     fix_s = (ft - dr.t0_ns) / 1e9
@@ -1186,7 +1192,7 @@ def _calibration(dr: _DRInputs, fixes, missing: list[str]) -> CalibrationSection
 
 
 def _deviation(voyage: Voyage, cfg: Config, missing: list[str]) -> tuple[DeviationResult | None, str | None]:
-    """INS deviations from the mean (dracc.deviation), with GNSS as the reference where present."""
+    """INS deviations from the mean (dracc.math.deviation), with GNSS as the reference where present."""
     present = [r for r in INS_ROLES if voyage.role_sources(r)]
     if len(present) < 2:
         found = f"only one INS unit ({present[0]}) found" if present else "no INS unit found"

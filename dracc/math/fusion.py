@@ -34,7 +34,7 @@ Observations (frozen dataclasses; radians and metres):
                   radius theta about the sub-point of the gyro spin axis
 
 Every observation has ``linearise(lat_rad, lon_rad) -> Rows``; the position may be an
-array (a leading batch axis), which the Kalman filter of :mod:`dracc.current` uses.
+array (a leading batch axis), which the Kalman filter of :mod:`dracc.math.current` uses.
 
 Distances and azimuths between the ship and a mark come from the chord between the
 two points on the WGS-84 ellipsoid (ECEF): the azimuth is that of the normal section
@@ -51,8 +51,8 @@ from typing import Literal
 
 import numpy as np
 
-from .errors import DraccError, ExitCode
-from .geodesy import (
+from dracc.core.errors import DraccError, ExitCode
+from dracc.core.geodesy import (
     E2,
     add_offset_ne,
     angdiff,
