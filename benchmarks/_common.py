@@ -15,8 +15,20 @@ def ensure_day_log(workdir: Path, quiet: bool = False) -> Path:
     log = workdir / "day" / "voyage.nmea"
     if log.exists():
         return log
-    cmd = [sys.executable, "-m", "dracc", "simulate", "--hours", "24", "--seed", "1", "--form", "tag",
-           "--out", str(log.parent)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "dracc",
+        "simulate",
+        "--hours",
+        "24",
+        "--seed",
+        "1",
+        "--form",
+        "tag",
+        "--out",
+        str(log.parent),
+    ]
     print("generating:", " ".join(cmd[2:]), flush=True)
     subprocess.run(cmd, check=True, cwd=REPO, stdout=subprocess.DEVNULL if quiet else None)
     return log

@@ -48,7 +48,7 @@ REPO = HERE.parent
 sys.path.insert(0, str(HERE))
 from _common import ensure_day_log  # noqa: E402
 
-PLAIN = r'''
+PLAIN = r"""
 import sys, time, math
 t_start = time.perf_counter()
 import numpy as np, pandas as pd, pynmea2
@@ -79,9 +79,9 @@ north = lat.sub(lat.mean(axis=1), axis=0) * math.pi / 180 * 6371000.0
 east = lon.sub(lon.mean(axis=1), axis=0).mul(np.cos(np.radians(lat.mean(axis=1))), axis=0) * math.pi / 180 * 6371000.0
 # lines read, seconds in the line loop, seconds for everything else (imports, pandas step)
 print(n - 1 if n > n_max else n, t_loop, time.perf_counter() - t_start - t_loop)
-'''
+"""
 
-BASELINE = r'''
+BASELINE = r"""
 import sys, math
 import numpy as np, pandas as pd, pynmea2
 rows = []
@@ -106,7 +106,7 @@ east = (lon.sub(lon.mean(axis=1), axis=0) * math.pi / 180 * r).mul(np.cos(np.rad
 out = pd.concat({"north_m": north, "east_m": east}, axis=1)
 out.to_csv(sys.argv[2])
 print(len(df), "hourly INS fixes")
-'''
+"""
 
 
 def ensure_log(workdir: Path) -> Path:
@@ -132,7 +132,9 @@ def run_once(cmd: list[str]) -> tuple[float, float, str]:
     """(wall s, CPU s of the process and its workers, stdout) of one run."""
     c = _child_cpu_s()
     t = time.perf_counter()
-    res = subprocess.run(cmd, check=True, cwd=REPO, stdout=subprocess.PIPE, text=True, env=CHILD_ENV)
+    res = subprocess.run(
+        cmd, check=True, cwd=REPO, stdout=subprocess.PIPE, text=True, env=CHILD_ENV
+    )
     return time.perf_counter() - t, _child_cpu_s() - c, res.stdout
 
 
@@ -186,10 +188,12 @@ def stages(log: Path, workdir: Path) -> list[tuple[str, float]]:
         if s in ends:
             out.append((f"  {s}", ends[s] - starts[s]))
     out.append(("analysis (analyse_voyage)", total))
-    for name, fn in (("terminal summary", lambda: terminal.render_text(a)),
-                     ("JSON", lambda: json_report.write_json(a, workdir / "stage.json")),
-                     ("HTML with plots", lambda: html.write_html(a, workdir / "stage.html")),
-                     ("tables CSV+Parquet", lambda: tables.write_tables(a, workdir / "tables"))):
+    for name, fn in (
+        ("terminal summary", lambda: terminal.render_text(a)),
+        ("JSON", lambda: json_report.write_json(a, workdir / "stage.json")),
+        ("HTML with plots", lambda: html.write_html(a, workdir / "stage.html")),
+        ("tables CSV+Parquet", lambda: tables.write_tables(a, workdir / "tables")),
+    ):
         t = time.perf_counter()
         fn()
         out.append((f"render: {name}", time.perf_counter() - t))
@@ -198,12 +202,19 @@ def stages(log: Path, workdir: Path) -> list[tuple[str, float]]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--workdir", type=Path,
-                    default=Path(os.environ.get("TMPDIR", "/tmp")) / "dracc-bench-analyze")
+    ap.add_argument(
+        "--workdir",
+        type=Path,
+        default=Path(os.environ.get("TMPDIR", "/tmp")) / "dracc-bench-analyze",
+    )
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--skip-baseline", action="store_true")
-    ap.add_argument("--plain-lines", type=int, default=200_000,
-                    help="lines the every-line pynmea2 baseline parses (its time is scaled to the file)")
+    ap.add_argument(
+        "--plain-lines",
+        type=int,
+        default=200_000,
+        help="lines the every-line pynmea2 baseline parses (its time is scaled to the file)",
+    )
     args = ap.parse_args()
     args.workdir.mkdir(parents=True, exist_ok=True)
     log = ensure_log(args.workdir)
@@ -244,15 +255,25 @@ def main() -> None:
 
     print(f"\n{'run':62s} {'wall s':>8s} {'median':>8s} {'CPU s':>8s} {'lines/s':>12s}")
     for name, t in rows:
-        print(f"{name:62s} {t:8.2f} {MEDIAN.get(name, t):8.2f} {CPU.get(name, float('nan')):8.2f} "
-              f"{n_lines / t:12,.0f}")
-    print(f"(load average {load0:.1f} before, {os.getloadavg()[0]:.1f} after, on {os.cpu_count()} CPUs)")
+        print(
+            f"{name:62s} {t:8.2f} {MEDIAN.get(name, t):8.2f} {CPU.get(name, float('nan')):8.2f} "
+            f"{n_lines / t:12,.0f}"
+        )
+    print(
+        f"(load average {load0:.1f} before, {os.getloadavg()[0]:.1f} after, on {os.cpu_count()} CPUs)"
+    )
     if not args.skip_baseline:
-        print("\nthe target (issue 5): dracc analyze without HTML >= 5x faster than the plain script")
-        print(f"speed-up without HTML vs plain (every-line) pynmea2: {t_plain / t_nohtml:.1f}x (target >= 5x; "
-              f"median runs: {MEDIAN[plain_name] / MEDIAN['dracc analyze --json']:.1f}x)")
+        print(
+            "\nthe target (issue 5): dracc analyze without HTML >= 5x faster than the plain script"
+        )
+        print(
+            f"speed-up without HTML vs plain (every-line) pynmea2: {t_plain / t_nohtml:.1f}x (target >= 5x; "
+            f"median runs: {MEDIAN[plain_name] / MEDIAN['dracc analyze --json']:.1f}x)"
+        )
         print(f"speed-up with HTML    vs plain (every-line) pynmea2: {t_plain / t_html:.1f}x")
-        print(f"speed-up without HTML vs pre-filtered script:        {t_base / t_nohtml:.1f}x (not the target)")
+        print(
+            f"speed-up without HTML vs pre-filtered script:        {t_base / t_nohtml:.1f}x (not the target)"
+        )
         print(f"speed-up with HTML    vs pre-filtered script:        {t_base / t_html:.1f}x")
         # the two agree on what they share
         import numpy as np
@@ -267,8 +288,10 @@ def main() -> None:
                 continue
             for j in (1, 2, 3):
                 diffs.append(abs(base.loc[t, ("north_m", f"INS{j}")] - s[f"ins{j}"]["lat_m"]))
-        print(f"baseline vs dracc latitude deviations: {len(diffs)} values, max |diff| "
-              f"{np.nanmax(diffs):.2f} m (spherical baseline vs WGS-84)")
+        print(
+            f"baseline vs dracc latitude deviations: {len(diffs)} values, max |diff| "
+            f"{np.nanmax(diffs):.2f} m (spherical baseline vs WGS-84)"
+        )
 
     print("\nwhere dracc's time goes (in-process, imports excluded):")
     for name, t in stages(log, args.workdir):

@@ -31,8 +31,10 @@ def main() -> None:
         t0 = time.perf_counter()
         tr = dead_reckon(t, heading, speed, fixes=fixes, reset_s=reset)
         dt = time.perf_counter() - t0
-        print(f"dead_reckon reset={reset:<6} legs={tr.n_legs:3d}: {dt:6.2f} s "
-              f"(2M at the end {tr.radius_2m_m[-1]:.0f} m)")
+        print(
+            f"dead_reckon reset={reset:<6} legs={tr.n_legs:3d}: {dt:6.2f} s "
+            f"(2M at the end {tr.radius_2m_m[-1]:.0f} m)"
+        )
 
 
 if __name__ == "__main__":

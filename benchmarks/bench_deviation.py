@@ -46,10 +46,14 @@ def main(days: float = 1.0, rate_hz: float = 1.0) -> None:
     t0 = time.perf_counter()
     d = res.to_dict()
     t_dict = time.perf_counter() - t0
-    print(f"deviation: {days:g} d at {rate_hz:g} Hz, 3 INS + reference = {readings:,} readings, "
-          f"{len(res.time_ns)} instants, {len(res.windows)} windows")
-    print(f"  analyse_deviations: {best * 1e3:.0f} ms (best of 3), "
-          f"{readings / best / 1e6:.1f} M readings/s")
+    print(
+        f"deviation: {days:g} d at {rate_hz:g} Hz, 3 INS + reference = {readings:,} readings, "
+        f"{len(res.time_ns)} instants, {len(res.windows)} windows"
+    )
+    print(
+        f"  analyse_deviations: {best * 1e3:.0f} ms (best of 3), "
+        f"{readings / best / 1e6:.1f} M readings/s"
+    )
     print(f"  to_dict: {t_dict * 1e3:.1f} ms ({len(d['samples'])} samples)")
 
 

@@ -32,24 +32,56 @@ CAP_MB = 512
 
 def _run(log: Path, out: Path) -> dict:
     """Analyse ``log`` in a fresh child; its peak RSS is the growth of the children's maximum."""
-    code = ("import resource, subprocess, sys; p = subprocess.run([sys.executable, '-m', 'dracc', "
-            "'analyze', sys.argv[1], '--json', sys.argv[2]], stdout=subprocess.DEVNULL, "
-            "stderr=subprocess.PIPE); r = resource.getrusage(resource.RUSAGE_CHILDREN); "
-            "print(p.returncode, r.ru_maxrss, repr(p.stderr.decode()[-300:]))")
+    code = (
+        "import resource, subprocess, sys; p = subprocess.run([sys.executable, '-m', 'dracc', "
+        "'analyze', sys.argv[1], '--json', sys.argv[2]], stdout=subprocess.DEVNULL, "
+        "stderr=subprocess.PIPE); r = resource.getrusage(resource.RUSAGE_CHILDREN); "
+        "print(p.returncode, r.ru_maxrss, repr(p.stderr.decode()[-300:]))"
+    )
     t0 = time.perf_counter()
-    res = subprocess.run([sys.executable, "-c", code, str(log), str(out)], capture_output=True,
-                         text=True, cwd=REPO, check=True)
+    res = subprocess.run(
+        [sys.executable, "-c", code, str(log), str(out)],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        check=True,
+    )
     rc, rss_kb, err = res.stdout.strip().split(" ", 2)
     doc = json.loads(out.read_text()) if out.exists() else {}
-    return {"rc": int(rc), "peak_mb": int(rss_kb) / 1024, "seconds": time.perf_counter() - t0,
-            "records": sum(i.get("records", 0) for i in doc.get("inputs", [])),
-            "rejected": doc.get("rejected", {}), "stderr": err}
+    return {
+        "rc": int(rc),
+        "peak_mb": int(rss_kb) / 1024,
+        "seconds": time.perf_counter() - t0,
+        "records": sum(i.get("records", 0) for i in doc.get("inputs", [])),
+        "rejected": doc.get("rejected", {}),
+        "stderr": err,
+    }
 
 
 def _simulate(work: Path, fmt: str, name: str) -> Path:
-    subprocess.run([sys.executable, "-m", "dracc", "simulate", "--out", str(work), "--hours", "1",
-                    "--seed", "3", "--format", fmt, "--compass-hz", "1", "--name", name],
-                   check=True, capture_output=True, cwd=REPO)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "dracc",
+            "simulate",
+            "--out",
+            str(work),
+            "--hours",
+            "1",
+            "--seed",
+            "3",
+            "--format",
+            fmt,
+            "--compass-hz",
+            "1",
+            "--name",
+            name,
+        ],
+        check=True,
+        capture_output=True,
+        cwd=REPO,
+    )
     return next(work.glob(f"{name}.*"))
 
 
@@ -77,7 +109,7 @@ def csv_field_case(work: Path, mb: int) -> Path:
         fh.write(head)
         fh.writelines(rows[: len(rows) // 2])
         fh.write(b",".join(bad) + b"\n")
-        fh.writelines(rows[len(rows) // 2:])
+        fh.writelines(rows[len(rows) // 2 :])
     return log
 
 
@@ -110,8 +142,13 @@ def zstd_bomb_case(work: Path, gb: float) -> Path:
     hdr_len = struct.unpack_from("<Q", src, len(magic) + 1)[0]
     after_header = len(magic) + 9 + hdr_len
     comp = _zstd_zeros(int(gb * (1 << 30)))
-    body = (struct.pack("<QQQI", 0, 0, 1024, 0) + struct.pack("<I", 4) + b"zstd"
-            + struct.pack("<Q", len(comp)) + comp)
+    body = (
+        struct.pack("<QQQI", 0, 0, 1024, 0)
+        + struct.pack("<I", 4)
+        + b"zstd"
+        + struct.pack("<Q", len(comp))
+        + comp
+    )
     log = work / "bomb.mcap"
     log.write_bytes(src[:after_header] + _record(0x06, body) + src[after_header:])
     return log
@@ -126,20 +163,26 @@ def main() -> None:
     args = ap.parse_args()
     base = args.workdir or Path(tempfile.mkdtemp(prefix="dracc-hostile-"))
     base.mkdir(parents=True, exist_ok=True)
-    cases = [("nul", lambda: nul_case(base, args.nul_mb)),
-             ("csv_field", lambda: csv_field_case(base, args.csv_field_mb)),
-             ("zstd_bomb", lambda: zstd_bomb_case(base, args.bomb_gb))]
+    cases = [
+        ("nul", lambda: nul_case(base, args.nul_mb)),
+        ("csv_field", lambda: csv_field_case(base, args.csv_field_mb)),
+        ("zstd_bomb", lambda: zstd_bomb_case(base, args.bomb_gb)),
+    ]
     # the address space of each analysis is not capped here: the figure is what it takes
-    print(f"{'case':<10} {'input MB':>9} {'peak RSS MB':>12} {'cap MB':>7} {'exit':>5} "
-          f"{'records':>8} {'s':>6}  damage counted")
+    print(
+        f"{'case':<10} {'input MB':>9} {'peak RSS MB':>12} {'cap MB':>7} {'exit':>5} "
+        f"{'records':>8} {'s':>6}  damage counted"
+    )
     for name, make in cases:
         log = make()
         r = _run(log, base / f"{name}.json")
         size = log.stat().st_size / 1e6
         verdict = "ok" if r["peak_mb"] <= CAP_MB else "OVER THE CAP"
-        print(f"{name:<10} {size:>9.1f} {r['peak_mb']:>12.0f} {CAP_MB:>7} {r['rc']:>5} "
-              f"{r['records']:>8} {r['seconds']:>6.1f}  {r['rejected']} {verdict}"
-              + (f"  stderr: {r['stderr']}" if r["rc"] not in (0,) else ""))
+        print(
+            f"{name:<10} {size:>9.1f} {r['peak_mb']:>12.0f} {CAP_MB:>7} {r['rc']:>5} "
+            f"{r['records']:>8} {r['seconds']:>6.1f}  {r['rejected']} {verdict}"
+            + (f"  stderr: {r['stderr']}" if r["rc"] not in (0,) else "")
+        )
 
 
 if __name__ == "__main__":

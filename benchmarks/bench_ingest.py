@@ -111,14 +111,23 @@ print(json.dumps({"lines": rep["lines"], "seconds": dt, "main_kib": me, "worker_
 
 
 def memory(path: Path) -> dict:
-    out = subprocess.run([sys.executable, "-c", _MEM_CHILD, str(path)], check=True, cwd=REPO,
-                         capture_output=True, text=True)
+    out = subprocess.run(
+        [sys.executable, "-c", _MEM_CHILD, str(path)],
+        check=True,
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+    )
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--workdir", type=Path, default=Path(os.environ.get("TMPDIR", "/tmp")) / "dracc-bench-ingest")
+    ap.add_argument(
+        "--workdir",
+        type=Path,
+        default=Path(os.environ.get("TMPDIR", "/tmp")) / "dracc-bench-ingest",
+    )
     ap.add_argument("--baseline-lines", type=int, default=300_000)
     ap.add_argument("--skip-memory", action="store_true")
     args = ap.parse_args()
@@ -128,8 +137,12 @@ def main() -> None:
     print(f"log: {log} ({size_mb:.1f} MB)")
     from dracc.ingest import nmea
 
-    print("engine:", "compiled kernel + numpy for the other lines" if nmea.engine_available()
-          else "numpy (DRACC_NMEA_ENGINE=numpy or the kernel not built)")
+    print(
+        "engine:",
+        "compiled kernel + numpy for the other lines"
+        if nmea.engine_available()
+        else "numpy (DRACC_NMEA_ENGINE=numpy or the kernel not built)",
+    )
 
     load = os.getloadavg()[0]
     n_d, t_d, rec, c_d = bench_dracc(log)
@@ -137,22 +150,30 @@ def main() -> None:
     rate_d = n_d / t_d
     rate_p = n_p / t_p
     print(f"load average before the run: {load:.1f} on {os.cpu_count()} cores")
-    print(f"dracc read_nmea : {n_d} lines, {rec} records in {t_d:.2f} s wall, {c_d:.2f} s CPU "
-          f"(main + 2 workers) -> {rate_d / 1e3:.0f} k lines/s, {size_mb / t_d:.1f} MB/s")
-    print(f"pynmea2         : {n_p} lines ({ok} parsed) in {t_p:.2f} s wall, {c_p:.2f} s CPU -> "
-          f"{rate_p / 1e3:.1f} k lines/s (whole file would take ~{n_d / rate_p:.0f} s)")
+    print(
+        f"dracc read_nmea : {n_d} lines, {rec} records in {t_d:.2f} s wall, {c_d:.2f} s CPU "
+        f"(main + 2 workers) -> {rate_d / 1e3:.0f} k lines/s, {size_mb / t_d:.1f} MB/s"
+    )
+    print(
+        f"pynmea2         : {n_p} lines ({ok} parsed) in {t_p:.2f} s wall, {c_p:.2f} s CPU -> "
+        f"{rate_p / 1e3:.1f} k lines/s (whole file would take ~{n_d / rate_p:.0f} s)"
+    )
     print(f"throughput ratio dracc / pynmea2, wall clock: {rate_d / rate_p:.1f}x (target >= 20x)")
     cpu_ratio = (n_d / c_d) / (n_p / c_p)
-    print(f"throughput ratio per CPU second: {cpu_ratio:.1f}x (an idle 2-core machine can give at most "
-          f"{2 * cpu_ratio:.1f}x wall clock, the two workers keeping both cores busy)")
+    print(
+        f"throughput ratio per CPU second: {cpu_ratio:.1f}x (an idle 2-core machine can give at most "
+        f"{2 * cpu_ratio:.1f}x wall clock, the two workers keeping both cores busy)"
+    )
 
     if not args.skip_memory:
         week = ensure_week(log, args.workdir)
         m1 = memory(log)
         m7 = memory(week)
         for name, m in (("1 day ", m1), ("7 days", m7)):
-            print(f"inspect {name}: {m['lines']} lines in {m['seconds']:.1f} s; peak RSS main "
-                  f"{m['main_kib'] / 1024:.0f} MiB, workers {m['worker_kib'] / 1024:.0f} MiB")
+            print(
+                f"inspect {name}: {m['lines']} lines in {m['seconds']:.1f} s; peak RSS main "
+                f"{m['main_kib'] / 1024:.0f} MiB, workers {m['worker_kib'] / 1024:.0f} MiB"
+            )
         r_main = m7["main_kib"] / m1["main_kib"]
         r_work = m7["worker_kib"] / max(m1["worker_kib"], 1)
         print(f"peak memory 7 d / 1 d: main {r_main:.2f}x, workers {r_work:.2f}x (target <= 1.5x)")

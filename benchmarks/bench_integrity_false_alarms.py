@@ -67,15 +67,21 @@ def main() -> None:
         any_fail += bool(night_fail)
     n = args.nights
     print(f"{n} clean nights, {np.mean(secs):.2f} s per night (simulate + check)")
-    print(f"{'check':<28} {'failed':>7} {'rate 99 % CI':>22} {'stated/source':>14} {'max stat/gate':>14}")
+    print(
+        f"{'check':<28} {'failed':>7} {'rate 99 % CI':>22} {'stated/source':>14} {'max stat/gate':>14}"
+    )
     for key in sorted(stated):
         k = fails[key]
         lo, hi = _interval(k, n)
-        print(f"{key:<28} {k:>7} {f'{k / n:.4f} [{lo:.4f}, {hi:.4f}]':>22} "
-              f"{np.mean(stated[key]):>14.4g} {ratio.get(key, float('nan')):>14.3f}")
+        print(
+            f"{key:<28} {k:>7} {f'{k / n:.4f} [{lo:.4f}, {hi:.4f}]':>22} "
+            f"{np.mean(stated[key]):>14.4g} {ratio.get(key, float('nan')):>14.3f}"
+        )
     lo, hi = _interval(any_fail, n)
-    print(f"nights with any failed check: {any_fail} of {n} = {any_fail / n:.4f} "
-          f"(99 % CI [{lo:.4f}, {hi:.4f}]); stated union bound {np.mean(bound):.4f} per night")
+    print(
+        f"nights with any failed check: {any_fail} of {n} = {any_fail / n:.4f} "
+        f"(99 % CI [{lo:.4f}, {hi:.4f}]); stated union bound {np.mean(bound):.4f} per night"
+    )
 
 
 if __name__ == "__main__":

@@ -62,12 +62,18 @@ def make_files(hours: float, workdir: Path) -> dict[str, Path]:
         return out
     t = time.perf_counter()
     v = simulate(SimParams(duration_s=hours * 3600.0))
-    print(f"simulated {hours:g} h in {time.perf_counter() - t:.1f} s: "
-          + ", ".join(f"{k} {len(f)}" for k, f in v.frames.items()), flush=True)
+    print(
+        f"simulated {hours:g} h in {time.perf_counter() - t:.1f} s: "
+        + ", ".join(f"{k} {len(f)}" for k, f in v.frames.items()),
+        flush=True,
+    )
     for enc, p in out.items():
         t = time.perf_counter()
         write_mcap(v.frames, v.roles, p, encoding=enc)
-        print(f"wrote {p.name}: {p.stat().st_size / 1e6:.1f} MB in {time.perf_counter() - t:.1f} s", flush=True)
+        print(
+            f"wrote {p.name}: {p.stat().st_size / 1e6:.1f} MB in {time.perf_counter() - t:.1f} s",
+            flush=True,
+        )
     return out
 
 
@@ -95,7 +101,9 @@ def time_stock(path: Path, enc: str, limit: int) -> tuple[float, int]:
         else:
             from mcap_ros2.decoder import DecoderFactory
 
-            for _s, _c, _m, _d in make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            for _s, _c, _m, _d in make_reader(
+                fh, decoder_factories=[DecoderFactory()]
+            ).iter_decoded_messages():
                 n += 1
                 if n == limit:
                     break
@@ -103,39 +111,53 @@ def time_stock(path: Path, enc: str, limit: int) -> tuple[float, int]:
 
 
 def memory(path: Path) -> dict:
-    res = subprocess.run([sys.executable, "-c", _CHILD, str(path)], capture_output=True, text=True, check=True)
+    res = subprocess.run(
+        [sys.executable, "-c", _CHILD, str(path)], capture_output=True, text=True, check=True
+    )
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--hours", type=float, default=24.0)
-    ap.add_argument("--workdir", type=Path, default=Path(tempfile.gettempdir()) / "dracc_bench_mcap")
+    ap.add_argument(
+        "--workdir", type=Path, default=Path(tempfile.gettempdir()) / "dracc_bench_mcap"
+    )
     ap.add_argument("--stock-limit", type=int, default=300_000)
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--mem-tolerance", type=float, default=5.0, help="MiB (see the module doc)")
     args = ap.parse_args()
     args.workdir.mkdir(parents=True, exist_ok=True)
     files = make_files(args.hours, args.workdir)
-    print(f"\n{'encoding':8} {'messages':>9} {'dracc s':>8} {'us/msg':>7} {'stock us/msg':>12} "
-          f"{'stock s (full file)':>20} {'speed-up':>8}  load (1/5/15 min)")
+    print(
+        f"\n{'encoding':8} {'messages':>9} {'dracc s':>8} {'us/msg':>7} {'stock us/msg':>12} "
+        f"{'stock s (full file)':>20} {'speed-up':>8}  load (1/5/15 min)"
+    )
     for enc, p in files.items():
         if enc == "nmea":  # raw NMEA sentences: in the memory table only
             continue
         # best of --repeat, alternating, so that load from other jobs hits both sides alike
-        runs = [(time_dracc(p), time_stock(p, enc, args.stock_limit or -1)) for _ in range(args.repeat)]
+        runs = [
+            (time_dracc(p), time_stock(p, enc, args.stock_limit or -1)) for _ in range(args.repeat)
+        ]
         td, n = min(r[0] for r in runs)
         ts, ns = min(r[1] for r in runs)
         per_d, per_s = td / n * 1e6, ts / ns * 1e6
         full = per_s * n / 1e6
         note = "" if ns == n else f" (extrapolated from {ns})"
         load = "/".join(f"{x:.2f}" for x in os.getloadavg())
-        print(f"{enc:8} {n:9d} {td:8.2f} {per_d:7.2f} {per_s:12.2f} {full:12.1f}{note} {per_s / per_d:7.1f}x  {load}",
-              flush=True)
-    print("\nmemory: fresh subprocess per file; working = peak RSS - RSS after imports - frames' own arrays")
+        print(
+            f"{enc:8} {n:9d} {td:8.2f} {per_d:7.2f} {per_s:12.2f} {full:12.1f}{note} {per_s / per_d:7.1f}x  {load}",
+            flush=True,
+        )
+    print(
+        "\nmemory: fresh subprocess per file; working = peak RSS - RSS after imports - frames' own arrays"
+    )
     six = make_files(6.0, args.workdir) if args.hours != 6.0 else files
-    print(f"{'encoding':8} {'voyage':>6} {'file MB':>8} {'messages':>9} {'peak MiB':>9} {'imports':>8} "
-          f"{'frames':>7} {'working':>8}  load (1/5/15 min)")
+    print(
+        f"{'encoding':8} {'voyage':>6} {'file MB':>8} {'messages':>9} {'peak MiB':>9} {'imports':>8} "
+        f"{'frames':>7} {'working':>8}  load (1/5/15 min)"
+    )
     for enc in files:
         work = []
         for label, p in (("6 h", six[enc]), (f"{args.hours:g} h", files[enc])):
@@ -143,12 +165,19 @@ def main() -> None:
             w = (m["peak_kib"] - m["base_kib"]) / 1024 - m["frames_bytes"] / 2**20
             work.append(w)
             load = "/".join(f"{x:.2f}" for x in os.getloadavg())
-            print(f"{enc:8} {label:>6} {p.stat().st_size / 1e6:8.1f} {m['messages']:9d} {m['peak_kib'] / 1024:9.1f} "
-                  f"{m['base_kib'] / 1024:8.1f} {m['frames_bytes'] / 2**20:7.1f} {w:8.1f}  {load}", flush=True)
+            print(
+                f"{enc:8} {label:>6} {p.stat().st_size / 1e6:8.1f} {m['messages']:9d} {m['peak_kib'] / 1024:9.1f} "
+                f"{m['base_kib'] / 1024:8.1f} {m['frames_bytes'] / 2**20:7.1f} {w:8.1f}  {load}",
+                flush=True,
+            )
         d = work[1] - work[0]
         verdict = "bounded" if abs(d) <= args.mem_tolerance else "GROWS with the file"
-        print(f"{enc:8} working memory 6 h {work[0]:.1f} MiB, {args.hours:g} h {work[1]:.1f} MiB: "
-              f"difference {d:+.1f} MiB (tolerance {args.mem_tolerance:g}): {verdict}", flush=True)
+        print(
+            f"{enc:8} working memory 6 h {work[0]:.1f} MiB, {args.hours:g} h {work[1]:.1f} MiB: "
+            f"difference {d:+.1f} MiB (tolerance {args.mem_tolerance:g}): {verdict}",
+            flush=True,
+        )
+
 
 if __name__ == "__main__":
     main()

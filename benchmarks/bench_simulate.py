@@ -20,8 +20,10 @@ def main() -> None:
     t0, c0 = time.perf_counter(), time.process_time()
     v = simulate(SimParams(duration_s=hours * 3600.0))
     t1, c1 = time.perf_counter(), time.process_time()
-    print(f"simulate {hours:g} h: {t1 - t0:.1f} s wall, {c1 - c0:.1f} s CPU "
-          f"({len(v.truth)} truth samples)")
+    print(
+        f"simulate {hours:g} h: {t1 - t0:.1f} s wall, {c1 - c0:.1f} s CPU "
+        f"({len(v.truth)} truth samples)"
+    )
     with tempfile.TemporaryDirectory() as d:
         for form in ("tag", "prefix", "bare"):
             p = Path(d) / f"{form}.nmea"
@@ -30,8 +32,10 @@ def main() -> None:
             t3, c3 = time.perf_counter(), time.process_time()
             data = p.read_bytes()
             lines = data.count(b"\n")
-            print(f"write {form:6s}: {t3 - t2:5.1f} s wall, {c3 - c2:5.1f} s CPU, {lines} lines, "
-                  f"{len(data) / 1e6:.1f} MB, {lines / (c3 - c2) / 1e6:.2f} M lines per CPU s")
+            print(
+                f"write {form:6s}: {t3 - t2:5.1f} s wall, {c3 - c2:5.1f} s CPU, {lines} lines, "
+                f"{len(data) / 1e6:.1f} MB, {lines / (c3 - c2) / 1e6:.2f} M lines per CPU s"
+            )
             p.unlink()
 
 

@@ -27,7 +27,9 @@ from dracc.core.units import DEG_RAD, KN_MPS
 from dracc.math.current import CurrentModel, estimate_current
 from dracc.math.fusion import PositionFix
 
-LOG = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "VDRplayer" / "Hakefjord.txt"
+LOG = (
+    Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "VDRplayer" / "Hakefjord.txt"
+)
 
 
 def _checksum_ok(line: str) -> bool:
@@ -69,8 +71,15 @@ def parse(path: Path):
         elif f[0] == "$IIVHW" and now is not None and f[5]:
             t_vhw.append(now)
             stw.append(float(f[5]))
-    return (np.array(t_gga), np.array(lat), np.array(lon), np.array(t_hdg), np.array(hdg),
-            np.array(t_vhw), np.array(stw))
+    return (
+        np.array(t_gga),
+        np.array(lat),
+        np.array(lon),
+        np.array(t_hdg),
+        np.array(hdg),
+        np.array(t_vhw),
+        np.array(stw),
+    )
 
 
 def main() -> None:
@@ -101,10 +110,18 @@ def main() -> None:
             speed[k] = speed[k - 1] if n_v[k] == 0 else speed[k]
     speed = speed * KN_MPS
     t = t - t[0]
-    print(f"{LOG.name}: {t.size} epochs over {t[-1] / 60:.1f} min, {int(missing.sum())} carried forward")
+    print(
+        f"{LOG.name}: {t.size} epochs over {t[-1] / 60:.1f} min, {int(missing.sum())} carried forward"
+    )
 
-    model = CurrentModel(current_sigma_mps=0.3 * KN_MPS, current_tau_s=3600.0, speed_sigma_mps=0.2 * KN_MPS,
-                         speed_tau_s=300.0, heading_sigma_rad=2.0 * DEG_RAD, heading_tau_s=120.0)
+    model = CurrentModel(
+        current_sigma_mps=0.3 * KN_MPS,
+        current_tau_s=3600.0,
+        speed_sigma_mps=0.2 * KN_MPS,
+        speed_tau_s=300.0,
+        heading_sigma_rad=2.0 * DEG_RAD,
+        heading_tau_s=120.0,
+    )
     sig = args.fix_sigma_m
     fix_idx = np.unique(np.searchsorted(t, np.arange(0.0, t[-1], args.fix_every)))
     fixes = [(t[i], PositionFix.from_sigma(lat[i], lon[i], sig)) for i in fix_idx[1:]]
@@ -120,26 +137,41 @@ def main() -> None:
     reset_lat, reset_lon = np.empty(t.size), np.empty(t.size)
     bounds = list(fix_idx) + [t.size]
     for a, b in zip(bounds[:-1], bounds[1:], strict=True):
-        leg = estimate_current(t[a:b + 1 if b < t.size else b] - t[a], course[a:b + 1], speed[a:b + 1],
-                               PositionFix.from_sigma(lat[a], lon[a], sig), (),
-                               CurrentModel(current_sigma_mps=1e-9, current_tau_s=3600.0))
+        leg = estimate_current(
+            t[a : b + 1 if b < t.size else b] - t[a],
+            course[a : b + 1],
+            speed[a : b + 1],
+            PositionFix.from_sigma(lat[a], lon[a], sig),
+            (),
+            CurrentModel(current_sigma_mps=1e-9, current_tau_s=3600.0),
+        )
         reset_lat[a:b], reset_lon[a:b] = leg.lat_rad[: b - a], leg.lon_rad[: b - a]
 
-    print(f"fixes every {args.fix_every:.0f} s (sigma {sig:.0f} m), variation {args.variation_deg:+.1f} deg; "
-          f"scored on {int(scored.sum())} GPS epochs between fixes")
+    print(
+        f"fixes every {args.fix_every:.0f} s (sigma {sig:.0f} m), variation {args.variation_deg:+.1f} deg; "
+        f"scored on {int(scored.sum())} GPS epochs between fixes"
+    )
     for name, la, lo, two_drms in (
         ("open-loop DR", open_loop.lat_rad, open_loop.lon_rad, open_loop.two_drms_m),
         ("DR reset at fixes", reset_lat, reset_lon, None),
         ("blended EP (KF)", blended.lat_rad, blended.lon_rad, blended.two_drms_m),
     ):
         err = np.hypot(*offset_ne_m(lat, lon, la, lo))[scored]
-        cover = "" if two_drms is None else f", inside 2drms {np.mean(err < two_drms[scored]) * 100:5.1f} %"
+        cover = (
+            ""
+            if two_drms is None
+            else f", inside 2drms {np.mean(err < two_drms[scored]) * 100:5.1f} %"
+        )
         print(f"  {name:18s} rms {np.sqrt(np.mean(err**2)):7.1f} m, max {err.max():7.1f} m{cover}")
-    print(f"  final current: set {blended.set_deg[-1]:.0f} deg, drift {blended.drift_kn[-1]:.2f} kn "
-          f"(+- {np.rad2deg(blended.set_sigma_rad[-1]):.0f} deg, {blended.drift_sigma_mps[-1] / KN_MPS:.2f} kn)")
+    print(
+        f"  final current: set {blended.set_deg[-1]:.0f} deg, drift {blended.drift_kn[-1]:.2f} kn "
+        f"(+- {np.rad2deg(blended.set_sigma_rad[-1]):.0f} deg, {blended.drift_sigma_mps[-1] / KN_MPS:.2f} kn)"
+    )
     nis = np.array([u.nis for u in blended.updates])
     print(f"  NIS mean {nis.mean():.2f} over {nis.size} fixes (2 expected when consistent)")
-    print(f"  filter run: {dt_run * 1e3:.1f} ms for {t.size} epochs ({dt_run / t.size * 1e6:.0f} us/epoch)")
+    print(
+        f"  filter run: {dt_run * 1e3:.1f} ms for {t.size} epochs ({dt_run / t.size * 1e6:.0f} us/epoch)"
+    )
 
 
 if __name__ == "__main__":

@@ -25,7 +25,9 @@ from dracc.core.geodesy import interp_position, offset_ne_m  # noqa: E402
 from dracc.pipeline.analysis import analyse  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-DEFAULT = ROOT.parent / "shared/data/real/anemomind/psaros33_Banque_Sturdza/2014/20140821/NMEA0010.TXT"
+DEFAULT = (
+    ROOT.parent / "shared/data/real/anemomind/psaros33_Banque_Sturdza/2014/20140821/NMEA0010.TXT"
+)
 
 
 def main() -> None:
@@ -42,23 +44,45 @@ def main() -> None:
     rlat, rlon = interp_position(ref.time_ns, ref.lat_rad, ref.lon_rad, tr.time_ns, 30 * 10**9)
     wn, we = offset_ne_m(tr.water_lat_rad, tr.water_lon_rad, rlat, rlon)
     fig, ax = plt.subplots(figsize=(8.0, 3.6), dpi=110)
-    ax.plot(t_min, np.hypot(wn, we), color="tab:red", lw=0.9, ls="--",
-            label="water track (heading and log alone) - GPS")
+    ax.plot(
+        t_min,
+        np.hypot(wn, we),
+        color="tab:red",
+        lw=0.9,
+        ls="--",
+        label="water track (heading and log alone) - GPS",
+    )
     ax.plot(t_min, tr.ref_error_m, color="tab:green", lw=0.9, label="estimated position - GPS")
     ax.plot(t_min, tr.radius_2m_m, color="tab:blue", lw=1.2, label="2M of the estimated position")
     s = ep.scored & np.isfinite(ep.ref_error_m)
     et = (ep.time_ns - tr.time_ns[0]) / 60e9
     inside = ep.ref_error_m <= ep.radius_2m_m
-    ax.scatter(et[s & inside], ep.ref_error_m[s & inside], s=10, color="tab:green", zorder=3,
-               label="scored epoch, inside 2M")
-    ax.scatter(et[s & ~inside], ep.ref_error_m[s & ~inside], s=16, color="black", marker="x",
-               zorder=3, label="scored epoch, outside 2M")
+    ax.scatter(
+        et[s & inside],
+        ep.ref_error_m[s & inside],
+        s=10,
+        color="tab:green",
+        zorder=3,
+        label="scored epoch, inside 2M",
+    )
+    ax.scatter(
+        et[s & ~inside],
+        ep.ref_error_m[s & ~inside],
+        s=16,
+        color="black",
+        marker="x",
+        zorder=3,
+        label="scored epoch, outside 2M",
+    )
     ax.set_yscale("log")
     ax.set_ylim(1.0, max(10.0, float(np.nanmax(tr.radius_2m_m[tr.leg > 0])) * 1.5))
     ax.set_xlabel("minutes from the first fix")
     ax.set_ylabel("metres")
-    ax.set_title(f"{Path(args.log).name}: {dr.reset}, inside 2M at {100 * dr.containment_2m:.0f} % "
-                 f"of {dr.n_scored} scored epochs", fontsize=9)
+    ax.set_title(
+        f"{Path(args.log).name}: {dr.reset}, inside 2M at {100 * dr.containment_2m:.0f} % "
+        f"of {dr.n_scored} scored epochs",
+        fontsize=9,
+    )
     ax.legend(fontsize=7, loc="lower right")
     ax.grid(alpha=0.3, which="both")
     fig.tight_layout()

@@ -67,9 +67,14 @@ CONFIGS = {
     "date": IngestConfig(date="2014-08-01"),
     "strict": IngestConfig(strict=True),
 }
-CONTAINERS = [SAMPLES / "voyage.mcap", SAMPLES / "voyage_long.csv", SAMPLES / "voyage_wide.csv",
-              REAL / "keelson" / "4a625f9" / "test.mcap", REAL / "rosbag2" / "talker.mcap",
-              REAL / "rosbag2" / "cdr_test_0.mcap"]
+CONTAINERS = [
+    SAMPLES / "voyage.mcap",
+    SAMPLES / "voyage_long.csv",
+    SAMPLES / "voyage_wide.csv",
+    REAL / "keelson" / "4a625f9" / "test.mcap",
+    REAL / "rosbag2" / "talker.mcap",
+    REAL / "rosbag2" / "cdr_test_0.mcap",
+]
 
 
 def _save(crash_dir: Path, tag: str, data: bytes, exc: BaseException) -> None:
@@ -80,7 +85,11 @@ def _save(crash_dir: Path, tag: str, data: bytes, exc: BaseException) -> None:
 
 def run_nmea(n_lines: int, rng: random.Random, tmp: Path, crash_dir: Path) -> dict:
     corpus = load_corpus(max_lines=20000)
-    windows = [(c, a) for c in range(len(corpus)) for a in range(0, max(1, len(corpus[c][0]) - WINDOW), WINDOW)]
+    windows = [
+        (c, a)
+        for c in range(len(corpus))
+        for a in range(0, max(1, len(corpus[c][0]) - WINDOW), WINDOW)
+    ]
     cache: dict[tuple[int, int, str], dict] = {}
     rejects: Counter = Counter()
     ops: Counter = Counter()
@@ -90,13 +99,15 @@ def run_nmea(n_lines: int, rng: random.Random, tmp: Path, crash_dir: Path) -> di
     while out["lines_mutated"] < n_lines:
         c, a = windows[rng.randrange(len(windows))]
         lines, timed = corpus[c]
-        window = lines[a:a + WINDOW]
+        window = lines[a : a + WINDOW]
         cname = rng.choice(tuple(CONFIGS))
         cfg = CONFIGS[cname]
         key = (c, a, cname)
         if key not in cache:
             try:
-                cache[key] = clean_records(window, tmp, CONFIGS["default"] if cname == "strict" else cfg)
+                cache[key] = clean_records(
+                    window, tmp, CONFIGS["default"] if cname == "strict" else cfg
+                )
             except DraccError:
                 cache[key] = {}
         mut = mutate(window, rng, rng.randint(WINDOW // 5, 3 * WINDOW // 5))
@@ -126,8 +137,14 @@ def run_nmea(n_lines: int, rng: random.Random, tmp: Path, crash_dir: Path) -> di
             if len(examples) < 10:
                 examples.append(f"traceback: {type(e).__name__}: {e}")
             _save(crash_dir, f"traceback-{out['logs']}", mut.data, e)
-    return {"counts": out, "ops": ops, "rejects": rejects, "tracebacks": tracebacks,
-            "violations": violations, "examples": examples}
+    return {
+        "counts": out,
+        "ops": ops,
+        "rejects": rejects,
+        "tracebacks": tracebacks,
+        "violations": violations,
+        "examples": examples,
+    }
 
 
 def run_containers(n: int, rng: random.Random, tmp: Path, crash_dir: Path) -> dict:
@@ -145,13 +162,13 @@ def run_containers(n: int, rng: random.Random, tmp: Path, crash_dir: Path) -> di
         if "overwrite" in op:
             at = rng.randrange(len(b))
             k = rng.randint(1, 2000)
-            b[at:at + k] = bytes(rng.randrange(256) for _ in range(min(k, len(b) - at)))
+            b[at : at + k] = bytes(rng.randrange(256) for _ in range(min(k, len(b) - at)))
         if op == "delete":
             at = rng.randrange(len(b))
-            del b[at:at + rng.randint(1, 5000)]
+            del b[at : at + rng.randint(1, 5000)]
         if op == "repeat":
             at = rng.randrange(len(b))
-            b[at:at] = b[at:at + rng.randint(1, 5000)]
+            b[at:at] = b[at : at + rng.randint(1, 5000)]
         if op.startswith("cut"):
             b = b[: rng.randrange(len(b))]
         q = tmp / ("c" + p.suffix)
@@ -173,13 +190,21 @@ def run_containers(n: int, rng: random.Random, tmp: Path, crash_dir: Path) -> di
             if len(examples) < 10:
                 examples.append(f"{p.name} {op}: {type(e).__name__}: {e}")
             _save(crash_dir, f"container-{i}{p.suffix}", bytes(b), e)
-    return {"counts": out, "errors": errors, "tracebacks": tracebacks, "violations": violations,
-            "examples": examples}
+    return {
+        "counts": out,
+        "errors": errors,
+        "tracebacks": tracebacks,
+        "violations": violations,
+        "examples": examples,
+    }
 
 
-PIPELINE_LOGS = [SAMPLES / "voyage_tag.nmea", SAMPLES / "voyage_prefix.nmea",
-                 REAL / "VDRplayer" / "Hakefjord.txt",
-                 REAL / "anemomind" / "Irene" / "2014" / "20140611" / "NMEA0048.TXT"]
+PIPELINE_LOGS = [
+    SAMPLES / "voyage_tag.nmea",
+    SAMPLES / "voyage_prefix.nmea",
+    REAL / "VDRplayer" / "Hakefjord.txt",
+    REAL / "anemomind" / "Irene" / "2014" / "20140611" / "NMEA0048.TXT",
+]
 
 
 def run_pipeline(n: int, rng: random.Random, tmp: Path, crash_dir: Path) -> dict:
@@ -224,10 +249,18 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--lines", type=int, default=100_000, help="mutated NMEA lines to try")
     ap.add_argument("--containers", type=int, default=1000, help="damaged MCAP/CSV files to try")
-    ap.add_argument("--pipeline", type=int, default=60,
-                    help="whole mutated logs through analyse() and the renderers")
-    ap.add_argument("--max-memory-gb", type=float, default=4.0,
-                    help="address-space cap: a runaway allocation is a MemoryError, not an OOM kill")
+    ap.add_argument(
+        "--pipeline",
+        type=int,
+        default=60,
+        help="whole mutated logs through analyse() and the renderers",
+    )
+    ap.add_argument(
+        "--max-memory-gb",
+        type=float,
+        default=4.0,
+        help="address-space cap: a runaway allocation is a MemoryError, not an OOM kill",
+    )
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--crash-dir", type=Path, default=Path("fuzz-crashes"))
     a = ap.parse_args()
@@ -245,32 +278,55 @@ def main() -> int:
         t3 = time.perf_counter()
     c = nm["counts"]
     print(f"seed {a.seed}")
-    print(f"NMEA: {c['lines_mutated']:,} mutated lines in {c['logs']:,} logs of {WINDOW} lines "
-          f"({t1 - t0:.0f} s)")
-    print("  configurations: " + ", ".join(f"{k[7:]} {v}" for k, v in sorted(c.items()) if k.startswith("config_")))
+    print(
+        f"NMEA: {c['lines_mutated']:,} mutated lines in {c['logs']:,} logs of {WINDOW} lines "
+        f"({t1 - t0:.0f} s)"
+    )
+    print(
+        "  configurations: "
+        + ", ".join(f"{k[7:]} {v}" for k, v in sorted(c.items()) if k.startswith("config_"))
+    )
     print("  mutations: " + ", ".join(f"{k} {v:,}" for k, v in nm["ops"].most_common()))
-    print(f"  rejected lines by reason ({sum(nm['rejects'].values()):,}): "
-          + ", ".join(f"{k} {v:,}" for k, v in nm["rejects"].most_common()))
-    print(f"  lines read {c['log_lines']:,} (outside --strict), of which {c['lines_without_record']:,} gave "
-          "no record (each counted under a reason)")
-    print(f"  --strict refusals {c['strict_refusals']:,}; other ingest errors {c['ingest_errors']:,}")
+    print(
+        f"  rejected lines by reason ({sum(nm['rejects'].values()):,}): "
+        + ", ".join(f"{k} {v:,}" for k, v in nm["rejects"].most_common())
+    )
+    print(
+        f"  lines read {c['log_lines']:,} (outside --strict), of which {c['lines_without_record']:,} gave "
+        "no record (each counted under a reason)"
+    )
+    print(
+        f"  --strict refusals {c['strict_refusals']:,}; other ingest errors {c['ingest_errors']:,}"
+    )
     print(f"  invariant violations {nm['violations']}; tracebacks {nm['tracebacks']}")
     cc = co["counts"]
-    print(f"containers: {a.containers:,} damaged MCAP/CSV files ({t2 - t1:.0f} s): "
-          f"{cc['read']:,} read ({cc['records']:,} records recovered), "
-          f"{cc['one_line_error']:,} one-line errors")
-    print("  damage: " + ", ".join(f"{k} {v}" for k, v in sorted(cc.items())
-                                   if k not in ("read", "records", "one_line_error")))
+    print(
+        f"containers: {a.containers:,} damaged MCAP/CSV files ({t2 - t1:.0f} s): "
+        f"{cc['read']:,} read ({cc['records']:,} records recovered), "
+        f"{cc['one_line_error']:,} one-line errors"
+    )
+    print(
+        "  damage: "
+        + ", ".join(
+            f"{k} {v}"
+            for k, v in sorted(cc.items())
+            if k not in ("read", "records", "one_line_error")
+        )
+    )
     print("  errors: " + "; ".join(f"{k} ({v})" for k, v in co["errors"].most_common(8)))
     print(f"  invariant violations {co['violations']}; tracebacks {co['tracebacks']}")
     pc = pi["counts"]
-    print(f"pipeline: {a.pipeline} whole logs with {pc['lines_mutated']:,} mutated lines through "
-          f"analyse, JSON (schema-checked), HTML and terminal ({t3 - t2:.0f} s): "
-          f"{pc['analysed']} analysed ({pc['sensor_faults']} sensor faults flagged), "
-          f"{pc['one_line_error']} one-line errors; tracebacks {pi['tracebacks']}")
+    print(
+        f"pipeline: {a.pipeline} whole logs with {pc['lines_mutated']:,} mutated lines through "
+        f"analyse, JSON (schema-checked), HTML and terminal ({t3 - t2:.0f} s): "
+        f"{pc['analysed']} analysed ({pc['sensor_faults']} sensor faults flagged), "
+        f"{pc['one_line_error']} one-line errors; tracebacks {pi['tracebacks']}"
+    )
     total_tb = nm["tracebacks"] + co["tracebacks"] + pi["tracebacks"]
-    print(f"inputs tried {c['lines_mutated'] + a.containers + a.pipeline:,}; tracebacks = {total_tb}; "
-          f"invariant violations = {nm['violations'] + co['violations']}")
+    print(
+        f"inputs tried {c['lines_mutated'] + a.containers + a.pipeline:,}; tracebacks = {total_tb}; "
+        f"invariant violations = {nm['violations'] + co['violations']}"
+    )
     for e in nm["examples"] + co["examples"] + pi["examples"]:
         print("  example:", e)
     return 1 if total_tb or nm["violations"] or co["violations"] else 0

@@ -50,19 +50,38 @@ INS_ROLES = ("ins1", "ins2", "ins3")
 #: rows costs more to filter, sort and concatenate than all the numbers beside it)
 REFERENCE_DTYPE = pd.CategoricalDtype(["M", "T"])
 
-COMMON_COLUMNS = {"time_ns": "int64", "source": "category", "talker": "category",
-                  "sentence": "category", "line": "int64", "recv_ns": "int64"}
+COMMON_COLUMNS = {
+    "time_ns": "int64",
+    "source": "category",
+    "talker": "category",
+    "sentence": "category",
+    "line": "int64",
+    "recv_ns": "int64",
+}
 #: ``recv_ns`` where a record has no receive time distinct from its time of fix
 MISSING_NS = np.iinfo(np.int64).min
 
 KIND_COLUMNS: dict[str, dict[str, str]] = {
-    "position": {"lat_rad": "float64", "lon_rad": "float64", "alt_m": "float64",
-                 "quality": "int8", "hdop": "float64"},
-    "heading": {"heading_rad": "float64", "reference": REFERENCE_DTYPE,
-                "deviation_rad": "float64", "variation_rad": "float64"},
+    "position": {
+        "lat_rad": "float64",
+        "lon_rad": "float64",
+        "alt_m": "float64",
+        "quality": "int8",
+        "hdop": "float64",
+    },
+    "heading": {
+        "heading_rad": "float64",
+        "reference": REFERENCE_DTYPE,
+        "deviation_rad": "float64",
+        "variation_rad": "float64",
+    },
     "ground": {"cog_rad": "float64", "sog_mps": "float64"},
-    "water": {"stw_mps": "float64", "stw_transverse_mps": "float64",
-              "sog_long_mps": "float64", "sog_transverse_mps": "float64"},
+    "water": {
+        "stw_mps": "float64",
+        "stw_transverse_mps": "float64",
+        "sog_long_mps": "float64",
+        "sog_transverse_mps": "float64",
+    },
     "distance": {"total_water_m": "float64", "trip_water_m": "float64"},
     "rot": {"rot_radps": "float64"},
 }
@@ -88,10 +107,17 @@ def make_frame(kind: str, data: dict[str, np.ndarray]) -> pd.DataFrame:
         if c in data:
             v = data[c]
             if t is REFERENCE_DTYPE:
-                out[c] = (v if isinstance(v, pd.Categorical) and v.dtype == t
-                          else pd.Categorical(np.asarray(v, dtype=object), dtype=t))
+                out[c] = (
+                    v
+                    if isinstance(v, pd.Categorical) and v.dtype == t
+                    else pd.Categorical(np.asarray(v, dtype=object), dtype=t)
+                )
             elif t == "category":
-                out[c] = v if isinstance(v, pd.Categorical) else pd.Categorical(np.asarray(v, dtype=object))
+                out[c] = (
+                    v
+                    if isinstance(v, pd.Categorical)
+                    else pd.Categorical(np.asarray(v, dtype=object))
+                )
             elif t == "object":
                 out[c] = np.asarray(v, dtype=object)
             else:
@@ -113,8 +139,9 @@ def make_frame(kind: str, data: dict[str, np.ndarray]) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
-
-def concat_blocks(blocks: list[dict[str, pd.DataFrame]], every_kind: bool = True) -> dict[str, pd.DataFrame]:
+def concat_blocks(
+    blocks: list[dict[str, pd.DataFrame]], every_kind: bool = True
+) -> dict[str, pd.DataFrame]:
     """One frame per kind from the frames of consecutive blocks (dicts kind -> frame),
     sorted by time (stable: a block's order kept among equal times), the string columns
     categorical.  ``every_kind``: an empty frame for a kind no block has."""
@@ -133,6 +160,7 @@ def concat_blocks(blocks: list[dict[str, pd.DataFrame]], every_kind: bool = True
             df = df.iloc[np.argsort(t, kind="stable")]
         out[kind] = df.reset_index(drop=True)
     return out
+
 
 @dataclass
 class Rejects:
@@ -205,7 +233,9 @@ class FileResult:
 
     path: str
     format: str  #: e.g. "nmea", "csv-long", "csv-wide", "csv-raw", "mcap"
-    frames: dict[str, pd.DataFrame]  #: kind -> canonical frame (kinds absent from the file may be missing)
+    frames: dict[
+        str, pd.DataFrame
+    ]  #: kind -> canonical frame (kinds absent from the file may be missing)
     lines: int  #: lines (or messages) read
     rejects: Rejects = field(default_factory=Rejects)
     time_events: TimeEvents = field(default_factory=TimeEvents)

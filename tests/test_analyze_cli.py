@@ -32,9 +32,18 @@ def _json(out: str, validator) -> dict:
     return doc
 
 
-@pytest.mark.parametrize("text,seconds", [("1h", 3600.0), ("2h", 7200.0), ("3600", 3600.0),
-                                          ("90min", 5400.0), ("30s", 30.0), ("1d", 86400.0),
-                                          ("0.5h", 1800.0)])
+@pytest.mark.parametrize(
+    "text,seconds",
+    [
+        ("1h", 3600.0),
+        ("2h", 7200.0),
+        ("3600", 3600.0),
+        ("90min", 5400.0),
+        ("30s", 30.0),
+        ("1d", 86400.0),
+        ("0.5h", 1800.0),
+    ],
+)
 def test_parse_duration(text, seconds):
     assert parse_duration_s(text, "--interval") == seconds
 
@@ -57,8 +66,15 @@ def test_sample_log_every_report(run_cli, tmp_path, validator):
     js, page, tables = tmp_path / "r.json", tmp_path / "r.html", tmp_path / "tables"
     code, out, err = run_cli("analyze", SAMPLE, "--json", js, "--html", page, "--out", tables)
     assert code == ExitCode.OK, err
-    for section in ("period", "Sources", "Dead reckoning", "INS deviations from the mean",
-                    "Calibration", "Current", "excess"):
+    for section in (
+        "period",
+        "Sources",
+        "Dead reckoning",
+        "INS deviations from the mean",
+        "Calibration",
+        "Current",
+        "excess",
+    ):
         assert section in out
     doc = _json(js.read_text(encoding="utf-8"), validator)
     assert doc["period"]["start_utc"] == "2026-03-01T06:00:00Z"
@@ -80,8 +96,20 @@ def test_sample_log_every_report(run_cli, tmp_path, validator):
 
 @pytest.mark.skipif(not SAMPLE.exists(), reason="sample_logs not generated")
 def test_json_to_stdout_is_only_json(run_cli, validator):
-    code, out, _ = run_cli("analyze", SAMPLE, "--json", "-", "--interval", "2h", "--role", "MAG=compass",
-                           "--dr-reset", "watch", "--probability", "0.9")
+    code, out, _ = run_cli(
+        "analyze",
+        SAMPLE,
+        "--json",
+        "-",
+        "--interval",
+        "2h",
+        "--role",
+        "MAG=compass",
+        "--dr-reset",
+        "watch",
+        "--probability",
+        "0.9",
+    )
     assert code == ExitCode.OK
     doc = _json(out, validator)
     assert doc["deviation"]["interval_s"] == 7200.0 and doc["deviation"]["probability"] == 0.9
@@ -90,15 +118,18 @@ def test_json_to_stdout_is_only_json(run_cli, validator):
     assert "MAG" in doc["sources"]["compass"]["keys"]
 
 
-@pytest.mark.parametrize("args,needle", [
-    (["--interval", "abc"], "--interval"),
-    (["--role", "GP"], "--role"),
-    (["--role", "GP=radar"], "--role"),
-    (["--dr-reset", "sometimes"], "--dr-reset"),
-    (["--probability", "1.5"], "--probability"),
-    (["--date", "1/3/2026"], "--date"),
-    (["--fix-role", "moon"], "--fix-role"),
-])
+@pytest.mark.parametrize(
+    "args,needle",
+    [
+        (["--interval", "abc"], "--interval"),
+        (["--role", "GP"], "--role"),
+        (["--role", "GP=radar"], "--role"),
+        (["--dr-reset", "sometimes"], "--dr-reset"),
+        (["--probability", "1.5"], "--probability"),
+        (["--date", "1/3/2026"], "--date"),
+        (["--fix-role", "moon"], "--fix-role"),
+    ],
+)
 def test_bad_options_are_one_line_usage_errors(run_cli, args, needle):
     code, out, err = run_cli("analyze", SAMPLE, *args)
     assert code == ExitCode.USAGE  # a bad option value, not a bad configuration file
@@ -133,15 +164,19 @@ def test_hakefjord_dr_against_its_gps(run_cli, real_dir, validator):
 
 #: the real logs with heading, water speed and GNSS (issue 12): 2M neither missing the GPS
 #: nor absurdly large, scored out of sample, default configuration
-REAL_DR_LOGS = ["VDRplayer/Hakefjord.txt", "gpsd/bundg_zeus_9.log",
-                "anemomind/Irene/2014/20140611/NMEA0048.TXT",
-                "anemomind/Irene/2008/champ_suisse_10_juillet_08/IreneLog.txt",
-                "anemomind/psaros33_Banque_Sturdza/2014/20140821/NMEA0010.TXT"]
+REAL_DR_LOGS = [
+    "VDRplayer/Hakefjord.txt",
+    "gpsd/bundg_zeus_9.log",
+    "anemomind/Irene/2014/20140611/NMEA0048.TXT",
+    "anemomind/Irene/2008/champ_suisse_10_juillet_08/IreneLog.txt",
+    "anemomind/psaros33_Banque_Sturdza/2014/20140821/NMEA0010.TXT",
+]
 
 
 @pytest.mark.parametrize("rel", REAL_DR_LOGS)
-def test_real_logs_estimated_position_neither_misses_nor_is_absurdly_large(run_cli, real_dir,
-                                                                           validator, rel):
+def test_real_logs_estimated_position_neither_misses_nor_is_absurdly_large(
+    run_cli, real_dir, validator, rel
+):
     code, out, err = run_cli("analyze", real_dir / rel, "--json", "-")
     assert code == ExitCode.OK, err
     doc = _json(out, validator)
@@ -150,8 +185,11 @@ def test_real_logs_estimated_position_neither_misses_nor_is_absurdly_large(run_c
     assert dr["n_scored"] >= 15 and dr["containment_2m"] is not None
     assert dr["nees"]["statistic"] is not None and dr["nees"]["lower"] < dr["nees"]["upper"]
     sig = dr["reference_sigma_m"]
-    ratio = [e["ref_error_m"] / math.sqrt((e["radius_2m_m"] / 2) ** 2 + 2 * sig**2)
-             for e in dr["epochs"] if e["scored"] and e["ref_error_m"] is not None]
+    ratio = [
+        e["ref_error_m"] / math.sqrt((e["radius_2m_m"] / 2) ** 2 + 2 * sig**2)
+        for e in dr["epochs"]
+        if e["scored"] and e["ref_error_m"] is not None
+    ]
     assert len(ratio) == dr["n_scored"]
     assert 0.3 <= float(np.median(ratio)) <= 1.5, np.median(ratio)
     assert dr["containment_2m"] >= 0.85
@@ -188,8 +226,15 @@ def test_shipped_sample_report_shows_every_section(validator):
     for key in ("deviation", "dead_reckoning", "calibration", "current"):
         assert doc[key] is not None, key
     html = (folder / "report.html").read_text(encoding="utf-8")
-    for heading in ("Summary", "Sources", "Dead reckoning", "INS accuracy per unit", "Per window",
-                    "Calibration and current", "Plots"):
+    for heading in (
+        "Summary",
+        "Sources",
+        "Dead reckoning",
+        "INS accuracy per unit",
+        "Per window",
+        "Calibration and current",
+        "Plots",
+    ):
         assert f">{heading}</h" in html, heading
     assert html.count('src="data:image/png;base64,') == 4
     summary = (folder / "summary.txt").read_text(encoding="utf-8")
@@ -201,7 +246,9 @@ def test_unwritable_report_is_one_line_error(run_cli, tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
     code, _, err = run_cli("analyze", SAMPLE, "--html", blocker / "r.html")
-    assert code == ExitCode.INPUT and err.startswith("error: cannot write") and "Traceback" not in err
+    assert (
+        code == ExitCode.INPUT and err.startswith("error: cannot write") and "Traceback" not in err
+    )
     assert len(err.strip().splitlines()) == 1
 
 
@@ -216,7 +263,9 @@ def test_regression_summary_to_a_file_is_not_squeezed_to_80_columns(run_cli):
 
 
 @pytest.mark.skipif(not SAMPLE.exists(), reason="sample_logs not generated")
-def test_interrupt_while_drawing_the_html_leaves_the_previous_reports(run_cli, tmp_path, monkeypatch):
+def test_interrupt_while_drawing_the_html_leaves_the_previous_reports(
+    run_cli, tmp_path, monkeypatch
+):
     """The JSON, HTML and tables of one run appear together: a Ctrl-C while the plots are
     drawn (the slow part) leaves the previous run's JSON and tables, not a new JSON beside
     an old HTML."""

@@ -32,8 +32,9 @@ from dracc.pipeline.state import StateStore
 def test_apriori_chain_by_hand():
     # conclusions of the INS-deviation paper: the larger of a priori and estimate becomes
     # the new a priori.  Seed 100; nights 80, 120, 110, NaN, 130 -> 100, 120, 120, 120, 130
-    steps = apriori_chain(100.0, [("d1", 80.0), ("d2", 120.0), ("d3", 110.0), ("d4", math.nan),
-                                  ("d5", 130.0)])
+    steps = apriori_chain(
+        100.0, [("d1", 80.0), ("d2", 120.0), ("d3", 110.0), ("d4", math.nan), ("d5", 130.0)]
+    )
     assert [s.before for s in steps] == [100.0, 100.0, 120.0, 120.0, 120.0]
     assert [s.after for s in steps] == [100.0, 120.0, 120.0, 120.0, 130.0]
     assert [s.verdict for s in steps] == ["within", "raised", "within", "no data", "raised"]
@@ -61,8 +62,16 @@ def test_apriori_chain_never_decreases():
 
 
 def test_audit_config_defaults_and_overrides():
-    cfg = config_from_dict({"audit": {"db": "x.sqlite", "limits": {"ins2": {"lon_m": 2500.0}},
-                                      "dr_containment_min": 0.8, "required_sources": ["gnss"]}})
+    cfg = config_from_dict(
+        {
+            "audit": {
+                "db": "x.sqlite",
+                "limits": {"ins2": {"lon_m": 2500.0}},
+                "dr_containment_min": 0.8,
+                "required_sources": ["gnss"],
+            }
+        }
+    )
     a = audit_config(cfg)
     assert a.db == "x.sqlite" and a.dr_containment_min == 0.8 and a.required_sources == ("gnss",)
     assert a.limit_for("ins2", "lon") == 2500.0
@@ -70,16 +79,19 @@ def test_audit_config_defaults_and_overrides():
     assert a.limit_for("ins3", "course") == 0.75
 
 
-@pytest.mark.parametrize("table, words", [
-    ({"dbb": "x"}, ["unknown key", "dbb"]),
-    ({"limits": {"ins4": {"lat_m": 1.0}}}, ["audit.limits", "ins4"]),
-    ({"limits": {"all": {"lat_deg": 1.0}}}, ["audit.limits.all", "lat_deg"]),
-    ({"limits": {"all": {"lat_m": -1.0}}}, ["audit.limits.all.lat_m", "positive"]),
-    ({"dr_containment_min": 1.5}, ["dr_containment_min", "fraction"]),
-    ({"required_sources": ["radar"]}, ["required_sources", "radar"]),
-    ({"compass_error_max_deg": "one"}, ["compass_error_max_deg", "number"]),
-    ({"apriori_raise_is_finding": 1}, ["apriori_raise_is_finding"]),
-])
+@pytest.mark.parametrize(
+    "table, words",
+    [
+        ({"dbb": "x"}, ["unknown key", "dbb"]),
+        ({"limits": {"ins4": {"lat_m": 1.0}}}, ["audit.limits", "ins4"]),
+        ({"limits": {"all": {"lat_deg": 1.0}}}, ["audit.limits.all", "lat_deg"]),
+        ({"limits": {"all": {"lat_m": -1.0}}}, ["audit.limits.all.lat_m", "positive"]),
+        ({"dr_containment_min": 1.5}, ["dr_containment_min", "fraction"]),
+        ({"required_sources": ["radar"]}, ["required_sources", "radar"]),
+        ({"compass_error_max_deg": "one"}, ["compass_error_max_deg", "number"]),
+        ({"apriori_raise_is_finding": 1}, ["apriori_raise_is_finding"]),
+    ],
+)
 def test_audit_config_errors_name_the_key(table, words):
     with pytest.raises(ConfigError) as e:
         audit_config(config_from_dict({"audit": table}))
@@ -87,7 +99,9 @@ def test_audit_config_errors_name_the_key(table, words):
 
 
 def test_apriori_seeds_from_deviation_section():
-    cfg = config_from_dict({"deviation": {"apriori": {"ins1": {"lat_m": 300.0, "course_deg": 0.1}}}})
+    cfg = config_from_dict(
+        {"deviation": {"apriori": {"ins1": {"lat_m": 300.0, "course_deg": 0.1}}}}
+    )
     assert apriori_seeds(cfg) == {("ins1", "lat"): 300.0, ("ins1", "course"): 0.1}
     with pytest.raises(ConfigError, match=r"deviation.apriori.ins1\] unknown key\(s\): lat;"):
         apriori_seeds(config_from_dict({"deviation": {"apriori": {"ins1": {"lat": 3.0}}}}))
@@ -108,17 +122,38 @@ def test_no_findings_within_limits():
 def test_each_threshold_triggers_just_above_not_at():
     # the per-night checks; the limiting errors are judged over the accuracy window
     # (test_accuracy_window_limit_just_above_not_at)
-    a = AuditConfig(limits={"all": {"lat_m": 1.0, "lon_m": 1.0, "course_deg": 0.001}},
-                    dr_containment_min=0.9, compass_error_max_deg=1.0, log_scale_max_pct=2.0,
-                    rejected_rate_max_pct=1.0)
-    at = make_doc(containment=0.9, compass_deg=-1.0, log_scale=-0.02, lines=10000, rejected=100,
-                  roles=("ins1", "ins2", "ins3"))
+    a = AuditConfig(
+        limits={"all": {"lat_m": 1.0, "lon_m": 1.0, "course_deg": 0.001}},
+        dr_containment_min=0.9,
+        compass_error_max_deg=1.0,
+        log_scale_max_pct=2.0,
+        rejected_rate_max_pct=1.0,
+    )
+    at = make_doc(
+        containment=0.9,
+        compass_deg=-1.0,
+        log_scale=-0.02,
+        lines=10000,
+        rejected=100,
+        roles=("ins1", "ins2", "ins3"),
+    )
     assert evaluate(facts_from_analysis(at), a)[0] == ()
-    above = make_doc(containment=0.8999, compass_deg=-1.01, log_scale=0.0201, lines=10000,
-                     rejected=101, roles=("ins1", "ins3"))
+    above = make_doc(
+        containment=0.8999,
+        compass_deg=-1.01,
+        log_scale=0.0201,
+        lines=10000,
+        rejected=101,
+        roles=("ins1", "ins3"),
+    )
     found, _ = evaluate(facts_from_analysis(above), a)
-    assert _kinds(found) == ["compass_error", "dr_containment", "log_scale", "missing_source",
-                             "rejected_rate"]
+    assert _kinds(found) == [
+        "compass_error",
+        "dr_containment",
+        "log_scale",
+        "missing_source",
+        "rejected_rate",
+    ]
     by = {f.subject: f for f in found}
     assert by["ins2"].kind == "missing_source" and by["ins2"].check == "availability"
     assert by["DR"].value == 0.8999 and by["DR"].limit == 0.9 and by["DR"].check == "consistency"
@@ -189,7 +224,9 @@ def test_accuracy_window_limit_just_above_not_at(tmp_path, factor, expect):
 def test_accuracy_window_short_nights_are_not_checked(tmp_path):
     # the same nights and the same limiting error, 12 h each: 36 h < 60 h, not judged
     lat = (100.0, 120.0, 140.0)
-    acfg = AuditConfig(limits={"ins1": {"lat_m": _pooled_limit(lat) / 1.001}}, accuracy_window_h=60.0)
+    acfg = AuditConfig(
+        limits={"ins1": {"lat_m": _pooled_limit(lat) / 1.001}}, accuracy_window_h=60.0
+    )
     with StateStore(tmp_path / "s.sqlite") as store:
         outs = _window_nights(store, lat, acfg=acfg, hours=12.0)
     assert all(f.kind != "limit" for o in outs for f in o.findings)
@@ -197,7 +234,9 @@ def test_accuracy_window_short_nights_are_not_checked(tmp_path):
     assert "36.0 h over 3 night(s)" in nc["why"] and outs[-1].exit_code == ExitCode.OK
     # a fourth and a fifth night fill the window (60 h): the five nights are pooled and judged
     lat5 = lat + (140.0, 140.0)
-    acfg = AuditConfig(limits={"ins1": {"lat_m": _pooled_limit(lat5) / 1.001}}, accuracy_window_h=60.0)
+    acfg = AuditConfig(
+        limits={"ins1": {"lat_m": _pooled_limit(lat5) / 1.001}}, accuracy_window_h=60.0
+    )
     with StateStore(tmp_path / "s.sqlite") as store:
         outs = _window_nights(store, lat5, acfg=acfg, hours=12.0)
     assert [o.status for o in outs] == ["unchanged"] * 3 + ["recorded"] * 2
@@ -218,13 +257,16 @@ def test_accuracy_window_without_duration_counts_the_period(tmp_path):
 
 
 def test_missing_figures_are_not_checked_and_said_so(tmp_path):
-    doc = make_doc(containment=None, compass_deg=None, log_scale=None,
-                   m_y={"ins1": {"lat": math.nan}})
+    doc = make_doc(
+        containment=None, compass_deg=None, log_scale=None, m_y={"ins1": {"lat": math.nan}}
+    )
     found, skipped = evaluate(facts_from_analysis(doc), AuditConfig())
     assert found == ()
     assert [(d["check"], d["name"], d["role"]) for d in skipped] == [
-        ("consistency", "dr", None), ("accuracy", "compass_error", "compass"),
-        ("accuracy", "log_scale", "log")]
+        ("consistency", "dr", None),
+        ("accuracy", "compass_error", "compass"),
+        ("accuracy", "log_scale", "log"),
+    ]
     why = {d["name"]: d["why"] for d in skipped}
     assert "no DR track" in why["dr"] and "compass error not estimated" in why["compass_error"]
     assert "log scale not estimated" in why["log_scale"]
@@ -237,19 +279,27 @@ def test_missing_figures_are_not_checked_and_said_so(tmp_path):
 
 # ------------------------------------------------- the DR verdict of the analysis
 
-INCONSISTENT = ("inconsistent (circle too small): reference inside 2M at 93.3 % of 45 epochs in "
-                "9 legs (a correct model gives 95.6 %); RMS error/M 1.16 (1 expected); NEES 80.2 "
-                "(chi^2 6.3-37.2)")
+INCONSISTENT = (
+    "inconsistent (circle too small): reference inside 2M at 93.3 % of 45 epochs in "
+    "9 legs (a correct model gives 95.6 %); RMS error/M 1.16 (1 expected); NEES 80.2 "
+    "(chi^2 6.3-37.2)"
+)
 
 
-@pytest.mark.parametrize("text, word", [
-    ("consistent: reference inside 2M at 100.0 %", "consistent"),
-    ("conservative: every epoch inside", "conservative"),
-    (INCONSISTENT, "inconsistent"),
-    ("Inconsistent: upper case", "inconsistent"),
-    ("undetermined: no epoch of a leg whose model was learned", "undetermined"),
-    ("inconsistently worded", None), ("", None), (None, None), (3, None),
-])
+@pytest.mark.parametrize(
+    "text, word",
+    [
+        ("consistent: reference inside 2M at 100.0 %", "consistent"),
+        ("conservative: every epoch inside", "conservative"),
+        (INCONSISTENT, "inconsistent"),
+        ("Inconsistent: upper case", "inconsistent"),
+        ("undetermined: no epoch of a leg whose model was learned", "undetermined"),
+        ("inconsistently worded", None),
+        ("", None),
+        (None, None),
+        (3, None),
+    ],
+)
 def test_dr_verdict_word(text, word):
     from dracc.pipeline.audit import dr_verdict_word
 
@@ -264,7 +314,13 @@ def test_inconsistent_dr_is_a_finding_even_with_containment_above_the_minimum():
     assert (facts.dr_verdict, facts.dr_consistent, facts.dr_nees) == ("inconsistent", False, 80.2)
     found, skipped = evaluate(facts, AuditConfig())
     (f,) = found
-    assert (f.kind, f.subject, f.value, f.limit, f.measure) == ("dr_inconsistent", "DR", 80.2, 37.2, "NEES")
+    assert (f.kind, f.subject, f.value, f.limit, f.measure) == (
+        "dr_inconsistent",
+        "DR",
+        80.2,
+        37.2,
+        "NEES",
+    )
     assert f.message == f"DR: {INCONSISTENT}" and skipped == ()
 
 
@@ -275,24 +331,39 @@ def test_inconsistent_dr_below_the_minimum_is_one_finding():
     assert "the circle is dominated by the current (key [dead_reckoning] current_kn)" in f.message
     assert f.message.endswith("; 50.0 % inside 2M is below the audit's minimum of 90.0 %")
     # the dominant source already in the sentence is not said twice
-    said = INCONSISTENT + "; the circle is dominated by the current (key [dead_reckoning] current_kn)"
-    (g,) = evaluate(facts_from_analysis(make_doc(verdict=said, dominant=("the current", "current_kn"))),
-                    AuditConfig())[0]
+    said = (
+        INCONSISTENT + "; the circle is dominated by the current (key [dead_reckoning] current_kn)"
+    )
+    (g,) = evaluate(
+        facts_from_analysis(make_doc(verdict=said, dominant=("the current", "current_kn"))),
+        AuditConfig(),
+    )[0]
     assert g.message == f"DR: {said}"
 
 
-@pytest.mark.parametrize("verdict", ["consistent: inside at 97.8 %", "conservative: every epoch inside"])
+@pytest.mark.parametrize(
+    "verdict", ["consistent: inside at 97.8 %", "conservative: every epoch inside"]
+)
 def test_consistent_or_conservative_dr_keeps_the_containment_check(verdict):
     assert evaluate(facts_from_analysis(make_doc(verdict=verdict)), AuditConfig()) == ((), ())
-    (f,) = evaluate(facts_from_analysis(make_doc(verdict=verdict, containment=0.8)), AuditConfig())[0]
+    (f,) = evaluate(facts_from_analysis(make_doc(verdict=verdict, containment=0.8)), AuditConfig())[
+        0
+    ]
     assert f.kind == "dr_containment"
 
 
 def test_undetermined_dr_is_not_checked_and_said_so():
     text = "undetermined: no epoch of a leg whose model was learned from earlier fixes"
     found, skipped = evaluate(facts_from_analysis(make_doc(verdict=text)), AuditConfig())
-    assert found == () and skipped == ({"check": "consistency", "name": "dr", "source": None,
-                                        "role": None, "why": f"DR verdict: {text}"},)
+    assert found == () and skipped == (
+        {
+            "check": "consistency",
+            "name": "dr",
+            "source": None,
+            "role": None,
+            "why": f"DR verdict: {text}",
+        },
+    )
 
 
 def test_not_an_analysis_document():
@@ -315,9 +386,16 @@ def test_night_of_period_middle_and_missing_period():
 
 
 def _audit(store, doc, *, seeds=None, acfg=None, night=None, content=None, settings="s"):
-    return audit_document(doc, store=store, acfg=acfg or AuditConfig(), seeds=seeds or {},
-                          vessel="Aurora", night=night,
-                          content_hash=content or doc["period"]["start_utc"], settings_hash=settings)
+    return audit_document(
+        doc,
+        store=store,
+        acfg=acfg or AuditConfig(),
+        seeds=seeds or {},
+        vessel="Aurora",
+        night=night,
+        content_hash=content or doc["period"]["start_utc"],
+        settings_hash=settings,
+    )
 
 
 def test_apriori_rule_over_several_nights(tmp_path):
@@ -338,11 +416,16 @@ def test_apriori_rule_over_several_nights(tmp_path):
         assert [h["verdict"] for h in lon] == ["established", "raised", "raised", "raised"]
         ev = [e for e in store.apriori_events("Aurora") if e.channel == "lat"]
         assert [(e.night, e.previous, e.value, e.reason) for e in ev] == [
-            ("2026-11-18", 120.0, 140.0, "raised"), ("2026-11-20", 140.0, 150.0, "raised")]
+            ("2026-11-18", 120.0, 140.0, "raised"),
+            ("2026-11-20", 140.0, 150.0, "raised"),
+        ]
         assert ev[0].evidence["m_y"] == 140.0 and ev[0].evidence["n"] == 24
         assert ev[0].evidence["m_u"] == pytest.approx(140.0 / 1.32)
         # the outcome of the last night carries its own events
-        assert [(e.unit, e.channel) for e in outs[-1].apriori_events] == [("ins1", "lat"), ("ins1", "lon")]
+        assert [(e.unit, e.channel) for e in outs[-1].apriori_events] == [
+            ("ins1", "lat"),
+            ("ins1", "lon"),
+        ]
 
 
 def test_night_audited_late_recomputes_the_chain(tmp_path):
@@ -361,7 +444,11 @@ def test_same_night_twice_is_recorded_once(tmp_path):
         doc = make_doc("2026-11-20")
         first = _audit(store, doc, content="abc")
         before = store.conn.execute("SELECT audited_utc FROM nights").fetchall()
-        second = _audit(store, doc, content="abc",)
+        second = _audit(
+            store,
+            doc,
+            content="abc",
+        )
         assert (first.status, second.status) == ("recorded", "unchanged")
         assert store.conn.execute("SELECT COUNT(*) FROM nights").fetchone()[0] == 1
         assert store.conn.execute("SELECT COUNT(*) FROM unit_stats").fetchone()[0] == 9
@@ -378,7 +465,10 @@ def test_changed_log_replaces_the_night(tmp_path):
         assert row["m_y"] == 90.0 and row["apriori_after"] == 90.0
         assert store.night("Aurora", "2026-11-20").content_sha256 == "v2"
         # other settings with the same content also replace it (the statistics depend on them)
-        assert _audit(store, make_doc("2026-11-20"), content="v2", settings="other").status == "replaced"
+        assert (
+            _audit(store, make_doc("2026-11-20"), content="v2", settings="other").status
+            == "replaced"
+        )
 
 
 def test_exit_code_follows_findings(tmp_path):
@@ -386,12 +476,16 @@ def test_exit_code_follows_findings(tmp_path):
         ok = _audit(store, make_doc("2026-11-19"))
         bad = _audit(store, make_doc("2026-11-20", containment=0.5))
         assert ok.exit_code == ExitCode.OK and bad.exit_code == ExitCode.FINDINGS
-        assert [f["kind"] for f in store.night("Aurora", "2026-11-20").findings] == ["dr_containment"]
+        assert [f["kind"] for f in store.night("Aurora", "2026-11-20").findings] == [
+            "dr_containment"
+        ]
 
 
 def test_inconsistent_night_exits_1_and_is_stored_with_its_verdict(tmp_path):
     with StateStore(tmp_path / "s.sqlite") as store:
-        ok = _audit(store, make_doc("2026-11-19", verdict="consistent: fine", nees=(9.0, 5.1, 34.3)))
+        ok = _audit(
+            store, make_doc("2026-11-19", verdict="consistent: fine", nees=(9.0, 5.1, 34.3))
+        )
         bad = _audit(store, make_doc("2026-11-20", verdict=INCONSISTENT, nees=(80.2, 6.3, 37.2)))
         assert ok.exit_code == ExitCode.OK and bad.exit_code == ExitCode.FINDINGS
         assert [f.kind for f in bad.findings] == ["dr_inconsistent"]
@@ -408,10 +502,16 @@ def test_inconsistent_night_exits_1_and_is_stored_with_its_verdict(tmp_path):
 def test_apriori_raise_as_finding_when_configured(tmp_path):
     a = AuditConfig(apriori_raise_is_finding=True)
     with StateStore(tmp_path / "s.sqlite") as store:
-        out = _audit(store, make_doc("2026-11-20", m_y={"ins2": {"lon": 300.0}}),
-                     seeds={("ins2", "lon"): 250.0}, acfg=a)
+        out = _audit(
+            store,
+            make_doc("2026-11-20", m_y={"ins2": {"lon": 300.0}}),
+            seeds={("ins2", "lon"): 250.0},
+            acfg=a,
+        )
         (f,) = out.findings
-        assert f.kind == "apriori_raised" and (f.value, f.limit) == (300.0, 250.0) and f.measure == "m"
+        assert (
+            f.kind == "apriori_raised" and (f.value, f.limit) == (300.0, 250.0) and f.measure == "m"
+        )
 
 
 def test_rollback_leaves_state_untouched(tmp_path):
@@ -429,15 +529,28 @@ def test_rollback_leaves_state_untouched(tmp_path):
 
 
 def test_select_logs_by_date_in_name(tmp_path):
-    for name in ("nav-2026-11-20.nmea", "nav-20261120-b.nmea", "nav_2026_11_20.log",
-                 "nav-2026-11-19.nmea", ".nav-2026-11-20.nmea.part"):
+    for name in (
+        "nav-2026-11-20.nmea",
+        "nav-20261120-b.nmea",
+        "nav_2026_11_20.log",
+        "nav-2026-11-19.nmea",
+        ".nav-2026-11-20.nmea.part",
+    ):
         (tmp_path / name).write_text("x")
     (tmp_path / "sub").mkdir()
     (tmp_path / "sub" / "ins-2026-11-20.nmea").write_text("y")
     got = select_logs([tmp_path], "2026-11-20", "*")
-    assert [p.name for p in got] == ["nav-2026-11-20.nmea", "nav-20261120-b.nmea", "nav_2026_11_20.log"]
+    assert [p.name for p in got] == [
+        "nav-2026-11-20.nmea",
+        "nav-20261120-b.nmea",
+        "nav_2026_11_20.log",
+    ]
     got = select_logs([tmp_path], "2026-11-20", "**/*.nmea")
-    assert [p.name for p in got] == ["nav-2026-11-20.nmea", "nav-20261120-b.nmea", "ins-2026-11-20.nmea"]
+    assert [p.name for p in got] == [
+        "nav-2026-11-20.nmea",
+        "nav-20261120-b.nmea",
+        "ins-2026-11-20.nmea",
+    ]
     with pytest.raises(NoLogsError, match=r"no logs for 2026-11-18 matching '\*' in "):
         select_logs([tmp_path], "2026-11-18", "*")
     with pytest.raises(NoLogsError, match=r"no logs for 2026-11-20 matching '\*\.csv' in "):
@@ -463,8 +576,9 @@ def test_yesterday_utc():
     assert yesterday_utc(dt.datetime(2026, 3, 1, 0, 30, tzinfo=dt.timezone.utc)) == "2026-02-28"
 
 
-@pytest.mark.parametrize("table, word", [({"name": 5}, "name"), ({"name": "  "}, "name"),
-                                         ({"nmae": "Aurora"}, "nmae")])
+@pytest.mark.parametrize(
+    "table, word", [({"name": 5}, "name"), ({"name": "  "}, "name"), ({"nmae": "Aurora"}, "nmae")]
+)
 def test_vessel_table_is_checked_not_silently_default(table, word):
     from dracc.core.config import Config
     from dracc.core.errors import ConfigError
@@ -472,4 +586,6 @@ def test_vessel_table_is_checked_not_silently_default(table, word):
 
     with pytest.raises(ConfigError, match=word):
         vessel_name(Config(extra={"vessel": table}), AuditConfig(), None)
-    assert vessel_name(Config(extra={"vessel": {"name": "Aurora"}}), AuditConfig(), None) == "Aurora"
+    assert (
+        vessel_name(Config(extra={"vessel": {"name": "Aurora"}}), AuditConfig(), None) == "Aurora"
+    )

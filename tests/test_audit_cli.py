@@ -28,10 +28,35 @@ def ship(tmp_path_factory):
     """A folder of three nights' logs (8 h each, low rates) from `dracc simulate`."""
     root = tmp_path_factory.mktemp("ship")
     for night, seed, scale in NIGHTS:
-        code = main(["simulate", "--out", str(root / "sim"), "--hours", "8", "--seed", str(seed),
-                     "--start", f"{night}T00:00:00Z", "--name", f"nav-{night}",
-                     "--ins-error-scale", str(scale), "--compass-hz", "0.2", "--log-hz", "0.2",
-                     "--ins-hz", "0.1", "--gnss-hz", "0.2", "--aux-hz", "0", "--truth-hz", "0.01"])
+        code = main(
+            [
+                "simulate",
+                "--out",
+                str(root / "sim"),
+                "--hours",
+                "8",
+                "--seed",
+                str(seed),
+                "--start",
+                f"{night}T00:00:00Z",
+                "--name",
+                f"nav-{night}",
+                "--ins-error-scale",
+                str(scale),
+                "--compass-hz",
+                "0.2",
+                "--log-hz",
+                "0.2",
+                "--ins-hz",
+                "0.1",
+                "--gnss-hz",
+                "0.2",
+                "--aux-hz",
+                "0",
+                "--truth-hz",
+                "0.01",
+            ]
+        )
         assert code == 0
     return root / "sim"
 
@@ -41,8 +66,11 @@ def memo_analysis(monkeypatch):
     real = audit_mod.analyse_voyage
 
     def memo(paths, cfg, progress=None):
-        key = (tuple(str(p) for p in paths), audit_mod.settings_sha256(cfg),
-               tuple(p.stat().st_mtime_ns for p in paths))
+        key = (
+            tuple(str(p) for p in paths),
+            audit_mod.settings_sha256(cfg),
+            tuple(p.stat().st_mtime_ns for p in paths),
+        )
         if key not in _MEMO:
             _MEMO[key] = real(paths, cfg, progress=progress)
         return _MEMO[key]
@@ -56,17 +84,32 @@ def _cfg(tmp_path, text: str) -> str:
     return str(p)
 
 
-LOOSE = "[audit]\nlimits = { all = { lat_m = 1e9, lon_m = 1e9, course_deg = 1e3 } }\n" \
-        "required_sources = [\"ins1\", \"ins2\", \"ins3\"]\n" \
-        "log_scale_max_pct = 10.0\ncompass_error_max_deg = 5.0\n"
+LOOSE = (
+    "[audit]\nlimits = { all = { lat_m = 1e9, lon_m = 1e9, course_deg = 1e3 } }\n"
+    'required_sources = ["ins1", "ins2", "ins3"]\n'
+    "log_scale_max_pct = 10.0\ncompass_error_max_deg = 5.0\n"
+)
 TIGHT = "[audit]\nlimits = { all = { lat_m = 1.0, lon_m = 1.0, course_deg = 0.0001 } }\n"
 
 
 def test_exit_0_within_limits_with_reports(run_cli, ship, tmp_path):
     db = tmp_path / "state.sqlite"
-    code, out, err = run_cli("audit", ship / "nav-2026-11-18.nmea", "--db", db, "--vessel", "Aurora",
-                             "--config", _cfg(tmp_path, LOOSE), "--json", tmp_path / "r.json",
-                             "--html", tmp_path / "r.html", "--summary", tmp_path / "s.txt")
+    code, out, err = run_cli(
+        "audit",
+        ship / "nav-2026-11-18.nmea",
+        "--db",
+        db,
+        "--vessel",
+        "Aurora",
+        "--config",
+        _cfg(tmp_path, LOOSE),
+        "--json",
+        tmp_path / "r.json",
+        "--html",
+        tmp_path / "r.html",
+        "--summary",
+        tmp_path / "s.txt",
+    )
     assert code == ExitCode.OK, err
     assert out == ""
     text = (tmp_path / "s.txt").read_text()
@@ -74,13 +117,20 @@ def test_exit_0_within_limits_with_reports(run_cli, ship, tmp_path):
     assert "findings:" not in text
     assert "state: recorded" in text and text.rstrip().endswith("exit 0 (ok)")
     # one 8 h night: the limiting errors wait for the 72 h accuracy window, and it is said
-    assert re.search(r"not checked: accuracy limit: the limiting errors are judged over 72 h of "
-                     r"logs; [0-9.]+ h over 1 night\(s\) so far", text)
+    assert re.search(
+        r"not checked: accuracy limit: the limiting errors are judged over 72 h of "
+        r"logs; [0-9.]+ h over 1 night\(s\) so far",
+        text,
+    )
     doc = json.loads((tmp_path / "r.json").read_text())
     jsonschema.validate(doc, load_schema())
     assert doc["schema"] == "dracc.audit/1" and doc["verdict"] == "ok" and doc["exit_code"] == 0
     assert (doc["vessel"], doc["night"], doc["state"], doc["findings"]) == (
-        "Aurora", "2026-11-18", "recorded", [])
+        "Aurora",
+        "2026-11-18",
+        "recorded",
+        [],
+    )
     assert doc["accuracy"]["complete"] is False and doc["accuracy"]["window_h"] == 72.0
     assert doc["analysis"]["schema"] == "dracc.analysis/1"
     assert doc["analysis"]["deviation"]["units"]["ins1"]["lat"]["n"] > 0
@@ -92,23 +142,46 @@ def test_exit_0_within_limits_with_reports(run_cli, ship, tmp_path):
 
 def test_exit_1_findings(run_cli, ship, tmp_path):
     # an accuracy window of 6 h: one 8 h night fills it, its limiting errors are judged
-    code, out, _ = run_cli("audit", ship / "nav-2026-11-18.nmea", "--db", tmp_path / "s.sqlite",
-                           "--config", _cfg(tmp_path, TIGHT + "accuracy_window_h = 6.0\n"))
+    code, out, _ = run_cli(
+        "audit",
+        ship / "nav-2026-11-18.nmea",
+        "--db",
+        tmp_path / "s.sqlite",
+        "--config",
+        _cfg(tmp_path, TIGHT + "accuracy_window_h = 6.0\n"),
+    )
     assert code == ExitCode.FINDINGS
     lines = out.splitlines()
     assert re.fullmatch(r"dracc audit: default, night 2026-11-18: \d+ findings.*", lines[0])
     assert lines[1] == "findings:"
-    assert re.search(r"^  - \[accuracy\] ins1 lat \(ins1\): limiting error [0-9.]+ m over 8 h "
-                     r"\(1 nights\) > 1 m$", out, re.M)
+    assert re.search(
+        r"^  - \[accuracy\] ins1 lat \(ins1\): limiting error [0-9.]+ m over 8 h "
+        r"\(1 nights\) > 1 m$",
+        out,
+        re.M,
+    )
     assert "not checked: accuracy limit" not in out and out.rstrip().endswith("exit 1 (findings)")
-    row = sqlite3.connect(tmp_path / "s.sqlite").execute("SELECT vessel, findings_json FROM nights").fetchone()
+    row = (
+        sqlite3.connect(tmp_path / "s.sqlite")
+        .execute("SELECT vessel, findings_json FROM nights")
+        .fetchone()
+    )
     stored = [f for f in json.loads(row[1]) if f["kind"] == "limit"]
     assert row[0] == "default" and len(stored) == 9  # every unit channel is far above 1 m / 0.0001°
     assert {f["check"] for f in stored} == {"accuracy"} and {f["role"] for f in stored} == {
-        "ins1", "ins2", "ins3"}
+        "ins1",
+        "ins2",
+        "ins3",
+    }
     # the default window (72 h): the same night judges no limit, and says why
-    code, out, _ = run_cli("audit", ship / "nav-2026-11-18.nmea", "--db", tmp_path / "t.sqlite",
-                           "--config", _cfg(tmp_path, TIGHT))
+    code, out, _ = run_cli(
+        "audit",
+        ship / "nav-2026-11-18.nmea",
+        "--db",
+        tmp_path / "t.sqlite",
+        "--config",
+        _cfg(tmp_path, TIGHT),
+    )
     assert "): limiting error" not in out and "not checked: accuracy limit" in out
 
 
@@ -116,10 +189,14 @@ def test_exit_3_no_usable_logs(run_cli, tmp_path):
     (tmp_path / "logs").mkdir()
     junk = tmp_path / "logs" / "junk-2026-11-20.nmea"
     junk.write_bytes(b"\x00\x01 no sentences here\n" * 50)
-    code, out, err = run_cli("audit", tmp_path / "logs", "--date", "2026-11-20", "--db", tmp_path / "s.sqlite")
+    code, out, err = run_cli(
+        "audit", tmp_path / "logs", "--date", "2026-11-20", "--db", tmp_path / "s.sqlite"
+    )
     assert code == ExitCode.INPUT and err.startswith("error:") and "Traceback" not in err
     assert len(err.strip().splitlines()) == 1 and out == ""
-    code, _, err = run_cli("audit", tmp_path / "logs", "--date", "20-11-2026", "--db", tmp_path / "s.sqlite")
+    code, _, err = run_cli(
+        "audit", tmp_path / "logs", "--date", "20-11-2026", "--db", tmp_path / "s.sqlite"
+    )
     assert code == ExitCode.USAGE and "YYYY-MM-DD" in err  # a bad option value is a usage error
     # nothing was recorded: the database is not even opened before the logs are analysed
     assert not (tmp_path / "s.sqlite").exists()
@@ -130,18 +207,33 @@ def test_exit_3_folder_without_the_nights_logs_is_a_night_without_data(run_cli, 
     logs.mkdir()
     (logs / "nav-2026-11-19.nmea").write_text("")  # another night's log
     db = tmp_path / "s.sqlite"
-    code, out, err = run_cli("audit", logs, "--date", "2026-11-20", "--db", db, "--json",
-                             tmp_path / "a.json", "--html", tmp_path / "a.html")
+    code, out, err = run_cli(
+        "audit",
+        logs,
+        "--date",
+        "2026-11-20",
+        "--db",
+        db,
+        "--json",
+        tmp_path / "a.json",
+        "--html",
+        tmp_path / "a.html",
+    )
     assert code == ExitCode.INPUT and err == ""
     lines = out.splitlines()
-    assert lines[0] == (f"dracc audit: default, night 2026-11-20: NO DATA: no logs for 2026-11-20 "
-                        f"matching '*' in {logs}")
+    assert lines[0] == (
+        f"dracc audit: default, night 2026-11-20: NO DATA: no logs for 2026-11-20 "
+        f"matching '*' in {logs}"
+    )
     assert "state: recorded (a new night); recorded as a night without data" in lines
     assert lines[-1] == "exit 3 (no logs)"
     doc = json.loads((tmp_path / "a.json").read_text())
     jsonschema.validate(doc, load_schema())
     assert (doc["verdict"], doc["exit_code"], doc["analysis"]) == ("no data", 3, None)
-    assert "NO DATA" in (tmp_path / "a.html").read_text() or "no logs" in (tmp_path / "a.html").read_text()
+    assert (
+        "NO DATA" in (tmp_path / "a.html").read_text()
+        or "no logs" in (tmp_path / "a.html").read_text()
+    )
     (row,) = sqlite3.connect(db).execute("SELECT night, content_sha256, findings_json FROM nights")
     assert row[:2] == ("2026-11-20", audit_mod.NO_DATA_SHA256)
     assert [f["kind"] for f in json.loads(row[2])] == ["no_logs"]
@@ -155,29 +247,48 @@ def test_exit_3_folder_without_the_nights_logs_is_a_night_without_data(run_cli, 
 
 def test_exit_4_config_errors(run_cli, ship, tmp_path):
     log = ship / "nav-2026-11-18.nmea"
-    code, _, err = run_cli("audit", log, "--db", tmp_path / "s.sqlite",
-                           "--config", _cfg(tmp_path, "[audit]\nthreshold = 3\n"))
+    code, _, err = run_cli(
+        "audit",
+        log,
+        "--db",
+        tmp_path / "s.sqlite",
+        "--config",
+        _cfg(tmp_path, "[audit]\nthreshold = 3\n"),
+    )
     assert code == ExitCode.CONFIG and "[audit] unknown key(s): threshold" in err
     code, _, err = run_cli("audit", log)
     assert code == ExitCode.CONFIG and "--db" in err
-    code, _, err = run_cli("audit", log, "--db", tmp_path / "s.sqlite",
-                           "--config", _cfg(tmp_path, "[audit]\nlimits = { ins9 = { lat_m = 1.0 } }\n"))
+    code, _, err = run_cli(
+        "audit",
+        log,
+        "--db",
+        tmp_path / "s.sqlite",
+        "--config",
+        _cfg(tmp_path, "[audit]\nlimits = { ins9 = { lat_m = 1.0 } }\n"),
+    )
     assert code == ExitCode.CONFIG and "ins9" in err
 
 
 def test_rule_over_nights_idempotence_and_history(run_cli, ship, tmp_path):
     db = tmp_path / "s.sqlite"
     cfg = _cfg(tmp_path, LOOSE + "[deviation.apriori]\nins1 = { lat_m = 400.0 }\n")
-    for i, (night, _, _) in enumerate(NIGHTS):  # a folder and --date: the files carrying the date in their name
-        code, out, err = run_cli("audit", ship, "--date", night, "--db", db, "--config", cfg,
-                                 "--vessel", "Søren")
+    for i, (night, _, _) in enumerate(
+        NIGHTS
+    ):  # a folder and --date: the files carrying the date in their name
+        code, out, err = run_cli(
+            "audit", ship, "--date", night, "--db", db, "--config", cfg, "--vessel", "Søren"
+        )
         assert code == ExitCode.OK, err
         assert f"night {night}: all checks passed" in out and "state: recorded" in out
         # three 8 h nights fill the 72 h accuracy window up to 24 h: the limits wait
-        assert re.search(rf"accuracy window: [0-9.]+ h of 72 h over {i + 1} night\(s\) \(limits "
-                         r"judged once the window is full\)", out)
-    code, out, _ = run_cli("audit", ship, "--date", "2026-11-19", "--db", db, "--config", cfg,
-                           "--vessel", "Søren")
+        assert re.search(
+            rf"accuracy window: [0-9.]+ h of 72 h over {i + 1} night\(s\) \(limits "
+            r"judged once the window is full\)",
+            out,
+        )
+    code, out, _ = run_cli(
+        "audit", ship, "--date", "2026-11-19", "--db", db, "--config", cfg, "--vessel", "Søren"
+    )
     assert code == ExitCode.OK and "state: unchanged" in out
     con = sqlite3.connect(db)
     assert con.execute("SELECT COUNT(*) FROM nights").fetchone()[0] == 3
@@ -186,7 +297,8 @@ def test_rule_over_nights_idempotence_and_history(run_cli, ship, tmp_path):
     assert code == ExitCode.OK
     hist = json.loads(out)
     assert {(s["unit"], s["channel"]) for s in hist["series"]} == {
-        (u, c) for u in ("ins1", "ins2", "ins3") for c in ("lat", "lon", "course")}
+        (u, c) for u in ("ins1", "ins2", "ins3") for c in ("lat", "lon", "course")
+    }
     raised = 0
     for s in hist["series"]:
         m_y = np.array([n["m_y"] for n in s["nights"]], dtype=float)
@@ -200,12 +312,26 @@ def test_rule_over_nights_idempotence_and_history(run_cli, ship, tmp_path):
     assert raised >= 3  # night 2 has 2.5x larger INS errors
     assert {e["reason"] for e in hist["apriori_events"]} == {"established", "raised"}
 
-    code, out, _ = run_cli("audit", "history", "--db", db, "--unit", "ins2", "--channel", "lon",
-                           "--html", tmp_path / "h.html")
+    code, out, _ = run_cli(
+        "audit",
+        "history",
+        "--db",
+        db,
+        "--unit",
+        "ins2",
+        "--channel",
+        "lon",
+        "--html",
+        tmp_path / "h.html",
+    )
     assert code == ExitCode.OK and "Søren ins2 lon (m)" in out and "2026-11-20" in out
     page = (tmp_path / "h.html").read_text()
     png = re.search(r"src='data:image/png;base64,([A-Za-z0-9+/=]+)'", page).group(1)
-    assert base64.b64decode(png)[:8] == b"\x89PNG\r\n\x1a\n" and "http://" not in page and "https://" not in page
+    assert (
+        base64.b64decode(png)[:8] == b"\x89PNG\r\n\x1a\n"
+        and "http://" not in page
+        and "https://" not in page
+    )
 
     # a changed log replaces its night (one transaction) and the chain follows
     log = ship / "nav-2026-11-20.nmea"
@@ -213,8 +339,9 @@ def test_rule_over_nights_idempotence_and_history(run_cli, ship, tmp_path):
     try:
         lines = original.splitlines(keepends=True)
         log.write_bytes(b"".join(lines[: len(lines) * 2 // 3]))
-        code, out, _ = run_cli("audit", log, "--date", "2026-11-20", "--db", db, "--config", cfg,
-                               "--vessel", "Søren")
+        code, out, _ = run_cli(
+            "audit", log, "--date", "2026-11-20", "--db", db, "--config", cfg, "--vessel", "Søren"
+        )
         assert "state: replaced" in out
         assert con.execute("SELECT COUNT(*) FROM nights").fetchone()[0] == 3
     finally:
@@ -223,10 +350,20 @@ def test_rule_over_nights_idempotence_and_history(run_cli, ship, tmp_path):
 
 def test_folder_without_date_audits_yesterday(run_cli, ship, tmp_path, monkeypatch):
     monkeypatch.setattr(audit_mod, "yesterday_utc", lambda now=None: "2026-11-19")
-    code, out, _ = run_cli("audit", ship, "--db", tmp_path / "s.sqlite", "--config", _cfg(tmp_path, LOOSE))
-    assert code == ExitCode.OK and "night 2026-11-19: all checks passed" in out and "1 file(s)" in out
-    assert "nav-2026-11-19" in json.loads(sqlite3.connect(tmp_path / "s.sqlite").execute(
-        "SELECT inputs_json FROM nights").fetchone()[0])[0]
+    code, out, _ = run_cli(
+        "audit", ship, "--db", tmp_path / "s.sqlite", "--config", _cfg(tmp_path, LOOSE)
+    )
+    assert (
+        code == ExitCode.OK and "night 2026-11-19: all checks passed" in out and "1 file(s)" in out
+    )
+    assert (
+        "nav-2026-11-19"
+        in json.loads(
+            sqlite3.connect(tmp_path / "s.sqlite")
+            .execute("SELECT inputs_json FROM nights")
+            .fetchone()[0]
+        )[0]
+    )
 
 
 def test_history_without_database(run_cli, tmp_path):
@@ -256,9 +393,12 @@ def test_real_log_without_ins(run_cli, real_dir, tmp_path):
     ignored = re.search(r"^ignored \(valid, not used\): (\d+) \(VDM 2669, ", out, re.M)
     assert ignored and int(ignored.group(1)) > 10000
     assert "[input]" not in out
-    cfg = _cfg(tmp_path, "[audit]\nrequired_sources = [\"compass\", \"log\"]\nrejected_rate_max_pct = 100.0\n")
-    code, out2, _ = run_cli("audit", log, "--db", tmp_path / "s.sqlite", "--vessel", "Hakefjord",
-                            "--config", cfg)
+    cfg = _cfg(
+        tmp_path, '[audit]\nrequired_sources = ["compass", "log"]\nrejected_rate_max_pct = 100.0\n'
+    )
+    code, out2, _ = run_cli(
+        "audit", log, "--db", tmp_path / "s.sqlite", "--vessel", "Hakefjord", "--config", cfg
+    )
     # the limits are not analysis settings: the night stays as recorded, today's limits decide
     assert "state: unchanged" in out2 and "required source" not in out2
     first = [s for s in out.splitlines() if s.startswith("  - ") and "required source" not in s]
@@ -269,14 +409,48 @@ def test_real_log_without_ins(run_cli, real_dir, tmp_path):
 def test_calibration_checks_against_known_sensor_errors(run_cli, tmp_path):
     # a simulated night with a gyro reading 2.0 deg high and a log 5 % fast: the audit's
     # compass and log checks (limits 1 deg, 2 %) must flag both, with about those sizes
-    code = main(["simulate", "--out", str(tmp_path), "--hours", "6", "--seed", "5",
-                 "--start", "2026-11-21T00:00:00Z", "--name", "bad-sensors", "--gyro-error-deg", "2.0",
-                 "--log-scale-pct", "5.0", "--compass-hz", "0.5", "--log-hz", "0.5", "--ins-hz", "0.1",
-                 "--gnss-hz", "0.5", "--aux-hz", "0", "--truth-hz", "0.01"])
+    code = main(
+        [
+            "simulate",
+            "--out",
+            str(tmp_path),
+            "--hours",
+            "6",
+            "--seed",
+            "5",
+            "--start",
+            "2026-11-21T00:00:00Z",
+            "--name",
+            "bad-sensors",
+            "--gyro-error-deg",
+            "2.0",
+            "--log-scale-pct",
+            "5.0",
+            "--compass-hz",
+            "0.5",
+            "--log-hz",
+            "0.5",
+            "--ins-hz",
+            "0.1",
+            "--gnss-hz",
+            "0.5",
+            "--aux-hz",
+            "0",
+            "--truth-hz",
+            "0.01",
+        ]
+    )
     assert code == 0
-    code, out, _ = run_cli("audit", tmp_path / "bad-sensors.nmea", "--db", tmp_path / "s.sqlite",
-                           "--config", _cfg(tmp_path, "[audit]\nlimits = { all = { lat_m = 1e9, "
-                                                      "lon_m = 1e9, course_deg = 1e3 } }\n"))
+    code, out, _ = run_cli(
+        "audit",
+        tmp_path / "bad-sensors.nmea",
+        "--db",
+        tmp_path / "s.sqlite",
+        "--config",
+        _cfg(
+            tmp_path, "[audit]\nlimits = { all = { lat_m = 1e9, lon_m = 1e9, course_deg = 1e3 } }\n"
+        ),
+    )
     assert code == ExitCode.FINDINGS
     con = sqlite3.connect(tmp_path / "s.sqlite")
     findings = json.loads(con.execute("SELECT findings_json FROM nights").fetchone()[0])
@@ -294,41 +468,67 @@ def test_summary_text_by_hand(tmp_path):
     from dracc.pipeline.state import StateStore
 
     with StateStore(tmp_path / "s.sqlite") as store:
+
         def run(night, lat, **kw):
-            return audit_document(make_doc(night, m_y={"ins1": {"lat": lat, "course": 0.1}}, **kw),
-                                  store=store, acfg=AuditConfig(required_sources=("ins1",)), seeds={},
-                                  vessel="Aurora", night=None, content_hash=night, settings_hash="s")
+            return audit_document(
+                make_doc(night, m_y={"ins1": {"lat": lat, "course": 0.1}}, **kw),
+                store=store,
+                acfg=AuditConfig(required_sources=("ins1",)),
+                seeds={},
+                vessel="Aurora",
+                night=None,
+                content_hash=night,
+                settings_hash="s",
+            )
+
         first = format_summary(run("2026-11-19", 100.0), 0.95)
         second = format_summary(run("2026-11-20", 150.0, containment=0.5, log_scale=None), 0.95)
     lines = first.splitlines()
     # the limiting errors wait for the accuracy window (72 h): the one check not made
-    assert lines[0] == ("dracc audit: Aurora, night 2026-11-19: all checks passed (1 check could not "
-                        "be made: see 'not checked')")
+    assert lines[0] == (
+        "dracc audit: Aurora, night 2026-11-19: all checks passed (1 check could not "
+        "be made: see 'not checked')"
+    )
     assert "findings:" not in lines
-    assert ("not checked: accuracy limit: the limiting errors are judged over 72 h of logs; 24.0 h "
-            "over 1 night(s) so far ([audit] accuracy_window_h)") in lines
-    assert "logs: 1 file(s), 10,000 lines, 10 damaged (0.10 %); period 2026-11-19T00:00:00Z to " \
-           "2026-11-19T23:59:59Z" in lines
+    assert (
+        "not checked: accuracy limit: the limiting errors are judged over 72 h of logs; 24.0 h "
+        "over 1 night(s) so far ([audit] accuracy_window_h)"
+    ) in lines
+    assert (
+        "logs: 1 file(s), 10,000 lines, 10 damaged (0.10 %); period 2026-11-19T00:00:00Z to "
+        "2026-11-19T23:59:59Z" in lines
+    )
     assert "a priori established for 2 unit channel(s)" in first
     assert first.rstrip().endswith("exit 0 (ok)")
     lines = second.splitlines()
-    assert lines[0] == ("dracc audit: Aurora, night 2026-11-20: 1 finding (2 checks could not be "
-                        "made: see 'not checked')")
-    assert lines[1:3] == ["findings:", "  - [consistency] DR: reference inside 2M at 50.0 % of "
-                          "epochs < 90.0 %"]
+    assert lines[0] == (
+        "dracc audit: Aurora, night 2026-11-20: 1 finding (2 checks could not be "
+        "made: see 'not checked')"
+    )
+    assert lines[1:3] == [
+        "findings:",
+        "  - [consistency] DR: reference inside 2M at 50.0 % of epochs < 90.0 %",
+    ]
     assert "a priori raised: ins1 lat 100.0 m -> 150.0 m (tonight's m_y is larger)" in lines
     assert "  ins1  lat      24      150.0 m      300.0 m      150.0 m  raised" in lines
-    assert ("not checked: accuracy log_scale log: log scale not estimated (no speed log or no "
-            "reference)") in lines
-    assert "accuracy window: 48.0 h of 72 h over 2 night(s) (limits judged once the window is full)" in lines
+    assert (
+        "not checked: accuracy log_scale log: log scale not estimated (no speed log or no "
+        "reference)"
+    ) in lines
+    assert (
+        "accuracy window: 48.0 h of 72 h over 2 night(s) (limits judged once the window is full)"
+        in lines
+    )
     assert "calibration: compass error +0.20 ± 0.05 deg" in lines
     assert lines[-1] == "exit 1 (findings)"
 
 
-INCONSISTENT = ("inconsistent (circle too small): reference inside 2M at 93.3 % of 45 epochs in "
-                "9 legs (a correct model gives 95.6 %); RMS error/M 1.16 (1 expected); NEES 80.2 "
-                "(chi^2 6.3-37.2); the circle is dominated by the current (key [dead_reckoning] "
-                "current_kn)")
+INCONSISTENT = (
+    "inconsistent (circle too small): reference inside 2M at 93.3 % of 45 epochs in "
+    "9 legs (a correct model gives 95.6 %); RMS error/M 1.16 (1 expected); NEES 80.2 "
+    "(chi^2 6.3-37.2); the circle is dominated by the current (key [dead_reckoning] "
+    "current_kn)"
+)
 
 
 def test_summary_carries_the_dr_verdict(tmp_path):
@@ -339,25 +539,51 @@ def test_summary_carries_the_dr_verdict(tmp_path):
     from dracc.pipeline.state import StateStore
 
     with StateStore(tmp_path / "s.sqlite") as store:
+
         def run(night, **kw):
-            return audit_document(make_doc(night, **kw), store=store, acfg=AuditConfig(), seeds={},
-                                  vessel="Aurora", night=None, content_hash=night, settings_hash="s")
-        good = format_summary(run("2026-11-19", verdict="consistent: reference inside 2M at 97.5 %"))
-        bad = format_summary(run("2026-11-20", containment=0.933, verdict=INCONSISTENT,
-                                 nees=(80.2, 6.3, 37.2), dominant=("the current", "current_kn")))
+            return audit_document(
+                make_doc(night, **kw),
+                store=store,
+                acfg=AuditConfig(),
+                seeds={},
+                vessel="Aurora",
+                night=None,
+                content_hash=night,
+                settings_hash="s",
+            )
+
+        good = format_summary(
+            run("2026-11-19", verdict="consistent: reference inside 2M at 97.5 %")
+        )
+        bad = format_summary(
+            run(
+                "2026-11-20",
+                containment=0.933,
+                verdict=INCONSISTENT,
+                nees=(80.2, 6.3, 37.2),
+                dominant=("the current", "current_kn"),
+            )
+        )
         old = format_summary(run("2026-11-21"))  # a document without a verdict
     assert "DR: consistent: reference inside 2M at 97.5 %" in good.splitlines()
     assert good.rstrip().endswith("exit 0 (ok)")
     lines = bad.splitlines()
-    assert lines[0] == ("dracc audit: Aurora, night 2026-11-20: 1 finding (1 check could not be "
-                        "made: see 'not checked')")
-    assert lines[1:3] == ["findings:", f"  - [consistency] DR: {INCONSISTENT}"]  # analyze's sentence, once
+    assert lines[0] == (
+        "dracc audit: Aurora, night 2026-11-20: 1 finding (1 check could not be "
+        "made: see 'not checked')"
+    )
+    assert lines[1:3] == [
+        "findings:",
+        f"  - [consistency] DR: {INCONSISTENT}",
+    ]  # analyze's sentence, once
     assert f"DR: {INCONSISTENT}" in lines
     assert lines[-1] == "exit 1 (findings)"
     assert "DR: reference inside 2M at 95.0 % of 120 epochs" in old.splitlines()
 
 
-def test_cli_exit_1_when_the_analysis_calls_the_dr_inconsistent(run_cli, ship, tmp_path, monkeypatch):
+def test_cli_exit_1_when_the_analysis_calls_the_dr_inconsistent(
+    run_cli, ship, tmp_path, monkeypatch
+):
     """End to end through `dracc audit` with the analysis document replaced by a hand-built
     one: 'inconsistent' -> a dr_inconsistent finding, exit 1, the JSON history carries it."""
     from test_audit_helpers import make_doc
@@ -368,20 +594,31 @@ def test_cli_exit_1_when_the_analysis_calls_the_dr_inconsistent(run_cli, ship, t
     monkeypatch.setattr(audit_mod, "analyse_voyage", lambda paths, cfg, progress=None: object())
     monkeypatch.setattr(json_report, "to_dict", lambda analysis: doc)
     db = tmp_path / "s.sqlite"
-    code, out, err = run_cli("audit", ship / "nav-2026-11-18.nmea", "--db", db, "--config",
-                             _cfg(tmp_path, LOOSE))
+    code, out, err = run_cli(
+        "audit", ship / "nav-2026-11-18.nmea", "--db", db, "--config", _cfg(tmp_path, LOOSE)
+    )
     assert code == ExitCode.FINDINGS, err
     assert f"  - [consistency] DR: {INCONSISTENT}" in out.splitlines()
     assert out.rstrip().endswith("exit 1 (findings)")
     code, out, _ = run_cli("audit", "history", "--db", db, "--json")
     (night,) = json.loads(out)["nights"]
-    assert (night["dr_verdict"], night["dr_consistent"], night["dr_nees"]) == ("inconsistent", False, 80.2)
+    assert (night["dr_verdict"], night["dr_consistent"], night["dr_nees"]) == (
+        "inconsistent",
+        False,
+        80.2,
+    )
     assert [f["kind"] for f in night["findings"]] == ["dr_inconsistent"]
     # the same log called consistent (a fresh database): exit 0
     doc = make_doc("2026-11-18", verdict="consistent: reference inside 2M at 97.5 %")
     monkeypatch.setattr(json_report, "to_dict", lambda analysis: doc)
-    code, out, err = run_cli("audit", ship / "nav-2026-11-18.nmea", "--db", tmp_path / "t.sqlite",
-                             "--config", _cfg(tmp_path, LOOSE))
+    code, out, err = run_cli(
+        "audit",
+        ship / "nav-2026-11-18.nmea",
+        "--db",
+        tmp_path / "t.sqlite",
+        "--config",
+        _cfg(tmp_path, LOOSE),
+    )
     assert code == ExitCode.OK, err
 
 
@@ -397,29 +634,47 @@ def recorded(run_cli, tmp_path):
     return db
 
 
-@pytest.mark.parametrize("args, words", [
-    (["--unit", "ins4"], ["--unit 'ins4'", "ins1, ins2, ins3"]),
-    (["--unit", "INS1"], ["--unit 'INS1'", "ins1, ins2, ins3"]),
-    (["--channel", "speed"], ["--channel 'speed'", "lat, lon, course"]),
-    (["--vessel", "Søren"], ["--vessel 'Søren'", "Aurora, Nordlys"]),
-])
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["--unit", "ins4"], ["--unit 'ins4'", "ins1, ins2, ins3"]),
+        (["--unit", "INS1"], ["--unit 'INS1'", "ins1, ins2, ins3"]),
+        (["--channel", "speed"], ["--channel 'speed'", "lat, lon, course"]),
+        (["--vessel", "Søren"], ["--vessel 'Søren'", "Aurora, Nordlys"]),
+    ],
+)
 def test_history_rejects_an_unknown_selection(run_cli, recorded, args, words):
     code, out, err = run_cli("audit", "history", "--db", recorded, *args)
     assert code == ExitCode.USAGE and out == ""
-    assert err.startswith("error:") and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert (
+        err.startswith("error:") and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    )
     assert all(w in err for w in words), err
 
 
 def test_history_known_selection_and_an_empty_database(run_cli, recorded, tmp_path):
-    code, out, _ = run_cli("audit", "history", "--db", recorded, "--vessel", "Nordlys", "--unit",
-                           "ins2", "--channel", "lon", "--json")
+    code, out, _ = run_cli(
+        "audit",
+        "history",
+        "--db",
+        recorded,
+        "--vessel",
+        "Nordlys",
+        "--unit",
+        "ins2",
+        "--channel",
+        "lon",
+        "--json",
+    )
     assert code == ExitCode.OK
     assert [n["vessel"] for n in json.loads(out)["nights"]] == ["Nordlys"]
     from dracc.pipeline.state import StateStore
 
     with StateStore(tmp_path / "empty.sqlite"):
         pass
-    code, _, err = run_cli("audit", "history", "--db", tmp_path / "empty.sqlite", "--vessel", "Aurora")
+    code, _, err = run_cli(
+        "audit", "history", "--db", tmp_path / "empty.sqlite", "--vessel", "Aurora"
+    )
     assert code == ExitCode.USAGE and "no vessel is recorded in this database yet" in err
     # an unknown unit is a usage error before the database is looked for
     code, _, err = run_cli("audit", "history", "--db", tmp_path / "none.sqlite", "--unit", "ins9")

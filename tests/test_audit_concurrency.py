@@ -27,10 +27,36 @@ def logs(tmp_path_factory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("nights")
     out = {}
     for night, seed in (("2026-11-19", 21), ("2026-11-20", 22)):
-        assert main(["simulate", "--out", str(root), "--hours", "2", "--seed", str(seed),
-                     "--start", f"{night}T00:00:00Z", "--name", f"nav-{night}", "--compass-hz", "0.2",
-                     "--log-hz", "0.2", "--ins-hz", "0.1", "--gnss-hz", "0.2", "--aux-hz", "0",
-                     "--truth-hz", "0.01"]) == 0
+        assert (
+            main(
+                [
+                    "simulate",
+                    "--out",
+                    str(root),
+                    "--hours",
+                    "2",
+                    "--seed",
+                    str(seed),
+                    "--start",
+                    f"{night}T00:00:00Z",
+                    "--name",
+                    f"nav-{night}",
+                    "--compass-hz",
+                    "0.2",
+                    "--log-hz",
+                    "0.2",
+                    "--ins-hz",
+                    "0.1",
+                    "--gnss-hz",
+                    "0.2",
+                    "--aux-hz",
+                    "0",
+                    "--truth-hz",
+                    "0.01",
+                ]
+            )
+            == 0
+        )
         out[night] = root / f"nav-{night}.nmea"
     return out
 
@@ -40,9 +66,24 @@ def _start(log: Path, db: Path, tmp: Path, tag: str, sleep_s: float | None = Non
     if sleep_s is not None:
         env[TEST_SLEEP_ENV] = str(sleep_s)
     errf = open(tmp / f"{tag}.err", "w+")  # noqa: SIM115 - closed in _finish
-    proc = subprocess.Popen([sys.executable, "-m", "dracc", "audit", str(log), "--db", str(db),
-                             "--vessel", "Aurora", "--summary", str(tmp / f"{tag}.txt")],
-                            stdout=subprocess.DEVNULL, stderr=errf, env=env)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "dracc",
+            "audit",
+            str(log),
+            "--db",
+            str(db),
+            "--vessel",
+            "Aurora",
+            "--summary",
+            str(tmp / f"{tag}.txt"),
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=errf,
+        env=env,
+    )
     proc.errfile = errf
     proc.tag = tag
     return proc
@@ -71,7 +112,11 @@ def _finish(proc, tmp: Path, timeout_s: float = 120.0) -> tuple[int, str, str]:
             proc.wait()
         proc.errfile.close()
     summary = tmp / f"{proc.tag}.txt"
-    return code, summary.read_text() if summary.exists() else "", Path(proc.errfile.name).read_text()
+    return (
+        code,
+        summary.read_text() if summary.exists() else "",
+        Path(proc.errfile.name).read_text(),
+    )
 
 
 def _nights(db: Path) -> list[tuple]:
@@ -85,7 +130,9 @@ def _nights(db: Path) -> list[tuple]:
 
 def _inprocess(log: Path, db: Path, tmp: Path, tag: str) -> tuple[int, str]:
     summary = tmp / f"{tag}.txt"
-    code = main(["audit", str(log), "--db", str(db), "--vessel", "Aurora", "--summary", str(summary)])
+    code = main(
+        ["audit", str(log), "--db", str(db), "--vessel", "Aurora", "--summary", str(summary)]
+    )
     return code, summary.read_text()
 
 
@@ -134,8 +181,13 @@ def test_killed_audit_leaves_no_partial_night(logs, tmp_path):
     assert victim.returncode == -signal.SIGKILL
     assert [n for _, n in _nights(db)] == ["2026-11-20"]  # no partial night
     con = sqlite3.connect(db)
-    assert con.execute("SELECT COUNT(*) FROM unit_stats us JOIN nights n ON n.id = us.night_id "
-                       "WHERE n.night = '2026-11-19'").fetchone()[0] == 0
+    assert (
+        con.execute(
+            "SELECT COUNT(*) FROM unit_stats us JOIN nights n ON n.id = us.night_id "
+            "WHERE n.night = '2026-11-19'"
+        ).fetchone()[0]
+        == 0
+    )
     con.close()
     # a re-run completes and records the night as new
     code, summary = _inprocess(logs["2026-11-19"], db, tmp_path, "rerun")

@@ -34,8 +34,15 @@ def _gm(rng, n, sigma, tau_s, dt_s=1.0):
     return lfilter([1.0], [1.0, -a], x)
 
 
-def _voyage(seed, *, hours=24.0, speed_range=(4.0, 7.0), wander_kn=0.1, single_course=None,
-            constant_speed=None):
+def _voyage(
+    seed,
+    *,
+    hours=24.0,
+    speed_range=(4.0, 7.0),
+    wander_kn=0.1,
+    single_course=None,
+    constant_speed=None,
+):
     """True water course/speed at 1 Hz (20-40 min legs, 2 min turns), current and GNSS."""
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, hours * 3600, 1.0)
@@ -51,8 +58,9 @@ def _voyage(seed, *, hours=24.0, speed_range=(4.0, 7.0), wander_kn=0.1, single_c
         speed = np.full(n, constant_speed)
     cur_n = 0.5 * KN * math.cos(60 * D) + _gm(rng, n, wander_kn * KN, 6 * 3600)
     cur_e = 0.5 * KN * math.sin(60 * D) + _gm(rng, n, wander_kn * KN, 6 * 3600)
-    lat, lon = integrate_ne(t, speed * np.cos(course) + cur_n, speed * np.sin(course) + cur_e,
-                            57.0 * D, 11.0 * D)
+    lat, lon = integrate_ne(
+        t, speed * np.cos(course) + cur_n, speed * np.sin(course) + cur_e, 57.0 * D, 11.0 * D
+    )
     glat, glon = add_offset_ne(lat, lon, rng.normal(0, 5.0, n), rng.normal(0, 5.0, n))
     return rng, t, course % (2 * math.pi), speed, glat, glon
 
@@ -134,8 +142,10 @@ def test_target_24h_gyro_error_and_log_scale_recovered():
         assert abs(cal.heading_error_rad[0] - 0.3 * D) < 4 * cal.heading_error_sigma_rad[0]
         assert abs(cal.log_scale - 0.03) < 4 * cal.log_scale_sigma
         # the current at the knots, within its uncertainty plus the wander
-        assert np.all(np.abs(cal.current_ne_mps[:, 0] - 0.5 * KN * math.cos(60 * D))
-                      < 4 * cal.current_sigma_ne_mps[:, 0] + 0.3 * KN)
+        assert np.all(
+            np.abs(cal.current_ne_mps[:, 0] - 0.5 * KN * math.cos(60 * D))
+            < 4 * cal.current_sigma_ne_mps[:, 0] + 0.3 * KN
+        )
 
 
 def test_log_scale_and_offset_separated_with_a_wide_speed_range():
@@ -159,8 +169,17 @@ def test_magnetic_deviation_curve_from_gnss_track():
         k = course - variation - deviation_curve_rad(k, coef)
     compass = k + _gm(rng, t.size, 0.3 * D, 120.0)
     spd = 1.02 * speed + _gm(rng, t.size, 0.1 * KN, 300.0)
-    cal = calibrate_from_track(t, compass + variation, spd, t, glat, glon, heading_model="deviation",
-                               fit_log_offset=False, variation_rad=variation)
+    cal = calibrate_from_track(
+        t,
+        compass + variation,
+        spd,
+        t,
+        glat,
+        glon,
+        heading_model="deviation",
+        fit_log_offset=False,
+        variation_rad=variation,
+    )
     err = cal.heading_error_rad - coef
     assert np.all(np.abs(err) < 4 * cal.heading_error_sigma_rad + 0.02 * D), err / D
     assert np.all(np.abs(err) < 0.3 * D)
@@ -169,8 +188,7 @@ def test_magnetic_deviation_curve_from_gnss_track():
 
 def test_one_course_cannot_separate_current_from_log_scale():
     """One course at one speed: a 3 % scale error is a 0.3 kn current along the track."""
-    rng, t, course, speed, glat, glon = _voyage(5, hours=6.0, single_course=0.7,
-                                                constant_speed=5.0)
+    rng, t, course, speed, glat, glon = _voyage(5, hours=6.0, single_course=0.7, constant_speed=5.0)
     with pytest.raises(InsufficientDataError, match="current"):
         calibrate_from_track(t, course, speed * 1.03, t, glat, glon, fit_log_offset=False)
 
@@ -193,15 +211,17 @@ def test_slowly_varying_gyro_error_from_gnss_track():
     spd = 1.03 * speed + _gm(rng, t.size, 0.1 * KN, 300.0)
     drift = (0.1 + 0.6 * t / t[-1]) * D
     hdg = course + drift + _gm(rng, t.size, 0.2 * D, 120.0)
-    cal = calibrate_from_track(t, hdg, spd, t, glat, glon, heading_model="varying",
-                               fit_log_offset=False)
+    cal = calibrate_from_track(
+        t, hdg, spd, t, glat, glon, heading_model="varying", fit_log_offset=False
+    )
     truth = (0.1 + 0.6 * cal.heading_knot_s / t[-1]) * D
     np.testing.assert_allclose(cal.heading_knot_s, np.arange(0, 25, 6) * 3600.0)
     assert np.all(np.abs(cal.heading_error_rad - truth) < 4 * cal.heading_error_sigma_rad)
     assert cal.heading_constant_p < 0.01
     steady = course + 0.3 * D + _gm(rng, t.size, 0.2 * D, 120.0)
-    cal2 = calibrate_from_track(t, steady, spd, t, glat, glon, heading_model="varying",
-                                fit_log_offset=False)
+    cal2 = calibrate_from_track(
+        t, steady, spd, t, glat, glon, heading_model="varying", fit_log_offset=False
+    )
     assert cal2.heading_constant_p > 0.01
 
 
@@ -218,8 +238,28 @@ def test_regression_single_straight_leg_with_yaw_is_not_separable(tmp_path):
     from dracc.core.config import Config
     from dracc.pipeline.analysis import analyse
 
-    assert main(["simulate", "--out", str(tmp_path), "--hours", "3", "--seed", "105", "--name", "v",
-                 "--compass-hz", "1", "--truth-hz", "0.01", "--legs", "0:60"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--out",
+                str(tmp_path),
+                "--hours",
+                "3",
+                "--seed",
+                "105",
+                "--name",
+                "v",
+                "--compass-hz",
+                "1",
+                "--truth-hz",
+                "0.01",
+                "--legs",
+                "0:60",
+            ]
+        )
+        == 0
+    )
     a = analyse([tmp_path / "v.nmea"], Config())
     assert a.calibration is None
     assert any("cannot separate" in m for m in a.missing)

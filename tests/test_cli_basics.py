@@ -47,11 +47,15 @@ def test_unknown_command_is_usage_error(run_cli):
 def test_missing_input_is_one_line_error(run_cli, tmp_path):
     code, out, err = run_cli("inspect", tmp_path / "missing.nmea")
     assert code == ExitCode.INPUT
-    assert err.startswith("error:") and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert (
+        err.startswith("error:") and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    )
 
 
 def test_console_script_runs_as_module():
-    r = subprocess.run([sys.executable, "-m", "dracc", "--version"], capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [sys.executable, "-m", "dracc", "--version"], capture_output=True, text=True, timeout=60
+    )
     assert r.returncode == 0 and __version__ in r.stdout
 
 
@@ -76,9 +80,13 @@ def test_regression_cli_runs_without_click_installed():
 
 
 def _analyze_process(*args, stdout=subprocess.PIPE):
-    return subprocess.run([sys.executable, "-m", "dracc", "analyze", "sample_logs/voyage_tag.nmea", *args],
-                          stdout=stdout, stderr=subprocess.PIPE, timeout=300,
-                          cwd=__import__("pathlib").Path(__file__).resolve().parents[1])
+    return subprocess.run(
+        [sys.executable, "-m", "dracc", "analyze", "sample_logs/voyage_tag.nmea", *args],
+        stdout=stdout,
+        stderr=subprocess.PIPE,
+        timeout=300,
+        cwd=__import__("pathlib").Path(__file__).resolve().parents[1],
+    )
 
 
 def test_quick_exit_after_analyze_loses_no_output(tmp_path):
@@ -92,8 +100,9 @@ def test_quick_exit_after_analyze_loses_no_output(tmp_path):
     assert doc["schema"] == "dracc.analysis/1" and doc["deviation"]["units"]
     summary = tmp_path / "summary.txt"
     with summary.open("wb") as fh:
-        r = _analyze_process("--json", str(tmp_path / "r.json"), "--html", str(tmp_path / "r.html"),
-                             stdout=fh)
+        r = _analyze_process(
+            "--json", str(tmp_path / "r.json"), "--html", str(tmp_path / "r.html"), stdout=fh
+        )
     assert r.returncode == 0
     text = summary.read_text(encoding="utf-8")
     assert text.startswith("dracc analyze") and "\nCurrent\n" in text and text.endswith("\n")
@@ -103,21 +112,33 @@ def test_quick_exit_after_analyze_loses_no_output(tmp_path):
 
 
 def test_a_failing_analyze_still_exits_with_its_code():
-    r = subprocess.run([sys.executable, "-m", "dracc", "analyze", "no/such/log.nmea"],
-                       capture_output=True, text=True, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-m", "dracc", "analyze", "no/such/log.nmea"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert r.returncode == ExitCode.INPUT and "no/such/log.nmea" in r.stderr
 
 
 def test_the_cli_runs_blas_on_one_thread_unless_told_otherwise():
     """Idle OpenBLAS threads spin after each call and took CPU from the ingest workers."""
     # OpenBLAS threads keep the interpreter's name; pyarrow's jemalloc thread has its own
-    code = ("import os, dracc.cli.main, numpy; a = numpy.ones((300, 300)); a @ a; "
-            "names = [open(f'/proc/self/task/{t}/comm').read().strip() "
-            "for t in os.listdir('/proc/self/task')]; "
-            "print(os.environ['OPENBLAS_NUM_THREADS'], names.count(names[0]))")
+    code = (
+        "import os, dracc.cli.main, numpy; a = numpy.ones((300, 300)); a @ a; "
+        "names = [open(f'/proc/self/task/{t}/comm').read().strip() "
+        "for t in os.listdir('/proc/self/task')]; "
+        "print(os.environ['OPENBLAS_NUM_THREADS'], names.count(names[0]))"
+    )
     env = {k: v for k, v in __import__("os").environ.items() if k != "OPENBLAS_NUM_THREADS"}
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
-    assert r.returncode == 0 and r.stdout.split() == ["1", "1"], r.stdout + r.stderr  # no BLAS thread
+    r = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env
+    )
+    assert r.returncode == 0 and r.stdout.split() == ["1", "1"], (
+        r.stdout + r.stderr
+    )  # no BLAS thread
     env["OPENBLAS_NUM_THREADS"] = "3"
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
+    r = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env
+    )
     assert r.stdout.split()[0] == "3"

@@ -35,19 +35,29 @@ BAD = [
     # audit run (and its alias), audit history
     (["audit", "run", "DIR", "--db", "DB", "--date", "20-11-2026"], ["--date", "YYYY-MM-DD"]),
     (["audit", "DIR", "--db", "DB", "--date", "2026-02-30"], ["--date", "YYYY-MM-DD"]),
-    (["audit", "DIR", "--db", "DB", "--date", "2026-11-20", "--pattern", "/var/log/*.nmea"],
-     ["--pattern", "relative"]),
+    (
+        ["audit", "DIR", "--db", "DB", "--date", "2026-11-20", "--pattern", "/var/log/*.nmea"],
+        ["--pattern", "relative"],
+    ),
     (["audit", "history", "--db", "DB", "--unit", "ins4"], ["--unit", "ins1, ins2, ins3"]),
     (["audit", "history", "--db", "DB", "--channel", "speed"], ["--channel", "lat, lon, course"]),
     (["audit", "history", "--db", "DB", "--vessel", "Nobody"], ["--vessel", "Aurora"]),
     # fleet
     (["fleet", "LOG", "--out", "OUT", "--workers", "0"], ["--workers"]),
-    (["fleet", "LOG", "--out", "OUT", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
-     ["--workers", "--scheduler"]),
-    pytest.param(["fleet", "LOG", "--out", "OUT", "--scheduler", "nonsense"], ["--scheduler", "port"],
-                 marks=pytest.mark.skipif(not HAS_DASK, reason="needs dask distributed")),
-    pytest.param(["fleet", "LOG", "--out", "OUT", "--scheduler", "foo://x:1"], ["--scheduler", "scheme"],
-                 marks=pytest.mark.skipif(not HAS_DASK, reason="needs dask distributed")),
+    (
+        ["fleet", "LOG", "--out", "OUT", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
+        ["--workers", "--scheduler"],
+    ),
+    pytest.param(
+        ["fleet", "LOG", "--out", "OUT", "--scheduler", "nonsense"],
+        ["--scheduler", "port"],
+        marks=pytest.mark.skipif(not HAS_DASK, reason="needs dask distributed"),
+    ),
+    pytest.param(
+        ["fleet", "LOG", "--out", "OUT", "--scheduler", "foo://x:1"],
+        ["--scheduler", "scheme"],
+        marks=pytest.mark.skipif(not HAS_DASK, reason="needs dask distributed"),
+    ),
     (["fleet", "DIR", "--out", "OUT", "--pattern", "/abs/*.nmea"], ["--pattern"]),
     # fix
     (["fix", "--fix", "abc"], ["--fix"]),
@@ -127,7 +137,7 @@ def test_a_bad_config_file_stays_4_and_unreadable_input_3(run_cli, places, tmp_p
     code, _, err = run_cli("audit", places["DIR"], "--db", places["DB"], "--config", bad)
     assert code == ExitCode.CONFIG
     pattern = tmp_path / "pattern.toml"
-    pattern.write_text("[audit]\npattern = \"/var/log/*.nmea\"\n")
+    pattern.write_text('[audit]\npattern = "/var/log/*.nmea"\n')
     code, _, err = run_cli("audit", places["DIR"], "--db", places["DB"], "--config", pattern)
     assert code == ExitCode.CONFIG and "[audit] pattern" in err
     code, _, err = run_cli("analyze", tmp_path / "nope.nmea")
@@ -136,13 +146,20 @@ def test_a_bad_config_file_stays_4_and_unreadable_input_3(run_cli, places, tmp_p
     assert code == ExitCode.INPUT
 
 
-@pytest.mark.parametrize("args", [
-    ["simulate", "--out", "OUT", "--fault", "jump=-3m"],
-    ["analyze", "LOG", "--role", "X=radar"],
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["simulate", "--out", "OUT", "--fault", "jump=-3m"],
+        ["analyze", "LOG", "--role", "X=radar"],
+    ],
+)
 def test_bad_option_value_exits_2_in_the_real_process(places, args):
-    r = subprocess.run([sys.executable, "-m", "dracc", *[places.get(a, a) for a in args]],
-                       capture_output=True, text=True, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-m", "dracc", *[places.get(a, a) for a in args]],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert r.returncode == 2, r.stderr
     assert r.stderr.startswith("error:") and len(r.stderr.strip().splitlines()) == 1
     assert "Traceback" not in r.stderr and r.stdout == ""

@@ -35,8 +35,13 @@ from dracc.core.errors import ConfigError, ExitCode
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "docs" / "dracc.example.toml"
 SAMPLE = REPO / "sample_logs" / "voyage_tag.nmea"
-SECTIONS = {"ingest": C.IngestConfig, "dead_reckoning": C.DeadReckoningConfig,
-            "deviation": C.DeviationConfig, "faults": C.FaultsConfig, "integrity": C.IntegrityConfig}
+SECTIONS = {
+    "ingest": C.IngestConfig,
+    "dead_reckoning": C.DeadReckoningConfig,
+    "deviation": C.DeviationConfig,
+    "faults": C.FaultsConfig,
+    "integrity": C.IntegrityConfig,
+}
 
 #: wrong-typed values for each annotation a section field has (a new annotation fails
 #: test_every_annotation_has_wrong_values until it is added here)
@@ -49,12 +54,28 @@ WRONG: dict = {
     float | None: ["ten", False, [1.0]],
     dict[str, str]: ["INS1", 5, True, ["INS1"], {"K": 5}, {"K": True}, {"K": ["ins1"]}],
     dict[str, float]: ["0", 5, ["0"], {"0": "one"}, {"0": True}, {"0": [1.0]}],
-    dict[str, dict[str, float]]: ["ins1", 5, [{"lat_m": 1.0}], {"ins1": 5}, {"ins1": "x"},
-                                  {"ins1": {"lat_m": "x"}}, {"ins1": {"lat_m": True}}],
+    dict[str, dict[str, float]]: [
+        "ins1",
+        5,
+        [{"lat_m": 1.0}],
+        {"ins1": 5},
+        {"ins1": "x"},
+        {"ins1": {"lat_m": "x"}},
+        {"ins1": {"lat_m": True}},
+    ],
     tuple[float, ...]: ["86400", 86400.0, {"a": 1.0}, ["a"], [True], [[1.0]]],
-    ErrorSource: ["big", True, [0.1], {"sigma": "x"}, {"sigma": True},
-                  {"sigma": 0.1, "tau_s": "long"}, {"sigma": 0.1, "tau_s": True},
-                  {"sigma": 0.1, "tau_s": [1]}, {"tau_s": 5.0}, {"sigma": 0.1, "tau": 5.0}],
+    ErrorSource: [
+        "big",
+        True,
+        [0.1],
+        {"sigma": "x"},
+        {"sigma": True},
+        {"sigma": 0.1, "tau_s": "long"},
+        {"sigma": 0.1, "tau_s": True},
+        {"sigma": 0.1, "tau_s": [1]},
+        {"tau_s": 5.0},
+        {"sigma": 0.1, "tau": 5.0},
+    ],
 }
 
 
@@ -179,13 +200,17 @@ RANGE_CASES = [
     ("faults", "max_rot_deg_per_min", math.inf, "finite"),
     ("integrity", "false_alarm", 0.5, r"\(0, 0.5\)"),
     ("integrity", "false_alarm", 0.0, r"\(0, 0.5\)"),
-    *[("integrity", f.name, 0.0, "positive") for f in fields(C.IntegrityConfig)
-      if f.name != "false_alarm"],
+    *[
+        ("integrity", f.name, 0.0, "positive")
+        for f in fields(C.IntegrityConfig)
+        if f.name != "false_alarm"
+    ],
 ]
 
 
-@pytest.mark.parametrize("section,key,value,words", RANGE_CASES,
-                         ids=[f"{s}.{k}-{v!r}" for s, k, v, _ in RANGE_CASES])
+@pytest.mark.parametrize(
+    "section,key,value,words", RANGE_CASES, ids=[f"{s}.{k}-{v!r}" for s, k, v, _ in RANGE_CASES]
+)
 def test_out_of_range_is_a_config_error_naming_the_key(section, key, value, words):
     with pytest.raises(ConfigError, match=words) as e:
         config_from_dict({section: {key: value}})
@@ -198,10 +223,15 @@ def test_every_numeric_key_has_a_range_case():
     covered = {(s, k) for s, k, _, _ in RANGE_CASES}
     for section, cls in SECTIONS.items():
         for name, tp in _hints(cls).items():
-            if tp in (float, int, float | None, tuple[float, ...], dict[str, float], ErrorSource) \
-                    and C._RULES[cls][name].range is not C._FINITE:
-                if tp is ErrorSource and name not in ("compass_bias_deg", "compass_noise_deg",
-                                                      "log_noise_kn"):
+            if (
+                tp in (float, int, float | None, tuple[float, ...], dict[str, float], ErrorSource)
+                and C._RULES[cls][name].range is not C._FINITE
+            ):
+                if tp is ErrorSource and name not in (
+                    "compass_bias_deg",
+                    "compass_noise_deg",
+                    "log_noise_kn",
+                ):
                     continue  # one schema for all error sources: three cases stand for them
                 assert (section, name) in covered, f"{section}.{name}"
 
@@ -211,36 +241,68 @@ ACCEPTED = [
     ({"ingest": {"backstep_tolerance_s": 0}}, lambda c: c.ingest.backstep_tolerance_s == 0.0),
     ({"ingest": {"date": "2026-03-01"}}, lambda c: c.ingest.date == "2026-03-01"),
     ({"ingest": {"date": dt.date(2026, 3, 1)}}, lambda c: c.ingest.date == "2026-03-01"),
-    ({"ingest": {"max_line_bytes": 1e5}}, lambda c: c.ingest.max_line_bytes == 100000
-     and type(c.ingest.max_line_bytes) is int),
-    ({"ingest": {"sources": {"INS1": "ins1", "HE": "compass"}}},
-     lambda c: c.ingest.sources == {"INS1": "ins1", "HE": "compass"}),
-    ({"ingest": {"quantities": {"Speed (kn)": "stw_kn"}}},
-     lambda c: c.ingest.quantities == {"Speed (kn)": "stw_kn"}),
-    *[({"dead_reckoning": {"reset": r}}, lambda c, r=r: c.dead_reckoning.reset == r)
-      for r in ("auto", "AUTO", "watch", "never", "1h", "4h", "30min", "90s", "0.5h", "1d")],
-    ({"dead_reckoning": {"fix_role": "ins_mean"}}, lambda c: c.dead_reckoning.fix_role == "ins_mean"),
+    (
+        {"ingest": {"max_line_bytes": 1e5}},
+        lambda c: c.ingest.max_line_bytes == 100000 and type(c.ingest.max_line_bytes) is int,
+    ),
+    (
+        {"ingest": {"sources": {"INS1": "ins1", "HE": "compass"}}},
+        lambda c: c.ingest.sources == {"INS1": "ins1", "HE": "compass"},
+    ),
+    (
+        {"ingest": {"quantities": {"Speed (kn)": "stw_kn"}}},
+        lambda c: c.ingest.quantities == {"Speed (kn)": "stw_kn"},
+    ),
+    *[
+        ({"dead_reckoning": {"reset": r}}, lambda c, r=r: c.dead_reckoning.reset == r)
+        for r in ("auto", "AUTO", "watch", "never", "1h", "4h", "30min", "90s", "0.5h", "1d")
+    ],
+    (
+        {"dead_reckoning": {"fix_role": "ins_mean"}},
+        lambda c: c.dead_reckoning.fix_role == "ins_mean",
+    ),
     ({"dead_reckoning": {"variation_deg": -3}}, lambda c: c.dead_reckoning.variation_deg == -3.0),
-    ({"dead_reckoning": {"deviation_table": {"0": 1.5, "90": -0.5, "360": 1.5}}},
-     lambda c: c.dead_reckoning.deviation_table["90"] == -0.5),
-    ({"dead_reckoning": {"log_scale": 0}}, lambda c: c.dead_reckoning.log_scale == ErrorSource(0.0)),
-    ({"dead_reckoning": {"compass_noise_deg": {"sigma": 0.3, "tau_s": 0}}},
-     lambda c: c.dead_reckoning.compass_noise_deg == ErrorSource(0.3, 0.0)),
-    ({"dead_reckoning": {"compass_noise_deg": {"sigma": 0.3, "tau_s": "inf"}}},
-     lambda c: c.dead_reckoning.compass_noise_deg == ErrorSource(0.3, math.inf)),
-    ({"dead_reckoning": {"compass_noise_deg": {"sigma": 0.3, "tau_s": math.inf}}},
-     lambda c: c.dead_reckoning.compass_noise_deg == ErrorSource(0.3, math.inf)),
-    ({"dead_reckoning": {"compass_noise_deg": {"sigma": 1}}},
-     lambda c: c.dead_reckoning.compass_noise_deg == ErrorSource(1.0, math.inf)),
-    ({"deviation": {"kurtosis_windows_s": [86400, 172800]}},
-     lambda c: c.deviation.kurtosis_windows_s == (86400.0, 172800.0)),
+    (
+        {"dead_reckoning": {"deviation_table": {"0": 1.5, "90": -0.5, "360": 1.5}}},
+        lambda c: c.dead_reckoning.deviation_table["90"] == -0.5,
+    ),
+    (
+        {"dead_reckoning": {"log_scale": 0}},
+        lambda c: c.dead_reckoning.log_scale == ErrorSource(0.0),
+    ),
+    (
+        {"dead_reckoning": {"compass_noise_deg": {"sigma": 0.3, "tau_s": 0}}},
+        lambda c: c.dead_reckoning.compass_noise_deg == ErrorSource(0.3, 0.0),
+    ),
+    (
+        {"dead_reckoning": {"compass_noise_deg": {"sigma": 0.3, "tau_s": "inf"}}},
+        lambda c: c.dead_reckoning.compass_noise_deg == ErrorSource(0.3, math.inf),
+    ),
+    (
+        {"dead_reckoning": {"compass_noise_deg": {"sigma": 0.3, "tau_s": math.inf}}},
+        lambda c: c.dead_reckoning.compass_noise_deg == ErrorSource(0.3, math.inf),
+    ),
+    (
+        {"dead_reckoning": {"compass_noise_deg": {"sigma": 1}}},
+        lambda c: c.dead_reckoning.compass_noise_deg == ErrorSource(1.0, math.inf),
+    ),
+    (
+        {"deviation": {"kurtosis_windows_s": [86400, 172800]}},
+        lambda c: c.deviation.kurtosis_windows_s == (86400.0, 172800.0),
+    ),
     ({"deviation": {"kurtosis_windows_s": []}}, lambda c: c.deviation.kurtosis_windows_s == ()),
     ({"deviation": {"offset_s": -1800}}, lambda c: c.deviation.offset_s == -1800.0),
     ({"deviation": {"correlation_time_s": 0}}, lambda c: c.deviation.correlation_time_s == 0.0),
-    ({"deviation": {"apriori": {"ins1": {"lat_m": 300, "lon_m": 400.0, "course_deg": 0.1}}}},
-     lambda c: c.deviation.apriori == {"ins1": {"lat_m": 300.0, "lon_m": 400.0, "course_deg": 0.1}}),
-    ({"deviation": {"hat_draws": 100, "seed": 0, "min_kurtosis_samples": 1}},
-     lambda c: c.deviation.hat_draws == 100),
+    (
+        {"deviation": {"apriori": {"ins1": {"lat_m": 300, "lon_m": 400.0, "course_deg": 0.1}}}},
+        lambda c: (
+            c.deviation.apriori == {"ins1": {"lat_m": 300.0, "lon_m": 400.0, "course_deg": 0.1}}
+        ),
+    ),
+    (
+        {"deviation": {"hat_draws": 100, "seed": 0, "min_kurtosis_samples": 1}},
+        lambda c: c.deviation.hat_draws == 100,
+    ),
     ({"faults": {"exclude": True, "min_records": 3.0}}, lambda c: c.faults.min_records == 3),
     ({"integrity": {"false_alarm": 0.01}}, lambda c: c.integrity.false_alarm == 0.01),
 ]
@@ -260,7 +322,9 @@ def test_the_defaults_pass_the_validator_unchanged():
     assert v == c
     for name in SECTIONS:
         for f in fields(getattr(c, name)):
-            assert type(getattr(getattr(v, name), f.name)) is type(getattr(getattr(c, name), f.name))
+            assert type(getattr(getattr(v, name), f.name)) is type(
+                getattr(getattr(c, name), f.name)
+            )
 
 
 def test_the_example_config_loads_and_its_examples_are_valid(tmp_path):
@@ -302,8 +366,27 @@ def test_reset_grammar_is_the_dead_reckonings():
     dracc.math.deadreckoning.parse_reset_s (which the DR uses) accepts, and reject the same."""
     from dracc.math.deadreckoning import parse_reset_s
 
-    for text in ("1h", "30min", "90s", "0.5h", "2hr", "1d", "45 m", "watch", "never", "WATCH",
-                 120, 7200.0, "hourly", "-1h", "0h", "1 fortnight", "", "auto", "1h30min"):
+    for text in (
+        "1h",
+        "30min",
+        "90s",
+        "0.5h",
+        "2hr",
+        "1d",
+        "45 m",
+        "watch",
+        "never",
+        "WATCH",
+        120,
+        7200.0,
+        "hourly",
+        "-1h",
+        "0h",
+        "1 fortnight",
+        "",
+        "auto",
+        "1h30min",
+    ):
         try:
             want = parse_reset_s(text)
         except ConfigError:
@@ -326,11 +409,13 @@ CLI_CASES = [
     ('[ingest]\nstrict = "no"\n', "[ingest] strict"),
     ('[ingest]\ngap_s = "sixty"\n', "[ingest] gap_s"),
     ('[ingest]\nsources = "INS1"\n', "[ingest] sources"),
-    ('[dead_reckoning]\ncompass_noise_deg = { sigma = 0.2, tau_s = "two minutes" }\n',
-     "[dead_reckoning.compass_noise_deg] tau_s"),
-    ('[dead_reckoning.deviation_table]\nnorth = 1.0\n', "[dead_reckoning.deviation_table] north"),
+    (
+        '[dead_reckoning]\ncompass_noise_deg = { sigma = 0.2, tau_s = "two minutes" }\n',
+        "[dead_reckoning.compass_noise_deg] tau_s",
+    ),
+    ("[dead_reckoning.deviation_table]\nnorth = 1.0\n", "[dead_reckoning.deviation_table] north"),
     ("[deviation]\nhat_draws = 1000.5\n", "[deviation] hat_draws"),
-    ('[faults]\nexclude = 1\n', "[faults] exclude"),
+    ("[faults]\nexclude = 1\n", "[faults] exclude"),
     ("[dead_reckoning]\nreset = 3600\n", "[dead_reckoning] reset"),
 ]
 
@@ -350,8 +435,12 @@ def test_cli_bad_config_is_exit_4_in_one_line(run_cli, tmp_path, text, words):
 def test_cli_bad_config_in_a_real_process(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text('[ingest]\nstrict = "no"\n')
-    r = subprocess.run([sys.executable, "-m", "dracc", "analyze", "--config", str(bad), str(SAMPLE)],
-                       capture_output=True, text=True, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-m", "dracc", "analyze", "--config", str(bad), str(SAMPLE)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert r.returncode == ExitCode.CONFIG, r.stderr
     assert r.stderr.strip() == "error: [ingest] strict = 'no': expected true or false, got a string"
     assert r.stdout == ""
@@ -359,5 +448,7 @@ def test_cli_bad_config_in_a_real_process(tmp_path):
 
 def test_dataclass_built_in_python_is_checked_by_validate():
     bad = Config(dead_reckoning=DeadReckoningConfig(max_gap_s="30"))  # type: ignore[arg-type]
-    with pytest.raises(ConfigError, match=r"^\[dead_reckoning\] max_gap_s = '30': expected a number"):
+    with pytest.raises(
+        ConfigError, match=r"^\[dead_reckoning\] max_gap_s = '30': expected a number"
+    ):
         validate(bad)

@@ -24,50 +24,102 @@ def voyage_frames(n: int = 40, seed: int = 1) -> dict[str, pd.DataFrame]:
     t = T0 + np.arange(n, dtype=np.int64) * 1_000_000_000 + 123_456_789
 
     def common(src, sen):
-        return {"time_ns": t, "source": np.full(n, src, object), "sentence": np.full(n, sen, object),
-                "line": np.arange(1, n + 1)}
+        return {
+            "time_ns": t,
+            "source": np.full(n, src, object),
+            "sentence": np.full(n, sen, object),
+            "line": np.arange(1, n + 1),
+        }
 
     hd = rng.uniform(0, 2 * math.pi, n)
     hd[:2] = [0.0, 2 * math.pi - 1e-12]
     alt = rng.normal(20, 3, n)
     alt[3] = np.nan
     return {
-        "position": make_frame("position", {**common("INS2", "GGA"), "lat_rad": rng.uniform(-1.5, 1.5, n),
-                                            "lon_rad": rng.uniform(-3.1, 3.1, n), "alt_m": alt,
-                                            "quality": rng.choice([0, 1, 2, 4], n), "hdop": rng.uniform(0.5, 3, n)}),
-        "heading": make_frame("heading", {**common("GYRO", "HDT"), "heading_rad": hd,
-                                          "reference": np.where(np.arange(n) % 2, "T", "M").astype(object),
-                                          "deviation_rad": rng.normal(0, 0.02, n),
-                                          "variation_rad": np.full(n, 0.05)}),
-        "ground": make_frame("ground", {**common("INS2", "VTG"), "cog_rad": rng.uniform(0, 6.28, n),
-                                        "sog_mps": rng.uniform(0, 9, n)}),
-        "water": make_frame("water", {**common("LOG", "VBW"), "stw_mps": rng.uniform(-1, 9, n),
-                                      "stw_transverse_mps": rng.normal(0, 0.2, n),
-                                      "sog_long_mps": rng.uniform(0, 9, n), "sog_transverse_mps": np.nan * np.ones(n)}),
-        "distance": make_frame("distance", {**common("LOG", "VLW"), "total_water_m": 1e6 + np.arange(n) * 5.0,
-                                            "trip_water_m": np.arange(n) * 5.0}),
+        "position": make_frame(
+            "position",
+            {
+                **common("INS2", "GGA"),
+                "lat_rad": rng.uniform(-1.5, 1.5, n),
+                "lon_rad": rng.uniform(-3.1, 3.1, n),
+                "alt_m": alt,
+                "quality": rng.choice([0, 1, 2, 4], n),
+                "hdop": rng.uniform(0.5, 3, n),
+            },
+        ),
+        "heading": make_frame(
+            "heading",
+            {
+                **common("GYRO", "HDT"),
+                "heading_rad": hd,
+                "reference": np.where(np.arange(n) % 2, "T", "M").astype(object),
+                "deviation_rad": rng.normal(0, 0.02, n),
+                "variation_rad": np.full(n, 0.05),
+            },
+        ),
+        "ground": make_frame(
+            "ground",
+            {
+                **common("INS2", "VTG"),
+                "cog_rad": rng.uniform(0, 6.28, n),
+                "sog_mps": rng.uniform(0, 9, n),
+            },
+        ),
+        "water": make_frame(
+            "water",
+            {
+                **common("LOG", "VBW"),
+                "stw_mps": rng.uniform(-1, 9, n),
+                "stw_transverse_mps": rng.normal(0, 0.2, n),
+                "sog_long_mps": rng.uniform(0, 9, n),
+                "sog_transverse_mps": np.nan * np.ones(n),
+            },
+        ),
+        "distance": make_frame(
+            "distance",
+            {
+                **common("LOG", "VLW"),
+                "total_water_m": 1e6 + np.arange(n) * 5.0,
+                "trip_water_m": np.arange(n) * 5.0,
+            },
+        ),
         "rot": make_frame("rot", {**common("GYRO", "ROT"), "rot_radps": rng.normal(0, 0.01, n)}),
     }
 
 
-def assert_same_frames(a: dict[str, pd.DataFrame], b: dict[str, pd.DataFrame], rtol: float = 1e-13,
-                       skip: tuple[str, ...] = ()) -> None:
+def assert_same_frames(
+    a: dict[str, pd.DataFrame],
+    b: dict[str, pd.DataFrame],
+    rtol: float = 1e-13,
+    skip: tuple[str, ...] = (),
+) -> None:
     for kind, fa in a.items():
         fb = b[kind]
         assert len(fa) == len(fb), kind
         fa = fa.sort_values(["time_ns", "source"], kind="stable").reset_index(drop=True)
         fb = fb.sort_values(["time_ns", "source"], kind="stable").reset_index(drop=True)
         np.testing.assert_array_equal(fa["time_ns"].to_numpy(), fb["time_ns"].to_numpy())
-        np.testing.assert_array_equal(fa["source"].astype(str).to_numpy(), fb["source"].astype(str).to_numpy())
+        np.testing.assert_array_equal(
+            fa["source"].astype(str).to_numpy(), fb["source"].astype(str).to_numpy()
+        )
         for c in fa.columns:
             if c in skip or c in ("time_ns", "source", "talker", "sentence", "line"):
                 continue
             if fa[c].dtype.kind == "f":
-                np.testing.assert_allclose(fb[c].to_numpy(), fa[c].to_numpy(), rtol=rtol, atol=1e-15,
-                                           equal_nan=True, err_msg=f"{kind}.{c}")
+                np.testing.assert_allclose(
+                    fb[c].to_numpy(),
+                    fa[c].to_numpy(),
+                    rtol=rtol,
+                    atol=1e-15,
+                    equal_nan=True,
+                    err_msg=f"{kind}.{c}",
+                )
             else:
-                np.testing.assert_array_equal(fb[c].astype(str).to_numpy(), fa[c].astype(str).to_numpy(),
-                                              err_msg=f"{kind}.{c}")
+                np.testing.assert_array_equal(
+                    fb[c].astype(str).to_numpy(),
+                    fa[c].astype(str).to_numpy(),
+                    err_msg=f"{kind}.{c}",
+                )
 
 
 @pytest.mark.parametrize("form", ["long", "wide"])
@@ -82,20 +134,26 @@ def test_round_trip_same_frames(tmp_path, form):
 
 def test_units_from_names_knots_never_read_as_mps(tmp_path):
     p = tmp_path / "u.csv"
-    p.write_text("time_utc,source,quantity,value\n"
-                 "2024-05-01T00:00:00Z,LOG,stw_kn,10\n"
-                 "2024-05-01T00:00:01Z,LOG,stw_mps,10\n"
-                 "2024-05-01T00:00:02Z,LOG,stw_kmh,36\n"
-                 "2024-05-01T00:00:00Z,LOG,total_water_nmi,2.5\n"
-                 "2024-05-01T00:00:00Z,GYRO,rot_degpmin,30\n"
-                 "2024-05-01T00:00:00Z,GYRO,heading_deg,360\n"
-                 "2024-05-01T00:00:01Z,GYRO,heading_rad,1.5\n")
+    p.write_text(
+        "time_utc,source,quantity,value\n"
+        "2024-05-01T00:00:00Z,LOG,stw_kn,10\n"
+        "2024-05-01T00:00:01Z,LOG,stw_mps,10\n"
+        "2024-05-01T00:00:02Z,LOG,stw_kmh,36\n"
+        "2024-05-01T00:00:00Z,LOG,total_water_nmi,2.5\n"
+        "2024-05-01T00:00:00Z,GYRO,rot_degpmin,30\n"
+        "2024-05-01T00:00:00Z,GYRO,heading_deg,360\n"
+        "2024-05-01T00:00:01Z,GYRO,heading_rad,1.5\n"
+    )
     r = read_csv(p, IngestConfig())
     w = r.frames["water"]["stw_mps"].to_numpy()
-    np.testing.assert_allclose(w, [10 * 1852 / 3600, 10.0, 10.0], rtol=1e-15)  # 10 kn = 5.1444 m/s by hand
+    np.testing.assert_allclose(
+        w, [10 * 1852 / 3600, 10.0, 10.0], rtol=1e-15
+    )  # 10 kn = 5.1444 m/s by hand
     assert r.frames["distance"]["total_water_m"].iloc[0] == pytest.approx(2.5 * 1852.0)
     assert r.frames["rot"]["rot_radps"].iloc[0] == pytest.approx(30 / 60 * math.pi / 180)
-    np.testing.assert_allclose(r.frames["heading"]["heading_rad"].to_numpy(), [0.0, 1.5])  # 360 deg -> 0
+    np.testing.assert_allclose(
+        r.frames["heading"]["heading_rad"].to_numpy(), [0.0, 1.5]
+    )  # 360 deg -> 0
     assert r.frames["heading"]["reference"].tolist() == ["T", "T"]
 
 
@@ -108,18 +166,20 @@ def test_quantity_table_factors():
 
 def test_bad_rows_counted_by_reason_with_line_numbers(tmp_path):
     p = tmp_path / "bad.csv"
-    p.write_text("time_utc,source,quantity,value\n"         # 1
-                 "2024-05-01T00:00:00Z,INS1,lat_deg,54.5\n"  # 2
-                 "2024-05-01T00:00:00Z,INS1,lon_deg,18.5\n"  # 3
-                 "\n"                                        # 4 blank
-                 "2024-05-01T00:00:01Z,INS1,lat_deg\n"       # 5 too few fields
-                 "yesterday,INS1,lat_deg,54.6\n"             # 6 bad time
-                 "2024-05-01T00:00:01Z,INS1,speed,3\n"       # 7 unknown quantity
-                 "2024-05-01T00:00:01Z,LOG,stw_kn,fast\n"    # 8 not a number
-                 "2024-05-01T00:00:02Z,INS1,lat_deg,95\n"    # 9 out of range -> with 10 a bad position
-                 "2024-05-01T00:00:02Z,INS1,lon_deg,18.6\n"  # 10
-                 "2024-05-01T00:00:03Z,LOG,stw_kn,\n"        # 11 empty value
-                 "2024-05-01T00:00:03Z,LOG,stw_kn,5\n")      # 12
+    p.write_text(
+        "time_utc,source,quantity,value\n"  # 1
+        "2024-05-01T00:00:00Z,INS1,lat_deg,54.5\n"  # 2
+        "2024-05-01T00:00:00Z,INS1,lon_deg,18.5\n"  # 3
+        "\n"  # 4 blank
+        "2024-05-01T00:00:01Z,INS1,lat_deg\n"  # 5 too few fields
+        "yesterday,INS1,lat_deg,54.6\n"  # 6 bad time
+        "2024-05-01T00:00:01Z,INS1,speed,3\n"  # 7 unknown quantity
+        "2024-05-01T00:00:01Z,LOG,stw_kn,fast\n"  # 8 not a number
+        "2024-05-01T00:00:02Z,INS1,lat_deg,95\n"  # 9 out of range -> with 10 a bad position
+        "2024-05-01T00:00:02Z,INS1,lon_deg,18.6\n"  # 10
+        "2024-05-01T00:00:03Z,LOG,stw_kn,\n"  # 11 empty value
+        "2024-05-01T00:00:03Z,LOG,stw_kn,5\n"
+    )  # 12
     r = read_csv(p, IngestConfig())
     c = r.rejects.counts
     ex = {k: [e[1] for e in v] for k, v in r.rejects.examples.items()}
@@ -139,13 +199,20 @@ def test_bad_rows_counted_by_reason_with_line_numbers(tmp_path):
 
 def test_wide_form_declared_units_and_ignored_columns(tmp_path):
     p = tmp_path / "w.csv"
-    p.write_text("time_utc,Speed (kn),heading_deg,speed,comment\n"
-                 "2024-05-01T00:00:00,10,90,1,a\n"
-                 "2024-05-01T00:00:01,12,,1,b\n")
+    p.write_text(
+        "time_utc,Speed (kn),heading_deg,speed,comment\n"
+        "2024-05-01T00:00:00,10,90,1,a\n"
+        "2024-05-01T00:00:01,12,,1,b\n"
+    )
     cfg = IngestConfig(quantities={"Speed (kn)": "stw_kn"})
     r = read_csv(p, cfg)
-    assert r.frames["water"]["stw_mps"].tolist() == pytest.approx([10 * 1852 / 3600, 12 * 1852 / 3600])
-    assert r.frames["water"]["source"].astype(str).tolist() == ["w", "w"]  # file stem without a source column
+    assert r.frames["water"]["stw_mps"].tolist() == pytest.approx(
+        [10 * 1852 / 3600, 12 * 1852 / 3600]
+    )
+    assert r.frames["water"]["source"].astype(str).tolist() == [
+        "w",
+        "w",
+    ]  # file stem without a source column
     assert len(r.frames["heading"]) == 1
     assert any("'speed' ignored" in n and "unit" in n for n in r.notes)
     assert any("'comment' ignored" in n for n in r.notes)
@@ -154,9 +221,21 @@ def test_wide_form_declared_units_and_ignored_columns(tmp_path):
 
 
 def test_time_forms():
-    t, ok = parse_times(np.array(["2024-05-01T00:00:00.5Z", "2024-05-01 00:00:00.5", "1714521600.5",
-                                  "1714521600500", "2024-05-01T02:00:00.5+02:00", "soon", ""], dtype=object),
-                        "time_utc")
+    t, ok = parse_times(
+        np.array(
+            [
+                "2024-05-01T00:00:00.5Z",
+                "2024-05-01 00:00:00.5",
+                "1714521600.5",
+                "1714521600500",
+                "2024-05-01T02:00:00.5+02:00",
+                "soon",
+                "",
+            ],
+            dtype=object,
+        ),
+        "time_utc",
+    )
     ref = 1714521600_500_000_000
     assert ok.tolist() == [True] * 5 + [False, False]
     assert t[:5].tolist() == [ref] * 5
@@ -196,7 +275,9 @@ def test_raw_logger_csv_goes_through_the_nmea_parser(tmp_path, real_dir):
     p = tmp_path / "logger.csv"
     rows = ["received_at,protocol,msg_type,source,raw_data"]
     for i, s in enumerate(lines[:20]):
-        rows.append(f'2020-04-20T09:25:{42 + i // 4:02d}.{(i % 4) * 25:02d}Z,NMEA0183,{s[3:6]},GNSS,"{s}"')
+        rows.append(
+            f'2020-04-20T09:25:{42 + i // 4:02d}.{(i % 4) * 25:02d}Z,NMEA0183,{s[3:6]},GNSS,"{s}"'
+        )
     rows.append('2020-04-20T09:25:59Z,NMEA2000,129025,N2K,"0x1234"')
     p.write_text("\n".join(rows) + "\n")
     r = read_csv(p, IngestConfig())
@@ -219,12 +300,14 @@ def test_raw_logger_csv_goes_through_the_nmea_parser(tmp_path, real_dir):
 
 def test_raw_csv_rejects_name_csv_lines(tmp_path):
     p = tmp_path / "logger.csv"
-    p.write_text("received_at,raw_data\n"
-                 '2020-04-20T09:25:42Z,"$GNGGA,092542.00,4846.4008666,N,00854.7249096,E,4,12,0.47,419.166,M,47.535,M,0.0,0000*66"\n'
-                 '2020-04-20T09:25:43Z,"$GNGGA,092543.00,4846.4008666,N,00854.7249096,E,4,12,0.47,419.166,M,47.535,M,0.0,0000*00"\n')
+    p.write_text(
+        "received_at,raw_data\n"
+        '2020-04-20T09:25:42Z,"$GNGGA,092542.00,4846.4008666,N,00854.7249096,E,4,12,0.47,419.166,M,47.535,M,0.0,0000*66"\n'
+        '2020-04-20T09:25:43Z,"$GNGGA,092543.00,4846.4008666,N,00854.7249096,E,4,12,0.47,419.166,M,47.535,M,0.0,0000*00"\n'
+    )
     r = read_csv(p, IngestConfig())
     assert len(r.frames["position"]) == 1
-    (reason, ex), = r.rejects.examples.items()
+    ((reason, ex),) = r.rejects.examples.items()
     assert r.rejects.counts[reason] == 1 and ex[0][1] == 3  # the bad checksum is on CSV line 3
 
 
@@ -243,7 +326,9 @@ def test_small_blocks_and_unsorted_rows_give_the_same_frames(tmp_path, monkeypat
     head, *body = p.read_text(encoding="utf-8").splitlines(keepends=True)
     rng = np.random.default_rng(4)
     shuffled = tmp_path / f"shuffled_{form}.csv"
-    shuffled.write_text(head + "".join(body[i] for i in rng.permutation(len(body))), encoding="utf-8")
+    shuffled.write_text(
+        head + "".join(body[i] for i in rng.permutation(len(body))), encoding="utf-8"
+    )
     passes = []
     real_pass = csv_mod._read_long_pass
 
@@ -261,7 +346,10 @@ def test_small_blocks_and_unsorted_rows_give_the_same_frames(tmp_path, monkeypat
         # shuffled: the same records, their lines where the rows went
         cols = [c for c in f.columns if c != "line"]
         pd.testing.assert_frame_equal(
-            mixed.frames[kind][cols].sort_values(["time_ns", "source"], kind="stable").reset_index(drop=True),
+            mixed.frames[kind][cols]
+            .sort_values(["time_ns", "source"], kind="stable")
+            .reset_index(drop=True),
             f[cols].sort_values(["time_ns", "source"], kind="stable").reset_index(drop=True),
-            check_categorical=False)
+            check_categorical=False,
+        )
     assert dict(small.rejects.counts) == dict(whole.rejects.counts) == dict(mixed.rejects.counts)

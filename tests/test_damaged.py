@@ -56,8 +56,15 @@ def test_jpeg(run_cli, tmp_path, cmd):
     _one_line_error(code, err, "not a log file", "JPEG")
 
 
-@pytest.mark.parametrize("magic,what", [(b"PK\x03\x04", "ZIP"), (b"\x1f\x8b\x08", "gzip"),
-                                        (b"%PDF-1.4", "PDF"), (b"\x89PNG\r\n\x1a\n", "PNG")])
+@pytest.mark.parametrize(
+    "magic,what",
+    [
+        (b"PK\x03\x04", "ZIP"),
+        (b"\x1f\x8b\x08", "gzip"),
+        (b"%PDF-1.4", "PDF"),
+        (b"\x89PNG\r\n\x1a\n", "PNG"),
+    ],
+)
 def test_other_known_non_logs(run_cli, tmp_path, magic, what):
     p = tmp_path / "x.log"
     p.write_bytes(magic + b"\x00" * 100)
@@ -88,8 +95,12 @@ def test_fifo_is_refused_not_waited_on(tmp_path):
     """Regression: a FIFO blocked the open() forever.  A real process with a bounded wait."""
     fifo = tmp_path / "pipe.nmea"
     os.mkfifo(fifo)
-    r = subprocess.run([sys.executable, "-m", "dracc", "analyze", str(fifo)], capture_output=True,
-                       text=True, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-m", "dracc", "analyze", str(fifo)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     _one_line_error(r.returncode, r.stderr, "FIFO")
 
 
@@ -103,8 +114,17 @@ def test_binary_noise_as_nmea(run_cli, tmp_path):
     code, doc, err = _inspect(run_cli, p)
     assert code == ExitCode.OK and doc["inputs"][0]["records"] == 0
     assert sum(doc["rejected"].values()) > 0
-    assert set(doc["rejected"]) <= {"binary", "not_nmea", "bad_address", "truncated", "checksum",
-                                    "unsupported", "comment", "bad_tag", "field_count"}
+    assert set(doc["rejected"]) <= {
+        "binary",
+        "not_nmea",
+        "bad_address",
+        "truncated",
+        "checksum",
+        "unsupported",
+        "comment",
+        "bad_tag",
+        "field_count",
+    }
 
 
 # ---------------------------------------------------------------- damaged MCAP
@@ -158,7 +178,7 @@ def test_mcap_corrupted_bytes(run_cli, tmp_path, mcap_full, seed):
     b = bytearray(data)
     at = rng.randrange(40, len(b) - 200)
     n = rng.randrange(1, 400)
-    b[at:at + n] = bytes(rng.randrange(256) for _ in range(n))
+    b[at : at + n] = bytes(rng.randrange(256) for _ in range(n))
     p = tmp_path / "bad.mcap"
     p.write_bytes(bytes(b))
     code, doc, err = _inspect(run_cli, p)
@@ -236,8 +256,9 @@ def test_csv_invalid_utf8_subprocess_has_no_traceback(tmp_path):
     lines[50] = lines[50] + b",\xff\xfe\xfd"
     p = tmp_path / "u.csv"
     p.write_bytes(b"\n".join(lines))
-    r = subprocess.run([sys.executable, "-m", "dracc", "inspect", str(p)], capture_output=True,
-                       timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-m", "dracc", "inspect", str(p)], capture_output=True, timeout=120
+    )
     assert r.returncode == 0, r.stderr
     assert b"Traceback" not in r.stderr and b"Exception ignored" not in r.stderr
 
@@ -252,8 +273,11 @@ def test_nmea_cut_mid_line_and_real_damaged_logs(run_cli, tmp_path):
     code, doc, _ = _inspect(run_cli, p)
     assert code == ExitCode.OK
     assert doc["rejected"].get("truncated", 0) + doc["rejected"].get("checksum", 0) >= 1
-    for name in ("gpsd/holux-gm-210.log", "gpsd/triton400.log",
-                 "anemomind/Irene/2008/regate_21_mai_08/IreneLog.txt"):
+    for name in (
+        "gpsd/holux-gm-210.log",
+        "gpsd/triton400.log",
+        "anemomind/Irene/2008/regate_21_mai_08/IreneLog.txt",
+    ):
         src = REAL / name
         if src.exists():
             code, doc, err = _inspect(run_cli, src)

@@ -135,8 +135,12 @@ def _rhumb_direct(lat1_rad, lon1_rad, azi_rad, s_m):
     if abs(math.cos(azi_rad)) > 1e-9:
         dlon = math.tan(azi_rad) * (_isometric_lat(lat2) - _isometric_lat(lat1_rad))
     else:  # along a parallel
-        dlon = s_m * math.sin(azi_rad) * math.sqrt(1 - E2 * math.sin(lat1_rad) ** 2) / (
-            A_M * math.cos(lat1_rad))
+        dlon = (
+            s_m
+            * math.sin(azi_rad)
+            * math.sqrt(1 - E2 * math.sin(lat1_rad) ** 2)
+            / (A_M * math.cos(lat1_rad))
+        )
     return lat2, lon1_rad + dlon
 
 
@@ -195,8 +199,15 @@ def test_noiseless_voyage_no_current_within_5m_after_6h():
     for c, v in zip(courses, speeds, strict=True):
         lat_t, lon_t = _rhumb_direct(lat_t, lon_t, c, v * leg_s)
         truth.append((lat_t, lon_t))
-    tr = dead_reckon(t, courses[leg], speeds[leg], lat0_rad=54.3 * D, lon0_rad=10.1 * D,
-                     reset_s="never", mode="ground")
+    tr = dead_reckon(
+        t,
+        courses[leg],
+        speeds[leg],
+        lat0_rad=54.3 * D,
+        lon0_rad=10.1 * D,
+        reset_s="never",
+        mode="ground",
+    )
     ends = (np.arange(1, 13) * leg_s).astype(int)
     err = distance_m(tr.lat_rad[ends], tr.lon_rad[ends], *np.array(truth[1:]).T)
     assert err.max() < 5.0
@@ -229,8 +240,12 @@ def test_b23_two_step_hand_example_reproduces_b26_to_b31():
     np.testing.assert_allclose(got[-1], P, rtol=1e-12)
     assert mean_error_m(got[-1], lat) == pytest.approx(M, rel=1e-12)  # (B30)
     # the numbers, so that a change of convention shows: M and 2M (B31) in metres
-    assert M == pytest.approx(math.sqrt(200 + (60 * 0.1) ** 2 + (120 * 0.1) ** 2
-                                        + (60 * 6 * s_c) ** 2 + (120 * 6 * s_c) ** 2), rel=1e-12)
+    assert M == pytest.approx(
+        math.sqrt(
+            200 + (60 * 0.1) ** 2 + (120 * 0.1) ** 2 + (60 * 6 * s_c) ** 2 + (120 * 6 * s_c) ** 2
+        ),
+        rel=1e-12,
+    )
     P_m2 = covariance_m2_from_rad2(got[-1], lat)
     assert 2 * math.sqrt(np.trace(P_m2)) == pytest.approx(2 * M, rel=1e-12)  # (B31)
 
@@ -240,8 +255,9 @@ def test_b28_misprint_common_factor_kphi_klambda():
     Jacobian of [k_phi V cos C, k_lambda V sin C] gives 1/2 k_phi k_lambda (sV^2 - V^2 sC^2) sin 2C."""
     lat, v, c, s_v, s_c = 60 * D, 7.0, 50 * D, 0.2, 1.5 * D
     kp, kl = k_phi(lat), k_lambda(lat)
-    J = np.array([[kp * math.cos(c), -kp * v * math.sin(c)],
-                  [kl * math.sin(c), kl * v * math.cos(c)]])
+    J = np.array(
+        [[kp * math.cos(c), -kp * v * math.sin(c)], [kl * math.sin(c), kl * v * math.cos(c)]]
+    )
     want = J @ np.diag([s_v**2, s_c**2]) @ J.T
     got = speed_covariance_rad2(lat, v, c, s_v, s_c)
     np.testing.assert_allclose(got, want, rtol=1e-12)
@@ -311,9 +327,12 @@ def test_tau_zero_is_the_paper_b23_form():
     course = np.array([0.3, 1.2, 2.0, 2.0])
     v = np.array([5.0, 6.0, 4.0, 4.0])
     cfg = DeadReckoningConfig(
-        compass_bias_deg=ErrorSource(0.0), compass_noise_deg=ErrorSource(1.0, 0.0),
-        log_scale=ErrorSource(0.0), log_bias_kn=ErrorSource(0.0),
-        log_noise_kn=ErrorSource(0.3, 0.0))
+        compass_bias_deg=ErrorSource(0.0),
+        compass_noise_deg=ErrorSource(1.0, 0.0),
+        log_scale=ErrorSource(0.0),
+        log_bias_kn=ErrorSource(0.0),
+        log_noise_kn=ErrorSource(0.3, 0.0),
+    )
     honest = honest_covariance_m2(t, v, course, error_processes(cfg, "ground"))
     paper = covariance_b23_rad2(t, lat, v, course, 0.3 * 1852 / 3600, 1.0 * D, np.zeros((2, 2)))
     np.testing.assert_allclose(honest, covariance_m2_from_rad2(paper, lat), rtol=1e-10, atol=1e-12)
@@ -351,12 +370,23 @@ def test_paper_form_shrinks_with_logging_rate_where_honest_does_not():
 
 def test_straight_course_bias_gives_cross_track_sigma_v_t_sigma_c():
     cfg = DeadReckoningConfig(
-        compass_bias_deg=ErrorSource(1.0), compass_noise_deg=ErrorSource(0.0),
-        log_scale=ErrorSource(0.0), log_bias_kn=ErrorSource(0.0), log_noise_kn=ErrorSource(0.0),
-        fix_sigma_m=0.0)
+        compass_bias_deg=ErrorSource(1.0),
+        compass_noise_deg=ErrorSource(0.0),
+        log_scale=ErrorSource(0.0),
+        log_bias_kn=ErrorSource(0.0),
+        log_noise_kn=ErrorSource(0.0),
+        fix_sigma_m=0.0,
+    )
     t = np.arange(0.0, 3601.0, 1.0)
-    tr = dead_reckon(t, np.zeros(t.size), np.full(t.size, 5.0), errors=cfg, lat0_rad=0.5,
-                     lon0_rad=0.0, mode="ground")
+    tr = dead_reckon(
+        t,
+        np.zeros(t.size),
+        np.full(t.size, 5.0),
+        errors=cfg,
+        lat0_rad=0.5,
+        lon0_rad=0.0,
+        mode="ground",
+    )
     assert tr.semi_major_m[-1] == pytest.approx(5.0 * 3600 * D, rel=1e-9)  # V T sigma_C
     assert tr.semi_minor_m[-1] == pytest.approx(0.0, abs=1e-6)
     assert tr.orientation_rad[-1] == pytest.approx(math.pi / 2)  # across a northerly track
@@ -372,8 +402,9 @@ def _fixes(t_fix, lat, lon):
 def test_restarts_every_hour_from_fixes_with_fix_covariance():
     t = np.arange(0.0, 3 * 3600 + 1, 1.0)
     tf = np.arange(0.0, 3 * 3600 + 1, 60.0)
-    tr = dead_reckon(t, np.full(t.size, 1.0), np.full(t.size, 5.0), fixes=_fixes(tf, 0.8, 0.2),
-                     reset_s="1h")
+    tr = dead_reckon(
+        t, np.full(t.size, 1.0), np.full(t.size, 5.0), fixes=_fixes(tf, 0.8, 0.2), reset_s="1h"
+    )
     np.testing.assert_allclose(tr.leg_start_s, [0.0, 3600.0, 7200.0, 10800.0])
     assert tr.leg_start_reason == ("start", "reset", "reset", "reset")
     k = 3600
@@ -397,8 +428,15 @@ def test_reset_never_and_watch():
 def test_fix_between_samples_is_advanced_to_the_next_sample():
     t = np.arange(0.0, 200.0, 10.0)
     tf = np.array([95.0])
-    tr = dead_reckon(t, np.zeros(t.size), np.full(t.size, 2.0), lat0_rad=0.0, lon0_rad=0.0,
-                     fixes=(tf, np.array([0.5]), np.array([0.0]), np.array([3.0])), reset_s=50.0)
+    tr = dead_reckon(
+        t,
+        np.zeros(t.size),
+        np.full(t.size, 2.0),
+        lat0_rad=0.0,
+        lon0_rad=0.0,
+        fixes=(tf, np.array([0.5]), np.array([0.0]), np.array([3.0])),
+        reset_s=50.0,
+    )
     k = 10  # t = 100
     assert tr.leg[k] == 1
     assert (tr.lat_rad[k] - 0.5) / k_phi(0.5) == pytest.approx(10.0, rel=1e-6)  # 5 s at 2 m/s
@@ -422,8 +460,16 @@ def test_long_gap_breaks_track_until_next_fix():
     v[500:700] = np.nan
     tf = np.array([650.0, 900.0, 1500.0])
     fx = (tf, np.full(3, 0.31), np.full(3, 0.01), np.full(3, 5.0))
-    tr = dead_reckon(t, np.zeros(t.size), v, lat0_rad=0.3, lon0_rad=0.0, fixes=fx,
-                     reset_s="never", max_gap_s=30.0)
+    tr = dead_reckon(
+        t,
+        np.zeros(t.size),
+        v,
+        lat0_rad=0.3,
+        lon0_rad=0.0,
+        fixes=fx,
+        reset_s="never",
+        max_gap_s=30.0,
+    )
     assert tr.n_breaks == 1 and not tr.gaps[0].bridged
     assert np.isfinite(tr.lat_rad[499]) and np.all(np.isnan(tr.lat_rad[500:900]))
     assert tr.leg_start_reason == ("start", "after-gap")
@@ -452,16 +498,33 @@ def test_no_start_position_raises():
 
 def test_water_mode_adds_current_and_transverse_log_leeway():
     t = np.arange(0.0, 101.0)
-    tr = dead_reckon(t, np.zeros(t.size), np.full(t.size, 3.0), transverse_mps=np.full(t.size, 4.0),
-                     current_ne_mps=[0.0, -4.0], lat0_rad=0.0, lon0_rad=0.0)
+    tr = dead_reckon(
+        t,
+        np.zeros(t.size),
+        np.full(t.size, 3.0),
+        transverse_mps=np.full(t.size, 4.0),
+        current_ne_mps=[0.0, -4.0],
+        lat0_rad=0.0,
+        lon0_rad=0.0,
+    )
     # (B1) V = 5, (B5) alpha = atan2(4, 3); east component 5 sin(alpha) = 4 cancels the current
     assert tr.vn_mps[0] == pytest.approx(3.0) and tr.ve_mps[0] == pytest.approx(0.0, abs=1e-12)
     assert {p.name for p in error_processes(DeadReckoningConfig(), "ground")}.isdisjoint(
-        {"current_kn", "leeway_deg"})
+        {"current_kn", "leeway_deg"}
+    )
 
 
-@pytest.mark.parametrize("text,want", [("1h", 3600.0), ("30min", 1800.0), ("90s", 90.0),
-                                       ("watch", 4 * 3600.0), ("never", math.inf), (120, 120.0)])
+@pytest.mark.parametrize(
+    "text,want",
+    [
+        ("1h", 3600.0),
+        ("30min", 1800.0),
+        ("90s", 90.0),
+        ("watch", 4 * 3600.0),
+        ("never", math.inf),
+        (120, 120.0),
+    ],
+)
 def test_parse_reset(text, want):
     assert parse_reset_s(text) == want
 
@@ -515,15 +578,25 @@ def test_real_log_without_heading_says_so(real_dir):
     n = min(len(heading), len(speed))
     assert n > 100 and np.isfinite(speed[:n]).any()
     with pytest.raises(InsufficientDataError, match="no heading"):
-        dead_reckon(np.arange(float(n)), np.array(heading[:n]), np.array(speed[:n]),
-                    lat0_rad=0.6, lon0_rad=0.4)
+        dead_reckon(
+            np.arange(float(n)),
+            np.array(heading[:n]),
+            np.array(speed[:n]),
+            lat0_rad=0.6,
+            lon0_rad=0.4,
+        )
 
 
 def test_true_heading_from_mixed_gyro_and_magnetic_samples():
     cfg = DeadReckoningConfig(variation_deg=2.0, deviation_table={"0": 1.0, "180": -1.0})
     h = np.array([10.0, 10.0, 10.0, 90.0]) * D
-    th = true_heading_rad(h, ["T", "M", "M", "M"], deviation_rad=[np.nan, 0.5 * D, np.nan, np.nan],
-                          variation_rad=[np.nan, 3.0 * D, np.nan, np.nan], errors=cfg)
+    th = true_heading_rad(
+        h,
+        ["T", "M", "M", "M"],
+        deviation_rad=[np.nan, 0.5 * D, np.nan, np.nan],
+        variation_rad=[np.nan, 3.0 * D, np.nan, np.nan],
+        errors=cfg,
+    )
     want = np.array([10.0, 10 + 3 + 0.5, 10 + 2 + (1 - 2 * 10 / 180), 90 + 2 + 0.0]) * D
     np.testing.assert_allclose(th.heading_rad, want, atol=1e-12)
     assert (th.n_magnetic, th.n_variation_from_sentence, th.n_variation_from_config) == (3, 1, 2)
@@ -539,8 +612,12 @@ def test_true_heading_magnetic_without_variation_raises():
 
 
 @settings(max_examples=40, deadline=None)
-@given(lat_deg=st.floats(-75, 75), lon_deg=st.floats(-180, 180), course_deg=st.floats(0, 360),
-       speed=st.floats(0.5, 15.0))
+@given(
+    lat_deg=st.floats(-75, 75),
+    lon_deg=st.floats(-180, 180),
+    course_deg=st.floats(0, 360),
+    speed=st.floats(0.5, 15.0),
+)
 def test_out_and_back_returns_to_the_start(lat_deg, lon_deg, course_deg, speed):
     """A rhumb line retraced on the reciprocal course ends where it began (< 1 mm)."""
     t = np.arange(0.0, 2 * 1800.0 + 1, 10.0)
@@ -576,5 +653,8 @@ def test_covariance_on_a_coarser_grid_matches_the_exact_propagation():
     np.testing.assert_allclose(tr_coarse, tr_exact, rtol=0, atol=0.05)
     bias = [p for p in procs if p.name == "compass_bias_deg"]
     grid = np.arange(0, t.size, 10)
-    np.testing.assert_allclose(honest_covariance_m2(t, v, c, bias, step_s=1.0)[grid],
-                               honest_covariance_m2(t, v, c, bias)[grid], rtol=1e-9)
+    np.testing.assert_allclose(
+        honest_covariance_m2(t, v, c, bias, step_s=1.0)[grid],
+        honest_covariance_m2(t, v, c, bias)[grid],
+        rtol=1e-9,
+    )

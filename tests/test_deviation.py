@@ -92,10 +92,13 @@ def test_table1_weighted_average_ratios_1_29_and_1_49():
     # RMS over the days (the paper does not state its weights, so only bounds are checked)
     lat_err = [row[1][0] for row in TABLE1]
     lat_dev = [row[1][1] for row in TABLE1]
-    assert S.weighted_rms(lat_err, [24] * 8) == pytest.approx(math.sqrt(np.mean(np.square(lat_err))))
+    assert S.weighted_rms(lat_err, [24] * 8) == pytest.approx(
+        math.sqrt(np.mean(np.square(lat_err)))
+    )
     # hand: weights n - 1.45 = 22.55 and 1.55: sqrt((22.55 * 4 + 1.55 * 1) / 24.1) = 1.955
     assert S.weighted_rms([2.0, 1.0, np.nan], [24, 3, 10]) == pytest.approx(
-        math.sqrt((22.55 * 4 + 1.55) / 24.1), rel=1e-12)
+        math.sqrt((22.55 * 4 + 1.55) / 24.1), rel=1e-12
+    )
     assert min(lat_err) < S.weighted_rms(lat_err, [24] * 8) < max(lat_err)
     assert 1.2 < S.weighted_rms(lat_err, [24] * 8) / S.weighted_rms(lat_dev, [24] * 8) < 1.32
 
@@ -136,9 +139,7 @@ def test_fisher_bound_of_the_conclusions():
 # ------------------------------------------------------------ hand-computed example
 
 # Three units, one channel, five instants:
-Y = np.array([[3.0, 0.0, -3.0, 6.0, 0.0],
-              [0.0, 3.0, 0.0, -3.0, 3.0],
-              [0.0, -3.0, 3.0, -3.0, -3.0]])
+Y = np.array([[3.0, 0.0, -3.0, 6.0, 0.0], [0.0, 3.0, 0.0, -3.0, 3.0], [0.0, -3.0, 3.0, -3.0, -3.0]])
 
 
 def test_hand_example_every_formula():
@@ -235,8 +236,9 @@ def _static_units(offsets_m, headings_deg=None, n_hours=6, step_s=10.0, t0=T0):
     t = t0 + np.arange(0, n_hours * 3600 + 1, step_s).astype(np.int64) * 1_000_000_000
     units = {}
     for name, (n_m, e_m) in offsets_m.items():
-        lat, lon = add_offset_ne(LAT0, LON0, np.broadcast_to(n_m, t.shape),
-                                 np.broadcast_to(e_m, t.shape))
+        lat, lon = add_offset_ne(
+            LAT0, LON0, np.broadcast_to(n_m, t.shape), np.broadcast_to(e_m, t.shape)
+        )
         hdg = np.radians(np.broadcast_to((headings_deg or {}).get(name, 90.0), t.shape))
         units[name] = UnitSeries(t, np.asarray(lat), np.asarray(lon), t, hdg % (2 * np.pi))
     return units
@@ -272,8 +274,11 @@ def test_entry_point_reproduces_the_hand_example_in_metres():
 
 def test_course_on_the_circle_359_and_1_degrees():
     # headings 359, 1, 3 deg: circular mean 1 deg, deviations -2, 0, +2 (a naive mean is 121)
-    units = _static_units({"ins1": (0, 0), "ins2": (10, 0), "ins3": (-10, 0)},
-                          {"ins1": 359.0, "ins2": 1.0, "ins3": 3.0}, n_hours=3)
+    units = _static_units(
+        {"ins1": (0, 0), "ins2": (10, 0), "ins3": (-10, 0)},
+        {"ins1": 359.0, "ins2": 1.0, "ins3": 3.0},
+        n_hours=3,
+    )
     res = analyse_deviations(units)
     np.testing.assert_allclose(res.samples["ins1"]["course"], -2.0, atol=1e-9)
     np.testing.assert_allclose(res.samples["ins2"]["course"], 0.0, atol=1e-9)
@@ -303,8 +308,9 @@ def test_missing_unit_at_an_instant_is_not_filled():
     units = _static_units({"ins1": (100, 0), "ins2": (0, 0), "ins3": (-100, 0)}, n_hours=5)
     u3 = units["ins3"]
     keep = np.abs(u3.pos_time_ns - (T0 + 2 * H)) > 300_000_000_000  # 10-min hole at 02:00
-    units["ins3"] = UnitSeries(u3.pos_time_ns[keep], u3.lat_rad[keep], u3.lon_rad[keep],
-                               u3.hdg_time_ns, u3.heading_rad)
+    units["ins3"] = UnitSeries(
+        u3.pos_time_ns[keep], u3.lat_rad[keep], u3.lon_rad[keep], u3.hdg_time_ns, u3.heading_rad
+    )
     res = analyse_deviations(units, DeviationConfig(max_interp_gap_s=120.0))
     assert np.isnan(res.samples["ins1"]["lat"][2]) and np.isnan(res.samples["ins3"]["lat"][2])
     assert not np.isnan(res.samples["ins1"]["course"][2])  # the heading was there
@@ -323,11 +329,19 @@ def test_instants_with_no_reading_from_any_unit_are_not_instants():
     reading: they are not sampling instants, not 'missing' for every unit, and make no
     per-day window."""
     a = _static_units({"ins1": (100, 0), "ins2": (0, 0), "ins3": (-100, 0)}, n_hours=3)
-    b = _static_units({"ins1": (100, 0), "ins2": (0, 0), "ins3": (-100, 0)}, n_hours=2,
-                      t0=T0 + 40 * 24 * H)  # the same units 40 days later
-    units = {u: UnitSeries(np.r_[a[u].pos_time_ns, b[u].pos_time_ns], np.r_[a[u].lat_rad, b[u].lat_rad],
-                           np.r_[a[u].lon_rad, b[u].lon_rad], np.r_[a[u].hdg_time_ns, b[u].hdg_time_ns],
-                           np.r_[a[u].heading_rad, b[u].heading_rad]) for u in a}
+    b = _static_units(
+        {"ins1": (100, 0), "ins2": (0, 0), "ins3": (-100, 0)}, n_hours=2, t0=T0 + 40 * 24 * H
+    )  # the same units 40 days later
+    units = {
+        u: UnitSeries(
+            np.r_[a[u].pos_time_ns, b[u].pos_time_ns],
+            np.r_[a[u].lat_rad, b[u].lat_rad],
+            np.r_[a[u].lon_rad, b[u].lon_rad],
+            np.r_[a[u].hdg_time_ns, b[u].hdg_time_ns],
+            np.r_[a[u].heading_rad, b[u].heading_rad],
+        )
+        for u in a
+    }
     res = analyse_deviations(units, DeviationConfig(max_interp_gap_s=120.0))
     assert len(res.time_ns) == 4 + 3  # 00:00..03:00 and 00:00..02:00 forty days later
     assert res.missing["ins1"] == {"lat": 0, "lon": 0, "course": 0}
@@ -388,16 +402,19 @@ def test_apriori_monitoring_rule():
     assert day.limit == pytest.approx(day.k_pie * day.k_hm * day.m_y)
 
 
-@pytest.mark.parametrize("table, word", [
-    ({"apriori": {"ins4": {"lat_m": 1}}}, "ins4"),
-    ({"apriori": {"ins1": {"lat": 1}}}, "unknown key 'lat'"),
-    ({"apriori": {"ins1": {"lat_m": -3}}}, "lat_m = -3"),
-    ({"confidence": 1.0}, "confidence"),
-    ({"correlation_time_s": -1.0}, "correlation_time_s"),
-    ({"hat_draws": "many"}, "hat_draws = 'many'"),
-    ({"first_approximation": 1}, "first_approximation"),
-    ({"interval_s": float("nan")}, "interval_s = nan"),
-])
+@pytest.mark.parametrize(
+    "table, word",
+    [
+        ({"apriori": {"ins4": {"lat_m": 1}}}, "ins4"),
+        ({"apriori": {"ins1": {"lat": 1}}}, "unknown key 'lat'"),
+        ({"apriori": {"ins1": {"lat_m": -3}}}, "lat_m = -3"),
+        ({"confidence": 1.0}, "confidence"),
+        ({"correlation_time_s": -1.0}, "correlation_time_s"),
+        ({"hat_draws": "many"}, "hat_draws = 'many'"),
+        ({"first_approximation": 1}, "first_approximation"),
+        ({"interval_s": float("nan")}, "interval_s = nan"),
+    ],
+)
 def test_config_errors_name_the_key(table, word):
     cfg = dataclasses.replace(DeviationConfig(), **table)
     with pytest.raises(ConfigError, match=word):
@@ -433,17 +450,35 @@ def test_unit_series_from_voyage_leaves_out_invalid_fixes_and_magnetic_headings(
     from dracc.math.deviation import unit_series_from_voyage
 
     t = np.array([T0, T0 + 1, T0 + 2], dtype=np.int64)
-    pos = make_frame("position", {"time_ns": t, "source": ["INS1", "INS1", "GP"],
-                                  "sentence": ["GGA"] * 3, "line": [1, 2, 3],
-                                  "lat_rad": [0.1, 0.2, 0.3], "lon_rad": [0.4, 0.5, 0.6],
-                                  "quality": [1, 0, 1]})
-    hdg = make_frame("heading", {"time_ns": t, "source": ["INS1"] * 3, "sentence": ["HDT"] * 3,
-                                 "line": [4, 5, 6], "heading_rad": [1.0, 2.0, 3.0],
-                                 "reference": ["T", "M", "T"]})
+    pos = make_frame(
+        "position",
+        {
+            "time_ns": t,
+            "source": ["INS1", "INS1", "GP"],
+            "sentence": ["GGA"] * 3,
+            "line": [1, 2, 3],
+            "lat_rad": [0.1, 0.2, 0.3],
+            "lon_rad": [0.4, 0.5, 0.6],
+            "quality": [1, 0, 1],
+        },
+    )
+    hdg = make_frame(
+        "heading",
+        {
+            "time_ns": t,
+            "source": ["INS1"] * 3,
+            "sentence": ["HDT"] * 3,
+            "line": [4, 5, 6],
+            "heading_rad": [1.0, 2.0, 3.0],
+            "reference": ["T", "M", "T"],
+        },
+    )
     frames = {k: empty_frame(k) for k in ("ground", "water", "distance", "rot")}
     frames.update(position=pos, heading=hdg)
-    sources = {"INS1": SourceInfo("INS1", ["ins1"], Counter(), Counter()),
-               "GP": SourceInfo("GP", ["gnss"], Counter(), Counter())}
+    sources = {
+        "INS1": SourceInfo("INS1", ["ins1"], Counter(), Counter()),
+        "GP": SourceInfo("GP", ["gnss"], Counter(), Counter()),
+    }
     v = Voyage(frames, sources, Rejects(), TimeEvents(), [])
     u = unit_series_from_voyage(v, "ins1")
     assert list(u.pos_time_ns) == [T0] and list(u.lat_rad) == [0.1]  # quality 0 and GP out
@@ -471,8 +506,7 @@ def test_arc_minutes_against_geographiclib():
     assert dlat == pytest.approx(1.0, rel=1e-6)
     assert metres_to_arcmin(0.0, east_m, math.radians(55.0))[1] == pytest.approx(1.0, rel=1e-6)
     # in the report: samples and whole-log RMS in arc-minutes where asked
-    units = _static_units({"ins1": (north_m, 0), "ins2": (0, 0), "ins3": (-north_m, 0)},
-                          n_hours=2)
+    units = _static_units({"ins1": (north_m, 0), "ins2": (0, 0), "ins3": (-north_m, 0)}, n_hours=2)
     d = analyse_deviations(units).to_dict(arcmin=True)
     assert d["samples"][0]["ins1"]["lat_arcmin"] == pytest.approx(1.0, rel=1e-4)
     assert d["samples"][0]["ins1"]["lon_arcmin"] == pytest.approx(0.0, abs=1e-9)

@@ -24,8 +24,10 @@ geographiclib = pytest.importorskip("geographiclib.geodesic")
 @pytest.fixture(scope="module")
 def palmer(real_dir):
     d = real_dir / "openrvdas"
-    frames = {name: ingest.read_file(d / f"NBP1406_{name}-2014-08-01", IngestConfig()).frames
-              for name in ("gp02", "seap", "gyr1")}
+    frames = {
+        name: ingest.read_file(d / f"NBP1406_{name}-2014-08-01", IngestConfig()).frames
+        for name in ("gp02", "seap", "gyr1")
+    }
     ins1 = unit_series_from_frames(frames["gp02"].get("position"), frames["gyr1"].get("heading"))
     ins2 = unit_series_from_frames(frames["seap"].get("position"), frames["seap"].get("heading"))
     return {"ins1": ins1, "ins2": ins2}
@@ -53,8 +55,9 @@ def test_two_real_receivers_as_two_units(palmer):
     s1 = sample_unit(palmer["ins1"], res.time_ns, cfg.max_interp_gap_s)
     s2 = sample_unit(palmer["ins2"], res.time_ns, cfg.max_interp_gap_s)
     for i in np.flatnonzero(both):
-        dist = geod.Inverse(*np.degrees([s1.lat_rad[i], s1.lon_rad[i], s2.lat_rad[i],
-                                         s2.lon_rad[i]]))["s12"]
+        dist = geod.Inverse(
+            *np.degrees([s1.lat_rad[i], s1.lon_rad[i], s2.lat_rad[i], s2.lon_rad[i]])
+        )["s12"]
         dev = math.hypot(lat1[i], res.samples["ins1"]["lon"][i])
         assert 2 * dev == pytest.approx(dist, rel=1e-3, abs=0.01)
     # two receivers on one ship: metres to tens of metres apart, not kilometres
@@ -71,9 +74,12 @@ def test_two_real_receivers_as_two_units(palmer):
     assert any("fewer than one independent sample" in n for n in lat.notes)
     assert lat.kurtosis < -2 and lat.k_pie == 1.0
     # with the samples taken as independent (correlation time 0) the limit exists
-    res0 = analyse_deviations(palmer, DeviationConfig(interval_s=60.0, window_s=3600.0,
-                                                      max_interp_gap_s=5.0,
-                                                      correlation_time_s=0.0))
+    res0 = analyse_deviations(
+        palmer,
+        DeviationConfig(
+            interval_s=60.0, window_s=3600.0, max_interp_gap_s=5.0, correlation_time_s=0.0
+        ),
+    )
     lat0 = res0.whole.units["ins1"].channels["lat"]
     assert lat0.n_eff == 11 and lat0.limit == pytest.approx(lat0.k_hm * lat0.m_y)
 
@@ -96,10 +102,19 @@ def test_a_unit_ending_early_invents_no_deviation(palmer):
     # the true disagreement: distance between the receivers' fixes nearest in time
     geod = geographiclib.Geodesic.WGS84
     a, b = palmer["ins1"], palmer["ins2"]
-    for t, n, e in zip(res.time_ns[used], res.samples["ins1"]["lat"][used],
-                       res.samples["ins1"]["lon"][used], strict=True):
+    for t, n, e in zip(
+        res.time_ns[used],
+        res.samples["ins1"]["lat"][used],
+        res.samples["ins1"]["lon"][used],
+        strict=True,
+    ):
         ia = np.argsort(np.abs(a.pos_time_ns - t))[:2]
         ib = np.argsort(np.abs(b.pos_time_ns - t))[:2]
-        dist = max(geod.Inverse(*np.degrees([a.lat_rad[i], a.lon_rad[i], b.lat_rad[k],
-                                             b.lon_rad[k]]))["s12"] for i in ia for k in ib)
+        dist = max(
+            geod.Inverse(*np.degrees([a.lat_rad[i], a.lon_rad[i], b.lat_rad[k], b.lon_rad[k]]))[
+                "s12"
+            ]
+            for i in ia
+            for k in ib
+        )
         assert 2 * math.hypot(n, e) <= dist + 0.05

@@ -53,9 +53,18 @@ def async_voyage(hours, step, phases, params=None, ground=True, seed=4):
     simulator's 5 Hz frames of each INS decimated at that unit's own phase.
     Returns (sim, units, own) with own[unit] the unit's reading times (ns)."""
     base = params or model.SimParams()
-    p = replace(base, duration_s=hours * 3600.0, seed=seed, compass_hz=1.0, log_hz=1.0,
-                ins_hz=float(BASE_HZ), gnss_hz=1.0, aux_hz=0.0, legs=turning_legs(hours),
-                initial_heading_deg=90.0)
+    p = replace(
+        base,
+        duration_s=hours * 3600.0,
+        seed=seed,
+        compass_hz=1.0,
+        log_hz=1.0,
+        ins_hz=float(BASE_HZ),
+        gnss_hz=1.0,
+        aux_hz=0.0,
+        legs=turning_legs(hours),
+        initial_heading_deg=90.0,
+    )
     sim = model.simulate(p)
     t0 = int(sim.truth["time_ns"].iloc[0])
     units, own = {}, {}
@@ -67,8 +76,9 @@ def async_voyage(hours, step, phases, params=None, ground=True, seed=4):
             f = f[f["source"].isin(keys)]
             k = (f["time_ns"].to_numpy() - t0) // (NS // BASE_HZ)
             fr[kind] = f[k % step == ph]
-        units[u] = unit_series_from_frames(fr["position"], fr["heading"],
-                                           fr["ground"] if ground else None)
+        units[u] = unit_series_from_frames(
+            fr["position"], fr["heading"], fr["ground"] if ground else None
+        )
         own[u] = fr["position"]["time_ns"].to_numpy()
     return sim, units, own
 
@@ -117,8 +127,9 @@ def test_asynchronous_units_give_the_true_deviations_in_turns(phased):
     # 00:00 and 12:00 are readings of ins1 only (ins2/ins3 start 0.2/0.4 s later and end
     # 0.6/0.8 s earlier): outside their data, not sampled, counted with the reason
     assert list(res.time_ns) == [t0 + h * 3600 * NS for h in (0, *range(1, 12), 12)]
-    assert res.skipped == {c: {"outside unit span": 2, "gap too long": 0}
-                           for c in ("lat", "lon", "course")}
+    assert res.skipped == {
+        c: {"outside unit span": 2, "gap too long": 0} for c in ("lat", "lon", "course")
+    }
     truth = true_deviations(sim, units, res.time_ns)
     for c, tol in (("lat", 2.0), ("lon", 2.0), ("course", 0.01)):
         got = np.vstack([res.samples[u][c] for u in UNITS])
@@ -141,10 +152,12 @@ def test_holding_the_nearest_reading_at_the_ends_would_fail_the_same_check(phase
     held = {}
     for u in UNITS:
         un = units[u]
-        pos = interpolate_at(un.pos_time_ns, np.vstack([un.lat_rad, un.lon_rad]), ends, 120.0,
-                             circular=(False, True))
-        hdg = interpolate_at(un.hdg_time_ns, un.heading_rad[None, :], ends, 120.0,
-                             circular=(True,))[0]
+        pos = interpolate_at(
+            un.pos_time_ns, np.vstack([un.lat_rad, un.lon_rad]), ends, 120.0, circular=(False, True)
+        )
+        hdg = interpolate_at(
+            un.hdg_time_ns, un.heading_rad[None, :], ends, 120.0, circular=(True,)
+        )[0]
         held[u] = (pos[0], pos[1], hdg)
     lat = np.vstack([held[u][0] for u in UNITS])
     lon = np.vstack([held[u][1] for u in UNITS])
@@ -159,8 +172,13 @@ def _smooth(u):
     """A unit's smooth errors only (oscillations, drift, biases): no white noise and no
     Gauss-Markov steps between readings, so the truth between readings is exact."""
     inf = math.inf
-    return replace(u, gm_m=model.GM(0.0, inf), white_m=0.0, heading_gm_deg=model.GM(0.0, inf),
-                   heading_white_deg=0.0)
+    return replace(
+        u,
+        gm_m=model.GM(0.0, inf),
+        white_m=0.0,
+        heading_gm_deg=model.GM(0.0, inf),
+        heading_white_deg=0.0,
+    )
 
 
 def test_the_units_own_velocity_follows_the_turn_between_sparse_readings():
@@ -255,15 +273,18 @@ def test_a_unit_ending_early_invents_no_deviation():
     # no instant after ins2's last reading is used, the skipped instants are counted, and
     # no deviation exceeds half the units' true disagreement (here a constant 40 m north)
     t = T0 + np.arange(0, 2 * 3600 + 1, 1, dtype=np.int64) * NS + 300_000_000
-    lat, lon = add_offset_ne(math.radians(54.0), math.radians(18.0), np.zeros(t.size),
-                             6.0 * (t - T0) / NS)
+    lat, lon = add_offset_ne(
+        math.radians(54.0), math.radians(18.0), np.zeros(t.size), 6.0 * (t - T0) / NS
+    )
     lat, lon = np.broadcast_to(lat, t.shape).copy(), np.broadcast_to(lon, t.shape).copy()
     la2, lo2 = add_offset_ne(lat, lon, 40.0, 0.0)
     end2 = T0 + (3600 + 50 * 60) * NS + 500_000_000  # ins2's last reading: 01:50:00.3
     k = t <= end2
     hdg = np.full(t.size, math.pi / 2)
-    units = {"ins1": UnitSeries(t, lat, lon, t, hdg),
-             "ins2": UnitSeries(t[k], la2[k], lo2[k], t[k], hdg[k])}
+    units = {
+        "ins1": UnitSeries(t, lat, lon, t, hdg),
+        "ins2": UnitSeries(t[k], la2[k], lo2[k], t[k], hdg[k]),
+    }
     res = analyse_deviations(units, DeviationConfig(interval_s=60.0, window_s=3600.0))
     used = ~np.isnan(res.samples["ins1"]["lat"])
     assert res.time_ns[used].min() >= t[0] and res.time_ns[used].max() <= end2

@@ -93,8 +93,12 @@ def voyage(rms_m, rms_course_deg, days=7, step_s=10.0, gnss_sigma_m=3.0, seed=0)
         lat, lon = add_offset_ne(true_lat, true_lon, en[j], ee[j])
         units[name] = UnitSeries(t_ns, lat, lon, t_ns, wrap_2pi(true_hdg + np.radians(ec[j])))
         truth[name] = tuple(np.interp(hours, t_s, e) for e in (en[j], ee[j], ec[j]))
-    glat, glon = add_offset_ne(true_lat, true_lon, rng.normal(0, gnss_sigma_m, len(t_s)),
-                               rng.normal(0, gnss_sigma_m, len(t_s)))
+    glat, glon = add_offset_ne(
+        true_lat,
+        true_lon,
+        rng.normal(0, gnss_sigma_m, len(t_s)),
+        rng.normal(0, gnss_sigma_m, len(t_s)),
+    )
     reference = UnitSeries(t_ns, glat, glon, t_ns, true_hdg % (2 * np.pi))
     return units, reference, truth
 
@@ -116,7 +120,8 @@ def test_reference_rms_matches_the_truth_within_2_percent():
             days = [w.units[name].reference[c] for w in res.windows]
             assert [d.n for d in days] == [23, 24, 24, 24, 24, 24, 24, 1]
             pooled = sum(d.m_x**2 * (d.n - 1.45) for d in days[:-1]) / sum(
-                d.n - 1.45 for d in days[:-1])
+                d.n - 1.45 for d in days[:-1]
+            )
             avg = res.reference_average[name][c]
             assert avg.days == 7 and avg.m_x == pytest.approx(math.sqrt(pooled), rel=1e-12)
             assert avg.k_star == pytest.approx(r.k_star, rel=0.03)
@@ -215,12 +220,16 @@ def test_to_dict_validates_against_the_report_schema():
     if not path.exists():
         pytest.skip("report schema not present")
     full = json.loads(path.read_text())
-    validator = jsonschema.Draft202012Validator({"$defs": full["$defs"], **full["$defs"]["deviation"]})
+    validator = jsonschema.Draft202012Validator(
+        {"$defs": full["$defs"], **full["$defs"]["deviation"]}
+    )
     units, ref, _ = voyage((150.0, 400.0, 250.0), (0.05, 0.15, 0.1), days=3, step_s=60.0)
     cfg = DeviationConfig(apriori={"ins1": {"lat_m": 100.0}})
-    for d in (analyse_deviations(units, cfg, reference=ref).to_dict(),
-              analyse_deviations({k: units[k] for k in ("ins1", "ins2")}).to_dict(),
-              analyse_deviations({"ins3": units["ins3"]}).to_dict()):
+    for d in (
+        analyse_deviations(units, cfg, reference=ref).to_dict(),
+        analyse_deviations({k: units[k] for k in ("ins1", "ins2")}).to_dict(),
+        analyse_deviations({"ins3": units["ins3"]}).to_dict(),
+    ):
         d["reference_source"] = None
         errors = [f"{list(e.path)}: {e.message}" for e in validator.iter_errors(d)]
         assert errors == []
@@ -233,8 +242,17 @@ def test_reference_rms_matches_the_project_simulators_truth():
     model = pytest.importorskip("dracc.sim.model")
     from dracc.math.deviation import unit_series_from_frames
 
-    sim = model.simulate(model.SimParams(duration_s=3 * DAY_S, seed=3, compass_hz=0.1,
-                                         log_hz=0.1, ins_hz=0.1, gnss_hz=0.1, aux_hz=0.0))
+    sim = model.simulate(
+        model.SimParams(
+            duration_s=3 * DAY_S,
+            seed=3,
+            compass_hz=0.1,
+            log_hz=0.1,
+            ins_hz=0.1,
+            gnss_hz=0.1,
+            aux_hz=0.0,
+        )
+    )
 
     def unit(role):
         keys = [k for k, r in sim.roles.items() if r == role]
@@ -248,6 +266,8 @@ def test_reference_rms_matches_the_project_simulators_truth():
     for u in units:
         for c, col in (("lat", f"{u}_north_m"), ("lon", f"{u}_east_m")):
             r = res.whole.units[u].reference[c]
-            at_instants = np.interp(res.time_ns.astype(float), errors_ns, sim.errors[col].to_numpy())
+            at_instants = np.interp(
+                res.time_ns.astype(float), errors_ns, sim.errors[col].to_numpy()
+            )
             assert r.rmse == pytest.approx(math.sqrt(np.mean(at_instants**2)), rel=0.005), (u, c)
             assert r.rmse == pytest.approx(sim.unit_rms[u][f"{c}_m"], rel=0.02), (u, c)

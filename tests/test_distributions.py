@@ -47,7 +47,9 @@ def test_student_t_against_scipy_stats(df):
 def test_student_t_hand_value():
     # t with 2 degrees of freedom: F^-1(q) = (2q - 1) / sqrt(2 q (1 - q))
     q = 0.9
-    assert float(dist.t_ppf(q, 2.0)) == pytest.approx((2 * q - 1) / math.sqrt(2 * q * (1 - q)), rel=1e-12)
+    assert float(dist.t_ppf(q, 2.0)) == pytest.approx(
+        (2 * q - 1) / math.sqrt(2 * q * (1 - q)), rel=1e-12
+    )
 
 
 @pytest.mark.parametrize("a", [0.3, 1.0, 2.5, 40.0])
@@ -62,8 +64,9 @@ def test_binomial_cdf_against_scipy_stats_and_edges():
     for n in (1, 5, 24, 120):
         for p in (0.05, 0.5, 0.9545, 0.99):
             k = np.arange(-2, n + 3)
-            np.testing.assert_allclose(dist.binom_cdf(k, n, p), stats.binom.cdf(k, n, p),
-                                       rtol=1e-12, atol=1e-300)
+            np.testing.assert_allclose(
+                dist.binom_cdf(k, n, p), stats.binom.cdf(k, n, p), rtol=1e-12, atol=1e-300
+            )
     # hand value: P(K <= 1), K ~ B(3, 1/2) = (1 + 3) / 8
     assert float(dist.binom_cdf(1, 3, 0.5)) == pytest.approx(0.5, rel=1e-15)
     assert float(dist.binom_cdf(2.7, 3, 0.5)) == pytest.approx(7 / 8, rel=1e-15)
@@ -74,8 +77,9 @@ def test_f_against_scipy_stats(dfn, dfd):
     q = np.array([1e-6, 0.01, 0.05, 0.5, 0.95, 0.99, 1 - 1e-6])
     np.testing.assert_allclose(dist.f_ppf(q, dfn, dfd), stats.f.ppf(q, dfn, dfd), rtol=1e-10)
     x = np.array([0.0, 0.1, 1.0, 2.0, 10.0, 100.0])
-    np.testing.assert_allclose(dist.f_cdf(x, dfn, dfd), stats.f.cdf(x, dfn, dfd), rtol=1e-12,
-                               atol=1e-300)
+    np.testing.assert_allclose(
+        dist.f_cdf(x, dfn, dfd), stats.f.cdf(x, dfn, dfd), rtol=1e-12, atol=1e-300
+    )
 
 
 def test_f_hand_values():

@@ -104,11 +104,13 @@ def test_truth_inside_2m_as_often_as_2drms_promises():
     per_leg = int(3600 / DT_S)
     for k0 in range(0, t.size, per_leg):
         sl = slice(k0, min(k0 + per_leg, t.size))
-        lat_dr[:, sl], lon_dr[:, sl] = integrate_ne(t[sl], vn_m[:, sl], ve_m[:, sl],
-                                                    fix_lat[:, k0], fix_lon[:, k0])
+        lat_dr[:, sl], lon_dr[:, sl] = integrate_ne(
+            t[sl], vn_m[:, sl], ve_m[:, sl], fix_lat[:, k0], fix_lon[:, k0]
+        )
     np.testing.assert_allclose(lat_dr[0], track.lat_rad, rtol=0, atol=1e-13)
-    epochs = np.array([k0 + m * int(600 / DT_S) for k0 in range(0, t.size - 1, per_leg)
-                       for m in range(1, 6)])
+    epochs = np.array(
+        [k0 + m * int(600 / DT_S) for k0 in range(0, t.size - 1, per_leg) for m in range(1, 6)]
+    )
     dn, de = offset_ne_m(lat_dr[:, epochs], lon_dr[:, epochs], lat_t[:, epochs], lon_t[:, epochs])
     inside = np.hypot(dn, de) <= track.radius_2m_m[epochs]
     frac = inside.mean()
@@ -129,8 +131,9 @@ def _verdicts(seed, factor, runs, hours=HOURS):
     out = []
     for r in range(runs):
         fixes = (t[::every], fix_lat[r, ::every], fix_lon[r, ::every])
-        tr = dead_reckon(t, hdg[r], spd[r], fixes=fixes, errors=CFG, reset_s="1h",
-                         epoch_interval_s=600.0)
+        tr = dead_reckon(
+            t, hdg[r], spd[r], fixes=fixes, errors=CFG, reset_s="1h", epoch_interval_s=600.0
+        )
         out.append(dr_consistency(tr, t, lat_t[r], lon_t[r]))
     return out
 
@@ -140,7 +143,8 @@ def test_errors_twice_the_configured_ones_are_flagged_inconsistent():
     (on 6 legs a run with doubled errors can still look fine by chance)."""
     cons = _verdicts(11, 2.0, 6, hours=24)
     assert all(c.verdict == "inconsistent (circle too small)" for c in cons), [
-        (c.inside_fraction, c.chi2_statistic) for c in cons]
+        (c.inside_fraction, c.chi2_statistic) for c in cons
+    ]
     assert np.mean([c.inside_fraction for c in cons]) < 0.85
 
 
@@ -226,8 +230,16 @@ def test_real_yacht_log_hakefjord_dr_against_gps(real_dir):
 
     heading = np.mod(per_second(hdg_a) * DEG_RAD + 3.0 * DEG_RAD, 2 * math.pi)
     speed = per_second(vhw_a) * KN_MPS
-    tr = dead_reckon(t, heading, speed, fixes=(ref_a[:, 0], ref_a[:, 1], ref_a[:, 2]),
-                     reset_s="10min", epoch_interval_s=60.0, max_gap_s=10.0, errors=CFG)
+    tr = dead_reckon(
+        t,
+        heading,
+        speed,
+        fixes=(ref_a[:, 0], ref_a[:, 1], ref_a[:, 2]),
+        reset_s="10min",
+        epoch_interval_s=60.0,
+        max_gap_s=10.0,
+        errors=CFG,
+    )
     assert tr.n_legs == 3 and tr.n_breaks == 0
     c = dr_consistency(tr, ref_a[:, 0], ref_a[:, 1], ref_a[:, 2], max_ref_gap_s=10.0)
     assert c.n_epochs == 22

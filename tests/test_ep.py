@@ -30,12 +30,23 @@ from dracc.math.ep import (
 )
 
 LAT0, LON0 = 50.0 * DEG_RAD, -4.0 * DEG_RAD
-PRIOR = ErrorPrior(current_sigma_mps=0.7 * KN_MPS, heading_sigma_rad=0.8 * DEG_RAD,
-                   scale_sigma=0.013, fix_sigma_m=10.0)
+PRIOR = ErrorPrior(
+    current_sigma_mps=0.7 * KN_MPS,
+    heading_sigma_rad=0.8 * DEG_RAD,
+    scale_sigma=0.013,
+    fix_sigma_m=10.0,
+)
 
 
-def _voyage(hours=6.0, current_ne=(0.4, -0.3), eps_deg=0.6, scale=0.03, fix_noise_m=3.0,
-            seed=0, turn_every_s=5400.0):
+def _voyage(
+    hours=6.0,
+    current_ne=(0.4, -0.3),
+    eps_deg=0.6,
+    scale=0.03,
+    fix_noise_m=3.0,
+    seed=0,
+    turn_every_s=5400.0,
+):
     """True and measured series on a 1 s grid; courses change every ``turn_every_s``.
 
     Measured heading = true course through the water + eps (reads high), measured speed =
@@ -57,8 +68,15 @@ def _voyage(hours=6.0, current_ne=(0.4, -0.3), eps_deg=0.6, scale=0.03, fix_nois
 
 
 def _ep(t, heading, log, fixes, **kw):
-    tr = dead_reckon(t, heading, log, fixes=fixes, reset_s=kw.pop("reset_s", "1h"),
-                     epoch_interval_s=600.0, covariance=False)
+    tr = dead_reckon(
+        t,
+        heading,
+        log,
+        fixes=fixes,
+        reset_s=kw.pop("reset_s", "1h"),
+        epoch_interval_s=600.0,
+        covariance=False,
+    )
     return tr, estimate_position(tr, *fixes, PRIOR, ref_max_gap_s=5.0, **kw)
 
 
@@ -66,7 +84,9 @@ def test_sensitivities_are_the_jacobian_of_the_water_velocity():
     c, v = 0.7, 5.0
     J = sensitivities(np.array([v * math.cos(c)]), np.array([v * math.sin(c)]))[0]
     h = 1e-6
-    d_eps = (np.array([v * math.cos(c + h), v * math.sin(c + h)]) - [v * math.cos(c), v * math.sin(c)]) / h
+    d_eps = (
+        np.array([v * math.cos(c + h), v * math.sin(c + h)]) - [v * math.cos(c), v * math.sin(c)]
+    ) / h
     d_s = np.array([v * math.cos(c), v * math.sin(c)])  # d/ds of (1 + s) v
     np.testing.assert_allclose(J[:, 0], d_eps, rtol=1e-5)
     np.testing.assert_allclose(J[:, 1], d_s, rtol=1e-12)
@@ -84,7 +104,10 @@ def test_learns_current_heading_and_scale_corrections_of_a_known_voyage():
     sd = np.sqrt(var)
     cur = x[2:4] + x[4:6]
     np.testing.assert_allclose(cur, [0.4, -0.3], atol=3 * math.hypot(sd[2], sd[4]) + 0.01)
-    assert abs(x[EPS] + x[DELTA] - (-0.6 * DEG_RAD)) < 3 * math.hypot(sd[EPS], sd[DELTA]) + 0.05 * DEG_RAD
+    assert (
+        abs(x[EPS] + x[DELTA] - (-0.6 * DEG_RAD))
+        < 3 * math.hypot(sd[EPS], sd[DELTA]) + 0.05 * DEG_RAD
+    )
     assert abs(x[SCALE] - (1 / 1.03 - 1)) < 3 * sd[SCALE] + 0.002
     h = m.history
     assert h.updated.sum() > 50 and np.all(np.isfinite(h.current_ne_mps))
@@ -144,8 +167,9 @@ def test_trace_parts_add_up_to_the_covariance_trace():
 
 def test_single_point_grid_gives_that_points_covariance_and_no_mixture_spread():
     t, hdg, log, fixes, _, _ = _voyage(hours=3.0)
-    one = Hyperparameters(*(np.array([v]) for v in (0.1 * KN_MPS, 7200.0, 0.05 * KN_MPS, 300.0,
-                                                    0.0, 3.0)))
+    one = Hyperparameters(
+        *(np.array([v]) for v in (0.1 * KN_MPS, 7200.0, 0.05 * KN_MPS, 300.0, 0.0, 3.0))
+    )
     tr, est = _ep(t, hdg, log, fixes, hyper=one)
     assert est.model.hyper.size == 1 and np.all(est.model.weights == 1.0)
     P = est.track.P_m2[tr.leg >= 0]
@@ -177,7 +201,9 @@ def test_heading_prior_uses_sec_phi_for_a_gyro_only():
     bias, lee = 0.75 / 1.96 * DEG_RAD, 0.5 * DEG_RAD
     at_54 = heading_prior_rad(bias, lee, 54.6 * DEG_RAD, gyro=True)
     assert at_54 == pytest.approx(math.hypot(bias / math.cos(54.6 * DEG_RAD), lee))
-    assert heading_prior_rad(bias, lee, 54.6 * DEG_RAD, gyro=False) == pytest.approx(math.hypot(bias, lee))
+    assert heading_prior_rad(bias, lee, 54.6 * DEG_RAD, gyro=False) == pytest.approx(
+        math.hypot(bias, lee)
+    )
     # METHODS section 7: +-0.75 deg sec phi at 54.6 N is 1.30 deg (95 %), sigma 0.66 deg
     assert bias / math.cos(54.6 * DEG_RAD) / DEG_RAD == pytest.approx(0.66, abs=0.005)
 
@@ -189,9 +215,16 @@ def test_grid_spans_the_documented_ranges():
     np.testing.assert_allclose(g.noise_psd_m2ps, 2 * g.noise_sigma_mps**2 * g.noise_tau_s)
 
 
-@pytest.mark.parametrize("span_h, reset_s, epoch_s", [(24.0, 3600.0, 600.0), (8.0, 3600.0, 600.0),
-                                                      (6.0, 1800.0, 300.0), (0.37, 120.0, 20.0),
-                                                      (0.04, 30.0, 5.0)])
+@pytest.mark.parametrize(
+    "span_h, reset_s, epoch_s",
+    [
+        (24.0, 3600.0, 600.0),
+        (8.0, 3600.0, 600.0),
+        (6.0, 1800.0, 300.0),
+        (0.37, 120.0, 20.0),
+        (0.04, 30.0, 5.0),
+    ],
+)
 def test_auto_schedule(span_h, reset_s, epoch_s):
     r, label, e = dr_schedule(DeadReckoningConfig(), span_h * 3600.0)
     assert (r, e) == (reset_s, epoch_s) and label.startswith("auto (")

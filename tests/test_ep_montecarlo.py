@@ -38,15 +38,24 @@ def random_voyage(seed: int, hours: float = HOURS) -> SimParams:
     r = np.random.default_rng(7919 + seed)
     leeway = r.random() < 0.5
     return SimParams(
-        duration_s=hours * 3600.0, seed=seed, compass="gyro" if r.random() < 0.5 else "magnetic",
-        compass_hz=1.0, aux_hz=0.0, ins_hz=0.1,
-        start_lat_deg=r.uniform(-60.0, 60.0), start_lon_deg=r.uniform(-180.0, 180.0),
-        speed_kn=r.uniform(6.0, 20.0), initial_heading_deg=r.uniform(0.0, 360.0),
-        log_scale=r.uniform(-0.05, 0.05), gyro_offset_deg=r.uniform(-1.0, 1.0),
-        current_drift_kn=r.uniform(0.1, 2.0), current_set_deg=r.uniform(0.0, 360.0),
+        duration_s=hours * 3600.0,
+        seed=seed,
+        compass="gyro" if r.random() < 0.5 else "magnetic",
+        compass_hz=1.0,
+        aux_hz=0.0,
+        ins_hz=0.1,
+        start_lat_deg=r.uniform(-60.0, 60.0),
+        start_lon_deg=r.uniform(-180.0, 180.0),
+        speed_kn=r.uniform(6.0, 20.0),
+        initial_heading_deg=r.uniform(0.0, 360.0),
+        log_scale=r.uniform(-0.05, 0.05),
+        gyro_offset_deg=r.uniform(-1.0, 1.0),
+        current_drift_kn=r.uniform(0.1, 2.0),
+        current_set_deg=r.uniform(0.0, 360.0),
         current_noise_kn=GM(r.uniform(0.05, 0.5), r.uniform(1.0, 24.0) * 3600.0),
         leeway_deg=r.uniform(-3.0, 3.0) if leeway else 0.0,
-        leeway_noise_deg=GM(0.3, 600.0) if leeway else GM(0.0, 600.0))
+        leeway_noise_deg=GM(0.3, 600.0) if leeway else GM(0.0, 600.0),
+    )
 
 
 def truth_inside(seed: int, hours: float = HOURS):
@@ -56,8 +65,9 @@ def truth_inside(seed: int, hours: float = HOURS):
     e = a.dead_reckoning.epochs
     t = sv.truth["time_ns"].to_numpy()
     i = np.searchsorted(t, e.time_ns)
-    dn, de = offset_ne_m(e.lat_rad, e.lon_rad, sv.truth["lat_rad"].to_numpy()[i],
-                         sv.truth["lon_rad"].to_numpy()[i])
+    dn, de = offset_ne_m(
+        e.lat_rad, e.lon_rad, sv.truth["lat_rad"].to_numpy()[i], sv.truth["lon_rad"].to_numpy()[i]
+    )
     d = np.hypot(dn, de)[e.scored]
     radius = e.radius_2m_m[e.scored]
     return d <= radius, d / (0.5 * radius)
@@ -83,8 +93,10 @@ def test_shipped_sample_and_simulate_seed_11_are_judged_consistent():
     from dracc.pipeline.analysis import analyse
 
     sample = Path(__file__).resolve().parents[1] / "sample_logs" / "day" / "voyage_day.mcap"
-    for a in (analyse([sample], Config()),
-              analyse_voyage(voyage_from_sim(simulate(SimParams(seed=11))), Config())):
+    for a in (
+        analyse([sample], Config()),
+        analyse_voyage(voyage_from_sim(simulate(SimParams(seed=11))), Config()),
+    ):
         dr = a.dead_reckoning
         assert dr.scored_out_of_sample and dr.n_scored >= 30
         assert dr.verdict.startswith("consistent"), dr.verdict

@@ -32,8 +32,18 @@ H = 3600 * NS_PER_S
 @pytest.fixture(scope="module")
 def sim():
     """3 h at 1 Hz: gyro, log, three INS, GNSS; a 90 deg turn at 1.5 h."""
-    return simulate(SimParams(duration_s=3 * 3600, seed=3, compass_hz=1, log_hz=1, ins_hz=1,
-                              gnss_hz=1, aux_hz=0, legs=((0, 60), (5400, 150))))
+    return simulate(
+        SimParams(
+            duration_s=3 * 3600,
+            seed=3,
+            compass_hz=1,
+            log_hz=1,
+            ins_hz=1,
+            gnss_hz=1,
+            aux_hz=0,
+            legs=((0, 60), (5400, 150)),
+        )
+    )
 
 
 def _frames(sim) -> dict[str, pd.DataFrame]:
@@ -42,7 +52,9 @@ def _frames(sim) -> dict[str, pd.DataFrame]:
 
 def _rows(df: pd.DataFrame, source: str, a_ns: int, b_ns: int) -> np.ndarray:
     t = df["time_ns"].to_numpy(np.int64)
-    return np.flatnonzero((df["source"].astype(str).to_numpy() == source) & (t >= a_ns) & (t <= b_ns))
+    return np.flatnonzero(
+        (df["source"].astype(str).to_numpy() == source) & (t >= a_ns) & (t <= b_ns)
+    )
 
 
 def _t0(sim) -> int:
@@ -62,10 +74,17 @@ def test_clean_simulated_voyage_has_no_fault(sim):
     assert detect_faults(sim.frames) == []
 
 
-@pytest.mark.parametrize("name", ["VDRplayer/Hakefjord.txt", "gpsd/bundg_zeus_9.log",
-                                  "anemomind/Irene/2014/20140611/NMEA0048.TXT",
-                                  "signalk-server/gofree-merrimac.log", "signalk-server/plaka.log",
-                                  "openrvdas/NBP1406_gyr1-2014-08-01"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "VDRplayer/Hakefjord.txt",
+        "gpsd/bundg_zeus_9.log",
+        "anemomind/Irene/2014/20140611/NMEA0048.TXT",
+        "signalk-server/gofree-merrimac.log",
+        "signalk-server/plaka.log",
+        "openrvdas/NBP1406_gyr1-2014-08-01",
+    ],
+)
 def test_real_logs_have_no_fault(name):
     path = REAL / name
     if not path.exists():
@@ -106,8 +125,9 @@ def test_jump_that_never_comes_back_covers_the_rest(sim):
     pos = f["position"]
     t_jump = _t0(sim) + 2 * H
     i = _rows(pos, "INS1", t_jump, 2**62)
-    nlat, nlon = add_offset_ne(pos.loc[i, "lat_rad"].to_numpy(), pos.loc[i, "lon_rad"].to_numpy(),
-                               0.0, 50 * NMI_M)
+    nlat, nlon = add_offset_ne(
+        pos.loc[i, "lat_rad"].to_numpy(), pos.loc[i, "lon_rad"].to_numpy(), 0.0, 50 * NMI_M
+    )
     pos.loc[i, "lat_rad"] = nlat
     pos.loc[i, "lon_rad"] = nlon
     (fl,) = detect_faults(f)
@@ -162,11 +182,18 @@ def test_compass_stuck_at_zero_through_a_turn(sim):
     i = _rows(hd, "GYRO", a, b)
     hd.loc[i, "heading_rad"] = 0.0
     (fl,) = detect_faults(f)
-    assert (fl.kind, fl.source, fl.frame, fl.start_ns, fl.end_ns) == ("stuck_heading", "GYRO",
-                                                                      "heading", a, b)
+    assert (fl.kind, fl.source, fl.frame, fl.start_ns, fl.end_ns) == (
+        "stuck_heading",
+        "GYRO",
+        "heading",
+        a,
+        b,
+    )
     v = dict(fl.values)
     assert v["heading_deg"] == 0.0
-    assert 90.0 <= v["other_turn_deg"] < 100.0  # the INS headings saw the 90 deg turn (+ yaw, noise)
+    assert (
+        90.0 <= v["other_turn_deg"] < 100.0
+    )  # the INS headings saw the 90 deg turn (+ yaw, noise)
     assert "stuck at 0.00 deg" in fl.message
 
 
@@ -191,9 +218,22 @@ def test_out_of_range_values_from_a_reader(sim):
     f["ground"].loc[g, "sog_mps"] = -3 * KN_MPS
     p = _rows(f["position"], "INS1", t, t)
     f["position"].loc[p, "lat_rad"] = 95 * DEG_RAD
-    f["rot"] = pd.concat([f["rot"], pd.DataFrame({
-        "time_ns": [t], "source": ["GYRO"], "talker": ["HE"], "sentence": ["ROT"], "line": [7],
-        "rot_radps": [99999 * DEG_RAD / 60]})], ignore_index=True)
+    f["rot"] = pd.concat(
+        [
+            f["rot"],
+            pd.DataFrame(
+                {
+                    "time_ns": [t],
+                    "source": ["GYRO"],
+                    "talker": ["HE"],
+                    "sentence": ["ROT"],
+                    "line": [7],
+                    "rot_radps": [99999 * DEG_RAD / 60],
+                }
+            ),
+        ],
+        ignore_index=True,
+    )
     faults = detect_faults(f)
     got = {(x.source, x.frame, x.values[0][0]): x for x in faults}
     assert {x.kind for x in faults} == {"out_of_range"}
@@ -210,14 +250,17 @@ def test_out_of_range_values_from_a_reader(sim):
 
 def test_negative_sog_through_the_nmea_reader(tmp_path):
     """The NMEA reader keeps '-3.0' knots of an RMC (a number); the faults flag it."""
+
     def cs(body: str) -> str:
         x = 0
         for c in body.encode():
             x ^= c
         return f"${body}*{x:02X}"
 
-    lines = [cs(f"GPRMC,1200{s:02d},A,5000.000,N,01000.000,E,{-3.0 if s == 5 else 0.1},90.0,010120,,")
-             for s in range(10)]
+    lines = [
+        cs(f"GPRMC,1200{s:02d},A,5000.000,N,01000.000,E,{-3.0 if s == 5 else 0.1},90.0,010120,,")
+        for s in range(10)
+    ]
     p = tmp_path / "neg.nmea"
     p.write_text("\r\n".join(lines) + "\r\n")
     v = read_logs([p], IngestConfig())
@@ -248,8 +291,12 @@ def test_config_section_and_validation(tmp_path):
     assert Config().faults.exclude is False
     with pytest.raises(ConfigError, match="unknown key"):
         config_from_dict({"faults": {"max_speed": 4}})
-    for bad in ({"max_speed_kn": -1.0}, {"jump_min_m": "big"}, {"stuck_min_s": math.nan},
-                {"exclude": "yes"}):
+    for bad in (
+        {"max_speed_kn": -1.0},
+        {"jump_min_m": "big"},
+        {"stuck_min_s": math.nan},
+        {"exclude": "yes"},
+    ):
         with pytest.raises(ConfigError, match=r"\[faults\]"):
             detect_faults({}, replace(FaultsConfig(), **bad))
 
@@ -270,8 +317,11 @@ def faulty_voyage(tmp_path_factory):
     """The simulated voyage with INS2 frozen for 2 h, written as NMEA and read back."""
     from dracc.sim.nmea_out import write_nmea
 
-    s = simulate(SimParams(duration_s=4 * 3600, seed=5, compass_hz=1, log_hz=1, ins_hz=1,
-                           gnss_hz=1, aux_hz=0))
+    s = simulate(
+        SimParams(
+            duration_s=4 * 3600, seed=5, compass_hz=1, log_hz=1, ins_hz=1, gnss_hz=1, aux_hz=0
+        )
+    )
     f = {k: v.copy() for k, v in s.frames.items()}
     pos = f["position"]
     t0 = int(pos["time_ns"].iloc[0])
@@ -313,11 +363,24 @@ def test_jump_and_return_of_a_moving_ship_is_one_fault():
     from dracc.sim import SimParams, simulate
     from dracc.sim.faults import parse_fault
 
-    sv = simulate(SimParams(duration_s=3600.0, seed=2, compass_hz=1.0, aux_hz=0.0, speed_kn=12.0,
-                            faults=(parse_fault("jump:GNSS@20min+10min=670m"),)))
+    sv = simulate(
+        SimParams(
+            duration_s=3600.0,
+            seed=2,
+            compass_hz=1.0,
+            aux_hz=0.0,
+            speed_kn=12.0,
+            faults=(parse_fault("jump:GNSS@20min+10min=670m"),),
+        )
+    )
     frames = {k: sv.frames.get(k, empty_frame(k)) for k in KINDS}
-    voyage = Voyage(frames, {k: SourceInfo(k, roles=[r]) for k, r in sv.roles.items()}, Rejects(),
-                    TimeEvents(), [])
+    voyage = Voyage(
+        frames,
+        {k: SourceInfo(k, roles=[r]) for k, r in sv.roles.items()},
+        Rejects(),
+        TimeEvents(),
+        [],
+    )
     jumps = [f for f in detect_faults(voyage) if f.kind == "jump"]
     assert len(jumps) == 1 and jumps[0].source == "GNSS"
     assert "back at" in jumps[0].message

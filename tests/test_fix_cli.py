@@ -43,53 +43,67 @@ def direct(lat, lon, azi_deg, s_m):
 # ------------------------------------------------------------------- the parser
 
 
-@pytest.mark.parametrize("text, axis, expected", [
-    ("54.6", "lat", 54.6),
-    ("-18.8", "lon", -18.8),
-    ("+7", "lon", 7.0),
-    ("54 36.5N", "lat", 54 + 36.5 / 60),
-    ("018 48.2E", "lon", 18 + 48.2 / 60),
-    ("54°36.5'N", "lat", 54 + 36.5 / 60),
-    ("54°36'30\"N", "lat", 54 + 36.5 / 60),
-    ("N54 36.5", "lat", 54 + 36.5 / 60),
-    ("12 30S", "lat", -12.5),
-    ("12 30 s", "lat", -12.5),
-    ("005 15.0W", "lon", -5.25),
-    ("0 30.0S", "lat", -0.5),
-    ("179 59.9W", "lon", -(179 + 59.9 / 60)),
-    ("54.6N", "lat", 54.6),
-    ("90S", "lat", -90.0),
-    ("  054° 36.5′ N ", "lat", 54 + 36.5 / 60),
-])
+@pytest.mark.parametrize(
+    "text, axis, expected",
+    [
+        ("54.6", "lat", 54.6),
+        ("-18.8", "lon", -18.8),
+        ("+7", "lon", 7.0),
+        ("54 36.5N", "lat", 54 + 36.5 / 60),
+        ("018 48.2E", "lon", 18 + 48.2 / 60),
+        ("54°36.5'N", "lat", 54 + 36.5 / 60),
+        ("54°36'30\"N", "lat", 54 + 36.5 / 60),
+        ("N54 36.5", "lat", 54 + 36.5 / 60),
+        ("12 30S", "lat", -12.5),
+        ("12 30 s", "lat", -12.5),
+        ("005 15.0W", "lon", -5.25),
+        ("0 30.0S", "lat", -0.5),
+        ("179 59.9W", "lon", -(179 + 59.9 / 60)),
+        ("54.6N", "lat", 54.6),
+        ("90S", "lat", -90.0),
+        ("  054° 36.5′ N ", "lat", 54 + 36.5 / 60),
+    ],
+)
 def test_coordinate_parser_hand_values(text, axis, expected):
     assert parse_coordinate_deg(text, axis) == pytest.approx(expected, abs=1e-12)
 
 
-@pytest.mark.parametrize("text, axis, reason", [
-    ("54 36.5E", "lat", "longitude hemisphere"),
-    ("018 48.2N", "lon", "latitude hemisphere"),
-    ("-54 36.5N", "lat", "not both"),
-    ("54 61N", "lat", "below 60"),
-    ("54 30 60N", "lat", "below 60"),
-    ("90 0.1N", "lat", "outside"),
-    ("181E", "lon", "outside"),
-    ("54.5 30N", "lat", "whole"),
-    ("54 30.5 10N", "lat", "whole"),
-    ("abc", "lat", "not a coordinate"),
-    ("", "lat", "not a coordinate"),
-    ("54 36.5NE", "lat", "not a coordinate"),
-    ("nan", "lat", "not a coordinate"),
-])
+@pytest.mark.parametrize(
+    "text, axis, reason",
+    [
+        ("54 36.5E", "lat", "longitude hemisphere"),
+        ("018 48.2N", "lon", "latitude hemisphere"),
+        ("-54 36.5N", "lat", "not both"),
+        ("54 61N", "lat", "below 60"),
+        ("54 30 60N", "lat", "below 60"),
+        ("90 0.1N", "lat", "outside"),
+        ("181E", "lon", "outside"),
+        ("54.5 30N", "lat", "whole"),
+        ("54 30.5 10N", "lat", "whole"),
+        ("abc", "lat", "not a coordinate"),
+        ("", "lat", "not a coordinate"),
+        ("54 36.5NE", "lat", "not a coordinate"),
+        ("nan", "lat", "not a coordinate"),
+    ],
+)
 def test_coordinate_parser_refuses(text, axis, reason):
     with pytest.raises(ValueError, match=reason):
         parse_coordinate_deg(text, axis)
 
 
-@pytest.mark.parametrize("text, unit_required, metres", [
-    ("2.4nmi", True, 2.4 * 1852), ("2.4nm", True, 2.4 * 1852), ("2.4 NM", True, 2.4 * 1852),
-    ("4cbl", True, 4 * 185.2), ("450m", True, 450.0), ("1.2km", True, 1200.0),
-    ("12", False, 12.0), (".5nmi", True, 926.0),
-])
+@pytest.mark.parametrize(
+    "text, unit_required, metres",
+    [
+        ("2.4nmi", True, 2.4 * 1852),
+        ("2.4nm", True, 2.4 * 1852),
+        ("2.4 NM", True, 2.4 * 1852),
+        ("4cbl", True, 4 * 185.2),
+        ("450m", True, 450.0),
+        ("1.2km", True, 1200.0),
+        ("12", False, 12.0),
+        (".5nmi", True, 926.0),
+    ],
+)
 def test_distance_parser(text, unit_required, metres):
     assert parse_distance_m(text, unit_required=unit_required) == pytest.approx(metres, rel=1e-15)
 
@@ -100,10 +114,15 @@ def test_distance_parser_refuses(text):
         parse_distance_m(text, unit_required=True)
 
 
-@pytest.mark.parametrize("deg, axis, text", [
-    (54 + 36.5 / 60, "lat", "54°36.500'N"), (-(5 + 15 / 60), "lon", "005°15.000'W"),
-    (54.99999999, "lat", "55°00.000'N"), (0.0, "lon", "000°00.000'E"),
-])
+@pytest.mark.parametrize(
+    "deg, axis, text",
+    [
+        (54 + 36.5 / 60, "lat", "54°36.500'N"),
+        (-(5 + 15 / 60), "lon", "005°15.000'W"),
+        (54.99999999, "lat", "55°00.000'N"),
+        (0.0, "lon", "000°00.000'E"),
+    ],
+)
 def test_format_dm(deg, axis, text):
     assert format_dm(deg, axis) == text
     assert parse_coordinate_deg(text, axis) == pytest.approx(deg, abs=1e-5 / 60)
@@ -124,8 +143,10 @@ def test_two_range_fix_matches_geographiclib(run_cli):
     assert geo_distance_m(j["lat_deg"], j["lon_deg"], *SHIP) < 0.02  # centimetres
     assert j["redundancy"] == 0 and j["chi2"] == pytest.approx(0.0, abs=1e-6)
     # the same fix given in nautical miles (numbers rounded to 1e-7 nmi = 0.2 mm)
-    args_nmi = [a if not a.endswith(",5") else a.replace(f"{r:.4f}m", f"{r / 1852:.7f}nmi")
-                for a, r in zip(args, [None, ranges[0], None, ranges[1]], strict=True)]
+    args_nmi = [
+        a if not a.endswith(",5") else a.replace(f"{r:.4f}m", f"{r / 1852:.7f}nmi")
+        for a, r in zip(args, [None, ranges[0], None, ranges[1]], strict=True)
+    ]
     j2 = fix_json(run_cli, *args_nmi, "--prior", "54 37.2N,18 46.8E")
     assert geo_distance_m(j2["lat_deg"], j2["lon_deg"], *SHIP) < 0.02
 
@@ -154,8 +175,13 @@ def test_bearing_and_range_fix_matches_geographiclib(run_cli, at):
         opt = "--bearing"
     else:
         brg, opt = azi_mark_to_ship, "--bearing-from-mark"
-    j = fix_json(run_cli, opt, f"{mark[0]},{mark[1]},{brg:.9f},0.5",
-                 "--range", f"{mark[0]},{mark[1]},{dist}m,10")
+    j = fix_json(
+        run_cli,
+        opt,
+        f"{mark[0]},{mark[1]},{brg:.9f},0.5",
+        "--range",
+        f"{mark[0]},{mark[1]},{dist}m,10",
+    )
     assert geo_distance_m(j["lat_deg"], j["lon_deg"], lat, lon) < 0.02
     # the ellipse of a range and a bearing from one mark: axes along and across the line
     across = dist * math.radians(0.5)
@@ -165,11 +191,14 @@ def test_bearing_and_range_fix_matches_geographiclib(run_cli, at):
     assert j["two_drms_m"] == pytest.approx(2 * math.hypot(across, 10.0), rel=1e-3)
 
 
-@pytest.mark.parametrize("heading, side, west_m", [
-    ("000", "starboard", 11.0),   # heading north, pier to starboard (east): ship west of it
-    ("180", "port", 11.0),        # heading south, pier to port (east): ship west
-    ("180", "starboard", -11.0),  # heading south, pier to starboard (west): ship east
-])
+@pytest.mark.parametrize(
+    "heading, side, west_m",
+    [
+        ("000", "starboard", 11.0),  # heading north, pier to starboard (east): ship west of it
+        ("180", "port", 11.0),  # heading south, pier to port (east): ship west
+        ("180", "starboard", -11.0),  # heading south, pier to starboard (west): ship east
+    ],
+)
 def test_pier_line_and_abeam_mark_berthed_reference_by_hand(run_cli, heading, side, west_m):
     """Pier A->B along a meridian; the reference point on the centreline; half-breadth 10 m,
     fenders 1 m: the reference point lies 11 m off the pier line, abeam of the mark."""
@@ -178,8 +207,13 @@ def test_pier_line_and_abeam_mark_berthed_reference_by_hand(run_cli, heading, si
     mark = direct(*a, 0.0, 120.0)[:2]
     expected = direct(*mark, 270.0 if west_m > 0 else 90.0, abs(west_m))[:2]
     a_b = f"{a[0]},{a[1]},{b[0]:.10f},{b[1]:.10f}"
-    j = fix_json(run_cli, "--pier", f"{a_b},{heading},{side},10,0.3,1",
-                 "--abeam", f"{mark[0]:.10f},{mark[1]:.10f},2")
+    j = fix_json(
+        run_cli,
+        "--pier",
+        f"{a_b},{heading},{side},10,0.3,1",
+        "--abeam",
+        f"{mark[0]:.10f},{mark[1]:.10f},2",
+    )
     assert geo_distance_m(j["lat_deg"], j["lon_deg"], *expected) < 0.01
     e = j["ellipse"]  # 0.3 m across the pier (east-west), 2 m along it (north)
     assert e["semi_major_m"] == pytest.approx(2.0, rel=1e-3)
@@ -195,8 +229,13 @@ def test_pier_with_reference_point_to_starboard_and_a_fix(run_cli):
     b = direct(*a, 0.0, 300.0)[:2]
     gnss = direct(*direct(*a, 0.0, 150.0)[:2], 270.0, 9.0)[:2]
     a_b = f"{a[0]},{a[1]},{b[0]:.10f},{b[1]:.10f}"
-    j = fix_json(run_cli, "--pier", f"{a_b},0,starboard,10,0.3,1,2",
-                 "--fix", f"{gnss[0]:.10f},{gnss[1]:.10f},5")
+    j = fix_json(
+        run_cli,
+        "--pier",
+        f"{a_b},0,starboard,10,0.3,1,2",
+        "--fix",
+        f"{gnss[0]:.10f},{gnss[1]:.10f},5",
+    )
     assert geo_distance_m(j["lat_deg"], j["lon_deg"], *gnss) < 0.01
 
 
@@ -216,8 +255,17 @@ def _schema_keys(schema) -> set[str]:
 
 def test_json_validates_and_every_key_is_documented(run_cli):
     jsonschema = pytest.importorskip("jsonschema")
-    j = fix_json(run_cli, "--fix", "54 36.0N,018 45.0E,15", "--range", "54.58,18.69,2.1nmi",
-                 "--bearing", "54.58,18.69,200", "--line", "54.6,18.7,54.62,18.8,8,-3")
+    j = fix_json(
+        run_cli,
+        "--fix",
+        "54 36.0N,018 45.0E,15",
+        "--range",
+        "54.58,18.69,2.1nmi",
+        "--bearing",
+        "54.58,18.69,200",
+        "--line",
+        "54.6,18.7,54.62,18.8,8,-3",
+    )
     jsonschema.validate(j, JSON_SCHEMA)
     assert j["schema"] == "dracc.fix/1" and j["method"] == "WLS" and j["weighted"] is True
     assert [r["row"] for r in j["residuals"]] == ["north", "east", "range", "bearing", "line"]
@@ -229,8 +277,16 @@ def test_json_validates_and_every_key_is_documented(run_cli):
 
 
 def test_json_is_strict_json_without_nan(run_cli):
-    code, out, _ = run_cli("fix", "--range", "54.63,18.73,3000m", "--range", "54.59,18.71,3500m",
-                           "--prior", "54.62,18.78", "--json")
+    code, out, _ = run_cli(
+        "fix",
+        "--range",
+        "54.63,18.73,3000m",
+        "--range",
+        "54.59,18.71,3500m",
+        "--prior",
+        "54.62,18.78",
+        "--json",
+    )
     assert code == 0
     j = json.loads(out, parse_constant=lambda c: pytest.fail(f"non-JSON constant {c}"))
     assert j["chi2_bound_95"] is None and j["consistent"] is None
@@ -300,29 +356,51 @@ def test_standardised_residuals_are_unit_normal_by_simulation():
 A_B = "54.5,18.6,54.503,18.6"
 
 
-@pytest.mark.parametrize("args, code, words", [
-    (["--range", "54.6,18.8,2.4"], ExitCode.USAGE, ["--range", "2.4", "unit"]),
-    (["--fix", "95,18"], ExitCode.USAGE, ["--fix", "95", "outside"]),
-    (["--fix", "54 36.5E,18"], ExitCode.USAGE, ["--fix", "LAT", "hemisphere"]),
-    (["--fix", "54.6"], ExitCode.USAGE, ["--fix", "LAT,LON[,SIGMA_M]"]),
-    (["--fix", "54.6,18.8,0"], ExitCode.USAGE, ["SIGMA_M", "> 0"]),
-    (["--bearing", "54.6,18.8,400"], ExitCode.USAGE, ["--bearing", "400"]),
-    (["--pier", f"{A_B},0,aft,10"], ExitCode.USAGE, ["--pier", "aft"]),
-    (["--abeam", "54.5,18.6"], ExitCode.USAGE, ["--abeam", "exactly one pier"]),
-    (["--nadir", "40,10,30,0.1", "--nadir", "45,30,35,0.1"], ExitCode.USAGE, ["--prior"]),
-    (["--prior", "54.6"], ExitCode.USAGE, ["--prior", "LAT,LON"]),
-    ([], ExitCode.USAGE, ["no observations"]),
-    (["--range", "54.6,18.8,2nmi"], ExitCode.INPUT, ["do not fix both"]),
-    (["--line", "54.5,18.6,54.6,18.6", "--line", "54.5,18.6,54.6,18.6,5,20"], ExitCode.INPUT,
-     ["do not fix both"]),
-    # two transits along meridians 650 m apart: great circles meeting at the pole
-    (["--line", "54.5,18.6,54.6,18.6", "--line", "54.5,18.61,54.6,18.61"], ExitCode.INPUT,
-     ["nearly parallel", "DOP"]),
-    (["--line", "54.5,18.6,54.6,18.6", "--line", "54.5,18.61,54.6,18.61", "--prior", "54.5,18.6"],
-     ExitCode.INPUT, ["nearly parallel"]),
-    (["--pier", f"{A_B},45,port,10", "--fix", "54.5,18.6"], ExitCode.INPUT,
-     ["--pier", "not along the pier"]),
-])
+@pytest.mark.parametrize(
+    "args, code, words",
+    [
+        (["--range", "54.6,18.8,2.4"], ExitCode.USAGE, ["--range", "2.4", "unit"]),
+        (["--fix", "95,18"], ExitCode.USAGE, ["--fix", "95", "outside"]),
+        (["--fix", "54 36.5E,18"], ExitCode.USAGE, ["--fix", "LAT", "hemisphere"]),
+        (["--fix", "54.6"], ExitCode.USAGE, ["--fix", "LAT,LON[,SIGMA_M]"]),
+        (["--fix", "54.6,18.8,0"], ExitCode.USAGE, ["SIGMA_M", "> 0"]),
+        (["--bearing", "54.6,18.8,400"], ExitCode.USAGE, ["--bearing", "400"]),
+        (["--pier", f"{A_B},0,aft,10"], ExitCode.USAGE, ["--pier", "aft"]),
+        (["--abeam", "54.5,18.6"], ExitCode.USAGE, ["--abeam", "exactly one pier"]),
+        (["--nadir", "40,10,30,0.1", "--nadir", "45,30,35,0.1"], ExitCode.USAGE, ["--prior"]),
+        (["--prior", "54.6"], ExitCode.USAGE, ["--prior", "LAT,LON"]),
+        ([], ExitCode.USAGE, ["no observations"]),
+        (["--range", "54.6,18.8,2nmi"], ExitCode.INPUT, ["do not fix both"]),
+        (
+            ["--line", "54.5,18.6,54.6,18.6", "--line", "54.5,18.6,54.6,18.6,5,20"],
+            ExitCode.INPUT,
+            ["do not fix both"],
+        ),
+        # two transits along meridians 650 m apart: great circles meeting at the pole
+        (
+            ["--line", "54.5,18.6,54.6,18.6", "--line", "54.5,18.61,54.6,18.61"],
+            ExitCode.INPUT,
+            ["nearly parallel", "DOP"],
+        ),
+        (
+            [
+                "--line",
+                "54.5,18.6,54.6,18.6",
+                "--line",
+                "54.5,18.61,54.6,18.61",
+                "--prior",
+                "54.5,18.6",
+            ],
+            ExitCode.INPUT,
+            ["nearly parallel"],
+        ),
+        (
+            ["--pier", f"{A_B},45,port,10", "--fix", "54.5,18.6"],
+            ExitCode.INPUT,
+            ["--pier", "not along the pier"],
+        ),
+    ],
+)
 def test_errors_are_one_line_with_documented_exit_code(run_cli, args, code, words):
     got, out, err = run_cli("fix", *args)
     assert got == code, err
@@ -354,11 +432,18 @@ def test_file_errors(run_cli, tmp_path):
 # ----------------------------------------------------------------- the TOML form
 
 
-OPTIONS = ["--fix", "54 36.0N,018 45.0E,15",
-           "--range", "54.58,18.69,2.1nmi,20",
-           "--bearing", "54.62,18.70,300.5,0.7",
-           "--bearing-from-mark", "54.6,18.8,255,1.5",
-           "--line", "54.6,18.7,54.62,18.8,8,-3"]
+OPTIONS = [
+    "--fix",
+    "54 36.0N,018 45.0E,15",
+    "--range",
+    "54.58,18.69,2.1nmi,20",
+    "--bearing",
+    "54.62,18.70,300.5,0.7",
+    "--bearing-from-mark",
+    "54.6,18.8,255,1.5",
+    "--line",
+    "54.6,18.7,54.62,18.8,8,-3",
+]
 
 TOML = """
 [prior]
@@ -413,7 +498,8 @@ def test_toml_file_gives_the_same_result_as_the_options(run_cli, tmp_path):
         np.testing.assert_allclose(other["cov_m2"], by_options["cov_m2"], rtol=1e-9)
         assert other["chi2"] == pytest.approx(by_options["chi2"], rel=1e-9)
         assert [r["residual"] for r in other["residuals"]] == pytest.approx(
-            [r["residual"] for r in by_options["residuals"]], rel=1e-6, abs=1e-9)
+            [r["residual"] for r in by_options["residuals"]], rel=1e-6, abs=1e-9
+        )
     assert by_file["prior"]["source"] == "given"
 
 
@@ -455,8 +541,13 @@ def test_real_log_two_receivers_fused_as_fixes(run_cli, real_dir):
     # the Garmin GGA at 09:22:14 and :16, averaged to 09:22:15 (a straight track over 2 s)
     garmin = tuple(np.mean([[deg(g[2], g[3], 2), deg(g[4], g[5], 3)] for g in ggas], axis=0))
     s1, s2 = 3.0, 10.0
-    j = fix_json(run_cli, "--fix", f"{text(rmc[3], rmc[4], 2)},{text(rmc[5], rmc[6], 3)},{s1}",
-                 "--fix", f"{garmin[0]:.10f},{garmin[1]:.10f},{s2}")
+    j = fix_json(
+        run_cli,
+        "--fix",
+        f"{text(rmc[3], rmc[4], 2)},{text(rmc[5], rmc[6], 3)},{s1}",
+        "--fix",
+        f"{garmin[0]:.10f},{garmin[1]:.10f},{s2}",
+    )
     inv = GEOD.Inverse(*fine, *garmin)
     s = inv["s12"]
     assert 1.0 < s < 20.0  # the receivers agree to metres (README: median 4 m)

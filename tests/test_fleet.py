@@ -32,10 +32,13 @@ def fake_analyser(path: str, cfg) -> dict:
     if text.startswith("BAD"):
         return {"ok": False, "error": f"{path}: line 1: not a log"}
     p = json.loads(text)
-    doc = make_doc(p["night"], m_y={"ins1": {"lat": p["lat"], "lon": 200.0},
-                                    "ins2": {"lat": 90.0, "lon": 210.0}},
-                   containment=p.get("containment", 0.95), verdict=p.get("verdict"),
-                   nees=p.get("nees"))
+    doc = make_doc(
+        p["night"],
+        m_y={"ins1": {"lat": p["lat"], "lon": 200.0}, "ins2": {"lat": 90.0, "lon": 210.0}},
+        containment=p.get("containment", 0.95),
+        verdict=p.get("verdict"),
+        nees=p.get("nees"),
+    )
     # record that a worker really ran (resumability is checked through these marks)
     with open(Path(path).parent.parent / "calls.log", "a", encoding="utf-8") as fh:
         fh.write(Path(path).name + "\n")
@@ -43,20 +46,31 @@ def fake_analyser(path: str, cfg) -> dict:
 
 
 #: the DR verdict of the fake logs, per night (none on 2026-11-18: an older document)
-DR = {"2026-11-19": {"verdict": "consistent: reference inside 2M at 97.5 %", "nees": [9.5, 5.1, 34.3]},
-      "2026-11-20": {"verdict": "inconsistent (circle too small): NEES 80.2 (chi^2 6.3-37.2)",
-                     "nees": [80.2, 6.3, 37.2]}}
+DR = {
+    "2026-11-19": {
+        "verdict": "consistent: reference inside 2M at 97.5 %",
+        "nees": [9.5, 5.1, 34.3],
+    },
+    "2026-11-20": {
+        "verdict": "inconsistent (circle too small): NEES 80.2 (chi^2 6.3-37.2)",
+        "nees": [80.2, 6.3, 37.2],
+    },
+}
 
 
 def _fleet(tmp_path: Path) -> Path:
     root = tmp_path / "fleet"
-    logs = {"Aurora": [("2026-11-18", 100.0), ("2026-11-19", 140.0), ("2026-11-20", 130.0)],
-            "Borealis": [("2026-11-19", 80.0), ("2026-11-20", 150.0)]}
+    logs = {
+        "Aurora": [("2026-11-18", 100.0), ("2026-11-19", 140.0), ("2026-11-20", 130.0)],
+        "Borealis": [("2026-11-19", 80.0), ("2026-11-20", 150.0)],
+    }
     for vessel, nights in logs.items():
         d = root / vessel
         d.mkdir(parents=True)
         for night, lat in nights:
-            (d / f"{night}.nmea").write_text(json.dumps({"night": night, "lat": lat, **DR.get(night, {})}))
+            (d / f"{night}.nmea").write_text(
+                json.dumps({"night": night, "lat": lat, **DR.get(night, {})})
+            )
         (d / ".hidden.nmea").write_text("BAD hidden files are skipped")
     (root / "Borealis" / "broken.nmea").write_text("BAD")
     return root
@@ -71,8 +85,12 @@ def test_discover_folders_and_globs(tmp_path):
     root = _fleet(tmp_path)
     tasks = discover([root / "Aurora", str(root / "Borealis" / "2026-*.nmea")])
     assert [(t.vessel, t.log) for t in tasks] == [
-        ("Aurora", "2026-11-18.nmea"), ("Aurora", "2026-11-19.nmea"), ("Aurora", "2026-11-20.nmea"),
-        ("Borealis", "2026-11-19.nmea"), ("Borealis", "2026-11-20.nmea")]
+        ("Aurora", "2026-11-18.nmea"),
+        ("Aurora", "2026-11-19.nmea"),
+        ("Aurora", "2026-11-20.nmea"),
+        ("Borealis", "2026-11-19.nmea"),
+        ("Borealis", "2026-11-20.nmea"),
+    ]
     assert all(len(t.sha256) == 64 and Path(t.path).is_absolute() for t in tasks)
     with pytest.raises(IngestError, match="matches nothing"):
         discover([str(root / "*.xyz")])
@@ -107,8 +125,16 @@ def test_fleet_run_table_rule_failures_and_resume(tmp_path):
     assert pd.isna(per_log.loc[("Aurora", "2026-11-18.nmea"), "dr_nees"])
     for vessel in ("Aurora", "Borealis"):
         ok, bad = per_log.loc[(vessel, "2026-11-19.nmea")], per_log.loc[(vessel, "2026-11-20.nmea")]
-        assert (ok["dr_verdict"], bool(ok["dr_consistent"]), ok["dr_nees"]) == ("consistent", True, 9.5)
-        assert (bad["dr_verdict"], bool(bad["dr_consistent"]), bad["dr_nees"]) == ("inconsistent", False, 80.2)
+        assert (ok["dr_verdict"], bool(ok["dr_consistent"]), ok["dr_nees"]) == (
+            "consistent",
+            True,
+            9.5,
+        )
+        assert (bad["dr_verdict"], bool(bad["dr_consistent"]), bad["dr_nees"]) == (
+            "inconsistent",
+            False,
+            80.2,
+        )
     assert t["dr_nees"].dtype == "float64" and t["dr_verdict"].dtype == "string"
     assert t.groupby(["vessel", "log"])["dr_verdict"].nunique(dropna=False).max() == 1
     assert t["day"].dropna().iloc[0] == "2026-11-18"
@@ -121,8 +147,10 @@ def test_fleet_run_table_rule_failures_and_resume(tmp_path):
     assert summary["failures"][0]["log"] == "broken.nmea"
     assert summary["logs"] == 6  # two vessels hold logs of the same names
     assert all(out.resolve() in p.parents for p in written)
-    assert _calls(root) == sorted(["2026-11-18.nmea", "2026-11-19.nmea", "2026-11-20.nmea"] * 1
-                                  + ["2026-11-19.nmea", "2026-11-20.nmea"])
+    assert _calls(root) == sorted(
+        ["2026-11-18.nmea", "2026-11-19.nmea", "2026-11-20.nmea"] * 1
+        + ["2026-11-19.nmea", "2026-11-20.nmea"]
+    )
 
     # a re-run analyses only what failed; the table is the same
     again = run_fleet(tasks, CFG, out, workers=2, analyser=fake_analyser)
@@ -140,7 +168,9 @@ def test_changed_log_or_settings_is_analysed_again(tmp_path):
     out = tmp_path / "out"
     tasks = discover([root / "Aurora"])
     run_fleet(tasks, CFG, out, workers=1, analyser=fake_analyser)
-    (root / "Aurora" / "2026-11-20.nmea").write_text(json.dumps({"night": "2026-11-20", "lat": 99.0}))
+    (root / "Aurora" / "2026-11-20.nmea").write_text(
+        json.dumps({"night": "2026-11-20", "lat": 99.0})
+    )
     res = run_fleet(discover([root / "Aurora"]), CFG, out, workers=1, analyser=fake_analyser)
     assert (res.analysed, res.cached) == (1, 2)
     other = config_from_dict({"deviation": {"interval_s": 7200.0}})
@@ -160,11 +190,23 @@ def test_unreadable_cache_entry_is_redone(tmp_path):
 def test_trends_pool_rms_per_day():
     from dracc.pipeline.fleet import fleet_trends
 
-    t = pd.DataFrame({"vessel": ["V"] * 2, "log": ["a", "b"], "sha256": ["1", "2"],
-                      "status": ["ok"] * 2, "day": ["d"] * 2,
-                      "unit": ["ins1"] * 2, "channel": ["lat"] * 2, "measure": ["m"] * 2,
-                      "n": [10, 30], "m_y": [100.0, 200.0], "apriori_after": [100.0, 200.0],
-                      "dr_containment_2m": [1.0, 0.5], "dr_n_scored": [10, 30]})
+    t = pd.DataFrame(
+        {
+            "vessel": ["V"] * 2,
+            "log": ["a", "b"],
+            "sha256": ["1", "2"],
+            "status": ["ok"] * 2,
+            "day": ["d"] * 2,
+            "unit": ["ins1"] * 2,
+            "channel": ["lat"] * 2,
+            "measure": ["m"] * 2,
+            "n": [10, 30],
+            "m_y": [100.0, 200.0],
+            "apriori_after": [100.0, 200.0],
+            "dr_containment_2m": [1.0, 0.5],
+            "dr_n_scored": [10, 30],
+        }
+    )
     (row,) = fleet_trends(t).to_dict("records")
     # sqrt((10*100^2 + 30*200^2)/40) = sqrt(32500)
     assert row["m_y"] == pytest.approx(math.sqrt(32500.0)) and row["n"] == 40 and row["logs"] == 2
@@ -172,8 +214,22 @@ def test_trends_pool_rms_per_day():
     assert row["apriori_after"] == 200.0
 
 
-@pytest.mark.parametrize("name", ["..", ".", "../../etc", "/abs/path", "a/../../b", "C:\\x", "",
-                                  "nul", "tab\there", "...", "x" * 300])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "..",
+        ".",
+        "../../etc",
+        "/abs/path",
+        "a/../../b",
+        "C:\\x",
+        "",
+        "nul",
+        "tab\there",
+        "...",
+        "x" * 300,
+    ],
+)
 def test_output_paths_never_escape(tmp_path, name):
     p = inside(tmp_path, "vessels", name, "fleet.csv")
     assert tmp_path.resolve() in p.parents and p.name == "fleet.csv"
@@ -204,8 +260,14 @@ def test_unreachable_scheduler_is_one_clear_error(tmp_path):
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     with pytest.raises(FleetError, match="cannot reach the Dask scheduler"):
-        run_fleet(discover([root / "Aurora"]), CFG, tmp_path / "out",
-                  scheduler=f"tcp://127.0.0.1:{port}", connect_timeout_s=1.0, analyser=fake_analyser)
+        run_fleet(
+            discover([root / "Aurora"]),
+            CFG,
+            tmp_path / "out",
+            scheduler=f"tcp://127.0.0.1:{port}",
+            connect_timeout_s=1.0,
+            analyser=fake_analyser,
+        )
 
 
 def test_an_unexpected_error_in_one_log_is_reported_not_raised(monkeypatch, tmp_path):
@@ -265,10 +327,13 @@ def test_table_rule_equals_the_reference_chain():
     seeds = {("ins1", "lat"): 150.0}
     t = fleet_table(tasks, summaries, {}, seeds)
     for (_vessel, unit, channel), g in t.groupby(["vessel", "unit", "channel"]):
-        steps = apriori_chain(seeds.get((unit, channel)),
-                              [(lg, None if pd.isna(m) else m) for lg, m in zip(g["log"], g["m_y"], strict=True)])
+        steps = apriori_chain(
+            seeds.get((unit, channel)),
+            [(lg, None if pd.isna(m) else m) for lg, m in zip(g["log"], g["m_y"], strict=True)],
+        )
         assert g["apriori_verdict"].tolist() == [s.verdict for s in steps]
-        np.testing.assert_array_equal(g["apriori_after"].to_numpy(),
-                                      [np.nan if s.after is None else s.after for s in steps])
+        np.testing.assert_array_equal(
+            g["apriori_after"].to_numpy(), [np.nan if s.after is None else s.after for s in steps]
+        )
         assert g["period_start_utc"].is_monotonic_increasing
     assert "no data" in set(t["apriori_verdict"]) and "raised" in set(t["apriori_verdict"])

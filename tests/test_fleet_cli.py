@@ -30,10 +30,36 @@ def fleet(tmp_path_factory) -> Path:
     for vessel, seeds in (("Aurora", (31, 32)), ("Nordlys ★", (33, 34))):
         for i, seed in enumerate(seeds):
             night = f"2026-11-{18 + i}"
-            assert main(["simulate", "--out", str(root / "sim"), "--hours", "2", "--seed", str(seed),
-                         "--start", f"{night}T00:00:00Z", "--name", f"{vessel[:2]}-{night}",
-                         "--compass-hz", "0.2", "--log-hz", "0.2", "--ins-hz", "0.1",
-                         "--gnss-hz", "0.2", "--aux-hz", "0", "--truth-hz", "0.01"]) == 0
+            assert (
+                main(
+                    [
+                        "simulate",
+                        "--out",
+                        str(root / "sim"),
+                        "--hours",
+                        "2",
+                        "--seed",
+                        str(seed),
+                        "--start",
+                        f"{night}T00:00:00Z",
+                        "--name",
+                        f"{vessel[:2]}-{night}",
+                        "--compass-hz",
+                        "0.2",
+                        "--log-hz",
+                        "0.2",
+                        "--ins-hz",
+                        "0.1",
+                        "--gnss-hz",
+                        "0.2",
+                        "--aux-hz",
+                        "0",
+                        "--truth-hz",
+                        "0.01",
+                    ]
+                )
+                == 0
+            )
             (root / vessel).mkdir(exist_ok=True)
             (root / "sim" / f"{vessel[:2]}-{night}.nmea").rename(root / vessel / f"{night}.nmea")
     (root / "Nordlys ★" / "notes.txt").write_text("crew list, not a log\n")
@@ -43,8 +69,17 @@ def fleet(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def local_run(fleet, tmp_path_factory):
     out = tmp_path_factory.mktemp("local")
-    code = main(["fleet", str(fleet / "Aurora"), str(fleet / "Nordlys ★"), "--workers", "2",
-                 "--out", str(out)])
+    code = main(
+        [
+            "fleet",
+            str(fleet / "Aurora"),
+            str(fleet / "Nordlys ★"),
+            "--workers",
+            "2",
+            "--out",
+            str(out),
+        ]
+    )
     # the tables as this run wrote them (a later test re-runs into the same folder)
     tables = {n: pd.read_parquet(out / f"{n}.parquet") for n in ("fleet", "trends")}
     return code, out, tables
@@ -59,10 +94,15 @@ def test_local_pool_tables_failures_and_pages(local_run):
     assert failed["log"].tolist() == ["notes.txt"] and failed["error"].str.len().min() > 10
     ok = t[t["status"] == "ok"]
     assert len(ok) == 4 * 9 and set(ok["unit"]) == {"ins1", "ins2", "ins3"}
-    assert ok["m_y"].gt(0).all() and ok["apriori_verdict"].isin(["established", "within", "raised"]).all()
+    assert (
+        ok["m_y"].gt(0).all()
+        and ok["apriori_verdict"].isin(["established", "within", "raised"]).all()
+    )
     # the DR verdict word of `dracc analyze`, and dr_consistent agreeing with it
     assert ok["dr_verdict"].notna().all()
-    assert ok["dr_verdict"].isin(["consistent", "conservative", "inconsistent", "undetermined"]).all()
+    assert (
+        ok["dr_verdict"].isin(["consistent", "conservative", "inconsistent", "undetermined"]).all()
+    )
     judged = ok[ok["dr_verdict"] != "undetermined"]
     assert (judged["dr_consistent"] == (judged["dr_verdict"] != "inconsistent")).all()
     assert ok.loc[ok["dr_verdict"] == "undetermined", "dr_consistent"].isna().all()
@@ -77,15 +117,21 @@ def test_local_pool_tables_failures_and_pages(local_run):
     page = (out / "fleet.html").read_text()
     pngs = re.findall(r"src='data:image/png;base64,([A-Za-z0-9+/=]+)'", page)
     assert len(pngs) >= 2 and all(base64.b64decode(p)[:4] == b"\x89PNG" for p in pngs)
-    assert "notes.txt" in page and "http://" not in page and "https://" not in page and "5 logs of 2 vessels" in page
+    assert (
+        "notes.txt" in page
+        and "http://" not in page
+        and "https://" not in page
+        and "5 logs of 2 vessels" in page
+    )
     assert pd.read_parquet(out / "trends.parquet")["day"].nunique() == 2
 
 
 def test_rerun_skips_done_logs(local_run, fleet, run_cli):
     _, out, tables = local_run
     before = tables["fleet"]
-    code, stdout, err = run_cli("fleet", fleet / "Aurora", fleet / "Nordlys ★", "--workers", "2",
-                                "--out", out)
+    code, stdout, err = run_cli(
+        "fleet", fleet / "Aurora", fleet / "Nordlys ★", "--workers", "2", "--out", out
+    )
     assert code == ExitCode.INPUT
     assert "1 analysed, 4 from the cache, 1 failed" in err
     pd.testing.assert_frame_equal(pd.read_parquet(out / "fleet.parquet"), before)
@@ -120,15 +166,53 @@ def test_dask_scheduler_gives_the_local_table(local_run, fleet, tmp_path):
     common = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     procs = []
     try:
-        procs.append(subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host",
-                                       "127.0.0.1", "--port", str(port), "--no-dashboard"], **common))
-        procs.append(subprocess.Popen([sys.executable, "-m", "dask", "worker", addr, "--nworkers", "1",
-                                       "--nthreads", "1", "--no-dashboard"], **common))
+        procs.append(
+            subprocess.Popen(
+                [
+                    sys.executable,
+                    "-m",
+                    "dask",
+                    "scheduler",
+                    "--host",
+                    "127.0.0.1",
+                    "--port",
+                    str(port),
+                    "--no-dashboard",
+                ],
+                **common,
+            )
+        )
+        procs.append(
+            subprocess.Popen(
+                [
+                    sys.executable,
+                    "-m",
+                    "dask",
+                    "worker",
+                    addr,
+                    "--nworkers",
+                    "1",
+                    "--nthreads",
+                    "1",
+                    "--no-dashboard",
+                ],
+                **common,
+            )
+        )
         with Client(addr, timeout=60) as c:  # bounded waits for the scheduler and the worker
             c.wait_for_workers(1, timeout=90)
         out = tmp_path / "dask"
-        code = main(["fleet", str(fleet / "Aurora"), str(fleet / "Nordlys ★"), "--scheduler", addr,
-                     "--out", str(out)])
+        code = main(
+            [
+                "fleet",
+                str(fleet / "Aurora"),
+                str(fleet / "Nordlys ★"),
+                "--scheduler",
+                addr,
+                "--out",
+                str(out),
+            ]
+        )
     finally:
         _stop(procs)
     assert code == ExitCode.INPUT
@@ -139,11 +223,23 @@ def test_dask_scheduler_gives_the_local_table(local_run, fleet, tmp_path):
 
 def test_real_logs_and_an_empty_mcap(real_dir, tmp_path):
     out = tmp_path / "out"
-    code = main(["fleet", str(real_dir / "VDRplayer" / "Hakefjord.txt"),
-                 str(real_dir / "keelson" / "6389403" / "test.mcap"), "--workers", "1", "--out", str(out)])
+    code = main(
+        [
+            "fleet",
+            str(real_dir / "VDRplayer" / "Hakefjord.txt"),
+            str(real_dir / "keelson" / "6389403" / "test.mcap"),
+            "--workers",
+            "1",
+            "--out",
+            str(out),
+        ]
+    )
     assert code == ExitCode.INPUT
     t = pd.read_parquet(out / "fleet.parquet").set_index("log")
-    assert t.loc["test.mcap", "status"] == "failed" and "no usable record" in t.loc["test.mcap", "error"]
+    assert (
+        t.loc["test.mcap", "status"] == "failed"
+        and "no usable record" in t.loc["test.mcap", "error"]
+    )
     hk = t.loc["Hakefjord.txt"]
     assert hk["status"] == "ok" and hk["vessel"] == "VDRplayer" and pd.isna(hk["unit"])
     assert hk["period_start_utc"].startswith("2015-07-20") and hk["lines"] > 25000

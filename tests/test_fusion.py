@@ -45,7 +45,9 @@ def _local(n_m, e_m):
 # ------------------------------------------------------------------ geodesy
 
 
-@pytest.mark.parametrize("s_m, tol_m, tol_rad", [(150.0, 1e-6, 1e-9), (2e4, 1e-4, 1e-8), (1e5, 1e-2, 2e-7)])
+@pytest.mark.parametrize(
+    "s_m, tol_m, tol_rad", [(150.0, 1e-6, 1e-9), (2e4, 1e-4, 1e-8), (1e5, 1e-2, 2e-7)]
+)
 def test_range_azimuth_against_geographiclib(s_m, tol_m, tol_rad):
     geo = pytest.importorskip("geographiclib.geodesic").Geodesic.WGS84
     rng = np.random.default_rng(7)
@@ -77,7 +79,9 @@ def test_error_ellipse_matches_eigen_decomposition():
     assert np.allclose(np.angle(np.exp(2j * (az - ell.orientation_rad))), 0.0, atol=1e-9)
     # by hand: variance 9 m^2 east, 1 m^2 north -> major axis 3 m towards east (pi/2)
     e = error_ellipse(np.diag([1.0, 9.0]))
-    assert (e.semi_major_m, e.semi_minor_m, e.orientation_rad) == pytest.approx((3.0, 1.0, np.pi / 2))
+    assert (e.semi_major_m, e.semi_minor_m, e.orientation_rad) == pytest.approx(
+        (3.0, 1.0, np.pi / 2)
+    )
 
 
 # ------------------------------------------------------------ LS / WLS by hand
@@ -159,7 +163,12 @@ def test_two_ranges_closed_form_intersection():
 
 def _scene():
     ship = _local(1200.0, -800.0)
-    marks = [_local(6000.0, 1000.0), _local(-2000.0, 5000.0), _local(-4000.0, -6000.0), _local(3000.0, -7000.0)]
+    marks = [
+        _local(6000.0, 1000.0),
+        _local(-2000.0, 5000.0),
+        _local(-4000.0, -6000.0),
+        _local(3000.0, -7000.0),
+    ]
     return ship, marks
 
 
@@ -171,7 +180,10 @@ def test_wls_covariance_matches_monte_carlo_scatter():
     sig_b = D(0.5)
     inv = [geo.Inverse(*np.rad2deg(ship), *np.rad2deg(m)) for m in marks]
     runs = 4000
-    obs = [RangeLOP(*m, inv[j]["s12"] + rng.normal(0, sig_r[j], runs), sig_r[j]) for j, m in enumerate(marks[:3])]
+    obs = [
+        RangeLOP(*m, inv[j]["s12"] + rng.normal(0, sig_r[j], runs), sig_r[j])
+        for j, m in enumerate(marks[:3])
+    ]
     obs.append(BearingLOP(*marks[3], D(inv[3]["azi1"]) + rng.normal(0, sig_b, runs), sig_b))
     sol = fuse_fix(obs, *ship)  # one batch of 4000 independent fixes
     est = np.stack(offset_ne_m(sol.lat_rad, sol.lon_rad, *ship), axis=-1)
@@ -181,8 +193,18 @@ def test_wls_covariance_matches_monte_carlo_scatter():
     assert np.allclose(scatter, p, rtol=0.08, atol=0.08 * np.sqrt(p[0, 0] * p[1, 1]))
     assert np.abs(est.mean(axis=0)).max() < 4 * np.sqrt(np.diag(p).max() / runs)
     # the batch equals one-at-a-time solutions
-    one = fuse_fix([type(o)(*(getattr(o, f)[7] if np.ndim(getattr(o, f)) else getattr(o, f)
-                              for f in o.__dataclass_fields__)) for o in obs], *ship)
+    one = fuse_fix(
+        [
+            type(o)(
+                *(
+                    getattr(o, f)[7] if np.ndim(getattr(o, f)) else getattr(o, f)
+                    for f in o.__dataclass_fields__
+                )
+            )
+            for o in obs
+        ],
+        *ship,
+    )
     assert (one.lat_rad, one.lon_rad) == pytest.approx((sol.lat_rad[7], sol.lon_rad[7]), abs=1e-12)
     assert np.allclose(one.cov_m2, sol.cov_m2[7])
 
@@ -195,7 +217,10 @@ def test_dop_trace_form_gives_rms_over_sigma():
     rng = np.random.default_rng(5)
     ranges = np.array([geo.Inverse(*np.rad2deg(ship), *np.rad2deg(m))["s12"] for m in marks])
     runs = 4000
-    obs = [RangeLOP(*m, r + rng.normal(0, sigma, runs), sigma) for m, r in zip(marks, ranges, strict=True)]
+    obs = [
+        RangeLOP(*m, r + rng.normal(0, sigma, runs), sigma)
+        for m, r in zip(marks, ranges, strict=True)
+    ]
     sol = fuse_fix(obs, *ship, weighted=False)
     n, e = offset_ne_m(sol.lat_rad, sol.lon_rad, *ship)
     rms = np.sqrt(np.mean(n**2 + e**2))
@@ -214,8 +239,13 @@ def test_chi_square_of_redundant_fits_has_its_degrees_of_freedom():
     rng = np.random.default_rng(9)
     ranges = np.array([geo.Inverse(*np.rad2deg(ship), *np.rad2deg(m))["s12"] for m in marks])
     runs = 2000
-    sol = fuse_fix([RangeLOP(*m, r + rng.normal(0, 5.0, runs), 5.0) for m, r in zip(marks, ranges, strict=True)],
-                   *ship)
+    sol = fuse_fix(
+        [
+            RangeLOP(*m, r + rng.normal(0, 5.0, runs), 5.0)
+            for m, r in zip(marks, ranges, strict=True)
+        ],
+        *ship,
+    )
     assert sol.redundancy == 2
     assert np.mean(sol.chi2) == pytest.approx(2.0, abs=0.15)  # sd of the mean 0.045
     assert np.mean(sol.variance_factor) == pytest.approx(1.0, abs=0.075)
@@ -271,16 +301,33 @@ def test_position_fix_rows_and_batch():
 def test_pier_line_shift_by_hand(heading_deg, side, expected_east_m):
     """Pier A->B runs north; half breadth 10 m, fenders 1 m, reference point 2 m to starboard."""
     a, b = _local(-100.0, 0.0), _local(100.0, 0.0)
-    pier = PierLine(*a, *b, D(heading_deg), side, half_breadth_m=10.0, sigma_m=0.5, ref_transverse_m=2.0, gap_m=1.0)
-    assert pier.offset_m == pytest.approx(expected_east_m, abs=1e-9)  # right of A->B (east) positive
+    pier = PierLine(
+        *a,
+        *b,
+        D(heading_deg),
+        side,
+        half_breadth_m=10.0,
+        sigma_m=0.5,
+        ref_transverse_m=2.0,
+        gap_m=1.0,
+    )
+    assert pier.offset_m == pytest.approx(
+        expected_east_m, abs=1e-9
+    )  # right of A->B (east) positive
     mark = _local(20.0, 0.0)
     sol = alongside_reference(pier, abeam_mark=mark, abeam_sigma_m=1.0)
-    truth = _direct(*mark, D(90.0), expected_east_m) if expected_east_m > 0 else _direct(*mark, D(270.0), -expected_east_m)
+    truth = (
+        _direct(*mark, D(90.0), expected_east_m)
+        if expected_east_m > 0
+        else _direct(*mark, D(270.0), -expected_east_m)
+    )
     assert np.hypot(*offset_ne_m(sol.lat_rad, sol.lon_rad, *truth)) < 0.01
     # across the pier the ellipse is the pier's 0.5 m, along it the mark's 1 m
     assert sol.ellipse.semi_major_m == pytest.approx(1.0, rel=1e-4)
     assert sol.ellipse.semi_minor_m == pytest.approx(0.5, rel=1e-4)
-    assert np.angle(np.exp(2j * sol.ellipse.orientation_rad)) == pytest.approx(0.0, abs=1e-4)  # along: north
+    assert np.angle(np.exp(2j * sol.ellipse.orientation_rad)) == pytest.approx(
+        0.0, abs=1e-4
+    )  # along: north
 
 
 def test_alongside_reference_with_ins_fixes():
@@ -293,7 +340,9 @@ def test_alongside_reference_with_ins_fixes():
     n, e = offset_ne_m(sol.lat_rad, sol.lon_rad, LAT0, LON0)
     assert float(n) == pytest.approx(8.0, abs=0.01)  # across: the pier
     assert float(e) == pytest.approx(35.0, abs=0.01)  # along: the INS
-    assert np.sqrt(sol.cov_m2[0, 0]) < 0.3 and np.sqrt(sol.cov_m2[1, 1]) == pytest.approx(40.0, rel=1e-6)
+    assert np.sqrt(sol.cov_m2[0, 0]) < 0.3 and np.sqrt(sol.cov_m2[1, 1]) == pytest.approx(
+        40.0, rel=1e-6
+    )
 
 
 def test_pier_line_errors():
@@ -318,7 +367,11 @@ def test_nadir_circle_from_gyro_vector_is_equation_1():
     circle = NadirCircle.from_gyro_vector(u, t_s, 1.0, 1e-4)
     lat, lon = D(35.0), D(129.0)
     w = OMEGA_E_RADPS * t_s
-    eq1 = -u[0] * np.cos(lat) * np.cos(lon + w) - u[1] * np.cos(lat) * np.sin(lon + w) - u[2] * np.sin(lat)  # (1)
+    eq1 = (
+        -u[0] * np.cos(lat) * np.cos(lon + w)
+        - u[1] * np.cos(lat) * np.sin(lon + w)
+        - u[2] * np.sin(lat)
+    )  # (1)
     assert circle.cos_nadir(lat, lon) == pytest.approx(eq1, abs=1e-12)
     with pytest.raises(GeometryError, match="unit vector"):
         NadirCircle.from_gyro_vector(2 * u, t_s, 1.0, 1e-4)
@@ -369,7 +422,12 @@ def test_bad_observations_are_refused():
 
 
 @settings(max_examples=60, deadline=None)
-@given(lat=st.floats(-80, 80), lon=st.floats(-180, 180), az=st.floats(0, 360), s=st.floats(10.0, 50_000.0))
+@given(
+    lat=st.floats(-80, 80),
+    lon=st.floats(-180, 180),
+    az=st.floats(0, 360),
+    s=st.floats(10.0, 50_000.0),
+)
 def test_range_is_symmetric_and_back_azimuth_is_opposite(lat, lon, az, s):
     lat2, lon2 = _direct(D(lat), D(lon), D(az), s)
     d12, a12 = range_azimuth(D(lat), D(lon), lat2, lon2)
@@ -379,8 +437,13 @@ def test_range_is_symmetric_and_back_azimuth_is_opposite(lat, lon, az, s):
 
 
 @settings(max_examples=60, deadline=None)
-@given(n=st.floats(-5000, 5000), e=st.floats(-5000, 5000), sn=st.floats(0.5, 50), se=st.floats(0.5, 50),
-       rho=st.floats(-0.9, 0.9))
+@given(
+    n=st.floats(-5000, 5000),
+    e=st.floats(-5000, 5000),
+    sn=st.floats(0.5, 50),
+    se=st.floats(0.5, 50),
+    rho=st.floats(-0.9, 0.9),
+)
 def test_a_fix_alone_is_returned_with_its_covariance(n, e, sn, se, rho):
     cov = np.array([[sn**2, rho * sn * se], [rho * sn * se, se**2]])
     fix = PositionFix(*_local(n, e), cov)
@@ -389,4 +452,6 @@ def test_a_fix_alone_is_returned_with_its_covariance(n, e, sn, se, rho):
     assert np.allclose(sol.cov_m2, cov, rtol=1e-9)
     ell = sol.ellipse
     assert ell.semi_major_m**2 + ell.semi_minor_m**2 == pytest.approx(sn**2 + se**2, rel=1e-9)
-    assert ell.semi_major_m * ell.semi_minor_m == pytest.approx(np.sqrt(np.linalg.det(cov)), rel=1e-6)
+    assert ell.semi_major_m * ell.semi_minor_m == pytest.approx(
+        np.sqrt(np.linalg.det(cov)), rel=1e-6
+    )

@@ -74,7 +74,7 @@ def split_lines(data: bytes) -> list[bytes]:
     """The lines of ``data`` without their line ends, as dracc counts them."""
     out, at = [], 0
     for m in LINE_END.finditer(data):
-        out.append(data[at:m.start()])
+        out.append(data[at : m.start()])
         at = m.end()
     if at < len(data):
         out.append(data[at:])
@@ -118,12 +118,12 @@ def _set_field(line: bytes, k: int, value: bytes) -> bytes | None:
     if sp is None:
         return None
     s, e = sp
-    fields = line[s + 1:e].split(b",")
+    fields = line[s + 1 : e].split(b",")
     if k >= len(fields):
         return None
     fields[k] = value
     body = b",".join(fields)
-    return line[:s + 1] + body + b"*" + _checksum(body) + line[e + 3:]
+    return line[: s + 1] + body + b"*" + _checksum(body) + line[e + 3 :]
 
 
 #: (sentence type, field number, value) making a physically impossible but well-formed line
@@ -131,7 +131,9 @@ OUT_OF_RANGE = {
     b"GGA": [(2, b"9500.000"), (4, b"18100.000")],  # latitude 95 deg, longitude 181 deg
     b"RMC": [(3, b"9500.000"), (7, b"-3.0")],  # latitude 95 deg, SOG -3 kn
     b"GLL": [(1, b"9500.000")],
-    b"HDT": [(1, b"400.0")], b"HDG": [(1, b"400.0")], b"THS": [(1, b"400.0")],  # heading 400 deg
+    b"HDT": [(1, b"400.0")],
+    b"HDG": [(1, b"400.0")],
+    b"THS": [(1, b"400.0")],  # heading 400 deg
     b"VTG": [(5, b"-3.0")],  # SOG -3 kn
     b"VHW": [(5, b"-3.0")],
 }
@@ -140,8 +142,21 @@ OUT_OF_RANGE = {
 class Mutator:
     """Seeded line mutations; each returns the new lines or None when it does not apply."""
 
-    OPS = ("bit_flip", "truncate", "garbage", "nul", "wrong_checksum", "no_checksum", "fuse",
-           "huge", "long_field", "non_ascii", "out_of_range", "swap_time_order", "insert_junk_line")
+    OPS = (
+        "bit_flip",
+        "truncate",
+        "garbage",
+        "nul",
+        "wrong_checksum",
+        "no_checksum",
+        "fuse",
+        "huge",
+        "long_field",
+        "non_ascii",
+        "out_of_range",
+        "swap_time_order",
+        "insert_junk_line",
+    )
 
     def __init__(self, rng: random.Random):
         self.rng = rng
@@ -158,8 +173,10 @@ class Mutator:
 
     def garbage(self, b: bytes) -> bytes:
         i = self.rng.randrange(len(b) + 1)
-        junk = bytes(self.rng.choice([x for x in range(256) if x != 10])
-                     for _ in range(self.rng.randint(1, 12)))
+        junk = bytes(
+            self.rng.choice([x for x in range(256) if x != 10])
+            for _ in range(self.rng.randint(1, 12))
+        )
         return b[:i] + junk + b[i:]
 
     def nul(self, b: bytes) -> bytes:
@@ -170,15 +187,15 @@ class Mutator:
         j = b.rfind(b"*")
         if j < 0 or len(b) < j + 3:
             return None
-        good = b[j + 1:j + 3]
+        good = b[j + 1 : j + 3]
         bad = good
         while bad == good:
             bad = b"%02X" % self.rng.randrange(256)
-        return b[:j + 1] + bad + b[j + 3:]
+        return b[: j + 1] + bad + b[j + 3 :]
 
     def no_checksum(self, b: bytes) -> bytes | None:
         j = b.rfind(b"*")
-        return None if j < 0 else b[:j] + b[j + 3:]
+        return None if j < 0 else b[:j] + b[j + 3 :]
 
     def huge(self, b: bytes) -> bytes:
         """A long run inside the line: up to 300 kB (beyond ``max_line_bytes``: too_long)."""
@@ -192,7 +209,7 @@ class Mutator:
         sp = _sentence_span(b)
         if sp is None:
             return None
-        nf = b[sp[0]:sp[1]].count(b",")
+        nf = b[sp[0] : sp[1]].count(b",")
         if nf < 1:
             return None
         n = self.rng.choice((25, 500, 5_000, 70_000))
@@ -209,15 +226,27 @@ class Mutator:
         sp = _sentence_span(b)
         if sp is None:
             return None
-        t = b[sp[0] + 3:sp[0] + 6]
+        t = b[sp[0] + 3 : sp[0] + 6]
         if t not in OUT_OF_RANGE:
             return None
         k, v = self.rng.choice(OUT_OF_RANGE[t])
         return _set_field(b, k, v)
 
     def mutate_line(self, b: bytes) -> bytes | None:
-        op = self.rng.choice(("bit_flip", "truncate", "garbage", "nul", "wrong_checksum",
-                              "no_checksum", "huge", "long_field", "non_ascii", "out_of_range"))
+        op = self.rng.choice(
+            (
+                "bit_flip",
+                "truncate",
+                "garbage",
+                "nul",
+                "wrong_checksum",
+                "no_checksum",
+                "huge",
+                "long_field",
+                "non_ascii",
+                "out_of_range",
+            )
+        )
         if not b:
             return None
         return getattr(self, op)(b), op
@@ -244,7 +273,7 @@ def mutate(lines: list[bytes], rng: random.Random, n_mut: int) -> Mutated:
         k = rng.randrange(len(cur))
         if kind < 0.08 and len(cur) > 1:  # fuse two lines (a lost newline)
             k = min(k, len(cur) - 2)
-            cur[k:k + 2] = [(cur[k][0] + cur[k + 1][0], None)]
+            cur[k : k + 2] = [(cur[k][0] + cur[k + 1][0], None)]
             ops["fuse"] += 1
             touched += 2
         elif kind < 0.14 and len(cur) > 1:  # times out of order: two lines swap places
@@ -278,8 +307,11 @@ def mutate(lines: list[bytes], rng: random.Random, n_mut: int) -> Mutated:
     # an untouched line's number in the mutated log: the lines before it, as dracc counts
     # them (a mutation may add line ends; a lone CR before a CR LF makes an empty line)
     starts = line_starts(data)
-    untouched = {i: bisect.bisect_right(starts, offsets[j]) - 1
-                 for j, (_, i) in enumerate(cur) if i is not None}
+    untouched = {
+        i: bisect.bisect_right(starts, offsets[j]) - 1
+        for j, (_, i) in enumerate(cur)
+        if i is not None
+    }
     return Mutated(data, untouched, ops, touched)
 
 
@@ -321,8 +353,9 @@ class Outcome:
     silent: int  #: of them, lines that gave no record (each counted in ``rejects``)
 
 
-def check_mutated(clean_lines: list[bytes], timed: bool, mut: Mutated, clean_recs, tmp: Path,
-                  cfg: IngestConfig) -> Outcome:
+def check_mutated(
+    clean_lines: list[bytes], timed: bool, mut: Mutated, clean_recs, tmp: Path, cfg: IngestConfig
+) -> Outcome:
     """Read the mutated log; raise InvariantError when an invariant breaks; return rejects."""
     p = tmp / "fuzz.nmea"
     p.write_bytes(mut.data)
@@ -333,14 +366,19 @@ def check_mutated(clean_lines: list[bytes], timed: bool, mut: Mutated, clean_rec
     got = records_by_line(res.frames)
     with_record = {ln for d in got.values() for ln in d}
     mlines = split_lines(mut.data)
-    silent = [i + 1 for i, ln in enumerate(mlines) if ln.strip(b"\r \t")
-              and (i + 1) not in with_record and b"ZDA," not in ln]
+    silent = [
+        i + 1
+        for i, ln in enumerate(mlines)
+        if ln.strip(b"\r \t") and (i + 1) not in with_record and b"ZDA," not in ln
+    ]
     # a line gives a record, or is rejected (damaged), or is ignored (valid, unused: GSV, AIS,
     # a comment ...); blank lines are ignored too but are not among the silent ones
     counted = res.rejects.total + sum(res.ignored.values()) - res.ignored.get("blank", 0)
     if len(silent) > counted:
-        raise InvariantError(f"{len(silent)} non-blank lines gave no record but only "
-                             f"{counted} rejected or ignored lines were counted (e.g. line {silent[0]})")
+        raise InvariantError(
+            f"{len(silent)} non-blank lines gave no record but only "
+            f"{counted} rejected or ignored lines were counted (e.g. line {silent[0]})"
+        )
     # differential: untouched lines give the same records
     lost_date = res.rejects.counts.get("no_date", 0) > clean_recs.get(NO_DATE, 0)
     for kind, d in clean_recs.items():
@@ -357,8 +395,9 @@ def check_mutated(clean_lines: list[bytes], timed: bool, mut: Mutated, clean_rec
             want = rec if timed else rec[2:]
             have = have if (have is None or timed) else have[2:]
             if have != want:
-                raise InvariantError(f"{kind}: clean line {ln} (mutated line {j + 1}) gave {want}, "
-                                     f"now {have}")
+                raise InvariantError(
+                    f"{kind}: clean line {ln} (mutated line {j + 1}) gave {want}, now {have}"
+                )
     nonblank = sum(1 for ln in mlines if ln.strip(b"\r \t"))
     return Outcome(Counter(res.rejects.counts), nonblank, len(silent))
 
@@ -373,11 +412,13 @@ def clean_records(lines: list[bytes], tmp: Path, cfg: IngestConfig):
     return {**records_by_line(res.frames), NO_DATE: res.rejects.counts.get("no_date", 0)}
 
 
-def fuzz_round(corpus, rng: random.Random, tmp: Path, cfg: IngestConfig) -> tuple[Outcome, int, Counter]:
+def fuzz_round(
+    corpus, rng: random.Random, tmp: Path, cfg: IngestConfig
+) -> tuple[Outcome, int, Counter]:
     """One fuzzed log: a window of a corpus file, 1-8 mutations; (rejects, lines mutated, ops)."""
     lines, timed = corpus[rng.randrange(len(corpus))]
     a = rng.randrange(max(1, len(lines) - WINDOW))
-    window = lines[a:a + WINDOW]
+    window = lines[a : a + WINDOW]
     clean = clean_records(window, tmp, cfg)
     mut = mutate(window, rng, rng.randint(1, 8))
     return check_mutated(window, timed, mut, clean, tmp, cfg), mut.n_mutated, mut.ops
@@ -413,8 +454,9 @@ def test_seeded_mutation_fuzzer(corpus, tmp_path, seed):
 
 def test_every_mutation_kind_is_rejected_with_its_reason(tmp_path):
     """One clean RMC line and one mutation of each kind: each gives the expected reason."""
-    good = b"$GPRMC,120000,A,5000.000,N,01000.000,E,10.0,90.0,010120,,*" + \
-        _checksum(b"GPRMC,120000,A,5000.000,N,01000.000,E,10.0,90.0,010120,,")
+    good = b"$GPRMC,120000,A,5000.000,N,01000.000,E,10.0,90.0,010120,,*" + _checksum(
+        b"GPRMC,120000,A,5000.000,N,01000.000,E,10.0,90.0,010120,,"
+    )
     m = Mutator(random.Random(0))
     cases = {
         "checksum": m.wrong_checksum(good),
@@ -440,8 +482,12 @@ def test_huge_line_is_rejected_and_neighbours_survive(tmp_path):
     lines = (SAMPLES / "voyage_tag.nmea").read_bytes().split(b"\r\n")[:50]
     clean = clean_records(lines, tmp_path, IngestConfig())
     huge = lines[:25] + [b"$GPGGA," + b"1234567890," * 200_000] + lines[25:]
-    mut = Mutated(b"\r\n".join(huge) + b"\r\n", {i: (i if i < 25 else i + 1) for i in range(50)},
-                  Counter(huge=1), 1)
+    mut = Mutated(
+        b"\r\n".join(huge) + b"\r\n",
+        {i: (i if i < 25 else i + 1) for i in range(50)},
+        Counter(huge=1),
+        1,
+    )
     rej = check_mutated(lines, True, mut, clean, tmp_path, IngestConfig()).rejects
     assert sum(rej.values()) == 1
 
@@ -479,8 +525,9 @@ def test_times_out_of_order_are_counted(tmp_path):
 
 # ------------------------------------------------------------------------ hypothesis
 
-SETTINGS = settings(max_examples=150, deadline=None, derandomize=True,
-                    suppress_health_check=[HealthCheck.too_slow])
+SETTINGS = settings(
+    max_examples=150, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
 
 
 @SETTINGS
@@ -493,9 +540,36 @@ def test_parse_buffer_never_raises_on_bytes(data):
 
 
 @SETTINGS
-@given(st.lists(st.sampled_from([b"$", b"!", b"*", b",", b"\\", b":", b"\r", b"\n", b"\x00", b"GPGGA",
-                                 b"HEHDT", b"s:", b"c:", b"1", b"A", b"5", b".", b"-", b"FF",
-                                 b"\xff", b"#"]), max_size=80))
+@given(
+    st.lists(
+        st.sampled_from(
+            [
+                b"$",
+                b"!",
+                b"*",
+                b",",
+                b"\\",
+                b":",
+                b"\r",
+                b"\n",
+                b"\x00",
+                b"GPGGA",
+                b"HEHDT",
+                b"s:",
+                b"c:",
+                b"1",
+                b"A",
+                b"5",
+                b".",
+                b"-",
+                b"FF",
+                b"\xff",
+                b"#",
+            ]
+        ),
+        max_size=80,
+    )
+)
 def test_parse_buffer_never_raises_on_nmea_like_tokens(tokens):
     pb = parse_buffer(b"".join(tokens))
     assert set(pb.reject_counts) <= set(REASONS)
@@ -520,8 +594,13 @@ def test_parse_numbers_agrees_with_python_float(field):
 
 
 @SETTINGS
-@given(lat=st.floats(-89.99, 89.99), lon=st.floats(-179.99, 179.99),
-       hdg=st.floats(0, 359.99), sog=st.floats(0, 50), junk=st.binary(max_size=40))
+@given(
+    lat=st.floats(-89.99, 89.99),
+    lon=st.floats(-179.99, 179.99),
+    hdg=st.floats(0, 359.99),
+    sog=st.floats(0, 50),
+    junk=st.binary(max_size=40),
+)
 def test_valid_lines_survive_any_junk_between_them(lat, lon, hdg, sog, junk):
     """Round trip: RMC + HDT written to their precision read back exactly, whatever junk
     line sits between them."""
@@ -529,7 +608,13 @@ def test_valid_lines_survive_any_junk_between_them(lat, lon, hdg, sog, junk):
     lat_f = b"%02d%07.4f" % (int(la), (la - int(la)) * 60)
     lon_f = b"%03d%07.4f" % (int(lo), (lo - int(lo)) * 60)
     body = b"GPRMC,120000,A,%s,%s,%s,%s,%.1f,%.1f,010120,," % (
-        lat_f, b"N" if lat >= 0 else b"S", lon_f, b"E" if lon >= 0 else b"W", sog, hdg)
+        lat_f,
+        b"N" if lat >= 0 else b"S",
+        lon_f,
+        b"E" if lon >= 0 else b"W",
+        sog,
+        hdg,
+    )
     if b"60.0000" in lat_f or b"60.0000" in lon_f:
         return  # rounding wrote 60 minutes: not a valid field (the writer's problem)
     rmc = b"$" + body + b"*" + _checksum(body)
@@ -555,14 +640,15 @@ def test_the_invariant_checks_can_fail(tmp_path):
     changed = list(lines)
     changed[7] = changed[7].replace(b",", b",1", 1)
     j = changed[7].rfind(b"$")
-    body = changed[7][j + 1:changed[7].rfind(b"*")]
-    changed[7] = changed[7][:j + 1] + body + b"*" + _checksum(body)
+    body = changed[7][j + 1 : changed[7].rfind(b"*")]
+    changed[7] = changed[7][: j + 1] + body + b"*" + _checksum(body)
     mut = Mutated(b"\r\n".join(changed) + b"\r\n", {i: i for i in range(30)}, Counter(), 0)
     with pytest.raises(InvariantError, match="clean line 8"):
         check_mutated(lines, True, mut, clean, tmp_path, IngestConfig())
     # a line that vanished without a reject: map line 3 onto a blank-free log missing it
-    mut = Mutated(b"\r\n".join(lines[:3] + lines[4:]) + b"\r\n",
-                  {i: i for i in range(30)}, Counter(), 0)
+    mut = Mutated(
+        b"\r\n".join(lines[:3] + lines[4:]) + b"\r\n", {i: i for i in range(30)}, Counter(), 0
+    )
     with pytest.raises(InvariantError):
         check_mutated(lines, True, mut, clean, tmp_path, IngestConfig())
 
@@ -651,8 +737,9 @@ def test_mutated_voyage_through_the_whole_pipeline(tmp_path, seed):
     jsonschema.validate(doc, json_report.load_schema())
     assert html_report.render_html(a).rstrip().endswith("</html>")
     assert "Sensor faults" in terminal.render_text(a)
-    assert any(f["kind"] == "out_of_range" and f["values"].get("min_sog_kn") == -3.0
-               for f in doc["faults"])
+    assert any(
+        f["kind"] == "out_of_range" and f["values"].get("min_sog_kn") == -3.0 for f in doc["faults"]
+    )
     assert sum(doc["rejected"].values()) > 0
 
 
@@ -668,8 +755,9 @@ def test_regression_tag_source_with_nul_or_300k_characters(tmp_path):
     long = lines[0].replace(b"s:GY", b"s:G" + b"A" * 300_000 + b"Y", 1)  # even count: XOR unchanged
     short_long = lines[0].replace(b"s:GY", b"s:G" + b"A" * 80 + b"Y", 1)  # a row-path TAG block
     under_cap = lines[0].replace(b"s:GY", b"s:G" + b"A" * 60_000 + b"Y", 1)  # within max_line_bytes
-    res = read_nmea(_write(tmp_path, [nul, long, short_long, under_cap] + lines[1:]), IngestConfig(),
-                    workers=1)
+    res = read_nmea(
+        _write(tmp_path, [nul, long, short_long, under_cap] + lines[1:]), IngestConfig(), workers=1
+    )
     # the 300 000 characters are beyond [ingest] max_line_bytes now: too_long, never parsed
     assert res.rejects.counts == Counter({"bad_tag": 3, "too_long": 1})
     keys = {str(k) for f in res.frames.values() if len(f) for k in f["source"].unique()}
@@ -698,5 +786,6 @@ def test_regression_stray_records_years_away_do_not_make_a_dr_grid_of_years(tmp_
     sel = np.isin(a.dead_reckoning.epochs.time_ns, t)
     assert sel.sum() == t.size
     # the same track to a micrometre (the times differ by four years, so their last bits do)
-    np.testing.assert_allclose(a.dead_reckoning.epochs.lat_rad[sel], clean.epochs.lat_rad,
-                               rtol=0, atol=1e-13)
+    np.testing.assert_allclose(
+        a.dead_reckoning.epochs.lat_rad[sel], clean.epochs.lat_rad, rtol=0, atol=1e-13
+    )

@@ -63,7 +63,9 @@ def test_wrap_edges():
 
 def test_circmean_no_359_1_blowup():
     assert g.angdiff(g.circmean(np.radians([359.0, 1.0])), 0.0) == pytest.approx(0.0, abs=1e-12)
-    assert g.angdiff(g.circmean(np.radians([350.0, 10.0, np.nan])), 0.0) == pytest.approx(0.0, abs=1e-12)
+    assert g.angdiff(g.circmean(np.radians([350.0, 10.0, np.nan])), 0.0) == pytest.approx(
+        0.0, abs=1e-12
+    )
     assert np.isnan(g.circmean(np.radians([0.0, 180.0])))
     assert 0.0 <= g.circmean(np.radians([359.0, 358.0])) < 2 * math.pi
 

@@ -76,17 +76,20 @@ def _pivot(block):
     def bounds(y, t):
         h = three_cornered_hat(y, confidence=NOMINAL, block=block, draws=1000, seed=t)
         return h.var_lower, h.var_upper
+
     return bounds
 
 
 def _old_bootstrap(block):
     """The bounds dracc reported before issue 13: percentile moving-block bootstrap."""
+
     def bounds(y, t):
         d = pair_differences(y)
         idx = block_bootstrap_indices(d.shape[1], block, 1000, np.random.default_rng(t))
         boot = hat_variances(np.moveaxis(np.mean((d * d)[:, idx], axis=-1), 0, -1))
         a = (1.0 - NOMINAL) / 2.0
         return np.quantile(boot, [a, 1.0 - a], axis=0)
+
     return bounds
 
 
@@ -207,6 +210,7 @@ def test_bounds_absent_below_two_degrees_of_freedom_and_reproducible():
     b = three_cornered_hat(np.random.default_rng(2).standard_normal((3, 20)), block=1, seed=4)
     np.testing.assert_array_equal(a.var_lower, b.var_lower)
     # corr_instants overrides block (the caller can pass tau/dt unrounded)
-    c = three_cornered_hat(np.random.default_rng(2).standard_normal((3, 20)), block=5,
-                           corr_instants=0.0, seed=4)
+    c = three_cornered_hat(
+        np.random.default_rng(2).standard_normal((3, 20)), block=5, corr_instants=0.0, seed=4
+    )
     np.testing.assert_array_equal(a.var_upper, c.var_upper)

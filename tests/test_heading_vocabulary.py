@@ -26,11 +26,28 @@ CFG = IngestConfig()
 T0 = 1_700_000_000_000_000_000
 
 
-@pytest.mark.parametrize("spelling, want", [
-    ("T", "T"), ("t", "T"), ("true", "T"), ("TRUE", "T"), (" True ", "T"), ("true_north", "T"),
-    ("True North", "T"), ("geographic", "T"), (84, "T"), (84.0, "T"),
-    ("M", "M"), ("m", "M"), ("magnetic", "M"), ("MAGNETIC", "M"), ("Magnetic_North", "M"), ("mag", "M"),
-    (77, "M")])
+@pytest.mark.parametrize(
+    "spelling, want",
+    [
+        ("T", "T"),
+        ("t", "T"),
+        ("true", "T"),
+        ("TRUE", "T"),
+        (" True ", "T"),
+        ("true_north", "T"),
+        ("True North", "T"),
+        ("geographic", "T"),
+        (84, "T"),
+        (84.0, "T"),
+        ("M", "M"),
+        ("m", "M"),
+        ("magnetic", "M"),
+        ("MAGNETIC", "M"),
+        ("Magnetic_North", "M"),
+        ("mag", "M"),
+        (77, "M"),
+    ],
+)
 def test_accepted_spellings(spelling, want):
     ref, bad = normalize_reference([spelling])
     assert ref.tolist() == [want] and not bad.any()
@@ -56,8 +73,10 @@ def test_booleans():
 
 
 def test_ros_constants_from_a_message_definition():
-    azimuth = ("float64 azimuth\nuint8 REFERENCE_MAGNETIC=0\nuint8 REFERENCE_GEOGRAPHIC=1\n"
-               "uint8 REFERENCE_UTM=2\nuint8 reference\n")
+    azimuth = (
+        "float64 azimuth\nuint8 REFERENCE_MAGNETIC=0\nuint8 REFERENCE_GEOGRAPHIC=1\n"
+        "uint8 REFERENCE_UTM=2\nuint8 reference\n"
+    )
     assert ros_constants(azimuth) == {0: "M", 1: "T", 2: None}
     assert ros_constants("uint8 reference  # 84 'T' true, 77 'M' magnetic\n") == {}
 
@@ -65,37 +84,62 @@ def test_ros_constants_from_a_message_definition():
 def test_build_frames_counts_and_shows_what_it_cannot_read():
     n = 5
     rej = Rejects()
-    fr = build_frames(T0 + np.arange(n), "GYRO", np.arange(1, n + 1), "csv",
-                      {"heading_deg": np.full(n, 10.0),
-                       "reference": np.array(["true", "Magnetic", "grid", None, "T"], dtype=object)},
-                      "f.csv", rej)
+    fr = build_frames(
+        T0 + np.arange(n),
+        "GYRO",
+        np.arange(1, n + 1),
+        "csv",
+        {
+            "heading_deg": np.full(n, 10.0),
+            "reference": np.array(["true", "Magnetic", "grid", None, "T"], dtype=object),
+        },
+        "f.csv",
+        rej,
+    )
     h = fr["heading"]
     assert h["line"].tolist() == [1, 2, 4, 5]  # the 'grid' record is not used
-    assert h["reference"].astype(object).tolist()[:2] == ["T", "M"] and h["reference"].isna().tolist()[2]
+    assert (
+        h["reference"].astype(object).tolist()[:2] == ["T", "M"]
+        and h["reference"].isna().tolist()[2]
+    )
     assert rej.counts[REJECT_REASON] == 1
     assert rej.examples[REJECT_REASON][0][1] == 3 and "grid" in rej.examples[REJECT_REASON][0][2]
 
 
 def test_two_fields_that_disagree_are_not_understood():
     rej = Rejects()
-    fr = build_frames(T0 + np.arange(2), "GYRO", np.array([1, 2]), "json",
-                      {"heading_deg": np.array([1.0, 2.0]), "reference": np.array(["T", "T"], dtype=object),
-                       "is_magnetic": np.array([False, True], dtype=object)}, "f", rej)
+    fr = build_frames(
+        T0 + np.arange(2),
+        "GYRO",
+        np.array([1, 2]),
+        "json",
+        {
+            "heading_deg": np.array([1.0, 2.0]),
+            "reference": np.array(["T", "T"], dtype=object),
+            "is_magnetic": np.array([False, True], dtype=object),
+        },
+        "f",
+        rej,
+    )
     assert fr["heading"]["line"].tolist() == [1] and rej.counts[REJECT_REASON] == 1
 
 
 def test_csv_wide_and_long_read_the_words(tmp_path):
     wide = tmp_path / "w.csv"
-    wide.write_text("time,source,heading_deg,reference\n"
-                    "2026-03-01T00:00:00Z,GYRO,10,true\n2026-03-01T00:00:01Z,GYRO,11,MAGNETIC\n"
-                    "2026-03-01T00:00:02Z,GYRO,12,grid\n")
+    wide.write_text(
+        "time,source,heading_deg,reference\n"
+        "2026-03-01T00:00:00Z,GYRO,10,true\n2026-03-01T00:00:01Z,GYRO,11,MAGNETIC\n"
+        "2026-03-01T00:00:02Z,GYRO,12,grid\n"
+    )
     r = read_csv(wide, CFG)
     assert r.frames["heading"]["reference"].astype(object).tolist() == ["T", "M"]
     assert r.rejects.counts[REJECT_REASON] == 1
     long = tmp_path / "l.csv"
-    long.write_text("time,source,quantity,value\n"
-                    "2026-03-01T00:00:00Z,GYRO,heading_deg,10\n2026-03-01T00:00:00Z,GYRO,is_true,true\n"
-                    "2026-03-01T00:00:01Z,GYRO,heading_deg,11\n2026-03-01T00:00:01Z,GYRO,is_true,false\n")
+    long.write_text(
+        "time,source,quantity,value\n"
+        "2026-03-01T00:00:00Z,GYRO,heading_deg,10\n2026-03-01T00:00:00Z,GYRO,is_true,true\n"
+        "2026-03-01T00:00:01Z,GYRO,heading_deg,11\n2026-03-01T00:00:01Z,GYRO,is_true,false\n"
+    )
     r = read_csv(long, CFG)
     assert r.frames["heading"]["reference"].astype(object).tolist() == ["T", "M"]
 
@@ -109,26 +153,43 @@ def _json_mcap(path, objs):
         sid = w.register_schema(name="dracc.Heading", encoding="jsonschema", data=b"{}")
         cid = w.register_channel(topic="/ins1/heading", message_encoding="json", schema_id=sid)
         for i, o in enumerate(objs):
-            w.add_message(cid, log_time=T0 + i * 10**9, data=json.dumps(o).encode(), publish_time=T0 + i * 10**9)
+            w.add_message(
+                cid,
+                log_time=T0 + i * 10**9,
+                data=json.dumps(o).encode(),
+                publish_time=T0 + i * 10**9,
+            )
         w.finish()
 
 
 def test_mcap_json_words_booleans_and_a_bad_value(tmp_path):
     p = tmp_path / "h.mcap"
-    _json_mcap(p, [{"heading_deg": 1.0, "reference": "true"}, {"heading_deg": 2.0, "reference": "magnetic"},
-                   {"heading_deg": 3.0, "reference": True}, {"heading_deg": 4.0, "reference": "T"}])
+    _json_mcap(
+        p,
+        [
+            {"heading_deg": 1.0, "reference": "true"},
+            {"heading_deg": 2.0, "reference": "magnetic"},
+            {"heading_deg": 3.0, "reference": True},
+            {"heading_deg": 4.0, "reference": "T"},
+        ],
+    )
     r = read_mcap(p, CFG)
     assert r.frames["heading"]["reference"].astype(object).tolist() == ["T", "M", "T"]
     assert r.rejects.counts[REJECT_REASON] == 1
     q = tmp_path / "b.mcap"
-    _json_mcap(q, [{"heading_deg": 1.0, "true_heading": True}, {"heading_deg": 2.0, "true_heading": False}])
+    _json_mcap(
+        q, [{"heading_deg": 1.0, "true_heading": True}, {"heading_deg": 2.0, "true_heading": False}]
+    )
     r = read_mcap(q, CFG)
     assert r.frames["heading"]["reference"].astype(object).tolist() == ["T", "M"]
 
 
-AZIMUTH = ("std_msgs/Header header\nfloat64 heading_deg\nuint8 REFERENCE_MAGNETIC=0\n"
-           "uint8 REFERENCE_GEOGRAPHIC=1\nuint8 REFERENCE_UTM=2\nuint8 reference\n" + "=" * 80 +
-           "\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n")
+AZIMUTH = (
+    "std_msgs/Header header\nfloat64 heading_deg\nuint8 REFERENCE_MAGNETIC=0\n"
+    "uint8 REFERENCE_GEOGRAPHIC=1\nuint8 REFERENCE_UTM=2\nuint8 reference\n"
+    + "=" * 80
+    + "\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
+)
 
 
 def test_ros2_reference_constants_from_the_definition(tmp_path):
@@ -139,9 +200,17 @@ def test_ros2_reference_constants_from_the_definition(tmp_path):
         w = Writer(fh)
         sch = w.register_msgdef("compass_msgs/msg/Azimuth", AZIMUTH)
         for i, ref in enumerate([0, 1, 2, 1]):
-            w.write_message("/gyro/azimuth", sch, {"header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "g"},
-                                                   "heading_deg": 10.0 + i, "reference": ref},
-                            log_time=T0 + i * 10**9, publish_time=T0 + i * 10**9)
+            w.write_message(
+                "/gyro/azimuth",
+                sch,
+                {
+                    "header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "g"},
+                    "heading_deg": 10.0 + i,
+                    "reference": ref,
+                },
+                log_time=T0 + i * 10**9,
+                publish_time=T0 + i * 10**9,
+            )
         w.finish()
     r = read_mcap(p, CFG)
     assert r.frames["heading"]["reference"].astype(object).tolist() == ["M", "T", "T"]
@@ -161,8 +230,9 @@ def _rewrite_reference(src, dst, true_word: str, magnetic_word: str) -> None:
             if schema.id not in schemas:
                 schemas[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
             if channel.id not in channels:
-                channels[channel.id] = w.register_channel(channel.topic, channel.message_encoding,
-                                                          schemas[schema.id])
+                channels[channel.id] = w.register_channel(
+                    channel.topic, channel.message_encoding, schemas[schema.id]
+                )
             data = msg.data.replace(b'"reference":"T"', b'"reference":"%s"' % true_word.encode())
             data = data.replace(b'"reference":"M"', b'"reference":"%s"' % magnetic_word.encode())
             n += data != msg.data
@@ -236,8 +306,12 @@ def test_configured_variation_wins_over_a_zero_placeholder(tmp_path, configured)
         # 2 deg W is kept
         np.testing.assert_allclose(got, [105.0, 105.0, 98.0, 105.0], atol=1e-9)
         assert "variation 5° from the configuration" in desc and not missing
-        assert any("configured 5° used at 3 of 4" in n and "0.0 (a placeholder) at 2" in n
-                   and "own non-zero variation kept at 1" in n for n in notes)
+        assert any(
+            "configured 5° used at 3 of 4" in n
+            and "0.0 (a placeholder) at 2" in n
+            and "own non-zero variation kept at 1" in n
+            for n in notes
+        )
 
 
 def test_real_hakefjord_zero_variation_and_the_option(real_dir):

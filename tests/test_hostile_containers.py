@@ -56,8 +56,24 @@ print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, r.returncode)
 def _analyze(path: Path, tmp_path: Path) -> tuple[int, int, dict, str]:
     """(peak RSS in MiB, exit code, the analysis JSON, stderr) of ``dracc analyze PATH``."""
     out = tmp_path / f"{path.stem}.json"
-    r = subprocess.run([sys.executable, "-c", _WRAP, str(AS_CAP), sys.executable, "-m", "dracc", "analyze",
-                        str(path), "--json", str(out)], capture_output=True, text=True, timeout=600)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            _WRAP,
+            str(AS_CAP),
+            sys.executable,
+            "-m",
+            "dracc",
+            "analyze",
+            str(path),
+            "--json",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     kib, code = (int(x) for x in r.stdout.split()[-2:])
     doc = json.loads(out.read_text()) if out.exists() else {}
     return kib // 1024, code, doc, r.stderr
@@ -104,8 +120,9 @@ def test_csv_long_field_memory_is_bounded(tmp_path, form):
     lines[2 * k] = _with_cell(lines[2 * k], col, b"7" * 60_000)
     p = tmp_path / f"long_field_{form}.csv"
     p.write_bytes(b"\n".join(lines))
-    full = read_csv(SAMPLES / f"voyage_{form}.csv" if form != "raw" else tmp_path / "clean_raw.csv",
-                    CFG).records
+    full = read_csv(
+        SAMPLES / f"voyage_{form}.csv" if form != "raw" else tmp_path / "clean_raw.csv", CFG
+    ).records
     rss, code, doc, err = _analyze(p, tmp_path)
     assert code == 0, err
     assert rss < RSS_LIMIT_MIB, f"peak RSS {rss} MiB"
@@ -144,15 +161,17 @@ def test_csv_too_long_rows_with_other_bad_rows_keep_their_line_numbers(tmp_path)
     """Rows left out before pyarrow sees the file shift pyarrow's own row numbers: the
     rows after them, and pyarrow's wrong-field-count rows, keep their file lines.  Line
     ends LF, CR LF and a lone CR; a too-long last row without a line end."""
-    rows = [b"time_utc,source,quantity,value",                       # 1
-            b"2024-05-01T00:00:00Z,LOG,stw_kn,10",                    # 2
-            b"2024-05-01T00:00:00Z,LOG,stw_kn," + b"1" * 300,         # 3 too long
-            b"2024-05-01T00:00:01Z,LOG,stw_kn",                       # 4 too few fields
-            b"2024-05-01T00:00:02Z,LOG,stw_kn,12",                    # 5
-            b"x" * 500,                                               # 6 too long
-            b"2024-05-01T00:00:03Z,LOG,stw_kn,13",                    # 7
-            b"2024-05-01T00:00:04Z,LOG,stw_kn,14",                    # 8
-            b"2024-05-01T00:00:05Z,LOG," + b"q" * 400]                # 9 too long, no line end
+    rows = [
+        b"time_utc,source,quantity,value",  # 1
+        b"2024-05-01T00:00:00Z,LOG,stw_kn,10",  # 2
+        b"2024-05-01T00:00:00Z,LOG,stw_kn," + b"1" * 300,  # 3 too long
+        b"2024-05-01T00:00:01Z,LOG,stw_kn",  # 4 too few fields
+        b"2024-05-01T00:00:02Z,LOG,stw_kn,12",  # 5
+        b"x" * 500,  # 6 too long
+        b"2024-05-01T00:00:03Z,LOG,stw_kn,13",  # 7
+        b"2024-05-01T00:00:04Z,LOG,stw_kn,14",  # 8
+        b"2024-05-01T00:00:05Z,LOG," + b"q" * 400,
+    ]  # 9 too long, no line end
     ends = [b"\n", b"\r\n", b"\r", b"\n", b"\r\n", b"\n", b"\r", b"\n"]
     p = tmp_path / "mixed.csv"
     p.write_bytes(b"".join(r + e for r, e in zip(rows, ends + [b""], strict=True)))
@@ -175,7 +194,9 @@ def test_csv_block_boundaries_do_not_change_the_scan(tmp_path, monkeypatch):
     import dracc.ingest.csv as csv_mod
 
     rows = [b"time_utc,source,quantity,value"] + [
-        b"2024-05-01T00:00:%02dZ,LOG,stw_kn,%s" % (i, b"1" * (250 if i % 4 == 1 else 2)) for i in range(20)]
+        b"2024-05-01T00:00:%02dZ,LOG,stw_kn,%s" % (i, b"1" * (250 if i % 4 == 1 else 2))
+        for i in range(20)
+    ]
     p = tmp_path / "crlf.csv"
     p.write_bytes(b"\r\n".join(rows) + b"\r\n")
     cfg = IngestConfig(max_line_bytes=200)
@@ -205,11 +226,18 @@ def _records(data: bytes):
 def _chunk_fields(data: bytes, pos: int) -> dict:
     b = pos + 9
     start, end, usize, crc, clen = struct.unpack_from("<QQQII", data, b)
-    comp = data[b + 32:b + 32 + clen].decode()
+    comp = data[b + 32 : b + 32 + clen].decode()
     (rlen,) = struct.unpack_from("<Q", data, b + 32 + clen)
     rat = b + 32 + clen + 8
-    return {"start": start, "end": end, "usize": usize, "crc": crc, "comp": comp, "records": data[rat:rat + rlen],
-            "records_at": rat}
+    return {
+        "start": start,
+        "end": end,
+        "usize": usize,
+        "crc": crc,
+        "comp": comp,
+        "records": data[rat : rat + rlen],
+        "records_at": rat,
+    }
 
 
 def _chunk_messages(data: bytes, pos: int) -> int:
@@ -218,8 +246,11 @@ def _chunk_messages(data: bytes, pos: int) -> int:
     import zstandard
 
     f = _chunk_fields(data, pos)
-    raw = {"zstd": lambda b: zstandard.ZstdDecompressor().decompress(b, max_output_size=f["usize"]),
-           "lz4": lz4.frame.decompress, "": bytes}[f["comp"]](f["records"])
+    raw = {
+        "zstd": lambda b: zstandard.ZstdDecompressor().decompress(b, max_output_size=f["usize"]),
+        "lz4": lz4.frame.decompress,
+        "": bytes,
+    }[f["comp"]](f["records"])
     n, q = 0, 0
     while q + 9 <= len(raw):
         op, ln = struct.unpack_from("<BQ", raw, q)
@@ -228,19 +259,37 @@ def _chunk_messages(data: bytes, pos: int) -> int:
     return n
 
 
-def _replace_chunk(data: bytes, pos: int, records: bytes, comp: str, usize: int | None = None,
-                   crc: int | None = None) -> bytes:
+def _replace_chunk(
+    data: bytes,
+    pos: int,
+    records: bytes,
+    comp: str,
+    usize: int | None = None,
+    crc: int | None = None,
+) -> bytes:
     """The file with the chunk at ``pos`` holding ``records`` (already compressed with
     ``comp``); its declared size and CRC as given (default: the old ones).  The record
     lengths, the footer's offsets and the summary CRC are fixed up, so that the chunk is
     the only damage."""
     f = _chunk_fields(data, pos)
     cs = comp.encode()
-    body = (struct.pack("<QQQI", f["start"], f["end"], f["usize"] if usize is None else usize,
-                        f["crc"] if crc is None else crc)
-            + struct.pack("<I", len(cs)) + cs + struct.pack("<Q", len(records)) + records)
+    body = (
+        struct.pack(
+            "<QQQI",
+            f["start"],
+            f["end"],
+            f["usize"] if usize is None else usize,
+            f["crc"] if crc is None else crc,
+        )
+        + struct.pack("<I", len(cs))
+        + cs
+        + struct.pack("<Q", len(records))
+        + records
+    )
     (old_len,) = struct.unpack_from("<Q", data, pos + 1)
-    out = bytearray(data[:pos] + struct.pack("<BQ", 6, len(body)) + body + data[pos + 9 + old_len:])
+    out = bytearray(
+        data[:pos] + struct.pack("<BQ", 6, len(body)) + body + data[pos + 9 + old_len :]
+    )
     delta = len(body) - old_len
     op, fpos, _ = _records(bytes(out))[-1]
     assert op == 2
@@ -249,7 +298,7 @@ def _replace_chunk(data: bytes, pos: int, records: bytes, comp: str, usize: int 
         s0, s1 = s0 + delta, (s1 + delta if s1 else 0)
         struct.pack_into("<QQ", out, fpos + 9, s0, s1)
         if scrc:
-            struct.pack_into("<I", out, fpos + 25, zlib.crc32(bytes(out[s0:fpos + 25])))
+            struct.pack_into("<I", out, fpos + 25, zlib.crc32(bytes(out[s0 : fpos + 25])))
     return bytes(out)
 
 
@@ -276,7 +325,9 @@ def chunked_voyage(tmp_path_factory) -> tuple[Path, dict]:
     """The sample voyage written again in small zstd chunks (about 30 of them)."""
     d = tmp_path_factory.mktemp("voyage")
     frames = read_mcap(SAMPLES / "voyage.mcap", CFG).frames
-    p = write_mcap(frames, {}, d / "chunked.mcap", encoding="json", chunk_size=64 << 10, compression="zstd")
+    p = write_mcap(
+        frames, {}, d / "chunked.mcap", encoding="json", chunk_size=64 << 10, compression="zstd"
+    )
     return p, frames
 
 
@@ -329,7 +380,7 @@ def test_mcap_lz4_bomb_is_rejected(tmp_path, chunked_voyage, where):
     victim = chunks[-1] if where == "cut" else chunks[5]
     new = _replace_chunk(data, victim, _lz4_bomb(300 << 20), "lz4")
     if where == "cut":
-        new = new[:victim + 9 + 200_000]  # the file ends inside the bomb's compressed data
+        new = new[: victim + 9 + 200_000]  # the file ends inside the bomb's compressed data
     q = tmp_path / f"lz4_bomb_{where}.mcap"
     q.write_bytes(new)
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -384,8 +435,14 @@ def test_mcap_chunk_crc_mismatch_drops_that_chunk_only(tmp_path, compression):
 
     frames = read_mcap(SAMPLES / "voyage.mcap", CFG).frames
     frames = {"position": frames["position"]}
-    p = write_mcap(frames, {}, tmp_path / "v.mcap", encoding="json", chunk_size=16 << 10,
-                   compression=compression)
+    p = write_mcap(
+        frames,
+        {},
+        tmp_path / "v.mcap",
+        encoding="json",
+        chunk_size=16 << 10,
+        compression=compression,
+    )
     data = p.read_bytes()
     victim = _chunks(data)[2]
     f = _chunk_fields(data, victim)
@@ -397,7 +454,7 @@ def test_mcap_chunk_crc_mismatch_drops_that_chunk_only(tmp_path, compression):
     if compression:
         new = _replace_chunk(data, victim, zstandard.ZstdCompressor().compress(bad), "zstd")
     else:
-        new = data[:f["records_at"] + at] + bad[at:at + 1] + data[f["records_at"] + at + 1:]
+        new = data[: f["records_at"] + at] + bad[at : at + 1] + data[f["records_at"] + at + 1 :]
     q = tmp_path / "flipped.mcap"
     q.write_bytes(new)
     r = read_mcap(q, CFG)
@@ -414,8 +471,14 @@ def test_mcap_chunk_crc_mismatch_drops_that_chunk_only(tmp_path, compression):
     from collections import Counter
 
     def triples(f):
-        return Counter(zip(f["time_ns"].tolist(), f["source"].astype(str).tolist(), f["lat_rad"].tolist(),
-                           strict=True))
+        return Counter(
+            zip(
+                f["time_ns"].tolist(),
+                f["source"].astype(str).tolist(),
+                f["lat_rad"].tolist(),
+                strict=True,
+            )
+        )
 
     assert not triples(got) - triples(want)
 
@@ -423,7 +486,9 @@ def test_mcap_chunk_crc_mismatch_drops_that_chunk_only(tmp_path, compression):
 def test_mcap_zero_crc_is_not_checked(tmp_path):
     """``uncompressed_crc`` 0 means 'not computed': the chunk is read."""
     frames = {"position": read_mcap(SAMPLES / "voyage.mcap", CFG).frames["position"]}
-    p = write_mcap(frames, {}, tmp_path / "v.mcap", encoding="json", chunk_size=16 << 10, compression=None)
+    p = write_mcap(
+        frames, {}, tmp_path / "v.mcap", encoding="json", chunk_size=16 << 10, compression=None
+    )
     data = p.read_bytes()
     victim = _chunks(data)[1]
     f = _chunk_fields(data, victim)
@@ -439,7 +504,9 @@ def test_mcap_zero_bytes_inside_a_chunk_are_walked_over(tmp_path):
     exactly where the record-by-record walk would go on: every message is still read
     (the message index no longer fits, so the chunk is walked)."""
     frames = {"position": read_mcap(SAMPLES / "voyage.mcap", CFG).frames["position"]}
-    p = write_mcap(frames, {}, tmp_path / "v.mcap", encoding="json", chunk_size=16 << 10, compression=None)
+    p = write_mcap(
+        frames, {}, tmp_path / "v.mcap", encoding="json", chunk_size=16 << 10, compression=None
+    )
     data = p.read_bytes()
     victim = _chunks(data)[1]
     raw = _chunk_fields(data, victim)["records"]
@@ -447,7 +514,9 @@ def test_mcap_zero_bytes_inside_a_chunk_are_walked_over(tmp_path):
     k = 9 + first
     padded = raw[:k] + bytes(9 * 50_000) + raw[k:]
     q = tmp_path / "zeros.mcap"
-    q.write_bytes(_replace_chunk(data, victim, padded, "", usize=len(padded), crc=zlib.crc32(padded)))
+    q.write_bytes(
+        _replace_chunk(data, victim, padded, "", usize=len(padded), crc=zlib.crc32(padded))
+    )
     r = read_mcap(q, CFG)
     assert r.rejects.total == 0, dict(r.rejects.counts)
     assert r.records == read_mcap(p, CFG).records
@@ -500,8 +569,12 @@ def test_mcap_topic_with_control_characters_is_kept_as_data(tmp_path):
         w.start()
         ch = w.register_channel(topic, "json", 0)
         for i in range(5):
-            w.add_message(ch, 1_700_000_000_000_000_000 + i * 10**9,
-                          json.dumps({"latitude": 54.0, "longitude": 18.0 + i / 100}).encode(), 0)
+            w.add_message(
+                ch,
+                1_700_000_000_000_000_000 + i * 10**9,
+                json.dumps({"latitude": 54.0, "longitude": 18.0 + i / 100}).encode(),
+                0,
+            )
         w.finish()
     r = read_mcap(p, CFG)
     key = "\x1b[31mINS2\x1b]0;pwned\x07"

@@ -51,8 +51,9 @@ def _dracc() -> list[str]:
 
 
 # ------------------------------------------------------------------ 1. memory is capped
-def _write_with_run(path: Path, before: list[bytes], filler: bytes, run_bytes: int,
-                    after: list[bytes]) -> None:
+def _write_with_run(
+    path: Path, before: list[bytes], filler: bytes, run_bytes: int, after: list[bytes]
+) -> None:
     """``before`` lines, a run of ``filler`` without any line end, then ``after`` lines
     (the first of them right after the run, on its line: a logger restarted after a crash)."""
     chunk = (filler * (MB // len(filler) + 1))[:MB]
@@ -60,7 +61,7 @@ def _write_with_run(path: Path, before: list[bytes], filler: bytes, run_bytes: i
         fh.write(b"\r\n".join(before) + b"\r\n")
         left = run_bytes
         while left > 0:
-            fh.write(chunk[:min(left, MB)])
+            fh.write(chunk[: min(left, MB)])
             left -= MB
         fh.write(b"\r\n".join(after) + b"\r\n")
 
@@ -76,7 +77,9 @@ _PEAK = textwrap.dedent("""
 def _peak_rss_mb(args: list[str], env: dict[str, str]) -> tuple[int, float, str]:
     """(exit code, peak RSS in MiB of the largest process of the run, stderr) of a command:
     the maximum over the command and the workers it waited for."""
-    r = subprocess.run([sys.executable, "-c", _PEAK, *args], capture_output=True, env=env, timeout=600)
+    r = subprocess.run(
+        [sys.executable, "-c", _PEAK, *args], capture_output=True, env=env, timeout=600
+    )
     code, kb = r.stdout.split()
     return int(code), int(kb) / 1024, r.stderr.decode("utf-8", "replace")
 
@@ -93,8 +96,9 @@ def _analyze_damaged(tmp_path: Path, filler: bytes, engine: str = "c"):
     _write_with_run(p, before, filler, RUN_MB * MB, after)
     assert p.stat().st_size > nmea.PARALLEL_MIN_BYTES  # the two reader workers take part
     out = tmp_path / "a.json"
-    code, peak, err = _peak_rss_mb(_dracc() + ["analyze", str(p), "--json", str(out)],
-                                   _env(DRACC_NMEA_ENGINE=engine))
+    code, peak, err = _peak_rss_mb(
+        _dracc() + ["analyze", str(p), "--json", str(out)], _env(DRACC_NMEA_ENGINE=engine)
+    )
     assert code == ExitCode.OK, err
     assert "Traceback" not in err
     doc = json.loads(out.read_text())
@@ -137,13 +141,20 @@ def _same_result(a, b) -> None:
     assert a.rejects.examples == b.rejects.examples
     assert a.ignored == b.ignored
     for kind in set(a.frames) | set(b.frames):
-        pd.testing.assert_frame_equal(_labels(a.frames[kind]), _labels(b.frames[kind]), check_exact=True)
+        pd.testing.assert_frame_equal(
+            _labels(a.frames[kind]), _labels(b.frames[kind]), check_exact=True
+        )
 
 
 def _labels(df: pd.DataFrame) -> pd.DataFrame:
     """Categorical columns as their labels (the order of categories depends on the blocks)."""
-    return df.assign(**{c: df[c].astype(str).to_numpy(object) for c in df.columns
-                        if isinstance(df[c].dtype, pd.CategoricalDtype)})
+    return df.assign(
+        **{
+            c: df[c].astype(str).to_numpy(object)
+            for c in df.columns
+            if isinstance(df[c].dtype, pd.CategoricalDtype)
+        }
+    )
 
 
 def _read_blocks(path: Path, cfg: IngestConfig, block_bytes: int):
@@ -152,9 +163,17 @@ def _read_blocks(path: Path, cfg: IngestConfig, block_bytes: int):
 
     st = StreamState(str(path))
     blocks = [b.frames for b in iter_nmea_blocks(path, cfg, st, block_bytes=block_bytes, workers=1)]
-    return FileResult(path=str(path), format="nmea", frames=concat_blocks(blocks), lines=st.lines,
-                      rejects=st.rejects, time_events=st.time_events(), notes=st.notes(),
-                      ignored=st.ignored, ignored_examples=st.ignored_examples)
+    return FileResult(
+        path=str(path),
+        format="nmea",
+        frames=concat_blocks(blocks),
+        lines=st.lines,
+        rejects=st.rejects,
+        time_events=st.time_events(),
+        notes=st.notes(),
+        ignored=st.ignored,
+        ignored_examples=st.ignored_examples,
+    )
 
 
 @pytest.mark.parametrize("engine", ["c", "numpy"])
@@ -172,8 +191,10 @@ def test_lines_too_long_give_the_same_result_whatever_the_blocks(tmp_path, monke
     damaged[90] = b"$GPGGA," * 700 + tag  # junk sentence starts, then a good one
     damaged[130] = lines[130] + b"\x00" * 4000  # a good sentence, then a NUL run
     damaged[170] = b"\x00" * 999  # within the cap: one 'binary' line
-    sentence = lines[171][lines[171].index(b"\\$") + 1:]
-    damaged[171] = b"\\s:GYRO,c:1," + b"x" * 2000 + b"*00\\" + sentence  # TAG block too long: not read
+    sentence = lines[171][lines[171].index(b"\\$") + 1 :]
+    damaged[171] = (
+        b"\\s:GYRO,c:1," + b"x" * 2000 + b"*00\\" + sentence
+    )  # TAG block too long: not read
     p = tmp_path / "d.nmea"
     p.write_bytes(b"\r\n".join(damaged))  # and no final line end
     cfg = IngestConfig(max_line_bytes=1000)
@@ -202,9 +223,15 @@ def test_numpy_path_parses_dense_junk_in_pieces(monkeypatch):
 
     rng = random.Random(4)
     tag = _sample_lines()[:3000]
-    datas = [b"$," * 30_000, b"x\n" * 30_000, b"\x00\r" * 20_000 + b"$GPHDT,1,T*00\n",
-             b"\r\n".join(tag), b"\r\n".join(_sample_lines("voyage_prefix.nmea")[:3000]),
-             mutate(tag, rng, 300).data, mutate(tag, rng, 300).data]
+    datas = [
+        b"$," * 30_000,
+        b"x\n" * 30_000,
+        b"\x00\r" * 20_000 + b"$GPHDT,1,T*00\n",
+        b"\r\n".join(tag),
+        b"\r\n".join(_sample_lines("voyage_prefix.nmea")[:3000]),
+        mutate(tag, rng, 300).data,
+        mutate(tag, rng, 300).data,
+    ]
 
     def parse(data, engine, budget, chunk):
         monkeypatch.setattr(nmea, "PIECE_BUDGET", budget)
@@ -276,8 +303,12 @@ def test_mixed_line_ends(tmp_path, voyage):
     recorders): the same as LF."""
     rng = random.Random(3)
     ends = list(LINE_ENDS.values())
-    _check_like_lf(tmp_path, voyage,
-                   lambda d: b"".join(ln + rng.choice(ends) for ln in d.split(b"\n")[:-1]), "mixed")
+    _check_like_lf(
+        tmp_path,
+        voyage,
+        lambda d: b"".join(ln + rng.choice(ends) for ln in d.split(b"\n")[:-1]),
+        "mixed",
+    )
 
 
 @pytest.mark.parametrize("name", sorted(LINE_ENDS))
@@ -343,8 +374,11 @@ def test_mcap_with_stripped_cr_is_named_a_damaged_container(run_cli, tmp_path, m
     alone or among other files."""
     bad = tmp_path / "recorder.mcap"
     bad.write_bytes(mcap_bytes.replace(b"\r", b""))
-    with pytest.raises(IngestError, match=r"recorder\.mcap.*MCAP file damaged in transfer "
-                                          r"\(CR bytes stripped: was it copied in text mode\?\)"):
+    with pytest.raises(
+        IngestError,
+        match=r"recorder\.mcap.*MCAP file damaged in transfer "
+        r"\(CR bytes stripped: was it copied in text mode\?\)",
+    ):
         detect_format(bad)
     code, _, err = run_cli("inspect", bad)
     _one_line_error(code, err, "recorder.mcap", "CR bytes stripped")
@@ -357,13 +391,17 @@ def test_mcap_with_stripped_cr_is_named_a_damaged_container(run_cli, tmp_path, m
         read_logs([good, bad], IngestConfig())
 
 
-@pytest.mark.parametrize("damage,why", [
-    (lambda d: d.replace(b"\n", b"\r\n"), "LF bytes turned into CR LF"),
-    (lambda d: bytes(b & 0x7F for b in d), "0x09, not 0x89"),
-    (lambda d: d.decode("latin-1").encode("utf-8"), "re-encoded as UTF-8"),
-    (lambda d: d[4096:], "its beginning is missing"),
-    (lambda d: d[:200].replace(b"\r", b"") + d[200:], "CR bytes stripped"),
-], ids=["lf-to-crlf", "7-bit", "utf-8", "head-lost", "magic-only"])
+@pytest.mark.parametrize(
+    "damage,why",
+    [
+        (lambda d: d.replace(b"\n", b"\r\n"), "LF bytes turned into CR LF"),
+        (lambda d: bytes(b & 0x7F for b in d), "0x09, not 0x89"),
+        (lambda d: d.decode("latin-1").encode("utf-8"), "re-encoded as UTF-8"),
+        (lambda d: d[4096:], "its beginning is missing"),
+        (lambda d: d[:200].replace(b"\r", b"") + d[200:], "CR bytes stripped"),
+    ],
+    ids=["lf-to-crlf", "7-bit", "utf-8", "head-lost", "magic-only"],
+)
 def test_mcap_damaged_in_other_ways_is_named(run_cli, tmp_path, mcap_bytes, damage, why):
     bad = tmp_path / "rec.mcap"
     bad.write_bytes(damage(mcap_bytes))
@@ -376,7 +414,9 @@ def test_intact_mcap_and_text_that_mentions_mcap_are_not_damaged(tmp_path, mcap_
     ok.write_bytes(mcap_bytes)
     assert detect_format(ok) == "mcap"
     txt = tmp_path / "t.nmea"
-    txt.write_bytes(b"MCAP0,1,2\r\n$GPTXT,01,01,02,MCAP0*00\r\n" + b"\r\n".join(_sample_lines()[:5]))
+    txt.write_bytes(
+        b"MCAP0,1,2\r\n$GPTXT,01,01,02,MCAP0*00\r\n" + b"\r\n".join(_sample_lines()[:5])
+    )
     assert detect_format(txt) == "nmea"
 
 
@@ -411,8 +451,10 @@ def _assert_gone_with_eof(proc: subprocess.Popen, workers: set[int], timeout: fl
         stream.read()
         eof[name] = time.monotonic()
 
-    threads = [threading.Thread(target=drain, args=(n, s), daemon=True)
-               for n, s in (("stdout", proc.stdout), ("stderr", proc.stderr))]
+    threads = [
+        threading.Thread(target=drain, args=(n, s), daemon=True)
+        for n, s in (("stdout", proc.stdout), ("stderr", proc.stderr))
+    ]
     for t in threads:
         t.start()
     t0 = time.monotonic()
@@ -454,8 +496,12 @@ def test_reader_workers_die_with_their_parent(tmp_path):
     (PR_SET_PDEATHSIG on Linux, a watchdog elsewhere) and the pipes it shared reach EOF.
     Before: the workers lived on (PPID 1, 115 MB each) holding the pipes."""
     p = _big_log(tmp_path, 12)
-    proc = subprocess.Popen([sys.executable, "-c", _DRIVER, str(p)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, env=_env())
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _DRIVER, str(p)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=_env(),
+    )
     try:
         assert proc.stdout.readline().strip() == b"ready", proc.stderr.read()
         workers = _children(proc.pid)
@@ -474,8 +520,12 @@ def test_reader_workers_die_when_dracc_analyze_is_killed(tmp_path):
     for mb in (48, 96, 192):  # bigger if the read ended before the workers were seen
         p = _big_log(tmp_path, mb)
         assert p.stat().st_size >= nmea.PARALLEL_MIN_BYTES
-        proc = subprocess.Popen(_dracc() + ["analyze", str(p), "--json", str(tmp_path / "a.json")],
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=_env())
+        proc = subprocess.Popen(
+            _dracc() + ["analyze", str(p), "--json", str(tmp_path / "a.json")],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            env=_env(),
+        )
         try:
             workers: set[int] = set()
             while proc.poll() is None and len(workers) < 2:
@@ -545,8 +595,10 @@ def test_strict_fails_on_a_line_too_long(tmp_path):
         read_nmea(p, IngestConfig(strict=True), workers=1)
     res = read_nmea(p, IngestConfig(), workers=1)
     assert res.rejects.counts == Counter({"too_long": 1}) and res.lines == 4
-    assert np.array_equal(np.sort(np.concatenate([df["line"].to_numpy() for df in res.frames.values()
-                                                   if len(df)])), [1, 2, 3])
+    assert np.array_equal(
+        np.sort(np.concatenate([df["line"].to_numpy() for df in res.frames.values() if len(df)])),
+        [1, 2, 3],
+    )
 
 
 def test_fleet_workers_die_when_dracc_fleet_is_killed(tmp_path):
@@ -557,9 +609,21 @@ def test_fleet_workers_die_when_dracc_fleet_is_killed(tmp_path):
     for v in ("V1", "V2"):
         (fleet / v).mkdir(parents=True)
         os.link(src, fleet / v / "nav.nmea")
-    proc = subprocess.Popen(_dracc() + ["fleet", str(fleet / "V1"), str(fleet / "V2"), "--workers",
-                                        "2", "--out", str(tmp_path / "out")],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=_env())
+    proc = subprocess.Popen(
+        _dracc()
+        + [
+            "fleet",
+            str(fleet / "V1"),
+            str(fleet / "V2"),
+            "--workers",
+            "2",
+            "--out",
+            str(tmp_path / "out"),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=_env(),
+    )
     try:
         workers: set[int] = set()
         deadline = time.monotonic() + 120

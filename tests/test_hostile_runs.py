@@ -56,6 +56,7 @@ class _Hung(Exception):
 @contextlib.contextmanager
 def _bounded(seconds: int = 60):
     """Fail instead of hanging (opening a FIFO blocks until a writer comes)."""
+
     def ring(signum, frame):
         raise _Hung(f"still running after {seconds} s: something blocked")
 
@@ -75,8 +76,12 @@ def _env(**extra) -> dict[str, str]:
 
 
 def _start(args, env=None) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "dracc", *map(str, args)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env or _env())
+    return subprocess.Popen(
+        [sys.executable, "-m", "dracc", *map(str, args)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        env=env or _env(),
+    )
 
 
 def _finish(p: subprocess.Popen) -> tuple[int, str]:
@@ -114,8 +119,10 @@ def _socket(path: Path) -> socket.socket:
 def _fake_fleet(tmp_path: Path) -> Path:
     """Fake logs (read by ``fake_analyser``) for two vessels."""
     root = tmp_path / "fleet"
-    for vessel, nights in (("Aurora", [("2026-11-19", 100.0), ("2026-11-20", 130.0)]),
-                           ("Borealis", [("2026-11-20", 90.0)])):
+    for vessel, nights in (
+        ("Aurora", [("2026-11-19", 100.0), ("2026-11-20", 130.0)]),
+        ("Borealis", [("2026-11-20", 90.0)]),
+    ):
         (root / vessel).mkdir(parents=True)
         for night, lat in nights:
             (root / vessel / f"{night}.nmea").write_text(json.dumps({"night": night, "lat": lat}))
@@ -142,8 +149,13 @@ def test_fleet_fifo_among_the_logs_is_listed_as_failed(tmp_path):
         with _bounded():
             tasks = discover([a, "/dev/zero"], "**/*.nmea")
             failed = {t.log: t.error for t in tasks if t.error}
-            assert set(failed) == {"2026-11-21.nmea", "gone.nmea", "archive.nmea", "other-ship.nmea",
-                                   "zero"}
+            assert set(failed) == {
+                "2026-11-21.nmea",
+                "gone.nmea",
+                "archive.nmea",
+                "other-ship.nmea",
+                "zero",
+            }
             assert "is a FIFO (named pipe), not a log file" in failed["2026-11-21.nmea"]
             assert "dangling symbolic link" in failed["gone.nmea"]
             assert "is a directory, not a log file" in failed["archive.nmea"]
@@ -190,7 +202,7 @@ def test_fleet_unreadable_log_is_listed_as_failed(tmp_path, monkeypatch):
 
 def test_input_problem_never_opens_what_could_block(tmp_path):
     with _bounded():
-        assert input_problem(_fifo(tmp_path / "f")) .startswith("is a FIFO")
+        assert input_problem(_fifo(tmp_path / "f")).startswith("is a FIFO")
         assert input_problem("/dev/null").startswith("is a device")
         assert input_problem(tmp_path) == "is a directory, not a log file"
         assert input_problem(tmp_path / "nope") == "no such file"
@@ -210,7 +222,9 @@ def test_fleet_cli_fifo_among_the_logs_exits_3(tmp_path):
     out = tmp_path / "out"
     code, err = _finish(_start(["fleet", v, "/dev/zero", "--workers", "1", "--out", out]))
     assert code == ExitCode.INPUT, err
-    assert "is a FIFO (named pipe)" in err and "dangling symbolic link" in err and "is a device" in err
+    assert (
+        "is a FIFO (named pipe)" in err and "dangling symbolic link" in err and "is a device" in err
+    )
     assert "3 failed" in err and "Traceback" not in err
     summary = json.loads((out / "fleet.json").read_text())
     assert len(summary["failures"]) == 3 and summary["analysed"] == 0
@@ -244,10 +258,19 @@ def test_fleet_outputs_appear_together_or_not_at_all(tmp_path, monkeypatch):
     one = run_fleet(discover([root / "Aurora"]), CFG, out, workers=1, analyser=fake_analyser)
     write_tables(one, out, extra={"fleet.html": "<html>one</html>"})
     old = _snapshot(out)
-    assert {"fleet.parquet", "fleet.csv", "trends.parquet", "trends.csv", "fleet.json", "fleet.html",
-            "vessels/Aurora/fleet.csv", "vessels/Aurora/trends.csv"} <= set(old)
-    both = run_fleet(discover([root / "Aurora", root / "Borealis"]), CFG, out, workers=1,
-                     analyser=fake_analyser)
+    assert {
+        "fleet.parquet",
+        "fleet.csv",
+        "trends.parquet",
+        "trends.csv",
+        "fleet.json",
+        "fleet.html",
+        "vessels/Aurora/fleet.csv",
+        "vessels/Aurora/trends.csv",
+    } <= set(old)
+    both = run_fleet(
+        discover([root / "Aurora", root / "Borealis"]), CFG, out, workers=1, analyser=fake_analyser
+    )
     import dracc.pipeline.fleet as fleet_mod
 
     real_csv = fleet_mod.csv_text
@@ -297,11 +320,15 @@ def test_fleet_outputs_without_symbolic_links_are_renamed_with_signals_held(tmp_
     root = _fake_fleet(tmp_path)
     out = tmp_path / "out"
     monkeypatch.setattr(atomic, "_symlinks_work", lambda folder: False)
-    res = run_fleet(discover([root / "Aurora", root / "Borealis"]), CFG, out, workers=1,
-                    analyser=fake_analyser)
+    res = run_fleet(
+        discover([root / "Aurora", root / "Borealis"]), CFG, out, workers=1, analyser=fake_analyser
+    )
     write_tables(res, out, extra={"fleet.html": "<html/>"})
     write_tables(res, out, extra={"fleet.html": "<html>2</html>"})
-    assert not (out / "fleet.csv").is_symlink() and (out / "fleet.html").read_text() == "<html>2</html>"
+    assert (
+        not (out / "fleet.csv").is_symlink()
+        and (out / "fleet.html").read_text() == "<html>2</html>"
+    )
     assert (out / "vessels" / "Borealis" / "trends.csv").is_file()
     assert os.listdir(out / atomic.RUNS) == []
 
@@ -324,14 +351,23 @@ def _which_set(out: Path, sets: dict[str, set[str]]) -> str | None:
     snap = _snapshot(out)
     if not snap:
         return None
-    names = {"fleet.parquet", "fleet.csv", "trends.parquet", "trends.csv", "fleet.json", "fleet.html"}
+    names = {
+        "fleet.parquet",
+        "fleet.csv",
+        "trends.parquet",
+        "trends.csv",
+        "fleet.json",
+        "fleet.html",
+    }
     assert names <= set(snap), f"incomplete set: {sorted(snap)}"
     seen = {
         "fleet.json": set(json.loads(snap["fleet.json"])["vessels"]),
         "fleet.parquet": set(pd.read_parquet(out / "fleet.parquet")["vessel"]),
         "fleet.csv": set(pd.read_csv(out / "fleet.csv")["vessel"]),
         "vessels/": {k.split("/")[1] for k in snap if k.startswith("vessels/")},
-        "fleet.html": {v for s in sets.values() for v in s if f"<li>{v} / " in snap["fleet.html"].decode()},
+        "fleet.html": {
+            v for s in sets.values() for v in s if f"<li>{v} / " in snap["fleet.html"].decode()
+        },
     }
     kinds = {k: [name for name, s in sets.items() if s == v] for k, v in seen.items()}
     assert all(len(v) == 1 for v in kinds.values()), f"outputs of different runs: {seen}"
@@ -444,8 +480,12 @@ def test_sigterm_in_the_first_moments_exits_130(tmp_path, entry):
     bare = _bare_start_s()
     env = _env(**{TEST_SLEEP_ENV: 60})
     for delay in (2 * bare + 0.02, 0.15, 0.25, 0.4, 0.7, 1.2):
-        p = subprocess.Popen([*cmd, "fleet", v, "--out", tmp_path / "out"], stdout=subprocess.DEVNULL,
-                             stderr=subprocess.PIPE, env=env)
+        p = subprocess.Popen(
+            [*cmd, "fleet", v, "--out", tmp_path / "out"],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            env=env,
+        )
         time.sleep(delay)
         assert p.poll() is None
         p.send_signal(signal.SIGTERM)
@@ -503,8 +543,23 @@ def test_two_audit_processes_creating_a_new_database_at_once(tmp_path):
     empty.mkdir()
     for k in range(3):
         db = tmp_path / f"cli-{k}.sqlite"
-        procs = [_start(["audit", empty, "--date", "2026-11-20", "--db", db, "--vessel", "Aurora",
-                         "--summary", tmp_path / f"s-{k}-{i}.txt"]) for i in range(2)]
+        procs = [
+            _start(
+                [
+                    "audit",
+                    empty,
+                    "--date",
+                    "2026-11-20",
+                    "--db",
+                    db,
+                    "--vessel",
+                    "Aurora",
+                    "--summary",
+                    tmp_path / f"s-{k}-{i}.txt",
+                ]
+            )
+            for i in range(2)
+        ]
         for p in procs:
             code, err = _finish(p)
             assert code == ExitCode.INPUT, err  # no logs for the night: exit 3, recorded
@@ -535,16 +590,45 @@ def _hostile_mcap(tmp_path: Path) -> Path:
     from dracc.ingest.mcap import read_mcap
     from dracc.sim.mcap_out import write_mcap
 
-    assert main(["simulate", "--out", str(tmp_path / "sim"), "--hours", "1", "--seed", "3",
-                 "--format", "mcap-json", "--name", "v", "--compass-hz", "0.2", "--log-hz", "0.2",
-                 "--ins-hz", "0.1", "--gnss-hz", "0.2", "--aux-hz", "0", "--truth-hz", "0.01"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--out",
+                str(tmp_path / "sim"),
+                "--hours",
+                "1",
+                "--seed",
+                "3",
+                "--format",
+                "mcap-json",
+                "--name",
+                "v",
+                "--compass-hz",
+                "0.2",
+                "--log-hz",
+                "0.2",
+                "--ins-hz",
+                "0.1",
+                "--gnss-hz",
+                "0.2",
+                "--aux-hz",
+                "0",
+                "--truth-hz",
+                "0.01",
+            ]
+        )
+        == 0
+    )
     r = read_mcap(tmp_path / "sim" / "v.mcap", IngestConfig())
     frames = {}
     for kind, df in r.frames.items():
         src = np.array(df["source"].astype(object).to_numpy(), dtype=object)
         src[src == "INS2"] = EVIL
         frames[kind] = df.assign(source=src)
-    return write_mcap(frames, {"GYRO": "compass", "LOG": "log", "GNSS": "gnss"}, tmp_path / "evil.mcap")
+    return write_mcap(
+        frames, {"GYRO": "compass", "LOG": "log", "GNSS": "gnss"}, tmp_path / "evil.mcap"
+    )
 
 
 @pytest.mark.slow
@@ -569,14 +653,22 @@ def test_fleet_csv_neutralises_formula_injection(tmp_path):
     names = ["=HYPERLINK(1)", "+SUM(A1)", "-2+3", "@cmd", "\tTab"]
     for i, vessel in enumerate(names):
         (root / vessel).mkdir(parents=True)
-        (root / vessel / "=1+1.nmea").write_text(json.dumps({"night": "2026-11-20", "lat": 100.0 + i}))
+        (root / vessel / "=1+1.nmea").write_text(
+            json.dumps({"night": "2026-11-20", "lat": 100.0 + i})
+        )
     out = tmp_path / "out"
-    res = run_fleet(discover([root / n for n in names]), CFG, out, workers=1, analyser=fake_analyser)
+    res = run_fleet(
+        discover([root / n for n in names]), CFG, out, workers=1, analyser=fake_analyser
+    )
     write_tables(res, out)
     raw = pd.read_parquet(out / "fleet.parquet")
     assert set(raw["vessel"]) == set(names) and set(raw["log"]) == {"=1+1.nmea"}
     assert csv_cell("-0.5") == "'-0.5" and csv_cell(-0.5) == -0.5
-    for rel in ["fleet.csv", "trends.csv", *(f"vessels/{d}/fleet.csv" for d in os.listdir(out / "vessels"))]:
+    for rel in [
+        "fleet.csv",
+        "trends.csv",
+        *(f"vessels/{d}/fleet.csv" for d in os.listdir(out / "vessels")),
+    ]:
         df = pd.read_csv(out / rel, dtype=str, keep_default_na=False)
         for col in ("vessel", "log"):
             if col in df:
@@ -590,10 +682,36 @@ def test_fleet_csv_neutralises_formula_injection(tmp_path):
 @pytest.fixture(scope="module")
 def night_log(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("night")
-    assert main(["simulate", "--out", str(root), "--hours", "2", "--seed", "41",
-                 "--start", "2026-11-20T00:00:00Z", "--name", "nav-2026-11-20", "--compass-hz", "0.2",
-                 "--log-hz", "0.2", "--ins-hz", "0.1", "--gnss-hz", "0.2", "--aux-hz", "0",
-                 "--truth-hz", "0.01"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--out",
+                str(root),
+                "--hours",
+                "2",
+                "--seed",
+                "41",
+                "--start",
+                "2026-11-20T00:00:00Z",
+                "--name",
+                "nav-2026-11-20",
+                "--compass-hz",
+                "0.2",
+                "--log-hz",
+                "0.2",
+                "--ins-hz",
+                "0.1",
+                "--gnss-hz",
+                "0.2",
+                "--aux-hz",
+                "0",
+                "--truth-hz",
+                "0.01",
+            ]
+        )
+        == 0
+    )
     return root / "nav-2026-11-20.nmea"
 
 
@@ -613,8 +731,22 @@ def test_audit_folder_symlink_outside_is_not_followed(tmp_path, night_log):
     _fifo(logs / "pipe-2026-11-20.nmea")
     summary, doc = tmp_path / "summary.txt", tmp_path / "audit.json"
     with _bounded(300):
-        code = main(["audit", str(logs), "--date", "2026-11-20", "--db", str(tmp_path / "a.sqlite"),
-                     "--vessel", "Aurora", "--summary", str(summary), "--json", str(doc)])
+        code = main(
+            [
+                "audit",
+                str(logs),
+                "--date",
+                "2026-11-20",
+                "--db",
+                str(tmp_path / "a.sqlite"),
+                "--vessel",
+                "Aurora",
+                "--summary",
+                str(summary),
+                "--json",
+                str(doc),
+            ]
+        )
     assert code in (0, 1)
     text = summary.read_text()
     assert "evil-2026-11-20.nmea: symbolic link to" in text and "not followed" in text
@@ -640,8 +772,18 @@ def test_audit_folder_holding_only_outside_links_is_a_night_without_data(tmp_pat
         choice_err = str(err)
     assert choice_err and "skipped" in choice_err and "not followed" in choice_err
     summary = tmp_path / "s.txt"
-    code = main(["audit", str(logs), "--date", "2026-11-20", "--db", str(tmp_path / "a.sqlite"),
-                 "--summary", str(summary)])
+    code = main(
+        [
+            "audit",
+            str(logs),
+            "--date",
+            "2026-11-20",
+            "--db",
+            str(tmp_path / "a.sqlite"),
+            "--summary",
+            str(summary),
+        ]
+    )
     assert code == ExitCode.INPUT
     assert "not followed" in summary.read_text() and "SECRET" not in summary.read_text()
 

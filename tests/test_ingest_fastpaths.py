@@ -51,8 +51,15 @@ def _both(tags: list[bytes]):
         ends.append(pos + len(t))
         pos += len(t) + len(line) + 1
     s, e = np.array(starts), np.array(ends)
-    general = parse_tags(buf, s, e, cum_xor, np.flatnonzero(buf == 42), np.flatnonzero(buf == 44),
-                         np.flatnonzero(buf == 58))
+    general = parse_tags(
+        buf,
+        s,
+        e,
+        cum_xor,
+        np.flatnonzero(buf == 42),
+        np.flatnonzero(buf == 44),
+        np.flatnonzero(buf == 58),
+    )
     w = int((e - s).max())
     mat = gather_rows(buf, s, w)
     mat = np.where(np.arange(w) < (e - s)[:, None], mat, 0).astype(np.uint8)
@@ -66,14 +73,20 @@ def _assert_same(general, rows):
 
 
 def test_hand_made_tags_agree_and_read_right():
-    tags = [_tag("s:INS2,c:1700000000"), _tag("c:1700000000250,s:GYRO"), _tag("s:A"),
-            _tag("c:1700000000"), _tag("g:1-2-3,s:LOG,c:1700000001"),
-            b"\\s:INS2,c:1700000000*00\\",  # wrong checksum
-            b"\\s:INS2,c:1700000000\\",  # no checksum
-            _tag("s:X,c:17000x0000"),  # unreadable time
-            _tag("xs:Y,c:5"),  # 'xs' is not the key 's'
-            b"\\s:B,c:1700000000*7\\",  # one hex digit
-            _tag("s:,c:1700000000"), _tag("c:,s:Q")]  # empty values
+    tags = [
+        _tag("s:INS2,c:1700000000"),
+        _tag("c:1700000000250,s:GYRO"),
+        _tag("s:A"),
+        _tag("c:1700000000"),
+        _tag("g:1-2-3,s:LOG,c:1700000001"),
+        b"\\s:INS2,c:1700000000*00\\",  # wrong checksum
+        b"\\s:INS2,c:1700000000\\",  # no checksum
+        _tag("s:X,c:17000x0000"),  # unreadable time
+        _tag("xs:Y,c:5"),  # 'xs' is not the key 's'
+        b"\\s:B,c:1700000000*7\\",  # one hex digit
+        _tag("s:,c:1700000000"),
+        _tag("c:,s:Q"),
+    ]  # empty values
     general, rows = _both(tags)
     _assert_same(general, rows)
     ok, bad_cs, ext, source = rows
@@ -92,11 +105,15 @@ _ALPHABET = "sc:,*\\0123456789ABCDEFabxg-."
 
 
 @settings(max_examples=200, deadline=None)
-@given(hs.lists(hs.text(alphabet=_ALPHABET, min_size=0, max_size=40), min_size=1, max_size=12),
-       hs.lists(hs.booleans(), min_size=12, max_size=12))
+@given(
+    hs.lists(hs.text(alphabet=_ALPHABET, min_size=0, max_size=40), min_size=1, max_size=12),
+    hs.lists(hs.booleans(), min_size=12, max_size=12),
+)
 def test_random_tags_agree(bodies, good):
     """Random bodies, with a right checksum or with the raw text closed by a backslash."""
-    tags = [(_tag(b) if g else b"\\" + b.encode() + b"\\") for b, g in zip(bodies, good, strict=False)]
+    tags = [
+        (_tag(b) if g else b"\\" + b.encode() + b"\\") for b, g in zip(bodies, good, strict=False)
+    ]
     tags = [t for t in tags if b"$" not in t and b"\n" not in t]
     general, rows = _both(tags)
     _assert_same(general, rows)
@@ -129,8 +146,15 @@ def _summaries_equal(a: dict, b: dict) -> None:
         assert list(a[k].talkers.items()) == list(b[k].talkers.items())
 
 
-@pytest.mark.parametrize("path", [REAL / "VDRplayer" / "Hakefjord.txt", SAMPLES / "voyage_tag.nmea",
-                                  SAMPLES / "voyage_prefix.nmea", SAMPLES / "voyage.mcap"])
+@pytest.mark.parametrize(
+    "path",
+    [
+        REAL / "VDRplayer" / "Hakefjord.txt",
+        SAMPLES / "voyage_tag.nmea",
+        SAMPLES / "voyage_prefix.nmea",
+        SAMPLES / "voyage.mcap",
+    ],
+)
 def test_summarize_frames_equals_summarize(path):
     if not path.exists():
         pytest.skip(f"{path} not present")
@@ -143,8 +167,10 @@ def test_summarize_frames_equals_summarize(path):
 def test_summarize_frames_accumulates_and_falls_back():
     """Two files into one summary; a frame with plain string columns (general path)."""
     r = read_file(SAMPLES / "voyage_tag.nmea", IngestConfig())
-    plain = {k: df.astype({"source": object, "talker": object, "sentence": object})
-             for k, df in r.frames.items()}
+    plain = {
+        k: df.astype({"source": object, "talker": object, "sentence": object})
+        for k, df in r.frames.items()
+    }
     a = summarize(r.frames, "one")
     summarize(plain, "two", into=a)
     b = summarize_frames(r.frames, "one")
@@ -163,8 +189,10 @@ def _numbers(fields: list[bytes], decimals: bool = True):
 
 
 @settings(max_examples=300, deadline=None)
-@given(hs.lists(hs.text(alphabet="0123456789.+-", min_size=0, max_size=22), min_size=1, max_size=8),
-       hs.booleans())
+@given(
+    hs.lists(hs.text(alphabet="0123456789.+-", min_size=0, max_size=22), min_size=1, max_size=8),
+    hs.booleans(),
+)
 def test_numbers_arrow_path_equals_general_path(fields, decimals):
     """Arrow's cast (fast path) and numpy's astype with row-wise validation (general
     path) give the same values, decimals and invalid flags, bit for bit."""

@@ -19,10 +19,21 @@ from dracc.core.errors import IngestError
 from dracc.ingest import detect_format, read_logs
 from dracc.ingest.nmea import REASONS, read_nmea
 
-REAL = Path(os.environ.get("DRACC_REAL_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "real"))
+REAL = Path(
+    os.environ.get(
+        "DRACC_REAL_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+    )
+)
 SKIP_SUFFIXES = {".chk", ".mcap", ".json", ".md"}
-NMEA_FILES = sorted(p.relative_to(REAL).as_posix() for p in REAL.rglob("*")
-                    if p.is_file() and p.suffix not in SKIP_SUFFIXES) if REAL.is_dir() else []
+NMEA_FILES = (
+    sorted(
+        p.relative_to(REAL).as_posix()
+        for p in REAL.rglob("*")
+        if p.is_file() and p.suffix not in SKIP_SUFFIXES
+    )
+    if REAL.is_dir()
+    else []
+)
 D = 180.0 / math.pi
 
 
@@ -60,8 +71,18 @@ def _tpv(chk: Path) -> list[tuple[dict, str]]:
     return out
 
 
-GPSD = ["ais-nmea.log", "bundg_zeus_9.log", "firefly-II.log", "gpsdf.log", "hemi.log", "isync.log",
-        "nmea-fuzzy-cases.log", "skytraq-PX1172RH_DS.log", "st-teseo-liv4f.log", "triton400.log"]
+GPSD = [
+    "ais-nmea.log",
+    "bundg_zeus_9.log",
+    "firefly-II.log",
+    "gpsdf.log",
+    "hemi.log",
+    "isync.log",
+    "nmea-fuzzy-cases.log",
+    "skytraq-PX1172RH_DS.log",
+    "st-teseo-liv4f.log",
+    "triton400.log",
+]
 
 
 @pytest.mark.parametrize("name", GPSD)
@@ -83,8 +104,11 @@ def test_gpsd_tpv_times_positions_courses_speeds(real_dir, name):
         assert len(m), f["time"]
         err = np.hypot(m["lat_rad"] * D - f["lat"], m["lon_rad"] * D - f["lon"]).min()
         assert err < 1e-7, (f["time"], err)
-    moving = [t for t, last in tpv if "track" in t and "speed" in t and "time" in t
-              and last in ("RMC", "VTG")]
+    moving = [
+        t
+        for t, last in tpv
+        if "track" in t and "speed" in t and "time" in t and last in ("RMC", "VTG")
+    ]
     for f in moving:
         g = gr[gr["time_ns"] == pd.Timestamp(f["time"]).value]
         assert len(g), f["time"]
@@ -103,7 +127,9 @@ def test_hakefjord_two_receivers_one_talker(real_dir):
 
 def test_spliced_addresses_rejected(real_dir):
     r = read_nmea(real_dir / "anemomind/Irene/2013/training/NMEA0001.TXT", IngestConfig())
-    assert r.rejects.counts["implausible_talker"] == 45  # 19 GPHDG + 19 GIHDG + 3 GPVLW + 2 GIVHW + ...
+    assert (
+        r.rejects.counts["implausible_talker"] == 45
+    )  # 19 GPHDG + 19 GIHDG + 3 GPVLW + 2 GIVHW + ...
     assert len(r.frames["heading"]) == 4274  # every IIHDG kept
 
 
@@ -130,17 +156,27 @@ def test_openrvdas_prefix_times(real_dir):
 
 
 def test_merge_two_files_by_time(real_dir):
-    v = read_logs([real_dir / "openrvdas/NBP1406_seap-2014-08-01", real_dir / "openrvdas/NBP1406_gyr1-2014-08-01"],
-                  IngestConfig())
+    v = read_logs(
+        [
+            real_dir / "openrvdas/NBP1406_seap-2014-08-01",
+            real_dir / "openrvdas/NBP1406_gyr1-2014-08-01",
+        ],
+        IngestConfig(),
+    )
     h = v.frames["heading"]
     assert set(h["source"].astype(str)) == {"GP", "HE"} and np.all(np.diff(h["time_ns"]) >= 0)
     assert [i["records"] for i in v.inputs] == [715 + 714 + 714, 5000]
 
 
-@pytest.mark.parametrize("content, match", [
-    (None, "no such file"), ("dir", "is a directory"), (b"", "empty file"),
-    (b"\xff\xd8\xff\xe0\x00\x10JFIF", "JPEG"),
-])
+@pytest.mark.parametrize(
+    "content, match",
+    [
+        (None, "no such file"),
+        ("dir", "is a directory"),
+        (b"", "empty file"),
+        (b"\xff\xd8\xff\xe0\x00\x10JFIF", "JPEG"),
+    ],
+)
 def test_unreadable_inputs_are_clear_errors(tmp_path, content, match):
     p = tmp_path / "x.log"
     if content == "dir":
@@ -159,8 +195,15 @@ def test_random_binary_is_counted_not_a_traceback(tmp_path):
 
 
 # ------------------------------------------------ rejected = damaged; ignored = valid, unused
-ALL_FILES = sorted(p.relative_to(REAL).as_posix() for p in REAL.rglob("*")
-                   if p.is_file() and p.suffix not in {".chk", ".json", ".md"}) if REAL.is_dir() else []
+ALL_FILES = (
+    sorted(
+        p.relative_to(REAL).as_posix()
+        for p in REAL.rglob("*")
+        if p.is_file() and p.suffix not in {".chk", ".json", ".md"}
+    )
+    if REAL.is_dir()
+    else []
+)
 
 
 #: a line ends at CR CR LF, CR LF, LF or a lone CR (docs/ingest.md)
@@ -181,8 +224,15 @@ def _outcomes(data: bytes) -> int:
     sentence (comments, blank, noise)."""
     n = 0
     for ln in _lines(data):
-        starts = 0 if ln.startswith(b"#") else sum(
-            1 for i, c in enumerate(ln) if c in b"$!" and not (i + 1 < len(ln) and ln[i + 1] in b"$!"))
+        starts = (
+            0
+            if ln.startswith(b"#")
+            else sum(
+                1
+                for i, c in enumerate(ln)
+                if c in b"$!" and not (i + 1 < len(ln) and ln[i + 1] in b"$!")
+            )
+        )
         n += max(starts, 1)
     return n
 
@@ -218,6 +268,20 @@ def test_bundg_zeus_rejects_nothing_and_ignores_2519_lines_by_type(real_dir):
     v = read_logs([real_dir / "gpsd" / "bundg_zeus_9.log"], IngestConfig())
     assert v.rejects.total == 0
     assert sum(v.ignored.values()) == 2519
-    assert v.ignored == {"comment": 10, "GSA": 144, "RMB": 147, "APB": 147, "GLC": 146, "BOD": 149,
-                         "MWD": 150, "XTE": 149, "AAM": 147, "XDR": 148, "DBT": 148, "DPT": 149,
-                         "GSV": 436, "MWV": 300, "MTW": 149}
+    assert v.ignored == {
+        "comment": 10,
+        "GSA": 144,
+        "RMB": 147,
+        "APB": 147,
+        "GLC": 146,
+        "BOD": 149,
+        "MWD": 150,
+        "XTE": 149,
+        "AAM": 147,
+        "XDR": 148,
+        "DBT": 148,
+        "DPT": 149,
+        "GSV": 436,
+        "MWV": 300,
+        "MTW": 149,
+    }

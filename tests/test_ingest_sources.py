@@ -14,8 +14,12 @@ from dracc.ingest.sources import assign_roles, require_role
 
 
 def src(key: str, talker: str, **sentences: int) -> SourceInfo:
-    return SourceInfo(key=key, talkers=Counter({talker: sum(sentences.values())}),
-                      sentences=Counter(sentences), records=sum(sentences.values()))
+    return SourceInfo(
+        key=key,
+        talkers=Counter({talker: sum(sentences.values())}),
+        sentences=Counter(sentences),
+        records=sum(sentences.values()),
+    )
 
 
 def roles(sources):
@@ -23,12 +27,26 @@ def roles(sources):
 
 
 def test_tag_names_give_roles():
-    s = {k: src(k, t, **sn) for k, t, sn in [
-        ("INS1", "IN", {"GGA": 5, "HDT": 5}), ("INS2", "IN", {"GGA": 5}), ("INS3", "IN", {"GGA": 5}),
-        ("GYRO", "HE", {"HDT": 50}), ("LOG", "VW", {"VHW": 5}), ("GNSS", "GP", {"GGA": 5, "RMC": 5})]}
+    s = {
+        k: src(k, t, **sn)
+        for k, t, sn in [
+            ("INS1", "IN", {"GGA": 5, "HDT": 5}),
+            ("INS2", "IN", {"GGA": 5}),
+            ("INS3", "IN", {"GGA": 5}),
+            ("GYRO", "HE", {"HDT": 50}),
+            ("LOG", "VW", {"VHW": 5}),
+            ("GNSS", "GP", {"GGA": 5, "RMC": 5}),
+        ]
+    }
     assign_roles(s, {})
-    assert roles(s) == {"INS1": "ins1", "INS2": "ins2", "INS3": "ins3", "GYRO": "compass", "LOG": "log",
-                        "GNSS": "gnss"}
+    assert roles(s) == {
+        "INS1": "ins1",
+        "INS2": "ins2",
+        "INS3": "ins3",
+        "GYRO": "compass",
+        "LOG": "log",
+        "GNSS": "gnss",
+    }
 
 
 def test_three_ins_talkers_and_satellite_talker_by_content():
@@ -47,8 +65,11 @@ def test_instrument_bus_serves_compass_and_log():
 
 
 def test_config_mapping_by_key_and_by_talker_first():
-    s = {"GP/3dp": src("GP/3dp", "GP", RMC=5, GGA=5), "GP/5dp": src("GP/5dp", "GP", RMC=5),
-         "II": src("II", "II", HDG=5, VHW=5, RMC=5)}
+    s = {
+        "GP/3dp": src("GP/3dp", "GP", RMC=5, GGA=5),
+        "GP/5dp": src("GP/5dp", "GP", RMC=5),
+        "II": src("II", "II", HDG=5, VHW=5, RMC=5),
+    }
     assign_roles(s, {"GP/3dp": "gnss", "II": "ins1"})
     assert roles(s) == {"GP/3dp": "gnss", "GP/5dp": None, "II": "ins1"}
     s = {"x": src("x", "HE", HDT=5)}
@@ -57,8 +78,12 @@ def test_config_mapping_by_key_and_by_talker_first():
 
 
 def test_ambiguous_candidates_are_named_not_guessed():
-    s = {"GP/3dp": src("GP/3dp", "GP", RMC=5), "GP/5dp": src("GP/5dp", "GP", RMC=5),
-         "HE": src("HE", "HE", HDT=5), "HN": src("HN", "HN", THS=5)}
+    s = {
+        "GP/3dp": src("GP/3dp", "GP", RMC=5),
+        "GP/5dp": src("GP/5dp", "GP", RMC=5),
+        "HE": src("HE", "HE", HDT=5),
+        "HN": src("HN", "HN", THS=5),
+    }
     notes = assign_roles(s, {})
     assert all(v is None for v in roles(s).values())
     assert any("GP/3dp, GP/5dp" in n for n in notes) and any("HE, HN" in n for n in notes)
@@ -77,15 +102,20 @@ def test_mapping_errors():
 
 
 def test_roles_from_config_through_read_logs(real_dir):
-    v = read_logs([real_dir / "VDRplayer" / "Hakefjord.txt"], IngestConfig(sources={"GP/3dp": "gnss"}))
+    v = read_logs(
+        [real_dir / "VDRplayer" / "Hakefjord.txt"], IngestConfig(sources={"GP/3dp": "gnss"})
+    )
     assert v.role_sources("gnss") == ["GP/3dp"] and set(v.role_sources("compass")) == {"II"}
     assert len(v.frame("position", "gnss")) > 600
 
 
 def test_heading_only_source_is_the_compass_beside_an_ins_talker():
     # prefix-form logs: three INS behind one talker IN (GGA + HDT) and a gyro HE (HDT only)
-    s = {"IN": src("IN", "IN", GGA=30, HDT=30, VTG=30), "HE": src("HE", "HE", HDT=100),
-         "GP": src("GP", "GP", GGA=10, RMC=10)}
+    s = {
+        "IN": src("IN", "IN", GGA=30, HDT=30, VTG=30),
+        "HE": src("HE", "HE", HDT=100),
+        "GP": src("GP", "GP", GGA=10, RMC=10),
+    }
     assign_roles(s, {})
     assert roles(s) == {"IN": None, "HE": "compass", "GP": "gnss"}
 

@@ -39,22 +39,36 @@ def test_days_from_civil_matches_datetime(d):
 
 
 def test_valid_civil_rejects_impossible_dates():
-    assert not valid_civil(2023, 2, 29) and valid_civil(2024, 2, 29) and not valid_civil(1900, 2, 29)
-    assert not valid_civil(2023, 13, 1) and not valid_civil(2023, 4, 31) and not valid_civil(2023, 1, 0)
+    assert (
+        not valid_civil(2023, 2, 29) and valid_civil(2024, 2, 29) and not valid_civil(1900, 2, 29)
+    )
+    assert (
+        not valid_civil(2023, 13, 1)
+        and not valid_civil(2023, 4, 31)
+        and not valid_civil(2023, 1, 0)
+    )
 
 
 def test_nearest_day_both_ways():
-    ref = np.array([ns("2023-11-15T00:00:00.500Z"), ns("2023-11-14T23:59:59.000Z"), ns("2023-11-14T12:00:00Z")])
+    ref = np.array(
+        [ns("2023-11-15T00:00:00.500Z"), ns("2023-11-14T23:59:59.000Z"), ns("2023-11-14T12:00:00Z")]
+    )
     tod = np.array([86399_800_000_000, 1_000_000_000, 43_200_000_000_000])
     got = nearest_day(tod, ref)
-    assert list(got) == [ns("2023-11-14T23:59:59.800Z"), ns("2023-11-15T00:00:01Z"), ns("2023-11-14T12:00:00Z")]
+    assert list(got) == [
+        ns("2023-11-14T23:59:59.800Z"),
+        ns("2023-11-15T00:00:01Z"),
+        ns("2023-11-14T12:00:00Z"),
+    ]
 
 
 def test_gps_week_rollover_corrected_and_counted():
     good = days_from_civil(2019, 4, 7)
     rolled = good - 1024 * 7  # 1999-08-22: what a pre-2019 receiver reports after the rollover
     far = days_from_civil(1980, 1, 6)
-    fixed, n_fix, n_bad = fix_dates(np.array([good, rolled, far, -1]), latest_days=days_from_civil(2026, 1, 1))
+    fixed, n_fix, n_bad = fix_dates(
+        np.array([good, rolled, far, -1]), latest_days=days_from_civil(2026, 1, 1)
+    )
     assert list(fixed) == [good, good, -1, -1] and n_fix == 1 and n_bad == 1
 
 
@@ -71,19 +85,28 @@ def gga(hhmmss: str) -> str:
 def test_midnight_without_date_needs_date_option(tmp_path):
     p = _write(tmp_path, [gga("235958"), gga("235959"), gga("000000"), gga("000001")])
     r = read_nmea(p, IngestConfig())
-    assert len(r.frames["position"]) == 0 and r.rejects.counts["no_date"] == 4  # counted, not dropped silently
+    assert (
+        len(r.frames["position"]) == 0 and r.rejects.counts["no_date"] == 4
+    )  # counted, not dropped silently
     assert any("--date" in d for d in r.time_events.decisions)
     r = read_nmea(p, IngestConfig(date="2019-03-09"))
     t = r.frames["position"]["time_ns"].tolist()
-    assert t == [ns("2019-03-09T23:59:58Z"), ns("2019-03-09T23:59:59Z"), ns("2019-03-10T00:00:00Z"),
-                 ns("2019-03-10T00:00:01Z")]
+    assert t == [
+        ns("2019-03-09T23:59:58Z"),
+        ns("2019-03-09T23:59:59Z"),
+        ns("2019-03-10T00:00:00Z"),
+        ns("2019-03-10T00:00:01Z"),
+    ]
     assert r.time_events.rollovers == 1
 
 
 def test_date_back_filled_from_trailing_zda(tmp_path):
     p = _write(tmp_path, [gga("235959"), gga("000000"), nmea("GPZDA,000001,10,03,2019,00,00")])
     r = read_nmea(p, IngestConfig(date="2000-01-01"))  # the log's own date wins over --date
-    assert r.frames["position"]["time_ns"].tolist() == [ns("2019-03-09T23:59:59Z"), ns("2019-03-10T00:00:00Z")]
+    assert r.frames["position"]["time_ns"].tolist() == [
+        ns("2019-03-09T23:59:59Z"),
+        ns("2019-03-10T00:00:00Z"),
+    ]
     assert any("back-filled" in d for d in r.time_events.decisions)
 
 
@@ -91,7 +114,11 @@ def test_real_backfilldate(real_dir):
     r = read_nmea(real_dir / "gpsbabel" / "backfilldate.nmea", IngestConfig())
     t = r.frames["position"]["time_ns"]
     # the only date is in the trailing ZDA (00:04:19 on 2019-03-09): the track began the day before
-    assert len(t) == 500 and t.iloc[0] == ns("2019-03-08T23:56:00Z") and t.iloc[-1] == ns("2019-03-09T00:04:19Z")
+    assert (
+        len(t) == 500
+        and t.iloc[0] == ns("2019-03-08T23:56:00Z")
+        and t.iloc[-1] == ns("2019-03-09T00:04:19Z")
+    )
     assert r.time_events.rollovers == 1
 
 
@@ -103,16 +130,33 @@ def test_real_adddate_with_date_option(real_dir):
 
 def test_rmc_dates_and_rollover_with_dates(tmp_path):
     rmc = "GPRMC,{},A,5436.0,N,01847.0,E,1.0,90.0,{},,,A"
-    p = _write(tmp_path, [nmea(rmc.format("235959.50", "140324")), gga("000000.50"),
-                          nmea(rmc.format("000001.00", "150324"))])
+    p = _write(
+        tmp_path,
+        [
+            nmea(rmc.format("235959.50", "140324")),
+            gga("000000.50"),
+            nmea(rmc.format("000001.00", "150324")),
+        ],
+    )
     r = read_nmea(p, IngestConfig())
-    assert r.frames["position"]["time_ns"].tolist() == [ns("2024-03-14T23:59:59.500Z"), ns("2024-03-15T00:00:00.500Z"),
-                                                         ns("2024-03-15T00:00:01Z")]
+    assert r.frames["position"]["time_ns"].tolist() == [
+        ns("2024-03-14T23:59:59.500Z"),
+        ns("2024-03-15T00:00:00.500Z"),
+        ns("2024-03-15T00:00:01Z"),
+    ]
 
 
 def test_sentence_without_time_takes_preceding_fix_time(tmp_path):
-    p = _write(tmp_path, [nmea("HEHDT,1.0,T"), nmea("GPZDA,120000.00,14,11,2023,00,00"), nmea("HEHDT,2.0,T"),
-                          nmea("GPZDA,120001.00,14,11,2023,00,00"), nmea("HEHDT,3.0,T")])
+    p = _write(
+        tmp_path,
+        [
+            nmea("HEHDT,1.0,T"),
+            nmea("GPZDA,120000.00,14,11,2023,00,00"),
+            nmea("HEHDT,2.0,T"),
+            nmea("GPZDA,120001.00,14,11,2023,00,00"),
+            nmea("HEHDT,3.0,T"),
+        ],
+    )
     r = read_nmea(p, IngestConfig())
     h = r.frames["heading"].sort_values("line")
     noon = ns("2023-11-14T12:00:00Z")
@@ -127,7 +171,9 @@ def test_duplicates_backsteps_gaps_counted(tmp_path):
     te = r.time_events
     assert (te.duplicates, te.backsteps, te.gaps) == (1, 1, 1)
     whats = [e[2] for e in te.examples]
-    assert any(w.startswith("back-step -11.000 s") for w in whats) and any(w.startswith("gap +170.000 s") for w in whats)
+    assert any(w.startswith("back-step -11.000 s") for w in whats) and any(
+        w.startswith("gap +170.000 s") for w in whats
+    )
     # nothing was dropped or reordered away: all six records are there, sorted by time
     assert len(r.frames["position"]) == 6
 
@@ -145,7 +191,23 @@ def test_event_counter_per_source_and_stream_carry():
     ec = EventCounter(gap_s=10, tolerance_s=0.5)
     t = np.array([0, 1, 1, 30, 2]) * 10**9
     src = np.array(["A", "A", "A", "A", "A"], dtype=object)
-    ec.add("heading", src[:3], t[:3], np.ones(3, bool), np.arange(1, 4), "f", np.array(["HDT"] * 3, dtype=object))
-    ec.add("heading", src[3:], t[3:], np.ones(2, bool), np.arange(4, 6), "f", np.array(["HDT"] * 2, dtype=object))
+    ec.add(
+        "heading",
+        src[:3],
+        t[:3],
+        np.ones(3, bool),
+        np.arange(1, 4),
+        "f",
+        np.array(["HDT"] * 3, dtype=object),
+    )
+    ec.add(
+        "heading",
+        src[3:],
+        t[3:],
+        np.ones(2, bool),
+        np.arange(4, 6),
+        "f",
+        np.array(["HDT"] * 2, dtype=object),
+    )
     assert ec.per_source["A"]["duplicates"] == 1 and ec.per_source["A"]["gaps"] == 1
     assert ec.per_source["A"]["backsteps"] == 1 and ec.per_source["A"]["max_gap_s"] == 29.0

@@ -27,9 +27,23 @@ def _log(tmp_path):
         t = 1_700_000_000 + k
         hh, mm, ss = (t // 3600) % 24, (t // 60) % 60, t % 60
         for u in (1, 2, 3):
-            lines.append(tag(f"s:INS{u},c:{t}", nmea(f"INGGA,{hh:02d}{mm:02d}{ss:02d}.00,5436.0{u},N,01847.0,E,1,,,25.0,M,,M,,")))
+            lines.append(
+                tag(
+                    f"s:INS{u},c:{t}",
+                    nmea(
+                        f"INGGA,{hh:02d}{mm:02d}{ss:02d}.00,5436.0{u},N,01847.0,E,1,,,25.0,M,,M,,"
+                    ),
+                )
+            )
         lines.append(tag(f"s:GYRO,c:{t}", nmea("HEHDT,60.5,T")))
-        lines.append(tag(f"s:GNSS,c:{t}", nmea(f"GPRMC,{hh:02d}{mm:02d}{ss:02d}.00,A,5436.0,N,01847.0,E,12.0,60.0,141123,,,A")))
+        lines.append(
+            tag(
+                f"s:GNSS,c:{t}",
+                nmea(
+                    f"GPRMC,{hh:02d}{mm:02d}{ss:02d}.00,A,5436.0,N,01847.0,E,12.0,60.0,141123,,,A"
+                ),
+            )
+        )
     lines.append(nmea("HEHDT,60.5,T")[:-1] + "0")  # one bad checksum
     p = tmp_path / "v.nmea"
     p.write_text("\n".join(lines) + "\n")
@@ -38,7 +52,13 @@ def _log(tmp_path):
 
 def test_help(run_cli):
     code, out, _ = run_cli("inspect", "--help")
-    assert code == 0 and "--json" in out and "--strict" in out and "--ignore-checksum" in out and "--date" in out
+    assert (
+        code == 0
+        and "--json" in out
+        and "--strict" in out
+        and "--ignore-checksum" in out
+        and "--date" in out
+    )
 
 
 def test_json_report(run_cli, tmp_path):
@@ -49,18 +69,37 @@ def test_json_report(run_cli, tmp_path):
     assert rep["rejected"] == {"checksum": 1}
     assert rep["rejected_examples"]["checksum"][0]["line"] == 601
     s = rep["sources"]
-    assert {k: v["role"] for k, v in s.items()} == {"INS1": "ins1", "INS2": "ins2", "INS3": "ins3",
-                                                    "GYRO": "compass", "GNSS": "gnss"}
+    assert {k: v["role"] for k, v in s.items()} == {
+        "INS1": "ins1",
+        "INS2": "ins2",
+        "INS3": "ins3",
+        "GYRO": "compass",
+        "GNSS": "gnss",
+    }
     assert s["INS2"]["records"] == 120 and s["INS2"]["sentences"] == {"GGA": 120}
-    assert s["GNSS"]["records"] == 240 and s["GNSS"]["sentences"] == {"RMC": 120}  # position + ground rows
-    assert s["GYRO"]["first_utc"] == "2023-11-14T22:13:20Z" and s["GYRO"]["last_utc"] == "2023-11-14T22:15:19Z"
+    assert s["GNSS"]["records"] == 240 and s["GNSS"]["sentences"] == {
+        "RMC": 120
+    }  # position + ground rows
+    assert (
+        s["GYRO"]["first_utc"] == "2023-11-14T22:13:20Z"
+        and s["GYRO"]["last_utc"] == "2023-11-14T22:15:19Z"
+    )
     assert abs(s["INS1"]["rate_hz"] - 1.0) < 1e-9 and s["INS1"]["gaps"] == 0
-    assert {"duplicates", "backsteps", "gaps", "rollovers", "implausible_dates", "decisions"} <= set(rep["time"])
+    assert {
+        "duplicates",
+        "backsteps",
+        "gaps",
+        "rollovers",
+        "implausible_dates",
+        "decisions",
+    } <= set(rep["time"])
 
 
 def test_table_output(run_cli, tmp_path):
     code, out, _ = run_cli("inspect", _log(tmp_path))
-    assert code == 0 and "INS2" in out and "ins2" in out and "checksum" in out and "time base" in out
+    assert (
+        code == 0 and "INS2" in out and "ins2" in out and "checksum" in out and "time base" in out
+    )
 
 
 def test_strict_and_missing_and_bad_date(run_cli, tmp_path):
@@ -76,10 +115,14 @@ def test_date_option_places_a_dateless_log(run_cli, tmp_path, real_dir):
     code, out, _ = run_cli("inspect", real_dir / "gpsbabel" / "adddate.nmea", "--json")
     rep = json.loads(out)
     assert code == 0 and rep["sources"] == {} and rep["rejected"] == {"no_date": 500}
-    code, out, _ = run_cli("inspect", real_dir / "gpsbabel" / "adddate.nmea", "--json", "--date", "2019-03-09")
+    code, out, _ = run_cli(
+        "inspect", real_dir / "gpsbabel" / "adddate.nmea", "--json", "--date", "2019-03-09"
+    )
     rep = json.loads(out)
     assert rep["sources"]["GP"]["first_utc"] == "2019-03-09T23:56:00Z"
-    assert rep["sources"]["GP"]["last_utc"] == "2019-03-10T00:04:19Z" and rep["time"]["rollovers"] == 1
+    assert (
+        rep["sources"]["GP"]["last_utc"] == "2019-03-10T00:04:19Z" and rep["time"]["rollovers"] == 1
+    )
 
 
 def test_ignore_checksum(run_cli, real_dir):

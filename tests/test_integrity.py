@@ -25,12 +25,19 @@ HOURS = 3.5
 def _params(seed: int, faults=()) -> SimParams:
     """A randomised ship and sensor set (ranges a fleet shows), 1 Hz sensors."""
     rng = np.random.default_rng(1000 + seed)
-    p = SimParams(duration_s=float(rng.uniform(3.2, 4.0)) * 3600.0, seed=seed, compass_hz=1.0,
-                  aux_hz=0.0, start_lat_deg=float(rng.uniform(-60, 60)),
-                  start_lon_deg=float(rng.uniform(-170, 170)), speed_kn=float(rng.uniform(6, 18)),
-                  current_drift_kn=float(rng.uniform(0, 1.5)),
-                  current_set_deg=float(rng.uniform(0, 360)),
-                  gyro_offset_deg=float(rng.uniform(-1, 1)), faults=tuple(faults))
+    p = SimParams(
+        duration_s=float(rng.uniform(3.2, 4.0)) * 3600.0,
+        seed=seed,
+        compass_hz=1.0,
+        aux_hz=0.0,
+        start_lat_deg=float(rng.uniform(-60, 60)),
+        start_lon_deg=float(rng.uniform(-170, 170)),
+        speed_kn=float(rng.uniform(6, 18)),
+        current_drift_kn=float(rng.uniform(0, 1.5)),
+        current_set_deg=float(rng.uniform(0, 360)),
+        gyro_offset_deg=float(rng.uniform(-1, 1)),
+        faults=tuple(faults),
+    )
     return p.with_ins_error_scale(float(rng.uniform(0.5, 1.5)))
 
 
@@ -48,17 +55,20 @@ def _failed(seed: int, spec: str | None):
     return result, [(c.check, c.name, c.source) for c in result.failed]
 
 
-@pytest.mark.parametrize("spec, check, name, source", [
-    ("jump:GNSS@1h=670m", "plausibility", "jump", "GNSS"),
-    ("jump:INS1@1.2h+5min=300m", "plausibility", "jump", "INS1"),
-    ("freeze:INS2@1h+40min", "plausibility", "frozen", "INS2"),
-    ("freeze:GYRO@1h+20min", "plausibility", "stuck", "GYRO"),
-    ("dropout:INS3@1h+25min", "availability", "dropout", "INS3"),
-    ("drift:INS1@1.5h=1kn", "consistency", "velocity", "INS1"),
-    ("drift:GNSS@1.5h=1kn", "consistency", "velocity", "GNSS"),
-    ("latency:GNSS@1h+30min=3s", "latency", "latency", "GNSS"),
-    ("invalid:GNSS@1h+10min", "validity", "invalid_flag", "GNSS"),
-])
+@pytest.mark.parametrize(
+    "spec, check, name, source",
+    [
+        ("jump:GNSS@1h=670m", "plausibility", "jump", "GNSS"),
+        ("jump:INS1@1.2h+5min=300m", "plausibility", "jump", "INS1"),
+        ("freeze:INS2@1h+40min", "plausibility", "frozen", "INS2"),
+        ("freeze:GYRO@1h+20min", "plausibility", "stuck", "GYRO"),
+        ("dropout:INS3@1h+25min", "availability", "dropout", "INS3"),
+        ("drift:INS1@1.5h=1kn", "consistency", "velocity", "INS1"),
+        ("drift:GNSS@1.5h=1kn", "consistency", "velocity", "GNSS"),
+        ("latency:GNSS@1h+30min=3s", "latency", "latency", "GNSS"),
+        ("invalid:GNSS@1h+10min", "validity", "invalid_flag", "GNSS"),
+    ],
+)
 def test_each_seeded_fault_fails_its_check_on_its_source(spec, check, name, source):
     result, failed = _failed(7, spec)
     assert (check, name, source) in failed, failed
@@ -71,10 +81,12 @@ def test_each_seeded_fault_fails_its_check_on_its_source(spec, check, name, sour
 def test_default_fault_specs_are_found():
     """The defaults of every kind (source, start, size drawn from the seed) on one night."""
     for kind, (check, name, source) in {
-            "jump": ("plausibility", "jump", "GNSS"), "freeze": ("plausibility", "frozen", "INS2"),
-            "dropout": ("availability", "dropout", "INS3"),
-            "latency": ("latency", "latency", "GNSS"),
-            "invalid": ("validity", "invalid_flag", "GNSS")}.items():
+        "jump": ("plausibility", "jump", "GNSS"),
+        "freeze": ("plausibility", "frozen", "INS2"),
+        "dropout": ("availability", "dropout", "INS3"),
+        "latency": ("latency", "latency", "GNSS"),
+        "invalid": ("validity", "invalid_flag", "GNSS"),
+    }.items():
         _, failed = _failed(11, kind)
         assert (check, name, source) in failed, (kind, failed)
 

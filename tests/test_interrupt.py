@@ -38,8 +38,12 @@ def _env() -> dict[str, str]:
 
 
 def _start(args: list[str], env: dict | None = None, stdout=subprocess.DEVNULL) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "dracc", *map(str, args)], stdout=stdout,
-                            stderr=subprocess.PIPE, env=env or _env())
+    return subprocess.Popen(
+        [sys.executable, "-m", "dracc", *map(str, args)],
+        stdout=stdout,
+        stderr=subprocess.PIPE,
+        env=env or _env(),
+    )
 
 
 def _finish(p: subprocess.Popen) -> tuple[int, str]:
@@ -95,13 +99,38 @@ def _gone(pids: list[int], timeout_s: float = 30.0) -> bool:
 @pytest.fixture(scope="module")
 def voyage(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("voyage")
-    assert main(["simulate", "--out", str(root), "--hours", "2", "--seed", "8", "--name", "v",
-                 "--truth-hz", "0.01"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--out",
+                str(root),
+                "--hours",
+                "2",
+                "--seed",
+                "8",
+                "--name",
+                "v",
+                "--truth-hz",
+                "0.01",
+            ]
+        )
+        == 0
+    )
     return root / "v.nmea"
 
 
 def _analyze_args(log: Path, out: Path, json_to: str) -> list:
-    return ["analyze", log, "--json", json_to, "--html", out / "report.html", "--out", out / "tables"]
+    return [
+        "analyze",
+        log,
+        "--json",
+        json_to,
+        "--html",
+        out / "report.html",
+        "--out",
+        out / "tables",
+    ]
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
@@ -156,7 +185,9 @@ def test_analyze_interrupted_mid_run_then_rerun_completes(voyage, tmp_path):
             code, err = _finish(p)
             # each report is whole or absent (they are written one after the other, each atomically)
             if (out / "report.json").exists():
-                assert json.loads((out / "report.json").read_text())["period"] == reference["period"]
+                assert (
+                    json.loads((out / "report.json").read_text())["period"] == reference["period"]
+                )
             if (out / "report.html").exists():
                 assert (out / "report.html").read_text().rstrip().endswith("</html>")
             if code == 0:  # it finished before the signal: try earlier or later
@@ -192,10 +223,36 @@ def night_logs(tmp_path_factory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("nights")
     out = {}
     for night, seed in (("2026-11-19", 41), ("2026-11-20", 42)):
-        assert main(["simulate", "--out", str(root), "--hours", "2", "--seed", str(seed),
-                     "--start", f"{night}T00:00:00Z", "--name", f"n-{night}", "--compass-hz", "0.2",
-                     "--log-hz", "0.2", "--ins-hz", "0.1", "--gnss-hz", "0.2", "--aux-hz", "0",
-                     "--truth-hz", "0.01"]) == 0
+        assert (
+            main(
+                [
+                    "simulate",
+                    "--out",
+                    str(root),
+                    "--hours",
+                    "2",
+                    "--seed",
+                    str(seed),
+                    "--start",
+                    f"{night}T00:00:00Z",
+                    "--name",
+                    f"n-{night}",
+                    "--compass-hz",
+                    "0.2",
+                    "--log-hz",
+                    "0.2",
+                    "--ins-hz",
+                    "0.1",
+                    "--gnss-hz",
+                    "0.2",
+                    "--aux-hz",
+                    "0",
+                    "--truth-hz",
+                    "0.01",
+                ]
+            )
+            == 0
+        )
         out[night] = root / f"n-{night}.nmea"
     return out
 
@@ -215,12 +272,35 @@ def test_audit_interrupted_inside_its_transaction(night_logs, tmp_path, sig):
     it back: no half-recorded night, no summary file; a re-run records the night."""
     db = tmp_path / "state.sqlite"
     summary = tmp_path / "summary.txt"
-    assert _main("audit", night_logs["2026-11-20"], "--db", db, "--vessel", "Aurora",
-                 "--summary", tmp_path / "before.txt") in (0, 1)
+    assert _main(
+        "audit",
+        night_logs["2026-11-20"],
+        "--db",
+        db,
+        "--vessel",
+        "Aurora",
+        "--summary",
+        tmp_path / "before.txt",
+    ) in (0, 1)
     env = {**_env(), TEST_SLEEP_ENV: "120"}
-    p = subprocess.Popen([sys.executable, "-m", "dracc", "audit", str(night_logs["2026-11-19"]),
-                          "--db", str(db), "--vessel", "Aurora", "--summary", str(summary)],
-                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+    p = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "dracc",
+            "audit",
+            str(night_logs["2026-11-19"]),
+            "--db",
+            str(db),
+            "--vessel",
+            "Aurora",
+            "--summary",
+            str(summary),
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        env=env,
+    )
     try:
         deadline = time.monotonic() + WAIT_S
         seen = b""
@@ -239,8 +319,9 @@ def test_audit_interrupted_inside_its_transaction(night_logs, tmp_path, sig):
     assert _nights(db) == ["2026-11-20"]
     assert not summary.exists()
     _no_leftovers(tmp_path)
-    code = _main("audit", night_logs["2026-11-19"], "--db", db, "--vessel", "Aurora",
-                 "--summary", summary)
+    code = _main(
+        "audit", night_logs["2026-11-19"], "--db", db, "--vessel", "Aurora", "--summary", summary
+    )
     assert code in (0, 1)
     assert "state: recorded" in summary.read_text()
     assert _nights(db) == ["2026-11-19", "2026-11-20"]
@@ -265,8 +346,9 @@ def test_fleet_interrupted_after_its_first_log(fleet_dir, tmp_path, sig):
     """Signal once the first log's result is cached: exit 130, no fleet tables, the
     worker processes end; a re-run takes the finished log from the cache and completes."""
     out = tmp_path / "report"
-    p = _start(["fleet", fleet_dir / "Aurora", fleet_dir / "Borealis", "--workers", "1",
-                "--out", out])
+    p = _start(
+        ["fleet", fleet_dir / "Aurora", fleet_dir / "Borealis", "--workers", "1", "--out", out]
+    )
     try:
         deadline = time.monotonic() + WAIT_S
         kids: set[int] = set()
@@ -289,8 +371,11 @@ def test_fleet_interrupted_after_its_first_log(fleet_dir, tmp_path, sig):
     assert _gone(sorted(kids)), "worker processes outlived the interrupted fleet run"
     cached = len(list((out / "cache").rglob("*.json")))
     assert 1 <= cached < 4
-    code, err = _finish(_start(["fleet", fleet_dir / "Aurora", fleet_dir / "Borealis",
-                                "--workers", "1", "--out", out]))
+    code, err = _finish(
+        _start(
+            ["fleet", fleet_dir / "Aurora", fleet_dir / "Borealis", "--workers", "1", "--out", out]
+        )
+    )
     assert code == 0, err
     summary = json.loads((out / "fleet.json").read_text())
     assert summary["analysed"] == 4 - cached

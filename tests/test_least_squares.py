@@ -35,8 +35,9 @@ def test_noisy_exponential_fit_matches_scipy_least_squares():
         return np.column_stack([e, -p[0] * t * e, np.ones_like(t)])
 
     ours = levenberg_marquardt(resid, jac, np.array([1.0, 0.5, 0.0]))
-    ref = optimize.least_squares(resid, [1.0, 0.5, 0.0], jac=jac, method="lm", x_scale="jac",
-                                 ftol=1e-12, xtol=1e-12)
+    ref = optimize.least_squares(
+        resid, [1.0, 0.5, 0.0], jac=jac, method="lm", x_scale="jac", ftol=1e-12, xtol=1e-12
+    )
     np.testing.assert_allclose(ours.x, ref.x, rtol=1e-7)
     assert float(ours.fun @ ours.fun) == pytest.approx(float(ref.fun @ ref.fun), rel=1e-10)
 

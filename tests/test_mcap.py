@@ -43,8 +43,15 @@ def _expected(fr, encoding):
 @pytest.mark.parametrize("compression,indexed", [("zstd", True), ("lz4", True), (None, False)])
 def test_round_trip_same_frames(tmp_path, encoding, compression, indexed):
     fr = voyage_frames()
-    p = write_mcap(fr, ROLES, tmp_path / "v.mcap", encoding=encoding, compression=compression,
-                   chunk_size=3000, indexed=indexed)
+    p = write_mcap(
+        fr,
+        ROLES,
+        tmp_path / "v.mcap",
+        encoding=encoding,
+        compression=compression,
+        chunk_size=3000,
+        indexed=indexed,
+    )
     r = read_mcap(p, CFG)
     assert r.rejects.total == 0, dict(r.rejects.counts)
     assert r.lines == sum(len(f) for f in fr.values())
@@ -90,7 +97,11 @@ def test_raw_nmea_parsed_in_chunks_equals_one_parse(tmp_path, monkeypatch):
         pd.testing.assert_frame_equal(chunked.frames[kind], f, check_categorical=False)
     assert dict(chunked.rejects.counts) == dict(whole.rejects.counts)
     te_w, te_c = whole.time_events, chunked.time_events
-    assert (te_c.duplicates, te_c.backsteps, te_c.gaps) == (te_w.duplicates, te_w.backsteps, te_w.gaps)
+    assert (te_c.duplicates, te_c.backsteps, te_c.gaps) == (
+        te_w.duplicates,
+        te_w.backsteps,
+        te_w.gaps,
+    )
 
 
 def test_topics_give_source_keys_and_roles():
@@ -100,8 +111,13 @@ def test_topics_give_source_keys_and_roles():
     assert topic_source("/log/water") == "log"
     assert topic_source("rise/v0/ais/nmea0183") == "rise/v0/ais/nmea0183"
     assert topic_source("/fix") == "fix"
-    assert [topic_role(k) for k in ("ins2", "gyro", "log", "gps", "camera")] == \
-        ["ins2", "compass", "log", "gnss", None]
+    assert [topic_role(k) for k in ("ins2", "gyro", "log", "gps", "camera")] == [
+        "ins2",
+        "compass",
+        "log",
+        "gnss",
+        None,
+    ]
 
 
 # ----------------------------------------------------------------- independent encoders
@@ -122,17 +138,31 @@ def test_navsatfix_from_the_stock_ros2_encoder(tmp_path):
     msgs = []
     for i in range(30):
         stamp = {"sec": 1_700_000_000 + i, "nanosec": 250_000_000}
-        msgs.append((1_800_000_000_000_000_000 + i, {
-            "header": {"stamp": stamp if i != 5 else {"sec": 0, "nanosec": 0}, "frame_id": "gps" + "x" * (i % 3)},
-            "status": {"status": [-1, 0, 1, 2][i % 4], "service": 1},
-            "latitude": 54.0 + i * 1e-4, "longitude": -18.5, "altitude": 10.0 + i,
-            "position_covariance": [0.0] * 9, "position_covariance_type": 0}))
+        msgs.append(
+            (
+                1_800_000_000_000_000_000 + i,
+                {
+                    "header": {
+                        "stamp": stamp if i != 5 else {"sec": 0, "nanosec": 0},
+                        "frame_id": "gps" + "x" * (i % 3),
+                    },
+                    "status": {"status": [-1, 0, 1, 2][i % 4], "service": 1},
+                    "latitude": 54.0 + i * 1e-4,
+                    "longitude": -18.5,
+                    "altitude": 10.0 + i,
+                    "position_covariance": [0.0] * 9,
+                    "position_covariance_type": 0,
+                },
+            )
+        )
     p = tmp_path / "fix.mcap"
     _ros2_writer(p, "sensor_msgs/msg/NavSatFix", NAVSATFIX, "/gps/fix", msgs)
     r = read_mcap(p, CFG)
     f = r.frames["position"].sort_values("line")
     assert len(f) == 30 and set(f["source"].astype(str)) == {"gps"}
-    np.testing.assert_allclose(np.degrees(f["lat_rad"].to_numpy()), 54.0 + np.arange(30) * 1e-4, rtol=1e-15)
+    np.testing.assert_allclose(
+        np.degrees(f["lat_rad"].to_numpy()), 54.0 + np.arange(30) * 1e-4, rtol=1e-15
+    )
     np.testing.assert_allclose(np.degrees(f["lon_rad"].to_numpy()), -18.5)
     np.testing.assert_allclose(f["alt_m"].to_numpy(), 10.0 + np.arange(30))
     assert f["quality"].tolist() == [[0, 1, 2, 4][i % 4] for i in range(30)]
@@ -141,24 +171,41 @@ def test_navsatfix_from_the_stock_ros2_encoder(tmp_path):
     assert t[5] == 1_800_000_000_000_000_005  # zero stamp: log time
 
 
-QUAT_STAMPED = ("std_msgs/Header header\ngeometry_msgs/Quaternion quaternion\n" + "=" * 80 +
-                "\nMSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\nfloat64 w\n" + "=" * 80 +
-                "\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n")
+QUAT_STAMPED = (
+    "std_msgs/Header header\ngeometry_msgs/Quaternion quaternion\n"
+    + "=" * 80
+    + "\nMSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\nfloat64 w\n"
+    + "=" * 80
+    + "\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
+)
 
 
 def test_heading_from_an_enu_quaternion(tmp_path):
     """REP 103: ENU yaw 0 faces east (heading 90 deg), yaw 90 deg north (0), yaw -90 deg south (180),
     yaw 150 deg -> heading 300 deg; hand values."""
     yaws_deg = [0.0, 90.0, -90.0, 150.0]
-    msgs = [(1_700_000_000_000_000_000 + i, {
-        "header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "imu"},
-        "quaternion": {"x": 0.0, "y": 0.0, "z": math.sin(math.radians(y) / 2), "w": math.cos(math.radians(y) / 2)}})
-        for i, y in enumerate(yaws_deg)]
+    msgs = [
+        (
+            1_700_000_000_000_000_000 + i,
+            {
+                "header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "imu"},
+                "quaternion": {
+                    "x": 0.0,
+                    "y": 0.0,
+                    "z": math.sin(math.radians(y) / 2),
+                    "w": math.cos(math.radians(y) / 2),
+                },
+            },
+        )
+        for i, y in enumerate(yaws_deg)
+    ]
     p = tmp_path / "q.mcap"
     _ros2_writer(p, "geometry_msgs/msg/QuaternionStamped", QUAT_STAMPED, "/gyro/heading", msgs)
     r = read_mcap(p, CFG)
     h = r.frames["heading"].sort_values("line")
-    np.testing.assert_allclose(np.degrees(h["heading_rad"].to_numpy()), [90.0, 0.0, 180.0, 300.0], atol=1e-9)
+    np.testing.assert_allclose(
+        np.degrees(h["heading_rad"].to_numpy()), [90.0, 0.0, 180.0, 300.0], atol=1e-9
+    )
     assert set(h["source"].astype(str)) == {"gyro"}
 
 
@@ -168,18 +215,37 @@ def _json_file(path, topic, payloads, schema_name="foxglove.LocationFix", encodi
     with open(path, "wb") as fh:
         w = Writer(fh)
         w.start()
-        sid = w.register_schema(name=schema_name, encoding="jsonschema", data=b"{}") if schema_name else 0
+        sid = (
+            w.register_schema(name=schema_name, encoding="jsonschema", data=b"{}")
+            if schema_name
+            else 0
+        )
         cid = w.register_channel(topic=topic, message_encoding=encoding, schema_id=sid)
         for i, p in enumerate(payloads):
-            w.add_message(cid, log_time=1_700_000_000_000_000_000 + i * 10**9, data=p,
-                          publish_time=1_700_000_000_000_000_000 + i * 10**9)
+            w.add_message(
+                cid,
+                log_time=1_700_000_000_000_000_000 + i * 10**9,
+                data=p,
+                publish_time=1_700_000_000_000_000_000 + i * 10**9,
+            )
         w.finish()
 
 
 def test_json_location_fix_pretty_printed_and_a_bad_message(tmp_path):
-    objs = [json.dumps({"timestamp": {"sec": 1_700_000_100 + i, "nsec": 5}, "frame_id": "f",
-                        "latitude": 10.5 + i, "longitude": 20.25, "altitude": None,
-                        "position_covariance_type": 0}, indent=2).encode() for i in range(5)]
+    objs = [
+        json.dumps(
+            {
+                "timestamp": {"sec": 1_700_000_100 + i, "nsec": 5},
+                "frame_id": "f",
+                "latitude": 10.5 + i,
+                "longitude": 20.25,
+                "altitude": None,
+                "position_covariance_type": 0,
+            },
+            indent=2,
+        ).encode()
+        for i in range(5)
+    ]
     objs.insert(2, b'{"latitude": "north", "longitude": 1}')
     p = tmp_path / "j.mcap"
     _json_file(p, "/gnss/fix", objs)
@@ -194,8 +260,12 @@ def test_json_location_fix_pretty_printed_and_a_bad_message(tmp_path):
 
 
 def test_plain_json_objects_units_from_keys(tmp_path):
-    objs = [json.dumps({"time_ns": 1_700_000_000_123_456_789 + i, "stw_kn": 10.0, "sog_long_mps": 5.0}).encode()
-            for i in range(3)]
+    objs = [
+        json.dumps(
+            {"time_ns": 1_700_000_000_123_456_789 + i, "stw_kn": 10.0, "sog_long_mps": 5.0}
+        ).encode()
+        for i in range(3)
+    ]
     p = tmp_path / "w.mcap"
     _json_file(p, "/log/water", objs, schema_name="dracc.WaterSpeed")
     r = read_mcap(p, CFG)
@@ -206,7 +276,7 @@ def test_plain_json_objects_units_from_keys(tmp_path):
 
 
 def test_json_sentence_and_text_channels_go_to_the_nmea_parser(tmp_path):
-    s = ("$GNGGA,092542.00,4846.4008666,N,00854.7249096,E,4,12,0.47,419.166,M,47.535,M,0.0,0000*66")
+    s = "$GNGGA,092542.00,4846.4008666,N,00854.7249096,E,4,12,0.47,419.166,M,47.535,M,0.0,0000*66"
     p = tmp_path / "s.mcap"
     _json_file(p, "/gnss/nmea", [json.dumps({"sentence": s}).encode()], schema_name="nmea_sentence")
     r = read_mcap(p, CFG)
@@ -214,7 +284,9 @@ def test_json_sentence_and_text_channels_go_to_the_nmea_parser(tmp_path):
     p2 = tmp_path / "t.mcap"
     _json_file(p2, "/gnss/nmea", [s.encode() + b"\r\n"], schema_name=None, encoding="nmea0183")
     r2 = read_mcap(p2, CFG)
-    assert math.degrees(r2.frames["position"]["lat_rad"].iloc[0]) == pytest.approx(48 + 46.4008666 / 60)
+    assert math.degrees(r2.frames["position"]["lat_rad"].iloc[0]) == pytest.approx(
+        48 + 46.4008666 / 60
+    )
 
 
 # ----------------------------------------------------------------- real files
@@ -225,7 +297,12 @@ def test_real_keelson_raw_nmea_in_protobuf(real_dir):
     # the 1451 NMEA messages reach the NMEA parser (AIS and VSI: valid sentences it does not
     # use, so ignored by type, not rejected); the 721 JSON messages: ignored by schema
     assert r.rejects.total == 0
-    assert r.ignored == {"VDM": 703, "VDO": 41, "VSI": 707, "keelson.primitives.TimestampedBytes": 721}
+    assert r.ignored == {
+        "VDM": 703,
+        "VDO": 41,
+        "VSI": 707,
+        "keelson.primitives.TimestampedBytes": 721,
+    }
     assert sum(r.ignored.values()) == r.lines
     assert any("not used" in n and "JSON" in n for n in r.notes)
 
@@ -236,14 +313,17 @@ def test_real_keelson_empty_file_says_so(real_dir):
     assert any("no channels" in n and "nothing to read" in n for n in r.notes)
 
 
-@pytest.mark.parametrize("name,channels", [
-    ("talker.mcap", ["/rosout", "/parameter_events", "/topic"]),
-    ("cdr_test_0.mcap", ["/test_topic", "/array_topic"]),
-    ("wrong_rmw_test_0.mcap", ["/test_topic", "/array_topic"]),
-    ("test_bag_for_seek_0.mcap", ["topic1"]),
-    ("rewriter_b_0.mcap", ["c_strings", "a_empty"]),
-    ("only_topics.mcap", ["/rosout", "/parameter_events", "/events/write_split"]),
-])
+@pytest.mark.parametrize(
+    "name,channels",
+    [
+        ("talker.mcap", ["/rosout", "/parameter_events", "/topic"]),
+        ("cdr_test_0.mcap", ["/test_topic", "/array_topic"]),
+        ("wrong_rmw_test_0.mcap", ["/test_topic", "/array_topic"]),
+        ("test_bag_for_seek_0.mcap", ["topic1"]),
+        ("rewriter_b_0.mcap", ["c_strings", "a_empty"]),
+        ("only_topics.mcap", ["/rosout", "/parameter_events", "/events/write_split"]),
+    ],
+)
 def test_real_rosbag2_files_report_channels_and_no_navigation_data(real_dir, name, channels):
     r = read_mcap(real_dir / "rosbag2" / name, CFG)
     assert r.records == 0 and r.rejects.total == 0
@@ -277,7 +357,7 @@ def _message_ends(data: bytes) -> list[int]:
             ends.append(pos + 9 + ln)
         elif op == 6:
             clen = struct.unpack_from("<I", data, pos + 9 + 28)[0]
-            assert data[pos + 9 + 32:pos + 9 + 32 + clen] == b""  # uncompressed
+            assert data[pos + 9 + 32 : pos + 9 + 32 + clen] == b""  # uncompressed
             rstart = pos + 9 + 32 + clen + 8
             (rlen,) = struct.unpack_from("<Q", data, rstart - 8)
             q = rstart
@@ -339,13 +419,17 @@ def test_cut_files_recover_every_complete_message(tmp_path, real_dir, chunked):
         n_got = 0 if got is None else len(got)
         assert n_got == n_complete, (k, n_got, n_complete)
         if n_got:
-            np.testing.assert_array_equal(got["lat_rad"].to_numpy(), whole["lat_rad"].to_numpy()[:n_got])
+            np.testing.assert_array_equal(
+                got["lat_rad"].to_numpy(), whole["lat_rad"].to_numpy()[:n_got]
+            )
         if k < len(data) - 8:
             assert any("ends at byte" in n or "cut" in n for n in r.notes), (k, r.notes)
 
 
 def test_cut_compressed_files_never_raise_and_keep_whole_chunks(tmp_path, real_dir):
-    p, _ = _derived_fixture(tmp_path, real_dir, encoding="json", compression="zstd", chunk_size=3000)
+    p, _ = _derived_fixture(
+        tmp_path, real_dir, encoding="json", compression="zstd", chunk_size=3000
+    )
     data = p.read_bytes()
     cut = tmp_path / "cut.mcap"
     prev = 0
@@ -383,7 +467,9 @@ def test_garbage_after_valid_records_is_reported(tmp_path, real_dir):
 
 
 def test_non_indexed_copy_reads_like_the_indexed_file(tmp_path, real_dir):
-    p, fr = _derived_fixture(tmp_path, real_dir, encoding="ros2", compression="zstd", chunk_size=3000)
+    p, fr = _derived_fixture(
+        tmp_path, real_dir, encoding="ros2", compression="zstd", chunk_size=3000
+    )
     q = tmp_path / "noindex.mcap"
     write_mcap(fr, {}, q, encoding="ros2", compression="zstd", chunk_size=3000, indexed=False)
     a, b = read_mcap(p, CFG), read_mcap(q, CFG)
@@ -406,13 +492,23 @@ def test_one_simulated_voyage_reads_the_same_from_every_container(tmp_path):
     for form in ("long", "wide"):
         paths[f"csv-{form}"] = write_csv(v.frames, tmp_path / f"v_{form}.csv", form)
     for enc in ("json", "ros2", "protobuf", "nmea"):
-        paths[f"mcap-{enc}"] = write_mcap(v.frames, v.roles, tmp_path / f"v_{enc}.mcap", encoding=enc)
-    coarse = {"lat_rad": 1e-8, "lon_rad": 1e-8, "heading_rad": 2e-5, "cog_rad": 2e-4, "sog_mps": 3e-3,
-              "stw_mps": 3e-3}
+        paths[f"mcap-{enc}"] = write_mcap(
+            v.frames, v.roles, tmp_path / f"v_{enc}.mcap", encoding=enc
+        )
+    coarse = {
+        "lat_rad": 1e-8,
+        "lon_rad": 1e-8,
+        "heading_rad": 2e-5,
+        "cog_rad": 2e-4,
+        "sog_mps": 3e-3,
+        "stw_mps": 3e-3,
+    }
     for name, p in paths.items():
         voy = read_logs([p], CFG)
         assert voy.rejects.total == 0, (name, dict(voy.rejects.counts))
-        assert {k: s.role for k, s in voy.sources.items()} == {k: r for k, r in v.roles.items()}, name
+        assert {k: s.role for k, s in voy.sources.items()} == {k: r for k, r in v.roles.items()}, (
+            name
+        )
         exact = name in ("csv-long", "csv-wide", "mcap-json", "mcap-ros2", "mcap-protobuf")
         for kind, want in v.frames.items():
             got = voy.frames[kind]
@@ -420,26 +516,43 @@ def test_one_simulated_voyage_reads_the_same_from_every_container(tmp_path):
             for src, w in want.groupby(want["source"].astype(str), observed=True):
                 g = got[got["source"].astype(str) == src]
                 assert len(g) == len(w), (name, kind, src)
-                cols = [c for c in w.columns if w[c].dtype.kind == "f"] if exact else \
-                    [c for c in coarse if c in w.columns]
+                cols = (
+                    [c for c in w.columns if w[c].dtype.kind == "f"]
+                    if exact
+                    else [c for c in coarse if c in w.columns]
+                )
                 for c in cols:
                     a, b = np.sort(w[c].to_numpy()), np.sort(g[c].to_numpy())
                     if exact and name == "mcap-ros2" and c == "hdop":
                         continue  # NavSatFix carries no HDOP
                     if exact and name == "mcap-protobuf" and c == "hdop":
                         continue  # foxglove.LocationFix carries no HDOP
-                    np.testing.assert_allclose(b, a, rtol=1e-12 if exact else 0,
-                                               atol=1e-12 if exact else coarse[c], equal_nan=True,
-                                               err_msg=f"{name} {kind} {src} {c}")
+                    np.testing.assert_allclose(
+                        b,
+                        a,
+                        rtol=1e-12 if exact else 0,
+                        atol=1e-12 if exact else coarse[c],
+                        equal_nan=True,
+                        err_msg=f"{name} {kind} {src} {c}",
+                    )
 
 
-@pytest.mark.parametrize("encoding,compression,indexed", [("json", "zstd", True), ("ros2", None, False),
-                                                          ("protobuf", "lz4", True)])
+@pytest.mark.parametrize(
+    "encoding,compression,indexed",
+    [("json", "zstd", True), ("ros2", None, False), ("protobuf", "lz4", True)],
+)
 def test_random_byte_damage_never_raises(tmp_path, encoding, compression, indexed):
     """Regression: corrupt log times (> int64), chunk lengths (MemoryError) and schema
     text once escaped as OverflowError/MemoryError/parser prints."""
-    p = write_mcap(voyage_frames(30), {}, tmp_path / "v.mcap", encoding=encoding, compression=compression,
-                   chunk_size=3000, indexed=indexed)
+    p = write_mcap(
+        voyage_frames(30),
+        {},
+        tmp_path / "v.mcap",
+        encoding=encoding,
+        compression=compression,
+        chunk_size=3000,
+        indexed=indexed,
+    )
     data = p.read_bytes()
     rng = np.random.default_rng(7)
     q = tmp_path / "d.mcap"
@@ -473,14 +586,18 @@ def _random_pieces(rng, n_pieces, sources):
             t = np.sort(t)  # most pieces arrive sorted, some not
         src = rng.choice(sources, n)
         ref = rng.choice(np.array(["T", "M", None], dtype=object), n)
-        pieces.append(pd.DataFrame({
-            "time_ns": t,
-            "source": pd.Categorical(src),
-            "line": rng.integers(1, 6, n).astype(np.int64),
-            "heading_rad": rng.uniform(0, 2 * math.pi, n),
-            "quality": rng.integers(0, 5, n).astype(np.int8),
-            "reference": ref,
-        }))
+        pieces.append(
+            pd.DataFrame(
+                {
+                    "time_ns": t,
+                    "source": pd.Categorical(src),
+                    "line": rng.integers(1, 6, n).astype(np.int64),
+                    "heading_rad": rng.uniform(0, 2 * math.pi, n),
+                    "quality": rng.integers(0, 5, n).astype(np.int8),
+                    "reference": ref,
+                }
+            )
+        )
     return pieces
 
 
@@ -510,8 +627,9 @@ def test_store_merge_equals_a_stable_sort_of_all_pieces(seed, step):
     assert list(got["source"].astype(object)) == list(want["source"])
     assert list(got["source"].cat.categories) == sorted(set(want["source"]))  # sorted categories
     assert got["reference"].dtype == pieces[0]["reference"].dtype
-    assert ([None if pd.isna(x) else x for x in got["reference"]]
-            == [None if pd.isna(x) else x for x in want["reference"]])
+    assert [None if pd.isna(x) else x for x in got["reference"]] == [
+        None if pd.isna(x) else x for x in want["reference"]
+    ]
 
 
 def test_store_codes_widen_past_127_labels():
@@ -523,14 +641,26 @@ def test_store_codes_widen_past_127_labels():
     store = _KindStore(step=50)
     names = [f"S{i:03d}" for i in range(300)]
     for k in range(3):  # the first pieces' runs have int8 codes, later ones int16
-        sub = names[k * 100:(k + 1) * 100]
-        store.add(pd.DataFrame({"time_ns": np.arange(100, dtype=np.int64)[::-1] * 10 + k,
-                                "source": pd.Categorical(sub), "line": np.arange(100, dtype=np.int64)}))
+        sub = names[k * 100 : (k + 1) * 100]
+        store.add(
+            pd.DataFrame(
+                {
+                    "time_ns": np.arange(100, dtype=np.int64)[::-1] * 10 + k,
+                    "source": pd.Categorical(sub),
+                    "line": np.arange(100, dtype=np.int64),
+                }
+            )
+        )
     got = store.frame()
     assert got["source"].cat.codes.dtype == np.int16
-    want = {(t, n) for k in range(3) for t, n in zip(np.arange(100)[::-1] * 10 + k, names[k * 100:(k + 1) * 100],
-                                                  strict=True)}
-    assert set(zip(got["time_ns"].tolist(), got["source"].astype(str).tolist(), strict=True)) == want
+    want = {
+        (t, n)
+        for k in range(3)
+        for t, n in zip(np.arange(100)[::-1] * 10 + k, names[k * 100 : (k + 1) * 100], strict=True)
+    }
+    assert (
+        set(zip(got["time_ns"].tolist(), got["source"].astype(str).tolist(), strict=True)) == want
+    )
     assert (np.diff(got["time_ns"].to_numpy()) > 0).all()
 
 
@@ -573,8 +703,11 @@ def test_frames_do_not_depend_on_piece_and_queue_sizes(tmp_path, monkeypatch, en
 MISSING = np.iinfo(np.int64).min
 T0_NS = 1_700_000_000_000_000_000  # 2023-11-14T22:13:20Z
 GGA_T0 = "$GPGGA,221320.00,5436.0,N,01847.0,E,1,10,0.8,25.0,M,,M,,*"
-NMEA_SENTENCE = ("std_msgs/Header header\nstring sentence\n" + "=" * 80 +
-                 "\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n")
+NMEA_SENTENCE = (
+    "std_msgs/Header header\nstring sentence\n"
+    + "=" * 80
+    + "\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
+)
 
 
 def _cs(sentence: str) -> str:
@@ -590,27 +723,46 @@ def test_recv_ns_is_the_log_time_of_stamped_messages(tmp_path):
     msgs = []
     for i in range(4):
         stamp = {"sec": 1_700_000_000 + i, "nanosec": 0} if i != 2 else {"sec": 0, "nanosec": 0}
-        msgs.append((T0_NS + i * 10**9 + 1_500_000_000, {
-            "header": {"stamp": stamp, "frame_id": "gps"}, "status": {"status": 0, "service": 1},
-            "latitude": 54.0, "longitude": -18.5, "altitude": 10.0,
-            "position_covariance": [0.0] * 9, "position_covariance_type": 0}))
+        msgs.append(
+            (
+                T0_NS + i * 10**9 + 1_500_000_000,
+                {
+                    "header": {"stamp": stamp, "frame_id": "gps"},
+                    "status": {"status": 0, "service": 1},
+                    "latitude": 54.0,
+                    "longitude": -18.5,
+                    "altitude": 10.0,
+                    "position_covariance": [0.0] * 9,
+                    "position_covariance_type": 0,
+                },
+            )
+        )
     p = tmp_path / "fix.mcap"
     _ros2_writer(p, "sensor_msgs/msg/NavSatFix", NAVSATFIX, "/gps/fix", msgs)
     f = read_mcap(p, CFG).frames["position"].sort_values("line")
     assert f["time_ns"].tolist() == [T0_NS, T0_NS + 10**9, T0_NS + 3_500_000_000, T0_NS + 3 * 10**9]
-    assert f["recv_ns"].tolist() == [T0_NS + 1_500_000_000, T0_NS + 2_500_000_000, MISSING,
-                                     T0_NS + 4_500_000_000]
+    assert f["recv_ns"].tolist() == [
+        T0_NS + 1_500_000_000,
+        T0_NS + 2_500_000_000,
+        MISSING,
+        T0_NS + 4_500_000_000,
+    ]
 
 
 def test_recv_ns_of_json_messages_with_their_own_time(tmp_path):
-    objs = [json.dumps({"timestamp": {"sec": 1_699_999_999, "nsec": 0}, "latitude": 10.5,
-                        "longitude": 20.25}).encode()]
+    objs = [
+        json.dumps(
+            {"timestamp": {"sec": 1_699_999_999, "nsec": 0}, "latitude": 10.5, "longitude": 20.25}
+        ).encode()
+    ]
     p = tmp_path / "j.mcap"
     _json_file(p, "/gnss/fix", objs)  # logged at T0
     f = read_mcap(p, CFG).frames["position"]
     assert f["time_ns"].tolist() == [T0_NS - 10**9] and f["recv_ns"].tolist() == [T0_NS]
-    objs = [json.dumps({"time_ns": T0_NS - 250_000_000, "stw_kn": 10.0}).encode(),
-            json.dumps({"stw_kn": 11.0}).encode()]
+    objs = [
+        json.dumps({"time_ns": T0_NS - 250_000_000, "stw_kn": 10.0}).encode(),
+        json.dumps({"stw_kn": 11.0}).encode(),
+    ]
     p = tmp_path / "w.mcap"
     _json_file(p, "/log/water", objs, schema_name="dracc.WaterSpeed")
     w = read_mcap(p, CFG).frames["water"].sort_values("line")
@@ -622,14 +774,30 @@ def test_recv_ns_of_raw_nmea_is_the_log_time(tmp_path):
     """Raw sentences: the fix is anchored as before (to the message stamp where there is
     one); the receive time is the MCAP log time.  A sentence without a time of fix has none."""
     p = tmp_path / "s.mcap"
-    _json_file(p, "/gnss/nmea", [json.dumps({"sentence": _cs(GGA_T0)}).encode(),
-                                 json.dumps({"sentence": _cs("$HEHDT,10.0,T*")}).encode()])
+    _json_file(
+        p,
+        "/gnss/nmea",
+        [
+            json.dumps({"sentence": _cs(GGA_T0)}).encode(),
+            json.dumps({"sentence": _cs("$HEHDT,10.0,T*")}).encode(),
+        ],
+    )
     r = read_mcap(p, CFG)  # logged at T0 and T0 + 1 s
     pos = r.frames["position"]
     assert pos["time_ns"].tolist() == [T0_NS] and pos["recv_ns"].tolist() == [T0_NS]
     assert r.frames["heading"]["recv_ns"].tolist() == [MISSING]
-    msgs = [(T0_NS + 1_500_000_000, {"header": {"stamp": {"sec": 1_700_000_001, "nanosec": 200_000_000},
-                                                "frame_id": "gps"}, "sentence": _cs(GGA_T0)})]
+    msgs = [
+        (
+            T0_NS + 1_500_000_000,
+            {
+                "header": {
+                    "stamp": {"sec": 1_700_000_001, "nanosec": 200_000_000},
+                    "frame_id": "gps",
+                },
+                "sentence": _cs(GGA_T0),
+            },
+        )
+    ]
     p2 = tmp_path / "cdr.mcap"
     _ros2_writer(p2, "nmea_msgs/msg/Sentence", NMEA_SENTENCE, "/gps/nmea", msgs)
     pos = read_mcap(p2, CFG).frames["position"]
@@ -655,7 +823,9 @@ def test_channels_not_decoded_are_ignored_by_schema(tmp_path):
             t = T0_NS + i * 10**9
             w.add_message(c1, log_time=t, data=json.dumps({"exposure": i}).encode(), publish_time=t)
             w.add_message(c2, log_time=t, data=b"\x00\x01", publish_time=t)
-            w.add_message(c3, log_time=t, data=_cs("$GPGSV,1,1,01,05,40,083,46*").encode(), publish_time=t)
+            w.add_message(
+                c3, log_time=t, data=_cs("$GPGSV,1,1,01,05,40,083,46*").encode(), publish_time=t
+            )
         w.add_message(c3, log_time=T0_NS, data=_cs(GGA_T0).encode(), publish_time=T0_NS)
         w.finish()
     r = read_mcap(p, CFG)

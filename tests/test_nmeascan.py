@@ -34,8 +34,20 @@ from test_fuzz import load_corpus, mutate  # noqa: E402  (tests/ is on sys.path)
 
 REPO = Path(__file__).resolve().parents[1]
 SAMPLES = REPO / "sample_logs"
-FIELDS = ("n_lines", "n_blank", "kinds", "clock", "reject_counts", "reject_examples",
-          "first_fatal", "stats", "source_names", "ignored", "ignored_examples", "n_seg")
+FIELDS = (
+    "n_lines",
+    "n_blank",
+    "kinds",
+    "clock",
+    "reject_counts",
+    "reject_examples",
+    "first_fatal",
+    "stats",
+    "source_names",
+    "ignored",
+    "ignored_examples",
+    "n_seg",
+)
 MAX_BYTES = 1_500_000  #: the first bytes of each real log (the test stays fast)
 
 
@@ -73,10 +85,15 @@ def both(data: bytes, **kw) -> tuple[ParsedBlock, ParsedBlock]:
 def _text_logs() -> list[Path]:
     from conftest import REAL
 
-    out = sorted(p for p in SAMPLES.rglob("*") if p.is_file() and p.suffix in (".nmea", ".txt", ".log"))
+    out = sorted(
+        p for p in SAMPLES.rglob("*") if p.is_file() and p.suffix in (".nmea", ".txt", ".log")
+    )
     if REAL.is_dir():
-        out += sorted(p for p in REAL.rglob("*") if p.is_file()
-                      and p.suffix not in (".mcap", ".json", ".md", ".csv", ".parquet"))
+        out += sorted(
+            p
+            for p in REAL.rglob("*")
+            if p.is_file() and p.suffix not in (".mcap", ".json", ".md", ".csv", ".parquet")
+        )
     return out
 
 
@@ -110,12 +127,23 @@ def test_real_logs_exist_and_kernel_decodes_most_lines():
 def voyage():
     from dracc.sim import SimParams, simulate
 
-    return simulate(SimParams(duration_s=300.0, compass="both", compass_hz=2.0, seed=3,
-                              start_utc="2025-12-31T23:58:30Z", start_lat_deg=-33.9,
-                              start_lon_deg=-0.01, legs=((0.0, 265.0),)))
+    return simulate(
+        SimParams(
+            duration_s=300.0,
+            compass="both",
+            compass_hz=2.0,
+            seed=3,
+            start_utc="2025-12-31T23:58:30Z",
+            start_lat_deg=-33.9,
+            start_lon_deg=-0.01,
+            legs=((0.0, 265.0),),
+        )
+    )
 
 
-@pytest.mark.parametrize("form,tag_time", [("tag", "s"), ("tag", "ms"), ("prefix", "s"), ("bare", "s")])
+@pytest.mark.parametrize(
+    "form,tag_time", [("tag", "s"), ("tag", "ms"), ("prefix", "s"), ("bare", "s")]
+)
 def test_simulated_forms(voyage, tmp_path, form, tag_time):
     from dracc.sim.nmea_out import write_nmea
 
@@ -133,9 +161,14 @@ def test_simulated_forms(voyage, tmp_path, form, tag_time):
 
 def test_kernel_values_against_hand_calculation():
     """Values decoded by the kernel itself (no fallback) against hand calculations."""
-    lines = [b"$GPGGA,123519.25,4807.038,N,01131.000,W,1,08,0.9,545.4,M,46.9,M,,",
-             b"$HEHDT,359.5,T", b"$GPRMC,235959.999,A,3352.2000,S,00000.6000,W,12.5,360.0,290224,,,A",
-             b"$VWVHW,,T,,M,,N,36.0,K", b"$IIROT,-12.0,A", b"$GPZDA,000001.5,01,03,1999,,"]
+    lines = [
+        b"$GPGGA,123519.25,4807.038,N,01131.000,W,1,08,0.9,545.4,M,46.9,M,,",
+        b"$HEHDT,359.5,T",
+        b"$GPRMC,235959.999,A,3352.2000,S,00000.6000,W,12.5,360.0,290224,,,A",
+        b"$VWVHW,,T,,M,,N,36.0,K",
+        b"$IIROT,-12.0,A",
+        b"$GPZDA,000001.5,01,03,1999,,",
+    ]
     data = b"".join(b"%s*%02X\r\n" % (s, _xor(s[1:])) for s in lines)
     c, _ = both(data)
     r = nmea._scan_c(data)
@@ -150,7 +183,9 @@ def test_kernel_values_against_hand_calculation():
     assert pos["tod_ns"][1] == 86399_999_000_000
     assert pos["date_days"][1] == 19782  # 2024-02-29: 54 years of days since 1970 + leap
     gr = c.kinds["ground"]
-    assert gr["sog_mps"][0] == pytest.approx(12.5 * 1852 / 3600, rel=1e-15) and gr["cog_rad"][0] == 0.0
+    assert (
+        gr["sog_mps"][0] == pytest.approx(12.5 * 1852 / 3600, rel=1e-15) and gr["cog_rad"][0] == 0.0
+    )
     assert gr["tod_ns"][0] == 86399_999_000_000
     assert c.kinds["heading"]["heading_rad"][0] == pytest.approx(359.5 * deg, rel=1e-15)
     assert c.kinds["water"]["stw_mps"][0] == pytest.approx(10.0, rel=1e-15)  # 36 km/h
@@ -176,64 +211,152 @@ def _tag(body: bytes) -> bytes:
 # ------------------------------------------------------------------------- edge cases
 GOOD = _sentence(b"GPGGA,000001,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,")
 EDGE = [
-    b"", b"\n", b"\r\n", b"\r", b"#comment\n", GOOD, GOOD + b"\n" + GOOD,
-    GOOD.replace(b"$", b"$$"), GOOD.replace(b"$", b"!$"), GOOD + b"$", GOOD + GOOD,
-    GOOD.replace(b"4807", b"48\x0007"), b"\x00" * 100 + b"\n" + GOOD, GOOD[:-1] + b"a",
-    GOOD.lower(), GOOD[:-2] + b"5", GOOD[:-3], GOOD + b" ", GOOD.replace(b"\n", b"") + b"\r\r\n",
-    b"$GPGGA" + b",1" * 100000 + b"*00", b"x" * 300000 + GOOD, GOOD + b"\t",
-    _sentence(b"GPHDG,10,1,E,2,W"), _sentence(b"HCHDG,10,1,E,2,W"), _sentence(b"HCHDG,10,1,X,2,W"),
-    _sentence(b"PGRMZ,1,2,3"), _sentence(b"P"), _sentence(b"GPXYZ,1,2"), _sentence(b"GPHDT"),
-    _sentence(b"GPHDT,"), _sentence(b"gpHDT,1,T"), _sentence(b"G1HDT,1,T"), _sentence(b"GPH1T,1,T"),
-    _sentence(b"HEHDT,1,T,,,,,,,,,,,,,,,,,,,,,,,,"), _sentence(b"HEHDT,1.5.5,T"),
-    _sentence(b"HEHDT,+5,T"), _sentence(b"HEHDT,5.,T"), _sentence(b"HEHDT,.5,T"),
-    _sentence(b"HEHDT,-0,T"), _sentence(b"HEHDT,-,T"), _sentence(b"HEHDT,.,T"),
-    _sentence(b"HEHDT,360,T"), _sentence(b"HEHDT,360.0001,T"), _sentence(b"HEHDT,1,TT"),
-    _sentence(b"HEHDT,1234567890123456.5,T"), _sentence(b"HEHDT,0.1234567890123456789,T"),
-    _sentence(b"HEHDT,000000000000000000001,T"), _sentence(b"HEHDT, 1,T"),
-    _sentence(b"HETHS,10.5,V"), _sentence(b"HETHS,10.5,A"), _sentence(b"TIROT,5,V"),
-    _sentence(b"GPGGA,,,,,,,,,,,,,,"), _sentence(b"GPGGA,240000,,,,,200,,,,,,,"),
-    _sentence(b"GPGGA,235960,,,,,-129,,,,,,,"), _sentence(b"GPGGA,235959.9999995,,,,,1.9,,,,,,,"),
-    _sentence(b"GPGGA,1,9000.0001,N,18000.0,E,,,,,,,,"), _sentence(b"GPGGA,1,4860.0,N,1,E,,,,,,,,"),
-    _sentence(b"GPGGA,1,4807,S,1,X,,,,,,,,"), _sentence(b"GPGGA,1,-4807,N,1,E,,,,,,,,"),
-    _sentence(b"GPGLL,4807.0,N,01131.0,E,120000,A,N"), _sentence(b"GPGLL,4807.0,N,01131.0,E,,V"),
+    b"",
+    b"\n",
+    b"\r\n",
+    b"\r",
+    b"#comment\n",
+    GOOD,
+    GOOD + b"\n" + GOOD,
+    GOOD.replace(b"$", b"$$"),
+    GOOD.replace(b"$", b"!$"),
+    GOOD + b"$",
+    GOOD + GOOD,
+    GOOD.replace(b"4807", b"48\x0007"),
+    b"\x00" * 100 + b"\n" + GOOD,
+    GOOD[:-1] + b"a",
+    GOOD.lower(),
+    GOOD[:-2] + b"5",
+    GOOD[:-3],
+    GOOD + b" ",
+    GOOD.replace(b"\n", b"") + b"\r\r\n",
+    b"$GPGGA" + b",1" * 100000 + b"*00",
+    b"x" * 300000 + GOOD,
+    GOOD + b"\t",
+    _sentence(b"GPHDG,10,1,E,2,W"),
+    _sentence(b"HCHDG,10,1,E,2,W"),
+    _sentence(b"HCHDG,10,1,X,2,W"),
+    _sentence(b"PGRMZ,1,2,3"),
+    _sentence(b"P"),
+    _sentence(b"GPXYZ,1,2"),
+    _sentence(b"GPHDT"),
+    _sentence(b"GPHDT,"),
+    _sentence(b"gpHDT,1,T"),
+    _sentence(b"G1HDT,1,T"),
+    _sentence(b"GPH1T,1,T"),
+    _sentence(b"HEHDT,1,T,,,,,,,,,,,,,,,,,,,,,,,,"),
+    _sentence(b"HEHDT,1.5.5,T"),
+    _sentence(b"HEHDT,+5,T"),
+    _sentence(b"HEHDT,5.,T"),
+    _sentence(b"HEHDT,.5,T"),
+    _sentence(b"HEHDT,-0,T"),
+    _sentence(b"HEHDT,-,T"),
+    _sentence(b"HEHDT,.,T"),
+    _sentence(b"HEHDT,360,T"),
+    _sentence(b"HEHDT,360.0001,T"),
+    _sentence(b"HEHDT,1,TT"),
+    _sentence(b"HEHDT,1234567890123456.5,T"),
+    _sentence(b"HEHDT,0.1234567890123456789,T"),
+    _sentence(b"HEHDT,000000000000000000001,T"),
+    _sentence(b"HEHDT, 1,T"),
+    _sentence(b"HETHS,10.5,V"),
+    _sentence(b"HETHS,10.5,A"),
+    _sentence(b"TIROT,5,V"),
+    _sentence(b"GPGGA,,,,,,,,,,,,,,"),
+    _sentence(b"GPGGA,240000,,,,,200,,,,,,,"),
+    _sentence(b"GPGGA,235960,,,,,-129,,,,,,,"),
+    _sentence(b"GPGGA,235959.9999995,,,,,1.9,,,,,,,"),
+    _sentence(b"GPGGA,1,9000.0001,N,18000.0,E,,,,,,,,"),
+    _sentence(b"GPGGA,1,4860.0,N,1,E,,,,,,,,"),
+    _sentence(b"GPGGA,1,4807,S,1,X,,,,,,,,"),
+    _sentence(b"GPGGA,1,-4807,N,1,E,,,,,,,,"),
+    _sentence(b"GPGLL,4807.0,N,01131.0,E,120000,A,N"),
+    _sentence(b"GPGLL,4807.0,N,01131.0,E,,V"),
     _sentence(b"GPGLL,4807.0,N,01131.0,E,120000,,"),
-    _sentence(b"GPRMC,1,A,1,N,1,E,1,1,290223,,,A"), _sentence(b"GPRMC,1,A,1,N,1,E,1,1,010180,,,A"),
-    _sentence(b"GPRMC,1,A,1,N,1,E,1,1,01018.5,,,A"), _sentence(b"GPRMC,1,A,1,N,1,E,1,1,99999999999999,,,A"),
-    _sentence(b"GPRMC,1,A,1,N,1,E,1,1,-10100,,,A"), _sentence(b"GPRMC,1,A,1,N,1,E,,,,,,AB"),
-    _sentence(b"GNGNS,1,1,N,1,E,AAN,10,1,2,,,"), _sentence(b"GNGNS,1,1,N,1,E,,10,1,2,,,"),
-    _sentence(b"GNGNS,1,1,N,1,E,XYZ,10,1,2,,,"), _sentence(b"GPVTG,1,T,,M,2,N,,K"),
-    _sentence(b"GPVTG,1,T,,M,,N,7.2,K"), _sentence(b"VWVBW,1,2,V,3,4,A"), _sentence(b"VWVBW,1,2,A,3,4,V"),
-    _sentence(b"VWVLW,1.5,N,2.5,N"), _sentence(b"GPVLW,1.5,N,2.5,N"),
-    _sentence(b"GPZDA,120000,31,12,2024,,"), _sentence(b"GPZDA,120000,31,11,2024,,"),
-    _sentence(b"GPZDA,120000,1,1,1e3,,"), _sentence(b"GPZDA,120000,1,1,1000000000000000,,"),
-    _sentence(b"GPZDA,120000,1,1,-4713,,"), _sentence(b"GPZDA,120000,1.7,1.2,2024.9,,"),
-    _sentence(b"HEHDT,1,T", cs=False), _sentence(b"HEHDT,1,T", cs=False) + GOOD,
+    _sentence(b"GPRMC,1,A,1,N,1,E,1,1,290223,,,A"),
+    _sentence(b"GPRMC,1,A,1,N,1,E,1,1,010180,,,A"),
+    _sentence(b"GPRMC,1,A,1,N,1,E,1,1,01018.5,,,A"),
+    _sentence(b"GPRMC,1,A,1,N,1,E,1,1,99999999999999,,,A"),
+    _sentence(b"GPRMC,1,A,1,N,1,E,1,1,-10100,,,A"),
+    _sentence(b"GPRMC,1,A,1,N,1,E,,,,,,AB"),
+    _sentence(b"GNGNS,1,1,N,1,E,AAN,10,1,2,,,"),
+    _sentence(b"GNGNS,1,1,N,1,E,,10,1,2,,,"),
+    _sentence(b"GNGNS,1,1,N,1,E,XYZ,10,1,2,,,"),
+    _sentence(b"GPVTG,1,T,,M,2,N,,K"),
+    _sentence(b"GPVTG,1,T,,M,,N,7.2,K"),
+    _sentence(b"VWVBW,1,2,V,3,4,A"),
+    _sentence(b"VWVBW,1,2,A,3,4,V"),
+    _sentence(b"VWVLW,1.5,N,2.5,N"),
+    _sentence(b"GPVLW,1.5,N,2.5,N"),
+    _sentence(b"GPZDA,120000,31,12,2024,,"),
+    _sentence(b"GPZDA,120000,31,11,2024,,"),
+    _sentence(b"GPZDA,120000,1,1,1e3,,"),
+    _sentence(b"GPZDA,120000,1,1,1000000000000000,,"),
+    _sentence(b"GPZDA,120000,1,1,-4713,,"),
+    _sentence(b"GPZDA,120000,1.7,1.2,2024.9,,"),
+    _sentence(b"HEHDT,1,T", cs=False),
+    _sentence(b"HEHDT,1,T", cs=False) + GOOD,
     b"!AIVDM,1,1,,A,13aEOK?P00PD2wVMdLDRhgvL289?,0*26",
-    _tag(b"s:GP1,c:1700000000") + GOOD, _tag(b"c:1700000000250,s:X") + GOOD,
-    _tag(b"s:GP1,c:-5") + GOOD, _tag(b"s:GP1,c:1e5") + GOOD, _tag(b"s:GP1,c:") + GOOD,
-    _tag(b"s:GP1,c:99999999999999999999") + GOOD, _tag(b"s:GP1,c:9200000000") + GOOD,
-    _tag(b"s:GP1,c:1700000000.1234567") + GOOD, _tag(b"s:,c:1") + GOOD, _tag(b"x:1") + GOOD,
-    _tag(b"s:" + b"A" * 64) + GOOD, _tag(b"s:" + b"A" * 65) + GOOD, _tag(b"s:" + b"B" * 200) + GOOD,
-    _tag(b"s:A,s:B,c:1,c:2") + GOOD, _tag(b"ss:A,xc:1") + GOOD, _tag(b"s:A:B,c:1") + GOOD,
-    _tag(b"s:GP1")[:-2] + b"0\\" + GOOD, _tag(b"s:GP1")[:-1] + GOOD, b"\\s:A*5\\" + GOOD,
-    _tag(b"s:GP1") + b" " + GOOD, _tag(b"s:GP$1") + GOOD, _tag(b"s:G\x01") + GOOD,
-    b"\\" + GOOD, b"2024-01-01T00:00:00Z " + GOOD, b"1700000000.5 " + GOOD,
-    b"1507112745025;A;" + GOOD, b"foo " + GOOD,
+    _tag(b"s:GP1,c:1700000000") + GOOD,
+    _tag(b"c:1700000000250,s:X") + GOOD,
+    _tag(b"s:GP1,c:-5") + GOOD,
+    _tag(b"s:GP1,c:1e5") + GOOD,
+    _tag(b"s:GP1,c:") + GOOD,
+    _tag(b"s:GP1,c:99999999999999999999") + GOOD,
+    _tag(b"s:GP1,c:9200000000") + GOOD,
+    _tag(b"s:GP1,c:1700000000.1234567") + GOOD,
+    _tag(b"s:,c:1") + GOOD,
+    _tag(b"x:1") + GOOD,
+    _tag(b"s:" + b"A" * 64) + GOOD,
+    _tag(b"s:" + b"A" * 65) + GOOD,
+    _tag(b"s:" + b"B" * 200) + GOOD,
+    _tag(b"s:A,s:B,c:1,c:2") + GOOD,
+    _tag(b"ss:A,xc:1") + GOOD,
+    _tag(b"s:A:B,c:1") + GOOD,
+    _tag(b"s:GP1")[:-2] + b"0\\" + GOOD,
+    _tag(b"s:GP1")[:-1] + GOOD,
+    b"\\s:A*5\\" + GOOD,
+    _tag(b"s:GP1") + b" " + GOOD,
+    _tag(b"s:GP$1") + GOOD,
+    _tag(b"s:G\x01") + GOOD,
+    b"\\" + GOOD,
+    b"2024-01-01T00:00:00Z " + GOOD,
+    b"1700000000.5 " + GOOD,
+    b"1507112745025;A;" + GOOD,
+    b"foo " + GOOD,
     # line ends: a lone CR, CR CR LF, LF CR, runs of CR (each engine splits them alike)
-    GOOD + b"\r" + GOOD, GOOD + b"\r\r" + GOOD, GOOD + b"\r\r\n" + GOOD, GOOD + b"\n\r" + GOOD,
-    b"\r" * 10, b"\r\r\r\n", GOOD + b"\r\r\r\n\r\n", b"\r" + GOOD + b"\r", b"#c\r" + GOOD,
+    GOOD + b"\r" + GOOD,
+    GOOD + b"\r\r" + GOOD,
+    GOOD + b"\r\r\n" + GOOD,
+    GOOD + b"\n\r" + GOOD,
+    b"\r" * 10,
+    b"\r\r\r\n",
+    GOOD + b"\r\r\r\n\r\n",
+    b"\r" + GOOD + b"\r",
+    b"#c\r" + GOOD,
     # lines longer than max_line_bytes: too_long, and the tail's last sentence read
-    b"A" * 65536, b"A" * 65537, b"\x00" * 70000 + GOOD, b"\x00" * 70000 + _tag(b"s:GP1,c:1700000000") + GOOD,
-    b"$GPGGA," * 10000 + GOOD, b"$GPGGA," * 10000, GOOD + b"x" * 70000, b"\\" * 70000 + GOOD,
-    b"\x00" * 70000 + b"$$" + GOOD[1:], b"\x00" * 70000 + b"\\" + GOOD,
+    b"A" * 65536,
+    b"A" * 65537,
+    b"\x00" * 70000 + GOOD,
+    b"\x00" * 70000 + _tag(b"s:GP1,c:1700000000") + GOOD,
+    b"$GPGGA," * 10000 + GOOD,
+    b"$GPGGA," * 10000,
+    GOOD + b"x" * 70000,
+    b"\\" * 70000 + GOOD,
+    b"\x00" * 70000 + b"$$" + GOOD[1:],
+    b"\x00" * 70000 + b"\\" + GOOD,
 ]
 
 
 @pytest.mark.parametrize("i", range(len(EDGE)))
 def test_edge_cases(i):
     line = EDGE[i]
-    for data in (line, line + b"\r\n", GOOD + b"\n" + line + b"\n" + GOOD + b"\n",
-                 _tag(b"s:Z") + GOOD + b"\n" + line):
+    for data in (
+        line,
+        line + b"\r\n",
+        GOOD + b"\n" + line + b"\n" + GOOD + b"\n",
+        _tag(b"s:Z") + GOOD + b"\n" + line,
+    ):
         for kw in ({}, {"ignore_checksum": True}, {"at_eof": False}):
             both(data, **kw)
 
@@ -241,7 +364,9 @@ def test_edge_cases(i):
 def test_many_tag_sources_overflow_the_kernel_table():
     """More distinct TAG sources than the kernel's table: the rest go to numpy, and the
     source codes still follow first appearance."""
-    data = b"".join(_tag(b"s:S%d,c:%d" % (i % 300, 1700000000 + i)) + GOOD + b"\n" for i in range(900))
+    data = b"".join(
+        _tag(b"s:S%d,c:%d" % (i % 300, 1700000000 + i)) + GOOD + b"\n" for i in range(900)
+    )
     c, _ = both(data)
     assert len(c.source_names) == 300
 
@@ -275,7 +400,7 @@ def test_fuzzed_logs(corpus, seed):
     for _ in range(25):
         lines, _timed = rng.choice(corpus)
         k = rng.randrange(max(1, len(lines) - 200))
-        m = mutate(lines[k:k + 200], rng, rng.randint(1, 40))
+        m = mutate(lines[k : k + 200], rng, rng.randint(1, 40))
         for kw in ({}, {"ignore_checksum": True}, {"at_eof": False}):
             both(m.data, **kw)
 
@@ -286,9 +411,35 @@ def test_random_bytes(data):
     both(data)
 
 
-TOKENS = [b"$", b"!", b"\\", b"*", b",", b"\r", b"\n", b"\x00", b"GPGGA", b"HEHDT", b"GPRMC",
-          b"GPZDA", b"s:A", b"c:17", b"1", b"4807.038", b"N", b"E", b"-", b".", b"*4F", b"*00",
-          b"A", b"V", b"T", GOOD, _tag(b"s:GP1,c:1700000000")]
+TOKENS = [
+    b"$",
+    b"!",
+    b"\\",
+    b"*",
+    b",",
+    b"\r",
+    b"\n",
+    b"\x00",
+    b"GPGGA",
+    b"HEHDT",
+    b"GPRMC",
+    b"GPZDA",
+    b"s:A",
+    b"c:17",
+    b"1",
+    b"4807.038",
+    b"N",
+    b"E",
+    b"-",
+    b".",
+    b"*4F",
+    b"*00",
+    b"A",
+    b"V",
+    b"T",
+    GOOD,
+    _tag(b"s:GP1,c:1700000000"),
+]
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -321,12 +472,21 @@ def _real(*parts: str) -> Path:
     return p
 
 
-@pytest.mark.parametrize("parts", [("VDRplayer", "Hakefjord.txt"), ("gpsd", "nmea-fuzzy-cases.log"),
-                                   ("libais", "tagblock.nmea"), ("signalk-server", "plaka.log")])
+@pytest.mark.parametrize(
+    "parts",
+    [
+        ("VDRplayer", "Hakefjord.txt"),
+        ("gpsd", "nmea-fuzzy-cases.log"),
+        ("libais", "tagblock.nmea"),
+        ("signalk-server", "plaka.log"),
+    ],
+)
 def test_read_nmea_real_equal(parts, monkeypatch):
     p = _real(*parts)
     for cfg in ({}, {"ignore_checksum": True}):
-        _assert_same_result(_read(p, "c", monkeypatch, **cfg), _read(p, "numpy", monkeypatch, **cfg))
+        _assert_same_result(
+            _read(p, "c", monkeypatch, **cfg), _read(p, "numpy", monkeypatch, **cfg)
+        )
 
 
 def test_read_nmea_fuzzed_and_simulated_equal(voyage, corpus, tmp_path, monkeypatch):
@@ -361,7 +521,9 @@ def test_streamed_small_blocks_equal(voyage, tmp_path):
         nmea.ENGINE = eng
         try:
             st_ = nmea.StreamState(str(p))
-            blocks = list(nmea.iter_nmea_blocks(p, IngestConfig(), st_, block_bytes=4096, workers=1))
+            blocks = list(
+                nmea.iter_nmea_blocks(p, IngestConfig(), st_, block_bytes=4096, workers=1)
+            )
         finally:
             nmea.ENGINE = old
         out[eng] = (blocks, st_)

@@ -36,9 +36,14 @@ def voyage_from_sim(sv, drop_kinds=(), drop_roles=()) -> Voyage:
         if key in sv.roles:
             info.roles = [sv.roles[key]]
     n = sum(len(f) for f in frames.values())
-    return Voyage(frames=frames, sources=sources, rejects=Rejects(), time_events=TimeEvents(),
-                  inputs=[{"path": "sim.nmea", "format": "nmea", "lines": n, "records": n,
-                           "rejected": {}}], lines=n)
+    return Voyage(
+        frames=frames,
+        sources=sources,
+        rejects=Rejects(),
+        time_events=TimeEvents(),
+        inputs=[{"path": "sim.nmea", "format": "nmea", "lines": n, "records": n, "rejected": {}}],
+        lines=n,
+    )
 
 
 @functools.cache
@@ -47,15 +52,29 @@ def _sim(kind: str):
         p = SimParams.noiseless(duration_s=3 * 3600.0, seed=3, compass_hz=1.0, aux_hz=0.0)
     elif kind == "current":
         # no sensor error; a steady current setting 168 deg while steering 034 deg, then 124
-        p = SimParams.noiseless(duration_s=3 * 3600.0, seed=4, compass_hz=1.0, aux_hz=0.0,
-                                initial_heading_deg=34.0, legs=((0.0, 34.0), (5400.0, 124.0)),
-                                current_set_deg=168.0, current_drift_kn=0.6)
+        p = SimParams.noiseless(
+            duration_s=3 * 3600.0,
+            seed=4,
+            compass_hz=1.0,
+            aux_hz=0.0,
+            initial_heading_deg=34.0,
+            legs=((0.0, 34.0), (5400.0, 124.0)),
+            current_set_deg=168.0,
+            current_drift_kn=0.6,
+        )
     elif kind == "calibration":
         # a gyro bias (drawn once, sigma 0.5 deg), log scale +4 %, small noise, four headings
-        p = SimParams.noiseless(duration_s=4 * 3600.0, seed=5, compass_hz=1.0, aux_hz=0.0,
-                                gyro_bias_deg=GM(0.5, math.inf), log_scale=0.04,
-                                legs=((0.0, 0.0), (3600.0, 90.0), (7200.0, 200.0), (10800.0, 300.0)),
-                                log_white_kn=0.02, gyro_white_deg=0.02)
+        p = SimParams.noiseless(
+            duration_s=4 * 3600.0,
+            seed=5,
+            compass_hz=1.0,
+            aux_hz=0.0,
+            gyro_bias_deg=GM(0.5, math.inf),
+            log_scale=0.04,
+            legs=((0.0, 0.0), (3600.0, 90.0), (7200.0, 200.0), (10800.0, 300.0)),
+            log_white_kn=0.02,
+            gyro_white_deg=0.02,
+        )
     else:  # "realistic": the simulator's defaults, 12 h
         p = SimParams(duration_s=12 * 3600.0, seed=6, compass_hz=1.0, aux_hz=0.0)
     return simulate(p)
@@ -170,8 +189,11 @@ def test_files_of_one_voyage_merge_by_time(tmp_path):
     """One file per instrument (as research vessels record) gives the same result as one file."""
     from dracc.sim.nmea_out import write_nmea
 
-    sv = simulate(SimParams.noiseless(duration_s=1.5 * 3600.0, seed=8, compass_hz=1.0, aux_hz=0.0,
-                                      ins=(NO_INS_ERROR,) * 3))
+    sv = simulate(
+        SimParams.noiseless(
+            duration_s=1.5 * 3600.0, seed=8, compass_hz=1.0, aux_hz=0.0, ins=(NO_INS_ERROR,) * 3
+        )
+    )
     whole = tmp_path / "all.nmea"
     write_nmea(sv, whole, form="tag")
     lines = whole.read_bytes().splitlines(keepends=True)
@@ -189,11 +211,14 @@ def test_files_of_one_voyage_merge_by_time(tmp_path):
     many = analyse(sorted(paths))
     assert len(many.inputs) == len(paths) and any("merged by time" in n for n in many.notes)
     assert one.start_ns == many.start_ns and one.end_ns == many.end_ns
-    np.testing.assert_array_equal(one.dead_reckoning.track.time_ns, many.dead_reckoning.track.time_ns)
+    np.testing.assert_array_equal(
+        one.dead_reckoning.track.time_ns, many.dead_reckoning.track.time_ns
+    )
     np.testing.assert_allclose(one.dead_reckoning.track.lat_rad, many.dead_reckoning.track.lat_rad)
     for u in INS_ROLES:
-        np.testing.assert_allclose(one.deviation.samples[u]["lat"], many.deviation.samples[u]["lat"],
-                                   equal_nan=True)
+        np.testing.assert_allclose(
+            one.deviation.samples[u]["lat"], many.deviation.samples[u]["lat"], equal_nan=True
+        )
 
 
 def test_recording_spells_cut_where_no_frame_has_a_record():
@@ -202,11 +227,16 @@ def test_recording_spells_cut_where_no_frame_has_a_record():
     from dracc.pipeline.analysis import recording_spells
 
     h = 3_600_000_000_000
-    frames = {"position": pd.DataFrame({"time_ns": np.array([0, h, 2 * h, 40 * 24 * h], np.int64)}),
-              "heading": pd.DataFrame({"time_ns": np.array([h // 2, 5 * h, 12 * h], np.int64)})}
+    frames = {
+        "position": pd.DataFrame({"time_ns": np.array([0, h, 2 * h, 40 * 24 * h], np.int64)}),
+        "heading": pd.DataFrame({"time_ns": np.array([h // 2, 5 * h, 12 * h], np.int64)}),
+    }
     # 5 h and 12 h bridge nothing more than 6 h apart... except 5 h -> 12 h (7 h)
-    assert recording_spells(frames, 6 * h) == [(0, 5 * h, 5), (12 * h, 12 * h, 1),
-                                               (40 * 24 * h, 40 * 24 * h, 1)]
+    assert recording_spells(frames, 6 * h) == [
+        (0, 5 * h, 5),
+        (12 * h, 12 * h, 1),
+        (40 * 24 * h, 40 * 24 * h, 1),
+    ]
     assert recording_spells(frames, 1000 * h) == [(0, 40 * 24 * h, 7)]
     assert recording_spells({"position": pd.DataFrame({"time_ns": np.zeros(0, np.int64)})}, h) == []
 
@@ -227,9 +257,11 @@ def test_a_stray_record_days_away_is_said_and_does_not_fill_the_report(tmp_path)
 
     t = 1772344800 + 40 * 86400  # 40 days after the log's first second
     stray = tmp_path / "stray.nmea"
-    stray.write_text(sample.read_text(encoding="ascii") + line(
-        f"s:INS1,c:{t}", "INGGA,060000.00,5436.138899,N,01848.019925,E,1,,,25.0,M,,M,,"),
-        encoding="ascii")
+    stray.write_text(
+        sample.read_text(encoding="ascii")
+        + line(f"s:INS1,c:{t}", "INGGA,060000.00,5436.138899,N,01848.019925,E,1,,,25.0,M,,M,,"),
+        encoding="ascii",
+    )
     plain, a = analyse([sample]), analyse([stray])
     assert (a.end_ns - a.start_ns) / 3.6e12 > 900  # the period as recorded
     said = [n for n in a.notes if "spells" in n]
@@ -249,12 +281,22 @@ def test_progress_reports_every_stage():
     seen: list[tuple[str, float]] = []
     analyse([sample], progress=lambda stage, f: seen.append((stage, f)))
     stages = [s for s, _ in seen]
-    for s in ("reading logs", "sensor faults", "dead reckoning", "current", "deviation statistics",
-              "calibration"):
+    for s in (
+        "reading logs",
+        "sensor faults",
+        "dead reckoning",
+        "current",
+        "deviation statistics",
+        "calibration",
+    ):
         assert (s, 0.0) in seen and (s, 1.0) in seen, s
     reading = [f for s, f in seen if s == "reading logs"]
     assert reading == sorted(reading) and len(reading) >= 3  # bytes read, as they are read
-    assert stages.index("reading logs") < stages.index("sensor faults") < stages.index("dead reckoning")
+    assert (
+        stages.index("reading logs")
+        < stages.index("sensor faults")
+        < stages.index("dead reckoning")
+    )
 
 
 def test_ground_log_when_there_is_no_water_speed():

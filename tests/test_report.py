@@ -58,14 +58,25 @@ def _deviation():
     lat0, lon0 = np.radians(54.0), np.radians(10.0)
     heading = np.full(t.size, np.radians(60.0))
     units = {}
-    for k, (name, (an, ae, ac, ph)) in enumerate({"ins1": (100, 150, 0.05, 0.0),
-                                                  "ins2": (200, 300, 0.1, 2.1),
-                                                  "ins3": (240, 180, 0.06, 2.1)}.items()):
+    for k, (name, (an, ae, ac, ph)) in enumerate(
+        {
+            "ins1": (100, 150, 0.05, 0.0),
+            "ins2": (200, 300, 0.1, 2.1),
+            "ins3": (240, 180, 0.06, 2.1),
+        }.items()
+    ):
         la, lo = add_offset_ne(lat0, lon0, an * np.sin(x + ph), ae * np.cos(x + 1.3 * k))
-        units[name] = UnitSeries(pos_time_ns=t, lat_rad=la, lon_rad=lo, hdg_time_ns=t,
-                                 heading_rad=heading + np.radians(ac * np.sin(x + 0.7 * k)))
+        units[name] = UnitSeries(
+            pos_time_ns=t,
+            lat_rad=la,
+            lon_rad=lo,
+            hdg_time_ns=t,
+            heading_rad=heading + np.radians(ac * np.sin(x + 0.7 * k)),
+        )
     ref = UnitSeries(pos_time_ns=t, lat_rad=np.full(t.size, lat0), lon_rad=np.full(t.size, lon0))
-    cfg = DeviationConfig(apriori={"ins1": {"lat_m": 150.0}, "ins2": {"lat_m": 150.0}}, hat_draws=200)
+    cfg = DeviationConfig(
+        apriori={"ins1": {"lat_m": 150.0}, "ins2": {"lat_m": 150.0}}, hat_draws=200
+    )
     return analyse_deviations(units, cfg, ref)
 
 
@@ -80,35 +91,67 @@ def _dr_track(n: int, step_s: float, with_ref: bool) -> DRTrack:
     # north-east that the EP learned (it starts at each leg's fix as the EP does)
     water_lat = lat - since * 0.25 * math.cos(math.radians(45.0)) / 6_371_000.0
     water_lon = lon - since * 0.25 * math.sin(math.radians(45.0)) / 3_750_000.0
-    return DRTrack(time_ns=t, lat_rad=lat, lon_rad=lon, since_fix_s=since, radius_2m_m=r2m,
-                   semi_major_m=0.6 * r2m, semi_minor_m=0.3 * r2m,
-                   orientation_rad=np.full(n, np.radians(30.0)),
-                   ref_error_m=0.5 * r2m if with_ref else np.full(n, np.nan), leg=leg,
-                   water_lat_rad=water_lat, water_lon_rad=water_lon,
-                   # leg 0 has only the prior (no earlier fix to learn from): not scored
-                   scored=(leg >= 1) & (since > 0))
+    return DRTrack(
+        time_ns=t,
+        lat_rad=lat,
+        lon_rad=lon,
+        since_fix_s=since,
+        radius_2m_m=r2m,
+        semi_major_m=0.6 * r2m,
+        semi_minor_m=0.3 * r2m,
+        orientation_rad=np.full(n, np.radians(30.0)),
+        ref_error_m=0.5 * r2m if with_ref else np.full(n, np.nan),
+        leg=leg,
+        water_lat_rad=water_lat,
+        water_lon_rad=water_lon,
+        # leg 0 has only the prior (no earlier fix to learn from): not scored
+        scored=(leg >= 1) & (since > 0),
+    )
 
 
 #: DRSection.learned as dracc.pipeline.analysis._learned_summary makes it
 LEARNED = {
-    "current_set_deg": 45.0, "current_drift_kn": 0.49, "current_variation_kn": 0.15,
-    "current_tau_s": 1800.0, "heading_correction_deg": 0.31, "heading_correction_sigma_deg": 0.12,
-    "log_scale_correction": -0.0171, "log_scale_correction_sigma": 0.0023, "noise_kn": 0.1,
-    "noise_tau_s": 600.0, "fix_sigma_m": 3.0, "model_weight": 0.93, "n_models": 576,
-    "filter_step_s": 300.0, "n_fixes_used": 288, "n_outliers": 1,
-    "config_block": ("[dead_reckoning]\nlearn = false\n"
-                     'compass_bias_deg = { sigma = 0.333, tau_s = "inf" }\n'
-                     "current_kn = { sigma = 0.397, tau_s = 1800 }\nfix_sigma_m = 3.0\n"),
+    "current_set_deg": 45.0,
+    "current_drift_kn": 0.49,
+    "current_variation_kn": 0.15,
+    "current_tau_s": 1800.0,
+    "heading_correction_deg": 0.31,
+    "heading_correction_sigma_deg": 0.12,
+    "log_scale_correction": -0.0171,
+    "log_scale_correction_sigma": 0.0023,
+    "noise_kn": 0.1,
+    "noise_tau_s": 600.0,
+    "fix_sigma_m": 3.0,
+    "model_weight": 0.93,
+    "n_models": 576,
+    "filter_step_s": 300.0,
+    "n_fixes_used": 288,
+    "n_outliers": 1,
+    "config_block": (
+        "[dead_reckoning]\nlearn = false\n"
+        'compass_bias_deg = { sigma = 0.333, tau_s = "inf" }\n'
+        "current_kn = { sigma = 0.397, tau_s = 1800 }\nfix_sigma_m = 3.0\n"
+    ),
 }
 
 
 def _leg_checks() -> tuple[LegConsistency, ...]:
     """Legs 1-24 scored (leg 0 had nothing to learn from), five epochs each."""
-    return tuple(LegConsistency(leg=i, start_s=3600.0 * i, n_epochs=5, n_inside=4 if i % 5 == 0 else 5,
-                                inside_fraction=0.8 if i % 5 == 0 else 1.0, rms_error_over_m=0.7,
-                                max_error_m=45.0, mean_nees=1.5 + 0.1 * (i % 4),
-                                last_nees=1.0 + 0.5 * (i % 3), nees_upper=9.21)
-                 for i in range(1, 25))
+    return tuple(
+        LegConsistency(
+            leg=i,
+            start_s=3600.0 * i,
+            n_epochs=5,
+            n_inside=4 if i % 5 == 0 else 5,
+            inside_fraction=0.8 if i % 5 == 0 else 1.0,
+            rms_error_over_m=0.7,
+            max_error_m=45.0,
+            mean_nees=1.5 + 0.1 * (i % 4),
+            last_nees=1.0 + 0.5 * (i % 3),
+            nees_upper=9.21,
+        )
+        for i in range(1, 25)
+    )
 
 
 def make_analysis(kind: str = "full") -> Analysis:
@@ -116,74 +159,190 @@ def make_analysis(kind: str = "full") -> Analysis:
     hostile = kind == "hostile"
     key1 = HOSTILE if hostile else "INS1"
     sources = (
-        SourceRow(key=key1, roles=("ins1",), records=90_000, sentences={"GGA": 30_000, "HDT": 30_000, "VTG": 30_000},
-                  first_ns=T0_NS, last_ns=T0_NS + 25 * H_NS),
-        SourceRow(key="INS2", roles=("ins2",), records=90_000, sentences={"GGA": 30_000, "HDT": 30_000},
-                  first_ns=T0_NS, last_ns=T0_NS + 25 * H_NS),
-        SourceRow(key="INS3", roles=("ins3",), records=90_000, sentences={"GGA": 30_000},
-                  first_ns=T0_NS, last_ns=T0_NS + 25 * H_NS),
-        SourceRow(key="GP", roles=("gnss",), records=270_000, sentences={"GGA": 90_000, "RMC": 90_000, "ZDA": 90_000},
-                  first_ns=T0_NS, last_ns=T0_NS + 25 * H_NS),
-        SourceRow(key="HE", roles=("compass",), records=900_000, sentences={"HDT": 900_000},
-                  first_ns=T0_NS, last_ns=T0_NS + 25 * H_NS),
-        SourceRow(key="VW", roles=("log",), records=90_000, sentences={"VHW": 90_000},
-                  first_ns=T0_NS, last_ns=T0_NS + 25 * H_NS),
+        SourceRow(
+            key=key1,
+            roles=("ins1",),
+            records=90_000,
+            sentences={"GGA": 30_000, "HDT": 30_000, "VTG": 30_000},
+            first_ns=T0_NS,
+            last_ns=T0_NS + 25 * H_NS,
+        ),
+        SourceRow(
+            key="INS2",
+            roles=("ins2",),
+            records=90_000,
+            sentences={"GGA": 30_000, "HDT": 30_000},
+            first_ns=T0_NS,
+            last_ns=T0_NS + 25 * H_NS,
+        ),
+        SourceRow(
+            key="INS3",
+            roles=("ins3",),
+            records=90_000,
+            sentences={"GGA": 30_000},
+            first_ns=T0_NS,
+            last_ns=T0_NS + 25 * H_NS,
+        ),
+        SourceRow(
+            key="GP",
+            roles=("gnss",),
+            records=270_000,
+            sentences={"GGA": 90_000, "RMC": 90_000, "ZDA": 90_000},
+            first_ns=T0_NS,
+            last_ns=T0_NS + 25 * H_NS,
+        ),
+        SourceRow(
+            key="HE",
+            roles=("compass",),
+            records=900_000,
+            sentences={"HDT": 900_000},
+            first_ns=T0_NS,
+            last_ns=T0_NS + 25 * H_NS,
+        ),
+        SourceRow(
+            key="VW",
+            roles=("log",),
+            records=90_000,
+            sentences={"VHW": 90_000},
+            first_ns=T0_NS,
+            last_ns=T0_NS + 25 * H_NS,
+        ),
     )
     n_pos = 200
     tt = T0_NS + np.linspace(0, 25 * H_NS, n_pos).astype("int64")
     lat = np.radians(54.0) + np.linspace(0, 0.01, n_pos)
     lon = np.radians(10.0) + np.linspace(0, 0.02, n_pos)
-    tracks = tuple(Track(source=s.key, role=s.roles[0], time_ns=tt, lat_rad=lat + 1e-6 * i,
-                         lon_rad=lon - 1e-6 * i)
-                   for i, s in enumerate(sources) if s.roles[0] in ("ins1", "ins2", "ins3", "gnss"))
+    tracks = tuple(
+        Track(
+            source=s.key,
+            role=s.roles[0],
+            time_ns=tt,
+            lat_rad=lat + 1e-6 * i,
+            lon_rad=lon - 1e-6 * i,
+        )
+        for i, s in enumerate(sources)
+        if s.roles[0] in ("ins1", "ins2", "ins3", "gnss")
+    )
     a_common = dict(
-        schema=SCHEMA, dracc_version="0.1.0",
-        inputs=(InputFile(path=f"/logs/{HOSTILE if hostile else 'voyage'}.nmea", format="nmea",
-                          lines=1_530_012, records=1_530_000, rejected={"checksum": 10, "truncated": 2}),),
-        sources=sources, rejected={"checksum": 10, "truncated": 2},
+        schema=SCHEMA,
+        dracc_version="0.1.0",
+        inputs=(
+            InputFile(
+                path=f"/logs/{HOSTILE if hostile else 'voyage'}.nmea",
+                format="nmea",
+                lines=1_530_012,
+                records=1_530_000,
+                rejected={"checksum": 10, "truncated": 2},
+            ),
+        ),
+        sources=sources,
+        rejected={"checksum": 10, "truncated": 2},
         reject_examples={"checksum": (("/logs/voyage.nmea", 17, "$INGGA,bad*00"),)},
-        time=TimeSummary(duplicates=0, backsteps=1, gaps=2, rollovers=1, implausible_dates=0,
-                         decisions=("date from RMC",)),
-        start_ns=T0_NS, end_ns=T0_NS + 25 * H_NS, lines=1_530_012, tracks=tracks,
+        time=TimeSummary(
+            duplicates=0,
+            backsteps=1,
+            gaps=2,
+            rollovers=1,
+            implausible_dates=0,
+            decisions=("date from RMC",),
+        ),
+        start_ns=T0_NS,
+        end_ns=T0_NS + 25 * H_NS,
+        lines=1_530_012,
+        tracks=tracks,
         settings={"interval_s": 3600.0, "reset": "1h"},
     )
     if kind == "bare":
-        return Analysis(**a_common, deviation=None, dead_reckoning=None, calibration=None, current=None,
-                        missing=("no INS triple: only 1 INS unit (ins1) found; deviation statistics need "
-                                 "at least two", "no heading: no HDT/THS/HDG/HDM sentence with a value; "
-                                 "dead reckoning not computed"),
-                        notes=("role ins1 assigned by --role",))
+        return Analysis(
+            **a_common,
+            deviation=None,
+            dead_reckoning=None,
+            calibration=None,
+            current=None,
+            missing=(
+                "no INS triple: only 1 INS unit (ins1) found; deviation statistics need "
+                "at least two",
+                "no heading: no HDT/THS/HDG/HDM sentence with a value; dead reckoning not computed",
+            ),
+            notes=("role ins1 assigned by --role",),
+        )
     dev = _deviation()
     track = _dr_track(25 * 360, 10.0, with_ref=True)
     pick = np.arange(0, len(track.time_ns), 60)
     epochs = DRTrack(**{f: getattr(track, f)[pick] for f in track.__dataclass_fields__})
     checks = _leg_checks()
-    legs = tuple(DRLeg(index=i, start_ns=T0_NS + i * H_NS, end_ns=T0_NS + (i + 1) * H_NS,
-                       fix_source="gnss", containment_2m=(1.0 if i % 5 else 0.8) if i else math.nan,
-                       n_scored=5 if i else 0, max_error_m=45.0 if i else math.nan) for i in range(25))
+    legs = tuple(
+        DRLeg(
+            index=i,
+            start_ns=T0_NS + i * H_NS,
+            end_ns=T0_NS + (i + 1) * H_NS,
+            fix_source="gnss",
+            containment_2m=(1.0 if i % 5 else 0.8) if i else math.nan,
+            n_scored=5 if i else 0,
+            max_error_m=45.0 if i else math.nan,
+        )
+        for i in range(25)
+    )
     nees_sum = sum(c.last_nees for c in checks)
-    dr = DRSection(heading_source="compass HE (HDT, true)", speed_source="log VW (VHW, through water)",
-                   reset="1h", epoch_interval_s=600.0, track=track, epochs=epochs, legs=legs,
-                   reference_role="gnss", containment_2m=0.96, n_scored=120, expected_inside=0.975,
-                   error_over_m_rms=0.71, consistent=True,
-                   verdict=f"consistent: 96.0 % inside 2M (expected 95-98 %); NEES {nees_sum:.1f}",
-                   n_gaps_bridged=2, n_breaks=0, notes=("heading and speed held onto a 1 s grid",),
-                   mean_nees=float(np.mean([c.mean_nees for c in checks])), nees_statistic=nees_sum,
-                   nees_lower=float(chi2_ppf(0.005, 2 * len(checks))),
-                   nees_upper=float(chi2_ppf(0.995, 2 * len(checks))), leg_checks=checks,
-                   dominant_source="the change of the current", dominant_key="current_kn",
-                   learned=dict(LEARNED), reference_sigma_m=3.0, scored_out_of_sample=True)
-    cal = CalibrationSection(reference_role="gnss", compass_error_deg=Estimate(0.31, 0.04),
-                             log_scale=Estimate(0.029, 0.002), log_offset_kn=Estimate(0.05, 0.02), n=140,
-                             segment_s=600.0, residual_rms_kn=0.08)
+    dr = DRSection(
+        heading_source="compass HE (HDT, true)",
+        speed_source="log VW (VHW, through water)",
+        reset="1h",
+        epoch_interval_s=600.0,
+        track=track,
+        epochs=epochs,
+        legs=legs,
+        reference_role="gnss",
+        containment_2m=0.96,
+        n_scored=120,
+        expected_inside=0.975,
+        error_over_m_rms=0.71,
+        consistent=True,
+        verdict=f"consistent: 96.0 % inside 2M (expected 95-98 %); NEES {nees_sum:.1f}",
+        n_gaps_bridged=2,
+        n_breaks=0,
+        notes=("heading and speed held onto a 1 s grid",),
+        mean_nees=float(np.mean([c.mean_nees for c in checks])),
+        nees_statistic=nees_sum,
+        nees_lower=float(chi2_ppf(0.005, 2 * len(checks))),
+        nees_upper=float(chi2_ppf(0.995, 2 * len(checks))),
+        leg_checks=checks,
+        dominant_source="the change of the current",
+        dominant_key="current_kn",
+        learned=dict(LEARNED),
+        reference_sigma_m=3.0,
+        scored_out_of_sample=True,
+    )
+    cal = CalibrationSection(
+        reference_role="gnss",
+        compass_error_deg=Estimate(0.31, 0.04),
+        log_scale=Estimate(0.029, 0.002),
+        log_offset_kn=Estimate(0.05, 0.02),
+        n=140,
+        segment_s=600.0,
+        residual_rms_kn=0.08,
+    )
     ct = T0_NS + np.arange(0, 25 * 3600, 600, dtype="int64") * 10**9
-    cur = CurrentSection(set_deg=Estimate(168.0, 12.0), drift_kn=Estimate(0.4, 0.1), time_ns=ct,
-                         set_rad=np.full(len(ct), np.radians(168.0)),
-                         drift_mps=np.full(len(ct), 0.2), drift_sigma_mps=np.full(len(ct), 0.05),
-                         n_updates=25)
+    cur = CurrentSection(
+        set_deg=Estimate(168.0, 12.0),
+        drift_kn=Estimate(0.4, 0.1),
+        time_ns=ct,
+        set_rad=np.full(len(ct), np.radians(168.0)),
+        drift_mps=np.full(len(ct), 0.2),
+        drift_sigma_mps=np.full(len(ct), 0.05),
+        n_updates=25,
+    )
     missing = ("no magnetic compass: deviation curve not estimated",) if not hostile else (HOSTILE,)
-    return Analysis(**a_common, deviation=dev, dead_reckoning=dr, calibration=cal, current=cur,
-                    deviation_reference="gnss", missing=missing, notes=(HOSTILE,) if hostile else ())
+    return Analysis(
+        **a_common,
+        deviation=dev,
+        dead_reckoning=dr,
+        calibration=cal,
+        current=cur,
+        deviation_reference="gnss",
+        missing=missing,
+        notes=(HOSTILE,) if hostile else (),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -214,16 +373,25 @@ def test_schema_rejects_a_broken_report(validator):
     bad["deviation"]["units"]["ins4"] = bad["deviation"]["units"]["ins1"]
     assert list(validator.iter_errors(bad))
     # the estimated-position keys are typed; the learned model and the NEES are complete
-    for path in (("nees", "upper"), ("learned_model", "config_block"), ("learned_model", "n_models")):
+    for path in (
+        ("nees", "upper"),
+        ("learned_model", "config_block"),
+        ("learned_model", "n_models"),
+    ):
         bad = json.loads(json.dumps(doc))
         node = bad["dead_reckoning"]
         for k in path[:-1]:
             node = node[k]
         del node[path[-1]]
         assert list(validator.iter_errors(bad)), f"{path} may be missing"
-    for path, value in ((("epochs", 3, "scored"), 1), (("learned_model", "config_block"), ["x"]),
-                        (("learned_model", "current_drift_kn"), "0.5 kn"), (("nees", "statistic"), "36"),
-                        (("learned_model",), "none"), (("legs", 0, "mean_nees"), "-")):
+    for path, value in (
+        (("epochs", 3, "scored"), 1),
+        (("learned_model", "config_block"), ["x"]),
+        (("learned_model", "current_drift_kn"), "0.5 kn"),
+        (("nees", "statistic"), "36"),
+        (("learned_model",), "none"),
+        (("legs", 0, "mean_nees"), "-"),
+    ):
         bad = json.loads(json.dumps(doc))
         node = bad["dead_reckoning"]
         for k in path[:-1]:
@@ -234,10 +402,19 @@ def test_schema_rejects_a_broken_report(validator):
 
 #: keys added with the estimated position: optional in the schema (reports written before
 #: them stay dracc.analysis/1), always written
-EP_KEYS = {"dead_reckoning": ("mean_nees", "nees", "dominant_source", "dominant_key", "learned_model",
-                              "reference_sigma_m", "scored_out_of_sample"),
-           "epoch": ("water_lat_deg", "water_lon_deg", "scored"),
-           "leg": ("mean_nees", "last_nees", "nees_upper")}
+EP_KEYS = {
+    "dead_reckoning": (
+        "mean_nees",
+        "nees",
+        "dominant_source",
+        "dominant_key",
+        "learned_model",
+        "reference_sigma_m",
+        "scored_out_of_sample",
+    ),
+    "epoch": ("water_lat_deg", "water_lon_deg", "scored"),
+    "leg": ("mean_nees", "last_nees", "nees_upper"),
+}
 
 
 @pytest.mark.parametrize("kind", ["full", "hostile"])
@@ -271,12 +448,19 @@ def test_schema_accepts_a_report_written_before_the_estimated_position(validator
 def test_json_content_and_units():
     a = make_analysis("full")
     doc = json.loads(json_report.dumps(a))
-    assert doc["period"] == {"start_utc": "2026-03-01T00:00:00Z", "end_utc": "2026-03-02T01:00:00Z",
-                             "duration_s": 90000.0}
+    assert doc["period"] == {
+        "start_utc": "2026-03-01T00:00:00Z",
+        "end_utc": "2026-03-02T01:00:00Z",
+        "duration_s": 90000.0,
+    }
     assert doc["sources"]["gnss"] == {"keys": ["GP"], "records": 270_000}
     assert doc["inputs"][0]["rejected"] == {"checksum": 10, "truncated": 2}
     dev = doc["deviation"]
-    assert dev["interval_s"] == 3600.0 and dev["factors"] == {"lat": 1.32, "lon": 1.49, "course": 1.49}
+    assert dev["interval_s"] == 3600.0 and dev["factors"] == {
+        "lat": 1.32,
+        "lon": 1.49,
+        "course": 1.49,
+    }
     assert dev["reference_source"] == "gnss"
     assert len(dev["samples"]) == 26
     s3 = dev["samples"][3]  # x = pi: lat errors 0, -200 sin 2.1, -240 sin 2.1 -> mean -126.57
@@ -293,7 +477,9 @@ def test_json_content_and_units():
     h2 = dev["hat"]["ins2"]["lat"]
     assert h2["negative"] is True and h2["sigma"] is None and h2["variance"] < 0
     # errors 100 sin(2 pi i/6), i = 0..25: RMS = 100 sqrt(12.75/26)
-    assert dev["reference"]["ins1"]["lat"]["rmse"] == pytest.approx(100 * math.sqrt(12.75 / 26), rel=1e-3)
+    assert dev["reference"]["ins1"]["lat"]["rmse"] == pytest.approx(
+        100 * math.sqrt(12.75 / 26), rel=1e-3
+    )
     assert [w["label"] for w in dev["windows"]] == ["2026-03-01", "2026-03-02"]
     dr = doc["dead_reckoning"]
     assert len(dr["epochs"]) == 25 * 6
@@ -304,8 +490,11 @@ def test_json_content_and_units():
     assert e1["lat_deg"] == pytest.approx(math.degrees(math.radians(54.0) + 600.0 * 5 / 6_371_000))
     assert dr["containment_2m"] == 0.96
     # the estimated position: epochs carry the water track and whether they were scored
-    want_water_lat = math.degrees(math.radians(54.0) + 600.0 * 5 / 6_371_000
-                                  - 600.0 * 0.25 * math.cos(math.radians(45.0)) / 6_371_000)
+    want_water_lat = math.degrees(
+        math.radians(54.0)
+        + 600.0 * 5 / 6_371_000
+        - 600.0 * 0.25 * math.cos(math.radians(45.0)) / 6_371_000
+    )
     assert e1["water_lat_deg"] == pytest.approx(want_water_lat, abs=1e-12)
     assert e1["water_lat_deg"] < e1["lat_deg"] and e1["water_lon_deg"] < e1["lon_deg"]
     assert e1["scored"] is False  # leg 0: the prior only
@@ -315,17 +504,28 @@ def test_json_content_and_units():
     assert sum(e["scored"] for e in dr["epochs"]) == 24 * 5
     assert dr["scored_out_of_sample"] is True and dr["n_scored"] == 120
     checks = a.dead_reckoning.leg_checks
-    assert dr["nees"] == {"statistic": pytest.approx(sum(c.last_nees for c in checks)),
-                          "lower": pytest.approx(a.dead_reckoning.nees_lower),
-                          "upper": pytest.approx(a.dead_reckoning.nees_upper)}
+    assert dr["nees"] == {
+        "statistic": pytest.approx(sum(c.last_nees for c in checks)),
+        "lower": pytest.approx(a.dead_reckoning.nees_lower),
+        "upper": pytest.approx(a.dead_reckoning.nees_upper),
+    }
     assert dr["nees"]["lower"] < dr["nees"]["statistic"] < dr["nees"]["upper"]
     assert dr["mean_nees"] == pytest.approx(np.mean([c.mean_nees for c in checks]))
     leg0, leg2 = dr["legs"][0], dr["legs"][2]
-    assert leg0["n_scored"] == 0 and leg0["mean_nees"] is None and leg0["last_nees"] is None \
+    assert (
+        leg0["n_scored"] == 0
+        and leg0["mean_nees"] is None
+        and leg0["last_nees"] is None
         and leg0["nees_upper"] is None
-    assert leg2["mean_nees"] == pytest.approx(1.7) and leg2["last_nees"] == pytest.approx(2.0) \
+    )
+    assert (
+        leg2["mean_nees"] == pytest.approx(1.7)
+        and leg2["last_nees"] == pytest.approx(2.0)
         and leg2["nees_upper"] == 9.21
-    assert dr["dominant_source"] == "the change of the current" and dr["dominant_key"] == "current_kn"
+    )
+    assert (
+        dr["dominant_source"] == "the change of the current" and dr["dominant_key"] == "current_kn"
+    )
     assert dr["reference_sigma_m"] == 3.0
     assert dr["learned_model"] == LEARNED
     assert isinstance(dr["learned_model"]["config_block"], str)
@@ -342,14 +542,36 @@ def _not_learned(a: Analysis) -> Analysis:
     """The same analysis as with ``learn = false``: the DR is the water track, nothing
     learned, every epoch after a fix scored, no NEES over legs."""
     dr = a.dead_reckoning
-    tr = dataclasses.replace(dr.track, water_lat_rad=dr.track.lat_rad, water_lon_rad=dr.track.lon_rad,
-                             scored=dr.track.since_fix_s > 0)
-    ep = dataclasses.replace(dr.epochs, water_lat_rad=dr.epochs.lat_rad, water_lon_rad=dr.epochs.lon_rad,
-                             scored=dr.epochs.since_fix_s > 0)
-    return dataclasses.replace(a, dead_reckoning=dataclasses.replace(
-        dr, track=tr, epochs=ep, learned=None, scored_out_of_sample=False, dominant_source=None,
-        dominant_key=None, leg_checks=(), mean_nees=math.nan, nees_statistic=math.nan,
-        nees_lower=math.nan, nees_upper=math.nan, reference_sigma_m=0.0))
+    tr = dataclasses.replace(
+        dr.track,
+        water_lat_rad=dr.track.lat_rad,
+        water_lon_rad=dr.track.lon_rad,
+        scored=dr.track.since_fix_s > 0,
+    )
+    ep = dataclasses.replace(
+        dr.epochs,
+        water_lat_rad=dr.epochs.lat_rad,
+        water_lon_rad=dr.epochs.lon_rad,
+        scored=dr.epochs.since_fix_s > 0,
+    )
+    return dataclasses.replace(
+        a,
+        dead_reckoning=dataclasses.replace(
+            dr,
+            track=tr,
+            epochs=ep,
+            learned=None,
+            scored_out_of_sample=False,
+            dominant_source=None,
+            dominant_key=None,
+            leg_checks=(),
+            mean_nees=math.nan,
+            nees_statistic=math.nan,
+            nees_lower=math.nan,
+            nees_upper=math.nan,
+            reference_sigma_m=0.0,
+        ),
+    )
 
 
 def test_json_without_a_learned_model(validator):
@@ -357,7 +579,9 @@ def test_json_without_a_learned_model(validator):
     assert not list(validator.iter_errors(doc))
     dr = doc["dead_reckoning"]
     assert dr["learned_model"] is None and dr["scored_out_of_sample"] is False
-    assert dr["nees"] == {"statistic": None, "lower": None, "upper": None} and dr["mean_nees"] is None
+    assert (
+        dr["nees"] == {"statistic": None, "lower": None, "upper": None} and dr["mean_nees"] is None
+    )
     assert dr["dominant_source"] is None and dr["dominant_key"] is None
     assert all(leg["mean_nees"] is None for leg in dr["legs"])
     e1 = dr["epochs"][1]
@@ -389,24 +613,39 @@ def test_terminal_summary_golden(kind):
 
 def test_terminal_summary_content():
     text = terminal.render_text(make_analysis("full"))
-    for needle in ("2026-03-01 00:00Z → 2026-03-02 01:00Z (25 h 00 min)", "rejected 12 lines: checksum 10",
-                   "2M       of the estimated position, largest 80 m: reference (gnss) inside 2M at 96.0 %",
-                   "scored   120 epochs out of sample", "5 prior-only epochs unscored",
-                   "NEES     36.0 over 24 legs (chi² 26.5-77.0)",
-                   "learned  current set 45 ° drift 0.49 kn; corrections: heading +0.31 ± 0.12 °, "
-                   "log scale -1.71 ± 0.23 %", "excess", "neg. var.", "1.76 -",
-                   "exceeds→178.6", "compass error 0.31 ± 0.04 °", "log scale 2.90 ± 0.20 %",
-                   "set 168 ± 12 ° (towards), drift 0.40 ± 0.10 kn"):
+    for needle in (
+        "2026-03-01 00:00Z → 2026-03-02 01:00Z (25 h 00 min)",
+        "rejected 12 lines: checksum 10",
+        "2M       of the estimated position, largest 80 m: reference (gnss) inside 2M at 96.0 %",
+        "scored   120 epochs out of sample",
+        "5 prior-only epochs unscored",
+        "NEES     36.0 over 24 legs (chi² 26.5-77.0)",
+        "learned  current set 45 ° drift 0.49 kn; corrections: heading +0.31 ± 0.12 °, "
+        "log scale -1.71 ± 0.23 %",
+        "excess",
+        "neg. var.",
+        "1.76 -",
+        "exceeds→178.6",
+        "compass error 0.31 ± 0.04 °",
+        "log scale 2.90 ± 0.20 %",
+        "set 168 ± 12 ° (towards), drift 0.40 ± 0.10 kn",
+    ):
         assert needle in text, needle
     bare = terminal.render_text(make_analysis("bare"))
-    assert "no INS triple" in bare and "no heading" in bare and bare.count("not computed (see Missing)") == 4
+    assert (
+        "no INS triple" in bare
+        and "no heading" in bare
+        and bare.count("not computed (see Missing)") == 4
+    )
 
 
 def test_terminal_dominant_source_only_when_not_consistent():
     a = make_analysis("full")
     assert "dominant" not in terminal.render_text(a)  # consistent: nothing to blame
-    for verdict in ("inconsistent (circle too small): reference inside 2M at 80.0 %",
-                    "conservative: reference inside 2M at 100.0 %"):
+    for verdict in (
+        "inconsistent (circle too small): reference inside 2M at 80.0 %",
+        "conservative: reference inside 2M at 100.0 %",
+    ):
         dr = dataclasses.replace(a.dead_reckoning, verdict=verdict, consistent=verdict[0] == "c")
         text = terminal.render_text(dataclasses.replace(a, dead_reckoning=dr))
         line = next(ln for ln in text.splitlines() if ln.startswith("dominant"))
@@ -430,8 +669,11 @@ def test_tables_roundtrip(tmp_path):
     a = make_analysis("full")
     written = tables.write_tables(a, tmp_path)
     names = sorted(p.name for p in written)
-    assert names == sorted(f"{n}.{ext}" for n in ("dr_track", "dr_epochs", "deviation_samples", "unit_stats")
-                           for ext in ("csv", "parquet"))
+    assert names == sorted(
+        f"{n}.{ext}"
+        for n in ("dr_track", "dr_epochs", "deviation_samples", "unit_stats")
+        for ext in ("csv", "parquet")
+    )
     track = pd.read_parquet(tmp_path / "dr_track.parquet")
     assert len(track) == len(a.dead_reckoning.track.time_ns)
     assert str(track["time_utc"].dt.tz) == "UTC"
@@ -443,19 +685,27 @@ def test_tables_roundtrip(tmp_path):
     # the water track and the scored flag, in both formats
     for df in (track, csv):
         assert list(df.columns)[-3:] == ["water_lat_deg", "water_lon_deg", "scored"]
-        np.testing.assert_allclose(df["water_lat_deg"], np.degrees(a.dead_reckoning.track.water_lat_rad))
-        np.testing.assert_allclose(df["water_lon_deg"], np.degrees(a.dead_reckoning.track.water_lon_rad))
+        np.testing.assert_allclose(
+            df["water_lat_deg"], np.degrees(a.dead_reckoning.track.water_lat_rad)
+        )
+        np.testing.assert_allclose(
+            df["water_lon_deg"], np.degrees(a.dead_reckoning.track.water_lon_rad)
+        )
         assert df["scored"].dtype == bool
         np.testing.assert_array_equal(df["scored"], a.dead_reckoning.track.scored)
     assert not track["scored"].iloc[:360].any() and track["scored"].iloc[361]
     epochs = pd.read_parquet(tmp_path / "dr_epochs.parquet")
     assert len(epochs) == 150 and int(epochs["scored"].sum()) == 120
-    np.testing.assert_allclose(epochs["water_lon_deg"], np.degrees(a.dead_reckoning.epochs.water_lon_rad))
+    np.testing.assert_allclose(
+        epochs["water_lon_deg"], np.degrees(a.dead_reckoning.epochs.water_lon_rad)
+    )
     samples = pd.read_parquet(tmp_path / "deviation_samples.parquet")
     assert list(samples.columns)[:4] == ["time_utc", "ins1_lat_m", "ins1_lon_m", "ins1_course_deg"]
     assert samples["ins1_lat_m"].iloc[3] == pytest.approx(440.0 * math.sin(2.1) / 3.0, rel=1e-4)
     stats = pd.read_csv(tmp_path / "unit_stats.csv")
-    row = stats[(stats.window == "all") & (stats.unit_name == "ins2") & (stats.channel == "lat")].iloc[0]
+    row = stats[
+        (stats.window == "all") & (stats.unit_name == "ins2") & (stats.channel == "lat")
+    ].iloc[0]
     ref = a.deviation.whole.units["ins2"]
     assert row["m_u"] == pytest.approx(ref.channels["lat"].m_u) and row["unit"] == "m"
     assert row["k_star"] == pytest.approx(ref.reference["lat"].k_star)
@@ -472,6 +722,8 @@ def test_tables_readable_by_duckdb(tmp_path):
     tables.write_tables(make_analysis("full"), tmp_path)
     n = duckdb.sql(f"select count(*) from '{tmp_path / 'dr_track.parquet'}'").fetchall()[0][0]
     assert n == 25 * 360
-    rows = duckdb.sql(f"select unit_name, max(m_u) from read_csv_auto('{tmp_path / 'unit_stats.csv'}') "
-                      "where channel = 'lat' group by unit_name order by unit_name").fetchall()
+    rows = duckdb.sql(
+        f"select unit_name, max(m_u) from read_csv_auto('{tmp_path / 'unit_stats.csv'}') "
+        "where channel = 'lat' group by unit_name order by unit_name"
+    ).fetchall()
     assert [r[0] for r in rows] == ["ins1", "ins2", "ins3"] and all(r[1] > 0 for r in rows)

@@ -62,9 +62,19 @@ def _chromium() -> str:
 
 
 def _run(tmp_path: Path, report: Path, *extra: str) -> subprocess.CompletedProcess:
-    cmd = [_chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
-           "--no-first-run", "--disable-background-networking", "--disable-component-update",
-           "--disable-sync", f"--user-data-dir={tmp_path / 'profile'}", *extra]
+    cmd = [
+        _chromium(),
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-quic",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        f"--user-data-dir={tmp_path / 'profile'}",
+        *extra,
+    ]
     return subprocess.run(cmd, capture_output=True, text=True, timeout=120, check=False)
 
 
@@ -72,8 +82,14 @@ def _probe(tmp_path: Path, report: Path) -> tuple[dict, list[str]]:
     probe = report.parent / "probe.html"
     probe.write_text(PROBE.replace("REPORT", report.name), encoding="utf-8")
     netlog = tmp_path / "net.json"
-    res = _run(tmp_path, report, "--allow-file-access-from-files", f"--log-net-log={netlog}",
-               "--dump-dom", probe.as_uri())
+    res = _run(
+        tmp_path,
+        report,
+        "--allow-file-access-from-files",
+        f"--log-net-log={netlog}",
+        "--dump-dom",
+        probe.as_uri(),
+    )
     m = re.search(r'<pre id="result">(.*?)</pre>', res.stdout, re.S)
     assert m, f"no probe result; chromium said: {res.stderr[-2000:]}"
     import html as _html
@@ -89,17 +105,33 @@ def test_html_in_real_browser(tmp_path):
     write_html(make_analysis("hostile"), report)
     data, urls = _probe(tmp_path, report)
     imgs = data["imgs"]
-    assert [i["alt"] for i in imgs] == ["track plot", "deviation plot", "2M growth plot", "current plot"]
+    assert [i["alt"] for i in imgs] == [
+        "track plot",
+        "deviation plot",
+        "2M growth plot",
+        "current plot",
+    ]
     for i in imgs:
         assert i["complete"] and i["w"] > 300 and i["h"] > 200, i
         assert i["scheme"] == "data"
     heads = data["heads"]
-    for h in ("Summary", "Sources", "Missing", "Dead reckoning", "INS accuracy per unit",
-              "Calibration and current", "Plots"):
+    for h in (
+        "Summary",
+        "Sources",
+        "Missing",
+        "Dead reckoning",
+        "INS accuracy per unit",
+        "Calibration and current",
+        "Plots",
+    ):
         assert h in heads
     assert data["scripts"] == 0 and data["links"] == 0
-    page_urls = [u for u in urls if not u.startswith(("file:", "data:"))
-                 and not any(host in u.split("/")[2] for host in _BROWSER_HOSTS)]
+    page_urls = [
+        u
+        for u in urls
+        if not u.startswith(("file:", "data:"))
+        and not any(host in u.split("/")[2] for host in _BROWSER_HOSTS)
+    ]
     assert not page_urls, page_urls
     assert not any("example.com" in u for u in urls)
     # the hostile text shows as text, it did not become markup
@@ -116,10 +148,16 @@ def test_html_dead_reckoning_shows_nees_and_the_learned_model():
     a = make_analysis("full")
     text = render_html(a)
     dr_part = text.split('<section id="dead-reckoning">', 1)[1].split("</section>", 1)[0]
-    assert "<td>NEES</td><td>36.0 over 24 legs (χ² bounds 26.5–77.0); mean per epoch 1.65" in dr_part
-    assert "out of sample" in dr_part and "5 epochs of earlier legs (prior only) not scored" in dr_part
-    assert "<td>largest part of the 2M</td><td>the change of the current (prior: [dead_reckoning] " \
-           "current_kn)</td>" in dr_part
+    assert (
+        "<td>NEES</td><td>36.0 over 24 legs (χ² bounds 26.5–77.0); mean per epoch 1.65" in dr_part
+    )
+    assert (
+        "out of sample" in dr_part and "5 epochs of earlier legs (prior only) not scored" in dr_part
+    )
+    assert (
+        "<td>largest part of the 2M</td><td>the change of the current (prior: [dead_reckoning] "
+        "current_kn)</td>" in dr_part
+    )
     assert "<td>heading correction</td><td>+0.31 ± 0.12°" in dr_part
     assert "<td>log scale correction</td><td>-1.71 ± 0.23 %" in dr_part
     assert "set 45° (towards), drift 0.49 kn" in dr_part
@@ -148,7 +186,10 @@ def test_track_plot_draws_the_water_track_and_the_estimated_position():
         assert ep.get_linestyle() == "-"
         tr = a.dead_reckoning.track
         lat0, lon0 = float(tr.lat_rad[0]), float(tr.lon_rad[0])
-        for line, (lat, lon) in ((water, (tr.water_lat_rad, tr.water_lon_rad)), (ep, (tr.lat_rad, tr.lon_rad))):
+        for line, (lat, lon) in (
+            (water, (tr.water_lat_rad, tr.water_lon_rad)),
+            (ep, (tr.lat_rad, tr.lon_rad)),
+        ):
             n, e = offset_ne_m(lat, lon, lat0, lon0)
             x, y = (np.asarray(v, float) for v in line.get_data())
             ok = np.isfinite(x)  # NaN breaks at the restarts
@@ -158,14 +199,20 @@ def test_track_plot_draws_the_water_track_and_the_estimated_position():
         # the two tracks differ (by the learned current: 0.25 m/s for up to an hour)
         wx, ex = np.asarray(water.get_xdata(), float), np.asarray(ep.get_xdata(), float)
         assert np.nanmax(np.abs(ex - wx)) > 0.5
-        assert "2M: each hour since the fix, and at each restart" in [p.get_label() for p in ax.patches]
+        assert "2M: each hour since the fix, and at each restart" in [
+            p.get_label() for p in ax.patches
+        ]
     finally:
         plt.close(fig)
     # learn = false: the DR is the water track, drawn once
     fig, ax = plots.track_figure(_not_learned(a))
     try:
         labels = [ln.get_label() for ln in ax.get_lines()]
-        assert plots.DR_LABEL in labels and plots.WATER_LABEL not in labels and plots.EP_LABEL not in labels
+        assert (
+            plots.DR_LABEL in labels
+            and plots.WATER_LABEL not in labels
+            and plots.EP_LABEL not in labels
+        )
     finally:
         plt.close(fig)
     assert plots.track_plot(a) != plots.track_plot(_not_learned(a))
@@ -182,8 +229,14 @@ def test_html_screenshot_is_not_blank(tmp_path):
     report = tmp_path / "report.html"
     write_html(make_analysis("full"), report)
     shot = tmp_path / "shot.png"
-    _run(tmp_path, report, "--window-size=1200,2400", "--hide-scrollbars", f"--screenshot={shot}",
-         report.as_uri())
+    _run(
+        tmp_path,
+        report,
+        "--window-size=1200,2400",
+        "--hide-scrollbars",
+        f"--screenshot={shot}",
+        report.as_uri(),
+    )
     import matplotlib.image as mpimg
 
     img = mpimg.imread(shot)

@@ -27,15 +27,23 @@ def test_rows_carry_the_statistics_figures():
     verdicts = set()
     for name, urows in table:
         u = d.whole.units[name]
-        assert [r.channel for r in urows] == [ch for ch in ("lat", "lon", "course") if ch in u.channels]
+        assert [r.channel for r in urows] == [
+            ch for ch in ("lat", "lon", "course") if ch in u.channels
+        ]
         for r in urows:
             c = u.channels[r.channel]
             digits = 3 if r.channel == "course" else 1
             assert r.channel_text == f"{r.channel} [{'deg' if r.channel == 'course' else 'm'}]"
-            assert (r.n, r.m_u, r.m_y, r.limit) == (str(c.n), f"{c.m_u:,.{digits}f}",
-                                                    f"{c.m_y:,.{digits}f}", f"{c.limit:,.{digits}f}")
+            assert (r.n, r.m_u, r.m_y, r.limit) == (
+                str(c.n),
+                f"{c.m_u:,.{digits}f}",
+                f"{c.m_y:,.{digits}f}",
+                f"{c.limit:,.{digits}f}",
+            )
             assert r.kurtosis == f"{c.kurtosis:.2f}"
-            want = {None: rows.NO_APRIORI, True: rows.EXCEEDS, False: rows.WITHIN}[c.exceeds_apriori]
+            want = {None: rows.NO_APRIORI, True: rows.EXCEEDS, False: rows.WITHIN}[
+                c.exceeds_apriori
+            ]
             assert r.verdict == want
             if want == rows.EXCEEDS:
                 assert r.new_apriori == f"{c.new_apriori:,.{digits}f}"
@@ -75,6 +83,9 @@ def test_unit_without_statistics():
     d2 = dataclasses.replace(d, whole=dataclasses.replace(d.whole, units=units))
     table = dict(rows.unit_rows(d2))
     assert table["ins2"] is None and table["ins1"]
-    line = next(ln for ln in terminal.render_text(dataclasses.replace(a, deviation=d2)).splitlines()
-                if ln.startswith("ins2"))
+    line = next(
+        ln
+        for ln in terminal.render_text(dataclasses.replace(a, deviation=d2)).splitlines()
+        if ln.startswith("ins2")
+    )
     assert line.split() == ["ins2", "-", "0"] + ["-"] * 9

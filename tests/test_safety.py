@@ -59,8 +59,10 @@ def test_config_is_never_executed(tmp_path, monkeypatch):
         load_config(py)
     # code inside TOML strings stays a string: here an unknown key and a bad type
     toml = tmp_path / "evil2.toml"
-    toml.write_text(f'[ingest]\ndate = "__import__(\'os\').system(\'touch {marker}\')"\n'
-                    f'[dead_reckoning]\nmax_gap_s = "__import__(\'os\')"\n')
+    toml.write_text(
+        f"[ingest]\ndate = \"__import__('os').system('touch {marker}')\"\n"
+        f"[dead_reckoning]\nmax_gap_s = \"__import__('os')\"\n"
+    )
     code = _main("analyze", SAMPLES / "voyage_tag.nmea", "--config", toml)
     assert code == ExitCode.CONFIG or code == ExitCode.INPUT
     assert not marker.exists()
@@ -68,7 +70,7 @@ def test_config_is_never_executed(tmp_path, monkeypatch):
 
 def test_config_string_where_a_number_belongs_is_a_config_error(tmp_path, run_cli):
     toml = tmp_path / "c.toml"
-    toml.write_text('[faults]\nmax_speed_kn = "__import__(\'os\')"\n')
+    toml.write_text("[faults]\nmax_speed_kn = \"__import__('os')\"\n")
     code, _, err = run_cli("analyze", SAMPLES / "voyage_tag.nmea", "--config", toml)
     assert code == ExitCode.CONFIG and "[faults] max_speed_kn" in err and "Traceback" not in err
 
@@ -76,8 +78,24 @@ def test_config_string_where_a_number_belongs_is_a_config_error(tmp_path, run_cl
 # ----------------------------------------------------------------- fleet output paths
 
 
-@pytest.mark.parametrize("name", ["..", ".", "../../etc", "a/../../b", "/etc/passwd", "..\\..\\x",
-                                  "\x00evil", "CON", " .. ", "~", "-rf", XSS, "Ålesund ☃"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "..",
+        ".",
+        "../../etc",
+        "a/../../b",
+        "/etc/passwd",
+        "..\\..\\x",
+        "\x00evil",
+        "CON",
+        " .. ",
+        "~",
+        "-rf",
+        XSS,
+        "Ålesund ☃",
+    ],
+)
 def test_fleet_names_cannot_escape_the_output_folder(tmp_path, name):
     root = tmp_path / "out"
     root.mkdir()
@@ -109,8 +127,11 @@ def test_fleet_with_hostile_vessel_folders(tmp_path):
     out = tmp_path / "out"
     code = _main("fleet", *[src / n for n in names], "--workers", "1", "--out", out)
     assert code == 0
-    outside = [p for p in tmp_path.rglob("*") if out not in p.parents and p != out
-               and src not in p.parents and p != src]
+    outside = [
+        p
+        for p in tmp_path.rglob("*")
+        if out not in p.parents and p != out and src not in p.parents and p != src
+    ]
     assert outside == []
     page = (out / "fleet.html").read_text()
     assert "<img src=x" not in page and "&lt;img src=x onerror=alert(1)&gt;" in page
@@ -121,8 +142,16 @@ def test_fleet_with_hostile_vessel_folders(tmp_path):
 # ----------------------------------------------------------------- odd file names
 
 
-@pytest.mark.parametrize("name", ["-odd name.nmea", "Ålesund ☃ log.nmea", "--json.nmea",
-                                  " leading space.nmea", "semi;colon $(echo x).nmea"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "-odd name.nmea",
+        "Ålesund ☃ log.nmea",
+        "--json.nmea",
+        " leading space.nmea",
+        "semi;colon $(echo x).nmea",
+    ],
+)
 def test_odd_file_names(tmp_path, monkeypatch, run_cli, name):
     monkeypatch.chdir(tmp_path)
     lines = (SAMPLES / "voyage_tag.nmea").read_bytes().split(b"\r\n")[:600]
@@ -139,9 +168,14 @@ def test_leading_dash_file_in_a_real_process(tmp_path):
     """`dracc analyze -- -odd name.nmea`, exactly as a user types it."""
     lines = (SAMPLES / "voyage_tag.nmea").read_bytes().split(b"\r\n")[:600]
     (tmp_path / "-odd name.nmea").write_bytes(b"\r\n".join(lines) + b"\r\n")
-    r = subprocess.run([sys.executable, "-m", "dracc", "analyze", "--", "-odd name.nmea"],
-                       cwd=tmp_path, capture_output=True, text=True, timeout=120,
-                       env={**os.environ, "PYTHONIOENCODING": "utf-8"})
+    r = subprocess.run(
+        [sys.executable, "-m", "dracc", "analyze", "--", "-odd name.nmea"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "PYTHONIOENCODING": "utf-8"},
+    )
     assert r.returncode == 0, r.stderr
     assert "-odd name.nmea" in r.stdout and "Traceback" not in r.stderr
 
@@ -161,8 +195,18 @@ def hostile_report(tmp_path_factory):
     log = d / "voyage <b onclick=x>.nmea"
     log.write_bytes(data)
     html = d / "r.html"
-    code = _main("analyze", log, "--role", f"{XSS}=ins2", "--role", f"{RICH}=ins3", "--html", html,
-                 "--json", d / "r.json")
+    code = _main(
+        "analyze",
+        log,
+        "--role",
+        f"{XSS}=ins2",
+        "--role",
+        f"{RICH}=ins3",
+        "--html",
+        html,
+        "--json",
+        d / "r.json",
+    )
     assert code == 0
     return html.read_text(), json.loads((d / "r.json").read_text()), log
 

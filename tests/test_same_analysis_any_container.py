@@ -13,7 +13,13 @@ from dracc.core.config import Config
 from dracc.pipeline.analysis import _dedupe_sorted, analyse
 from dracc.report.json_report import to_dict
 
-FILES = ["voyage_tag.nmea", "voyage_prefix.nmea", "voyage_long.csv", "voyage_wide.csv", "voyage.mcap"]
+FILES = [
+    "voyage_tag.nmea",
+    "voyage_prefix.nmea",
+    "voyage_long.csv",
+    "voyage_wide.csv",
+    "voyage.mcap",
+]
 
 
 def _figures(d: dict) -> dict[str, float]:

@@ -23,10 +23,14 @@ LAT0, LON0 = math.radians(55.0), math.radians(12.0)
 
 # Table 1 (seeds/001), k* and printed mark per day: latitude, longitude
 TABLE1_K = [
-    ("25.10", (1.32, "+"), (1.42, "+")), ("26.10", (1.31, "+"), (1.39, "+")),
-    ("27.10", (1.5, "-"), (0.89, "-")), ("28.10", (1.2, "+"), (1.53, "+")),
-    ("29.10", (1.3, "+"), (1.17, "+")), ("30.10", (1.36, "-"), (1.44, "+")),
-    ("31.10", (1.27, "+"), (2.89, "-")), ("01.11", (1.29, "+"), (1.76, "-")),
+    ("25.10", (1.32, "+"), (1.42, "+")),
+    ("26.10", (1.31, "+"), (1.39, "+")),
+    ("27.10", (1.5, "-"), (0.89, "-")),
+    ("28.10", (1.2, "+"), (1.53, "+")),
+    ("29.10", (1.3, "+"), (1.17, "+")),
+    ("30.10", (1.36, "-"), (1.44, "+")),
+    ("31.10", (1.27, "+"), (2.89, "-")),
+    ("01.11", (1.29, "+"), (1.76, "-")),
 ]
 #: the last row: weighted RMS of errors and deviations
 LAST_ROW = {"lat": (0.124, 0.096), "lon": (0.226, 0.151)}
@@ -123,7 +127,8 @@ def test_second_approximation_factor_and_the_papers_1_32():
     assert k2 == pytest.approx(1.445763, abs=1e-6)
     # the cross term once: k = (sqrt 6 + sqrt 870) / 24 = 1.331052
     assert S.k_second_approximation(cross=1.0) == pytest.approx(
-        (math.sqrt(6) + math.sqrt(870)) / 24, rel=1e-12)
+        (math.sqrt(6) + math.sqrt(870)) / 24, rel=1e-12
+    )
     # iterated, the fixed points k^2 = 9 / (6 - cross): 1.5 and sqrt(9/5) = 1.341641
     assert S.k_second_approximation(iterations=80) == pytest.approx(1.5, rel=1e-9)
     assert S.k_second_approximation(cross=1.0, iterations=80) == pytest.approx(math.sqrt(1.8))

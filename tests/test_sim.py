@@ -35,8 +35,11 @@ def noisy():
 
 @pytest.fixture(scope="module")
 def exact():
-    return simulate(SimParams.noiseless(compass="both", current_drift_kn=0.4,
-                                        legs=((0.0, 350.0), (300.0, 80.0)), **SHORT))
+    return simulate(
+        SimParams.noiseless(
+            compass="both", current_drift_kn=0.4, legs=((0.0, 350.0), (300.0, 80.0)), **SHORT
+        )
+    )
 
 
 def at(v, frame, source):
@@ -47,6 +50,7 @@ def at(v, frame, source):
 
 
 # ---------------------------------------------------------------- structure and determinism
+
 
 def test_frames_are_canonical(noisy):
     for kind in KINDS:
@@ -62,8 +66,14 @@ def test_frames_are_canonical(noisy):
     assert not np.isin(noisy.zda["line"], u).any()
     allln = np.union1d(u, noisy.zda["line"].to_numpy())
     assert np.array_equal(allln, np.arange(1, allln.max() + 1))
-    assert noisy.roles == {"GYRO": "compass", "LOG": "log", "INS1": "ins1", "INS2": "ins2",
-                           "INS3": "ins3", "GNSS": "gnss"}  # 'both': MAG left unassigned
+    assert noisy.roles == {
+        "GYRO": "compass",
+        "LOG": "log",
+        "INS1": "ins1",
+        "INS2": "ins2",
+        "INS3": "ins3",
+        "GNSS": "gnss",
+    }  # 'both': MAG left unassigned
 
 
 def test_rates_and_counts(noisy):
@@ -105,11 +115,15 @@ def test_start_time_and_bad_params():
 
 # ---------------------------------------------------------------- truth
 
+
 def test_rhumb_line_against_geographiclib():
     """Constant heading, no current: the track is a rhumb line.  North: the meridian arc
     (GeographicLib); east: tan C times the isometric-latitude difference (closed form)."""
-    v = simulate(SimParams.noiseless(duration_s=6 * 3600.0, compass_hz=1.0,
-                                     legs=((0.0, 35.0),), speed_kn=15.0))
+    v = simulate(
+        SimParams.noiseless(
+            duration_s=6 * 3600.0, compass_hz=1.0, legs=((0.0, 35.0),), speed_kn=15.0
+        )
+    )
     tr = v.truth
     d_m = 15.0 * KN_MPS * 6 * 3600.0
     c = 35.0 * DEG_RAD
@@ -129,14 +143,21 @@ def test_velocity_composition(noisy):
     """(B7-B12, B10 corrected): ground = water track + current; the track follows it."""
     tr = noisy.truth
     kdw = tr["heading_rad"] + tr["leeway_rad"]
-    np.testing.assert_allclose(tr["vn_mps"], tr["stw_mps"] * np.cos(kdw) + tr["current_n_mps"],
-                               atol=1e-12)
-    np.testing.assert_allclose(tr["ve_mps"], tr["stw_mps"] * np.sin(kdw) + tr["current_e_mps"],
-                               atol=1e-12)
-    np.testing.assert_allclose(np.hypot(tr["stw_long_mps"], tr["stw_transverse_mps"]),
-                               tr["stw_mps"], rtol=1e-12)
-    n_m, e_m = offset_ne_m(tr["lat_rad"].to_numpy()[1:], tr["lon_rad"].to_numpy()[1:],
-                           tr["lat_rad"].to_numpy()[:-1], tr["lon_rad"].to_numpy()[:-1])
+    np.testing.assert_allclose(
+        tr["vn_mps"], tr["stw_mps"] * np.cos(kdw) + tr["current_n_mps"], atol=1e-12
+    )
+    np.testing.assert_allclose(
+        tr["ve_mps"], tr["stw_mps"] * np.sin(kdw) + tr["current_e_mps"], atol=1e-12
+    )
+    np.testing.assert_allclose(
+        np.hypot(tr["stw_long_mps"], tr["stw_transverse_mps"]), tr["stw_mps"], rtol=1e-12
+    )
+    n_m, e_m = offset_ne_m(
+        tr["lat_rad"].to_numpy()[1:],
+        tr["lon_rad"].to_numpy()[1:],
+        tr["lat_rad"].to_numpy()[:-1],
+        tr["lon_rad"].to_numpy()[:-1],
+    )
     dt = 0.5
     vn_mid = 0.5 * (tr["vn_mps"].to_numpy()[1:] + tr["vn_mps"].to_numpy()[:-1])
     ve_mid = 0.5 * (tr["ve_mps"].to_numpy()[1:] + tr["ve_mps"].to_numpy()[:-1])
@@ -155,11 +176,14 @@ def test_integrate_track_uses_k_phi_k_lambda():
 
 def test_legs_turn_at_the_given_rate():
     legs = ((0.0, 350.0), (600.0, 20.0), (1200.0, 290.0))
-    v = simulate(SimParams.noiseless(duration_s=1800.0, compass_hz=1.0, legs=legs,
-                                     turn_rate_deg_s=0.5))
+    v = simulate(
+        SimParams.noiseless(duration_s=1800.0, compass_hz=1.0, legs=legs, turn_rate_deg_s=0.5)
+    )
     tr = v.truth.set_index("t_s")
     assert tr.loc[599.0, "heading_rad"] == pytest.approx(350 * DEG_RAD)
-    assert tr.loc[630.0, "heading_rad"] == pytest.approx(5 * DEG_RAD)  # 15 deg into 30 (shorter way)
+    assert tr.loc[630.0, "heading_rad"] == pytest.approx(
+        5 * DEG_RAD
+    )  # 15 deg into 30 (shorter way)
     assert tr.loc[700.0, "heading_rad"] == pytest.approx(20 * DEG_RAD)
     assert tr.loc[1260.0, "heading_rad"] == pytest.approx(350 * DEG_RAD)  # turning to port
     assert tr.loc[1400.0, "heading_rad"] == pytest.approx(290 * DEG_RAD)
@@ -169,8 +193,11 @@ def test_legs_turn_at_the_given_rate():
 
 def test_generated_legs_are_explicit():
     r = 1 / 60.0
-    v = simulate(SimParams(duration_s=12 * 3600.0, compass_hz=r, log_hz=r, ins_hz=r, gnss_hz=r,
-                           aux_hz=r, seed=2))
+    v = simulate(
+        SimParams(
+            duration_s=12 * 3600.0, compass_hz=r, log_hz=r, ins_hz=r, gnss_hz=r, aux_hz=r, seed=2
+        )
+    )
     assert v.params.legs is not None and len(v.params.legs) >= 3
     assert v.params.legs[0] == (0.0, 60.0)
 
@@ -186,6 +213,7 @@ def test_compass_course_inverts_b2():
 
 
 # ---------------------------------------------------------------- noiseless: frames equal truth
+
 
 def test_noiseless_frames_equal_truth(exact):
     v = exact
@@ -210,21 +238,34 @@ def test_noiseless_frames_equal_truth(exact):
     f, tr = at(v, v.frames["water"], "LOG")
     vbw = f["sentence"] == "VBW"
     assert np.max(np.abs(f["stw_mps"].to_numpy() - tr["stw_long_mps"].to_numpy())) <= Q_SPEED
-    assert np.max(np.abs(f["sog_long_mps"][vbw].to_numpy()
-                         - tr["sog_long_mps"][vbw.to_numpy()].to_numpy())) <= Q_SPEED
+    assert (
+        np.max(
+            np.abs(
+                f["sog_long_mps"][vbw].to_numpy() - tr["sog_long_mps"][vbw.to_numpy()].to_numpy()
+            )
+        )
+        <= Q_SPEED
+    )
     assert f.loc[~vbw, "sog_long_mps"].isna().all()  # VHW has no ground speed: NaN, not 0
     f, tr = at(v, v.frames["distance"], "LOG")
-    assert np.max(np.abs(f["trip_water_m"].to_numpy() - tr["water_distance_m"].to_numpy())) \
+    assert (
+        np.max(np.abs(f["trip_water_m"].to_numpy() - tr["water_distance_m"].to_numpy()))
         <= 0.0005 * NMI_M + 1e-9
+    )
     f, tr = at(v, v.frames["rot"], "GYRO")
-    assert np.max(np.abs(f["rot_radps"].to_numpy() - tr["rot_radps"].to_numpy())) \
+    assert (
+        np.max(np.abs(f["rot_radps"].to_numpy() - tr["rot_radps"].to_numpy()))
         <= 0.005 * DEG_RAD / 60 + 1e-15
-    assert v.errors.drop(columns=["time_ns", "current_n_mps", "current_e_mps"]).abs().max().max() \
+    )
+    assert (
+        v.errors.drop(columns=["time_ns", "current_n_mps", "current_e_mps"]).abs().max().max()
         == 0.0
+    )
     assert all(r == pytest.approx(0.0, abs=0.01) for u in v.unit_rms.values() for r in u.values())
 
 
 # ---------------------------------------------------------------- error processes
+
 
 def test_noisy_frames_carry_the_errors(noisy):
     v = noisy
@@ -235,7 +276,9 @@ def test_noisy_frames_carry_the_errors(noisy):
     assert np.mean(g) / DEG_RAD == pytest.approx(0.3, abs=0.3)  # 0.3 deg offset + noise
     f, tr = at(v, v.frames["water"], "LOG")
     ee = e.loc[f["time_ns"].to_numpy()]
-    want = 1.02 * tr["stw_long_mps"].to_numpy() + 0.05 * KN_MPS + ee["log_noise_long_mps"].to_numpy()
+    want = (
+        1.02 * tr["stw_long_mps"].to_numpy() + 0.05 * KN_MPS + ee["log_noise_long_mps"].to_numpy()
+    )
     assert np.max(np.abs(f["stw_mps"].to_numpy() - want)) <= Q_SPEED
     for j in (1, 2, 3):
         f, tr = at(v, v.frames["position"], f"INS{j}")
@@ -250,21 +293,21 @@ def test_gauss_markov_sigma_and_tau():
     rng = np.random.default_rng(1)
     sigma, tau, dt = 2.0, 50.0, 1.0
     x = gauss_markov(3000, dt, sigma, tau, rng, runs=400)
-    var = np.mean(x ** 2, axis=0)
+    var = np.mean(x**2, axis=0)
     # the variance of a mean of 400 chi-square(1) samples: rel. sd sqrt(2/400) = 7 %
-    assert abs(var[0] / sigma ** 2 - 1) < 4 * math.sqrt(2 / 400)
-    assert abs(var[-1] / sigma ** 2 - 1) < 4 * math.sqrt(2 / 400)
-    assert np.mean(var) / sigma ** 2 == pytest.approx(1.0, abs=0.03)
+    assert abs(var[0] / sigma**2 - 1) < 4 * math.sqrt(2 / 400)
+    assert abs(var[-1] / sigma**2 - 1) < 4 * math.sqrt(2 / 400)
+    assert np.mean(var) / sigma**2 == pytest.approx(1.0, abs=0.03)
     lag = int(tau / dt)
-    rho = np.mean(x[:, :-lag] * x[:, lag:]) / np.mean(x ** 2)
+    rho = np.mean(x[:, :-lag] * x[:, lag:]) / np.mean(x**2)
     assert rho == pytest.approx(math.exp(-1.0), abs=0.03)
-    rho1 = np.mean(x[:, :-1] * x[:, 1:]) / np.mean(x ** 2)
+    rho1 = np.mean(x[:, :-1] * x[:, 1:]) / np.mean(x**2)
     assert rho1 == pytest.approx(math.exp(-dt / tau), abs=0.01)
     b = gauss_markov(100, dt, sigma, math.inf, rng, runs=2000)
     assert np.all(b == b[:, :1])
     assert np.std(b[:, 0]) == pytest.approx(sigma, rel=4 / math.sqrt(2 * 2000))
     w = gauss_markov(20000, dt, sigma, 0.0, rng)
-    assert abs(np.mean(w[:-1] * w[1:])) / sigma ** 2 < 4 / math.sqrt(20000)
+    assert abs(np.mean(w[:-1] * w[1:])) / sigma**2 < 4 / math.sqrt(20000)
     with pytest.raises(ConfigError):
         gauss_markov(10, dt, 1.0, -1.0, rng)
 
@@ -295,20 +338,24 @@ def test_ins_velocity_error_is_position_error_rate():
 
 def test_unit_rms_matches_errors_and_ins2_is_worst():
     r = 0.1
-    v = simulate(SimParams(duration_s=24 * 3600.0, compass_hz=r, log_hz=r, ins_hz=r, gnss_hz=r,
-                           aux_hz=r, seed=11))
+    v = simulate(
+        SimParams(
+            duration_s=24 * 3600.0, compass_hz=r, log_hz=r, ins_hz=r, gnss_hz=r, aux_hz=r, seed=11
+        )
+    )
     e = v.errors
     for j in (1, 2, 3):
         r = v.unit_rms[f"ins{j}"]
         assert r["lat_m"] == pytest.approx(np.sqrt(np.mean(e[f"ins{j}_north_m"] ** 2)), rel=1e-3)
         assert r["lon_m"] == pytest.approx(np.sqrt(np.mean(e[f"ins{j}_east_m"] ** 2)), rel=1e-3)
         assert r["course_deg"] == pytest.approx(
-            np.sqrt(np.mean(e[f"ins{j}_heading_rad"] ** 2)) / DEG_RAD, rel=2e-2)
+            np.sqrt(np.mean(e[f"ins{j}_heading_rad"] ** 2)) / DEG_RAD, rel=2e-2
+        )
         # independently, from the frames against the truth
         f, tr = at(v, v.frames["position"], f"INS{j}")
         n_m, e_m = offset_ne_m(f["lat_rad"], f["lon_rad"], tr["lat_rad"], tr["lon_rad"])
-        assert np.sqrt(np.mean(n_m ** 2)) == pytest.approx(r["lat_m"], rel=1e-4)
-        assert np.sqrt(np.mean(e_m ** 2)) == pytest.approx(r["lon_m"], rel=1e-4)
+        assert np.sqrt(np.mean(n_m**2)) == pytest.approx(r["lat_m"], rel=1e-4)
+        assert np.sqrt(np.mean(e_m**2)) == pytest.approx(r["lon_m"], rel=1e-4)
     for ch in ("lat_m", "lon_m", "course_deg"):
         assert v.unit_rms["ins2"][ch] > max(v.unit_rms["ins1"][ch], v.unit_rms["ins3"][ch])
     # realistic sizes: a few hundred metres to about a nautical mile over a day
@@ -320,18 +367,27 @@ def test_ins_error_scale():
     a = simulate(SimParams(seed=1, **SHORT))
     b = simulate(SimParams(seed=1, **SHORT).with_ins_error_scale(2.0))
     np.testing.assert_allclose(b.errors["ins2_north_m"], 2 * a.errors["ins2_north_m"], rtol=1e-12)
-    np.testing.assert_allclose(b.errors["ins3_heading_rad"], 2 * a.errors["ins3_heading_rad"],
-                               rtol=1e-12)
+    np.testing.assert_allclose(
+        b.errors["ins3_heading_rad"], 2 * a.errors["ins3_heading_rad"], rtol=1e-12
+    )
 
 
 def test_antimeridian_crossing():
     """Eastward across 180 deg: longitude wraps to -180, the track stays continuous."""
-    v = simulate(SimParams.noiseless(duration_s=1200.0, compass_hz=1.0, start_lat_deg=-20.0,
-                                     start_lon_deg=179.99, legs=((0.0, 90.0),)))
+    v = simulate(
+        SimParams.noiseless(
+            duration_s=1200.0,
+            compass_hz=1.0,
+            start_lat_deg=-20.0,
+            start_lon_deg=179.99,
+            legs=((0.0, 90.0),),
+        )
+    )
     lon = v.truth["lon_rad"].to_numpy()
     assert lon[0] > 0 > lon[-1] and np.all(np.abs(lon) <= np.pi)
-    n_m, e_m = offset_ne_m(v.truth["lat_rad"].to_numpy()[1:], lon[1:],
-                           v.truth["lat_rad"].to_numpy()[:-1], lon[:-1])
+    n_m, e_m = offset_ne_m(
+        v.truth["lat_rad"].to_numpy()[1:], lon[1:], v.truth["lat_rad"].to_numpy()[:-1], lon[:-1]
+    )
     np.testing.assert_allclose(e_m, 12.0 * KN_MPS, rtol=1e-6)
     f, tr = at(v, v.frames["position"], "INS1")
     assert np.max(np.abs(angdiff(f["lon_rad"], tr["lon_rad"]))) < 1e-9
@@ -342,16 +398,19 @@ def test_simulated_gyro_noise_has_its_sigma_and_tau():
     + 0.02 deg white.  Ten days at 0.1 Hz hold ~1400 correlation times: the variance is
     within 4 x sqrt(2/1440) = 15 %, the autocorrelation at 300 s within +-0.1 of e^-1."""
     r = 0.1
-    v = simulate(SimParams(duration_s=10 * 86400.0, compass_hz=r, log_hz=r, ins_hz=r,
-                           gnss_hz=r, aux_hz=r, seed=4))
+    v = simulate(
+        SimParams(
+            duration_s=10 * 86400.0, compass_hz=r, log_hz=r, ins_hz=r, gnss_hz=r, aux_hz=r, seed=4
+        )
+    )
     x = v.errors["gyro_err_rad"].to_numpy() / DEG_RAD - 0.3
-    var_gm, var_w = 0.1 ** 2, 0.02 ** 2
+    var_gm, var_w = 0.1**2, 0.02**2
     assert np.var(x) == pytest.approx(var_gm + var_w, rel=0.15)
     lag = 30  # 300 s at 0.1 Hz
     rho = np.mean(x[:-lag] * x[lag:]) / var_gm
     assert rho == pytest.approx(math.exp(-1.0), abs=0.1)
     y = v.errors["log_noise_long_mps"].to_numpy() / KN_MPS
-    assert np.var(y) == pytest.approx(0.1 ** 2 + 0.02 ** 2, rel=0.15)
+    assert np.var(y) == pytest.approx(0.1**2 + 0.02**2, rel=0.15)
 
 
 def test_segments_continue_one_voyage():
@@ -359,8 +418,12 @@ def test_segments_continue_one_voyage():
     with noise, no error series jumps at a joint more than within a segment."""
     from dracc.sim.model import simulate_segments
 
-    kw = dict(duration_s=3 * 1800.0, compass_hz=1.0, current_drift_kn=0.7,
-              legs=((0.0, 20.0), (2000.0, 200.0)))
+    kw = dict(
+        duration_s=3 * 1800.0,
+        compass_hz=1.0,
+        current_drift_kn=0.7,
+        legs=((0.0, 20.0), (2000.0, 200.0)),
+    )
     whole = simulate(SimParams.noiseless(**kw))
     parts = list(simulate_segments(SimParams.noiseless(**kw), segment_s=1800.0))
     assert len(parts) == 3
@@ -368,8 +431,9 @@ def test_segments_continue_one_voyage():
     assert np.array_equal(tr["time_ns"], whole.truth["time_ns"])
     for c in ("lat_rad", "lon_rad", "heading_rad"):
         np.testing.assert_allclose(tr[c], whole.truth[c], rtol=0, atol=1e-12, err_msg=c)
-    np.testing.assert_allclose(tr["water_distance_m"], whole.truth["water_distance_m"],
-                               rtol=1e-12)  # summation order differs: rounding only
+    np.testing.assert_allclose(
+        tr["water_distance_m"], whole.truth["water_distance_m"], rtol=1e-12
+    )  # summation order differs: rounding only
     trip = pd.concat([p.frames["distance"]["trip_water_m"] for p in parts]).to_numpy()
     np.testing.assert_allclose(trip, whole.frames["distance"]["trip_water_m"], atol=1e-6)
 
@@ -382,5 +446,7 @@ def test_segments_continue_one_voyage():
         inside = np.delete(d, joints - 1)
         assert d[joints - 1].max() <= inside.max(), c
     # the segments draw their own noise: not a copy of the first segment
-    assert not np.allclose(noisy[1].errors["gnss_north_m"].to_numpy()[:100],
-                           noisy[0].errors["gnss_north_m"].to_numpy()[:100])
+    assert not np.allclose(
+        noisy[1].errors["gnss_north_m"].to_numpy()[:100],
+        noisy[0].errors["gnss_north_m"].to_numpy()[:100],
+    )

@@ -84,8 +84,12 @@ def assert_others_unchanged(a, b, source: str, ignore_line: bool = False) -> Non
         for src in ALL_SOURCES:
             if src == source:
                 continue
-            same(rows(a, kind, src), rows(b, kind, src), ("line",) if ignore_line else (),
-                 f"{kind} {src}")
+            same(
+                rows(a, kind, src),
+                rows(b, kind, src),
+                ("line",) if ignore_line else (),
+                f"{kind} {src}",
+            )
 
 
 def assert_errors_unchanged_except(a, b, cols=(), lo=None, hi=None) -> None:
@@ -103,6 +107,7 @@ def xor(s: bytes) -> int:
 
 
 # ---------------------------------------------------------------- spec parsing
+
 
 def test_parse_the_documented_examples():
     assert parse_fault("jump:GNSS@2h=670m") == SimFault("jump", "GNSS", 7200.0, None, 670.0)
@@ -127,18 +132,21 @@ def test_parse_units_and_case():
     assert math.isinf(parse_fault("drift:INS3@1h+end=1kn").duration_s)
 
 
-@pytest.mark.parametrize("spec, words", [
-    ("jmp:GNSS", ["jmp", "unknown kind", "jump, freeze, dropout, drift, latency, invalid"]),
-    ("jump:INS4", ["INS4", "unknown source", "INS1"]),
-    ("jump:GNSS@2hours", ["START", "2hours", "s, min, h"]),
-    ("jump:GNSS@2m", ["START", "s, min, h"]),  # m is metres, not minutes
-    ("jump:GNSS=670ft", ["SIZE", "670ft", "m, km"]),
-    ("drift:INS1=1knot", ["SIZE", "kn, m/s"]),
-    ("freeze:INS2=5m", ["freeze takes no =SIZE"]),
-    ("latency:GNSS+x", ["DURATION"]),
-    ("jump:GNSS=670m@2h", ["SIZE"]),  # the parts in the wrong order
-    ("", ["expected KIND[:SOURCE][@START][+DURATION][=SIZE]"]),
-])
+@pytest.mark.parametrize(
+    "spec, words",
+    [
+        ("jmp:GNSS", ["jmp", "unknown kind", "jump, freeze, dropout, drift, latency, invalid"]),
+        ("jump:INS4", ["INS4", "unknown source", "INS1"]),
+        ("jump:GNSS@2hours", ["START", "2hours", "s, min, h"]),
+        ("jump:GNSS@2m", ["START", "s, min, h"]),  # m is metres, not minutes
+        ("jump:GNSS=670ft", ["SIZE", "670ft", "m, km"]),
+        ("drift:INS1=1knot", ["SIZE", "kn, m/s"]),
+        ("freeze:INS2=5m", ["freeze takes no =SIZE"]),
+        ("latency:GNSS+x", ["DURATION"]),
+        ("jump:GNSS=670m@2h", ["SIZE"]),  # the parts in the wrong order
+        ("", ["expected KIND[:SOURCE][@START][+DURATION][=SIZE]"]),
+    ],
+)
 def test_parse_errors_name_the_spec_and_what_is_expected(spec, words):
     with pytest.raises(ConfigError) as e:
         parse_fault(spec)
@@ -149,6 +157,7 @@ def test_parse_errors_name_the_spec_and_what_is_expected(spec, words):
 
 
 # ---------------------------------------------------------------- resolution
+
 
 def test_resolve_fills_the_defaults():
     got = resolve_faults([SimFault(k) for k in FAULT_KINDS], 4 * 3600.0, seed=5)
@@ -183,19 +192,22 @@ def test_resolve_draws_are_seeded_and_independent():
     assert two[0] == one[0] and two[1].start_s != two[0].start_s
 
 
-@pytest.mark.parametrize("fault, compass, words", [
-    (SimFault("jump", start_s=3600.0), "gyro", ["start 1 h", "outside the voyage", "[0, 1 h)"]),
-    (SimFault("jump", start_s=-5.0), "gyro", ["outside the voyage"]),
-    (SimFault("jump", size=-1.0), "gyro", ["size -1 m", "SIZE >= 0"]),
-    (SimFault("latency", size=-3.0), "gyro", ["SIZE >= 0"]),
-    (SimFault("freeze", duration_s=0.0), "gyro", ["DURATION > 0"]),
-    (SimFault("freeze", "MAG"), "gyro", ["no source MAG", "INS1, INS2, INS3, GNSS, GYRO"]),
-    (SimFault("dropout", "GYRO"), "magnetic", ["no source GYRO"]),
-    (SimFault("freeze", "LOG"), "gyro", ["freeze cannot hit source 'LOG'"]),
-    (SimFault("jump", "GYRO"), "gyro", ["INS1, INS2, INS3, GNSS"]),
-    (SimFault("invalid", size=1.0), "gyro", ["takes no size"]),
-    (SimFault("bogus"), "gyro", ["unknown kind"]),
-])
+@pytest.mark.parametrize(
+    "fault, compass, words",
+    [
+        (SimFault("jump", start_s=3600.0), "gyro", ["start 1 h", "outside the voyage", "[0, 1 h)"]),
+        (SimFault("jump", start_s=-5.0), "gyro", ["outside the voyage"]),
+        (SimFault("jump", size=-1.0), "gyro", ["size -1 m", "SIZE >= 0"]),
+        (SimFault("latency", size=-3.0), "gyro", ["SIZE >= 0"]),
+        (SimFault("freeze", duration_s=0.0), "gyro", ["DURATION > 0"]),
+        (SimFault("freeze", "MAG"), "gyro", ["no source MAG", "INS1, INS2, INS3, GNSS, GYRO"]),
+        (SimFault("dropout", "GYRO"), "magnetic", ["no source GYRO"]),
+        (SimFault("freeze", "LOG"), "gyro", ["freeze cannot hit source 'LOG'"]),
+        (SimFault("jump", "GYRO"), "gyro", ["INS1, INS2, INS3, GNSS"]),
+        (SimFault("invalid", size=1.0), "gyro", ["takes no size"]),
+        (SimFault("bogus"), "gyro", ["unknown kind"]),
+    ],
+)
 def test_resolve_errors(fault, compass, words):
     with pytest.raises(ConfigError) as e:
         resolve_faults([fault], 3600.0, seed=0, compass=compass, labels=["SPEC"])
@@ -219,6 +231,7 @@ def test_no_fault_is_the_default(base):
 
 # ---------------------------------------------------------------- each kind
 
+
 def test_jump(base):
     v = run(SimFault("jump", "GNSS", 1200.0, 600.0, 670.0, 30.0))
     lo, hi = window(v)
@@ -234,8 +247,11 @@ def test_jump(base):
     same(rows(base, "ground", "GNSS"), rows(v, "ground", "GNSS"))
     assert_errors_unchanged_except(base, v, ("gnss_north_m", "gnss_east_m"), lo, hi)
     we = inside(v.errors["time_ns"], lo, hi)
-    np.testing.assert_allclose(v.errors["gnss_north_m"][we] - base.errors["gnss_north_m"][we],
-                               670 * math.cos(math.radians(30)), atol=1e-9)
+    np.testing.assert_allclose(
+        v.errors["gnss_north_m"][we] - base.errors["gnss_north_m"][we],
+        670 * math.cos(math.radians(30)),
+        atol=1e-9,
+    )
 
 
 def test_freeze_position(base):
@@ -249,14 +265,15 @@ def test_freeze_position(base):
     last = np.flatnonzero(a["time_ns"] < lo)[-1]
     for c in ("lat_rad", "lon_rad"):
         held = b[c].to_numpy()[w]
-        assert (held.view(np.int64) == a[c].to_numpy()[last:last + 1].view(np.int64)).all()
+        assert (held.view(np.int64) == a[c].to_numpy()[last : last + 1].view(np.int64)).all()
     for kind in ("heading", "ground"):  # an INS freeze is its position only
         same(rows(base, kind, "INS2"), rows(v, kind, "INS2"))
     # errors.csv: the frozen reading minus the truth
     assert_errors_unchanged_except(base, v, ("ins2_north_m", "ins2_east_m"), lo, hi)
     we = inside(v.errors["time_ns"], lo, hi)
-    n, e = offset_ne_m(a["lat_rad"][last], a["lon_rad"][last], v.truth["lat_rad"][we],
-                       v.truth["lon_rad"][we])
+    n, e = offset_ne_m(
+        a["lat_rad"][last], a["lon_rad"][last], v.truth["lat_rad"][we], v.truth["lon_rad"][we]
+    )
     np.testing.assert_allclose(v.errors["ins2_north_m"][we], n, atol=1e-6)
     np.testing.assert_allclose(v.errors["ins2_east_m"][we], e, atol=1e-6)
     assert v.unit_rms["ins2"]["lat_m"] > base.unit_rms["ins2"]["lat_m"]
@@ -280,8 +297,9 @@ def test_freeze_compass(base, source, err_col):
     assert_errors_unchanged_except(base, v, (err_col,), lo, hi)
     we = inside(v.errors["time_ns"], lo, hi)
     true = v.truth["heading_rad" if source == "GYRO" else "compass_course_rad"][we]
-    np.testing.assert_allclose(v.errors[err_col][we],
-                               angdiff(b["heading_rad"][w].iloc[0], true), atol=1e-12)
+    np.testing.assert_allclose(
+        v.errors[err_col][we], angdiff(b["heading_rad"][w].iloc[0], true), atol=1e-12
+    )
 
 
 def test_dropout(base):
@@ -359,10 +377,16 @@ def test_invalid(base):
     ins1 = src == "INS1"
     win = inside(t, lo, hi)
     for typ, pat_bad, pat_ok in (("GGA", rb",E,0,", rb",E,1,"), ("VTG", rb",K,N\*", rb",K,A\*")):
-        sel = [ln for ln, s, k in zip(lines, ins1, win, strict=True) if s and ln[3:6] == typ.encode()
-               and k]
-        out = [ln for ln, s, k in zip(lines, ins1, win, strict=True) if s and ln[3:6] == typ.encode()
-               and not k]
+        sel = [
+            ln
+            for ln, s, k in zip(lines, ins1, win, strict=True)
+            if s and ln[3:6] == typ.encode() and k
+        ]
+        out = [
+            ln
+            for ln, s, k in zip(lines, ins1, win, strict=True)
+            if s and ln[3:6] == typ.encode() and not k
+        ]
         assert len(sel) == 600 and all(re.search(pat_bad, ln) for ln in sel)
         assert all(re.search(pat_ok, ln) for ln in out)
     # GNSS invalid: RMC status V and mode N
@@ -374,8 +398,14 @@ def test_invalid(base):
 
 
 def test_reproducible_and_composable(base):
-    faults = (SimFault("jump"), SimFault("freeze"), SimFault("dropout"), SimFault("drift"),
-              SimFault("latency"), SimFault("invalid"))
+    faults = (
+        SimFault("jump"),
+        SimFault("freeze"),
+        SimFault("dropout"),
+        SimFault("drift"),
+        SimFault("latency"),
+        SimFault("invalid"),
+    )
     a, b = run(*faults), run(*faults)
     for kind in KINDS:
         same(a.frames[kind], b.frames[kind])
@@ -396,8 +426,11 @@ def test_segments_apply_faults_by_absolute_time():
     """Faults across segment boundaries: the same as the unfaulted segmented voyage except
     in the window; a freeze holds one value through every boundary."""
     p = SimParams(duration_s=3600.0, seed=4, compass_hz=1.0)
-    faults = (SimFault("freeze", "INS2", 500.0, 2000.0), SimFault("dropout", "INS3", 800.0, 1000.0),
-              SimFault("latency", "GNSS", 1000.0, size=2.0))
+    faults = (
+        SimFault("freeze", "INS2", 500.0, 2000.0),
+        SimFault("dropout", "INS3", 800.0, 1000.0),
+        SimFault("latency", "GNSS", 1000.0, size=2.0),
+    )
     seg = 700.0
 
     def cat(params):
@@ -437,13 +470,16 @@ def test_segments_apply_faults_by_absolute_time():
 
 # ---------------------------------------------------------------- written logs read back
 
+
 @pytest.fixture(scope="module")
 def faulted():
-    return run(SimFault("jump", "GNSS", 600.0, 300.0, 670.0, 90.0),
-               SimFault("freeze", "INS2", 900.0, 1200.0),
-               SimFault("dropout", "INS3", 1200.0, 1500.0),
-               SimFault("latency", "GNSS", 1500.0, 900.0, 3.0),
-               SimFault("invalid", "INS1", 2400.0, 600.0))
+    return run(
+        SimFault("jump", "GNSS", 600.0, 300.0, 670.0, 90.0),
+        SimFault("freeze", "INS2", 900.0, 1200.0),
+        SimFault("dropout", "INS3", 1200.0, 1500.0),
+        SimFault("latency", "GNSS", 1500.0, 900.0, 3.0),
+        SimFault("invalid", "INS1", 2400.0, 600.0),
+    )
 
 
 def read_back(path: Path):
@@ -491,8 +527,9 @@ def test_nmea_tag_log_read_back_shows_the_faults(faulted, tmp_path):
     np.testing.assert_allclose(g["lon_rad"].to_numpy(), gb["lon_rad"].to_numpy(), atol=1e-12)
     base = run()
     gbase = rows(base, "position", "GNSS")
-    n, e = offset_ne_m(g["lat_rad"].to_numpy(), g["lon_rad"].to_numpy(), gbase["lat_rad"],
-                       gbase["lon_rad"])
+    n, e = offset_ne_m(
+        g["lat_rad"].to_numpy(), g["lon_rad"].to_numpy(), gbase["lat_rad"], gbase["lon_rad"]
+    )
     w = inside(g["time_ns"], lo, hi)
     np.testing.assert_allclose(e[w], 670.0, atol=0.01)
     assert np.abs(n[w]).max() < 0.01 and np.abs(e[~w]).max() < 0.01
@@ -527,8 +564,14 @@ def test_mcap_log_time_is_the_receive_time(tmp_path):
     pytest.importorskip("mcap")
     from dracc.sim.mcap_out import write_mcap
 
-    v = simulate(SimParams(duration_s=900.0, seed=2, compass_hz=1.0,
-                           faults=(SimFault("latency", "GNSS", 300.0, 300.0, 3.0),)))
+    v = simulate(
+        SimParams(
+            duration_s=900.0,
+            seed=2,
+            compass_hz=1.0,
+            faults=(SimFault("latency", "GNSS", 300.0, 300.0, 3.0),),
+        )
+    )
     lo, hi = window(v)
     for enc in ("json", "nmea"):
         p = tmp_path / f"f-{enc}.mcap"
@@ -545,6 +588,7 @@ def test_mcap_log_time_is_the_receive_time(tmp_path):
 
 # ---------------------------------------------------------------- CLI
 
+
 def _run(*args):
     from dracc.cli import simulate_cmd  # noqa: F401
     from dracc.cli.app import app
@@ -558,42 +602,91 @@ def _run(*args):
 
 def test_cli_faults_in_params_json(tmp_path, capsys):
     out = tmp_path / "v"
-    code = _run("simulate", "--hours", "1", "--compass-hz", "1", "--seed", "7",
-                "--segment-hours", "0.25", "--out", out,
-                "--fault", "jump:GNSS@20min=670m", "--fault", "freeze:INS2@15min+40min",
-                "--fault", "dropout:INS3+25min", "--fault", "drift:INS1=1kn",
-                "--fault", "latency:GNSS=3s", "--fault", "invalid:GNSS+10min")
+    code = _run(
+        "simulate",
+        "--hours",
+        "1",
+        "--compass-hz",
+        "1",
+        "--seed",
+        "7",
+        "--segment-hours",
+        "0.25",
+        "--out",
+        out,
+        "--fault",
+        "jump:GNSS@20min=670m",
+        "--fault",
+        "freeze:INS2@15min+40min",
+        "--fault",
+        "dropout:INS3+25min",
+        "--fault",
+        "drift:INS1=1kn",
+        "--fault",
+        "latency:GNSS=3s",
+        "--fault",
+        "invalid:GNSS+10min",
+    )
     assert code == 0
     assert "faults: jump:GNSS@1200s+600s=670m, freeze:INS2@900s+2400s" in capsys.readouterr().err
     info = json.loads((out / "params.json").read_text())
     faults = info["faults"]
     assert [f["kind"] for f in faults] == list(FAULT_KINDS)
-    assert set(faults[0]) == {"kind", "source", "role", "start_utc", "end_utc", "start_s",
-                              "duration_s", "size", "size_unit", "direction_deg"}
+    assert set(faults[0]) == {
+        "kind",
+        "source",
+        "role",
+        "start_utc",
+        "end_utc",
+        "start_s",
+        "duration_s",
+        "size",
+        "size_unit",
+        "direction_deg",
+    }
     assert faults[0] | {"direction_deg": None} == {
-        "kind": "jump", "source": "GNSS", "role": "gnss",
-        "start_utc": "2026-03-01T00:20:00.000000000Z", "end_utc": "2026-03-01T00:30:00.000000000Z",
-        "start_s": 1200.0, "duration_s": 600.0, "size": 670.0, "size_unit": "m",
-        "direction_deg": None}
+        "kind": "jump",
+        "source": "GNSS",
+        "role": "gnss",
+        "start_utc": "2026-03-01T00:20:00.000000000Z",
+        "end_utc": "2026-03-01T00:30:00.000000000Z",
+        "start_s": 1200.0,
+        "duration_s": 600.0,
+        "size": 670.0,
+        "size_unit": "m",
+        "direction_deg": None,
+    }
     drift = faults[3]
     assert drift["end_utc"] == "2026-03-01T01:00:00.000000000Z" and drift["size_unit"] == "m/s"
     assert drift["duration_s"] == 3600.0 - drift["start_s"]
     assert drift["size"] == pytest.approx(KN_MPS)
     assert info["params"]["faults"][3]["duration_s"] == "inf"
-    want = resolve_faults([parse_fault(s) for s in ("jump:GNSS@20min=670m",
-                                                     "freeze:INS2@15min+40min",
-                                                     "dropout:INS3+25min", "drift:INS1=1kn",
-                                                     "latency:GNSS=3s", "invalid:GNSS+10min")],
-                          3600.0, 7)
-    assert faults == fault_table(want, start_ns("2026-03-01T00:00:00Z"), 3600.0,
-                                 {s: SOURCES[s][0] for s in SOURCES})
+    want = resolve_faults(
+        [
+            parse_fault(s)
+            for s in (
+                "jump:GNSS@20min=670m",
+                "freeze:INS2@15min+40min",
+                "dropout:INS3+25min",
+                "drift:INS1=1kn",
+                "latency:GNSS=3s",
+                "invalid:GNSS+10min",
+            )
+        ],
+        3600.0,
+        7,
+    )
+    assert faults == fault_table(
+        want, start_ns("2026-03-01T00:00:00Z"), 3600.0, {s: SOURCES[s][0] for s in SOURCES}
+    )
     # errors.csv holds the truth of the faults: the jump in the GNSS error
     errors = pd.read_csv(out / "errors.csv")
     jumped = np.hypot(errors["gnss_north_m"], errors["gnss_east_m"]) > 600
     assert jumped.sum() == 600
     t = pd.to_datetime(errors["time_utc"][jumped])
     assert t.min() == pd.Timestamp("2026-03-01T00:20:00Z") and t.max() == pd.Timestamp(
-        "2026-03-01T00:29:59Z")
+        "2026-03-01T00:29:59Z"
+    )
     # the log read back: the dropout gap and the frozen run through the segment boundaries
     got = read_back(out / "voyage.nmea")
     pos = got.frames["position"]
@@ -606,20 +699,41 @@ def test_cli_faults_in_params_json(tmp_path, capsys):
 
 def test_cli_rejects_bad_fault_specs(tmp_path, capsys):
     for spec in ("jmp", "jump:GNSS@5h", "jump=-3m", "freeze:MAG", "drift=1knot", "dropout:LOG=1s"):
-        assert _run("simulate", "--hours", "1", "--out", tmp_path / "x", "--fault", spec) == 2  # usage
+        assert (
+            _run("simulate", "--hours", "1", "--out", tmp_path / "x", "--fault", spec) == 2
+        )  # usage
     assert not (tmp_path / "x").exists()
 
 
 @pytest.mark.parametrize("fmt", ["csv-long", "mcap-json"])
 def test_cli_other_formats(tmp_path, fmt):
     out = tmp_path / fmt
-    assert _run("simulate", "--hours", "0.2", "--compass-hz", "1", "--format", fmt, "--out", out,
-                "--fault", "freeze:GNSS@5min+2min", "--fault", "latency:INS1@2min+2min=2s") == 0
+    assert (
+        _run(
+            "simulate",
+            "--hours",
+            "0.2",
+            "--compass-hz",
+            "1",
+            "--format",
+            fmt,
+            "--out",
+            out,
+            "--fault",
+            "freeze:GNSS@5min+2min",
+            "--fault",
+            "latency:INS1@2min+2min=2s",
+        )
+        == 0
+    )
     got = read_back(next(out.glob("voyage.*")))
     pos = got.frames["position"]
     g = pos[pos["source"] == "GNSS"]
-    w = inside(g["time_ns"], 300 * S + start_ns("2026-03-01T00:00:00Z"),
-               420 * S + start_ns("2026-03-01T00:00:00Z"))
+    w = inside(
+        g["time_ns"],
+        300 * S + start_ns("2026-03-01T00:00:00Z"),
+        420 * S + start_ns("2026-03-01T00:00:00Z"),
+    )
     assert w.sum() == 240 and g["lat_rad"][w].nunique() == 1 and g["lon_rad"][w].nunique() == 1
     assert g["lat_rad"][w].iloc[0] == g["lat_rad"][g["time_ns"] < g["time_ns"][w].min()].iloc[-1]
     i1 = pos[pos["source"] == "INS1"]

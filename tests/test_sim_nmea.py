@@ -24,9 +24,18 @@ KMH_MPS = 1000.0 / 3600.0
 @pytest.fixture(scope="module")
 def voyage():
     # a midnight crossing, both compasses, and a southern/western start to exercise S and W
-    return simulate(SimParams(duration_s=240.0, compass="both", compass_hz=2.0, seed=5,
-                              start_utc="2025-12-31T23:58:30Z", start_lat_deg=-33.9,
-                              start_lon_deg=-0.01, legs=((0.0, 265.0),)))
+    return simulate(
+        SimParams(
+            duration_s=240.0,
+            compass="both",
+            compass_hz=2.0,
+            seed=5,
+            start_utc="2025-12-31T23:58:30Z",
+            start_lat_deg=-33.9,
+            start_lon_deg=-0.01,
+            legs=((0.0, 265.0),),
+        )
+    )
 
 
 def xor(s: bytes) -> int:
@@ -35,8 +44,9 @@ def xor(s: bytes) -> int:
 
 def test_every_line_has_a_valid_checksum(voyage):
     _, _, lines = frames_to_lines(voyage.frames, voyage.roles)
-    assert len(lines) == sum(len(f) for f in voyage.frames.values()) \
-        - (voyage.frames["ground"]["sentence"] == "RMC").sum() + len(voyage.zda)
+    assert len(lines) == sum(len(f) for f in voyage.frames.values()) - (
+        voyage.frames["ground"]["sentence"] == "RMC"
+    ).sum() + len(voyage.zda)
     for ln in lines:
         m = re.fullmatch(rb"\$([A-Z]{5}),([ -~]*)\*([0-9A-F]{2})", ln)
         assert m, ln
@@ -70,8 +80,10 @@ def test_lines_parse_with_pynmea2_to_the_frame_values(voyage):
         if typ == "ZDA":
             assert i in zda_lines
             assert (msg.year, msg.month, msg.day) == (
-                pd.Timestamp(int(t_ns[i - 1])).year, pd.Timestamp(int(t_ns[i - 1])).month,
-                pd.Timestamp(int(t_ns[i - 1])).day)
+                pd.Timestamp(int(t_ns[i - 1])).year,
+                pd.Timestamp(int(t_ns[i - 1])).month,
+                pd.Timestamp(int(t_ns[i - 1])).day,
+            )
             continue
         r = by_line[i]
         seen.add(i)
@@ -85,7 +97,10 @@ def test_lines_parse_with_pynmea2_to_the_frame_values(voyage):
             assert msg.lat_dir == "S" and msg.lon_dir in "EW"
             tod = pd.Timestamp(int(r["time_ns"])) - pd.Timestamp(int(r["time_ns"])).normalize()
             assert (msg.timestamp.hour, msg.timestamp.minute, msg.timestamp.second) == (
-                tod.components.hours, tod.components.minutes, tod.components.seconds)
+                tod.components.hours,
+                tod.components.minutes,
+                tod.components.seconds,
+            )
             if typ == "GGA":
                 assert int(msg.gps_qual) == r["quality"]
                 assert float(msg.altitude) == r["alt_m"] and msg.altitude_units == "M"
@@ -106,28 +121,36 @@ def test_lines_parse_with_pynmea2_to_the_frame_values(voyage):
                 assert dev * DEG_RAD == pytest.approx(r["deviation_rad"], abs=1e-12)
                 assert var * DEG_RAD == pytest.approx(r["variation_rad"], abs=1e-12)
         elif typ == "ROT":
-            assert float(msg.rate_of_turn) / 60 * DEG_RAD == pytest.approx(r["rot_radps"], abs=1e-14)
+            assert float(msg.rate_of_turn) / 60 * DEG_RAD == pytest.approx(
+                r["rot_radps"], abs=1e-14
+            )
             assert msg.status == "A"
         elif typ == "VHW":
             assert float(msg.water_speed_knots) * KN_MPS == pytest.approx(r["stw_mps"], abs=1e-12)
             assert float(msg.water_speed_km) * KMH_MPS == pytest.approx(r["stw_mps"], abs=3e-4)
         elif typ == "VBW":
-            for f, c in (("lon_water_spd", "stw_mps"), ("trans_water_spd", "stw_transverse_mps"),
-                         ("lon_grnd_spd", "sog_long_mps"), ("trans_grnd_spd", "sog_transverse_mps")):
+            for f, c in (
+                ("lon_water_spd", "stw_mps"),
+                ("trans_water_spd", "stw_transverse_mps"),
+                ("lon_grnd_spd", "sog_long_mps"),
+                ("trans_grnd_spd", "sog_transverse_mps"),
+            ):
                 assert float(getattr(msg, f)) * KN_MPS == pytest.approx(r[c], abs=1e-12)
         elif typ == "VLW":
             # pynmea2 names the fields oddly: the first is the total, the third the trip
             assert float(msg.trip_distance) * NMI_M == pytest.approx(r["total_water_m"], abs=1e-8)
-            assert float(msg.trip_distance_reset) * NMI_M == pytest.approx(r["trip_water_m"],
-                                                                           abs=1e-8)
+            assert float(msg.trip_distance_reset) * NMI_M == pytest.approx(
+                r["trip_water_m"], abs=1e-8
+            )
         elif typ == "VTG":
             assert float(msg.true_track) * DEG_RAD == pytest.approx(r["cog_rad"], abs=1e-12)
             assert float(msg.spd_over_grnd_kts) * KN_MPS == pytest.approx(r["sog_mps"], abs=1e-12)
             assert float(msg.spd_over_grnd_kmph) * KMH_MPS == pytest.approx(r["sog_mps"], abs=3e-4)
         else:
             raise AssertionError(f"unexpected sentence {text}")
-    assert seen | zda_lines | {i for i in by_line if by_line[i]["sentence"] == "THS"} \
-        == set(range(1, len(lines) + 1))
+    assert seen | zda_lines | {i for i in by_line if by_line[i]["sentence"] == "THS"} == set(
+        range(1, len(lines) + 1)
+    )
     assert day.year == 2025  # the voyage crosses midnight into 2026
     assert pd.Timestamp(int(t_ns[-1])).year == 2026
 
@@ -135,18 +158,42 @@ def test_lines_parse_with_pynmea2_to_the_frame_values(voyage):
 def test_signs_and_missing_fields():
     """Negative ROT and transverse speeds carry '-', NaN gives an empty field (never 0)."""
     fr = {
-        "rot": make_frame("rot", {"time_ns": np.array([0, 1], np.int64), "source": ["G", "G"],
-                                  "sentence": ["ROT", "ROT"], "line": np.array([1, 2]),
-                                  "talker": ["HE", "HE"], "rot_radps": np.array([-0.01, np.nan])}),
-        "water": make_frame("water", {"time_ns": np.array([2], np.int64), "source": ["L"],
-                                      "sentence": ["VBW"], "line": np.array([3]), "talker": ["VD"],
-                                      "stw_mps": np.array([5.0]),
-                                      "stw_transverse_mps": np.array([-0.0001])}),
-        "heading": make_frame("heading", {"time_ns": np.array([3], np.int64), "source": ["M"],
-                                          "sentence": ["HDG"], "line": np.array([4]),
-                                          "talker": ["HC"], "heading_rad": np.array([6.2831853]),
-                                          "reference": ["M"],
-                                          "variation_rad": np.array([-3 * DEG_RAD])}),
+        "rot": make_frame(
+            "rot",
+            {
+                "time_ns": np.array([0, 1], np.int64),
+                "source": ["G", "G"],
+                "sentence": ["ROT", "ROT"],
+                "line": np.array([1, 2]),
+                "talker": ["HE", "HE"],
+                "rot_radps": np.array([-0.01, np.nan]),
+            },
+        ),
+        "water": make_frame(
+            "water",
+            {
+                "time_ns": np.array([2], np.int64),
+                "source": ["L"],
+                "sentence": ["VBW"],
+                "line": np.array([3]),
+                "talker": ["VD"],
+                "stw_mps": np.array([5.0]),
+                "stw_transverse_mps": np.array([-0.0001]),
+            },
+        ),
+        "heading": make_frame(
+            "heading",
+            {
+                "time_ns": np.array([3], np.int64),
+                "source": ["M"],
+                "sentence": ["HDG"],
+                "line": np.array([4]),
+                "talker": ["HC"],
+                "heading_rad": np.array([6.2831853]),
+                "reference": ["M"],
+                "variation_rad": np.array([-3 * DEG_RAD]),
+            },
+        ),
     }
     _, _, lines = frames_to_lines(fr)
     text = [ln.decode() for ln in lines]
@@ -165,13 +212,23 @@ def test_generic_frames_without_talker_or_roles():
     heads = {ln[:6].decode() for ln in lines}
     # X -> the default sentence of each kind (VHW where only the speed through water is
     # known, VBW where more); the GNSS ground rows become VTG; no RMC, so no ZDA
-    assert heads == {"$HEHDT", "$HEROT", "$VWVHW", "$VWVBW", "$VWVLW", "$INGGA", "$INHDT",
-                     "$INVTG", "$GPGGA", "$GPVTG"}
+    assert heads == {
+        "$HEHDT",
+        "$HEROT",
+        "$VWVHW",
+        "$VWVBW",
+        "$VWVLW",
+        "$INGGA",
+        "$INHDT",
+        "$INVTG",
+        "$GPGGA",
+        "$GPVTG",
+    }
     assert len(lines) == sum(len(f) for f in fr.values())
 
 
 def test_tag_and_prefix_forms(voyage, tmp_path):
-    for tag_time, unit in (("s", 10 ** 9), ("ms", 10 ** 6)):
+    for tag_time, unit in (("s", 10**9), ("ms", 10**6)):
         p = tmp_path / f"tag_{tag_time}.nmea"
         write_nmea(voyage, p, form="tag", tag_time=tag_time)
         raw = p.read_bytes()
@@ -191,7 +248,7 @@ def test_tag_and_prefix_forms(voyage, tmp_path):
     rows = p.read_bytes().split(b"\r\n")[:-1]
     for ln, t, b in zip(rows, t_ns, bare, strict=True):
         stamp, sentence = ln.split(b" ", 1)
-        assert pd.Timestamp(stamp.decode()).value == t // 10 ** 6 * 10 ** 6
+        assert pd.Timestamp(stamp.decode()).value == t // 10**6 * 10**6
         assert stamp.endswith(b"Z") and len(stamp) == 24
         assert sentence == b
     p = tmp_path / "bare.nmea"
@@ -205,12 +262,14 @@ def test_chunking_does_not_change_the_output(voyage):
     from dracc.sim.nmea_out import iter_blocks
 
     one = b"".join(b for _, _, b in iter_blocks(voyage.frames, voyage.roles, form="tag"))
-    many = b"".join(b for _, _, b in iter_blocks(voyage.frames, voyage.roles, form="tag",
-                                                 chunk_rows=333))
+    many = b"".join(
+        b for _, _, b in iter_blocks(voyage.frames, voyage.roles, form="tag", chunk_rows=333)
+    )
     assert one == many
 
 
 # ---------------------------------------------------------------- CLI
+
 
 def _run(*args):
     """``dracc ARGS`` in-process through the real entry point where it imports."""
@@ -226,16 +285,34 @@ def _run(*args):
                 return 0
             except DraccError as e:
                 return int(e.exit_code)
+
     return main([str(a) for a in args])
 
 
 def test_cli_writes_all_files(tmp_path):
     out = tmp_path / "v"
-    code = _run("simulate", "--hours", "0.05", "--seed", "3", "--form", "prefix",
-                "--compass", "both", "--compass-hz", "2", "--out", out)
+    code = _run(
+        "simulate",
+        "--hours",
+        "0.05",
+        "--seed",
+        "3",
+        "--form",
+        "prefix",
+        "--compass",
+        "both",
+        "--compass-hz",
+        "2",
+        "--out",
+        out,
+    )
     assert code == 0
-    assert {p.name for p in out.iterdir()} == {"voyage.nmea", "truth.csv", "errors.csv",
-                                               "params.json"}
+    assert {p.name for p in out.iterdir()} == {
+        "voyage.nmea",
+        "truth.csv",
+        "errors.csv",
+        "params.json",
+    }
     info = json.loads((out / "params.json").read_text())
     assert info["params"]["seed"] == 3 and info["params"]["compass"] == "both"
     assert info["roles"]["INS2"] == "ins2" and set(info["unit_rms"]) == {"ins1", "ins2", "ins3"}
@@ -253,15 +330,18 @@ def test_cli_writes_all_files(tmp_path):
         assert _run("simulate", "--hours", "0.01", "--compass-hz", hz, "--out", d) == 0
         c = re.search(rb",c:([0-9]+)\*", (d / "voyage.nmea").read_bytes()).group(1)
         assert len(c) == digits
-        assert json.loads((d / "params.json").read_text())["tag_time"] == ("ms" if hz == "2"
-                                                                            else "s")
+        assert json.loads((d / "params.json").read_text())["tag_time"] == (
+            "ms" if hz == "2" else "s"
+        )
 
 
 def test_cli_rejects_bad_options(tmp_path):
     assert _run("simulate", "--hours", "-1", "--out", tmp_path) != 0
     assert _run("simulate", "--hours", "1", "--format", "xml", "--out", tmp_path) != 0
-    assert _run("simulate", "--hours", "1", "--compass-hz", "3", "--log-hz", "2",
-                "--out", tmp_path) != 0
+    assert (
+        _run("simulate", "--hours", "1", "--compass-hz", "3", "--log-hz", "2", "--out", tmp_path)
+        != 0
+    )
     assert not any(tmp_path.iterdir())
 
 
@@ -291,8 +371,13 @@ def test_dracc_ingest_reads_back_the_frames(tmp_path):
             elif c in ("source", "talker", "sentence", "reference"):
                 assert (have[c].astype(str).to_numpy() == want[c].astype(str).to_numpy()).all()
             else:
-                np.testing.assert_allclose(have[c].to_numpy(float), want[c].to_numpy(float),
-                                           rtol=0, atol=1e-12, err_msg=f"{kind}.{c}")
+                np.testing.assert_allclose(
+                    have[c].to_numpy(float),
+                    want[c].to_numpy(float),
+                    rtol=0,
+                    atol=1e-12,
+                    err_msg=f"{kind}.{c}",
+                )
 
 
 def test_cli_help_legs_and_noiseless(tmp_path, capsys):
@@ -300,8 +385,25 @@ def test_cli_help_legs_and_noiseless(tmp_path, capsys):
     assert "--ins-error-scale" in capsys.readouterr().out
     assert _run("simulate", "--hours", "1", "--legs", "0:60,x", "--out", tmp_path) == 2  # usage
     out = tmp_path / "n"
-    assert _run("simulate", "--hours", "0.02", "--noiseless", "--compass-hz", "1",
-                "--legs", "0:10,30:100", "--format", "nmea", "--form", "bare", "--out", out) == 0
+    assert (
+        _run(
+            "simulate",
+            "--hours",
+            "0.02",
+            "--noiseless",
+            "--compass-hz",
+            "1",
+            "--legs",
+            "0:10,30:100",
+            "--format",
+            "nmea",
+            "--form",
+            "bare",
+            "--out",
+            out,
+        )
+        == 0
+    )
     info = json.loads((out / "params.json").read_text())
     assert info["params"]["legs"] == [[0.0, 10.0], [30.0, 100.0]]
     assert info["params"]["gyro_offset_deg"] == 0.0 and info["params"]["current_drift_kn"] == 0.0

@@ -32,16 +32,25 @@ def gga_log(path, start_s: int, n: int, lat_min: str) -> None:
     for k in range(n):
         t = start_s + k
         hh, mm, ss = (t // 3600) % 24, (t // 60) % 60, t % 60
-        lines.append(f"2026-03-01T{hh:02d}:{mm:02d}:{ss:02d}.000Z "
-                     + nmea(f"GPGGA,{hh:02d}{mm:02d}{ss:02d}.00,54{lat_min},N,01847.000,E,1,8,1.0,10.0,M,,M,,"))
+        lines.append(
+            f"2026-03-01T{hh:02d}:{mm:02d}:{ss:02d}.000Z "
+            + nmea(
+                f"GPGGA,{hh:02d}{mm:02d}{ss:02d}.00,54{lat_min},N,01847.000,E,1,8,1.0,10.0,M,,M,,"
+            )
+        )
     path.write_text("\n".join(lines) + "\n")
 
 
 def test_file_ids_strip_what_the_names_share():
-    assert file_ids(["/a/NBP1406_seap-2014-08-01", "/a/NBP1406_gp02-2014-08-01"]) == \
-        {"/a/NBP1406_seap-2014-08-01": "seap", "/a/NBP1406_gp02-2014-08-01": "gp02"}
+    assert file_ids(["/a/NBP1406_seap-2014-08-01", "/a/NBP1406_gp02-2014-08-01"]) == {
+        "/a/NBP1406_seap-2014-08-01": "seap",
+        "/a/NBP1406_gp02-2014-08-01": "gp02",
+    }
     assert file_ids(["x/gps.nmea", "y/gps.nmea"]) == {"x/gps.nmea": "gps", "y/gps.nmea": "gps~2"}
-    assert file_ids(["a1.nmea", "a2.nmea"]) == {"a1.nmea": "a1", "a2.nmea": "a2"}  # no separator: whole stems
+    assert file_ids(["a1.nmea", "a2.nmea"]) == {
+        "a1.nmea": "a1",
+        "a2.nmea": "a2",
+    }  # no separator: whole stems
 
 
 def test_real_two_receivers_of_one_ship_are_two_sources(real_dir):
@@ -51,8 +60,10 @@ def test_real_two_receivers_of_one_ship_are_two_sources(real_dir):
     pos = v.frames["position"]
     assert Counter(pos["source"].astype(str)) == {"gp02:GP": 1667, "seap:GP": 715}
     assert v.sources["seap:GP"].files == {str(real_dir / SEAP)}
-    assert any("GP: in 2 files whose times overlap" in d and "seap:GP, gp02:GP" in d
-               for d in v.time_events.decisions)
+    assert any(
+        "GP: in 2 files whose times overlap" in d and "seap:GP, gp02:GP" in d
+        for d in v.time_events.decisions
+    )
     # the two are tens of metres apart, not one jumping receiver
     a = pos[pos["source"] == "seap:GP"].iloc[0]
     b = pos[pos["source"] == "gp02:GP"].iloc[0]
@@ -71,7 +82,10 @@ def test_consecutive_files_of_one_recorder_are_one_source_and_say_so(tmp_path):
     gga_log(b, 300, 300, "30.000")
     v = read_logs([a, b], IngestConfig())
     assert set(v.sources) == {"GP"} and v.sources["GP"].records == 600
-    assert any(d.startswith("GP: one source over 2 files that follow each other") for d in v.time_events.decisions)
+    assert any(
+        d.startswith("GP: one source over 2 files that follow each other")
+        for d in v.time_events.decisions
+    )
 
 
 def test_overlapping_files_are_two_sources_in_inspect_too(run_cli, tmp_path):
@@ -89,6 +103,7 @@ def test_overlapping_files_are_two_sources_in_inspect_too(run_cli, tmp_path):
 def test_separate_files_tolerates_a_short_overlap_at_the_seam():
     def info(lo, hi):
         return {"GP": SourceInfo(key="GP", first_ns=int(lo * 1e9), last_ns=int(hi * 1e9))}
+
     renames, notes = separate_files([("a", info(0, 3600)), ("b", info(3590, 7200))])
     assert renames == {"a": {}, "b": {}} and "merged" in notes[0]
     renames, _ = separate_files([("a", info(0, 3600)), ("b", info(3000, 7200))])
@@ -97,8 +112,12 @@ def test_separate_files_tolerates_a_short_overlap_at_the_seam():
 
 # ------------------------------------------------------------------------------ roles
 def src(key: str, talker: str, **sentences: int) -> SourceInfo:
-    return SourceInfo(key=key, talkers=Counter({talker: sum(sentences.values())}),
-                      sentences=Counter(sentences), records=sum(sentences.values()))
+    return SourceInfo(
+        key=key,
+        talkers=Counter({talker: sum(sentences.values())}),
+        sentences=Counter(sentences),
+        records=sum(sentences.values()),
+    )
 
 
 def test_a_lone_ins_is_not_the_compass():
@@ -109,8 +128,11 @@ def test_a_lone_ins_is_not_the_compass():
 
 
 def test_a_gga_talker_is_never_the_compass_beside_a_gyro():
-    s = {"GP": src("GP", "GP", GGA=30, RMC=30, HDT=30), "HE": src("HE", "HE", HDT=300),
-         "IN": src("IN", "IN", GGA=30, HDT=30)}
+    s = {
+        "GP": src("GP", "GP", GGA=30, RMC=30, HDT=30),
+        "HE": src("HE", "HE", HDT=300),
+        "IN": src("IN", "IN", GGA=30, HDT=30),
+    }
     assign_roles(s, {})
     assert s["HE"].roles == ["compass"] and "compass" not in s["IN"].roles
 
@@ -138,7 +160,10 @@ def test_instrument_bus_with_fixes_is_still_compass_and_log():
 
 def test_role_key_matching_nothing_is_an_error_naming_the_keys():
     s = {"GYRO": src("GYRO", "HE", HDT=5), "GNSS": src("GNSS", "GP", GGA=5)}
-    with keys_must_match({"GYR0"}), pytest.raises(ConfigError, match="GYR0.*the sources are GNSS, GYRO"):
+    with (
+        keys_must_match({"GYR0"}),
+        pytest.raises(ConfigError, match="GYR0.*the sources are GNSS, GYRO"),
+    ):
         assign_roles(s, {"GYR0": "compass"})
     notes = assign_roles(s, {"GYR0": "compass"})  # from a config file: a note, as before
     assert any("'GYR0' matches no source" in n for n in notes)
@@ -152,7 +177,10 @@ def test_cli_role_key_matching_nothing_exits_with_the_config_code(run_cli, tmp_p
     code, out, err = run_cli("analyze", p, "--role", "GPS1=gnss")
     assert code == ExitCode.CONFIG
     lines = [ln for ln in err.strip().splitlines() if ln.strip()]
-    assert lines[-1].startswith("error: --role GPS1=gnss: no source has the key 'GPS1'") and "GP" in lines[-1]
+    assert (
+        lines[-1].startswith("error: --role GPS1=gnss: no source has the key 'GPS1'")
+        and "GP" in lines[-1]
+    )
     assert sum(ln.startswith("error:") for ln in lines) == 1
 
 
@@ -165,7 +193,9 @@ def test_real_two_receivers_analysed_as_two_units_by_their_new_keys(real_dir):
     cfg = build_config(None, interval="1min", window="1h", roles=["seap:GP=ins1", "gp02:GP=ins2"])
     with keys_must_match({"seap:GP", "gp02:GP"}):
         d = to_dict(analyse([real_dir / SEAP, real_dir / GP02], cfg))
-    assert d["sources"]["ins1"]["keys"] == ["seap:GP"] and d["sources"]["ins2"]["keys"] == ["gp02:GP"]
+    assert d["sources"]["ins1"]["keys"] == ["seap:GP"] and d["sources"]["ins2"]["keys"] == [
+        "gp02:GP"
+    ]
     assert d["source_keys"]["seap:GP"]["roles"] == ["ins1"]
     units = d["deviation"]["units"]
     assert set(units) == {"ins1", "ins2"} and units["ins1"]["lat"]["n"] > 0

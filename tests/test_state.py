@@ -14,15 +14,31 @@ from dracc.pipeline.state import AprioriEvent, ChannelRow, NightRecord, StateErr
 
 def _record(night: str = "2026-11-20", m_y: float = 100.0, vessel: str = "Aurora") -> NightRecord:
     return NightRecord(
-        vessel=vessel, night=night, content_sha256="c" * 64, settings_sha256="s" * 64,
-        audited_utc="2026-11-21T00:20:00Z", period_start_utc=f"{night}T00:00:00Z",
-        period_end_utc=f"{night}T23:59:59Z", inputs=("/logs/a.nmea", "/logs/ü.nmea"),
-        sources={"ins1": "INS1"}, lines=1000, rejected=3, rejected_rate=0.003,
-        dr_containment_2m=math.nan, dr_n_scored=0, compass_error_deg=0.4,
-        compass_error_sigma_deg=0.1, log_scale=None, log_scale_sigma=None,
-        findings=({"kind": "limit", "message": "x"},), missing=("no reference",),
-        channels=(ChannelRow("ins1", "course", 24, 0.07, 0.1, -0.2, 0.3),
-                  ChannelRow("ins1", "lat", 24, m_y / 1.32, m_y, 0.1, 2 * m_y)))
+        vessel=vessel,
+        night=night,
+        content_sha256="c" * 64,
+        settings_sha256="s" * 64,
+        audited_utc="2026-11-21T00:20:00Z",
+        period_start_utc=f"{night}T00:00:00Z",
+        period_end_utc=f"{night}T23:59:59Z",
+        inputs=("/logs/a.nmea", "/logs/ü.nmea"),
+        sources={"ins1": "INS1"},
+        lines=1000,
+        rejected=3,
+        rejected_rate=0.003,
+        dr_containment_2m=math.nan,
+        dr_n_scored=0,
+        compass_error_deg=0.4,
+        compass_error_sigma_deg=0.1,
+        log_scale=None,
+        log_scale_sigma=None,
+        findings=({"kind": "limit", "message": "x"},),
+        missing=("no reference",),
+        channels=(
+            ChannelRow("ins1", "course", 24, 0.07, 0.1, -0.2, 0.3),
+            ChannelRow("ins1", "lat", 24, m_y / 1.32, m_y, 0.1, 2 * m_y),
+        ),
+    )
 
 
 def test_round_trip_nan_as_null_and_channel_order(tmp_path):
@@ -55,7 +71,9 @@ def test_unique_night_per_vessel(tmp_path):
 
 def test_apriori_events_replaced_per_vessel(tmp_path):
     with StateStore(tmp_path / "s.sqlite") as store:
-        ev = AprioriEvent("Aurora", "ins1", "lat", "2026-11-20", 120.0, None, "established", {"m_y": 120.0})
+        ev = AprioriEvent(
+            "Aurora", "ins1", "lat", "2026-11-20", 120.0, None, "established", {"m_y": 120.0}
+        )
         other = AprioriEvent("Borealis", "ins1", "lat", "2026-11-20", 90.0, None, "established", {})
         with store.transaction():
             store.replace_apriori_events("Aurora", [ev])
@@ -106,16 +124,20 @@ def _v1_database(db) -> None:
     import re
 
     from dracc.pipeline import state
+
     v2_only = "|".join(name for name, _ in state._NIGHT_COLUMNS_V2)
-    ddl = "\n".join(line for line in state._DDL.splitlines()
-                    if not re.match(rf"\s+({v2_only})\s", line))
+    ddl = "\n".join(
+        line for line in state._DDL.splitlines() if not re.match(rf"\s+({v2_only})\s", line)
+    )
     con = sqlite3.connect(db)
     con.executescript(ddl)
     con.execute("INSERT INTO meta (key, value) VALUES ('schema', '1')")
-    con.execute("INSERT INTO nights (vessel, night, content_sha256, settings_sha256, audited_utc, "
-                "inputs_json, sources_json, dr_containment_2m, findings_json, missing_json) "
-                "VALUES ('Aurora', '2026-11-19', 'c', 's', '2026-11-20T00:20:00Z', '[]', '{}', 0.97, "
-                "'[]', '[]')")
+    con.execute(
+        "INSERT INTO nights (vessel, night, content_sha256, settings_sha256, audited_utc, "
+        "inputs_json, sources_json, dr_containment_2m, findings_json, missing_json) "
+        "VALUES ('Aurora', '2026-11-19', 'c', 's', '2026-11-20T00:20:00Z', '[]', '{}', 0.97, "
+        "'[]', '[]')"
+    )
     con.commit()
     con.close()
 
@@ -127,11 +149,20 @@ def test_schema_1_database_is_migrated_in_place(tmp_path):
     assert "dr_verdict" not in cols
     with StateStore(db) as store:
         old = store.night("Aurora", "2026-11-19")
-        assert old.dr_containment_2m == 0.97 and (old.dr_verdict, old.dr_consistent, old.dr_nees) == (None,) * 3
+        assert (
+            old.dr_containment_2m == 0.97
+            and (old.dr_verdict, old.dr_consistent, old.dr_nees) == (None,) * 3
+        )
         with store.transaction():
-            store.insert_night(replace(_record("2026-11-20"), dr_verdict="inconsistent",
-                                       dr_verdict_text="inconsistent (circle too small): x",
-                                       dr_consistent=False, dr_nees=80.2))
+            store.insert_night(
+                replace(
+                    _record("2026-11-20"),
+                    dr_verdict="inconsistent",
+                    dr_verdict_text="inconsistent (circle too small): x",
+                    dr_consistent=False,
+                    dr_nees=80.2,
+                )
+            )
     con = sqlite3.connect(db)
     assert con.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()[0] == "2"
     cols = [r[1] for r in con.execute("PRAGMA table_info(nights)")]
@@ -146,8 +177,14 @@ def test_schema_1_database_is_migrated_in_place(tmp_path):
 def test_verdict_round_trip_and_null(tmp_path):
     with StateStore(tmp_path / "s.sqlite") as store:
         with store.transaction():
-            store.insert_night(replace(_record("2026-11-19"), dr_verdict="conservative",
-                                       dr_consistent=True, dr_nees=math.nan))
+            store.insert_night(
+                replace(
+                    _record("2026-11-19"),
+                    dr_verdict="conservative",
+                    dr_consistent=True,
+                    dr_nees=math.nan,
+                )
+            )
             store.insert_night(_record("2026-11-20"))
         a, b = store.night("Aurora", "2026-11-19"), store.night("Aurora", "2026-11-20")
     assert (a.dr_verdict, a.dr_consistent, a.dr_nees) == ("conservative", True, None)

@@ -15,10 +15,20 @@ def test_knots_exact():
     assert units.mps_to_kn(1852.0 / 3600.0) == pytest.approx(1.0, abs=1e-15)
 
 
-@pytest.mark.parametrize("x, want", [(None, None), (math.nan, None), (math.inf, None),
-                                     (-math.inf, None), (np.float32("nan"), None),
-                                     (np.float64(2.5), 2.5), (3, 3.0), (-0.0, -0.0),
-                                     (np.int64(7), 7.0)])
+@pytest.mark.parametrize(
+    "x, want",
+    [
+        (None, None),
+        (math.nan, None),
+        (math.inf, None),
+        (-math.inf, None),
+        (np.float32("nan"), None),
+        (np.float64(2.5), 2.5),
+        (3, 3.0),
+        (-0.0, -0.0),
+        (np.int64(7), 7.0),
+    ],
+)
 def test_finite_or_none(x, want):
     got = units.finite_or_none(x)
     assert got == want

@@ -38,15 +38,25 @@ from dracc.ingest.sources import keys_must_match
 from dracc.math.deadreckoning import parse_reset_s
 
 _DURATION = re.compile(r"^\s*([0-9]*\.?[0-9]+)\s*(s|sec|min|m|h|hr|d)?\s*$", re.IGNORECASE)
-_UNIT_S = {None: 1.0, "s": 1.0, "sec": 1.0, "min": 60.0, "m": 60.0, "h": 3600.0, "hr": 3600.0,
-           "d": 86400.0}
+_UNIT_S = {
+    None: 1.0,
+    "s": 1.0,
+    "sec": 1.0,
+    "min": 60.0,
+    "m": 60.0,
+    "h": 3600.0,
+    "hr": 3600.0,
+    "d": 86400.0,
+}
 
 
 def parse_duration_s(text: str, option: str) -> float:
     """'1h', '2h', '90min', '30s', '1d' or plain seconds ('3600') -> seconds (> 0)."""
     m = _DURATION.match(text)
     if not m:
-        raise ConfigError(f"{option} {text!r}: expected a duration such as 1h, 2h, 90min, 30s or 3600")
+        raise ConfigError(
+            f"{option} {text!r}: expected a duration such as 1h, 2h, 90min, 30s or 3600"
+        )
     unit = m.group(2).lower() if m.group(2) else None
     value = float(m.group(1)) * _UNIT_S[unit]
     if not value > 0 or not math.isfinite(value):
@@ -68,31 +78,68 @@ def parse_roles(items: list[str]) -> dict[str, str]:
     return out_
 
 
-def build_config(config: Path | None, *, interval: str | None = None, window: str | None = None,
-                 dr_reset: str | None = None, probability: float | None = None,
-                 roles: list[str] | None = None, date: str | None = None, strict: bool = False,
-                 ignore_checksum: bool = False, epoch_interval: str | None = None,
-                 variation_deg: float | None = None, fix_role: str | None = None):
+def build_config(
+    config: Path | None,
+    *,
+    interval: str | None = None,
+    window: str | None = None,
+    dr_reset: str | None = None,
+    probability: float | None = None,
+    roles: list[str] | None = None,
+    date: str | None = None,
+    strict: bool = False,
+    ignore_checksum: bool = False,
+    epoch_interval: str | None = None,
+    variation_deg: float | None = None,
+    fix_role: str | None = None,
+):
     """The configuration file with the command-line options applied on top.
 
     An error of the file is a ConfigError (exit 4); a bad option value, or one the
     validated file's settings cannot take, an OptionError (exit 2)."""
     cfg = load_config(config)  # validated: what fails below comes from the options
     with option_values():
-        return _apply_options(cfg, interval=interval, window=window, dr_reset=dr_reset,
-                              probability=probability, roles=roles, date=date, strict=strict,
-                              ignore_checksum=ignore_checksum, epoch_interval=epoch_interval,
-                              variation_deg=variation_deg, fix_role=fix_role)
+        return _apply_options(
+            cfg,
+            interval=interval,
+            window=window,
+            dr_reset=dr_reset,
+            probability=probability,
+            roles=roles,
+            date=date,
+            strict=strict,
+            ignore_checksum=ignore_checksum,
+            epoch_interval=epoch_interval,
+            variation_deg=variation_deg,
+            fix_role=fix_role,
+        )
 
 
-def _apply_options(cfg, *, interval, window, dr_reset, probability, roles, date, strict,
-                   ignore_checksum, epoch_interval, variation_deg, fix_role):
+def _apply_options(
+    cfg,
+    *,
+    interval,
+    window,
+    dr_reset,
+    probability,
+    roles,
+    date,
+    strict,
+    ignore_checksum,
+    epoch_interval,
+    variation_deg,
+    fix_role,
+):
     ing = cfg.ingest
     sources = {**ing.sources, **parse_roles(roles or [])}
     date = check_date(date)
-    ing = replace(ing, sources=sources, strict=ing.strict or strict,
-                  ignore_checksum=ing.ignore_checksum or ignore_checksum,
-                  date=date if date is not None else ing.date)
+    ing = replace(
+        ing,
+        sources=sources,
+        strict=ing.strict or strict,
+        ignore_checksum=ing.ignore_checksum or ignore_checksum,
+        date=date if date is not None else ing.date,
+    )
     dev = cfg.deviation
     if interval is not None:
         dev = replace(dev, interval_s=parse_duration_s(interval, "--interval"))
@@ -108,7 +155,9 @@ def _apply_options(cfg, *, interval, window, dr_reset, probability, roles, date,
             if dr_reset.strip().lower() != "auto":
                 parse_reset_s(dr_reset)
         except ConfigError as e:
-            raise ConfigError(f"--dr-reset {dr_reset!r}: expected auto, 1h, 4h, 30min, watch or never") from e
+            raise ConfigError(
+                f"--dr-reset {dr_reset!r}: expected auto, 1h, 4h, 30min, watch or never"
+            ) from e
         dr = replace(dr, reset=dr_reset)
     if epoch_interval is not None:
         dr = replace(dr, epoch_interval_s=parse_duration_s(epoch_interval, "--epoch-interval"))
@@ -127,45 +176,105 @@ def _apply_options(cfg, *, interval, window, dr_reset, probability, roles, date,
 def analyze(
     logs: list[Path] = LogsArgument,
     config: Path | None = ConfigOption,
-    out_dir: Path | None = typer.Option(None, "--out", "-o", help="Write CSV and Parquet tables "
-                                        "(DR track, DR epochs, deviation samples, per-unit statistics) here."),
-    json_path: str | None = typer.Option(None, "--json", help="Write the JSON report (schema "
-                                         "dracc.analysis/1) to FILE, or '-' for stdout."),
-    html_path: Path | None = typer.Option(None, "--html", help="Write one self-contained offline HTML report."),
-    interval: str | None = typer.Option(None, "--interval", help="INS sampling interval: 1h (default), 2h, 3600 ..."),
-    window: str | None = typer.Option(None, "--window", help="Statistics window: 24h (default), 2d ..."),
-    dr_reset: str | None = typer.Option(None, "--dr-reset", help="Restart the DR from a fix: auto "
-                                        "(default: 1h on logs of 8 h or more, shorter on short logs), "
-                                        "1h, 4h, 30min, watch, never."),
-    probability: float | None = typer.Option(None, "--probability", help="Probability of limiting errors (K8), default 0.95."),
-    role: list[str] = typer.Option([], "--role", help="Map a source to a role, KEY=ROLE (repeatable), "
-                                   "e.g. --role INS2=ins2 --role II=compass."),
+    out_dir: Path | None = typer.Option(
+        None,
+        "--out",
+        "-o",
+        help="Write CSV and Parquet tables "
+        "(DR track, DR epochs, deviation samples, per-unit statistics) here.",
+    ),
+    json_path: str | None = typer.Option(
+        None,
+        "--json",
+        help="Write the JSON report (schema dracc.analysis/1) to FILE, or '-' for stdout.",
+    ),
+    html_path: Path | None = typer.Option(
+        None, "--html", help="Write one self-contained offline HTML report."
+    ),
+    interval: str | None = typer.Option(
+        None, "--interval", help="INS sampling interval: 1h (default), 2h, 3600 ..."
+    ),
+    window: str | None = typer.Option(
+        None, "--window", help="Statistics window: 24h (default), 2d ..."
+    ),
+    dr_reset: str | None = typer.Option(
+        None,
+        "--dr-reset",
+        help="Restart the DR from a fix: auto "
+        "(default: 1h on logs of 8 h or more, shorter on short logs), "
+        "1h, 4h, 30min, watch, never.",
+    ),
+    probability: float | None = typer.Option(
+        None, "--probability", help="Probability of limiting errors (K8), default 0.95."
+    ),
+    role: list[str] = typer.Option(
+        [],
+        "--role",
+        help="Map a source to a role, KEY=ROLE (repeatable), "
+        "e.g. --role INS2=ins2 --role II=compass.",
+    ),
     date: str | None = typer.Option(None, "--date", help="YYYY-MM-DD for logs that carry no date."),
     strict: bool = typer.Option(False, "--strict", help="Fail on the first rejected line."),
-    ignore_checksum: bool = typer.Option(False, "--ignore-checksum", help="Accept lines with wrong checksums (still counted)."),
-    epoch_interval: str | None = typer.Option(None, "--epoch-interval", help="Spacing of reported DR epochs: 10min, or a sixth of a shorter reset (default)."),
-    variation: float | None = typer.Option(None, "--variation", help="Magnetic variation in degrees, east +, where the compass sends none."),
-    fix_role: str | None = typer.Option(None, "--fix-role", help="DR restart fixes from gnss (default) or ins_mean."),
+    ignore_checksum: bool = typer.Option(
+        False, "--ignore-checksum", help="Accept lines with wrong checksums (still counted)."
+    ),
+    epoch_interval: str | None = typer.Option(
+        None,
+        "--epoch-interval",
+        help="Spacing of reported DR epochs: 10min, or a sixth of a shorter reset (default).",
+    ),
+    variation: float | None = typer.Option(
+        None,
+        "--variation",
+        help="Magnetic variation in degrees, east +, where the compass sends none.",
+    ),
+    fix_role: str | None = typer.Option(
+        None, "--fix-role", help="DR restart fixes from gnss (default) or ins_mean."
+    ),
 ) -> None:
     """Analyse a voyage: DR with honest 2M circles, INS deviations from the mean, current; reports."""
     from dracc.pipeline.analysis import analyse
 
     paths_exist(logs)
-    cfg = build_config(config, interval=interval, window=window, dr_reset=dr_reset,
-                       probability=probability, roles=role, date=date, strict=strict,
-                       ignore_checksum=ignore_checksum, epoch_interval=epoch_interval,
-                       variation_deg=variation, fix_role=fix_role)
+    cfg = build_config(
+        config,
+        interval=interval,
+        window=window,
+        dr_reset=dr_reset,
+        probability=probability,
+        roles=role,
+        date=date,
+        strict=strict,
+        ignore_checksum=ignore_checksum,
+        epoch_interval=epoch_interval,
+        variation_deg=variation,
+        fix_role=fix_role,
+    )
     total = sum(p.stat().st_size for p in logs if p.is_file())
     with _gc_spares_loaded_code():
         with progress("analyze", 100.0) as advance:
             state = {"done": 0.0}
-            weights = {"reading logs": 78.0, "sensor faults": 2.0, "dead reckoning": 8.0,
-                       "current": 4.0, "deviation statistics": 4.0, "calibration": 4.0}
-            offsets = {"reading logs": 0.0, "sensor faults": 78.0, "dead reckoning": 80.0,
-                       "current": 88.0, "deviation statistics": 92.0, "calibration": 96.0}
+            weights = {
+                "reading logs": 78.0,
+                "sensor faults": 2.0,
+                "dead reckoning": 8.0,
+                "current": 4.0,
+                "deviation statistics": 4.0,
+                "calibration": 4.0,
+            }
+            offsets = {
+                "reading logs": 0.0,
+                "sensor faults": 78.0,
+                "dead reckoning": 80.0,
+                "current": 88.0,
+                "deviation statistics": 92.0,
+                "calibration": 96.0,
+            }
 
             def on_progress(stage: str, fraction: float) -> None:
-                target = offsets.get(stage, state["done"]) + weights.get(stage, 0.0) * min(max(fraction, 0.0), 1.0)
+                target = offsets.get(stage, state["done"]) + weights.get(stage, 0.0) * min(
+                    max(fraction, 0.0), 1.0
+                )
                 if target > state["done"]:
                     advance(target - state["done"])
                     state["done"] = target
@@ -200,7 +309,9 @@ def _writing(target) -> Iterator[None]:
         raise DraccError(f"cannot write {target}: {detail}") from e
 
 
-def _write_reports(result, json_path: str | None, html_path: Path | None, out_dir: Path | None) -> None:
+def _write_reports(
+    result, json_path: str | None, html_path: Path | None, out_dir: Path | None
+) -> None:
     """The terminal summary (or the JSON on stdout), then the report files: each written in
     full to a temporary file and all renamed together at the end
     (:func:`dracc.core.atomic.together`), so that an interrupt while the plots are drawn
@@ -226,7 +337,10 @@ def _write_reports(result, json_path: str | None, html_path: Path | None, out_di
         if out_dir is not None:
             with _writing(out_dir):
                 written = tables.write_tables(result, out_dir)
-            said.append(f"wrote {len(written)} tables to {out_dir}" if written else
-                        f"no tables to write to {out_dir} (no DR and no deviation statistics)")
+            said.append(
+                f"wrote {len(written)} tables to {out_dir}"
+                if written
+                else f"no tables to write to {out_dir} (no DR and no deviation statistics)"
+            )
     for line in said:
         err.print(line, highlight=False, markup=False)

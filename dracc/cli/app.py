@@ -83,6 +83,7 @@ class Interrupted(DraccError):
 
     exit_code = ExitCode.INTERRUPTED
 
+
 class _Typer(typer.Typer):
     def __call__(self, *args, **kwargs):
         try:
@@ -101,6 +102,7 @@ app = _Typer(
     context_settings={"help_option_names": ["-h", "--help"]},
 )
 
+
 class _Console(Console):
     """A rich console that never sends a control character it was given in a text to the
     terminal: ESC (colours, cursor moves, OSC titles), CR, backspace, C1 controls from a
@@ -111,8 +113,9 @@ class _Console(Console):
     def print(self, *objects, **kwargs) -> None:
         from dracc.core.safetext import printable
 
-        super().print(*(printable(o, keep="\n") if isinstance(o, str) else o for o in objects),
-                      **kwargs)
+        super().print(
+            *(printable(o, keep="\n") if isinstance(o, str) else o for o in objects), **kwargs
+        )
 
 
 #: data goes to stdout; messages, progress and errors to stderr
@@ -134,8 +137,12 @@ def _version(value: bool) -> None:
 
 @app.callback()
 def root(
-    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print the version and exit."),
-    verbose: bool = typer.Option(False, "--verbose", "-v", help="Show tracebacks and debug messages on stderr."),
+    version: bool = typer.Option(
+        False, "--version", callback=_version, is_eager=True, help="Print the version and exit."
+    ),
+    verbose: bool = typer.Option(
+        False, "--verbose", "-v", help="Show tracebacks and debug messages on stderr."
+    ),
 ) -> None:
     """dracc: voyage log analyser for ships."""
     VERBOSE["on"] = verbose
@@ -143,8 +150,12 @@ def root(
 
 
 # Shared option definitions (one place for help texts and names).
-ConfigOption = typer.Option(None, "--config", "-c", exists=False, help="TOML configuration file (see README).")
-LogsArgument = typer.Argument(..., help="Log files (NMEA text, CSV or MCAP); several files of one voyage merge by time.")
+ConfigOption = typer.Option(
+    None, "--config", "-c", exists=False, help="TOML configuration file (see README)."
+)
+LogsArgument = typer.Argument(
+    ..., help="Log files (NMEA text, CSV or MCAP); several files of one voyage merge by time."
+)
 
 
 def progress_enabled() -> bool:
@@ -161,8 +172,14 @@ def progress(description: str, total: float | None):
     if not progress_enabled():
         yield lambda n=1: None
         return
-    with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
-                  TimeElapsedColumn(), console=err, transient=True) as bar:
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.percentage:>3.0f}%"),
+        TimeElapsedColumn(),
+        console=err,
+        transient=True,
+    ) as bar:
         task = bar.add_task(description, total=total)
         yield lambda n=1: bar.advance(task, n)
 
@@ -212,8 +229,9 @@ def options_only(command):
     return run
 
 
-def check_choice(value: str | None, known: Iterable[str], option: str,
-                 none_known: str = "nothing to choose from") -> str | None:
+def check_choice(
+    value: str | None, known: Iterable[str], option: str, none_known: str = "nothing to choose from"
+) -> str | None:
     """``value`` if it is one of ``known`` (or None); else an OptionError listing them
     (``none_known`` says why the list is empty)."""
     known = list(known)
@@ -241,6 +259,8 @@ def check_pattern(value: str | None, option: str = "--pattern") -> str | None:
     if value is None:
         return None
     if not value.strip() or PurePath(value).is_absolute() or PurePath(value).drive:
-        raise OptionError(f"{option} {value!r}: expected a glob relative to the folder, "
-                          "e.g. '*.nmea' or '**/*.nmea'")
+        raise OptionError(
+            f"{option} {value!r}: expected a glob relative to the folder, "
+            "e.g. '*.nmea' or '**/*.nmea'"
+        )
     return value

@@ -128,8 +128,10 @@ def parse_coordinate_deg(text: str, axis: str) -> float:
     if hemi is not None:
         hemi_axis, hemi_sign = _HEMI[hemi]
         if hemi_axis != axis:
-            raise ValueError(f"'{hemi}' is a {'longitude' if axis == 'lat' else 'latitude'} "
-                             f"hemisphere, expected {'N or S' if axis == 'lat' else 'E or W'}")
+            raise ValueError(
+                f"'{hemi}' is a {'longitude' if axis == 'lat' else 'latitude'} "
+                f"hemisphere, expected {'N or S' if axis == 'lat' else 'E or W'}"
+            )
         if sign_txt:
             raise ValueError("give a sign or a hemisphere letter, not both")
         sign = hemi_sign
@@ -214,7 +216,9 @@ class _Reader:
         if self.value is None:  # a file: name the table and key, not a re-joined value
             for field, key in (("BRG_DEG", "bearing_deg"), ("DIST", "dist")):
                 reason = reason.replace(field, key)
-            reason = re.sub(r"\b[A-Z][A-Z0-9_]*[A-Z0-9]\b(?= )", lambda m: m.group(0).lower(), reason)
+            reason = re.sub(
+                r"\b[A-Z][A-Z0-9_]*[A-Z0-9]\b(?= )", lambda m: m.group(0).lower(), reason
+            )
             return self.exc_type(f"{self.where}: {reason}")
         return _fields_error(self.where, self.exc_type, self.value, reason)
 
@@ -266,8 +270,11 @@ OPTION_FORMS = {
     "--bearing": ("bearing", ("lat", "lon", "bearing_deg"), ("sigma_deg",)),
     "--bearing-from-mark": ("bearing_from_mark", ("lat", "lon", "bearing_deg"), ("sigma_deg",)),
     "--line": ("line", ("lat1", "lon1", "lat2", "lon2"), ("sigma_m", "offset_m")),
-    "--pier": ("pier", ("lat1", "lon1", "lat2", "lon2", "heading_deg", "side", "half_breadth_m"),
-               ("sigma_m", "gap_m", "ref_stbd_m")),
+    "--pier": (
+        "pier",
+        ("lat1", "lon1", "lat2", "lon2", "heading_deg", "side", "half_breadth_m"),
+        ("sigma_m", "gap_m", "ref_stbd_m"),
+    ),
     "--abeam": ("abeam", ("lat", "lon"), ("sigma_m",)),
     "--nadir": ("nadir", ("sublat", "sublon", "nadir_deg"), ("sigma_deg",)),
 }
@@ -278,8 +285,11 @@ TABLE_FORMS = {
     "range": ("range", ("lat", "lon", "dist_m|dist_nmi|dist"), ("sigma_m|sigma",)),
     "bearing": ("bearing", ("lat", "lon", "bearing_deg"), ("sigma_deg", "observed_at")),
     "line": ("line", ("lat1", "lon1", "lat2", "lon2"), ("sigma_m", "offset_m")),
-    "pier": ("pier", ("lat1", "lon1", "lat2", "lon2", "heading_deg", "side", "half_breadth_m"),
-             ("sigma_m", "gap_m", "ref_stbd_m")),
+    "pier": (
+        "pier",
+        ("lat1", "lon1", "lat2", "lon2", "heading_deg", "side", "half_breadth_m"),
+        ("sigma_m", "gap_m", "ref_stbd_m"),
+    ),
     "abeam": ("abeam", ("lat", "lon"), ("sigma_m",)),
     "nadir": ("nadir", ("sublat", "sublon", "nadir_deg"), ("sigma_deg",)),
 }
@@ -320,7 +330,9 @@ def _toml_pending(path: Path, table: str, index: int, entry) -> Pending:
     if kind == "bearing" and fields.pop("observed_at", "ship") == "mark":
         kind = "bearing_from_mark"
     elif kind == "bearing" and entry.get("observed_at", "ship") != "ship":
-        raise FixFileError(f"{where}: observed_at must be 'ship' or 'mark', got {entry['observed_at']!r}")
+        raise FixFileError(
+            f"{where}: observed_at must be 'ship' or 'mark', got {entry['observed_at']!r}"
+        )
     return Pending(kind, where, fields)
 
 
@@ -346,8 +358,9 @@ def read_obs_file(path: Path) -> tuple[list[Pending], dict | None]:
             prior = value
             continue
         if key not in TABLE_FORMS:
-            raise FixFileError(f"{path}: unknown table {key!r} (tables: prior, "
-                               f"{', '.join(TABLE_FORMS)})")
+            raise FixFileError(
+                f"{path}: unknown table {key!r} (tables: prior, {', '.join(TABLE_FORMS)})"
+            )
         entries = value if isinstance(value, list) else [value]
         for i, entry in enumerate(entries, start=1):
             pending.append(_toml_pending(path, key, i, entry))
@@ -388,17 +401,32 @@ def build_observation(p: Pending, label: str, piers: Sequence[ObsSpec]) -> ObsSp
             else:
                 sigma = r.dist(f[skey], "SIGMA", unit_required=False, positive=True)
             obs = RangeLOP(_rad(lat), _rad(lon), dist, sigma)
-            return ObsSpec(label, p.source, obs, "m", sigma, not given, ((lat, lon),),
-                           scale_m=dist, circle=True)
+            return ObsSpec(
+                label,
+                p.source,
+                obs,
+                "m",
+                sigma,
+                not given,
+                ((lat, lon),),
+                scale_m=dist,
+                circle=True,
+            )
         if p.kind in ("bearing", "bearing_from_mark"):
             lat, lon = r.coord(f["lat"], "lat", "LAT"), r.coord(f["lon"], "lon", "LON")
             brg = r.num(f["bearing_deg"], "BRG_DEG")
             if not 0.0 <= brg <= 360.0:
                 raise r.fail(f"BRG_DEG must be in [0, 360], got {f['bearing_deg']!r}")
             given = "sigma_deg" in f
-            sigma = r.num(f["sigma_deg"], "SIGMA_DEG", positive=True) if given else DEFAULT_BEARING_SIGMA_DEG
+            sigma = (
+                r.num(f["sigma_deg"], "SIGMA_DEG", positive=True)
+                if given
+                else DEFAULT_BEARING_SIGMA_DEG
+            )
             at = "mark" if p.kind == "bearing_from_mark" else "ship"
-            obs = BearingLOP(_rad(lat), _rad(lon), _rad(brg) % (2 * math.pi), _rad(sigma), observed_at=at)
+            obs = BearingLOP(
+                _rad(lat), _rad(lon), _rad(brg) % (2 * math.pi), _rad(sigma), observed_at=at
+            )
             return ObsSpec(label, p.source, obs, "deg", sigma, not given, ((lat, lon),))
         if p.kind == "line":
             pts = _two_points(r, f)
@@ -420,16 +448,27 @@ def build_observation(p: Pending, label: str, piers: Sequence[ObsSpec]) -> ObsSp
             sigma = r.num(f["sigma_m"], "SIGMA_M", positive=True) if given else DEFAULT_PIER_SIGMA_M
             gap = r.num(f["gap_m"], "GAP_M", nonneg=True) if "gap_m" in f else 0.0
             ref = r.num(f["ref_stbd_m"], "REF_STBD_M") if "ref_stbd_m" in f else 0.0
-            obs = PierLine(*(_rad(v) for v in (*pts[0], *pts[1])), _rad(heading) % (2 * math.pi),
-                           side, half, sigma, ref_transverse_m=ref, gap_m=gap)  # type: ignore[arg-type]
+            obs = PierLine(
+                *(_rad(v) for v in (*pts[0], *pts[1])),
+                _rad(heading) % (2 * math.pi),
+                side,
+                half,
+                sigma,
+                ref_transverse_m=ref,
+                gap_m=gap,
+            )  # type: ignore[arg-type]
             return ObsSpec(label, p.source, obs, "m", sigma, not given, pts)
         if p.kind == "abeam":
             lat, lon = r.coord(f["lat"], "lat", "LAT"), r.coord(f["lon"], "lon", "LON")
             if len(piers) != 1:
-                raise r.fail(f"an abeam mark needs exactly one pier line (--pier or [[pier]]), "
-                             f"{len(piers)} given")
+                raise r.fail(
+                    f"an abeam mark needs exactly one pier line (--pier or [[pier]]), "
+                    f"{len(piers)} given"
+                )
             given = "sigma_m" in f
-            sigma = r.num(f["sigma_m"], "SIGMA_M", positive=True) if given else DEFAULT_ABEAM_SIGMA_M
+            sigma = (
+                r.num(f["sigma_m"], "SIGMA_M", positive=True) if given else DEFAULT_ABEAM_SIGMA_M
+            )
             obs = abeam_line(piers[0].obs, _rad(lat), _rad(lon), sigma)  # type: ignore[arg-type]
             return ObsSpec(label, p.source, obs, "m", sigma, not given, ((lat, lon),))
         if p.kind == "nadir":
@@ -438,20 +477,37 @@ def build_observation(p: Pending, label: str, piers: Sequence[ObsSpec]) -> ObsSp
             if not 0.0 < nadir < 180.0:
                 raise r.fail(f"NADIR_DEG must be in (0, 180), got {f['nadir_deg']!r}")
             given = "sigma_deg" in f
-            sigma = r.num(f["sigma_deg"], "SIGMA_DEG", positive=True) if given else DEFAULT_NADIR_SIGMA_DEG
+            sigma = (
+                r.num(f["sigma_deg"], "SIGMA_DEG", positive=True)
+                if given
+                else DEFAULT_NADIR_SIGMA_DEG
+            )
             obs = NadirCircle(_rad(lat), _rad(lon), _rad(nadir), _rad(sigma))
             r_m = float(np.sqrt(radius_meridian_m(_rad(lat)) * radius_prime_vertical_m(_rad(lat))))
             r_m *= _rad(nadir)  # the circle's radius on the Gaussian sphere, for the search
-            return ObsSpec(label, p.source, obs, "deg", sigma, not given, ((lat, lon),),
-                           scale_m=r_m, circle=True)
-    except GeometryError as e:  # the library refuses the observation itself (e.g. a pier misaligned)
+            return ObsSpec(
+                label,
+                p.source,
+                obs,
+                "deg",
+                sigma,
+                not given,
+                ((lat, lon),),
+                scale_m=r_m,
+                circle=True,
+            )
+    except (
+        GeometryError
+    ) as e:  # the library refuses the observation itself (e.g. a pier misaligned)
         raise GeometryError(f"{p.source} {value!r}: {e}" if value else f"{p.source}: {e}") from None
     raise AssertionError(p.kind)  # pragma: no cover - kinds come from OPTION_FORMS/TABLE_FORMS
 
 
 def _two_points(r: _Reader, f: dict) -> tuple[tuple[float, float], tuple[float, float]]:
-    return ((r.coord(f["lat1"], "lat", "LAT1"), r.coord(f["lon1"], "lon", "LON1")),
-            (r.coord(f["lat2"], "lat", "LAT2"), r.coord(f["lon2"], "lon", "LON2")))
+    return (
+        (r.coord(f["lat1"], "lat", "LAT1"), r.coord(f["lon1"], "lon", "LON1")),
+        (r.coord(f["lat2"], "lat", "LAT2"), r.coord(f["lon2"], "lon", "LON2")),
+    )
 
 
 _ORDER = ("fix", "range", "bearing", "bearing_from_mark", "line", "pier", "abeam", "nadir")
@@ -537,32 +593,73 @@ def _residual_rows(specs: Sequence[ObsSpec], sol: FixSolution) -> tuple[Residual
             if spec.unit == "deg":
                 value, sigma_native = math.degrees(value), math.degrees(sigma_native)
             row = {"fix_north": "north", "fix_east": "east"}.get(kind, kind)
-            rows.append(ResidualRow(spec.label, row, spec.unit, value, float(metres.residual[i]),
-                                    sigma_native, spec.sigma_default, value / sigma_native,
-                                    float(w[i])))
+            rows.append(
+                ResidualRow(
+                    spec.label,
+                    row,
+                    spec.unit,
+                    value,
+                    float(metres.residual[i]),
+                    sigma_native,
+                    spec.sigma_default,
+                    value / sigma_native,
+                    float(w[i]),
+                )
+            )
             i += 1
     return tuple(rows)
 
 
-def _verdict(sol: FixSolution, rows: Sequence[ResidualRow]) -> tuple[float | None, bool | None, str]:
+def _verdict(
+    sol: FixSolution, rows: Sequence[ResidualRow]
+) -> tuple[float | None, bool | None, str]:
     if sol.redundancy == 0:
-        return None, None, ("no redundancy: the fix passes exactly through the observations, "
-                            "so they cannot be checked against each other")
+        return (
+            None,
+            None,
+            (
+                "no redundancy: the fix passes exactly through the observations, "
+                "so they cannot be checked against each other"
+            ),
+        )
     bound = float(chi2_ppf(0.95, sol.redundancy))
     if sol.chi2 <= bound:
-        return bound, True, (f"residuals consistent with the sigmas (chi-square {sol.chi2:.2f} "
-                             f"<= {bound:.2f}, the 95 % bound for {sol.redundancy} degree(s) of freedom)")
+        return (
+            bound,
+            True,
+            (
+                f"residuals consistent with the sigmas (chi-square {sol.chi2:.2f} "
+                f"<= {bound:.2f}, the 95 % bound for {sol.redundancy} degree(s) of freedom)"
+            ),
+        )
     ranked = sorted((r for r in rows if math.isfinite(r.w)), key=lambda r: -abs(r.w))
-    head = (f"chi-square {sol.chi2:.2f} > {bound:.2f} (95 % bound, {sol.redundancy} degree(s) of "
-            "freedom)")
+    head = (
+        f"chi-square {sol.chi2:.2f} > {bound:.2f} (95 % bound, {sol.redundancy} degree(s) of "
+        "freedom)"
+    )
     if ranked and (len(ranked) == 1 or abs(ranked[0].w) > 1.01 * abs(ranked[1].w)):
         top = ranked[0]
-        what = top.label if top.row in ("range", "bearing", "line", "pier", "nadir") else \
-            f"{top.label} ({top.row})"
-        return bound, False, (f"an observation disagrees: {what}, residual {top.residual:+.3g} "
-                              f"{top.unit} (w = {top.w:+.1f}); {head}; check it or its sigma")
-    return bound, False, (f"the observations disagree: {head}; with so little redundancy the "
-                          "culprit cannot be told apart; check them or their sigmas")
+        what = (
+            top.label
+            if top.row in ("range", "bearing", "line", "pier", "nadir")
+            else f"{top.label} ({top.row})"
+        )
+        return (
+            bound,
+            False,
+            (
+                f"an observation disagrees: {what}, residual {top.residual:+.3g} "
+                f"{top.unit} (w = {top.w:+.1f}); {head}; check it or its sigma"
+            ),
+        )
+    return (
+        bound,
+        False,
+        (
+            f"the observations disagree: {head}; with so little redundancy the "
+            "culprit cannot be told apart; check them or their sigmas"
+        ),
+    )
 
 
 def default_prior_deg(specs: Sequence[ObsSpec]) -> tuple[float, float]:
@@ -574,8 +671,9 @@ def default_prior_deg(specs: Sequence[ObsSpec]) -> tuple[float, float]:
     return lat, lon
 
 
-def solve(specs: Sequence[ObsSpec], prior_deg: tuple[float, float] | None,
-          weighted: bool) -> tuple[FixSolution, float, float, str]:
+def solve(
+    specs: Sequence[ObsSpec], prior_deg: tuple[float, float] | None, weighted: bool
+) -> tuple[FixSolution, float, float, str]:
     """Fuse; with no prior, search for other solutions (two circles cross twice).
 
     Without ``--prior`` the fix is iterated from the default prior and from eight points
@@ -585,19 +683,26 @@ def solve(specs: Sequence[ObsSpec], prior_deg: tuple[float, float] | None,
     """
     obs = [s.obs for s in specs]
     if not obs:
-        raise FixUsageError("dracc fix: no observations; give --fix, --range, --bearing, --line, "
-                            "--pier, --nadir or --file")
+        raise FixUsageError(
+            "dracc fix: no observations; give --fix, --range, --bearing, --line, "
+            "--pier, --nadir or --file"
+        )
     if prior_deg is not None:
         lat, lon = prior_deg
         sol = fuse_fix(obs, _rad(lat), _rad(lon), weighted=weighted)
         return _near(sol, specs, lat, lon), lat, lon, "given"
     if all(isinstance(s.obs, NadirCircle) for s in specs):
-        raise FixUsageError("dracc fix: nadir circles are thousands of km wide; give --prior LAT,LON "
-                            "(the DR position) to choose the intersection")
+        raise FixUsageError(
+            "dracc fix: nadir circles are thousands of km wide; give --prior LAT,LON "
+            "(the DR position) to choose the intersection"
+        )
     lat0, lon0 = default_prior_deg(specs)
     scales = [s.scale_m for s in specs if s.scale_m is not None]
-    scales += [float(distance_m(_rad(lat0), _rad(lon0), _rad(p[0]), _rad(p[1])))
-               for s in specs for p in s.points_deg]
+    scales += [
+        float(distance_m(_rad(lat0), _rad(lon0), _rad(p[0]), _rad(p[1])))
+        for s in specs
+        for p in s.points_deg
+    ]
     ring_m = float(np.clip(np.median(scales) if scales else 100.0, 100.0, 50_000.0))
     starts = [(_rad(lat0), _rad(lon0))]
     for az in np.radians(np.arange(0.0, 360.0, 45.0) + 22.5):
@@ -620,15 +725,27 @@ def solve(specs: Sequence[ObsSpec], prior_deg: tuple[float, float] | None,
     bound = float(chi2_ppf(0.999, redundancy)) if redundancy > 0 else math.inf
     good = [s for s in found if s.chi2 <= bound or redundancy == 0]
     if len(good) > 1:
-        cands = "; ".join(f"{format_dm(math.degrees(s.lat_rad), 'lat')} "
-                          f"{format_dm(math.degrees(s.lon_rad), 'lon')}" for s in good[:4])
-        raise GeometryError(f"the observations fit {len(good)} positions ({cands}); give --prior "
-                            "LAT,LON near the ship (e.g. the DR position) to choose one")
+        cands = "; ".join(
+            f"{format_dm(math.degrees(s.lat_rad), 'lat')} "
+            f"{format_dm(math.degrees(s.lon_rad), 'lon')}"
+            for s in good[:4]
+        )
+        raise GeometryError(
+            f"the observations fit {len(good)} positions ({cands}); give --prior "
+            "LAT,LON near the ship (e.g. the DR position) to choose one"
+        )
     best = good[0] if good else min(found, key=lambda s: s.chi2)
-    return _near(best, specs, lat0, lon0), lat0, lon0, "mean of the fixes" if any(s.is_fix for s in specs) else "mean of the marks"
+    return (
+        _near(best, specs, lat0, lon0),
+        lat0,
+        lon0,
+        "mean of the fixes" if any(s.is_fix for s in specs) else "mean of the marks",
+    )
 
 
-def _near(sol: FixSolution, specs: Sequence[ObsSpec], lat_deg: float, lon_deg: float) -> FixSolution:
+def _near(
+    sol: FixSolution, specs: Sequence[ObsSpec], lat_deg: float, lon_deg: float
+) -> FixSolution:
     """Refuse a solution far beyond the observations' own scale (nearly parallel lines).
 
     Straight lines of position are great circles: two "parallel" transits (e.g. two
@@ -640,12 +757,14 @@ def _near(sol: FixSolution, specs: Sequence[ObsSpec], lat_deg: float, lon_deg: f
     if d_m > limit_m:
         raise GeometryError(
             f"the lines of position meet {d_m / NMI_M:,.0f} nmi from the prior "
-            f"(DOP {float(sol.dop):,.0f}): they are nearly parallel (or the prior is far off); no fix")
+            f"(DOP {float(sol.dop):,.0f}): they are nearly parallel (or the prior is far off); no fix"
+        )
     return sol
 
 
-def fix_report(specs: Sequence[ObsSpec], prior_deg: tuple[float, float] | None,
-               weighted: bool) -> FixReport:
+def fix_report(
+    specs: Sequence[ObsSpec], prior_deg: tuple[float, float] | None, weighted: bool
+) -> FixReport:
     """Solve and assess: residual rows, Baarda w, chi-square verdict."""
     sol, plat, plon, psrc = solve(specs, prior_deg, weighted)
     rows = _residual_rows(specs, sol)
@@ -678,18 +797,32 @@ def to_json(rep: FixReport) -> dict:
         "lon_deg": lon,
         "lat_dm": format_dm(lat, "lat"),
         "lon_dm": format_dm(lon, "lon"),
-        "cov_m2": [[float(s.cov_m2[0, 0]), float(s.cov_m2[0, 1])],
-                   [float(s.cov_m2[1, 0]), float(s.cov_m2[1, 1])]],
-        "ellipse": {"semi_major_m": float(s.ellipse.semi_major_m),
-                    "semi_minor_m": float(s.ellipse.semi_minor_m),
-                    "orientation_deg": math.degrees(float(s.ellipse.orientation_rad))},
+        "cov_m2": [
+            [float(s.cov_m2[0, 0]), float(s.cov_m2[0, 1])],
+            [float(s.cov_m2[1, 0]), float(s.cov_m2[1, 1])],
+        ],
+        "ellipse": {
+            "semi_major_m": float(s.ellipse.semi_major_m),
+            "semi_minor_m": float(s.ellipse.semi_minor_m),
+            "orientation_deg": math.degrees(float(s.ellipse.orientation_rad)),
+        },
         "drms_m": float(s.drms_m),
         "two_drms_m": float(s.two_drms_m),
         "dop": float(s.dop),
-        "residuals": [{"observation": r.label, "row": r.row, "unit": r.unit,
-                       "residual": r.residual, "residual_m": r.residual_m, "sigma": r.sigma,
-                       "sigma_default": r.sigma_default, "normalised": r.normalised,
-                       "w": _finite(r.w)} for r in rep.residuals],
+        "residuals": [
+            {
+                "observation": r.label,
+                "row": r.row,
+                "unit": r.unit,
+                "residual": r.residual,
+                "residual_m": r.residual_m,
+                "sigma": r.sigma,
+                "sigma_default": r.sigma_default,
+                "normalised": r.normalised,
+                "w": _finite(r.w),
+            }
+            for r in rep.residuals
+        ],
         "chi2": float(s.chi2),
         "redundancy": int(s.redundancy),
         "chi2_bound_95": rep.chi2_bound_95,
@@ -698,8 +831,11 @@ def to_json(rep: FixReport) -> dict:
         "weighted": bool(s.weighted),
         "method": "WLS" if s.weighted else "LS",
         "iterations": int(s.iterations),
-        "prior": {"lat_deg": rep.prior_lat_deg, "lon_deg": rep.prior_lon_deg,
-                  "source": rep.prior_source},
+        "prior": {
+            "lat_deg": rep.prior_lat_deg,
+            "lon_deg": rep.prior_lon_deg,
+            "source": rep.prior_source,
+        },
         "observations": [{"label": sp.label, "source": sp.source} for sp in rep.specs],
     }
 
@@ -710,39 +846,83 @@ JSON_SCHEMA = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
     "type": "object",
     "additionalProperties": False,
-    "required": ["schema", "lat_deg", "lon_deg", "lat_dm", "lon_dm", "cov_m2", "ellipse", "drms_m",
-                 "two_drms_m", "dop", "residuals", "chi2", "redundancy", "chi2_bound_95",
-                 "consistent", "verdict", "weighted", "method", "iterations", "prior",
-                 "observations"],
+    "required": [
+        "schema",
+        "lat_deg",
+        "lon_deg",
+        "lat_dm",
+        "lon_dm",
+        "cov_m2",
+        "ellipse",
+        "drms_m",
+        "two_drms_m",
+        "dop",
+        "residuals",
+        "chi2",
+        "redundancy",
+        "chi2_bound_95",
+        "consistent",
+        "verdict",
+        "weighted",
+        "method",
+        "iterations",
+        "prior",
+        "observations",
+    ],
     "properties": {
         "schema": {"const": SCHEMA},
         "lat_deg": {"type": "number", "minimum": -90, "maximum": 90},
         "lon_deg": {"type": "number", "minimum": -180, "maximum": 180},
         "lat_dm": {"type": "string"},
         "lon_dm": {"type": "string"},
-        "cov_m2": {"type": "array", "minItems": 2, "maxItems": 2,
-                   "items": {"type": "array", "minItems": 2, "maxItems": 2, "items": _NUMBER}},
-        "ellipse": {"type": "object", "additionalProperties": False,
-                    "required": ["semi_major_m", "semi_minor_m", "orientation_deg"],
-                    "properties": {"semi_major_m": {"type": "number", "minimum": 0},
-                                   "semi_minor_m": {"type": "number", "minimum": 0},
-                                   "orientation_deg": {"type": "number", "minimum": 0,
-                                                       "exclusiveMaximum": 180}}},
+        "cov_m2": {
+            "type": "array",
+            "minItems": 2,
+            "maxItems": 2,
+            "items": {"type": "array", "minItems": 2, "maxItems": 2, "items": _NUMBER},
+        },
+        "ellipse": {
+            "type": "object",
+            "additionalProperties": False,
+            "required": ["semi_major_m", "semi_minor_m", "orientation_deg"],
+            "properties": {
+                "semi_major_m": {"type": "number", "minimum": 0},
+                "semi_minor_m": {"type": "number", "minimum": 0},
+                "orientation_deg": {"type": "number", "minimum": 0, "exclusiveMaximum": 180},
+            },
+        },
         "drms_m": {"type": "number", "minimum": 0},
         "two_drms_m": {"type": "number", "minimum": 0},
         "dop": {"type": "number", "minimum": 0},
-        "residuals": {"type": "array", "items": {
-            "type": "object", "additionalProperties": False,
-            "required": ["observation", "row", "unit", "residual", "residual_m", "sigma",
-                         "sigma_default", "normalised", "w"],
-            "properties": {"observation": {"type": "string"},
-                           "row": {"enum": ["north", "east", "range", "bearing", "line", "pier",
-                                            "nadir"]},
-                           "unit": {"enum": ["m", "deg"]},
-                           "residual": _NUMBER, "residual_m": _NUMBER,
-                           "sigma": {"type": "number", "exclusiveMinimum": 0},
-                           "sigma_default": {"type": "boolean"},
-                           "normalised": _NUMBER, "w": {"type": ["number", "null"]}}}},
+        "residuals": {
+            "type": "array",
+            "items": {
+                "type": "object",
+                "additionalProperties": False,
+                "required": [
+                    "observation",
+                    "row",
+                    "unit",
+                    "residual",
+                    "residual_m",
+                    "sigma",
+                    "sigma_default",
+                    "normalised",
+                    "w",
+                ],
+                "properties": {
+                    "observation": {"type": "string"},
+                    "row": {"enum": ["north", "east", "range", "bearing", "line", "pier", "nadir"]},
+                    "unit": {"enum": ["m", "deg"]},
+                    "residual": _NUMBER,
+                    "residual_m": _NUMBER,
+                    "sigma": {"type": "number", "exclusiveMinimum": 0},
+                    "sigma_default": {"type": "boolean"},
+                    "normalised": _NUMBER,
+                    "w": {"type": ["number", "null"]},
+                },
+            },
+        },
         "chi2": {"type": "number", "minimum": 0},
         "redundancy": {"type": "integer", "minimum": 0},
         "chi2_bound_95": {"type": ["number", "null"]},
@@ -751,13 +931,21 @@ JSON_SCHEMA = {
         "weighted": {"type": "boolean"},
         "method": {"enum": ["WLS", "LS"]},
         "iterations": {"type": "integer", "minimum": 1},
-        "prior": {"type": "object", "additionalProperties": False,
-                  "required": ["lat_deg", "lon_deg", "source"],
-                  "properties": {"lat_deg": _NUMBER, "lon_deg": _NUMBER,
-                                 "source": {"type": "string"}}},
-        "observations": {"type": "array", "items": {
-            "type": "object", "additionalProperties": False, "required": ["label", "source"],
-            "properties": {"label": {"type": "string"}, "source": {"type": "string"}}}},
+        "prior": {
+            "type": "object",
+            "additionalProperties": False,
+            "required": ["lat_deg", "lon_deg", "source"],
+            "properties": {"lat_deg": _NUMBER, "lon_deg": _NUMBER, "source": {"type": "string"}},
+        },
+        "observations": {
+            "type": "array",
+            "items": {
+                "type": "object",
+                "additionalProperties": False,
+                "required": ["label", "source"],
+                "properties": {"label": {"type": "string"}, "source": {"type": "string"}},
+            },
+        },
     },
 }
 
@@ -767,30 +955,51 @@ def render(rep: FixReport) -> None:
     s = rep.solution
     lat, lon = math.degrees(s.lat_rad), math.degrees(s.lon_rad)
     e = s.ellipse
-    head = Table(title=f"dracc fix ({'WLS (W4)' if s.weighted else 'LS (W1)'}, "
-                       f"{len(rep.specs)} observation(s), {s.iterations} iteration(s))",
-                 show_header=False, title_justify="left")
+    head = Table(
+        title=f"dracc fix ({'WLS (W4)' if s.weighted else 'LS (W1)'}, "
+        f"{len(rep.specs)} observation(s), {s.iterations} iteration(s))",
+        show_header=False,
+        title_justify="left",
+    )
     head.add_column("quantity")
     head.add_column("value")
     head.add_row("position", f"{format_dm(lat, 'lat')}  {format_dm(lon, 'lon')}")
     head.add_row("decimal", f"{lat:.7f}, {lon:.7f}")
-    head.add_row("error ellipse (1σ)", f"{float(e.semi_major_m):.2f} m × {float(e.semi_minor_m):.2f} m, "
-                 f"major axis {math.degrees(float(e.orientation_rad)):05.1f}° true")
+    head.add_row(
+        "error ellipse (1σ)",
+        f"{float(e.semi_major_m):.2f} m × {float(e.semi_minor_m):.2f} m, "
+        f"major axis {math.degrees(float(e.orientation_rad)):05.1f}° true",
+    )
     head.add_row("drms / 2drms", f"{float(s.drms_m):.2f} m / {float(s.two_drms_m):.2f} m")
     head.add_row("DOP", f"{float(s.dop):.3f}")
     head.add_row("chi-square", f"{float(s.chi2):.3f}, redundancy {s.redundancy}")
-    head.add_row("prior", f"{format_dm(rep.prior_lat_deg, 'lat')}  "
-                 f"{format_dm(rep.prior_lon_deg, 'lon')} ({rep.prior_source})")
+    head.add_row(
+        "prior",
+        f"{format_dm(rep.prior_lat_deg, 'lat')}  "
+        f"{format_dm(rep.prior_lon_deg, 'lon')} ({rep.prior_source})",
+    )
     out.print(head)
     res = Table(title="residuals (measured − fitted)", title_justify="left")
-    for name, justify in (("observation", "left"), ("row", "left"), ("residual", "right"),
-                          ("σ", "right"), ("r/σ", "right"), ("w", "right")):
+    for name, justify in (
+        ("observation", "left"),
+        ("row", "left"),
+        ("residual", "right"),
+        ("σ", "right"),
+        ("r/σ", "right"),
+        ("w", "right"),
+    ):
         res.add_column(name, justify=justify)  # type: ignore[arg-type]
     for r in rep.residuals:
         digits = 3 if r.unit == "deg" else 2
         sigma = f"{r.sigma:.{digits}f} {r.unit}" + (" (default)" if r.sigma_default else "")
-        res.add_row(r.label, r.row, f"{r.residual:+.{digits}f} {r.unit}", sigma,
-                    f"{r.normalised:+.2f}", "-" if not math.isfinite(r.w) else f"{r.w:+.2f}")
+        res.add_row(
+            r.label,
+            r.row,
+            f"{r.residual:+.{digits}f} {r.unit}",
+            sigma,
+            f"{r.normalised:+.2f}",
+            "-" if not math.isfinite(r.w) else f"{r.w:+.2f}",
+        )
     out.print(res)
     out.print(f"verdict: {rep.verdict}", highlight=False, markup=False)
 
@@ -798,7 +1007,9 @@ def render(rep: FixReport) -> None:
 # -------------------------------------------------------------------------- command
 
 
-def _prior(text: str | None, file_prior: dict | None, file: Path | None) -> tuple[float, float] | None:
+def _prior(
+    text: str | None, file_prior: dict | None, file: Path | None
+) -> tuple[float, float] | None:
     if text is not None:
         parts = [p.strip() for p in text.split(",")]
         if len(parts) != 2:
@@ -816,43 +1027,86 @@ _OBS_HELP = "Repeatable. Coordinates: 54.6, -18.8, '54 36.5N', '018 48.2E', \"54
 
 @app.command("fix")
 def fix_cmd(
-    fix: list[str] = typer.Option([], "--fix", metavar="LAT,LON[,SIGMA_M]",
-                                  help=f"A position fix (default sigma {DEFAULT_FIX_SIGMA_M:g} m). {_OBS_HELP}"),
-    range_: list[str] = typer.Option([], "--range", metavar="LAT,LON,DIST[,SIGMA]",
-                                     help="Range of a mark, DIST with a unit: 2.4nmi, 2.4nm, 4cbl, 450m, "
-                                          "1.2km; SIGMA the same (bare: metres; default: IMO radar, "
-                                          "max(30 m, 1 % of DIST) / 2)."),
-    bearing: list[str] = typer.Option([], "--bearing", metavar="LAT,LON,BRG_DEG[,SIGMA_DEG]",
-                                      help="True bearing of the mark taken from the ship (default "
-                                           f"sigma {DEFAULT_BEARING_SIGMA_DEG:g}°)."),
-    bearing_mark: list[str] = typer.Option([], "--bearing-from-mark",
-                                           metavar="LAT,LON,BRG_DEG[,SIGMA_DEG]",
-                                           help="True bearing of the ship taken at the mark (D/F, VOR)."),
-    line: list[str] = typer.Option([], "--line", metavar="LAT1,LON1,LAT2,LON2[,SIGMA_M[,OFFSET_M]]",
-                                   help="Straight line of position A->B (a transit); OFFSET_M > 0: "
-                                        f"the ship is right of A->B (default sigma {DEFAULT_LINE_SIGMA_M:g} m)."),
-    pier: list[str] = typer.Option([], "--pier",
-                                   metavar="LAT1,LON1,LAT2,LON2,HEADING_DEG,port|starboard,"
-                                           "HALF_BREADTH_M[,SIGMA_M[,GAP_M[,REF_STBD_M]]]",
-                                   help="Lying alongside the pier line A->B, SIDE to the pier (default "
-                                        f"sigma {DEFAULT_PIER_SIGMA_M:g} m; GAP_M fenders; REF_STBD_M the "
-                                        "reference point to starboard of the centreline)."),
-    abeam: list[str] = typer.Option([], "--abeam", metavar="LAT,LON[,SIGMA_M]",
-                                    help="A pier mark abeam of the reference point (needs one --pier; "
-                                         f"default sigma {DEFAULT_ABEAM_SIGMA_M:g} m)."),
-    nadir: list[str] = typer.Option([], "--nadir", metavar="SUBLAT,SUBLON,NADIR_DEG[,SIGMA_DEG]",
-                                    help="Free-gyro nadir circle about the sub-point (default sigma "
-                                         "1'; needs --prior when alone)."),
-    prior: str | None = typer.Option(None, "--prior", metavar="LAT,LON",
-                                     help="Linearisation point, e.g. the DR position (default: the mean "
-                                          "of the fixes, else of the marks; then other solutions are "
-                                          "searched for and an ambiguity is an error)."),
-    file: Path | None = typer.Option(None, "--file", "-f", metavar="OBS.TOML",
-                                     help="Observations as TOML table arrays named fix, range, bearing, "
-                                          "line, pier, abeam, nadir, and an optional prior table "
-                                          "(docs/fix.md); they combine with the options."),
-    ls: bool = typer.Option(False, "--ls", help="Unweighted least squares (W1) instead of WLS (W4)."),
-    as_json: bool = typer.Option(False, "--json", help="Print the dracc.fix/1 JSON object instead of tables."),
+    fix: list[str] = typer.Option(
+        [],
+        "--fix",
+        metavar="LAT,LON[,SIGMA_M]",
+        help=f"A position fix (default sigma {DEFAULT_FIX_SIGMA_M:g} m). {_OBS_HELP}",
+    ),
+    range_: list[str] = typer.Option(
+        [],
+        "--range",
+        metavar="LAT,LON,DIST[,SIGMA]",
+        help="Range of a mark, DIST with a unit: 2.4nmi, 2.4nm, 4cbl, 450m, "
+        "1.2km; SIGMA the same (bare: metres; default: IMO radar, "
+        "max(30 m, 1 % of DIST) / 2).",
+    ),
+    bearing: list[str] = typer.Option(
+        [],
+        "--bearing",
+        metavar="LAT,LON,BRG_DEG[,SIGMA_DEG]",
+        help="True bearing of the mark taken from the ship (default "
+        f"sigma {DEFAULT_BEARING_SIGMA_DEG:g}°).",
+    ),
+    bearing_mark: list[str] = typer.Option(
+        [],
+        "--bearing-from-mark",
+        metavar="LAT,LON,BRG_DEG[,SIGMA_DEG]",
+        help="True bearing of the ship taken at the mark (D/F, VOR).",
+    ),
+    line: list[str] = typer.Option(
+        [],
+        "--line",
+        metavar="LAT1,LON1,LAT2,LON2[,SIGMA_M[,OFFSET_M]]",
+        help="Straight line of position A->B (a transit); OFFSET_M > 0: "
+        f"the ship is right of A->B (default sigma {DEFAULT_LINE_SIGMA_M:g} m).",
+    ),
+    pier: list[str] = typer.Option(
+        [],
+        "--pier",
+        metavar="LAT1,LON1,LAT2,LON2,HEADING_DEG,port|starboard,"
+        "HALF_BREADTH_M[,SIGMA_M[,GAP_M[,REF_STBD_M]]]",
+        help="Lying alongside the pier line A->B, SIDE to the pier (default "
+        f"sigma {DEFAULT_PIER_SIGMA_M:g} m; GAP_M fenders; REF_STBD_M the "
+        "reference point to starboard of the centreline).",
+    ),
+    abeam: list[str] = typer.Option(
+        [],
+        "--abeam",
+        metavar="LAT,LON[,SIGMA_M]",
+        help="A pier mark abeam of the reference point (needs one --pier; "
+        f"default sigma {DEFAULT_ABEAM_SIGMA_M:g} m).",
+    ),
+    nadir: list[str] = typer.Option(
+        [],
+        "--nadir",
+        metavar="SUBLAT,SUBLON,NADIR_DEG[,SIGMA_DEG]",
+        help="Free-gyro nadir circle about the sub-point (default sigma "
+        "1'; needs --prior when alone).",
+    ),
+    prior: str | None = typer.Option(
+        None,
+        "--prior",
+        metavar="LAT,LON",
+        help="Linearisation point, e.g. the DR position (default: the mean "
+        "of the fixes, else of the marks; then other solutions are "
+        "searched for and an ambiguity is an error).",
+    ),
+    file: Path | None = typer.Option(
+        None,
+        "--file",
+        "-f",
+        metavar="OBS.TOML",
+        help="Observations as TOML table arrays named fix, range, bearing, "
+        "line, pier, abeam, nadir, and an optional prior table "
+        "(docs/fix.md); they combine with the options.",
+    ),
+    ls: bool = typer.Option(
+        False, "--ls", help="Unweighted least squares (W1) instead of WLS (W4)."
+    ),
+    as_json: bool = typer.Option(
+        False, "--json", help="Print the dracc.fix/1 JSON object instead of tables."
+    ),
 ) -> None:
     """Fuse position fixes and lines of position (LS/WLS): position, error ellipse, DOP, residuals.
 
@@ -860,9 +1114,16 @@ def fix_cmd(
     --file missing; 4 an invalid --file.
     """
     pending: list[Pending] = []
-    for option, values in (("--fix", fix), ("--range", range_), ("--bearing", bearing),
-                           ("--bearing-from-mark", bearing_mark), ("--line", line), ("--pier", pier),
-                           ("--abeam", abeam), ("--nadir", nadir)):
+    for option, values in (
+        ("--fix", fix),
+        ("--range", range_),
+        ("--bearing", bearing),
+        ("--bearing-from-mark", bearing_mark),
+        ("--line", line),
+        ("--pier", pier),
+        ("--abeam", abeam),
+        ("--nadir", nadir),
+    ):
         pending += [parse_option(option, v) for v in values]
     file_prior = None
     if file is not None:
@@ -872,7 +1133,9 @@ def fix_cmd(
     specs = build_observations(pending)
     rep = fix_report(specs, prior_deg, weighted=not ls)
     if as_json:
-        out.file.write(json.dumps(to_json(rep), indent=2, allow_nan=False, ensure_ascii=False) + "\n")
+        out.file.write(
+            json.dumps(to_json(rep), indent=2, allow_nan=False, ensure_ascii=False) + "\n"
+        )
     else:
         render(rep)
 

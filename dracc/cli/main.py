@@ -108,8 +108,12 @@ def _run(args: list[str]) -> int:
     except Exception as e:  # a bug: one line unless --verbose
         if VERBOSE["on"]:
             traceback.print_exc()
-        err.print(f"error: internal error ({type(e).__name__}: {e}); run with --verbose and report it",
-                  style="red", highlight=False, markup=False)
+        err.print(
+            f"error: internal error ({type(e).__name__}: {e}); run with --verbose and report it",
+            style="red",
+            highlight=False,
+            markup=False,
+        )
         return ExitCode.INTERNAL
 
 

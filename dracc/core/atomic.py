@@ -32,7 +32,9 @@ from contextvars import ContextVar
 from pathlib import Path
 
 #: (temporary, target) renames waiting for the end of the innermost ``together`` block
-_PENDING: ContextVar[list[tuple[Path, Path]] | None] = ContextVar("dracc_atomic_pending", default=None)
+_PENDING: ContextVar[list[tuple[Path, Path]] | None] = ContextVar(
+    "dracc_atomic_pending", default=None
+)
 
 
 def _discard(tmp: Path) -> None:
@@ -339,7 +341,11 @@ def _publish_by_link(folder: Path, final: Path, names: list[str], flag: list) ->
     # what the new set no longer has: its link would lead nowhere
     for entry in os.listdir(folder):
         p = folder / entry
-        if entry not in names and os.path.islink(p) and os.readlink(p) == os.path.join(CURRENT, entry):
+        if (
+            entry not in names
+            and os.path.islink(p)
+            and os.readlink(p) == os.path.join(CURRENT, entry)
+        ):
             _discard(p)
     _collect(runs, {final.name, *([previous] if previous else [])})
 

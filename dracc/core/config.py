@@ -69,15 +69,23 @@ class IngestConfig:
 
 @dataclass(frozen=True)
 class DeadReckoningConfig:
-    learn: bool = True  #: learn the errors and the current from the reference, causally (dracc.math.ep)
+    learn: bool = (
+        True  #: learn the errors and the current from the reference, causally (dracc.math.ep)
+    )
     #: restart from a fix: "auto" (1 h on logs of 8 h or more, shorter on short logs), a
     #: duration ("1h", "4h", "30min"), "watch" (4 h) or "never"
     reset: str = "auto"
     fix_role: str = "gnss"  #: where restart fixes come from: "gnss", "ins_mean"
-    max_gap_s: float = 30.0  #: bridge heading/speed gaps up to this long; longer ones break the track
-    epoch_interval_s: float | None = None  #: spacing of reported DR epochs (None: 10 min, shorter for short resets)
+    max_gap_s: float = (
+        30.0  #: bridge heading/speed gaps up to this long; longer ones break the track
+    )
+    epoch_interval_s: float | None = (
+        None  #: spacing of reported DR epochs (None: 10 min, shorter for short resets)
+    )
     variation_deg: float | None = None  #: magnetic variation (east +) where the log has none
-    deviation_table: dict[str, float] = field(default_factory=dict)  #: heading_deg -> deviation_deg (east +)
+    deviation_table: dict[str, float] = field(
+        default_factory=dict
+    )  #: heading_deg -> deviation_deg (east +)
     # Error sources (METHODS §2, §6).  Defaults from IMO performance standards,
     # treating the standards' limits as 95 % bounds (sigma = limit / 1.96).
     compass_bias_deg: ErrorSource = ErrorSource(0.75 / 1.96, math.inf)
@@ -97,7 +105,9 @@ class DeviationConfig:
     offset_s: float = 0.0  #: sampling instants at offset + k*interval from 00:00 UTC
     window_s: float = 86400.0  #: statistics windows (per day by default)
     kurtosis_windows_s: tuple[float, ...] = (86400.0, 172800.0, 259200.0)
-    max_interp_gap_s: float = 120.0  #: a unit with no reading this close to an instant is missing there
+    max_interp_gap_s: float = (
+        120.0  #: a unit with no reading this close to an instant is missing there
+    )
     factor_lat: float = 1.32  #: (K5b) second approximation
     factor_lon: float = 1.49  #: empirical, Table 1
     factor_course: float = 1.49
@@ -106,7 +116,9 @@ class DeviationConfig:
     apriori: dict[str, dict[str, float]] = field(default_factory=dict)
     first_approximation: bool = False  #: (K5a) use sqrt(3/2) = 1.2247 for every channel instead
     confidence: float = 0.95  #: of the upper bound K_hm of an RMS (K8)
-    correlation_time_s: float = 18000.0  #: INS error correlation time (paper: 4-6 h) -> N_eff, blocks
+    correlation_time_s: float = (
+        18000.0  #: INS error correlation time (paper: 4-6 h) -> N_eff, blocks
+    )
     min_kurtosis_samples: int = 12  #: a kurtosis window with fewer samples gives no upper bound
     kurtosis_tol: float = 0.05  #: kurtosis marks of Table 1: '=' within this
     hat_confidence: float = 0.90  #: three-cornered-hat bootstrap interval
@@ -167,9 +179,13 @@ class Config:
 
 
 _KNOWN_EXTRA = {"audit", "fleet", "report", "vessel"}
-_SECTIONS: dict[str, type] = {"ingest": IngestConfig, "dead_reckoning": DeadReckoningConfig,
-                              "deviation": DeviationConfig, "faults": FaultsConfig,
-                              "integrity": IntegrityConfig}
+_SECTIONS: dict[str, type] = {
+    "ingest": IngestConfig,
+    "dead_reckoning": DeadReckoningConfig,
+    "deviation": DeviationConfig,
+    "faults": FaultsConfig,
+    "integrity": IntegrityConfig,
+}
 
 
 def _build(cls, table: dict, where: str):
@@ -184,8 +200,10 @@ def _build(cls, table: dict, where: str):
 def _no_unknown(table: dict, known, where: str) -> None:
     unknown = set(table) - set(known)
     if unknown:
-        raise ConfigError(f"[{where}] unknown key(s): {', '.join(sorted(map(str, unknown)))}; "
-                          f"known: {', '.join(sorted(known))}")
+        raise ConfigError(
+            f"[{where}] unknown key(s): {', '.join(sorted(map(str, unknown)))}; "
+            f"known: {', '.join(sorted(known))}"
+        )
 
 
 # --------------------------------------------------------------------------------------
@@ -236,7 +254,9 @@ _POS = _Rule(_POSITIVE)
 def _key(k) -> str:
     """A key as TOML writes it: bare where it can be, else quoted."""
     k = str(k)
-    return k if re.fullmatch(r"[A-Za-z0-9_-]+(\[[0-9]+\])?", k) else json.dumps(k, ensure_ascii=False)
+    return (
+        k if re.fullmatch(r"[A-Za-z0-9_-]+(\[[0-9]+\])?", k) else json.dumps(k, ensure_ascii=False)
+    )
 
 
 def _show(value) -> str:
@@ -318,8 +338,9 @@ def _error_source(value, section: str, key: str) -> ErrorSource:
     """An ErrorSource from a number (a bias), a table {sigma, tau_s} or an ErrorSource."""
     inner = f"{section}.{_key(key)}"
     if _is_number(value):
-        return ErrorSource(_number(value, section, key, _Range(">= 0 (the sigma of a bias)", 0.0)),
-                           math.inf)
+        return ErrorSource(
+            _number(value, section, key, _Range(">= 0 (the sigma of a bias)", 0.0)), math.inf
+        )
     if isinstance(value, ErrorSource):
         sigma, tau = value.sigma, value.tau_s
     elif isinstance(value, dict):
@@ -408,16 +429,19 @@ def _check_date(value: str | None, section: str, key: str) -> str | None:
 def _check_roles(table: dict[str, str], section: str, key: str) -> dict[str, str]:
     for src, role in table.items():
         if role not in ROLES:
-            raise ConfigError(f"[{section}.{key}] {src!r} = {role!r}: role must be one of "
-                              f"{', '.join(ROLES)}")
+            raise ConfigError(
+                f"[{section}.{key}] {src!r} = {role!r}: role must be one of {', '.join(ROLES)}"
+            )
     return table
 
 
 def _check_quantities(table: dict[str, str], section: str, key: str) -> dict[str, str]:
     for col, q in table.items():
         if q not in QUANTITIES:
-            raise ConfigError(f"[{section}.{key}] {_key(col)} = {q!r}: not a quantity name; "
-                              f"known: {', '.join(sorted(QUANTITIES))}")
+            raise ConfigError(
+                f"[{section}.{key}] {_key(col)} = {q!r}: not a quantity name; "
+                f"known: {', '.join(sorted(QUANTITIES))}"
+            )
     return table
 
 
@@ -444,8 +468,8 @@ def parse_reset_s(text: str | float) -> float:
         m = _DURATION.match(word)
         if not m:
             raise ConfigError(
-                f"[dead_reckoning] reset = {text!r}: expected a duration such as \"1h\", "
-                "\"30min\", \"90s\", or \"watch\" or \"never\""
+                f'[dead_reckoning] reset = {text!r}: expected a duration such as "1h", '
+                '"30min", "90s", or "watch" or "never"'
             )
         value = float(m.group(1)) * _UNIT_S[m.group(2).lower()]
     if not value > 0:
@@ -458,8 +482,13 @@ def _check_reset(value: str, section: str, key: str) -> str:
         try:
             parse_reset_s(value)
         except ConfigError:
-            raise _fail(section, key, value, 'expected "auto", "watch", "never" or a positive '
-                                             'duration such as "1h", "4h", "30min", "90s"') from None
+            raise _fail(
+                section,
+                key,
+                value,
+                'expected "auto", "watch", "never" or a positive '
+                'duration such as "1h", "4h", "30min", "90s"',
+            ) from None
     return value
 
 
@@ -468,6 +497,7 @@ def _one_of(*choices: str) -> Callable[[Any, str, str], Any]:
         if value not in choices:
             raise _fail(section, key, value, f"expected one of {', '.join(map(repr, choices))}")
         return value
+
     return check
 
 
@@ -482,12 +512,16 @@ def _check_deviation_table(table: dict[str, float], section: str, key: str) -> d
         except ValueError:
             h = math.nan
         if not 0.0 <= h <= 360.0:
-            raise ConfigError(f"[{where}] {_key(heading)} = {_show(dev)}: the key is a compass "
-                              "heading in degrees, a number in [0, 360]")
+            raise ConfigError(
+                f"[{where}] {_key(heading)} = {_show(dev)}: the key is a compass "
+                "heading in degrees, a number in [0, 360]"
+            )
         h %= 360.0
         if h in seen and seen[h][1] != dev:
-            raise ConfigError(f"[{where}] heading {_key(heading)} given twice with different "
-                              f"deviations (as {_key(seen[h][0])}; 0 and 360 are the same heading)")
+            raise ConfigError(
+                f"[{where}] heading {_key(heading)} given twice with different "
+                f"deviations (as {_key(seen[h][0])}; 0 and 360 are the same heading)"
+            )
         seen[h] = (heading, dev)
     return table
 
@@ -500,8 +534,10 @@ _APRIORI_KEYS = ("course_deg", "lat_m", "lon_m")
 def _check_apriori(table: dict[str, dict[str, float]], section: str, key: str):
     for unit, values in table.items():
         if unit not in INS_ROLES:
-            raise ConfigError(f"[{section}.{key}] {_key(unit)} = {_show(values)}: unit must be one "
-                              f"of {', '.join(INS_ROLES)}")
+            raise ConfigError(
+                f"[{section}.{key}] {_key(unit)} = {_show(values)}: unit must be one "
+                f"of {', '.join(INS_ROLES)}"
+            )
         _no_unknown(values, _APRIORI_KEYS, f"{section}.{key}.{_key(unit)}")
     return table
 
@@ -528,10 +564,22 @@ _RULES: dict[type, dict[str, _Rule]] = {
         "max_gap_s": _POS,
         "epoch_interval_s": _POS,
         "variation_deg": _Rule(_Range("within +-180 degrees (east +)", -180.0, 180.0)),
-        "deviation_table": _Rule(_Range("a deviation within +-180 degrees (east +)", -180.0, 180.0),
-                                 check=_check_deviation_table),
-        **dict.fromkeys(("compass_bias_deg", "compass_noise_deg", "log_scale", "log_bias_kn",
-                         "log_noise_kn", "current_kn", "leeway_deg"), _TYPE_ONLY),
+        "deviation_table": _Rule(
+            _Range("a deviation within +-180 degrees (east +)", -180.0, 180.0),
+            check=_check_deviation_table,
+        ),
+        **dict.fromkeys(
+            (
+                "compass_bias_deg",
+                "compass_noise_deg",
+                "log_scale",
+                "log_bias_kn",
+                "log_noise_kn",
+                "current_kn",
+                "leeway_deg",
+            ),
+            _TYPE_ONLY,
+        ),
         "fix_sigma_m": _POS,
     },
     DeviationConfig: {
@@ -557,15 +605,37 @@ _RULES: dict[type, dict[str, _Rule]] = {
     },
     FaultsConfig: {
         "exclude": _TYPE_ONLY,
-        **dict.fromkeys(("max_speed_kn", "jump_min_m", "frozen_min_s", "stuck_min_s",
-                         "moving_min_kn", "turn_min_deg", "max_rot_deg_per_min"), _POS),
+        **dict.fromkeys(
+            (
+                "max_speed_kn",
+                "jump_min_m",
+                "frozen_min_s",
+                "stuck_min_s",
+                "moving_min_kn",
+                "turn_min_deg",
+                "max_rot_deg_per_min",
+            ),
+            _POS,
+        ),
         "min_records": _Rule(_AT_LEAST_1),
     },
     IntegrityConfig: {
         "false_alarm": _Rule(_Range("a probability in (0, 0.5)", 0.0, 0.5, True, True)),
-        **dict.fromkeys(("latency_max_s", "spell_min_s", "dropout_cadences", "dropout_min_s",
-                         "frozen_min_s", "jump_floor_m", "consistency_interval_s",
-                         "consistency_max_gap_s", "heading_gate_min_deg", "velocity_gate_kn"), _POS),
+        **dict.fromkeys(
+            (
+                "latency_max_s",
+                "spell_min_s",
+                "dropout_cadences",
+                "dropout_min_s",
+                "frozen_min_s",
+                "jump_floor_m",
+                "consistency_interval_s",
+                "consistency_max_gap_s",
+                "heading_gate_min_deg",
+                "velocity_gate_kn",
+            ),
+            _POS,
+        ),
     },
 }
 
@@ -628,10 +698,13 @@ def config_from_dict(data: dict, where: str = "config") -> Config:
     """Build a validated Config from a parsed TOML document."""
     unknown = set(data) - set(_SECTIONS) - _KNOWN_EXTRA
     if unknown:
-        raise ConfigError(f"{where}: unknown section(s): {', '.join(sorted(unknown))}; "
-                          f"known: {', '.join(sorted(set(_SECTIONS) | _KNOWN_EXTRA))}")
-    kwargs: dict[str, Any] = {name: _build(cls, data[name], name)
-                              for name, cls in _SECTIONS.items() if name in data}
+        raise ConfigError(
+            f"{where}: unknown section(s): {', '.join(sorted(unknown))}; "
+            f"known: {', '.join(sorted(set(_SECTIONS) | _KNOWN_EXTRA))}"
+        )
+    kwargs: dict[str, Any] = {
+        name: _build(cls, data[name], name) for name, cls in _SECTIONS.items() if name in data
+    }
     kwargs["extra"] = {k: v for k, v in data.items() if k in _KNOWN_EXTRA}
     return validate(Config(**kwargs))
 

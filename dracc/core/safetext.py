@@ -36,8 +36,12 @@ def printable(text, keep: str = "") -> str:
     s = str(text)
     if s.isprintable():  # the common case, fast
         return s
-    return "".join(_escape(c) if c not in keep and (
-        unicodedata.category(c) in ("Cc", "Cs", "Zl", "Zp") or c in _BIDI) else c for c in s)
+    return "".join(
+        _escape(c)
+        if c not in keep and (unicodedata.category(c) in ("Cc", "Cs", "Zl", "Zp") or c in _BIDI)
+        else c
+        for c in s
+    )
 
 
 def csv_cell(value):

@@ -40,9 +40,14 @@ if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
     from dracc.core.config import IngestConfig
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
-_BINARY_MAGIC = {b"\xff\xd8\xff": "a JPEG image", b"\x89PNG": "a PNG image", b"PK\x03\x04": "a ZIP archive",
-                 b"%PDF": "a PDF document", b"\x1f\x8b": "a gzip file (decompress it first)",
-                 b"\x28\xb5\x2f\xfd": "a zstd file (decompress it first)"}
+_BINARY_MAGIC = {
+    b"\xff\xd8\xff": "a JPEG image",
+    b"\x89PNG": "a PNG image",
+    b"PK\x03\x04": "a ZIP archive",
+    b"%PDF": "a PDF document",
+    b"\x1f\x8b": "a gzip file (decompress it first)",
+    b"\x28\xb5\x2f\xfd": "a zstd file (decompress it first)",
+}
 
 __all__ = ["read_logs", "read_file", "detect_format", "assign_roles", "MCAP_MAGIC"]
 
@@ -68,20 +73,26 @@ def _damaged_container(head: bytes, tail: bytes) -> str | None:
     text mode: FTP ASCII, a Windows text editor, ``unix2dos``), its first byte changed
     (a 7-bit channel, a text re-encoding), or the magic at the end but not at the start."""
     k = head.find(b"MCAP0", 0, 8)
-    lead = head[:max(k, 0)]
+    lead = head[: max(k, 0)]
     if k >= 0 and (lead in _LEAD_DAMAGE or lead == b"\x89" or (len(lead) == 1 and lead[0] >= 0x80)):
-        after = head[k + 5:k + 8]
+        after = head[k + 5 : k + 8]
         if not lead and not after.startswith((b"\r\n", b"\n", b"\r\r\n")):
             return None  # text that happens to start with 'MCAP0'
         why = []
         if lead != b"\x89":
             why.append(_LEAD_DAMAGE.get(lead, f"its first byte is {lead!r}, not b'\\x89'"))
         if not after.startswith(b"\r\n"):
-            why.append(next((w for a, w in _MAGIC_DAMAGE.items() if after.startswith(a)),
-                            f"the magic ends in {after!r}, not b'\\r\\n'"))
+            why.append(
+                next(
+                    (w for a, w in _MAGIC_DAMAGE.items() if after.startswith(a)),
+                    f"the magic ends in {after!r}, not b'\\r\\n'",
+                )
+            )
         return "; ".join(why) or None
     if _FOOTER_MAGIC.search(tail):
-        return "the MCAP magic is at its end but not at its start: its beginning is missing or damaged"
+        return (
+            "the MCAP magic is at its end but not at its start: its beginning is missing or damaged"
+        )
     return None
 
 
@@ -102,8 +113,10 @@ def detect_format(path: str | Path) -> str:
         return "mcap"
     damage = _damaged_container(head, tail)
     if damage is not None:
-        raise IngestError(f"{p}: not readable: looks like an MCAP file damaged in transfer ({damage}); "
-                          "copy the original again in binary mode")
+        raise IngestError(
+            f"{p}: not readable: looks like an MCAP file damaged in transfer ({damage}); "
+            "copy the original again in binary mode"
+        )
     for magic, what in _BINARY_MAGIC.items():
         if head.startswith(magic):
             raise IngestError(f"{p}: not a log file: looks like {what}")
@@ -169,8 +182,7 @@ def _labels(col: pd.Series) -> tuple[np.ndarray, list[str]] | None:
     return codes, labels
 
 
-def summarize_frames(frames: dict[str, pd.DataFrame], file: str,
-                     into: dict | None = None) -> dict:
+def summarize_frames(frames: dict[str, pd.DataFrame], file: str, into: dict | None = None) -> dict:
     """:func:`sources.summarize`, counted on the categorical codes of the frames.
 
     The same :class:`SourceInfo` values, in the same order (sources in order of first
@@ -190,7 +202,9 @@ def summarize_frames(frames: dict[str, pd.DataFrame], file: str,
         ns, nt, nk = len(src_l), len(sent_l), len(talk_l)
         t = df["time_ns"].to_numpy()
         # one count per (source, sentence, talker); the rest are its sums
-        full = np.bincount((src * nt + sent) * nk + talk, minlength=ns * nt * nk).reshape(ns, nt, nk)
+        full = np.bincount((src * nt + sent) * nk + talk, minlength=ns * nt * nk).reshape(
+            ns, nt, nk
+        )
         records = full.sum(axis=(1, 2))
         if kind == "ground" and "RMC" in sent_l:  # an RMC is counted in its position row
             full[:, sent_l.index("RMC"), :] = 0
@@ -253,10 +267,24 @@ def read_logs(paths: list[Path], cfg: IngestConfig, progress=None) -> Voyage:
         te.decisions.extend(f"{Path(r.path).name}: {d}" for d in e.decisions)
         te.decisions.extend(f"{Path(r.path).name}: {n}" for n in r.notes)
         te.examples.extend(e.examples[:10])
-        inputs.append({"path": r.path, "format": r.format, "lines": r.lines, "records": r.records,
-                       "rejected": dict(Counter(r.rejects.counts)),
-                       "ignored": dict(Counter(r.ignored))})
+        inputs.append(
+            {
+                "path": r.path,
+                "format": r.format,
+                "lines": r.lines,
+                "records": r.records,
+                "rejected": dict(Counter(r.rejects.counts)),
+                "ignored": dict(Counter(r.ignored)),
+            }
+        )
     te.decisions.extend(identity_notes)
     te.decisions.extend(assign_roles(sources, dict(cfg.sources)))
-    return Voyage(frames=frames, sources=sources, rejects=rejects, time_events=te, inputs=inputs,
-                  lines=sum(r.lines for r in results), ignored=ignored)
+    return Voyage(
+        frames=frames,
+        sources=sources,
+        rejects=rejects,
+        time_events=te,
+        inputs=inputs,
+        lines=sum(r.lines for r in results),
+        ignored=ignored,
+    )

@@ -65,8 +65,17 @@ from dracc.ingest.csv_quantities import (
     renumber_examples,
 )
 
-TIME_COLUMNS = ("time_utc", "time_ns", "received_at", "timestamp", "time", "datetime", "date_time",
-                "utc", "log_time")
+TIME_COLUMNS = (
+    "time_utc",
+    "time_ns",
+    "received_at",
+    "timestamp",
+    "time",
+    "datetime",
+    "date_time",
+    "utc",
+    "log_time",
+)
 RAW_COLUMNS = ("raw_data", "raw", "nmea", "raw_sentence", "sentence_raw")
 _BLOCK_BYTES = 4 << 20
 
@@ -133,7 +142,11 @@ def parse_times(text: np.ndarray, column: str) -> tuple[np.ndarray, np.ndarray]:
     if rest.any():
         dt = pd.to_datetime(s[rest], utc=True, format="ISO8601", errors="coerce")
         good = dt.notna().to_numpy()
-        vals = dt[good].dt.as_unit("ns").astype("int64").to_numpy() if good.any() else np.zeros(0, np.int64)
+        vals = (
+            dt[good].dt.as_unit("ns").astype("int64").to_numpy()
+            if good.any()
+            else np.zeros(0, np.int64)
+        )
         idx = np.flatnonzero(rest)
         out[idx[good]] = vals
         ok[idx[good]] = True
@@ -227,18 +240,18 @@ def _scan(path: Path, max_line: int) -> _Scan:
                 if ok.any():
                     out.longest = max(out.longest, int(lens[ok].max()))
                 if start < at:  # the row that began in an earlier block ends here
-                    head += bytes(buf[:max(min(_HEAD - len(head), int(ends[0])), 0)])
+                    head += bytes(buf[: max(min(_HEAD - len(head), int(ends[0])), 0)])
                 for i in over.tolist():
                     a = int(starts[i]) + at
-                    first = head if i == 0 and a < at else bytes(buf[a - at:a - at + _HEAD])
+                    first = head if i == 0 and a < at else bytes(buf[a - at : a - at + _HEAD])
                     out.long_rows.append((line + i, a, int(ends[i]) + at + 1, int(lens[i]), first))
                 line += len(ends)
                 start = int(ends[-1]) + 1 + at
-                head = bytes(buf[start - at:start - at + _HEAD])
+                head = bytes(buf[start - at : start - at + _HEAD])
             elif start >= at:
-                head = bytes(buf[start - at:start - at + _HEAD])
+                head = bytes(buf[start - at : start - at + _HEAD])
             elif len(head) < _HEAD:
-                head += bytes(buf[:_HEAD - len(head)])
+                head += bytes(buf[: _HEAD - len(head)])
             at += len(buf)
             if eof:
                 break
@@ -283,11 +296,21 @@ class _Without(io.RawIOBase):
 
 
 _REPLACE_CODEC = "dracc-utf8-replace"
-codecs.register(lambda name: codecs.CodecInfo(
-    name=_REPLACE_CODEC, encode=codecs.utf_8_encode, decode=codecs.utf_8_decode,
-    incrementaldecoder=functools.partial(codecs.getincrementaldecoder("utf-8"), errors="replace"),
-    incrementalencoder=codecs.getincrementalencoder("utf-8"))
-    if name.replace("_", "-") == _REPLACE_CODEC else None)
+codecs.register(
+    lambda name: (
+        codecs.CodecInfo(
+            name=_REPLACE_CODEC,
+            encode=codecs.utf_8_encode,
+            decode=codecs.utf_8_decode,
+            incrementaldecoder=functools.partial(
+                codecs.getincrementaldecoder("utf-8"), errors="replace"
+            ),
+            incrementalencoder=codecs.getincrementalencoder("utf-8"),
+        )
+        if name.replace("_", "-") == _REPLACE_CODEC
+        else None
+    )
+)
 
 
 def _iter_blocks(path: Path, cols: list[str], rejects: Rejects, file: str, scan: _Scan):
@@ -315,12 +338,19 @@ def _iter_blocks(path: Path, cols: list[str], rejects: Rejects, file: str, scan:
         reader = pcsv.open_csv(
             source,
             # a row must fit in one block (pyarrow): the longest row read sets the least size
-            read_options=pcsv.ReadOptions(block_size=max(_BLOCK_BYTES, 2 * scan.longest + 64),
-                                          use_threads=False, encoding=scan.encoding),
-            parse_options=pcsv.ParseOptions(invalid_row_handler=on_invalid, ignore_empty_lines=False,
-                                            newlines_in_values=False),
-            convert_options=pcsv.ConvertOptions(column_types={c: pa.string() for c in cols},
-                                                strings_can_be_null=False, quoted_strings_can_be_null=False),
+            read_options=pcsv.ReadOptions(
+                block_size=max(_BLOCK_BYTES, 2 * scan.longest + 64),
+                use_threads=False,
+                encoding=scan.encoding,
+            ),
+            parse_options=pcsv.ParseOptions(
+                invalid_row_handler=on_invalid, ignore_empty_lines=False, newlines_in_values=False
+            ),
+            convert_options=pcsv.ConvertOptions(
+                column_types={c: pa.string() for c in cols},
+                strings_can_be_null=False,
+                quoted_strings_can_be_null=False,
+            ),
             memory_pool=pa.system_memory_pool(),  # freed blocks go back to the C heap (see mcap)
         )
     except (pa.ArrowInvalid, OSError) as err:
@@ -335,8 +365,10 @@ def _iter_blocks(path: Path, cols: list[str], rejects: Rejects, file: str, scan:
                 continue
             lines = _line_numbers(k0, n, invalid)
             k0 += n
-            data = {name: batch.column(i).to_numpy(zero_copy_only=False).astype(object)
-                    for i, name in enumerate(batch.schema.names)}
+            data = {
+                name: batch.column(i).to_numpy(zero_copy_only=False).astype(object)
+                for i, name in enumerate(batch.schema.names)
+            }
             yield data, lines
     except pa.ArrowInvalid as err:
         raise IngestError(f"{file}: CSV damaged after line {k0 + 1 + len(invalid)}: {err}") from err
@@ -345,7 +377,9 @@ def _iter_blocks(path: Path, cols: list[str], rejects: Rejects, file: str, scan:
             source.close()
 
 
-def _drop_blank(data: dict, lines: np.ndarray, rejects: Rejects, file: str) -> tuple[dict, np.ndarray]:
+def _drop_blank(
+    data: dict, lines: np.ndarray, rejects: Rejects, file: str
+) -> tuple[dict, np.ndarray]:
     blank = np.ones(len(lines), dtype=bool)
     for v in data.values():
         blank &= v == ""
@@ -372,19 +406,25 @@ def _nan_text(text: np.ndarray, where: np.ndarray) -> np.ndarray:
     out = np.zeros(len(text), dtype=bool)
     idx = np.flatnonzero(where)
     if len(idx):
-        out[idx] = np.fromiter((isinstance(x, str) and len(x) == 3 and x.lower() == "nan"
-                                for x in text[idx].tolist()), dtype=bool, count=len(idx))
+        out[idx] = np.fromiter(
+            (isinstance(x, str) and len(x) == 3 and x.lower() == "nan" for x in text[idx].tolist()),
+            dtype=bool,
+            count=len(idx),
+        )
     return out
 
 
-def _numbers(text: np.ndarray, lines: np.ndarray, name: str, rejects: Rejects, file: str) -> np.ndarray:
+def _numbers(
+    text: np.ndarray, lines: np.ndarray, name: str, rejects: Rejects, file: str
+) -> np.ndarray:
     """Floats from strings: '' is absent (NaN); anything else non-numeric is counted."""
     v = pd.to_numeric(pd.Series(text, dtype=object), errors="coerce").to_numpy(dtype=np.float64)
     maybe = np.isnan(v) & (text != "")
     bad = maybe & ~_nan_text(text, maybe)
     if bad.any():
-        add_rejects(rejects, "value not a number", file, lines[bad],
-                    [f"{name}={x}" for x in text[bad][:5]])
+        add_rejects(
+            rejects, "value not a number", file, lines[bad], [f"{name}={x}" for x in text[bad][:5]]
+        )
     return v
 
 
@@ -406,8 +446,10 @@ def read_csv(path, cfg: IngestConfig) -> FileResult:
     cols = _split_header(head)
     if not cols or _find(cols, TIME_COLUMNS) is None:
         first = head.split(b"\n", 1)[0][:80].decode("utf-8", "replace")
-        raise IngestError(f"{file}:1: not a dracc CSV header (needs a time column such as "
-                          f"time_utc, and quantity,value or quantity columns): {first!r}")
+        raise IngestError(
+            f"{file}:1: not a dracc CSV header (needs a time column such as "
+            f"time_utc, and quantity,value or quantity columns): {first!r}"
+        )
     if len(set(cols)) != len(cols):
         raise IngestError(f"{file}:1: repeated column name in header")
     if len(head) == 65536 and b"\n" not in head and b"\r" not in head:
@@ -422,17 +464,23 @@ def read_csv(path, cfg: IngestConfig) -> FileResult:
         raise IngestError(f"{file}: cannot read: {err}") from err
     if scan.long_rows:
         if scan.long_rows[0][0] == 1:
-            raise IngestError(f"{file}:1: header line of {scan.long_rows[0][3]} bytes, longer than "
-                              f"[ingest] max_line_bytes = {limit}")
+            raise IngestError(
+                f"{file}:1: header line of {scan.long_rows[0][3]} bytes, longer than "
+                f"[ingest] max_line_bytes = {limit}"
+            )
         for ln, _a, _b, n, first in scan.long_rows:
             rejects.add("too_long", file, ln, f"{first.decode('utf-8', 'replace')}... ({n} bytes)")
-        notes.append(f"{file}: {len(scan.long_rows)} row(s) longer than [ingest] max_line_bytes = {limit} "
-                     f"bytes left out (too_long; the longest {max(r[3] for r in scan.long_rows)} bytes, "
-                     f"first at line {scan.long_rows[0][0]})")
+        notes.append(
+            f"{file}: {len(scan.long_rows)} row(s) longer than [ingest] max_line_bytes = {limit} "
+            f"bytes left out (too_long; the longest {max(r[3] for r in scan.long_rows)} bytes, "
+            f"first at line {scan.long_rows[0][0]})"
+        )
         if cfg.strict:
             ln, n = scan.long_rows[0][0], scan.long_rows[0][3]
-            raise IngestError(f"{file}:{ln}: too_long: a row of {n} bytes, over [ingest] max_line_bytes = "
-                              f"{limit} (--strict)")
+            raise IngestError(
+                f"{file}:{ln}: too_long: a row of {n} bytes, over [ingest] max_line_bytes = "
+                f"{limit} (--strict)"
+            )
     if form == "csv-long":
         frames, rows = _read_long(p, cols, declared, rejects, file, scan)
     elif form == "csv-wide":
@@ -445,7 +493,9 @@ def read_csv(path, cfg: IngestConfig) -> FileResult:
         raise IngestError(f"{f}:{line}: {reason}: {text!r} (--strict)")
     if not frames:
         notes.append(f"{file}: no navigation records ({rows} rows read)")
-    return FileResult(path=file, format=form, frames=frames, lines=rows, rejects=rejects, notes=notes)
+    return FileResult(
+        path=file, format=form, frames=frames, lines=rows, rejects=rejects, notes=notes
+    )
 
 
 class _Labels:
@@ -457,7 +507,9 @@ class _Labels:
 
     def codes(self, text: np.ndarray) -> np.ndarray:
         local, uniq = pd.factorize(text)
-        lut = np.array([self.code.setdefault(str(u), len(self.code)) for u in uniq] or [0], dtype=np.int32)
+        lut = np.array(
+            [self.code.setdefault(str(u), len(self.code)) for u in uniq] or [0], dtype=np.int32
+        )
         return lut[local]
 
     def labels(self) -> np.ndarray:
@@ -488,14 +540,23 @@ def _read_long(p: Path, cols: list[str], declared: dict, rejects: Rejects, file:
     return frames, rows
 
 
-def _read_long_pass(p: Path, cols: list[str], declared: dict, rejects: Rejects, file: str,
-                    scan: _Scan, streaming: bool):
+def _read_long_pass(
+    p: Path,
+    cols: list[str],
+    declared: dict,
+    rejects: Rejects,
+    file: str,
+    scan: _Scan,
+    streaming: bool,
+):
     tcol = _find(cols, TIME_COLUMNS)
     scol = _find(cols, ("source",))
     qcol = _find(cols, ("quantity",))
     vcol = _find(cols, ("value",))
     sources, quantities = _Labels(), _Labels()
-    held: list[tuple] = []  #: rows not yet made into records: (t, source, quantity, value, line, reference text)
+    held: list[
+        tuple
+    ] = []  #: rows not yet made into records: (t, source, quantity, value, line, reference text)
     parts: list[dict[str, pd.DataFrame]] = []
     done_upto: int | None = None  #: the latest time made into records (streaming)
     rows = 0
@@ -509,11 +570,15 @@ def _read_long_pass(p: Path, cols: list[str], declared: dict, rejects: Rejects, 
         known = np.isin(qmapped, list(QUANTITIES))
         unk = ok & ~known
         if unk.any():
-            add_rejects(rejects, "unknown quantity", file, lines[unk], [str(q) for q in qname[unk][:5]])
+            add_rejects(
+                rejects, "unknown quantity", file, lines[unk], [str(q) for q in qname[unk][:5]]
+            )
         val = data[vcol]
         empty = ok & known & (val == "")
         if empty.any():
-            add_rejects(rejects, "empty value", file, lines[empty], [str(q) for q in qname[empty][:5]])
+            add_rejects(
+                rejects, "empty value", file, lines[empty], [str(q) for q in qname[empty][:5]]
+            )
         keep = ok & known & ~empty
         isref = np.isin(qmapped, list(REF_QUANTITIES))
         num = np.full(len(val), np.nan)
@@ -527,7 +592,14 @@ def _read_long_pass(p: Path, cols: list[str], declared: dict, rejects: Rejects, 
         if len(k) == 0:
             continue
         ref = np.where(isref[k], val[k], None)
-        block = (t_ns[k], sources.codes(src[k]), quantities.codes(qmapped[k]), num[k], lines[k], ref)
+        block = (
+            t_ns[k],
+            sources.codes(src[k]),
+            quantities.codes(qmapped[k]),
+            num[k],
+            lines[k],
+            ref,
+        )
         if not streaming:
             held.append(block)
             continue
@@ -537,7 +609,9 @@ def _read_long_pass(p: Path, cols: list[str], declared: dict, rejects: Rejects, 
         t_last = rows_now[0].max()
         complete = rows_now[0] < t_last
         if complete.any():
-            parts.append(_records(*(x[complete] for x in rows_now), sources, quantities, file, rejects))
+            parts.append(
+                _records(*(x[complete] for x in rows_now), sources, quantities, file, rejects)
+            )
             done_upto = int(rows_now[0][complete].max())
         held = [tuple(x[~complete] for x in rows_now)]
     if held and len(held[0][0]):
@@ -547,8 +621,18 @@ def _read_long_pass(p: Path, cols: list[str], declared: dict, rejects: Rejects, 
     return _sorted(concat_blocks(parts, every_kind=False)), rows
 
 
-def _records(t_ns, sc, qc, num, lines, ref, sources: _Labels, quantities: _Labels, file: str,
-             rejects: Rejects) -> dict[str, pd.DataFrame]:
+def _records(
+    t_ns,
+    sc,
+    qc,
+    num,
+    lines,
+    ref,
+    sources: _Labels,
+    quantities: _Labels,
+    file: str,
+    rejects: Rejects,
+) -> dict[str, pd.DataFrame]:
     """Frames from long-form rows: one record per (time, source, occurrence), the n-th value
     of a quantity at one time and source belonging to the n-th record there (a GGA and an
     RMC fix of one receiver at one time)."""
@@ -592,12 +676,21 @@ def _occurrence(t: np.ndarray, s: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 def _sorted(frames: dict[str, pd.DataFrame]) -> dict[str, pd.DataFrame]:
-    return {k: f.sort_values(["time_ns", "line"], kind="stable").reset_index(drop=True)
-            for k, f in frames.items()}
+    return {
+        k: f.sort_values(["time_ns", "line"], kind="stable").reset_index(drop=True)
+        for k, f in frames.items()
+    }
 
 
-def _read_wide(p: Path, cols: list[str], declared: dict, rejects: Rejects, notes: list[str], file: str,
-               scan: _Scan):
+def _read_wide(
+    p: Path,
+    cols: list[str],
+    declared: dict,
+    rejects: Rejects,
+    notes: list[str],
+    file: str,
+    scan: _Scan,
+):
     tcol = _find(cols, TIME_COLUMNS)
     scol = _find(cols, ("source",))
     qcols: dict[str, str] = {}
@@ -611,12 +704,20 @@ def _read_wide(p: Path, cols: list[str], declared: dict, rejects: Rejects, notes
         else:
             qcols[c] = q.name
     for c in ignored:
-        hint = (" (a quantity without its unit: name the column e.g. sog_kn, or declare it in "
-                "[ingest] quantities)") if c.lower() in UNITLESS_HINTS else ""
+        hint = (
+            (
+                " (a quantity without its unit: name the column e.g. sog_kn, or declare it in "
+                "[ingest] quantities)"
+            )
+            if c.lower() in UNITLESS_HINTS
+            else ""
+        )
         notes.append(f"{file}: column {c!r} ignored: not a quantity name{hint}")
     if not qcols:
-        raise IngestError(f"{file}:1: no column names a quantity (e.g. lat_deg, heading_deg, stw_kn); "
-                          f"columns: {', '.join(cols)}")
+        raise IngestError(
+            f"{file}:1: no column names a quantity (e.g. lat_deg, heading_deg, stw_kn); "
+            f"columns: {', '.join(cols)}"
+        )
     parts: list[tuple] = []
     rows = 0
     for data, lines in _iter_blocks(p, cols, rejects, file, scan):
@@ -637,8 +738,15 @@ def _read_wide(p: Path, cols: list[str], declared: dict, rejects: Rejects, notes
     return _sorted(concat_blocks(parts, every_kind=False)), rows
 
 
-def _read_raw(p: Path, cols: list[str], cfg: IngestConfig, rejects: Rejects, notes: list[str],
-              file: str, scan: _Scan) -> FileResult:
+def _read_raw(
+    p: Path,
+    cols: list[str],
+    cfg: IngestConfig,
+    rejects: Rejects,
+    notes: list[str],
+    file: str,
+    scan: _Scan,
+) -> FileResult:
     from dracc.ingest.nmea import parse_sentences
 
     tcol = _find(cols, TIME_COLUMNS)
@@ -657,11 +765,16 @@ def _read_raw(p: Path, cols: list[str], cfg: IngestConfig, rejects: Rejects, not
         data, lines = _drop_blank(data, lines, rejects, file)
         keep = np.ones(len(lines), dtype=bool)
         if pcol:  # valid rows of a protocol dracc does not decode: ignored, not rejected
-            n2k = np.fromiter(("2000" in x for x in data[pcol].tolist()), dtype=bool, count=len(lines))
+            n2k = np.fromiter(
+                ("2000" in x for x in data[pcol].tolist()), dtype=bool, count=len(lines)
+            )
             if n2k.any():
                 n2k_rows += int(n2k.sum())
-                for ln, x in zip(lines[n2k][:max(0, 3 - len(n2k_examples))].tolist(),
-                                 data[rcol][n2k][:3].tolist(), strict=False):
+                for ln, x in zip(
+                    lines[n2k][: max(0, 3 - len(n2k_examples))].tolist(),
+                    data[rcol][n2k][:3].tolist(),
+                    strict=False,
+                ):
                     n2k_examples.append((file, int(ln), str(x)[:120]))
             keep &= ~n2k
         empty = keep & (data[rcol] == "")
@@ -671,7 +784,9 @@ def _read_raw(p: Path, cols: list[str], cfg: IngestConfig, rejects: Rejects, not
         t_ns, ok = parse_times(data[tcol], tcol)
         bad = keep & ~ok
         if bad.any():
-            add_rejects(rejects, "bad time", file, lines[bad], [str(x) for x in data[tcol][bad][:5]])
+            add_rejects(
+                rejects, "bad time", file, lines[bad], [str(x) for x in data[tcol][bad][:5]]
+            )
         keep &= ok
         all_lines.extend(s.encode("utf-8", "replace") for s in data[rcol][keep])
         times.append(t_ns[keep])
@@ -688,8 +803,10 @@ def _read_raw(p: Path, cols: list[str], cfg: IngestConfig, rejects: Rejects, not
             f["line"] = where[f["line"].to_numpy(dtype=np.int64) - 1]
             res.frames[kind] = f
     renumber_examples(res.rejects, where)
-    res.ignored_examples = {k: [(f, int(where[ln - 1]) if 1 <= ln <= len(where) else ln, t) for f, ln, t in ex]
-                            for k, ex in res.ignored_examples.items()}
+    res.ignored_examples = {
+        k: [(f, int(where[ln - 1]) if 1 <= ln <= len(where) else ln, t) for f, ln, t in ex]
+        for k, ex in res.ignored_examples.items()
+    }
     if n2k_rows:
         res.ignored["NMEA 2000"] += n2k_rows
         res.ignored_examples["NMEA 2000"] = n2k_examples

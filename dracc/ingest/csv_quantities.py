@@ -111,8 +111,23 @@ QUANTITIES: dict[str, Quantity] = _build_table()
 REF_QUANTITIES = frozenset(n for n, q in QUANTITIES.items() if q.column == "reference")
 
 #: names that look like a physical quantity but carry no unit: a hint for the user
-UNITLESS_HINTS = {"lat", "lon", "latitude", "longitude", "heading", "hdg", "course", "cog",
-                  "speed", "sog", "stw", "rot", "alt", "altitude", "distance"}
+UNITLESS_HINTS = {
+    "lat",
+    "lon",
+    "latitude",
+    "longitude",
+    "heading",
+    "hdg",
+    "course",
+    "cog",
+    "speed",
+    "sog",
+    "stw",
+    "rot",
+    "alt",
+    "altitude",
+    "distance",
+}
 
 _SPEED_MAX_MPS = 100.0
 
@@ -135,8 +150,10 @@ def check_declared(declared: dict[str, str], where: str) -> None:
 
     for col, q in declared.items():
         if q not in QUANTITIES:
-            raise ConfigError(f"[ingest.quantities] {col!r} = {q!r}: not a quantity name "
-                              f"({where}); known: {', '.join(sorted(QUANTITIES))}")
+            raise ConfigError(
+                f"[ingest.quantities] {col!r} = {q!r}: not a quantity name "
+                f"({where}); known: {', '.join(sorted(QUANTITIES))}"
+            )
 
 
 def _valid_mask(column: str, v: np.ndarray) -> np.ndarray:
@@ -164,7 +181,9 @@ def _valid_mask(column: str, v: np.ndarray) -> np.ndarray:
     return ok | nan
 
 
-def add_rejects(rejects: Rejects, reason: str, file: str, lines: np.ndarray, texts: list[str]) -> None:
+def add_rejects(
+    rejects: Rejects, reason: str, file: str, lines: np.ndarray, texts: list[str]
+) -> None:
     """Count ``len(lines)`` rejects of one reason, keeping the first few as examples."""
     n = len(lines)
     if n == 0:
@@ -185,9 +204,17 @@ def _labels(x, n: int):
     return np.asarray(x, dtype=object)
 
 
-def build_frames(time_ns: np.ndarray, source, line: np.ndarray, sentence,
-                 values: dict[str, np.ndarray], file: str, rejects: Rejects,
-                 talker=None, recv_ns: np.ndarray | None = None) -> dict[str, pd.DataFrame]:
+def build_frames(
+    time_ns: np.ndarray,
+    source,
+    line: np.ndarray,
+    sentence,
+    values: dict[str, np.ndarray],
+    file: str,
+    rejects: Rejects,
+    talker=None,
+    recv_ns: np.ndarray | None = None,
+) -> dict[str, pd.DataFrame]:
     """Canonical frames from records given as quantity columns.
 
     ``values`` maps quantity names (``lat_deg``, ``stw_kn``, ...) to float arrays (or, for
@@ -207,8 +234,11 @@ def build_frames(time_ns: np.ndarray, source, line: np.ndarray, sentence,
         q = QUANTITIES[name]
         cols = by_kind.setdefault(q.kind, {})
         if q.column == "reference":
-            ref, bad = (normalize_boolean(arr, BOOLEAN_FIELDS[name]) if name in BOOLEAN_FIELDS
-                        else normalize_reference(arr))
+            ref, bad = (
+                normalize_boolean(arr, BOOLEAN_FIELDS[name])
+                if name in BOOLEAN_FIELDS
+                else normalize_reference(arr)
+            )
             if "reference" in cols:  # two fields give it: they must agree
                 prev = cols["reference"]
                 clash = (prev != None) & (ref != None) & (prev != ref)  # noqa: E711
@@ -221,8 +251,9 @@ def build_frames(time_ns: np.ndarray, source, line: np.ndarray, sentence,
             if bad.any():
                 idx = np.flatnonzero(bad)
                 raw = np.asarray(arr, dtype=object)
-                add_rejects(rejects, REJECT_REASON, file, line[idx],
-                            [f"{name}={raw[i]!r}" for i in idx[:5]])
+                add_rejects(
+                    rejects, REJECT_REASON, file, line[idx], [f"{name}={raw[i]!r}" for i in idx[:5]]
+                )
             continue
         v = np.asarray(arr, dtype=np.float64) * q.factor
         if q.column in cols:
@@ -230,8 +261,13 @@ def build_frames(time_ns: np.ndarray, source, line: np.ndarray, sentence,
             both = ~np.isnan(prev) & ~np.isnan(v)
             if both.any():
                 idx = np.flatnonzero(both)
-                add_rejects(rejects, f"{q.column} given twice in different units", file,
-                            line[idx], [f"{name}" for _ in idx[:5]])
+                add_rejects(
+                    rejects,
+                    f"{q.column} given twice in different units",
+                    file,
+                    line[idx],
+                    [f"{name}" for _ in idx[:5]],
+                )
                 v = np.where(both, np.nan, v)
                 prev = np.where(both, np.nan, prev)
             cols[q.column] = np.where(np.isnan(prev), v, prev)
@@ -255,24 +291,38 @@ def build_frames(time_ns: np.ndarray, source, line: np.ndarray, sentence,
             half = present & (np.isnan(lat) | np.isnan(lon))
             if half.any():
                 idx = np.flatnonzero(half)
-                add_rejects(rejects, "position without both lat and lon", file, line[idx],
-                            [str(src[i]) for i in idx[:5]])
+                add_rejects(
+                    rejects,
+                    "position without both lat and lon",
+                    file,
+                    line[idx],
+                    [str(src[i]) for i in idx[:5]],
+                )
             keep &= ~half
         for c, v in numeric.items():
             bad = keep & ~_valid_mask(c, v)
             if bad.any():
                 idx = np.flatnonzero(bad)
-                add_rejects(rejects, f"{c} out of range", file, line[idx],
-                            [f"{c}={v[i]:.6g} (canonical unit)" for i in idx[:5]])
+                add_rejects(
+                    rejects,
+                    f"{c} out of range",
+                    file,
+                    line[idx],
+                    [f"{c}={v[i]:.6g} (canonical unit)" for i in idx[:5]],
+                )
                 keep &= ~bad
         if ref_bad is not None:
             keep &= ~ref_bad  # counted above: never read as true or magnetic by accident
         if not keep.any():
             continue
         idx = np.flatnonzero(keep)
-        data: dict[str, object] = {"time_ns": np.asarray(time_ns)[idx], "source": src[idx],
-                                   "sentence": sen[idx], "line": np.asarray(line)[idx],
-                                   "talker": tal[idx]}
+        data: dict[str, object] = {
+            "time_ns": np.asarray(time_ns)[idx],
+            "source": src[idx],
+            "sentence": sen[idx],
+            "line": np.asarray(line)[idx],
+            "talker": tal[idx],
+        }
         for c, v in numeric.items():
             v = v[idx]
             if c in ("heading_rad", "cog_rad"):
@@ -320,5 +370,6 @@ def renumber_examples(rejects: Rejects, numbers: np.ndarray) -> None:
     """Rewrite reject examples numbered by position in a list of sentences (1-based) to the
     numbers of their origin (CSV line, MCAP message), in place."""
     for reason, ex in rejects.examples.items():
-        rejects.examples[reason] = [(f, int(numbers[ln - 1]) if 1 <= ln <= len(numbers) else ln, t)
-                                    for f, ln, t in ex]
+        rejects.examples[reason] = [
+            (f, int(numbers[ln - 1]) if 1 <= ln <= len(numbers) else ln, t) for f, ln, t in ex
+        ]

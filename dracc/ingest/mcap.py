@@ -113,18 +113,37 @@ _WINDOW = 8 << 20
 _TOPLEVEL_FLUSH = 20000
 _CHUNK_NOTES = 10  #: rejected chunks noted one by one (all are counted in the rejects)
 _JSON_BATCH = 50000  #: JSON messages of one channel parsed together
-_JSON_QUEUED = 50000  #: JSON messages of all channels waiting to be parsed (the largest queue goes first)
+_JSON_QUEUED = (
+    50000  #: JSON messages of all channels waiting to be parsed (the largest queue goes first)
+)
 _TRIM_RECORDS = 200_000  #: records moved into the stores between two trims of the C heap
 _NMEA_CHUNK = 100_000  #: raw NMEA sentences gathered before they are parsed
-_PIECE_RECORDS = 50_000  #: decoded records of a channel kept as columns before becoming a frame piece
-_PENDING_RECORDS = 100_000  #: decoded records of all channels kept as columns (the largest one goes first)
+_PIECE_RECORDS = (
+    50_000  #: decoded records of a channel kept as columns before becoming a frame piece
+)
+_PENDING_RECORDS = (
+    100_000  #: decoded records of all channels kept as columns (the largest one goes first)
+)
 
 _OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 1, 2, 3, 4, 5, 6
 _OP_DATA_END = 0x0F
-_OP_NAMES = {1: "Header", 2: "Footer", 3: "Schema", 4: "Channel", 5: "Message", 6: "Chunk",
-             7: "MessageIndex", 8: "ChunkIndex", 9: "Attachment", 10: "AttachmentIndex",
-             11: "Statistics", 12: "Metadata", 13: "MetadataIndex", 14: "SummaryOffset",
-             15: "DataEnd"}
+_OP_NAMES = {
+    1: "Header",
+    2: "Footer",
+    3: "Schema",
+    4: "Channel",
+    5: "Message",
+    6: "Chunk",
+    7: "MessageIndex",
+    8: "ChunkIndex",
+    9: "Attachment",
+    10: "AttachmentIndex",
+    11: "Statistics",
+    12: "Metadata",
+    13: "MetadataIndex",
+    14: "SummaryOffset",
+    15: "DataEnd",
+}
 _MSG_HEAD = struct.Struct("<HIQQ")
 _REC_HEAD = struct.Struct("<BQ")
 
@@ -211,7 +230,9 @@ class _Reader:
         self.queued = 0  #: JSON messages of all channels waiting to be parsed
         self.untrimmed = 0  #: records moved into the stores since the C heap was last trimmed
         self.chunk_no = 0  #: chunks met so far (numbered from 1 in notes and rejects)
-        self.chunks_rejected: dict[str, int] = {}  #: reason -> chunks none of whose messages was read
+        self.chunks_rejected: dict[
+            str, int
+        ] = {}  #: reason -> chunks none of whose messages was read
 
     # ---------------------------------------------------------------- records
     def run(self) -> None:
@@ -232,33 +253,43 @@ class _Reader:
             while True:
                 if pos + 9 > size:
                     if pos < size:
-                        self.notes.append(f"{self.file}: file ends at byte {size} inside a record "
-                                          f"header at byte {pos} (recording cut short); every "
-                                          f"complete message before it was read")
+                        self.notes.append(
+                            f"{self.file}: file ends at byte {size} inside a record "
+                            f"header at byte {pos} (recording cut short); every "
+                            f"complete message before it was read"
+                        )
                     else:
-                        self.notes.append(f"{self.file}: file ends at byte {size} without a footer "
-                                          f"(recording cut short); every message before it was read")
+                        self.notes.append(
+                            f"{self.file}: file ends at byte {size} without a footer "
+                            f"(recording cut short); every message before it was read"
+                        )
                     break
                 fh.seek(pos)
                 op, ln = _REC_HEAD.unpack(fh.read(9))
                 body_at = pos + 9
                 if op == 0 or (op > 0x0F and op < 0x80):
-                    self.notes.append(f"{self.file}: damaged at byte {pos}: invalid record opcode "
-                                      f"0x{op:02x}; reading stopped, messages before it kept")
+                    self.notes.append(
+                        f"{self.file}: damaged at byte {pos}: invalid record opcode "
+                        f"0x{op:02x}; reading stopped, messages before it kept"
+                    )
                     break
                 cut = body_at + ln > size
                 if cut and op != _OP_CHUNK:
-                    self.notes.append(f"{self.file}: file ends at byte {size} inside a "
-                                      f"{_OP_NAMES.get(op, 'record')} record starting at byte {pos} "
-                                      f"(needs {ln} bytes); every complete message before it was read")
+                    self.notes.append(
+                        f"{self.file}: file ends at byte {size} inside a "
+                        f"{_OP_NAMES.get(op, 'record')} record starting at byte {pos} "
+                        f"(needs {ln} bytes); every complete message before it was read"
+                    )
                     break
                 if op == _OP_CHUNK:
                     self._chunk(fh, body_at, ln, size)
                     if cut:
-                        self.notes.append(f"{self.file}: file ends at byte {size} inside a Chunk record "
-                                          f"starting at byte {pos} (it would end at byte "
-                                          f"{body_at + ln}); the complete messages in it before the "
-                                          f"cut were read")
+                        self.notes.append(
+                            f"{self.file}: file ends at byte {size} inside a Chunk record "
+                            f"starting at byte {pos} (it would end at byte "
+                            f"{body_at + ln}); the complete messages in it before the "
+                            f"cut were read"
+                        )
                         break
                 elif op in (_OP_SCHEMA, _OP_CHANNEL) or (op == _OP_MESSAGE and not ended):
                     # the summary repeats schemas and channels, and may hold channels without messages
@@ -283,11 +314,17 @@ class _Reader:
         ``max_chunk_bytes``: not read, counted (``record_too_large``)."""
         if op == _OP_MESSAGE:
             self.msg_no += 1
-        self.rejects.add("record_too_large", self.file, self.msg_no if op == _OP_MESSAGE else 0,
-                         f"{_OP_NAMES[op]} record at byte {pos}: {ln:,} bytes, over [ingest] max_chunk_bytes "
-                         f"= {int(self.cfg.max_chunk_bytes):,}")
-        self.notes.append(f"{self.file}: {_OP_NAMES[op]} record at byte {pos} of {ln:,} bytes not read "
-                          f"(record_too_large)")
+        self.rejects.add(
+            "record_too_large",
+            self.file,
+            self.msg_no if op == _OP_MESSAGE else 0,
+            f"{_OP_NAMES[op]} record at byte {pos}: {ln:,} bytes, over [ingest] max_chunk_bytes "
+            f"= {int(self.cfg.max_chunk_bytes):,}",
+        )
+        self.notes.append(
+            f"{self.file}: {_OP_NAMES[op]} record at byte {pos} of {ln:,} bytes not read "
+            f"(record_too_large)"
+        )
 
     def _crc_of(self, fh, start: int, end: int) -> int:
         """CRC32 of the file's bytes ``start`` to ``end``, read ``_PIECE`` at a time."""
@@ -318,8 +355,9 @@ class _Reader:
         why = f"data section CRC32 {got:08x}, the DataEnd record at byte {pos} says {want:08x}"
         if not self.chunks_rejected.get("chunk_crc"):
             self.rejects.add("data_section_crc", self.file, 0, why)
-        self.notes.append(f"{self.file}: {why}: the file was altered or damaged (what could be read is "
-                          f"kept)")
+        self.notes.append(
+            f"{self.file}: {why}: the file was altered or damaged (what could be read is kept)"
+        )
 
     def _check_summary_crc(self, fh, pos: int, ln: int) -> None:
         """The Footer's ``summary_crc`` (0: not computed): the CRC32 from the summary's
@@ -359,7 +397,9 @@ class _Reader:
                 if len(self.top_msgs) >= _TOPLEVEL_FLUSH:
                     self._flush_top()
         except (McapError, struct.error, UnicodeDecodeError, ValueError) as err:
-            self.notes.append(f"{self.file}: damaged {_OP_NAMES[op]} record at byte {pos} skipped ({err})")
+            self.notes.append(
+                f"{self.file}: damaged {_OP_NAMES[op]} record at byte {pos} skipped ({err})"
+            )
 
     def _flush_top(self) -> None:
         if not self.top_msgs:
@@ -396,31 +436,42 @@ class _Reader:
         head = fh.read(min(avail, 4096))
         try:
             (_s, _e, usize, want_crc, clen) = struct.unpack_from("<QQQII", head, 0)
-            comp = head[32:32 + clen].decode("ascii")
+            comp = head[32 : 32 + clen].decode("ascii")
             (rlen,) = struct.unpack_from("<Q", head, 32 + clen)
         except (struct.error, UnicodeDecodeError):
             self.notes.append(f"{self.file}: {where} cut or damaged in its header; skipped")
             return
         data_at = body_at + 32 + clen + 8
         if 32 + clen + 8 + rlen != ln:
-            self.notes.append(f"{self.file}: {where} damaged (its lengths disagree: "
-                              f"{32 + clen + 8 + rlen} vs {ln}); skipped")
+            self.notes.append(
+                f"{self.file}: {where} damaged (its lengths disagree: "
+                f"{32 + clen + 8 + rlen} vs {ln}); skipped"
+            )
             return
         cap = int(self.cfg.max_chunk_bytes)
         if usize > cap:
-            self._reject_chunk("chunk_too_large", where, f"declares {usize:,} bytes uncompressed, over "
-                                                        f"[ingest] max_chunk_bytes = {cap:,}")
+            self._reject_chunk(
+                "chunk_too_large",
+                where,
+                f"declares {usize:,} bytes uncompressed, over [ingest] max_chunk_bytes = {cap:,}",
+            )
             return
         if comp not in ("zstd", "lz4", ""):
-            self.notes.append(f"{self.file}: {where}: unsupported compression {comp!r}; its messages skipped")
+            self.notes.append(
+                f"{self.file}: {where}: unsupported compression {comp!r}; its messages skipped"
+            )
             return
         box: list[BaseException] = []
         if body_at + ln > size:  # cut off by the end of the file: streamed, no CRC to check
-            rest = self._walk_pieces(_guard(_inflate(fh, data_at, size - data_at, comp, usize), box))
+            rest = self._walk_pieces(
+                _guard(_inflate(fh, data_at, size - data_at, comp, usize), box)
+            )
             self._chunk_trouble(where, box, usize, "its complete messages before that kept")
             if rest:
-                self.notes.append(f"{self.file}: {where}: {len(rest)} bytes of an incomplete record at "
-                                  f"its end not read")
+                self.notes.append(
+                    f"{self.file}: {where}: {len(rest)} bytes of an incomplete record at "
+                    f"its end not read"
+                )
             return
         parts: list[bytes] = []
         crc = got = 0
@@ -432,14 +483,22 @@ class _Reader:
             self._chunk_trouble(where, box, usize, "none of its messages read")
             return
         if not box and want_crc and crc != want_crc:
-            self._reject_chunk("chunk_crc", where, f"the CRC32 of its {got:,} uncompressed bytes is "
-                                                  f"{crc:08x}, its record says {want_crc:08x}")
+            self._reject_chunk(
+                "chunk_crc",
+                where,
+                f"the CRC32 of its {got:,} uncompressed bytes is "
+                f"{crc:08x}, its record says {want_crc:08x}",
+            )
             return
         if box:  # damaged compressed data: what came out before the damage
-            self._chunk_trouble(where, box, usize, "its messages before the damage kept (CRC not checked)")
+            self._chunk_trouble(
+                where, box, usize, "its messages before the damage kept (CRC not checked)"
+            )
         elif got != usize:
-            self.notes.append(f"{self.file}: {where}: holds {got:,} bytes uncompressed, its record declares "
-                              f"{usize:,}{'' if want_crc else ' (no CRC to check)'}")
+            self.notes.append(
+                f"{self.file}: {where}: holds {got:,} bytes uncompressed, its record declares "
+                f"{usize:,}{'' if want_crc else ' (no CRC to check)'}"
+            )
         if not box and got == usize:
             bodies = self._message_indexes(fh, body_at + ln, size)
             if bodies:
@@ -451,28 +510,41 @@ class _Reader:
                 del data
         rest = self._walk_pieces(_drain(parts))
         if rest:
-            self.notes.append(f"{self.file}: {where}: {len(rest)} bytes of an incomplete record at its end "
-                              f"not read")
+            self.notes.append(
+                f"{self.file}: {where}: {len(rest)} bytes of an incomplete record at its end "
+                f"not read"
+            )
 
-    def _reject_chunk(self, reason: str, where: str, why: str, kept: str = "none of its messages read") -> None:
+    def _reject_chunk(
+        self, reason: str, where: str, why: str, kept: str = "none of its messages read"
+    ) -> None:
         """Count a rejected chunk (reason ``chunk_too_large`` or ``chunk_crc``); the first
         ones are also noted (all are counted in the rejects, with the first examples)."""
         self.rejects.add(reason, self.file, 0, f"{where}: {why}")
         self.chunks_rejected[reason] = self.chunks_rejected.get(reason, 0) + 1
         if sum(self.chunks_rejected.values()) <= _CHUNK_NOTES:
-            self.notes.append(f"{self.file}: {where} rejected ({reason}): {why}; {kept}, the rest of the "
-                              f"file read")
+            self.notes.append(
+                f"{self.file}: {where} rejected ({reason}): {why}; {kept}, the rest of the "
+                f"file read"
+            )
 
     def _chunk_trouble(self, where: str, box: list, usize: int, kept: str) -> None:
         if not box:
             return
         err = box[0]
         if isinstance(err, _TooLarge):
-            self._reject_chunk("chunk_too_large", where, f"declares {usize:,} bytes uncompressed but inflates "
-                                                        f"to more (stopped after {err.n:,} bytes)", kept)
+            self._reject_chunk(
+                "chunk_too_large",
+                where,
+                f"declares {usize:,} bytes uncompressed but inflates "
+                f"to more (stopped after {err.n:,} bytes)",
+                kept,
+            )
         else:
-            self.notes.append(f"{self.file}: {where}: compressed data damaged ({type(err).__name__}: "
-                              f"{err}); {kept}")
+            self.notes.append(
+                f"{self.file}: {where}: compressed data damaged ({type(err).__name__}: "
+                f"{err}); {kept}"
+            )
 
     def _message_indexes(self, fh, pos: int, size: int) -> list[bytes]:
         """The bodies of the MessageIndex records right after a chunk (each at most
@@ -534,7 +606,12 @@ class _Reader:
             length = u8[off[:, None] + 1 + np.arange(8)].copy().view("<u8").ravel().astype(np.int64)
             ch_in = u8[off[:, None] + 9 + np.arange(2)].copy().view("<u2").ravel().astype(np.int64)
             end = off + 9 + length
-            if (ch_in != cid).any() or (length < 22).any() or (end > n).any() or (end[:-1] > off[1:]).any():
+            if (
+                (ch_in != cid).any()
+                or (length < 22).any()
+                or (end > n).any()
+                or (end[:-1] > off[1:]).any()
+            ):
                 return False
             log_time = u8[off[:, None] + 15 + np.arange(8)].copy().view("<u8").ravel()
         else:
@@ -542,7 +619,9 @@ class _Reader:
         # records the index does not cover: schemas and channels (walked), never messages
         gap_from = np.concatenate(([0], end))
         gap_to = np.concatenate((off, [n]))
-        for a, b in zip(gap_from[gap_from < gap_to].tolist(), gap_to[gap_from < gap_to].tolist(), strict=True):
+        for a, b in zip(
+            gap_from[gap_from < gap_to].tolist(), gap_to[gap_from < gap_to].tolist(), strict=True
+        ):
             p = a
             while p + 9 <= b:
                 op, rl = _REC_HEAD.unpack_from(data, p)
@@ -552,7 +631,7 @@ class _Reader:
                 if p + 9 + rl > b or op == _OP_MESSAGE:
                     return False
                 if op in (_OP_SCHEMA, _OP_CHANNEL):
-                    self._small_record(op, data[p + 9:p + 9 + rl], p)
+                    self._small_record(op, data[p + 9 : p + 9 + rl], p)
                 p += 9 + rl
             if p != b:
                 return False
@@ -574,7 +653,9 @@ class _Reader:
         no = self.msg_no
         while pos + 9 <= n:
             op, ln = unpack_rec(buf, pos)
-            if op == 0 and ln == 0:  # a run of zero bytes (empty records of opcode 0): skipped at once
+            if (
+                op == 0 and ln == 0
+            ):  # a run of zero bytes (empty records of opcode 0): skipped at once
                 pos = _past_zeros(buf, pos, n)
                 continue
             end = pos + 9 + ln
@@ -591,12 +672,18 @@ class _Reader:
                 lst[2].append(log_time)
                 lst[3].append(no)
             elif op in (_OP_SCHEMA, _OP_CHANNEL):
-                self._small_record(op, buf[pos + 9:end], pos)
+                self._small_record(op, buf[pos + 9 : end], pos)
             pos = end
         self.msg_no = no
         for cid, (s, e, t, k) in per.items():
-            self._decode(cid, buf, np.asarray(s, np.int64), np.asarray(e, np.int64),
-                         np.asarray(t, np.uint64), np.asarray(k, np.int64))
+            self._decode(
+                cid,
+                buf,
+                np.asarray(s, np.int64),
+                np.asarray(e, np.int64),
+                np.asarray(t, np.uint64),
+                np.asarray(k, np.int64),
+            )
         return buf[pos:]
 
     # ---------------------------------------------------------------- decoding
@@ -605,8 +692,13 @@ class _Reader:
         if times.dtype == np.uint64:  # MCAP log times are uint64; beyond int64 is damage
             over = times > np.uint64(np.iinfo(np.int64).max)
             if over.any():
-                add_rejects(self.rejects, "log time out of range (after year 2262)", self.file, nums[over],
-                            [f"channel {cid}"] * 5)
+                add_rejects(
+                    self.rejects,
+                    "log time out of range (after year 2262)",
+                    self.file,
+                    nums[over],
+                    [f"channel {cid}"] * 5,
+                )
                 starts, ends, times, nums = starts[~over], ends[~over], times[~over], nums[~over]
                 if len(starts) == 0:
                     return
@@ -628,12 +720,19 @@ class _Reader:
             elif ch.mode == "protobuf":
                 self._protobuf(ch, buf, starts, ends, times, nums)
             elif ch.mode == "text":
-                for s, e, t, k in zip(starts.tolist(), ends.tolist(), times.tolist(), nums.tolist(), strict=False):
+                for s, e, t, k in zip(
+                    starts.tolist(), ends.tolist(), times.tolist(), nums.tolist(), strict=False
+                ):
                     self._nmea_text(ch, buf[s:e], t, k, t)
         except (CdrError, ValueError, TypeError, KeyError) as err:
             ch.bad += len(starts)
-            add_rejects(self.rejects, f"message does not decode ({ch.type_name})", self.file, nums,
-                        [f"{ch.topic}: {err}"] * 5)
+            add_rejects(
+                self.rejects,
+                f"message does not decode ({ch.type_name})",
+                self.file,
+                nums,
+                [f"{ch.topic}: {err}"] * 5,
+            )
 
     def _setup(self, ch: _Channel, buf: bytes, s: int, e: int) -> None:
         enc = ch.encoding
@@ -644,7 +743,11 @@ class _Reader:
                 return
             try:
                 fields = compile_schema(sch.name, sch.data.decode("utf-8"))
-            except (CdrError, UnicodeDecodeError, Exception) as err:  # the IDL parser raises its own
+            except (
+                CdrError,
+                UnicodeDecodeError,
+                Exception,
+            ) as err:  # the IDL parser raises its own
                 ch.mode, ch.why = "skip", f"schema not understood ({type(err).__name__}: {err})"
                 return
             self._setup_cdr(ch, fields, buf, s, e)
@@ -659,17 +762,24 @@ class _Reader:
 
             try:
                 fn = DecoderFactory().decoder_for(
-                    "protobuf", Schema(id=sch.id, name=sch.name, encoding=sch.encoding, data=sch.data))
+                    "protobuf",
+                    Schema(id=sch.id, name=sch.name, encoding=sch.encoding, data=sch.data),
+                )
             except Exception as err:  # protobuf raises several types on bad descriptors
-                ch.mode, ch.why = "skip", f"protobuf schema not usable ({type(err).__name__}: {err})"
+                ch.mode, ch.why = (
+                    "skip",
+                    f"protobuf schema not usable ({type(err).__name__}: {err})",
+                )
                 return
             ch.state["decode"] = fn
             ch.mode = "protobuf"
-        elif sch is None and bytes(buf[s:s + 1]) in _NMEA_START:
+        elif sch is None and bytes(buf[s : s + 1]) in _NMEA_START:
             ch.mode = "text"
         else:
             ch.mode = "skip"
-            ch.why = f"message encoding {enc!r} not supported" if enc else "schemaless, not NMEA text"
+            ch.why = (
+                f"message encoding {enc!r} not supported" if enc else "schemaless, not NMEA text"
+            )
 
     def _setup_cdr(self, ch: _Channel, fields, buf: bytes, s: int, e: int) -> None:
         paths = scalar_paths(fields)
@@ -683,7 +793,10 @@ class _Reader:
             if "status.status" in paths:
                 want["status.status"] = "_navsat_status"
         for prefix in ("orientation", "quaternion"):
-            if all(f"{prefix}.{c}" in paths for c in "xyzw") and short in ("Imu", "QuaternionStamped"):
+            if all(f"{prefix}.{c}" in paths for c in "xyzw") and short in (
+                "Imu",
+                "QuaternionStamped",
+            ):
                 for c in "xyzw":
                     want[f"{prefix}.{c}"] = f"_q{c}"
         for p in paths:
@@ -703,7 +816,9 @@ class _Reader:
             text_path = "data"
         if text_path:
             ch.state["text_path"] = text_path
-        elif not any(not v.startswith("_") or v.startswith(("_q", "_navsat")) for v in want.values()):
+        elif not any(
+            not v.startswith("_") or v.startswith(("_q", "_navsat")) for v in want.values()
+        ):
             ch.mode, ch.why = "skip", "no navigation fields"
             return
         if "header.stamp.sec" in paths and "header.stamp.nanosec" in paths:
@@ -713,7 +828,9 @@ class _Reader:
         ch.state["want"] = want
         ch.mode = "cdr"
 
-    def _stamp(self, sec: np.ndarray, nsec: np.ndarray, log_time: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _stamp(
+        self, sec: np.ndarray, nsec: np.ndarray, log_time: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(time, recv): stamp times where the message has a stamp (not zero), else the log
         time; a stamp outside int64 nanoseconds or with nanoseconds outside [0, 1e9) is
         counted and the log time used.  ``recv`` is the log time where the stamp was used
@@ -735,8 +852,13 @@ class _Reader:
         vals, strs, ok = decode_channel(fields, buf, starts, ends, list(want), [tp] if tp else [])
         if not ok.all():
             ch.bad += int((~ok).sum())
-            add_rejects(self.rejects, f"message does not match its schema ({ch.type_name})", self.file,
-                        nums[~ok], [ch.topic] * 5)
+            add_rejects(
+                self.rejects,
+                f"message does not match its schema ({ch.type_name})",
+                self.file,
+                nums[~ok],
+                [ch.topic] * 5,
+            )
         if "header.stamp.sec" in want:
             t, recv = self._stamp(vals["header.stamp.sec"], vals["header.stamp.nanosec"], times)
         else:
@@ -751,30 +873,47 @@ class _Reader:
             for i in np.flatnonzero(ok):
                 text = strs[tp][i]
                 if text is not None:
-                    self._nmea_text(ch, text.encode("utf-8", "replace"), int(t[i]), int(nums[i]),
-                                    int(times[i]))
+                    self._nmea_text(
+                        ch, text.encode("utf-8", "replace"), int(t[i]), int(nums[i]), int(times[i])
+                    )
             return
         out: dict[str, np.ndarray] = {}
         for path, q in want.items():
             v = np.where(ok, vals[path], np.nan)
             if q == "_navsat_status":
                 # NavSatStatus -1 no fix, 0 fix, 1 SBAS, 2 GBAS -> GGA-style quality 0, 1, 2, 4
-                out["quality"] = np.select([v == -1, v == 0, v == 1, v == 2], [0.0, 1.0, 2.0, 4.0], np.nan)
+                out["quality"] = np.select(
+                    [v == -1, v == 0, v == 1, v == 2], [0.0, 1.0, 2.0, 4.0], np.nan
+                )
             elif q == "_reference_code":
                 codes = ch.state.get("ref_codes") or {}
                 if codes:  # declared constants: a declared code dracc cannot use is not understood
-                    ref = np.array([None if c != c else (codes.get(int(c)) or f"code {int(c)}")
-                                    for c in v.tolist()], dtype=object)
+                    ref = np.array(
+                        [
+                            None if c != c else (codes.get(int(c)) or f"code {int(c)}")
+                            for c in v.tolist()
+                        ],
+                        dtype=object,
+                    )
                 else:  # dracc's uint8 reference: 84 'T', 77 'M', 0 not given
-                    ref = np.array([None if (c != c or c == 0) else ASCII_CODES.get(int(c), f"code {int(c)}")
-                                    for c in v.tolist()], dtype=object)
+                    ref = np.array(
+                        [
+                            None
+                            if (c != c or c == 0)
+                            else ASCII_CODES.get(int(c), f"code {int(c)}")
+                            for c in v.tolist()
+                        ],
+                        dtype=object,
+                    )
                 out["reference"] = ref
             elif not q.startswith("_"):
                 out[q] = v
         if "_qw" in want.values():
             inv = {q: p for p, q in want.items()}
             x, y, z, w = (np.where(ok, vals[inv[f"_q{c}"]], np.nan) for c in "xyzw")
-            yaw_rad = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))  # ENU yaw (REP 103)
+            yaw_rad = np.arctan2(
+                2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)
+            )  # ENU yaw (REP 103)
             out["heading_rad"] = np.mod(math.pi / 2 - yaw_rad, 2 * math.pi)  # from north, clockwise
         keep = ok
         self._add_part(ch, t[keep], nums[keep], {k: v[keep] for k, v in out.items()}, recv[keep])
@@ -791,7 +930,9 @@ class _Reader:
         if q[1] >= _JSON_BATCH:
             self._json_flush(ch)
         elif self.queued >= _JSON_QUEUED:
-            self._json_flush(max(self.channels.values(), key=lambda c: c.state.get("queue", [0, 0])[1]))
+            self._json_flush(
+                max(self.channels.values(), key=lambda c: c.state.get("queue", [0, 0])[1])
+            )
 
     def _json_flush(self, ch: _Channel) -> None:
         q = ch.state.pop("queue", None)
@@ -806,13 +947,15 @@ class _Reader:
         payloads = None
         if "plan" not in ch.state:
             try:
-                first = json.loads(joined[:joined.find(b"\n")])
+                first = json.loads(joined[: joined.find(b"\n")])
             except ValueError:
                 first = None
             plan = self._json_plan(first)
             if plan is None:
                 ch.mode = "skip"
-                keys = ", ".join(list(first)[:8]) if isinstance(first, dict) else type(first).__name__
+                keys = (
+                    ", ".join(list(first)[:8]) if isinstance(first, dict) else type(first).__name__
+                )
                 ch.why = "JSON without navigation fields (no quantity names, no latitude/longitude)"
                 ch.state["keys"] = keys
                 return
@@ -827,7 +970,9 @@ class _Reader:
                     self._nmea_text(ch, str(obj["sentence"]).encode("utf-8", "replace"), t, k, t)
                 except (ValueError, KeyError, TypeError):
                     ch.bad += 1
-                    add_rejects(self.rejects, "bad JSON message", self.file, np.array([k]), [ch.topic])
+                    add_rejects(
+                        self.rejects, "bad JSON message", self.file, np.array([k]), [ch.topic]
+                    )
             return
         cols = _json_columns(joined, n, plan)
         if cols is None:  # pyarrow could not: message by message, counting the bad ones
@@ -837,8 +982,16 @@ class _Reader:
         if not good.all():
             payloads = payloads or joined.split(b"\n")[:-1]
             ch.bad += int((~good).sum())
-            add_rejects(self.rejects, "bad JSON message", self.file, nums[~good],
-                        [bytes(payloads[i][:100]).decode("utf-8", "replace") for i in np.flatnonzero(~good)[:5]])
+            add_rejects(
+                self.rejects,
+                "bad JSON message",
+                self.file,
+                nums[~good],
+                [
+                    bytes(payloads[i][:100]).decode("utf-8", "replace")
+                    for i in np.flatnonzero(~good)[:5]
+                ],
+            )
         sec, nsec = cols.pop("_sec", None), cols.pop("_nsec", None)
         tns = cols.pop("_time_ns", None)
         t = np.asarray(times, dtype=np.int64)
@@ -896,8 +1049,13 @@ class _Reader:
                 good[i] = False
         if not good.all():
             ch.bad += int((~good).sum())
-            add_rejects(self.rejects, f"message does not decode ({ch.type_name})", self.file,
-                        nums[~good], [ch.topic] * 5)
+            add_rejects(
+                self.rejects,
+                f"message does not decode ({ch.type_name})",
+                self.file,
+                nums[~good],
+                [ch.topic] * 5,
+            )
         live = [m for m in msgs if m is not None]
         if not live:
             return
@@ -941,14 +1099,26 @@ class _Reader:
                 sub_t = np.asarray(tt, np.int64)
                 lens = np.fromiter((len(x) for x in payloads), dtype=np.int64, count=len(payloads))
                 e = np.cumsum(lens)
-                self._json_queue(ch, _join_lines(b"".join(payloads), e - lens, e), len(payloads), sub_t,
-                                 np.asarray(kk, np.int64))
+                self._json_queue(
+                    ch,
+                    _join_lines(b"".join(payloads), e - lens, e),
+                    len(payloads),
+                    sub_t,
+                    np.asarray(kk, np.int64),
+                )
             return
-        out = {q: np.array([getattr(m, f) if m is not None else np.nan for m in msgs], dtype=np.float64)
-               for f, q in plan["fields"].items() if q not in REF_QUANTITIES}
+        out = {
+            q: np.array(
+                [getattr(m, f) if m is not None else np.nan for m in msgs], dtype=np.float64
+            )
+            for f, q in plan["fields"].items()
+            if q not in REF_QUANTITIES
+        }
         for f, q in plan["fields"].items():
             if q in REF_QUANTITIES:  # text or boolean, normalised by build_frames
-                out[q] = np.array([getattr(m, f) if m is not None else None for m in msgs], dtype=object)
+                out[q] = np.array(
+                    [getattr(m, f) if m is not None else None for m in msgs], dtype=object
+                )
         self._add_part(ch, t[good], nums[good], {k: v[good] for k, v in out.items()}, recv[good])
 
     def _proto_plan(self, ch: _Channel, msg) -> dict | None:
@@ -956,7 +1126,11 @@ class _Reader:
         names = {f.name: f for f in desc.fields}
         stamp = None
         ts = names.get("timestamp")
-        if ts is not None and ts.message_type is not None and ts.message_type.full_name == "google.protobuf.Timestamp":
+        if (
+            ts is not None
+            and ts.message_type is not None
+            and ts.message_type.full_name == "google.protobuf.Timestamp"
+        ):
             stamp = "timestamp"
         fields = self._quantities_of(names)
         if fields:
@@ -964,8 +1138,12 @@ class _Reader:
         # a wrapper of raw text (keelson TimestampedBytes: timestamp + value)
         from google.protobuf.descriptor import FieldDescriptor
 
-        texts = [f.name for f in desc.fields if f.type in (FieldDescriptor.TYPE_BYTES, FieldDescriptor.TYPE_STRING)
-                 and not _repeated(f)]
+        texts = [
+            f.name
+            for f in desc.fields
+            if f.type in (FieldDescriptor.TYPE_BYTES, FieldDescriptor.TYPE_STRING)
+            and not _repeated(f)
+        ]
         if len(texts) == 1:
             ch.state["plan_note"] = f"text in field {texts[0]!r}"
             return {"stamp": stamp, "fields": {}, "bytes": texts[0]}
@@ -997,9 +1175,13 @@ class _Reader:
             from dracc.ingest.nmea import SentenceStream
 
             self.nmea = SentenceStream(self.file, self.cfg)
-        released = self.nmea.add(self.nmea_lines, np.asarray(self.nmea_time, dtype=np.int64),
-                                 self.nmea_src, numbers=np.asarray(self.nmea_no, dtype=np.int64),
-                                 recv_ns=np.asarray(self.nmea_recv, dtype=np.int64))
+        released = self.nmea.add(
+            self.nmea_lines,
+            np.asarray(self.nmea_time, dtype=np.int64),
+            self.nmea_src,
+            numbers=np.asarray(self.nmea_no, dtype=np.int64),
+            recv_ns=np.asarray(self.nmea_recv, dtype=np.int64),
+        )
         self.nmea_lines, self.nmea_time, self.nmea_src, self.nmea_no = [], [], [], []
         self.nmea_recv = []
         self._nmea_store(released)
@@ -1035,8 +1217,17 @@ class _Reader:
         ch.state["pending"] = 0
         n = len(t)
         sentence = ch.type_name.split("/")[-1].split(".")[-1]
-        frames = build_frames(t, _const_cat(ch.key, n), k, _const_cat(sentence, n), qs, self.file,
-                              self.rejects, talker=_const_cat("", n), recv_ns=recv)
+        frames = build_frames(
+            t,
+            _const_cat(ch.key, n),
+            k,
+            _const_cat(sentence, n),
+            qs,
+            self.file,
+            self.rejects,
+            talker=_const_cat("", n),
+            recv_ns=recv,
+        )
         ch.state["records"] = ch.state.get("records", 0) + sum(len(f) for f in frames.values())
         for kind, f in frames.items():
             self.stores.setdefault(kind, _KindStore()).add(f)
@@ -1052,8 +1243,14 @@ class _Reader:
             self._json_flush(ch)
             self._to_pieces(ch)
         _trim_heap()
-        res = FileResult(path=self.file, format="mcap", frames={}, lines=self.msg_no, rejects=self.rejects,
-                         notes=[])
+        res = FileResult(
+            path=self.file,
+            format="mcap",
+            frames={},
+            lines=self.msg_no,
+            rejects=self.rejects,
+            notes=[],
+        )
         self._nmea_flush()
         if self.nmea is not None:
             self._nmea_store(self.nmea.finish())
@@ -1075,19 +1272,30 @@ class _Reader:
             if ch.mode in ("skip", "pending") and n > 0:
                 res.ignored[ch.type_name] += n
         if self.bad_stamps:
-            res.notes.append(f"{self.file}: {self.bad_stamps} message stamp(s) out of range; their log "
-                             f"time was used")
+            res.notes.append(
+                f"{self.file}: {self.bad_stamps} message stamp(s) out of range; their log "
+                f"time was used"
+            )
         if self.orphans:
-            add_rejects(res.rejects, "message on an undeclared channel", self.file, np.zeros(1, np.int64),
-                        [f"{self.orphans} messages"])
+            add_rejects(
+                res.rejects,
+                "message on an undeclared channel",
+                self.file,
+                np.zeros(1, np.int64),
+                [f"{self.orphans} messages"],
+            )
             res.rejects.counts["message on an undeclared channel"] += self.orphans - 1
         if not res.frames or res.records == 0:
             if not self.channels:
-                res.notes.append(f"{self.file}: valid MCAP with no channels and {self.msg_no} messages: "
-                                 f"nothing to read")
+                res.notes.append(
+                    f"{self.file}: valid MCAP with no channels and {self.msg_no} messages: "
+                    f"nothing to read"
+                )
             else:
-                res.notes.append(f"{self.file}: no navigation data in {len(self.channels)} channel(s), "
-                                 f"{self.msg_no} message(s)")
+                res.notes.append(
+                    f"{self.file}: no navigation data in {len(self.channels)} channel(s), "
+                    f"{self.msg_no} message(s)"
+                )
         if self.cfg.strict and res.rejects.total:
             reason, ex = next(iter(res.rejects.examples.items()))
             raise IngestError(f"{ex[0][0]}: message {ex[0][1]}: {reason}: {ex[0][2]!r} (--strict)")
@@ -1112,9 +1320,10 @@ class _Reader:
                 notes.append(f"channel {what}: no navigation records")
         if len(notes) > 40:  # hundreds of channels (e.g. one per AIS target): summarise the unused
             used = [n for n in notes if "not used" not in n]
-            notes = used + [f"{k} further channel(s) not used ({why})" for why, k in unused.most_common()]
+            notes = used + [
+                f"{k} further channel(s) not used ({why})" for why, k in unused.most_common()
+            ]
         return notes
-
 
 
 _ZEROS = re.compile(b"\\x00+")
@@ -1165,8 +1374,9 @@ def _inflate(fh, at: int, n: int, comp: str, limit: int):
     if comp == "zstd":
         import zstandard
 
-        reader = zstandard.ZstdDecompressor().stream_reader(src, read_size=_PIECE, read_across_frames=True,
-                                                             closefd=False)
+        reader = zstandard.ZstdDecompressor().stream_reader(
+            src, read_size=_PIECE, read_across_frames=True, closefd=False
+        )
         pieces = iter(lambda: reader.read(_PIECE), b"")
     elif comp == "lz4":
         pieces = _lz4_pieces(src)
@@ -1276,7 +1486,10 @@ def _mapped_columns(n: int, dtypes: list) -> list[np.ndarray]:
         except OSError:  # pragma: no cover - the kernel's mapping limit
             mm = None
         if mm is not None:
-            return [np.frombuffer(mm, dtype=dt, count=n, offset=o) for dt, o in zip(dts, offs, strict=True)]
+            return [
+                np.frombuffer(mm, dtype=dt, count=n, offset=o)
+                for dt, o in zip(dts, offs, strict=True)
+            ]
     return [np.empty(n, dtype=dt) for dt in dts]
 
 
@@ -1301,10 +1514,12 @@ class _Run:
 
     def count_upto(self, key: tuple[int, int]) -> int:
         """How many of the records from ``pos`` on have (time_ns, line) <= ``key``."""
-        t = self.cols["time_ns"][self.pos:self.n]
+        t = self.cols["time_ns"][self.pos : self.n]
         lo = int(np.searchsorted(t, key[0], side="left"))
         hi = int(np.searchsorted(t, key[0], side="right"))
-        return lo + int(np.searchsorted(self.cols["line"][self.pos + lo:self.pos + hi], key[1], side="right"))
+        return lo + int(
+            np.searchsorted(self.cols["line"][self.pos + lo : self.pos + hi], key[1], side="right")
+        )
 
 
 class _KindStore:
@@ -1358,7 +1573,9 @@ class _KindStore:
         for c in self.names:
             v = self._codes(c, df[c]) if c in self.labels else df[c].to_numpy()
             vals[c] = v if order is None else v[order]
-        cols = dict(zip(self.names, _mapped_columns(n, [v.dtype for v in vals.values()]), strict=True))
+        cols = dict(
+            zip(self.names, _mapped_columns(n, [v.dtype for v in vals.values()]), strict=True)
+        )
         for c, v in vals.items():
             cols[c][:] = v
         del vals
@@ -1382,8 +1599,11 @@ class _KindStore:
         """The merged frame (see the class doc); the runs are released on the way."""
         out = {}
         for c in self.names:
-            dt = (np.result_type(*[r.cols[c].dtype for r in self.runs]) if self.how[c][0] == "num"
-                  else _code_dtype(len(self.labels[c])))
+            dt = (
+                np.result_type(*[r.cols[c].dtype for r in self.runs])
+                if self.how[c][0] == "num"
+                else _code_dtype(len(self.labels[c]))
+            )
             out[c] = np.empty(self.total, dtype=dt)
         o = 0
         active = self.runs
@@ -1401,17 +1621,21 @@ class _KindStore:
             if len(takes) == 1:
                 r, m = takes[0]
                 for c in self.names:
-                    out[c][o:o + m] = r.cols[c][r.pos:r.pos + m]
+                    out[c][o : o + m] = r.cols[c][r.pos : r.pos + m]
             else:
-                t = np.concatenate([r.cols["time_ns"][r.pos:r.pos + m] for r, m in takes])
-                ln = np.concatenate([r.cols["line"][r.pos:r.pos + m] for r, m in takes])
+                t = np.concatenate([r.cols["time_ns"][r.pos : r.pos + m] for r, m in takes])
+                ln = np.concatenate([r.cols["line"][r.pos : r.pos + m] for r, m in takes])
                 order = np.lexsort((ln, t))  # stable: equal keys in the order the runs were added
                 for c in self.names:
-                    out[c][o:o + m_all] = np.concatenate([r.cols[c][r.pos:r.pos + m] for r, m in takes])[order]
+                    out[c][o : o + m_all] = np.concatenate(
+                        [r.cols[c][r.pos : r.pos + m] for r, m in takes]
+                    )[order]
             o += m_all
             for r, m in takes:
                 r.pos += m
-            active = [r for r in active if r.pos < r.n]  # used-up runs are dropped: their mappings unmapped
+            active = [
+                r for r in active if r.pos < r.n
+            ]  # used-up runs are dropped: their mappings unmapped
         self.total = 0
         for c in self.names:
             how, dtype = self.how[c]
@@ -1440,11 +1664,15 @@ def _strings(codes: np.ndarray, labels: list, dtype) -> object:
         import pyarrow as pa
 
         missing = codes < 0
-        dic = pa.DictionaryArray.from_arrays(pa.array(codes, mask=missing if missing.any() else None),
-                                             pa.array(labels, pa.large_string()))
+        dic = pa.DictionaryArray.from_arrays(
+            pa.array(codes, mask=missing if missing.any() else None),
+            pa.array(labels, pa.large_string()),
+        )
         arr = dic.cast(pa.large_string())
         if arr.null_count == 0:  # no validity bitmap where nothing is missing (as pandas builds it)
-            arr = pa.Array.from_buffers(arr.type, len(arr), [None, *arr.buffers()[1:]], offset=arr.offset)
+            arr = pa.Array.from_buffers(
+                arr.type, len(arr), [None, *arr.buffers()[1:]], offset=arr.offset
+            )
         return dtype.construct_array_type()._from_sequence(arr, dtype=dtype)
     vals = np.empty(len(labels) + 1, dtype=object)
     vals[:-1] = labels
@@ -1483,7 +1711,18 @@ def _json_columns(joined: bytes, n: int, plan: dict) -> dict[str, np.ndarray] | 
     (``benchmarks/bench_mcap.py``)."""
     import pyarrow as pa
     import pyarrow.json as pj
-    fields = [pa.field(k, pa.string() if q == "reference" else pa.bool_() if q in REF_QUANTITIES else pa.float64()) for k, q in plan["fields"].items()]
+
+    fields = [
+        pa.field(
+            k,
+            pa.string()
+            if q == "reference"
+            else pa.bool_()
+            if q in REF_QUANTITIES
+            else pa.float64(),
+        )
+        for k, q in plan["fields"].items()
+    ]
     st = plan["stamp"]
     if st:
         inner = pa.struct([pa.field(st[1], pa.float64()), pa.field(st[2], pa.float64())])
@@ -1494,11 +1733,16 @@ def _json_columns(joined: bytes, n: int, plan: dict) -> dict[str, np.ndarray] | 
     if plan["time_ns"]:
         fields.append(pa.field("time_ns", pa.int64()))
     try:
-        table = pj.read_json(BytesIO(joined),
-                             read_options=pj.ReadOptions(use_threads=False, block_size=max(len(joined) + 1, 1 << 16)),
-                             parse_options=pj.ParseOptions(explicit_schema=pa.schema(fields),
-                                                           unexpected_field_behavior="ignore"),
-                             memory_pool=pa.system_memory_pool())
+        table = pj.read_json(
+            BytesIO(joined),
+            read_options=pj.ReadOptions(
+                use_threads=False, block_size=max(len(joined) + 1, 1 << 16)
+            ),
+            parse_options=pj.ParseOptions(
+                explicit_schema=pa.schema(fields), unexpected_field_behavior="ignore"
+            ),
+            memory_pool=pa.system_memory_pool(),
+        )
     except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
         return None
     if table.num_rows != n:
@@ -1533,8 +1777,10 @@ def _num(v) -> float:
 
 def _json_columns_slow(payloads: list[bytes], plan: dict) -> dict[str, np.ndarray]:
     n = len(payloads)
-    cols: dict[str, np.ndarray] = {q: (np.full(n, None, dtype=object) if q in REF_QUANTITIES else np.full(n, np.nan))
-                                   for q in plan["fields"].values()}
+    cols: dict[str, np.ndarray] = {
+        q: (np.full(n, None, dtype=object) if q in REF_QUANTITIES else np.full(n, np.nan))
+        for q in plan["fields"].values()
+    }
     ok = np.ones(n, dtype=bool)
     st = plan["stamp"]
     if st:
@@ -1551,7 +1797,11 @@ def _json_columns_slow(payloads: list[bytes], plan: dict) -> dict[str, np.ndarra
                 else:
                     cols[q][i] = _num(v)
             if st:
-                s = obj.get("timestamp") if st[0] == "timestamp" else (obj.get("header") or {}).get("stamp")
+                s = (
+                    obj.get("timestamp")
+                    if st[0] == "timestamp"
+                    else (obj.get("header") or {}).get("stamp")
+                )
                 if s:
                     cols["_sec"][i], cols["_nsec"][i] = _num(s.get(st[1])), _num(s.get(st[2]))
             if plan["time_ns"] and obj.get("time_ns") is not None:

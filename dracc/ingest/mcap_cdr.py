@@ -25,9 +25,21 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-_PRIM = {"bool": "u1", "byte": "u1", "char": "u1", "int8": "i1", "uint8": "u1", "int16": "i2",
-         "uint16": "u2", "int32": "i4", "uint32": "u4", "int64": "i8", "uint64": "u8",
-         "float32": "f4", "float64": "f8"}
+_PRIM = {
+    "bool": "u1",
+    "byte": "u1",
+    "char": "u1",
+    "int8": "i1",
+    "uint8": "u1",
+    "int16": "i2",
+    "uint16": "u2",
+    "int32": "i4",
+    "uint32": "u4",
+    "int64": "i8",
+    "uint64": "u8",
+    "float32": "f4",
+    "float64": "f8",
+}
 
 _BUILTIN = {
     "builtin_interfaces/Time": "int32 sec\nuint32 nanosec\n",
@@ -57,7 +69,7 @@ def _split_schema(name: str, text: str) -> dict[str, str]:
         m = re.search(r"^MSG:\s+(\S+)\s*$", part, flags=re.MULTILINE)
         if m:
             cur = _short(m.group(1))
-            part = part[: m.start()] + part[m.end():]
+            part = part[: m.start()] + part[m.end() :]
         defs[cur] = part
     return defs
 
@@ -86,12 +98,18 @@ def compile_schema(name: str, text: str) -> list[_Field]:
         with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
             try:  # the IDL parser prints what it rejects, then raises: keep only the exception
                 spec = parse_message_string(pkg, msg, text)
-            except Exception as err:  # it raises several types (InvalidResourceName, ValueError ...)
+            except (
+                Exception
+            ) as err:  # it raises several types (InvalidResourceName, ValueError ...)
                 raise CdrError(f"schema {name}: {short}: {err}") from err
         out = []
         for f in spec.fields:
             t = f.type
-            arr = (t.array_size if (t.array_size and not t.is_upper_bound) else -1) if t.is_array else None
+            arr = (
+                (t.array_size if (t.array_size and not t.is_upper_bound) else -1)
+                if t.is_array
+                else None
+            )
             if t.is_primitive_type():
                 if t.type in ("string", "wstring"):
                     out.append(_Field(f.name, "string", "string", arr))
@@ -112,7 +130,9 @@ def compile_schema(name: str, text: str) -> list[_Field]:
 class Layout:
     """Where the scalar fields of one message are, and what fixed that layout."""
 
-    offsets: dict[str, tuple[int, str]]  #: 'header.stamp.sec' -> (byte offset in message, dtype code)
+    offsets: dict[
+        str, tuple[int, str]
+    ]  #: 'header.stamp.sec' -> (byte offset in message, dtype code)
     strings: dict[str, str]  #: 'header.frame_id' -> value
     checks: list[int]  #: offsets of the uint32 length/count fields that determine the layout
     size: int  #: bytes used (the message may be padded beyond)
@@ -156,7 +176,7 @@ def walk(fields: list[_Field], buf, start: int, end: int) -> Layout:
             ln, pos = read_count(pos)
             need(pos, ln)
             if record:
-                strings[path] = bytes(buf[pos:pos + max(ln - 1, 0)]).decode("utf-8", "replace")
+                strings[path] = bytes(buf[pos : pos + max(ln - 1, 0)]).decode("utf-8", "replace")
             return pos + ln
         return struct_(f.sub, path, pos, record)
 
@@ -185,8 +205,14 @@ def walk(fields: list[_Field], buf, start: int, end: int) -> Layout:
     return Layout(offsets, strings, checks, size)
 
 
-def decode_channel(fields: list[_Field], buf: bytes, starts: np.ndarray, ends: np.ndarray,
-                   wanted: list[str], want_strings: list[str] = ()):
+def decode_channel(
+    fields: list[_Field],
+    buf: bytes,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    wanted: list[str],
+    want_strings: list[str] = (),
+):
     """Decode the messages ``buf[starts[i]:ends[i]]`` of one channel.
 
     Returns (values, strings, ok): ``values[path]`` float64/int arrays for the scalar
@@ -215,7 +241,7 @@ def decode_channel(fields: list[_Field], buf: bytes, starts: np.ndarray, ends: n
         rows = u8[starts[idx][:, None] + np.arange(span)]
         same = (rows[:, :4] == rows[0, :4]).all(axis=1)
         for c in lay.checks:
-            same &= (rows[:, c:c + 4] == rows[0, c:c + 4]).all(axis=1)
+            same &= (rows[:, c : c + 4] == rows[0, c : c + 4]).all(axis=1)
         sel = idx[same]
         rows = rows[same]
         for p in wanted:
@@ -223,7 +249,7 @@ def decode_channel(fields: list[_Field], buf: bytes, starts: np.ndarray, ends: n
                 continue
             off, code = lay.offsets[p]
             size = np.dtype(code).itemsize
-            col = np.ascontiguousarray(rows[:, off:off + size]).view(code).ravel()
+            col = np.ascontiguousarray(rows[:, off : off + size]).view(code).ravel()
             values[p][sel] = col.astype(np.float64)
         todo[sel] = False
     for i in np.flatnonzero(todo):
@@ -235,7 +261,9 @@ def decode_channel(fields: list[_Field], buf: bytes, starts: np.ndarray, ends: n
         for p in wanted:
             if p in lay.offsets:
                 off, code = lay.offsets[p]
-                values[p][i] = float(np.frombuffer(buf, dtype=code, count=1, offset=int(starts[i]) + off)[0])
+                values[p][i] = float(
+                    np.frombuffer(buf, dtype=code, count=1, offset=int(starts[i]) + off)[0]
+                )
         for p in want_strings:
             strings[p][i] = lay.strings.get(p)
     return values, strings, ok
@@ -265,8 +293,9 @@ def string_paths(fields: list[_Field]) -> list[str]:
     return _leaf_paths(fields, "string")
 
 
-def encode_fixed(fields: list[_Field], columns: dict[str, np.ndarray], strings: dict[str, str],
-                 n: int) -> tuple[np.ndarray, int]:
+def encode_fixed(
+    fields: list[_Field], columns: dict[str, np.ndarray], strings: dict[str, str], n: int
+) -> tuple[np.ndarray, int]:
     """Encode ``n`` little-endian CDR messages of a fixed layout at once.
 
     ``columns`` gives scalar field values by path (absent ones are zero); ``strings`` one
@@ -313,5 +342,5 @@ def encode_fixed(fields: list[_Field], columns: dict[str, np.ndarray], strings: 
         off, code = offs[path]
         dt = np.dtype(code)
         arr = np.asarray(col).astype(dt)
-        out[:, off:off + dt.itemsize] = arr.view(np.uint8).reshape(n, dt.itemsize)
+        out[:, off : off + dt.itemsize] = arr.view(np.uint8).reshape(n, dt.itemsize)
     return out, size

@@ -101,10 +101,20 @@ _W_BYTE, _W_START, _W_LINE = 8, 200, 80
 
 #: sentence type -> (min, max) number of data fields after the address
 FIELD_COUNTS = {
-    "HDT": (2, 3), "HDM": (2, 3), "HDG": (5, 6), "THS": (2, 3), "ROT": (2, 3),
-    "VHW": (8, 9), "VBW": (6, 11), "VLW": (4, 9),
-    "GGA": (12, 15), "GLL": (4, 8), "RMC": (10, 14), "GNS": (12, 14),
-    "VTG": (8, 10), "ZDA": (4, 7),
+    "HDT": (2, 3),
+    "HDM": (2, 3),
+    "HDG": (5, 6),
+    "THS": (2, 3),
+    "ROT": (2, 3),
+    "VHW": (8, 9),
+    "VBW": (6, 11),
+    "VLW": (4, 9),
+    "GGA": (12, 15),
+    "GLL": (4, 8),
+    "RMC": (10, 14),
+    "GNS": (12, 14),
+    "VTG": (8, 10),
+    "ZDA": (4, 7),
 }
 SENTENCES = tuple(FIELD_COUNTS)
 #: talkers of satellite receivers: they cannot measure magnetic heading nor water speed
@@ -261,7 +271,9 @@ def _speed(F: _Fields, k_kn: int, k_kmh: int | None = None) -> np.ndarray:
 
 
 # ------------------------------------------------------------------- per-type decoders
-def _decode(stype: str, F: _Fields) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, np.ndarray]]:
+def _decode(
+    stype: str, F: _Fields
+) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, np.ndarray]]:
     """Decode rows of one sentence type.
 
     Returns ({kind: columns}, timing) with timing = {"tod_ns", "date_days", "dec"}.
@@ -279,11 +291,19 @@ def _decode(stype: str, F: _Fields) -> tuple[dict[str, dict[str, np.ndarray]], d
             h = np.where(ref == 86, np.nan, h)  # mode V: not valid
         # the reference as a byte ('T' 84, 'M' 77): compact between processes
         refs = np.full(n, 77 if stype == "HDM" else 84, dtype=np.uint8)
-        out["heading"] = {"heading_rad": h, "reference": refs,
-                          "deviation_rad": nanv, "variation_rad": nanv}
+        out["heading"] = {
+            "heading_rad": h,
+            "reference": refs,
+            "deviation_rad": nanv,
+            "variation_rad": nanv,
+        }
     elif stype == "HDG":
-        out["heading"] = {"heading_rad": _angle(F, 1), "reference": np.full(n, 77, dtype=np.uint8),
-                          "deviation_rad": _signed(F, 2, 3), "variation_rad": _signed(F, 4, 5)}
+        out["heading"] = {
+            "heading_rad": _angle(F, 1),
+            "reference": np.full(n, 77, dtype=np.uint8),
+            "deviation_rad": _signed(F, 2, 3),
+            "variation_rad": _signed(F, 4, 5),
+        }
     elif stype == "ROT":
         v, _ = F.num(1)
         st = F.char(2)
@@ -300,10 +320,12 @@ def _decode(stype: str, F: _Fields) -> tuple[dict[str, dict[str, np.ndarray]], d
         sg = F.char(6)
         vw = sw != 86
         vg = sg != 86
-        out["water"] = {"stw_mps": np.where(vw, lw * KN_MPS, np.nan),
-                        "stw_transverse_mps": np.where(vw, tw * KN_MPS, np.nan),
-                        "sog_long_mps": np.where(vg, lg * KN_MPS, np.nan),
-                        "sog_transverse_mps": np.where(vg, tg * KN_MPS, np.nan)}
+        out["water"] = {
+            "stw_mps": np.where(vw, lw * KN_MPS, np.nan),
+            "stw_transverse_mps": np.where(vw, tw * KN_MPS, np.nan),
+            "sog_long_mps": np.where(vg, lg * KN_MPS, np.nan),
+            "sog_transverse_mps": np.where(vg, tg * KN_MPS, np.nan),
+        }
     elif stype == "VLW":
         tot, _ = F.num(1)
         trip, _ = F.num(3)
@@ -315,8 +337,13 @@ def _decode(stype: str, F: _Fields) -> tuple[dict[str, dict[str, np.ndarray]], d
         q, _ = F.num(6)
         hdop, _ = F.num(8)
         alt, _ = F.num(9)
-        out["position"] = {"lat_rad": lat, "lon_rad": lon, "alt_m": alt, "hdop": hdop,
-                           "quality": np.where(np.isnan(q), -1, q).astype(np.int8)}
+        out["position"] = {
+            "lat_rad": lat,
+            "lon_rad": lon,
+            "alt_m": alt,
+            "hdop": hdop,
+            "quality": np.where(np.isnan(q), -1, q).astype(np.int8),
+        }
     elif stype == "GNS":
         tod = _tod(F, 1)
         lat, dec = _latlon(F, 2, 3, 78, 83, 90.0)
@@ -327,8 +354,13 @@ def _decode(stype: str, F: _Fields) -> tuple[dict[str, dict[str, np.ndarray]], d
             qmap[ch] = qv
         hdop, _ = F.num(8)
         alt, _ = F.num(9)
-        out["position"] = {"lat_rad": lat, "lon_rad": lon, "alt_m": alt, "hdop": hdop,
-                           "quality": qmap[mode]}
+        out["position"] = {
+            "lat_rad": lat,
+            "lon_rad": lon,
+            "alt_m": alt,
+            "hdop": hdop,
+            "quality": qmap[mode],
+        }
     elif stype == "GLL":
         lat, dec = _latlon(F, 1, 2, 78, 83, 90.0)
         lon, _ = _latlon(F, 3, 4, 69, 87, 180.0)
@@ -336,7 +368,13 @@ def _decode(stype: str, F: _Fields) -> tuple[dict[str, dict[str, np.ndarray]], d
         st = F.char(6)
         mode = F.char(7)
         q = np.where((st == 65) & (mode != 78), 1, np.where(st == 0, -1, 0)).astype(np.int8)
-        out["position"] = {"lat_rad": lat, "lon_rad": lon, "alt_m": nanv, "hdop": nanv, "quality": q}
+        out["position"] = {
+            "lat_rad": lat,
+            "lon_rad": lon,
+            "alt_m": nanv,
+            "hdop": nanv,
+            "quality": q,
+        }
     elif stype == "RMC":
         tod = _tod(F, 1)
         st = F.char(2)
@@ -352,13 +390,24 @@ def _decode(stype: str, F: _Fields) -> tuple[dict[str, dict[str, np.ndarray]], d
         date = _ymd_days(F, yyyy, mo, dd)
         mode = F.char(12)
         q = np.where((st == 65) & (mode != 78), 1, np.where(st == 0, -1, 0)).astype(np.int8)
-        out["position"] = {"lat_rad": lat, "lon_rad": lon, "alt_m": nanv, "hdop": nanv, "quality": q}
+        out["position"] = {
+            "lat_rad": lat,
+            "lon_rad": lon,
+            "alt_m": nanv,
+            "hdop": nanv,
+            "quality": q,
+        }
         bad = q == 0  # status V or mode N: the velocity is not valid either
-        out["ground"] = {"cog_rad": np.where(bad, np.nan, cog), "sog_mps": np.where(bad, np.nan, sog)}
+        out["ground"] = {
+            "cog_rad": np.where(bad, np.nan, cog),
+            "sog_mps": np.where(bad, np.nan, sog),
+        }
     elif stype == "VTG":
         bad = F.char(9) == 78  # mode N: data not valid
-        out["ground"] = {"cog_rad": np.where(bad, np.nan, _angle(F, 1)),
-                         "sog_mps": np.where(bad, np.nan, _speed(F, 5, 7))}
+        out["ground"] = {
+            "cog_rad": np.where(bad, np.nan, _angle(F, 1)),
+            "sog_mps": np.where(bad, np.nan, _speed(F, 5, 7)),
+        }
     elif stype == "ZDA":
         tod = _tod(F, 1)
         d, _ = F.num(2)
@@ -460,8 +509,9 @@ def _line_bounds(buf: np.ndarray, bufp: np.ndarray):
 def _too_long_block(text: bytes) -> ParsedBlock:
     """The block of one line too long to parse (``text``: its first bytes)."""
     tx = text[:120].decode("ascii", "replace")
-    return ParsedBlock(1, 0, {}, {}, Counter(too_long=1), {"too_long": [(1, tx)]},
-                       (1, "too_long", tx))
+    return ParsedBlock(
+        1, 0, {}, {}, Counter(too_long=1), {"too_long": [(1, tx)]}, (1, "too_long", tx)
+    )
 
 
 def _tail_start(tail: bytes) -> int:
@@ -479,8 +529,16 @@ def _tail_start(tail: bytes) -> int:
     return j
 
 
-def _long_line_block(head: bytes, tail: bytes, line_end: bytes, ignore_checksum: bool, at_eof: bool,
-                     max_line_bytes: int, ext_ns=None, ext_src=None) -> tuple[ParsedBlock, dict[str, int]]:
+def _long_line_block(
+    head: bytes,
+    tail: bytes,
+    line_end: bytes,
+    ignore_checksum: bool,
+    at_eof: bool,
+    max_line_bytes: int,
+    ext_ns=None,
+    ext_src=None,
+) -> tuple[ParsedBlock, dict[str, int]]:
     """The block of one line longer than ``max_line_bytes``: one ``too_long`` reject (its
     example the line's first bytes, ``head``), and the line's ``tail`` (its last
     ``max_line_bytes`` bytes) read from its last sentence start (:func:`_tail_start`), so
@@ -489,8 +547,16 @@ def _long_line_block(head: bytes, tail: bytes, line_end: bytes, ignore_checksum:
     k = _tail_start(tail)
     if k == len(tail):
         return _too_long_block(head), {"": 0}
-    pb, src = _parse_chunk(tail[k:] + line_end, ignore_checksum, at_eof, ext_ns, ext_src, 0,
-                           max_line_bytes, split=False)[0]
+    pb, src = _parse_chunk(
+        tail[k:] + line_end,
+        ignore_checksum,
+        at_eof,
+        ext_ns,
+        ext_src,
+        0,
+        max_line_bytes,
+        split=False,
+    )[0]
     tx = head[:120].decode("ascii", "replace")
     pb.reject_counts["too_long"] += 1
     pb.reject_examples["too_long"] = [(1, tx)]
@@ -498,7 +564,9 @@ def _long_line_block(head: bytes, tail: bytes, line_end: bytes, ignore_checksum:
     return pb, src
 
 
-def _concat_parsed(parts: list[tuple[ParsedBlock, dict[str, int]]]) -> tuple[ParsedBlock, dict[str, int]]:
+def _concat_parsed(
+    parts: list[tuple[ParsedBlock, dict[str, int]]],
+) -> tuple[ParsedBlock, dict[str, int]]:
     """Blocks of consecutive pieces of a buffer as the block of the whole buffer: line
     numbers and ``seq`` offset, TAG source codes in order of first appearance over all
     lines (from each piece's first lines of its sources, see :func:`_parse_core`),
@@ -550,9 +618,20 @@ def _concat_parsed(parts: list[tuple[ParsedBlock, dict[str, int]]]) -> tuple[Par
         n_blank += pb.n_blank
     cat = {k: {c: np.concatenate(v) for c, v in d.items()} for k, d in kinds.items()}
     clock_np = {c: np.concatenate(v) for c, v in clock.items()}
-    pb = ParsedBlock(n_lines, n_blank, cat, clock_np, counts, {r: ex[:5] for r, ex in examples.items()},
-                     min(fatal) if fatal else None, stats, list(names) if n_seg else [], ignored,
-                     {k: ex[:IGNORED_EXAMPLES] for k, ex in ign_examples.items()}, n_seg)
+    pb = ParsedBlock(
+        n_lines,
+        n_blank,
+        cat,
+        clock_np,
+        counts,
+        {r: ex[:5] for r, ex in examples.items()},
+        min(fatal) if fatal else None,
+        stats,
+        list(names) if n_seg else [],
+        ignored,
+        {k: ex[:IGNORED_EXAMPLES] for k, ex in ign_examples.items()},
+        n_seg,
+    )
     return pb, firsts
 
 
@@ -580,7 +659,7 @@ def _end_of_line_at(data: bytes, pos: int) -> int | None:
     q = i if j < 0 else j if i < 0 else min(i, j)
     if q < 0:
         return None
-    return q + _line_end_length(data[q:q + 3])
+    return q + _line_end_length(data[q : q + 3])
 
 
 def _line_end_length(b: bytes) -> int:
@@ -590,10 +669,14 @@ def _line_end_length(b: bytes) -> int:
     return 1
 
 
-def _parse_numpy(data: bytes, ignore_checksum: bool = False, at_eof: bool = True,
-                 ext_line_ns: np.ndarray | None = None,
-                 ext_line_source: np.ndarray | None = None,
-                 max_line_bytes: int = MAX_LINE_BYTES) -> tuple[ParsedBlock, dict[str, int]]:
+def _parse_numpy(
+    data: bytes,
+    ignore_checksum: bool = False,
+    at_eof: bool = True,
+    ext_line_ns: np.ndarray | None = None,
+    ext_line_source: np.ndarray | None = None,
+    max_line_bytes: int = MAX_LINE_BYTES,
+) -> tuple[ParsedBlock, dict[str, int]]:
     """Parse a buffer of whole lines (the vectorised numpy core).
 
     ``ext_line_ns``/``ext_line_source`` give a receive time / source key per line (for
@@ -615,15 +698,30 @@ def _parse_numpy(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
     cuts = _chunk_cuts(data, NUMPY_CHUNK_BYTES, NUMPY_CHUNK_LINES)
     for a, b in cuts:
         chunk = data if len(cuts) == 1 else data[a:b]
-        for part in _parse_chunk(chunk, ignore_checksum, at_eof and b == len(data), ext_line_ns,
-                                 ext_line_source, line0, max_line_bytes):
+        for part in _parse_chunk(
+            chunk,
+            ignore_checksum,
+            at_eof and b == len(data),
+            ext_line_ns,
+            ext_line_source,
+            line0,
+            max_line_bytes,
+        ):
             parts.append(part)
             line0 += part[0].n_lines
     return _concat_parsed(parts)
 
 
-def _parse_chunk(data: bytes, ignore_checksum: bool, at_eof: bool, ext_ns, ext_src, line0: int,
-                 max_line_bytes: int, split: bool = True) -> list[tuple[ParsedBlock, dict[str, int]]]:
+def _parse_chunk(
+    data: bytes,
+    ignore_checksum: bool,
+    at_eof: bool,
+    ext_ns,
+    ext_src,
+    line0: int,
+    max_line_bytes: int,
+    split: bool = True,
+) -> list[tuple[ParsedBlock, dict[str, int]]]:
     """:func:`_parse_numpy` of one chunk: its lines too long split off, the rest in pieces
     within :data:`PIECE_BUDGET`; ``line0`` is the chunk's first line in ``ext_ns``/``ext_src``."""
     n = len(data)
@@ -636,15 +734,34 @@ def _parse_chunk(data: bytes, ignore_checksum: bool, at_eof: bool, ext_ns, ext_s
     long = (line_end - line_start) > max_line_bytes
 
     def ext(a: int, b: int):
-        return (None if ext_ns is None else np.asarray(ext_ns)[line0 + a:line0 + b],
-                None if ext_src is None else np.asarray(ext_src, dtype=object)[line0 + a:line0 + b])
+        return (
+            None if ext_ns is None else np.asarray(ext_ns)[line0 + a : line0 + b],
+            None if ext_src is None else np.asarray(ext_src, dtype=object)[line0 + a : line0 + b],
+        )
 
-    if not split or (not long.any() and _W_BYTE * n + _W_START * len(st) + _W_LINE * nl <= PIECE_BUDGET):
+    if not split or (
+        not long.any() and _W_BYTE * n + _W_START * len(st) + _W_LINE * nl <= PIECE_BUDGET
+    ):
         e_ns, e_src = ext(0, nl)
-        return [_parse_core(bufp, buf, line_start, line_end, ends_nl, bad, st, ignore_checksum, at_eof,
-                            e_ns, e_src)]
+        return [
+            _parse_core(
+                bufp,
+                buf,
+                line_start,
+                line_end,
+                ends_nl,
+                bad,
+                st,
+                ignore_checksum,
+                at_eof,
+                e_ns,
+                e_src,
+            )
+        ]
     w = np.empty(nl + 1, dtype=np.int64)  # estimated working memory before each line
-    w[:nl] = _W_BYTE * line_start + _W_START * np.searchsorted(st, line_start) + _W_LINE * np.arange(nl)
+    w[:nl] = (
+        _W_BYTE * line_start + _W_START * np.searchsorted(st, line_start) + _W_LINE * np.arange(nl)
+    )
     w[nl] = _W_BYTE * n + _W_START * len(st) + _W_LINE * nl
     long_idx = np.flatnonzero(long).tolist()
     spans, a = [], 0
@@ -665,20 +782,48 @@ def _parse_chunk(data: bytes, ignore_checksum: bool, at_eof: bool, ext_ns, ext_s
         if is_long:
             e = ends[a]
             e_ns, e_src = ext(a, b)
-            out.append(_long_line_block(data[at[a]:at[a] + 120], data[max(at[a], e - max_line_bytes):e],
-                                        data[e:at[b]], ignore_checksum, at_eof and b == nl, max_line_bytes,
-                                        e_ns, e_src))
+            out.append(
+                _long_line_block(
+                    data[at[a] : at[a] + 120],
+                    data[max(at[a], e - max_line_bytes) : e],
+                    data[e : at[b]],
+                    ignore_checksum,
+                    at_eof and b == nl,
+                    max_line_bytes,
+                    e_ns,
+                    e_src,
+                )
+            )
         else:
             e_ns, e_src = ext(a, b)
-            out.extend(_parse_chunk(data[at[a]:at[b]], ignore_checksum, at_eof and b == nl, e_ns, e_src,
-                                    0, max_line_bytes, split=False))
+            out.extend(
+                _parse_chunk(
+                    data[at[a] : at[b]],
+                    ignore_checksum,
+                    at_eof and b == nl,
+                    e_ns,
+                    e_src,
+                    0,
+                    max_line_bytes,
+                    split=False,
+                )
+            )
     return out
 
 
-def _parse_core(bufp: np.ndarray, buf: np.ndarray, line_start: np.ndarray, line_end: np.ndarray,
-                ends_nl: bool, bad: _Marked, st: np.ndarray, ignore_checksum: bool, at_eof: bool,
-                ext_line_ns: np.ndarray | None,
-                ext_line_source: np.ndarray | None) -> tuple[ParsedBlock, dict[str, int]]:
+def _parse_core(
+    bufp: np.ndarray,
+    buf: np.ndarray,
+    line_start: np.ndarray,
+    line_end: np.ndarray,
+    ends_nl: bool,
+    bad: _Marked,
+    st: np.ndarray,
+    ignore_checksum: bool,
+    at_eof: bool,
+    ext_line_ns: np.ndarray | None,
+    ext_line_source: np.ndarray | None,
+) -> tuple[ParsedBlock, dict[str, int]]:
     """The vectorised parse of a piece without lines too long (see :func:`_parse_numpy`):
     ``st`` the positions of its '$' and '!' bytes."""
     n_lines = len(line_end)
@@ -695,12 +840,25 @@ def _parse_core(bufp: np.ndarray, buf: np.ndarray, line_start: np.ndarray, line_
         counts[reason] += len(lines_idx)
         ex = examples.setdefault(reason, [])  # the first 5 of each call: sorted at the end
         for j in range(min(5, len(lines_idx))):
-            ex.append((int(lines_idx[j]) + 1, bytes(buf[starts[j]:min(ends[j], starts[j] + 120)])
-                       .decode("ascii", "replace")))
+            ex.append(
+                (
+                    int(lines_idx[j]) + 1,
+                    bytes(buf[starts[j] : min(ends[j], starts[j] + 120)]).decode(
+                        "ascii", "replace"
+                    ),
+                )
+            )
         if reason not in NON_FATAL:
             j = 0
-            fatal.append((int(lines_idx[j]) + 1, reason, bytes(buf[starts[j]:min(ends[j], starts[j] + 120)])
-                          .decode("ascii", "replace")))
+            fatal.append(
+                (
+                    int(lines_idx[j]) + 1,
+                    reason,
+                    bytes(buf[starts[j] : min(ends[j], starts[j] + 120)]).decode(
+                        "ascii", "replace"
+                    ),
+                )
+            )
 
     ignored: Counter = Counter()
     ign_examples: dict[str, list[tuple[int, str]]] = {}
@@ -720,18 +878,24 @@ def _parse_core(bufp: np.ndarray, buf: np.ndarray, line_start: np.ndarray, line_
             name = int(key).to_bytes(8, "little").rstrip(b"\0").decode("ascii", "replace")
             ignored[name] += int(cnt[j])
             ex = ign_examples.setdefault(name, [])
-            for r in order[g0[j]:g0[j] + min(IGNORED_EXAMPLES, int(cnt[j]))].tolist():
-                ex.append((int(lines_idx[r]) + 1, bytes(buf[starts[r]:min(ends[r], starts[r] + 120)])
-                           .decode("ascii", "replace")))
+            for r in order[g0[j] : g0[j] + min(IGNORED_EXAMPLES, int(cnt[j]))].tolist():
+                ex.append(
+                    (
+                        int(lines_idx[r]) + 1,
+                        bytes(buf[starts[r] : min(ends[r], starts[r] + 120)]).decode(
+                            "ascii", "replace"
+                        ),
+                    )
+                )
 
     def named(name: str, n: int) -> np.ndarray:
         m = np.zeros((n, 8), dtype=np.uint8)
-        m[:, :len(name)] = np.frombuffer(name.encode(), dtype=np.uint8)
+        m[:, : len(name)] = np.frombuffer(name.encode(), dtype=np.uint8)
         return m
 
     # sentence starts: '$' or '!' not immediately followed by another start ('$$GPGGA')
     nxt_is = np.zeros(len(st), dtype=bool)
-    nxt_is[:-1] = (st[1:] == st[:-1] + 1)
+    nxt_is[:-1] = st[1:] == st[:-1] + 1
     stats["doubled_start"] = int(nxt_is.sum())
     st = st[~nxt_is]
     seg_line = np.searchsorted(line_start, st, side="right") - 1
@@ -759,10 +923,21 @@ def _parse_core(bufp: np.ndarray, buf: np.ndarray, line_start: np.ndarray, line_
         sel = noseg[iscom]
         ignore(named("comment", len(sel)), sel, line_start[sel], line_end[sel])
     if nseg == 0:
-        return (ParsedBlock(n_lines, int(blank.sum()), {}, {}, counts, _first_examples(examples, 5),
-                            min(fatal) if fatal else None, stats, ignored=ignored,
-                            ignored_examples=_first_examples(ign_examples, IGNORED_EXAMPLES)),
-                {"": 0} if n_lines else {})
+        return (
+            ParsedBlock(
+                n_lines,
+                int(blank.sum()),
+                {},
+                {},
+                counts,
+                _first_examples(examples, 5),
+                min(fatal) if fatal else None,
+                stats,
+                ignored=ignored,
+                ignored_examples=_first_examples(ign_examples, IGNORED_EXAMPLES),
+            ),
+            {"": 0} if n_lines else {},
+        )
 
     cum_xor = np.bitwise_xor.accumulate(buf)
     commas = np.flatnonzero(buf == 44)
@@ -830,7 +1005,7 @@ def _parse_core(bufp: np.ndarray, buf: np.ndarray, line_start: np.ndarray, line_
         eof_cut[-1] = seg_line[-1] == n_lines - 1
     drop("truncated", ~has_cs & (followed | stray_star | eof_cut))
     x = cum_xor[np.maximum(body_end - 1, 0)] ^ cum_xor[st]  # XOR over (start, body_end)
-    given = (h1.astype(np.int64) * 16 + h2)
+    given = h1.astype(np.int64) * 16 + h2
     wrong = has_cs & (x.astype(np.int64) != given)
     if ignore_checksum:
         stats["checksum_ignored"] += int((wrong & alive).sum())
@@ -842,14 +1017,21 @@ def _parse_core(bufp: np.ndarray, buf: np.ndarray, line_start: np.ndarray, line_
     # the commas of each sentence body: [c_first, c_first + ncomma) in the comma table
     c_first = np.searchsorted(commas, st)
     ncomma = np.searchsorted(commas, body_end) - c_first
-    first_comma = np.where(ncomma > 0, commas[np.minimum(c_first, max(len(commas) - 1, 0))]
-                           if len(commas) else 0, body_end)
+    first_comma = np.where(
+        ncomma > 0,
+        commas[np.minimum(c_first, max(len(commas) - 1, 0))] if len(commas) else 0,
+        body_end,
+    )
     addr_len = np.where(first_comma < body_end, first_comma - st - 1, body_end - st - 1)
     a5 = st[:, None] + 1 + np.arange(5)
     amat = buf[np.minimum(a5, len(buf) - 1)]
     alnum = ((amat >= 65) & (amat <= 90)) | ((amat >= 48) & (amat <= 57))
     proprietary = amat[:, 0] == 80  # 'P'
-    good_addr = (addr_len == 5) & alnum.all(axis=1) & np.all((amat[:, 2:] >= 65) & (amat[:, 2:] <= 90), axis=1)
+    good_addr = (
+        (addr_len == 5)
+        & alnum.all(axis=1)
+        & np.all((amat[:, 2:] >= 65) & (amat[:, 2:] <= 90), axis=1)
+    )
     ais = buf[st] == 33
 
     def drop_ignored(mask, width):
@@ -904,11 +1086,15 @@ def _parse_core(bufp: np.ndarray, buf: np.ndarray, line_start: np.ndarray, line_
             timing = {k: v[okr] for k, v in timing.items()}
             if len(rows) == 0:
                 continue
-        common = {"line": seg_line[rows] + 1, "seq": rows,
-                  "talker": talker_b[rows].view(np.uint16),
-                  "sentence": np.full(len(rows), SENTENCES.index(stype), dtype=np.int8),
-                  "tag_source": src_codes[seg_line[rows]], "ext_ns": line_ext[seg_line[rows]],
-                  **timing}
+        common = {
+            "line": seg_line[rows] + 1,
+            "seq": rows,
+            "talker": talker_b[rows].view(np.uint16),
+            "sentence": np.full(len(rows), SENTENCES.index(stype), dtype=np.int8),
+            "tag_source": src_codes[seg_line[rows]],
+            "ext_ns": line_ext[seg_line[rows]],
+            **timing,
+        }
         if stype == "ZDA":
             for c, v in common.items():
                 clock.setdefault(c, []).append(v)
@@ -925,12 +1111,28 @@ def _parse_core(bufp: np.ndarray, buf: np.ndarray, line_start: np.ndarray, line_
         order = np.argsort(cat["seq"], kind="stable")  # back to stream order
         kinds_np[k] = {c: v[order] for c, v in cat.items()}
     clock_np = {c: np.concatenate(v) for c, v in clock.items()}
-    return (ParsedBlock(n_lines, int(blank.sum()), kinds_np, clock_np, counts, _first_examples(examples, 5),
-                        min(fatal) if fatal else None, stats, src_names, ignored,
-                        _first_examples(ign_examples, IGNORED_EXAMPLES), nseg), firsts)
+    return (
+        ParsedBlock(
+            n_lines,
+            int(blank.sum()),
+            kinds_np,
+            clock_np,
+            counts,
+            _first_examples(examples, 5),
+            min(fatal) if fatal else None,
+            stats,
+            src_names,
+            ignored,
+            _first_examples(ign_examples, IGNORED_EXAMPLES),
+            nseg,
+        ),
+        firsts,
+    )
 
 
-def _first_examples(examples: dict[str, list[tuple[int, str]]], k: int) -> dict[str, list[tuple[int, str]]]:
+def _first_examples(
+    examples: dict[str, list[tuple[int, str]]], k: int
+) -> dict[str, list[tuple[int, str]]]:
     """The first ``k`` examples of each reason or type in stream order (by line; on one
     line in the order they were found): the same whatever pieces a buffer was cut into."""
     return {r: sorted(ex, key=lambda e: e[0])[:k] for r, ex in examples.items()}
@@ -952,8 +1154,11 @@ _T = {s: i for i, s in enumerate(SENTENCES)}
 #: kind -> sentence type codes giving it; value column -> column of the kernel's r_val
 _KIND_TYPES = {
     "heading": (_T["HDT"], _T["HDM"], _T["HDG"], _T["THS"]),
-    "rot": (_T["ROT"],), "water": (_T["VHW"], _T["VBW"]), "distance": (_T["VLW"],),
-    "position": (_T["GGA"], _T["GLL"], _T["RMC"], _T["GNS"]), "ground": (_T["RMC"], _T["VTG"]),
+    "rot": (_T["ROT"],),
+    "water": (_T["VHW"], _T["VBW"]),
+    "distance": (_T["VLW"],),
+    "position": (_T["GGA"], _T["GLL"], _T["RMC"], _T["GNS"]),
+    "ground": (_T["RMC"], _T["VTG"]),
 }
 _KIND_VALS = {
     "heading": {"heading_rad": 0, "reference": "code", "deviation_rad": 1, "variation_rad": 2},
@@ -976,30 +1181,66 @@ def _scan_c(data: bytes, max_line_bytes: int = MAX_LINE_BYTES) -> dict:
     cap, cap_rows = _nmeascan.sizes(data)
     cap_long = len(data) // (max_line_bytes + 1) + 1
     nval = _nmeascan.NVAL
-    a = {"fb_line": np.empty(cap, np.int64), "long_line": np.empty(cap_long, np.int64),
-         "long_start": np.empty(cap_long, np.int64), "long_end": np.empty(cap_long, np.int64),
-         "sub": np.empty(len(data), np.uint8), "line": np.empty(cap_rows, np.int64),
-         "seq": np.empty(cap_rows, np.int64), "talker": np.empty(cap_rows, np.uint16),
-         "sentence": np.empty(cap_rows, np.int8), "src": np.empty(cap_rows, np.int32),
-         "ext_ns": np.empty(cap_rows, np.int64), "tod_ns": np.empty(cap_rows, np.int64),
-         "date_days": np.empty(cap_rows, np.int64), "dec": np.empty(cap_rows, np.int8),
-         "code": np.empty(cap_rows, np.int8), "val": np.empty((cap_rows, nval), np.float64)}
+    a = {
+        "fb_line": np.empty(cap, np.int64),
+        "long_line": np.empty(cap_long, np.int64),
+        "long_start": np.empty(cap_long, np.int64),
+        "long_end": np.empty(cap_long, np.int64),
+        "sub": np.empty(len(data), np.uint8),
+        "line": np.empty(cap_rows, np.int64),
+        "seq": np.empty(cap_rows, np.int64),
+        "talker": np.empty(cap_rows, np.uint16),
+        "sentence": np.empty(cap_rows, np.int8),
+        "src": np.empty(cap_rows, np.int32),
+        "ext_ns": np.empty(cap_rows, np.int64),
+        "tod_ns": np.empty(cap_rows, np.int64),
+        "date_days": np.empty(cap_rows, np.int64),
+        "dec": np.empty(cap_rows, np.int8),
+        "code": np.empty(cap_rows, np.int8),
+        "val": np.empty((cap_rows, nval), np.float64),
+    }
     n_lines, n_blank, n_rows, n_fb, n_long, sub_len, n_seg, n_tag, names, first = _nmeascan.scan(
-        data, cap, cap_rows, max_line_bytes, a["fb_line"], a["long_line"],
-        a["long_start"], a["long_end"], a["sub"], a["line"], a["seq"], a["talker"], a["sentence"],
-        a["src"], a["ext_ns"], a["tod_ns"], a["date_days"], a["dec"], a["code"], a["val"])
+        data,
+        cap,
+        cap_rows,
+        max_line_bytes,
+        a["fb_line"],
+        a["long_line"],
+        a["long_start"],
+        a["long_end"],
+        a["sub"],
+        a["line"],
+        a["seq"],
+        a["talker"],
+        a["sentence"],
+        a["src"],
+        a["ext_ns"],
+        a["tod_ns"],
+        a["date_days"],
+        a["dec"],
+        a["code"],
+        a["val"],
+    )
     fb = ("fb_line",)
     lg = ("long_line", "long_start", "long_end")
     out = {k: v[:n_rows] for k, v in a.items() if k not in fb + lg + ("sub",)}
     out.update({k: a[k][:n_fb] for k in fb})  # views: the pages beyond were never written
     out.update({k: a[k][:n_long] for k in lg})
-    out.update(sub=a["sub"][:sub_len].tobytes(), n_lines=n_lines, n_blank=n_blank, n_tag=n_tag,
-               n_seg=n_seg, names=names, first=first)
+    out.update(
+        sub=a["sub"][:sub_len].tobytes(),
+        n_lines=n_lines,
+        n_blank=n_blank,
+        n_tag=n_tag,
+        n_seg=n_seg,
+        names=names,
+        first=first,
+    )
     return out
 
 
-def _parse_c(data: bytes, ignore_checksum: bool, at_eof: bool,
-             max_line_bytes: int = MAX_LINE_BYTES) -> ParsedBlock:
+def _parse_c(
+    data: bytes, ignore_checksum: bool, at_eof: bool, max_line_bytes: int = MAX_LINE_BYTES
+) -> ParsedBlock:
     """:func:`parse_buffer` with the compiled kernel: it decodes the clean lines and
     copies all others into a side buffer, parsed by :func:`_parse_numpy`; the two are
     merged back into stream order (line numbers, ``seq``, TAG source codes in order of
@@ -1040,9 +1281,17 @@ def _parse_c(data: bytes, ignore_checksum: bool, at_eof: bool,
         return out
 
     sent = r["sentence"]
-    common = {"line": r["line"], "seq": r["seq"], "talker": r["talker"], "sentence": sent,
-              "tag_source": lut_c[r["src"]], "ext_ns": r["ext_ns"], "tod_ns": r["tod_ns"],
-              "date_days": r["date_days"], "dec": r["dec"]}
+    common = {
+        "line": r["line"],
+        "seq": r["seq"],
+        "talker": r["talker"],
+        "sentence": sent,
+        "tag_source": lut_c[r["src"]],
+        "ext_ns": r["ext_ns"],
+        "tod_ns": r["tod_ns"],
+        "date_days": r["date_days"],
+        "dec": r["dec"],
+    }
     val = r["val"]
     kinds: dict[str, dict[str, np.ndarray]] = {}
     for kind in _KIND_ORDER:
@@ -1072,28 +1321,48 @@ def _parse_c(data: bytes, ignore_checksum: bool, at_eof: bool,
     if pbs.clock:
         parts.append(from_sub(pbs.clock))
     clock = _merge_parts(parts) if parts else {}
-    examples = {k: [(int(fb_lines[ln - 1]) + 1, tx) for ln, tx in v]
-                for k, v in pbs.reject_examples.items()}
+    examples = {
+        k: [(int(fb_lines[ln - 1]) + 1, tx) for ln, tx in v] for k, v in pbs.reject_examples.items()
+    }
     fatal = pbs.first_fatal
     if fatal is not None:
         fatal = (int(fb_lines[fatal[0] - 1]) + 1, fatal[1], fatal[2])
     counts = Counter(pbs.reject_counts)
     if len(r["long_line"]):
         counts["too_long"] += len(r["long_line"])
-        examples["too_long"] = [(int(li) + 1, data[a:min(int(e), a + 120)].decode("ascii", "replace"))
-                                for li, a, e in zip(r["long_line"][:5].tolist(), r["long_start"][:5].tolist(),
-                                                    r["long_end"][:5].tolist(), strict=True)]
+        examples["too_long"] = [
+            (int(li) + 1, data[a : min(int(e), a + 120)].decode("ascii", "replace"))
+            for li, a, e in zip(
+                r["long_line"][:5].tolist(),
+                r["long_start"][:5].tolist(),
+                r["long_end"][:5].tolist(),
+                strict=True,
+            )
+        ]
         too_long = (examples["too_long"][0][0], "too_long", examples["too_long"][0][1])
         fatal = too_long if fatal is None else min(fatal, too_long)
     stats = Counter(pbs.stats)
     stats["blank"] += r["n_blank"]
     if r["n_tag"]:
         stats["prefix_tag"] += r["n_tag"]
-    ign_examples = {k: [(int(fb_lines[ln - 1]) + 1, tx) for ln, tx in v]
-                    for k, v in pbs.ignored_examples.items()}
-    return ParsedBlock(n_lines, r["n_blank"] + pbs.n_blank, kinds, clock, counts,
-                       examples, fatal, stats, [str(x) for x in names], Counter(pbs.ignored),
-                       ign_examples, int(r["n_seg"]))
+    ign_examples = {
+        k: [(int(fb_lines[ln - 1]) + 1, tx) for ln, tx in v]
+        for k, v in pbs.ignored_examples.items()
+    }
+    return ParsedBlock(
+        n_lines,
+        r["n_blank"] + pbs.n_blank,
+        kinds,
+        clock,
+        counts,
+        examples,
+        fatal,
+        stats,
+        [str(x) for x in names],
+        Counter(pbs.ignored),
+        ign_examples,
+        int(r["n_seg"]),
+    )
 
 
 def _merge_parts(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
@@ -1105,10 +1374,15 @@ def _merge_parts(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
     return {c: v[order] for c, v in cat.items()}
 
 
-def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True,
-                 ext_line_ns: np.ndarray | None = None,
-                 ext_line_source: np.ndarray | None = None,
-                 engine: str | None = None, max_line_bytes: int = MAX_LINE_BYTES) -> ParsedBlock:
+def parse_buffer(
+    data: bytes,
+    ignore_checksum: bool = False,
+    at_eof: bool = True,
+    ext_line_ns: np.ndarray | None = None,
+    ext_line_source: np.ndarray | None = None,
+    engine: str | None = None,
+    max_line_bytes: int = MAX_LINE_BYTES,
+) -> ParsedBlock:
     """Parse a buffer of whole lines.
 
     ``engine`` "c" uses the compiled kernel (:mod:`dracc.ingest._nmeascan`) where it is
@@ -1120,14 +1394,24 @@ def parse_buffer(data: bytes, ignore_checksum: bool = False, at_eof: bool = True
     """
     use_c = (engine or ENGINE) == "c" and _nmeascan is not None
     if use_c and ext_line_ns is None and ext_line_source is None and len(data):
-        return _parse_c(data if isinstance(data, bytes) else bytes(data), ignore_checksum, at_eof,
-                        max_line_bytes)
-    return _parse_numpy(data, ignore_checksum, at_eof, ext_line_ns, ext_line_source, max_line_bytes)[0]
+        return _parse_c(
+            data if isinstance(data, bytes) else bytes(data),
+            ignore_checksum,
+            at_eof,
+            max_line_bytes,
+        )
+    return _parse_numpy(
+        data, ignore_checksum, at_eof, ext_line_ns, ext_line_source, max_line_bytes
+    )[0]
 
 
 # ------------------------------------------------------------------ streaming reader
-def _block_ranges(path: Path, block_bytes: int, first_bytes: int | None = None,
-                  max_line_bytes: int = MAX_LINE_BYTES) -> Iterator[tuple[int, int, bool]]:
+def _block_ranges(
+    path: Path,
+    block_bytes: int,
+    first_bytes: int | None = None,
+    max_line_bytes: int = MAX_LINE_BYTES,
+) -> Iterator[tuple[int, int, bool]]:
     """(offset, length, too long) of blocks of whole lines: the first about ``first_bytes``
     (default ``block_bytes``), the others about ``block_bytes``, each cut after a line end
     (LF, CR LF, CR CR LF or a lone CR).  A line longer than ``max_line_bytes`` across a
@@ -1191,8 +1475,15 @@ def _line_start_before(fd: int, lo: int, hi: int) -> int:
     return lo
 
 
-def _parse_range(path: str, off: int, length: int, ignore_checksum: bool, at_eof: bool,
-                 max_line_bytes: int = MAX_LINE_BYTES, too_long: bool = False) -> ParsedBlock:
+def _parse_range(
+    path: str,
+    off: int,
+    length: int,
+    ignore_checksum: bool,
+    at_eof: bool,
+    max_line_bytes: int = MAX_LINE_BYTES,
+    too_long: bool = False,
+) -> ParsedBlock:
     """Parse one block of a file; a block flagged ``too_long`` (one line, see
     :func:`_block_ranges`) is one ``too_long`` reject and only its first bytes are read."""
     with open(path, "rb") as fh:
@@ -1203,10 +1494,18 @@ def _parse_range(path: str, off: int, length: int, ignore_checksum: bool, at_eof
             fh.seek(a)
             tail = fh.read(off + length - a)
             content = tail.rstrip(b"\r\n")  # a line's content holds no CR or LF
-            return _long_line_block(head, content[-max_line_bytes:], tail[len(content):], ignore_checksum,
-                                    at_eof, max_line_bytes)[0]
+            return _long_line_block(
+                head,
+                content[-max_line_bytes:],
+                tail[len(content) :],
+                ignore_checksum,
+                at_eof,
+                max_line_bytes,
+            )[0]
         data = fh.read(length)
-    return parse_buffer(data, ignore_checksum=ignore_checksum, at_eof=at_eof, max_line_bytes=max_line_bytes)
+    return parse_buffer(
+        data, ignore_checksum=ignore_checksum, at_eof=at_eof, max_line_bytes=max_line_bytes
+    )
 
 
 @dataclass
@@ -1236,29 +1535,46 @@ class StreamState:
     timebase: TimeBase = field(default_factory=TimeBase)
     events: EventCounter = field(default_factory=EventCounter)
     sentences: Counter = field(default_factory=Counter)
-    split_talkers: dict = field(default_factory=dict)  #: talker -> decimals seen (fingerprint split)
+    split_talkers: dict = field(
+        default_factory=dict
+    )  #: talker -> decimals seen (fingerprint split)
 
     def time_events(self) -> TimeEvents:
         tb = self.timebase
         tot = self.events.totals()
-        te = TimeEvents(duplicates=tot["duplicates"], backsteps=tot["backsteps"], gaps=tot["gaps"],
-                        rollovers=tb.rollovers, implausible_dates=tb.week_rollovers + tb.implausible)
+        te = TimeEvents(
+            duplicates=tot["duplicates"],
+            backsteps=tot["backsteps"],
+            gaps=tot["gaps"],
+            rollovers=tb.rollovers,
+            implausible_dates=tb.week_rollovers + tb.implausible,
+        )
         te.decisions = list(dict.fromkeys(tb.decisions))
         if tb.derived:
-            te.decisions.append(f"{tb.derived} records without a time field took the time of the "
-                                "preceding timed record (or the logger/TAG time)")
+            te.decisions.append(
+                f"{tb.derived} records without a time field took the time of the "
+                "preceding timed record (or the logger/TAG time)"
+            )
         if tb.backward_midnight:
-            te.decisions.append(f"{tb.backward_midnight} steps back over midnight between interleaved clocks")
+            te.decisions.append(
+                f"{tb.backward_midnight} steps back over midnight between interleaved clocks"
+            )
         if tb.week_rollovers:
-            te.decisions.append(f"{tb.week_rollovers} dates corrected for the GPS week rollover (+1024 weeks)")
+            te.decisions.append(
+                f"{tb.week_rollovers} dates corrected for the GPS week rollover (+1024 weeks)"
+            )
         if tb.implausible:
-            te.decisions.append(f"{tb.implausible} implausible dates (before 2000 or in the future) not used")
+            te.decisions.append(
+                f"{tb.implausible} implausible dates (before 2000 or in the future) not used"
+            )
         if tb.date_changes:
             te.decisions.append(f"the date changed {tb.date_changes} times other than at midnight")
         te.examples = list(self.events.examples)
         return te
 
-    def count_block(self, pb: ParsedBlock, strict: bool, number=None, label: str = "{path}:{n}") -> int:
+    def count_block(
+        self, pb: ParsedBlock, strict: bool, number=None, label: str = "{path}:{n}"
+    ) -> int:
         """Add a parsed block's lines, statistics and rejects; return the stream line of its
         first line.  ``number(ln, line0)``: the number a reject example gets for the block's
         line ``ln`` (default: its line in the stream); ``label``: how the strict-mode error
@@ -1290,11 +1606,15 @@ class StreamState:
         s = self.stats
         out = []
         if s["no_checksum"]:
-            out.append(f"{s['no_checksum']} sentences without checksum accepted (field checks only)")
+            out.append(
+                f"{s['no_checksum']} sentences without checksum accepted (field checks only)"
+            )
         if s["checksum_ignored"]:
             out.append(f"{s['checksum_ignored']} wrong checksums accepted (--ignore-checksum)")
         if s["tag_checksum_ignored"]:
-            out.append(f"{s['tag_checksum_ignored']} wrong TAG checksums accepted (--ignore-checksum)")
+            out.append(
+                f"{s['tag_checksum_ignored']} wrong TAG checksums accepted (--ignore-checksum)"
+            )
         if s["one_digit_checksum"]:
             out.append(f"{s['one_digit_checksum']} one-digit checksums ('*5' for '*05') accepted")
         if s["doubled_start"]:
@@ -1307,8 +1627,10 @@ class StreamState:
             if k.startswith("prefix_") and k != "prefix_other" and v:
                 out.append(f"{v} lines with {k[7:]} prefix")
         for t, decs in self.split_talkers.items():
-            out.append(f"talker {t}: position sentences with {sorted(decs)} decimals of minutes "
-                       f"come from different receivers: source keys {t}/<n>dp")
+            out.append(
+                f"talker {t}: position sentences with {sorted(decs)} decimals of minutes "
+                f"come from different receivers: source keys {t}/<n>dp"
+            )
         return out
 
 
@@ -1367,7 +1689,9 @@ def _handover_dir(needed_bytes: int):
         if os.access(base, os.W_OK):
             _sweep_handover(base)
             if st.f_bavail * st.f_frsize >= needed_bytes:
-                return tempfile.TemporaryDirectory(prefix=f"{_HANDOVER_PREFIX}{os.getpid()}-", dir=base)
+                return tempfile.TemporaryDirectory(
+                    prefix=f"{_HANDOVER_PREFIX}{os.getpid()}-", dir=base
+                )
     return contextlib.nullcontext(None)
 
 
@@ -1380,7 +1704,7 @@ def _sweep_handover(base: str) -> None:
     except OSError:
         return
     for name in names:
-        parts = name[len(_HANDOVER_PREFIX):].split("-", 1)
+        parts = name[len(_HANDOVER_PREFIX) :].split("-", 1)
         if len(parts) != 2 or not parts[0].isdigit():  # not <pid>-<random>: not ours to judge
             continue
         pid_s = parts[0]
@@ -1395,8 +1719,16 @@ def _sweep_handover(base: str) -> None:
             continue
 
 
-def _parse_range_to_file(folder: str | None, i: int, path: str, off: int, length: int,
-                         ignore_checksum: bool, at_eof: bool, max_line_bytes: int = MAX_LINE_BYTES):
+def _parse_range_to_file(
+    folder: str | None,
+    i: int,
+    path: str,
+    off: int,
+    length: int,
+    ignore_checksum: bool,
+    at_eof: bool,
+    max_line_bytes: int = MAX_LINE_BYTES,
+):
     """:func:`_parse_range` in a worker, its arrays written to a file in ``folder``.
 
     A block's arrays (about 1.3x its text) sent through the pool's pipe cost the worker
@@ -1430,11 +1762,13 @@ def _load_parsed(handed) -> ParsedBlock:
         return handed
     meta, sizes, name = handed
     with open(name, "rb") as fh:
-        whole = memoryview(mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_COPY)) if sum(sizes) else None
+        whole = (
+            memoryview(mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_COPY)) if sum(sizes) else None
+        )
     os.unlink(name)
     views, at = [], 0
     for size in sizes:
-        views.append(whole[at:at + size])
+        views.append(whole[at : at + size])
         at += size
     return pickle.loads(meta, buffers=views)
 
@@ -1470,8 +1804,9 @@ def _talker_str(code: int) -> str:
     return int(code).to_bytes(2, "little").decode("ascii", "replace")
 
 
-def _source_categorical(cols: dict[str, np.ndarray], names: list[str], split_talkers: dict,
-                        kind: str) -> tuple[pd.Categorical, pd.Categorical]:
+def _source_categorical(
+    cols: dict[str, np.ndarray], names: list[str], split_talkers: dict, kind: str
+) -> tuple[pd.Categorical, pd.Categorical]:
     """(source, talker) categoricals from codes: the TAG/given source where there is one,
     else the talker, split by decimals of minutes for fingerprinted talkers."""
     talker = cols["talker"].astype(np.int64)
@@ -1502,8 +1837,14 @@ def _source_categorical(cols: dict[str, np.ndarray], names: list[str], split_tal
     return src, tal
 
 
-def _assemble(pb: ParsedBlock, times: list[np.ndarray], state: StreamState, file: str,
-              line0: int, cfg: IngestConfig) -> dict[str, pd.DataFrame]:
+def _assemble(
+    pb: ParsedBlock,
+    times: list[np.ndarray],
+    state: StreamState,
+    file: str,
+    line0: int,
+    cfg: IngestConfig,
+) -> dict[str, pd.DataFrame]:
     """Turn a parsed block plus resolved times into canonical frames; count events."""
     frames = {}
     order_kinds = [k for k in KINDS if k in pb.kinds]
@@ -1519,8 +1860,13 @@ def _assemble(pb: ParsedBlock, times: list[np.ndarray], state: StreamState, file
                 state.rejects.counts["no_date"] += len(idx)
                 ex = state.rejects.examples.setdefault("no_date", [])
                 for j in idx[: max(0, 5 - len(ex))]:
-                    ex.append((file, int(line[j]),
-                               f"{SENTENCES[cols['sentence'][j]]} time of day without date"))
+                    ex.append(
+                        (
+                            file,
+                            int(line[j]),
+                            f"{SENTENCES[cols['sentence'][j]]} time of day without date",
+                        )
+                    )
             keep = ~missing
             cols = {c: v[keep] for c, v in cols.items()}
             t, line = t[keep], line[keep]
@@ -1532,11 +1878,29 @@ def _assemble(pb: ParsedBlock, times: list[np.ndarray], state: StreamState, file
         own = (cols["tod_ns"] >= 0) | (cols["ext_ns"] != MISSING_NS)
         if kind == "ground":  # an RMC is counted once, in its position record
             own &= cols["sentence"] != SENTENCES.index("RMC")
-        data = {c: v for c, v in cols.items()
-                if c not in ("seq", "tag_source", "dec", "tod_ns", "date_days", "ext_ns", "talker",
-                             "sentence")}
-        data.update(talker=tal, source=src, sentence=sent, time_ns=t, line=line,
-                    recv_ns=_recv_ns(cols["tod_ns"], cols["ext_ns"]))
+        data = {
+            c: v
+            for c, v in cols.items()
+            if c
+            not in (
+                "seq",
+                "tag_source",
+                "dec",
+                "tod_ns",
+                "date_days",
+                "ext_ns",
+                "talker",
+                "sentence",
+            )
+        }
+        data.update(
+            talker=tal,
+            source=src,
+            sentence=sent,
+            time_ns=t,
+            line=line,
+            recv_ns=_recv_ns(cols["tod_ns"], cols["ext_ns"]),
+        )
         if "reference" in data:
             data["reference"] = _reference_categorical(data["reference"])
         df = make_frame(kind, data)
@@ -1551,7 +1915,9 @@ def _recv_ns(tod_ns: np.ndarray, ext_ns: np.ndarray) -> np.ndarray:
     :func:`~dracc.ingest.timebase.drop_implausible_ext`; ``MISSING_NS`` where the record
     has no time of fix (HDT, VTG ...) or no usable external time."""
     ext, _ = drop_implausible_ext(ext_ns)
-    return np.where((tod_ns >= 0) & (ext != MISSING_NS), ext, MISSING_NS).astype(np.int64, copy=False)
+    return np.where((tod_ns >= 0) & (ext != MISSING_NS), ext, MISSING_NS).astype(
+        np.int64, copy=False
+    )
 
 
 def _time_arrays(pb: ParsedBlock):
@@ -1564,9 +1930,12 @@ def _time_arrays(pb: ParsedBlock):
         return e, e, e, lambda t: []
     seq = np.concatenate([p["seq"] for p in parts])
     # an RMC gives a position and a ground row: its date counts once (position row)
-    dates = [np.where(p["sentence"] == SENTENCES.index("RMC"), -1, p["date_days"])
-             if k == "ground" else p["date_days"]
-             for k, p in zip([k for k in KINDS if k in pb.kinds] + ["clock"], parts, strict=False)]
+    dates = [
+        np.where(p["sentence"] == SENTENCES.index("RMC"), -1, p["date_days"])
+        if k == "ground"
+        else p["date_days"]
+        for k, p in zip([k for k in KINDS if k in pb.kinds] + ["clock"], parts, strict=False)
+    ]
     order = np.argsort(seq, kind="stable")
     tod = np.concatenate([p["tod_ns"] for p in parts])[order]
     date = np.concatenate(dates)[order]
@@ -1583,9 +1952,14 @@ def _time_arrays(pb: ParsedBlock):
     return tod, date, ext, split
 
 
-def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | None = None,
-                     block_bytes: int | None = None, workers: int | None = None,
-                     progress=None) -> Iterator[Block]:
+def iter_nmea_blocks(
+    path: str | Path,
+    cfg: IngestConfig,
+    state: StreamState | None = None,
+    block_bytes: int | None = None,
+    workers: int | None = None,
+    progress=None,
+) -> Iterator[Block]:
     """Stream an NMEA text file as resolved blocks with bounded memory.
 
     ``state`` (a :class:`StreamState`, created if None) accumulates rejections, time
@@ -1616,7 +1990,9 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
     st.events.gap_s = cfg.gap_s
     st.events.tolerance_s = cfg.backstep_tolerance_s
     size = path.stat().st_size
-    nworkers = workers if workers is not None else (2 if size >= PARALLEL_MIN_BYTES and _pool_ok() else 1)
+    nworkers = (
+        workers if workers is not None else (2 if size >= PARALLEL_MIN_BYTES and _pool_ok() else 1)
+    )
     max_line = int(getattr(cfg, "max_line_bytes", MAX_LINE_BYTES))
     if block_bytes is not None:
         ranges = list(_block_ranges(path, block_bytes, max_line_bytes=max_line))
@@ -1635,8 +2011,11 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
         line0 = st.count_block(pb, cfg.strict)
         st.bytes += nbytes
         for kind, cols in pb.kinds.items():
-            sc = cols["sentence"][cols["sentence"] != SENTENCES.index("RMC")] if kind == "ground" \
+            sc = (
+                cols["sentence"][cols["sentence"] != SENTENCES.index("RMC")]
+                if kind == "ground"
                 else cols["sentence"]
+            )
             c = np.bincount(sc.astype(np.int64), minlength=len(SENTENCES))
             st.sentences.update({SENTENCES[i]: int(c[i]) for i in np.flatnonzero(c).tolist()})
             if kind == "position" and first_parsed[0] and not st.split_talkers:
@@ -1672,16 +2051,32 @@ def iter_nmea_blocks(path: str | Path, cfg: IngestConfig, state: StreamState | N
         # memory) falls back to parsing the remaining blocks in this process
         pending = list(range(len(ranges)))
         broken = False
-        with _handover_dir(2 * size) as folder, \
-                ProcessPoolExecutor(max_workers=nworkers, initializer=_worker_init,
-                                    initargs=(os.getpid(),)) as ex:
+        with (
+            _handover_dir(2 * size) as folder,
+            ProcessPoolExecutor(
+                max_workers=nworkers, initializer=_worker_init, initargs=(os.getpid(),)
+            ) as ex,
+        ):
             futures = []
 
             def submit():
                 i = pending.pop(0)
                 off, ln, too_long = ranges[i]
-                fut = None if too_long else ex.submit(_parse_range_to_file, folder, i, file, off, ln,
-                                                      cfg.ignore_checksum, at_eof[i], max_line)
+                fut = (
+                    None
+                    if too_long
+                    else ex.submit(
+                        _parse_range_to_file,
+                        folder,
+                        i,
+                        file,
+                        off,
+                        ln,
+                        cfg.ignore_checksum,
+                        at_eof[i],
+                        max_line,
+                    )
+                )
                 futures.append((fut, i))  # None: read here (a line too long: a few bytes)
 
             # the first block is parsed here while the workers start and take the next ones
@@ -1737,8 +2132,15 @@ def check_readable(path: Path) -> None:
         raise IngestError(f"{path}: is a directory, not a log file")
     mode = path.stat().st_mode
     if not stat.S_ISREG(mode):  # a FIFO would block on open; a device reads as size 0
-        what = ("a FIFO (named pipe)" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode)
-                else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "not a regular file")
+        what = (
+            "a FIFO (named pipe)"
+            if stat.S_ISFIFO(mode)
+            else "a socket"
+            if stat.S_ISSOCK(mode)
+            else "a device"
+            if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+            else "not a regular file"
+        )
         raise IngestError(f"{path}: is {what}, not a log file; save the log to a file first")
     try:
         with path.open("rb") as fh:
@@ -1747,17 +2149,29 @@ def check_readable(path: Path) -> None:
         raise IngestError(f"{path}: cannot read: {err.strerror or err}") from err
 
 
-def read_nmea(path: str | Path, cfg: IngestConfig, progress=None, workers: int | None = None) -> FileResult:
+def read_nmea(
+    path: str | Path, cfg: IngestConfig, progress=None, workers: int | None = None
+) -> FileResult:
     """Read a whole NMEA 0183 text file into a :class:`FileResult` (frames sorted by time)."""
     path = Path(path)
     check_readable(path)
     st = StreamState(str(path))
     blocks = [b.frames for b in iter_nmea_blocks(path, cfg, st, progress=progress, workers=workers)]
     frames = concat_blocks(blocks)
-    res = FileResult(path=str(path), format="nmea", frames=frames, lines=st.lines,
-                     rejects=st.rejects, time_events=st.time_events(), notes=st.notes(),
-                     ignored=st.ignored, ignored_examples=st.ignored_examples)
-    res.notes.extend(f"{k}: {v}" for k, v in st.events.per_source.items() if v["backsteps"] or v["gaps"])
+    res = FileResult(
+        path=str(path),
+        format="nmea",
+        frames=frames,
+        lines=st.lines,
+        rejects=st.rejects,
+        time_events=st.time_events(),
+        notes=st.notes(),
+        ignored=st.ignored,
+        ignored_examples=st.ignored_examples,
+    )
+    res.notes.extend(
+        f"{k}: {v}" for k, v in st.events.per_source.items() if v["backsteps"] or v["gaps"]
+    )
     return res
 
 
@@ -1781,9 +2195,14 @@ class SentenceStream:
         self.st.events.tolerance_s = cfg.backstep_tolerance_s
         self._held: list = []
 
-    def add(self, lines: Sequence[bytes], time_ns: np.ndarray, source: Sequence[str],
-            numbers: np.ndarray | None = None,
-            recv_ns: np.ndarray | None = None) -> list[dict[str, pd.DataFrame]]:
+    def add(
+        self,
+        lines: Sequence[bytes],
+        time_ns: np.ndarray,
+        source: Sequence[str],
+        numbers: np.ndarray | None = None,
+        recv_ns: np.ndarray | None = None,
+    ) -> list[dict[str, pd.DataFrame]]:
         """Parse one chunk.  ``time_ns``: each line's external time (the time base anchors
         its time of fix to it); ``recv_ns``: each line's receive time where it differs
         (an MCAP log time beside a message stamp), else ``time_ns`` is its receive time:
@@ -1791,20 +2210,38 @@ class SentenceStream:
         clean = [bytes(x).replace(b"\r", b"").replace(b"\n", b" ") for x in lines]
         t = np.asarray(time_ns, dtype=np.int64)
         src = np.asarray(list(source), dtype=object)
-        if not (len(t) == len(src) == len(clean)) or (numbers is not None and len(numbers) != len(clean)) \
-                or (recv_ns is not None and len(recv_ns) != len(clean)):
-            raise ValueError(f"SentenceStream: {len(clean)} lines, {len(t)} times, {len(src)} sources")
+        if (
+            not (len(t) == len(src) == len(clean))
+            or (numbers is not None and len(numbers) != len(clean))
+            or (recv_ns is not None and len(recv_ns) != len(clean))
+        ):
+            raise ValueError(
+                f"SentenceStream: {len(clean)} lines, {len(t)} times, {len(src)} sources"
+            )
         if not clean:
             return []
-        pb = parse_buffer(b"\n".join(clean) + b"\n", ignore_checksum=self.cfg.ignore_checksum,
-                          at_eof=False, ext_line_ns=t, ext_line_source=src,
-                          max_line_bytes=int(getattr(self.cfg, "max_line_bytes", MAX_LINE_BYTES)))
+        pb = parse_buffer(
+            b"\n".join(clean) + b"\n",
+            ignore_checksum=self.cfg.ignore_checksum,
+            at_eof=False,
+            ext_line_ns=t,
+            ext_line_source=src,
+            max_line_bytes=int(getattr(self.cfg, "max_line_bytes", MAX_LINE_BYTES)),
+        )
         nos = None if numbers is None else np.asarray(numbers, dtype=np.int64)
         st = self.st
-        line0 = st.count_block(pb, self.cfg.strict, label="{path}: message {n}",
-                               number=None if nos is None else (lambda ln, first: int(nos[ln - 1])))
+        line0 = st.count_block(
+            pb,
+            self.cfg.strict,
+            label="{path}: message {n}",
+            number=None if nos is None else (lambda ln, first: int(nos[ln - 1])),
+        )
         tod, date, ext, split = _time_arrays(pb)
-        recv = None if recv_ns is None else drop_implausible_ext(np.asarray(recv_ns, dtype=np.int64))[0]
+        recv = (
+            None
+            if recv_ns is None
+            else drop_implausible_ext(np.asarray(recv_ns, dtype=np.int64))[0]
+        )
         self._held.append((pb, split, line0, nos, recv))
         return self._release(st.timebase.feed(tod, date, ext))
 
@@ -1831,16 +2268,24 @@ class SentenceStream:
         """The :class:`FileResult` of ``frames`` (those returned, concatenated and sorted by
         time) with the counts, rejects, time events and notes of every chunk."""
         st = self.st
-        return FileResult(path=self.file, format="nmea", frames=concat_blocks(frames), lines=st.lines,
-                          rejects=st.rejects, time_events=st.time_events(), notes=st.notes(),
-                          ignored=st.ignored, ignored_examples=st.ignored_examples)
+        return FileResult(
+            path=self.file,
+            format="nmea",
+            frames=concat_blocks(frames),
+            lines=st.lines,
+            rejects=st.rejects,
+            time_events=st.time_events(),
+            notes=st.notes(),
+            ignored=st.ignored,
+            ignored_examples=st.ignored_examples,
+        )
 
 
-def parse_sentences(lines: Sequence[bytes], time_ns: np.ndarray, source: Sequence[str], file: str,
-                    cfg: IngestConfig) -> FileResult:
+def parse_sentences(
+    lines: Sequence[bytes], time_ns: np.ndarray, source: Sequence[str], file: str, cfg: IngestConfig
+) -> FileResult:
     """:class:`SentenceStream` over one chunk: sentences with an external receive time
     and source key each, parsed at once."""
     stream = SentenceStream(file, cfg)
     frames = stream.add(lines, time_ns, source)
     return stream.result(frames + stream.finish())
-

@@ -28,13 +28,20 @@ import re
 import numpy as np
 import pandas as pd
 
-TRUE_WORDS = frozenset({"t", "true", "true north", "true_north", "truenorth", "true-north",
-                        "geographic", "gyro"})
-MAGNETIC_WORDS = frozenset({"m", "mag", "magnetic", "magnetic north", "magnetic_north",
-                            "magneticnorth", "magnetic-north"})
+TRUE_WORDS = frozenset(
+    {"t", "true", "true north", "true_north", "truenorth", "true-north", "geographic", "gyro"}
+)
+MAGNETIC_WORDS = frozenset(
+    {"m", "mag", "magnetic", "magnetic north", "magnetic_north", "magneticnorth", "magnetic-north"}
+)
 #: boolean fields: name -> the reference their ``true`` means
-BOOLEAN_FIELDS = {"is_true": "T", "true_heading": "T", "is_true_heading": "T",
-                  "is_magnetic": "M", "magnetic_heading": "M"}
+BOOLEAN_FIELDS = {
+    "is_true": "T",
+    "true_heading": "T",
+    "is_true_heading": "T",
+    "is_magnetic": "M",
+    "magnetic_heading": "M",
+}
 _YES = frozenset({"true", "1", "yes", "y"})
 _NO = frozenset({"false", "0", "no", "n"})
 ASCII_CODES = {84: "T", 77: "M"}
@@ -89,8 +96,9 @@ def normalize_reference(values) -> tuple[np.ndarray, np.ndarray]:
     w = np.array([("?" if x is None else x) for x in words] + [""], dtype=object)[codes]
     if any(isinstance(x, (bool, np.bool_, int, np.integer)) for x in uniq):
         # factorize folds True into 1 and 1 into True: a bool is never understood
-        isbool = np.fromiter((isinstance(x, (bool, np.bool_)) for x in arr.tolist()), dtype=bool,
-                             count=arr.size)
+        isbool = np.fromiter(
+            (isinstance(x, (bool, np.bool_)) for x in arr.tolist()), dtype=bool, count=arr.size
+        )
         w = np.where(isbool, "?", w)
     bad = w == "?"
     out = np.where((w == "T") | (w == "M"), w, None).astype(object)
@@ -110,8 +118,11 @@ def normalize_boolean(values, means: str) -> tuple[np.ndarray, np.ndarray]:
         if isinstance(x, (bool, np.bool_)):
             out[i] = means if x else other
             continue
-        s = str(int(x)) if isinstance(x, (int, float, np.integer, np.floating)) and float(x).is_integer() \
+        s = (
+            str(int(x))
+            if isinstance(x, (int, float, np.integer, np.floating)) and float(x).is_integer()
             else str(x).strip().lower()
+        )
         if s in _YES:
             out[i] = means
         elif s in _NO:
@@ -130,6 +141,11 @@ def ros_constants(schema_text: str) -> dict[int, str | None]:
     out: dict[int, str | None] = {}
     for name, code in _CONST.findall(schema_text or ""):
         n = name.lower()
-        out[int(code)] = ("T" if n in ("true", "geographic", "true_north", "geographic_north")
-                          else "M" if n in ("magnetic", "magnetic_north") else None)
+        out[int(code)] = (
+            "T"
+            if n in ("true", "geographic", "true_north", "geographic_north")
+            else "M"
+            if n in ("magnetic", "magnetic_north")
+            else None
+        )
     return out

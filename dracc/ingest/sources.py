@@ -52,8 +52,9 @@ _NAME_RULES = [
 ]
 
 
-def summarize(frames: dict[str, pd.DataFrame], file: str,
-              into: dict[str, SourceInfo] | None = None) -> dict[str, SourceInfo]:
+def summarize(
+    frames: dict[str, pd.DataFrame], file: str, into: dict[str, SourceInfo] | None = None
+) -> dict[str, SourceInfo]:
     """Add per-source counts of ``frames`` (kind -> canonical frame) to ``into``.
 
     Records are counted once per frame row; an RMC gives a position and a ground row,
@@ -76,7 +77,9 @@ def summarize(frames: dict[str, pd.DataFrame], file: str,
                 u, c = np.unique(sent[count_sent], return_counts=True)
                 info.sentences.update(dict(zip(u.tolist(), c.tolist(), strict=True)))
                 u, c = np.unique(talk[count_sent], return_counts=True)
-                info.talkers.update({k: v for k, v in zip(u.tolist(), c.tolist(), strict=True) if k})
+                info.talkers.update(
+                    {k: v for k, v in zip(u.tolist(), c.tolist(), strict=True) if k}
+                )
             info.records += int(sel.sum())
             ts = t[sel]
             lo, hi = int(ts.min()), int(ts.max())
@@ -89,7 +92,9 @@ def summarize(frames: dict[str, pd.DataFrame], file: str,
 #: mapping keys that must match a source (``--role KEY=ROLE`` on the command line: a key
 #: that matches nothing is a mistake there, while a fleet's [ingest.sources] may name
 #: units a given log lacks)
-_MUST_MATCH: ContextVar[frozenset[str]] = ContextVar("dracc_role_keys_must_match", default=frozenset())
+_MUST_MATCH: ContextVar[frozenset[str]] = ContextVar(
+    "dracc_role_keys_must_match", default=frozenset()
+)
 
 
 @contextmanager
@@ -129,7 +134,9 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
     notes: list[str] = []
     for key, role in mapping.items():
         if role not in ROLES:
-            raise ConfigError(f"[ingest.sources] {key!r} = {role!r}: role must be one of {', '.join(ROLES)}")
+            raise ConfigError(
+                f"[ingest.sources] {key!r} = {role!r}: role must be one of {', '.join(ROLES)}"
+            )
     taken: dict[str, list[str]] = {}
 
     def give(info: SourceInfo, role: str, why: str) -> None:
@@ -148,16 +155,19 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
             if key in _MUST_MATCH.get():
                 known = ", ".join(sorted(sources)) or "none"
                 talkers = sorted({t for x in sources.values() for t in x.talkers} - set(sources))
-                raise ConfigError(f"--role {key}={role}: no source has the key {key!r}; the sources are "
-                                  f"{known}" + (f" (talkers {', '.join(talkers)})" if talkers else ""))
+                raise ConfigError(
+                    f"--role {key}={role}: no source has the key {key!r}; the sources are "
+                    f"{known}" + (f" (talkers {', '.join(talkers)})" if talkers else "")
+                )
             notes.append(f"[ingest.sources] {key!r} matches no source in the data")
         for s in hits:
             give(s, role, "configuration")
             used_keys.add(s.key)
     for role, keys in taken.items():
         if role in INS_ROLES and len(keys) > 1:
-            raise AmbiguousSourceError(f"[ingest.sources] role {role} given to several sources: "
-                                       f"{', '.join(sorted(keys))}")
+            raise AmbiguousSourceError(
+                f"[ingest.sources] role {role} given to several sources: {', '.join(sorted(keys))}"
+            )
     free = {k: s for k, s in sources.items() if k not in used_keys}
     # 2. names
     by_name: dict[str, list[SourceInfo]] = {}
@@ -169,8 +179,10 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
         if len(infos) == 1:
             give(infos[0], role, "name")
         else:
-            notes.append(f"{role} role not assigned: several sources are named for it "
-                         f"({', '.join(sorted(i.key for i in infos))}); map one in [ingest.sources]")
+            notes.append(
+                f"{role} role not assigned: several sources are named for it "
+                f"({', '.join(sorted(i.key for i in infos))}); map one in [ingest.sources]"
+            )
     free = {k: s for k, s in free.items() if not s.roles}
 
     # 3. content
@@ -178,26 +190,39 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
         return any(info.sentences.get(x, 0) for x in sents)
 
     if not any(r in taken for r in INS_ROLES):
-        ins = [s for s in free.values()
-               if has(s, POSITION_SENTENCES) and ((_talker(s) in INS_TALKERS and "/" not in s.key)
-                                                 or "ins" in s.key.lower())]
+        ins = [
+            s
+            for s in free.values()
+            if has(s, POSITION_SENTENCES)
+            and ((_talker(s) in INS_TALKERS and "/" not in s.key) or "ins" in s.key.lower())
+        ]
         if len(ins) == 3:
             for role, s in zip(INS_ROLES, sorted(ins, key=lambda s: s.key), strict=True):
                 give(s, role, "three INS-type sources with positions")
         elif ins and len(ins) != 1:
-            notes.append(f"INS roles not assigned: {len(ins)} INS-type position sources "
-                         f"({', '.join(sorted(s.key for s in ins))}); map them in [ingest.sources]")
-    gnss = [s for s in free.values() if not s.roles and has(s, POSITION_SENTENCES)
-            and (_talker(s) or "") in GNSS_FAMILY]
+            notes.append(
+                f"INS roles not assigned: {len(ins)} INS-type position sources "
+                f"({', '.join(sorted(s.key for s in ins))}); map them in [ingest.sources]"
+            )
+    gnss = [
+        s
+        for s in free.values()
+        if not s.roles and has(s, POSITION_SENTENCES) and (_talker(s) or "") in GNSS_FAMILY
+    ]
     if "gnss" not in taken:
         if len(gnss) == 1:
             give(gnss[0], "gnss", f"satellite talker {_talker(gnss[0])}")
         elif len(gnss) > 1:
-            notes.append("gnss role not assigned: several satellite sources "
-                         f"({', '.join(sorted(s.key for s in gnss))}); map one in [ingest.sources]")
+            notes.append(
+                "gnss role not assigned: several satellite sources "
+                f"({', '.join(sorted(s.key for s in gnss))}); map one in [ingest.sources]"
+            )
     if "compass" not in taken:
-        cands = [s for s in sources.values() if has(s, HEADING_SENTENCES)
-                 and not any(r in INS_ROLES or r == "gnss" for r in s.roles)]
+        cands = [
+            s
+            for s in sources.values()
+            if has(s, HEADING_SENTENCES) and not any(r in INS_ROLES or r == "gnss" for r in s.roles)
+        ]
         # what a sentence type can be: a source of fixes (GGA/GLL/RMC/GNS) that gives heading
         # too is an INS or a GNSS compass (a lone IN, a skytraq GN with HDT), not the ship's
         # compass; only an instrument bus (fixes beside speed-log sentences, e.g. II with
@@ -209,29 +234,42 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
             for s in sorted(devices, key=lambda s: s.key):
                 hs = "/".join(x for x in sorted(HEADING_SENTENCES) if s.sentences.get(x))
                 ps = "/".join(x for x in sorted(POSITION_SENTENCES) if s.sentences.get(x))
-                notes.append(f"{s.key} not given the compass role: it sends fixes ({ps}) as well as "
-                             f"heading ({hs}), so it is an INS or a GNSS compass; map it "
-                             f"(--role {s.key}=compass) if it is the ship's compass")
+                notes.append(
+                    f"{s.key} not given the compass role: it sends fixes ({ps}) as well as "
+                    f"heading ({hs}), so it is an INS or a GNSS compass; map it "
+                    f"(--role {s.key}=compass) if it is the ship's compass"
+                )
         pure = [s for s in cands if not has(s, POSITION_SENTENCES)]  # heading sentences only
         if pure:
             cands = pure
         true = [s for s in cands if has(s, {"HDT", "THS"})]
         if len(cands) > 1 and len(true) == 1:  # a gyro (true heading) beside magnetic compasses
-            give(true[0], "compass", "the only source of true heading (HDT/THS) among "
-                 f"{', '.join(sorted(s.key for s in cands))}")
+            give(
+                true[0],
+                "compass",
+                "the only source of true heading (HDT/THS) among "
+                f"{', '.join(sorted(s.key for s in cands))}",
+            )
         elif len(cands) == 1:
             give(cands[0], "compass", "the only source of heading sentences")
         elif len(cands) > 1:
-            notes.append("compass role not assigned: several heading sources "
-                         f"({', '.join(sorted(s.key for s in cands))}); map one in [ingest.sources]")
+            notes.append(
+                "compass role not assigned: several heading sources "
+                f"({', '.join(sorted(s.key for s in cands))}); map one in [ingest.sources]"
+            )
     if "log" not in taken:
-        cands = [s for s in sources.values() if has(s, {"VHW", "VBW"})
-                 and not any(r in INS_ROLES or r == "gnss" for r in s.roles)]
+        cands = [
+            s
+            for s in sources.values()
+            if has(s, {"VHW", "VBW"}) and not any(r in INS_ROLES or r == "gnss" for r in s.roles)
+        ]
         if len(cands) == 1:
             give(cands[0], "log", "the only source of VHW/VBW")
         elif len(cands) > 1:
-            notes.append("log role not assigned: several speed-log sources "
-                         f"({', '.join(sorted(s.key for s in cands))}); map one in [ingest.sources]")
+            notes.append(
+                "log role not assigned: several speed-log sources "
+                f"({', '.join(sorted(s.key for s in cands))}); map one in [ingest.sources]"
+            )
     unassigned = [k for k, s in sources.items() if not s.roles]
     if unassigned:
         notes.append(f"no role: {', '.join(sorted(unassigned))}")
@@ -244,10 +282,14 @@ def require_role(sources: dict[str, SourceInfo], role: str) -> str:
     if len(keys) == 1:
         return keys[0]
     if keys:
-        raise AmbiguousSourceError(f"role {role} is served by several sources: {', '.join(sorted(keys))}; "
-                                   "choose one in [ingest.sources]")
-    raise AmbiguousSourceError(f"no source has role {role}; sources: {', '.join(sorted(sources)) or 'none'}; "
-                               "map one in [ingest.sources]")
+        raise AmbiguousSourceError(
+            f"role {role} is served by several sources: {', '.join(sorted(keys))}; "
+            "choose one in [ingest.sources]"
+        )
+    raise AmbiguousSourceError(
+        f"no source has role {role}; sources: {', '.join(sorted(sources)) or 'none'}; "
+        "map one in [ingest.sources]"
+    )
 
 
 def sentence_counts(infos: dict[str, SourceInfo]) -> Counter:
@@ -272,7 +314,10 @@ def file_ids(files: list[str]) -> dict[str, str]:
     from os.path import commonprefix
     from pathlib import Path
 
-    stems = {f: Path(f).name.rsplit(".", 1)[0] if "." in Path(f).name[1:] else Path(f).name for f in files}
+    stems = {
+        f: Path(f).name.rsplit(".", 1)[0] if "." in Path(f).name[1:] else Path(f).name
+        for f in files
+    }
     names = list(dict.fromkeys(stems.values()))
     ids = dict(stems)
     if len(names) > 1:
@@ -281,7 +326,7 @@ def file_ids(files: list[str]) -> dict[str, str]:
         suf = commonprefix([n[::-1] for n in names])[::-1]
         cut_end = min((m.start() for m in _SEP.finditer(suf)), default=len(suf))
         tail = len(suf) - cut_end
-        short = {f: s[cut:len(s) - tail if tail else None] for f, s in stems.items()}
+        short = {f: s[cut : len(s) - tail if tail else None] for f, s in stems.items()}
         if all(short.values()) and len(set(short.values())) == len(names):
             ids = short
     seen: Counter = Counter()
@@ -297,11 +342,15 @@ def _span(info: SourceInfo) -> str:
 
     def hm(ns):
         return dt.datetime.fromtimestamp(ns / 1e9, tz=dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
-    return f"{hm(info.first_ns)}-{hm(info.last_ns)[11:]}" if info.first_ns is not None else "no times"
+
+    return (
+        f"{hm(info.first_ns)}-{hm(info.last_ns)[11:]}" if info.first_ns is not None else "no times"
+    )
 
 
-def separate_files(per_file: list[tuple[str, dict[str, SourceInfo]]],
-                   overlap_s: float = FILE_OVERLAP_S) -> tuple[dict[str, dict[str, str]], list[str]]:
+def separate_files(
+    per_file: list[tuple[str, dict[str, SourceInfo]]], overlap_s: float = FILE_OVERLAP_S
+) -> tuple[dict[str, dict[str, str]], list[str]]:
     """Decide, for every source key that several files carry, whether it is one source.
 
     A source is its file *and* its key (TAG ``s:``, topic, CSV source or talker): two
@@ -325,8 +374,14 @@ def separate_files(per_file: list[tuple[str, dict[str, SourceInfo]]],
         if len(lst) < 2:
             continue
         timed = [(f, s) for f, s in lst if s.first_ns is not None]
-        overlap = max((min(a.last_ns, b.last_ns) - max(a.first_ns, b.first_ns)
-                       for i, (_, a) in enumerate(timed) for _, b in timed[i + 1:]), default=-1)
+        overlap = max(
+            (
+                min(a.last_ns, b.last_ns) - max(a.first_ns, b.first_ns)
+                for i, (_, a) in enumerate(timed)
+                for _, b in timed[i + 1 :]
+            ),
+            default=-1,
+        )
         where = ", ".join(f"{Path(f).name} {_span(s)}" for f, s in lst)
         if overlap > overlap_s * 1e9:
             if ids is None:
@@ -334,16 +389,21 @@ def separate_files(per_file: list[tuple[str, dict[str, SourceInfo]]],
             new = {f: f"{ids[f]}:{key}" for f, _ in lst}
             for f, n in new.items():
                 renames[f][key] = n
-            notes.append(f"{key}: in {len(lst)} files whose times overlap by {overlap / 1e9:.0f} s ({where}): "
-                         f"{len(lst)} instruments, kept apart as {', '.join(new.values())}")
+            notes.append(
+                f"{key}: in {len(lst)} files whose times overlap by {overlap / 1e9:.0f} s ({where}): "
+                f"{len(lst)} instruments, kept apart as {', '.join(new.values())}"
+            )
         else:
-            notes.append(f"{key}: one source over {len(lst)} files that follow each other in time "
-                         f"({where}); merged")
+            notes.append(
+                f"{key}: one source over {len(lst)} files that follow each other in time "
+                f"({where}); merged"
+            )
     return renames, notes
 
 
-def merge_infos(per_file: list[tuple[str, dict[str, SourceInfo]]],
-                renames: dict[str, dict[str, str]]) -> dict[str, SourceInfo]:
+def merge_infos(
+    per_file: list[tuple[str, dict[str, SourceInfo]]], renames: dict[str, dict[str, str]]
+) -> dict[str, SourceInfo]:
     """The per-file summaries under their decided keys, merged where a key is shared."""
     out: dict[str, SourceInfo] = {}
     for f, infos in per_file:

@@ -37,8 +37,10 @@ for _i, _c in enumerate(b"abcdef"):
 
 # at most 9 fraction digits (ns): a run of 300 000 digits matched and was widened to an
 # 11 GiB fixed-width array (fuzz)
-_ISO_RE = (r"(?P<iso>\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}:\d{2}(?:\.\d{1,9})?)"
-           r"(?P<tz>Z|[+-]\d{2}:?\d{2})?\s*$")
+_ISO_RE = (
+    r"(?P<iso>\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}:\d{2}(?:\.\d{1,9})?)"
+    r"(?P<tz>Z|[+-]\d{2}:?\d{2})?\s*$"
+)
 _UNIX_RE = r"^\s*(?P<u>\d{9,10}(?:\.\d*)?|\d{12,13}(?:\.\d*)?)\s*[,;:]?\s*$"
 _SK_RE = r"^(?P<ms>\d{10,13});[A-Za-z];$"
 
@@ -53,7 +55,7 @@ def gather_rows(buf: np.ndarray, s: np.ndarray, w: int) -> np.ndarray:
     lim = len(buf) - w
     mat = np.lib.stride_tricks.sliding_window_view(buf, w)[np.minimum(s, lim)]
     for r in np.flatnonzero(s > lim):  # rows starting in the last w bytes of an unpadded buffer
-        mat[r] = np.concatenate((buf[s[r]:], np.zeros(w, np.uint8)))[:w]
+        mat[r] = np.concatenate((buf[s[r] :], np.zeros(w, np.uint8)))[:w]
     return mat
 
 
@@ -64,8 +66,11 @@ def unix_to_ns(v: np.ndarray, is_ms: np.ndarray) -> np.ndarray:
     iv = np.floor(v)
     frac = v - iv
     whole = iv.astype(np.int64)
-    return np.where(is_ms, whole * 1_000_000 + np.round(frac * 1e6).astype(np.int64),
-                    whole * 1_000_000_000 + np.round(frac * 1e6).astype(np.int64) * 1000)
+    return np.where(
+        is_ms,
+        whole * 1_000_000 + np.round(frac * 1e6).astype(np.int64),
+        whole * 1_000_000_000 + np.round(frac * 1e6).astype(np.int64) * 1000,
+    )
 
 
 def gather_strings(buf: np.ndarray, start: np.ndarray, end: np.ndarray) -> pa.Array:
@@ -122,8 +127,9 @@ def _numbers_arrow(buf: np.ndarray, s: np.ndarray, ln: np.ndarray, decimals: boo
     d = buf[np.repeat(s - offsets[:-1], ln) + np.arange(total)]
     if (((d - np.uint8(48)) > 9) & (d != 46) & (d != 45) & (d != 43)).any():
         return None
-    arr = pa.StringArray.from_buffers(len(s), pa.py_buffer(offsets.astype(np.int32)),
-                                      pa.py_buffer(d))
+    arr = pa.StringArray.from_buffers(
+        len(s), pa.py_buffer(offsets.astype(np.int32)), pa.py_buffer(d)
+    )
     try:
         v = pc.cast(arr, pa.float64()).to_numpy(zero_copy_only=False)
     except pa.ArrowInvalid:
@@ -137,8 +143,9 @@ def _numbers_arrow(buf: np.ndarray, s: np.ndarray, ln: np.ndarray, decimals: boo
     return v, dec
 
 
-def parse_numbers(buf: np.ndarray, s: np.ndarray, e: np.ndarray, width: int = 20,
-                  decimals: bool = True):
+def parse_numbers(
+    buf: np.ndarray, s: np.ndarray, e: np.ndarray, width: int = 20, decimals: bool = True
+):
     """Decimal numbers in byte ranges [s, e) of ``buf``, vectorised.
 
     Returns (value float64 with NaN where empty or invalid, decimals int8 = digits after
@@ -224,8 +231,15 @@ def _key_value(buf, colons, commas, start, stop, key: int):
     return found, np.where(found, vs, 0), np.where(found, ve, 0)
 
 
-def parse_tags(buf: np.ndarray, start: np.ndarray, end: np.ndarray, cum_xor: np.ndarray,
-               stars: np.ndarray, commas: np.ndarray, colons: np.ndarray):
+def parse_tags(
+    buf: np.ndarray,
+    start: np.ndarray,
+    end: np.ndarray,
+    cum_xor: np.ndarray,
+    stars: np.ndarray,
+    commas: np.ndarray,
+    colons: np.ndarray,
+):
     """TAG blocks ``buf[start:end]`` (each ``\\...*hh\\``), vectorised with numpy.
 
     Returns (ok, bad_checksum, ext_ns, source) where ``source`` is an object array.
@@ -249,13 +263,15 @@ def parse_tags(buf: np.ndarray, start: np.ndarray, end: np.ndarray, cum_xor: np.
     # printable ASCII only (NUL and pairs of equal bytes leave the XOR checksum unchanged),
     # and a source of at most MAX_SOURCE_CHARS (fuzz: 300 000-character source keys)
     for i in np.flatnonzero(ok):  # long TAG blocks only: rare
-        blk = buf[start[i]:end[i]]
+        blk = buf[start[i] : end[i]]
         ok[i] = not np.any((blk < 32) | (blk > 126))
     ok &= ~(fs & (se - ss > MAX_SOURCE_CHARS))
     fs &= ok & (se > ss)
     if fs.any():
         hi = np.flatnonzero(fs)
-        source[hi] = _decode_names(gather_rows(buf, ss[hi], int((se[hi] - ss[hi]).max())), se[hi] - ss[hi])
+        source[hi] = _decode_names(
+            gather_rows(buf, ss[hi], int((se[hi] - ss[hi]).max())), se[hi] - ss[hi]
+        )
     return ok, bad_cs, ext, source
 
 
@@ -330,8 +346,9 @@ def _key_value_rows(mat: np.ndarray, stop: np.ndarray, keys: tuple[int, ...]):
     return out
 
 
-def parse_tag_rows(buf: np.ndarray, mat: np.ndarray, start: np.ndarray, length: np.ndarray,
-                   cum_xor: np.ndarray):
+def parse_tag_rows(
+    buf: np.ndarray, mat: np.ndarray, start: np.ndarray, length: np.ndarray, cum_xor: np.ndarray
+):
     """:func:`parse_tags` for TAG blocks given as rows of a byte matrix.
 
     ``mat[i, :length[i]]`` are the bytes of TAG block i (``\\...*hh\\``, starting at
@@ -364,17 +381,26 @@ def parse_tag_rows(buf: np.ndarray, mat: np.ndarray, start: np.ndarray, length: 
     if fs.any():
         hi = np.flatnonzero(fs)
         cols = np.arange(int((se[hi] - ss[hi]).max()))
-        source[hi] = _decode_names(mat[hi[:, None], np.minimum(ss[hi, None] + cols, w - 1)], se[hi] - ss[hi])
+        source[hi] = _decode_names(
+            mat[hi[:, None], np.minimum(ss[hi, None] + cols, w - 1)], se[hi] - ss[hi]
+        )
     return ok, bad_cs, ext, source
 
 
 def _num(arr: pa.Array) -> np.ndarray:
-    return pc.cast(pc.if_else(pc.equal(arr, ""), None, arr), pa.float64()).to_numpy(zero_copy_only=False)
+    return pc.cast(pc.if_else(pc.equal(arr, ""), None, arr), pa.float64()).to_numpy(
+        zero_copy_only=False
+    )
 
 
-def parse_prefixes(buf: np.ndarray, start: np.ndarray, end: np.ndarray,
-                   cum_xor: np.ndarray, stars: np.ndarray | None = None,
-                   commas: np.ndarray | None = None) -> PrefixResult:
+def parse_prefixes(
+    buf: np.ndarray,
+    start: np.ndarray,
+    end: np.ndarray,
+    cum_xor: np.ndarray,
+    stars: np.ndarray | None = None,
+    commas: np.ndarray | None = None,
+) -> PrefixResult:
     """Classify and read prefixes ``buf[start:end]`` (vectorised with Arrow regexes).
 
     ``cum_xor`` is ``np.bitwise_xor.accumulate(buf)`` for the TAG checksum:

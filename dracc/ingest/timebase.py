@@ -146,8 +146,16 @@ class TimeBase:
         seq = has_tod & ~has_ext
         tods = tod_ns[seq]
         # rule 2: running day index over the time-of-day sequence
-        prev = np.concatenate(([self.last_tod_ns if self.last_tod_ns is not None else
-                                (tods[0] if len(tods) else 0)], tods[:-1]))
+        prev = np.concatenate(
+            (
+                [
+                    self.last_tod_ns
+                    if self.last_tod_ns is not None
+                    else (tods[0] if len(tods) else 0)
+                ],
+                tods[:-1],
+            )
+        )
         jump = tods - prev
         step = (jump < -HALF_DAY_NS).astype(np.int64) - (jump > HALF_DAY_NS)
         self.rollovers += int((step > 0).sum())
@@ -234,8 +242,10 @@ class TimeBase:
                     t[both] = nearest_day(tod_ns[both], ext_ns[both])  # rule 1, as in _flush
                     out.append(t)
                 self._pending = []
-                self.decisions.append("no date in the log and none given: records with only a "
-                                      "time of day rejected as 'no_date' (pass --date YYYY-MM-DD)")
+                self.decisions.append(
+                    "no date in the log and none given: records with only a "
+                    "time of day rejected as 'no_date' (pass --date YYYY-MM-DD)"
+                )
                 return out
         return self._flush()
 
@@ -263,11 +273,21 @@ class EventCounter:
     gap_s: float = 60.0
     tolerance_s: float = 1.0
     last: dict = field(default_factory=dict)
-    per_source: dict = field(default_factory=dict)  #: source -> {"duplicates","backsteps","gaps","max_gap_s"}
+    per_source: dict = field(
+        default_factory=dict
+    )  #: source -> {"duplicates","backsteps","gaps","max_gap_s"}
     examples: list = field(default_factory=list)
 
-    def add(self, kind: str, source: np.ndarray, time_ns: np.ndarray, own: np.ndarray,
-            line: np.ndarray, file: str, sentence: np.ndarray | None = None) -> None:
+    def add(
+        self,
+        kind: str,
+        source: np.ndarray,
+        time_ns: np.ndarray,
+        own: np.ndarray,
+        line: np.ndarray,
+        file: str,
+        sentence: np.ndarray | None = None,
+    ) -> None:
         """Arrays aligned with ``time_ns`` in stream order; streams are told apart by
         (source, sentence type) so the GGA, GLL and RMC of one fix are not duplicates."""
         if len(time_ns) == 0:
@@ -279,13 +299,15 @@ class EventCounter:
         counts = np.bincount(combo)
         ucombo = np.flatnonzero(counts)
         # small keys as int16: numpy's stable sort is then a radix sort (the same order)
-        order = np.argsort(combo.astype(np.int16) if len(counts) <= 1 << 15 else combo, kind="stable")
+        order = np.argsort(
+            combo.astype(np.int16) if len(counts) <= 1 << 15 else combo, kind="stable"
+        )
         bounds = np.concatenate(([0], np.cumsum(counts[ucombo])))
         gap_ns = int(self.gap_s * 1e9)
         tol_ns = int(self.tolerance_s * 1e9)
         for i, uc in enumerate(ucombo.tolist()):
             key, stype = str(kn[uc // (len(sn) + 1)]), str(sn[uc % (len(sn) + 1)])
-            rows = order[bounds[i]:bounds[i + 1]]
+            rows = order[bounds[i] : bounds[i + 1]]
             sel = rows[own[rows]]
             t = time_ns[sel]
             if len(t) == 0:
@@ -294,8 +316,9 @@ class EventCounter:
             prev = self.last.get((key, stype))
             tt = np.concatenate(([prev], t)) if prev is not None else t
             d = np.diff(tt)
-            st = self.per_source.setdefault(key, {"duplicates": 0, "backsteps": 0, "gaps": 0,
-                                                  "max_gap_s": 0.0})
+            st = self.per_source.setdefault(
+                key, {"duplicates": 0, "backsteps": 0, "gaps": 0, "max_gap_s": 0.0}
+            )
             dup = d == 0
             back = d < -tol_ns
             gap = d > gap_ns
@@ -308,8 +331,9 @@ class EventCounter:
             for what, mask in (("back-step", back), ("gap", gap), ("duplicate", dup)):
                 room = max(0, 3 - sum(e[2].startswith(what) for e in self.examples))
                 for j in np.flatnonzero(mask)[:room]:
-                    self.examples.append((file, int(lines_d[j]),
-                                          f"{what} {d[j] / 1e9:+.3f} s in {key} {stype}"))
+                    self.examples.append(
+                        (file, int(lines_d[j]), f"{what} {d[j] / 1e9:+.3f} s in {key} {stype}")
+                    )
             self.last[(key, stype)] = int(t[-1])
 
     def totals(self) -> dict:

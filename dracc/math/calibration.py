@@ -69,8 +69,9 @@ class LeastSquaresSolution:
     n_iter: int
 
 
-def levenberg_marquardt(resid, jac, x0: np.ndarray, ftol: float = 1e-10, xtol: float = 1e-10,
-                        max_iter: int = 200) -> LeastSquaresSolution:
+def levenberg_marquardt(
+    resid, jac, x0: np.ndarray, ftol: float = 1e-10, xtol: float = 1e-10, max_iter: int = 200
+) -> LeastSquaresSolution:
     """min ||resid(x)||^2 by Levenberg-Marquardt with Marquardt's scaling.
 
     Each step solves (J'J + lam diag(J'J)) dx = -J' r (Marquardt 1963; the damping scaled
@@ -168,7 +169,12 @@ class CompassErrorEstimate:
 
 
 def compass_error_from_heading(
-    time_s, compass_rad, reference_rad, *, block_s: float = 600.0, window_s: float = 3600.0,
+    time_s,
+    compass_rad,
+    reference_rad,
+    *,
+    block_s: float = 600.0,
+    window_s: float = 3600.0,
     alpha: float = 0.01,
 ) -> CompassErrorEstimate:
     """Estimate the compass error against a reference heading (INS mean, GNSS heading).
@@ -210,9 +216,16 @@ def compass_error_from_heading(
         w_sigma = np.full(uniq.size, np.nan)
         chi2, p = float("nan"), float("nan")
     return CompassErrorEstimate(
-        error_rad=eps, sigma_rad=sigma, n_samples=int(ok.sum()), n_blocks=int(bm.size),
-        block_s=block_s, window_start_s=t[ok][0] + uniq * window_s, window_error_rad=w_mean,
-        window_sigma_rad=w_sigma, chi2_constant=chi2, p_constant=p,
+        error_rad=eps,
+        sigma_rad=sigma,
+        n_samples=int(ok.sum()),
+        n_blocks=int(bm.size),
+        block_s=block_s,
+        window_start_s=t[ok][0] + uniq * window_s,
+        window_error_rad=w_mean,
+        window_sigma_rad=w_sigma,
+        chi2_constant=chi2,
+        p_constant=p,
         varying=bool(np.isfinite(p) and p < alpha),
     )
 
@@ -240,7 +253,12 @@ def _curve_basis(k_rad):
 
 
 def deviation_from_heading(
-    time_s, compass_rad, reference_true_rad, variation_rad, *, block_s: float = 120.0,
+    time_s,
+    compass_rad,
+    reference_true_rad,
+    variation_rad,
+    *,
+    block_s: float = 120.0,
 ) -> DeviationEstimate:
     """Fit delta(K) = A + B sin K + C cos K + D sin 2K + E cos 2K against a reference.
 
@@ -279,8 +297,11 @@ def deviation_from_heading(
     s2 = float(res @ res) / dof
     cov = s2 * np.linalg.inv(X.T @ X)
     return DeviationEstimate(
-        coefficients_rad=coef, covariance_rad2=cov, sigma_rad=np.sqrt(np.diag(cov)),
-        residual_rms_rad=math.sqrt(float(np.mean(res**2))), n_blocks=int(y.size),
+        coefficients_rad=coef,
+        covariance_rad2=cov,
+        sigma_rad=np.sqrt(np.diag(cov)),
+        residual_rms_rad=math.sqrt(float(np.mean(res**2))),
+        n_blocks=int(y.size),
         heading_coverage_rad=largest_gap,
     )
 
@@ -331,8 +352,12 @@ def _segment_reference_velocity(ref_t, ref_lat, ref_lon, edges_s, max_ref_gap_s)
     rlo = np.unwrap(np.asarray(ref_lon, float)[ok][order])
     hi = np.clip(np.searchsorted(rt, edges_s), 1, max(rt.size - 1, 1))
     lo = hi - 1
-    good = (rt.size >= 2) & (rt[lo] <= edges_s) & (rt[hi] >= edges_s) & (
-        rt[hi] - rt[lo] <= max_ref_gap_s)
+    good = (
+        (rt.size >= 2)
+        & (rt[lo] <= edges_s)
+        & (rt[hi] >= edges_s)
+        & (rt[hi] - rt[lo] <= max_ref_gap_s)
+    )
     lat_e = np.interp(edges_s, rt, rla)
     lon_e = wrap_pi(np.interp(edges_s, rt, rlo))
     dn, de = offset_ne_m(lat_e[1:], lon_e[1:], lat_e[:-1], lon_e[:-1])
@@ -377,7 +402,8 @@ def calibrate_from_track(
     """
     if heading_model not in ("constant", "deviation", "varying"):
         raise ValueError(
-            f"heading_model must be 'constant', 'deviation' or 'varying', got {heading_model!r}")
+            f"heading_model must be 'constant', 'deviation' or 'varying', got {heading_model!r}"
+        )
     t = np.asarray(time_s, float)
     h = np.asarray(heading_rad, float)
     v = np.asarray(speed_mps, float)
@@ -390,12 +416,14 @@ def calibrate_from_track(
     edges = np.arange(t[0], t[-1] + 1e-9, segment_s)
     if edges.size < 2:
         raise InsufficientDataError(
-            f"log calibration needs more than one segment of {segment_s:g} s of log data")
+            f"log calibration needs more than one segment of {segment_s:g} s of log data"
+        )
     seg = np.searchsorted(edges, t, side="right") - 1
     inside = seg < edges.size - 1
     cover = np.bincount(seg[inside], weights=dt[inside], minlength=edges.size - 1)
     u_ref, ref_ok = _segment_reference_velocity(
-        ref_time_s, ref_lat_rad, ref_lon_rad, edges, max_ref_gap_s)
+        ref_time_s, ref_lat_rad, ref_lon_rad, edges, max_ref_gap_s
+    )
     # a segment is used when the log covers it and no sample holds across its end
     use_seg = ref_ok & (cover >= min_coverage * segment_s)
     sample_use = inside & use_seg[np.clip(seg, 0, edges.size - 2)]
@@ -404,7 +432,8 @@ def calibrate_from_track(
     if m < 4:
         raise InsufficientDataError(
             f"log calibration: only {m} segments of {segment_s:g} s have both log data and "
-            "reference positions at their ends (need at least 4)")
+            "reference positions at their ends (need at least 4)"
+        )
     # per-sample arrays restricted to used segments, with a compact segment index
     hs, vs, ws = h[sample_use], v[sample_use], dt[sample_use]
     remap = -np.ones(edges.size - 1, dtype=np.int64)
@@ -457,7 +486,7 @@ def calibrate_from_track(
         spd, c, _ = speed_course(theta)
         mn = np.bincount(si, weights=wn * spd * np.cos(c), minlength=m)
         me = np.bincount(si, weights=wn * spd * np.sin(c), minlength=m)
-        cur = theta[n_h + 1 + n_b:].reshape(2, nk)
+        cur = theta[n_h + 1 + n_b :].reshape(2, nk)
         return np.column_stack([mn + B @ cur[0], me + B @ cur[1]])
 
     def resid(theta):
@@ -482,36 +511,42 @@ def calibrate_from_track(
             out[:, 0, n_h + 1] = seg_sum(-cos_c) / (1.0 + s)
             out[:, 1, n_h + 1] = seg_sum(-sin_c) / (1.0 + s)
         c0 = n_h + 1 + n_b
-        out[:, 0, c0:c0 + nk] = B
-        out[:, 1, c0 + nk:] = B
+        out[:, 0, c0 : c0 + nk] = B
+        out[:, 1, c0 + nk :] = B
         return out.reshape(2 * m, n_par)
 
     n_par = n_h + 1 + n_b + 2 * nk
     if 2 * m <= n_par:
         raise InsufficientDataError(
             f"log calibration: {m} segments cannot determine {n_par} parameters; use a longer "
-            "log, shorter segments or a longer current_knot_s")
+            "log, shorter segments or a longer current_knot_s"
+        )
     sol = levenberg_marquardt(resid, jac, np.zeros(n_par))
     J = sol.jac
     JtJ = J.T @ J
-    names = (["heading"] * n_h + ["log scale"] + ["log offset"] * n_b
-             + ["current"] * (2 * nk))
+    names = ["heading"] * n_h + ["log scale"] + ["log offset"] * n_b + ["current"] * (2 * nk)
     # singular or nearly singular geometry: report which parameter cannot be separated
     w, vecs = np.linalg.eigh(JtJ / np.outer(np.sqrt(np.diag(JtJ)), np.sqrt(np.diag(JtJ))))
     if w[0] < ILL_CONDITIONED:
         # parameter groups carrying > 5 % of any near-null direction
         null = vecs[:, w < ILL_CONDITIONED] ** 2
         groups = sorted(set(names))
-        culprits = [g for g in groups
-                    if np.any(null[[i for i, nm in enumerate(names) if nm == g]].sum(0) > 0.05)]
+        culprits = [
+            g
+            for g in groups
+            if np.any(null[[i for i, nm in enumerate(names) if nm == g]].sum(0) > 0.05)
+        ]
         hint = ""
         if "log offset" in culprits and vspan < 0.5:
-            hint = (f"; the log speed spans only {vspan:.2f} m/s, too little to separate "
-                    "scale from offset (fit_log_offset=False)")
+            hint = (
+                f"; the log speed spans only {vspan:.2f} m/s, too little to separate "
+                "scale from offset (fit_log_offset=False)"
+            )
         elif "current" in culprits:
             hint = "; steer different headings within each current knot interval"
         raise InsufficientDataError(
-            "log calibration: the data cannot separate " + ", ".join(culprits) + hint)
+            "log calibration: the data cannot separate " + ", ".join(culprits) + hint
+        )
     res = sol.fun
     dof = res.size - n_par
     s2 = float(res @ res) / dof
@@ -538,17 +573,24 @@ def calibrate_from_track(
         p_const = float(dist.chi2_sf(chi2, n_h - 1))
     else:
         p_const = float("nan")
-    cur = x[n_h + 1 + n_b:].reshape(2, nk).T
-    cur_sig = sig[n_h + 1 + n_b:].reshape(2, nk).T
+    cur = x[n_h + 1 + n_b :].reshape(2, nk).T
+    cur_sig = sig[n_h + 1 + n_b :].reshape(2, nk).T
     return TrackCalibration(
-        heading_model=heading_model, heading_error_rad=x[:n_h].copy(),
-        heading_knot_s=h_knots, heading_constant_p=p_const,
-        heading_error_sigma_rad=sig[:n_h].copy(), log_scale=float(x[n_h]),
+        heading_model=heading_model,
+        heading_error_rad=x[:n_h].copy(),
+        heading_knot_s=h_knots,
+        heading_constant_p=p_const,
+        heading_error_sigma_rad=sig[:n_h].copy(),
+        log_scale=float(x[n_h]),
         log_scale_sigma=float(sig[n_h]),
         log_offset_mps=float(x[n_h + 1]) if n_b else 0.0,
         log_offset_sigma_mps=float(sig[n_h + 1]) if n_b else float("nan"),
-        current_knot_s=knots[used_knots], current_ne_mps=cur, current_sigma_ne_mps=cur_sig,
-        covariance=cov, residual_rms_mps=math.sqrt(float(np.mean(res**2))),
-        residual_lag1_correlation=rho, n_segments=m,
+        current_knot_s=knots[used_knots],
+        current_ne_mps=cur,
+        current_sigma_ne_mps=cur_sig,
+        covariance=cov,
+        residual_rms_mps=math.sqrt(float(np.mean(res**2))),
+        residual_lag1_correlation=rho,
+        n_segments=m,
         segment_s=segment_s,
     )

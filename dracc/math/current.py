@@ -110,16 +110,20 @@ class CurrentModel:
         for name in ("current_tau_s", "speed_tau_s", "heading_tau_s"):
             v = getattr(self, name)
             if not v >= 0:  # also NaN; inf is a bias, 0 white noise
-                raise InsufficientDataError(f"CurrentModel.{name} must be >= 0 (inf: a bias, "
-                                            f"0: white noise), got {v!r}")
+                raise InsufficientDataError(
+                    f"CurrentModel.{name} must be >= 0 (inf: a bias, 0: white noise), got {v!r}"
+                )
         for name in ("current_sigma_mps", "speed_sigma_mps", "heading_sigma_rad"):
             v = getattr(self, name)
             if not np.isfinite(v) or v < 0:
-                raise InsufficientDataError(f"CurrentModel.{name} must be finite and >= 0, got {v!r}")
+                raise InsufficientDataError(
+                    f"CurrentModel.{name} must be finite and >= 0, got {v!r}"
+                )
         s0 = self.initial_current_sigma_mps
         if s0 is not None and (not np.isfinite(s0) or s0 < 0):
-            raise InsufficientDataError(f"CurrentModel.initial_current_sigma_mps must be finite and "
-                                        f">= 0, got {s0!r}")
+            raise InsufficientDataError(
+                f"CurrentModel.initial_current_sigma_mps must be finite and >= 0, got {s0!r}"
+            )
 
     @property
     def current0_sigma_mps(self) -> float:
@@ -132,8 +136,11 @@ class CurrentModel:
         course = np.nan_to_num(np.asarray(course_rad, float))  # a lone last epoch may lack them
         speed = np.nan_to_num(np.asarray(speed_mps, float))
         along = self.speed_sigma_mps**2 if math.isinf(self.speed_tau_s) else 0.0
-        across = ((speed * self.heading_sigma_rad) ** 2 if math.isinf(self.heading_tau_s)
-                  else np.zeros(speed.shape))
+        across = (
+            (speed * self.heading_sigma_rad) ** 2
+            if math.isinf(self.heading_tau_s)
+            else np.zeros(speed.shape)
+        )
         c, s = np.cos(course), np.sin(course)
         out = np.empty(np.broadcast_shapes(np.shape(c), np.shape(across)) + (2, 2))
         out[..., 0, 0] = along * c**2 + across * s**2
@@ -207,8 +214,11 @@ def gauss_markov_noise(dt_s, sigma, tau_s):
     q_cc = s2 * one_m_phi2
     q_pc = s2 * tau * one_m_phi**2
     # x - 2(1 - phi) + (1 - phi^2)/2, by its series x^3/3 - x^4/4 + 7x^5/60 where it cancels
-    bracket = np.where(x < 1e-3, x**3 / 3.0 - x**4 / 4.0 + 7.0 * x**5 / 60.0,
-                       x - 2.0 * one_m_phi + 0.5 * one_m_phi2)
+    bracket = np.where(
+        x < 1e-3,
+        x**3 / 3.0 - x**4 / 4.0 + 7.0 * x**5 / 60.0,
+        x - 2.0 * one_m_phi + 0.5 * one_m_phi2,
+    )
     q_pp = 2.0 * s2 * tau**2 * bracket
     return q_pp, q_pc, q_cc
 
@@ -235,9 +245,15 @@ def _water_noise(dt_s, course_rad, speed_mps, model: CurrentModel):
     dt = np.asarray(dt_s, float)
     psd_along = _psd(model.speed_sigma_mps, model.speed_tau_s)
     if _regular(model.heading_tau_s):
-        psd_across = 2.0 * (np.asarray(speed_mps, float) * model.heading_sigma_rad) ** 2 * model.heading_tau_s
+        psd_across = (
+            2.0
+            * (np.asarray(speed_mps, float) * model.heading_sigma_rad) ** 2
+            * model.heading_tau_s
+        )
     else:
-        psd_across = np.asarray(speed_mps, float) ** 2 * _psd(model.heading_sigma_rad, model.heading_tau_s)
+        psd_across = np.asarray(speed_mps, float) ** 2 * _psd(
+            model.heading_sigma_rad, model.heading_tau_s
+        )
     c, s = np.cos(course_rad), np.sin(course_rad)
     v_nn = (psd_along * c**2 + psd_across * s**2) * dt  # (B26) in metres, PSD form
     v_ee = (psd_along * s**2 + psd_across * c**2) * dt  # (B27)
@@ -301,7 +317,9 @@ def _propagate(st: _State, t_from: float, targets, t_s, course, speed, model: Cu
         prev = np.concatenate([lat0, lat[:, :-1]], axis=1)
         lat = lat0 + np.cumsum(d_n * k_phi(0.5 * (prev + lat)), axis=1)
     prev = np.concatenate([lat0, lat[:, :-1]], axis=1)
-    lon = wrap_pi(st.lon[:, None] + np.cumsum(d_e * k_lambda(0.5 * (prev + lat)), axis=1))  # (B17, B19)
+    lon = wrap_pi(
+        st.lon[:, None] + np.cumsum(d_e * k_lambda(0.5 * (prev + lat)), axis=1)
+    )  # (B17, B19)
     c = phi[None, :, None] * st.c[:, None, :]
     f = _transition_matrix(targets - t_from, model.current_tau_s)  # (m, 4, 4)
     p = f @ st.p[:, None] @ np.swapaxes(f, -1, -2)  # (R, m, 4, 4)
@@ -318,7 +336,12 @@ def _propagate(st: _State, t_from: float, targets, t_s, course, speed, model: Cu
     p[..., 0, 1] += v_ne
     p[..., 1, 0] += v_ne
     if targets.size:
-        st.lat, st.lon, st.c, st.p = lat[:, -1].copy(), lon[:, -1].copy(), c[:, -1].copy(), p[:, -1].copy()
+        st.lat, st.lon, st.c, st.p = (
+            lat[:, -1].copy(),
+            lon[:, -1].copy(),
+            c[:, -1].copy(),
+            p[:, -1].copy(),
+        )
     return lat, lon, c, p
 
 
@@ -415,7 +438,10 @@ class CurrentTrack:
         """1-sigma of set: sqrt(v^T P_c v) / drift, v across the current (linearised)."""
         v = np.stack([-np.sin(self.set_rad), np.cos(self.set_rad)], axis=-1)
         with np.errstate(divide="ignore", invalid="ignore"):
-            return np.sqrt(np.einsum("...i,...ij,...j->...", v, self.current_cov_m2ps2, v)) / self.drift_mps
+            return (
+                np.sqrt(np.einsum("...i,...ij,...j->...", v, self.current_cov_m2ps2, v))
+                / self.drift_mps
+            )
 
     @property
     def ellipse(self) -> Ellipse:
@@ -449,14 +475,22 @@ def estimate_current(
     model = CurrentModel() if model is None else model
     t = np.asarray(t_s, float)
     if t.ndim != 1 or t.size < 1:
-        raise InsufficientDataError(f"estimate_current: t_s must be a non-empty 1-D array, got shape {t.shape}")
+        raise InsufficientDataError(
+            f"estimate_current: t_s must be a non-empty 1-D array, got shape {t.shape}"
+        )
     if np.any(np.diff(t) < 0) or not np.all(np.isfinite(t)):
-        raise InsufficientDataError("estimate_current: epochs t_s must be finite and non-decreasing")
+        raise InsufficientDataError(
+            "estimate_current: epochs t_s must be finite and non-decreasing"
+        )
     course = np.asarray(course_rad, float)
     speed = np.asarray(speed_mps, float)
     lat0 = np.atleast_1d(np.asarray(start.lat_rad, float))
     batched = course.ndim == 2 or speed.ndim == 2 or lat0.size > 1
-    runs = max(course.shape[0] if course.ndim == 2 else 1, speed.shape[0] if speed.ndim == 2 else 1, lat0.size)
+    runs = max(
+        course.shape[0] if course.ndim == 2 else 1,
+        speed.shape[0] if speed.ndim == 2 else 1,
+        lat0.size,
+    )
     course = np.broadcast_to(course, (runs, t.size))
     speed = np.broadcast_to(speed, (runs, t.size))
     bad = ~np.isfinite(course[:, :-1]) | ~np.isfinite(speed[:, :-1])
@@ -466,7 +500,9 @@ def estimate_current(
             f"estimate_current: course or speed missing at epoch {k} (t = {t[k]:.1f} s); bridge gaps first"
         )
     fix_times = [float(tf) for tf, _ in fixes]
-    if fix_times and (np.any(np.diff(fix_times) < 0) or fix_times[0] < t[0] or fix_times[-1] > t[-1]):
+    if fix_times and (
+        np.any(np.diff(fix_times) < 0) or fix_times[0] < t[0] or fix_times[-1] > t[-1]
+    ):
         raise InsufficientDataError(
             f"estimate_current: fix times must be in time order within [{t[0]:.1f}, {t[-1]:.1f}] s, "
             f"got {fix_times[0]:.1f} .. {fix_times[-1]:.1f} s"
@@ -506,7 +542,8 @@ def estimate_current(
     if not batched:
         lat, lon, cur, cov = lat[0], lon[0], cur[0], cov[0]
         updates = [
-            UpdateRecord(u.t_s, u.kinds, u.nis[0], u.dof, u.cov_before_m2[0], u.cov_after_m2[0]) for u in updates
+            UpdateRecord(u.t_s, u.kinds, u.nis[0], u.dof, u.cov_before_m2[0], u.cov_after_m2[0])
+            for u in updates
         ]
     return CurrentTrack(t, lat, lon, cur[..., 0], cur[..., 1], cov, tuple(updates))
 
@@ -521,7 +558,11 @@ class OpenLoopComparison:
 
 
 def open_loop_vs_blended(
-    t_s, course_rad, speed_mps, start: PositionFix, fixes: Sequence[tuple[float, Observation]],
+    t_s,
+    course_rad,
+    speed_mps,
+    start: PositionFix,
+    fixes: Sequence[tuple[float, Observation]],
     model: CurrentModel | None = None,
 ) -> OpenLoopComparison:
     """Both tracks from the same DR inputs: open loop ignores the fixes (its covariance
@@ -578,7 +619,9 @@ def simulate_voyage(
     else:
         c = np.broadcast_to(np.asarray(current0_ne_mps, float), (runs, 2)).copy()
     d0 = rng.normal(0.0, 1.0, (runs, 2)) * start_sigma_m
-    lat, lon = add_offset_ne(np.full(runs, start_lat_rad), np.full(runs, start_lon_rad), d0[:, 0], d0[:, 1])
+    lat, lon = add_offset_ne(
+        np.full(runs, start_lat_rad), np.full(runs, start_lon_rad), d0[:, 0], d0[:, 1]
+    )
     lats, lons = np.empty((runs, n)), np.empty((runs, n))
     curs = np.empty((runs, n, 2))
     lats[:, 0], lons[:, 0], curs[:, 0] = lat, lon, c
@@ -600,8 +643,12 @@ def nees(track: CurrentTrack, voyage: SimulatedVoyage) -> np.ndarray:
     (chi-square with 4 degrees of freedom for a consistent filter)."""
     d_n, d_e = offset_ne_m(voyage.lat_rad, voyage.lon_rad, track.lat_rad, track.lon_rad)
     err = np.stack(
-        [d_n, d_e, voyage.current_ne_mps[..., 0] - track.current_north_mps,
-         voyage.current_ne_mps[..., 1] - track.current_east_mps],
+        [
+            d_n,
+            d_e,
+            voyage.current_ne_mps[..., 0] - track.current_north_mps,
+            voyage.current_ne_mps[..., 1] - track.current_east_mps,
+        ],
         axis=-1,
     )
     return np.einsum("...i,...i->...", err, np.linalg.solve(track.cov, err[..., None])[..., 0])

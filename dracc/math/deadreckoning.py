@@ -85,7 +85,6 @@ __all__ = [
 ]
 
 
-
 # --------------------------------------------------------------------------------------
 # Course made good and speed (B1-B6)
 # --------------------------------------------------------------------------------------
@@ -210,10 +209,16 @@ def true_heading_rad(
     n = h.size
     ref = np.broadcast_to(np.asarray(reference, dtype=object), (n,))
     magnetic = np.array([str(r).upper() == "M" for r in ref], dtype=bool) & np.isfinite(h)
-    dev_in = np.full(n, np.nan) if deviation_rad is None else np.broadcast_to(
-        np.asarray(deviation_rad, float), (n,))
-    var_in = np.full(n, np.nan) if variation_rad is None else np.broadcast_to(
-        np.asarray(variation_rad, float), (n,))
+    dev_in = (
+        np.full(n, np.nan)
+        if deviation_rad is None
+        else np.broadcast_to(np.asarray(deviation_rad, float), (n,))
+    )
+    var_in = (
+        np.full(n, np.nan)
+        if variation_rad is None
+        else np.broadcast_to(np.asarray(variation_rad, float), (n,))
+    )
     out = np.asarray(course_gyro_rad(h, gyro_correction_rad), float).copy()  # (B3)
     if not magnetic.any():
         return TrueHeading(out, 0, 0, 0, "none")
@@ -244,7 +249,8 @@ def true_heading_rad(
             sources.add("none")
     out[magnetic] = course_magnetic_rad(h[magnetic], var[magnetic], dev[magnetic])  # (B2)
     return TrueHeading(
-        heading_rad=out, n_magnetic=int(magnetic.sum()),
+        heading_rad=out,
+        n_magnetic=int(magnetic.sum()),
         n_variation_from_sentence=int(from_sentence.sum()),
         n_variation_from_config=int(missing.sum()),
         deviation_source=sources.pop() if len(sources) == 1 else "mixed",
@@ -303,11 +309,13 @@ def integrate_ne(time_s, vn_mps, ve_mps, lat0_rad, lon0_rad, *, iterations: int 
     for _ in range(iterations):
         lat_mid = 0.5 * (lat[..., :-1] + lat[..., 1:])
         lat = lat0 + np.concatenate(
-            [zero, np.cumsum(k_phi(lat_mid) * d_north_m, axis=-1)], axis=-1  # (B16), (B20)
+            [zero, np.cumsum(k_phi(lat_mid) * d_north_m, axis=-1)],
+            axis=-1,  # (B16), (B20)
         )
     lat_mid = 0.5 * (lat[..., :-1] + lat[..., 1:])
     lon = lon0 + np.concatenate(
-        [zero, np.cumsum(k_lambda(lat_mid) * d_east_m, axis=-1)], axis=-1  # (B17), (B21)
+        [zero, np.cumsum(k_lambda(lat_mid) * d_east_m, axis=-1)],
+        axis=-1,  # (B17), (B21)
     )
     return lat, wrap_pi(lon)
 
@@ -357,8 +365,10 @@ def covariance_b23_rad2(time_s, lat_rad, speed_mps, course_rad, sigma_v_mps, sig
     t = np.asarray(time_s, float)
     n = t.size
     pv = speed_covariance_rad2(
-        np.broadcast_to(lat_rad, (n,)), np.broadcast_to(speed_mps, (n,)),
-        np.broadcast_to(course_rad, (n,)), np.broadcast_to(sigma_v_mps, (n,)),
+        np.broadcast_to(lat_rad, (n,)),
+        np.broadcast_to(speed_mps, (n,)),
+        np.broadcast_to(course_rad, (n,)),
+        np.broadcast_to(sigma_v_mps, (n,)),
         np.broadcast_to(sigma_c_rad, (n,)),
     )
     dt = np.diff(t)
@@ -378,7 +388,9 @@ def covariance_m2_from_rad2(P_rad2, lat_rad):
 def mean_error_m(P_rad2, lat_rad):
     """M = sqrt((sigma_phi/k_phi)^2 + (sigma_lambda/k_lambda)^2) (B30); 2M is (B31)."""
     P = np.asarray(P_rad2, float)
-    return np.sqrt(P[..., 0, 0] / k_phi(lat_rad) ** 2 + P[..., 1, 1] / k_lambda(lat_rad) ** 2)  # (B30)
+    return np.sqrt(
+        P[..., 0, 0] / k_phi(lat_rad) ** 2 + P[..., 1, 1] / k_lambda(lat_rad) ** 2
+    )  # (B30)
 
 
 def error_ellipse(P_m2):
@@ -447,7 +459,7 @@ def _linear_recurrence(a, b, tau_s, dt):
     while start < m:
         stop = int(np.searchsorted(cum_t, cum_t[start] + span, side="right")) - 1
         stop = min(max(stop, start + 1), m)
-        rel = cum_t[start:stop + 1] - cum_t[start]  # t_k - t_s for k = start..stop
+        rel = cum_t[start : stop + 1] - cum_t[start]  # t_k - t_s for k = start..stop
         grow = np.exp(rel / tau_s)
         # h_k = exp(-(t_k - t_s)/tau) [h_s + sum_{s<=i<k} b_i exp((t_i+1 - t_s)/tau)]
         acc = np.cumsum(b[start:stop] * grow[1:, None], axis=0)
@@ -591,8 +603,9 @@ def _coarse_grid(t, step_s):
     return idx
 
 
-def honest_covariance_m2(time_s, speed_mps, course_rad, processes, P0_m2=None, *,
-                         step_s: float | None = None):
+def honest_covariance_m2(
+    time_s, speed_mps, course_rad, processes, P0_m2=None, *, step_s: float | None = None
+):
     """Position covariance (n, 2, 2) in m^2 north/east from independent Gauss-Markov sources.
 
     P_k = P0 + sum over processes of :func:`gauss_markov_position_covariance_m2`; every
@@ -660,8 +673,9 @@ def honest_covariance_m2(time_s, speed_mps, course_rad, processes, P0_m2=None, *
 _AUTO_RESETS_S = (30.0, 60.0, 120.0, 300.0, 600.0, 900.0, 1200.0, 1800.0, 3600.0)
 
 
-def dr_schedule(cfg: DeadReckoningConfig, span_s: float,
-                reset: str | float | None = None) -> tuple[float, str, float]:
+def dr_schedule(
+    cfg: DeadReckoningConfig, span_s: float, reset: str | float | None = None
+) -> tuple[float, str, float]:
     """(reset_s, label, epoch_interval_s) for a DR over ``span_s`` seconds.
 
     ``reset`` overrides ``cfg.reset`` (a duration, "watch", "never" or "auto").
@@ -695,7 +709,6 @@ def covered_span_s(time_s, max_gap_s: float) -> float:
 
 def _duration_label(s: float) -> str:
     return f"{s / 3600:g}h" if s >= 3600 else f"{s / 60:g}min" if s >= 60 else f"{s:g}s"
-
 
 
 @dataclass(frozen=True)
@@ -897,7 +910,9 @@ def dead_reckon(
     if vy is not None:
         # (B1) speed and (B5)/(B6) leeway angle from the log's two components
         speed_f = speed_from_components_mps(spd[src_v], vy[src_v])  # (B1)
-        course_f = wrap_2pi(hdg[src_h] + leeway_from_log_rad(spd[src_v], vy[src_v]))  # (B2)/(B3) + z
+        course_f = wrap_2pi(
+            hdg[src_h] + leeway_from_log_rad(spd[src_v], vy[src_v])
+        )  # (B2)/(B3) + z
     else:
         speed_f = spd[src_v]
         course_f = wrap_2pi(hdg[src_h])
@@ -949,8 +964,9 @@ def dead_reckon(
         ft, flat, flon, fs = fx[0][i_fix], fx[1][i_fix], fx[2][i_fix], fx[3][i_fix]
         lead = t[j] - ft  # advance the fix to the sample by the velocity held then
         kv = j - 1 if j > 0 else j
-        la, lo = integrate_ne(np.array([0.0, lead]), np.full(2, vn[kv]), np.full(2, ve[kv]),
-                              flat, flon)
+        la, lo = integrate_ne(
+            np.array([0.0, lead]), np.full(2, vn[kv]), np.full(2, ve[kv]), flat, flon
+        )
         return float(la[-1]), float(lo[-1]), float(fs)
 
     if lat0_rad is not None and lon0_rad is not None:
@@ -987,7 +1003,11 @@ def dead_reckon(
         la, lo = integrate_ne(t[sl], vn[sl], ve[sl], s_lat, s_lon)
         if covariance:
             Pl = honest_covariance_m2(
-                t[sl], speed_f[sl], course_f[sl], processes, P0_m2=s_sig**2 * np.eye(2),
+                t[sl],
+                speed_f[sl],
+                course_f[sl],
+                processes,
+                P0_m2=s_sig**2 * np.eye(2),
                 step_s=covariance_step_s,
             )
         else:
@@ -1028,12 +1048,24 @@ def dead_reckon(
     ei, grid = ei[inside], grid[inside]
     ei = unique_sorted(ei[(t[ei] - grid <= max_gap) & np.isfinite(lat[ei])])
     return DRTrack(
-        time_s=t, lat_rad=lat, lon_rad=lon,
-        vn_mps=np.where(leg_of >= 0, vn, np.nan), ve_mps=np.where(leg_of >= 0, ve, np.nan),
-        P_m2=P, radius_2m_m=radius, semi_major_m=smaj, semi_minor_m=smin,
-        orientation_rad=orient, since_fix_s=since, leg=leg_of,
-        leg_start_s=np.asarray(leg_starts), leg_start_reason=tuple(reasons),
-        epoch_index=ei, gaps=tuple(gaps), mode=mode, reset_s=reset,
+        time_s=t,
+        lat_rad=lat,
+        lon_rad=lon,
+        vn_mps=np.where(leg_of >= 0, vn, np.nan),
+        ve_mps=np.where(leg_of >= 0, ve, np.nan),
+        P_m2=P,
+        radius_2m_m=radius,
+        semi_major_m=smaj,
+        semi_minor_m=smin,
+        orientation_rad=orient,
+        since_fix_s=since,
+        leg=leg_of,
+        leg_start_s=np.asarray(leg_starts),
+        leg_start_reason=tuple(reasons),
+        epoch_index=ei,
+        gaps=tuple(gaps),
+        mode=mode,
+        reset_s=reset,
         n_invalid_samples=n_invalid,
     )
 
@@ -1134,8 +1166,9 @@ def dr_consistency(
     ei = np.asarray(track.epoch_index, dtype=np.int64)
     ei = ei[track.since_fix_s[ei] > 0]
     t_e = track.time_s[ei]
-    rlat, rlon = interp_position(np.asarray(ref_time_s, float), ref_lat_rad, ref_lon_rad, t_e,
-                                 max_ref_gap_s)
+    rlat, rlon = interp_position(
+        np.asarray(ref_time_s, float), ref_lat_rad, ref_lon_rad, t_e, max_ref_gap_s
+    )
     has = np.isfinite(rlat)
     ei, t_e, rlat, rlon = ei[has], t_e[has], rlat[has], rlon[has]
     dn, de = offset_ne_m(track.lat_rad[ei], track.lon_rad[ei], rlat, rlon)
@@ -1156,13 +1189,20 @@ def dr_consistency(
     for leg_id in np.unique(legs_e):
         sel = legs_e == leg_id
         k = int(inside[sel].sum())
-        legs.append(LegConsistency(
-            leg=int(leg_id), start_s=float(track.leg_start_s[leg_id]), n_epochs=int(sel.sum()),
-            n_inside=k, inside_fraction=k / int(sel.sum()),
-            rms_error_over_m=float(np.sqrt(np.mean(ratio[sel] ** 2))),
-            max_error_m=float(d[sel].max()), mean_nees=float(np.mean(nees[sel])),
-            last_nees=float(nees[sel][-1]), nees_upper=nees_leg_hi,
-        ))
+        legs.append(
+            LegConsistency(
+                leg=int(leg_id),
+                start_s=float(track.leg_start_s[leg_id]),
+                n_epochs=int(sel.sum()),
+                n_inside=k,
+                inside_fraction=k / int(sel.sum()),
+                rms_error_over_m=float(np.sqrt(np.mean(ratio[sel] ** 2))),
+                max_error_m=float(d[sel].max()),
+                mean_nees=float(np.mean(nees[sel])),
+                last_nees=float(nees[sel][-1]),
+                nees_upper=nees_leg_hi,
+            )
+        )
     n_legs = len(legs)
     if n_legs == 0:
         nan = float("nan")
@@ -1185,15 +1225,32 @@ def dr_consistency(
             verdict = "consistent"
     n_ep = int(ei.size)
     return Consistency(
-        time_s=t_e, leg=legs_e, error_north_m=dn, error_east_m=de, error_m=d,
-        radius_2m_m=radius, inside=inside, error_over_m=ratio, nees=nees,
-        p_inside_expected=p_exp, legs=tuple(legs), n_epochs=n_ep,
+        time_s=t_e,
+        leg=legs_e,
+        error_north_m=dn,
+        error_east_m=de,
+        error_m=d,
+        radius_2m_m=radius,
+        inside=inside,
+        error_over_m=ratio,
+        nees=nees,
+        p_inside_expected=p_exp,
+        legs=tuple(legs),
+        n_epochs=n_ep,
         n_inside=int(inside.sum()),
         inside_fraction=float(inside.mean()) if n_ep else float("nan"),
         expected_inside_fraction=float(p_exp.mean()) if n_ep else float("nan"),
         rms_error_over_m=float(np.sqrt(np.mean(ratio**2))) if n_ep else float("nan"),
         mean_nees=float(np.mean(nees)) if n_ep else float("nan"),
-        n_legs=n_legs, p_value_too_small=p_small, chi2_statistic=q, chi2_upper=q_hi,
-        chi2_lower=q_lo, alpha=alpha, verdict=verdict, nees_statistic=nees_sum,
-        nees_lower=nees_lo, nees_upper=nees_hi, reference_sigma_m=float(ref_sigma_m),
+        n_legs=n_legs,
+        p_value_too_small=p_small,
+        chi2_statistic=q,
+        chi2_upper=q_hi,
+        chi2_lower=q_lo,
+        alpha=alpha,
+        verdict=verdict,
+        nees_statistic=nees_sum,
+        nees_lower=nees_lo,
+        nees_upper=nees_hi,
+        reference_sigma_m=float(ref_sigma_m),
     )

@@ -93,7 +93,9 @@ PRUNE_LOGLIK = 25.0
 class ErrorPrior:
     """What is assumed before anything is learned (1-sigma, SI units)."""
 
-    current_sigma_mps: float  #: persistent current, per axis (a knot or so: honest about not knowing)
+    current_sigma_mps: (
+        float  #: persistent current, per axis (a knot or so: honest about not knowing)
+    )
     heading_sigma_rad: float  #: compass error + leeway (IMO gyro limit with sec phi, as 95 %)
     scale_sigma: float  #: log scale error (IMO 2 % or 0.2 kn, as 95 %)
     fix_sigma_m: float  #: the reference fixes, per axis (the grid spans 0.3-3 times this)
@@ -128,9 +130,14 @@ def hyperparameter_grid(fix_sigma_m: float = 10.0) -> Hyperparameters:
     noise 0.03-0.3 kn over 1 or 10 min (a log's 0.1 kn over 5 min lies between); a
     heading-dependent error (residual deviation, leeway that changes side with the tack) of
     0 or 1.5 deg; fix noise 0.1, 0.3, 1 or 3 times ``fix_sigma_m``."""
-    axes = (np.array([0.05, 0.15, 0.5, 1.5]) * KN_MPS, np.array([0.5, 2.0, 8.0]) * 3600.0,
-            np.array([0.03, 0.1, 0.3]) * KN_MPS, np.array([60.0, 600.0]),
-            np.array([0.0, 1.5]) * math.pi / 180.0, np.array([0.1, 0.3, 1.0, 3.0]) * fix_sigma_m)
+    axes = (
+        np.array([0.05, 0.15, 0.5, 1.5]) * KN_MPS,
+        np.array([0.5, 2.0, 8.0]) * 3600.0,
+        np.array([0.03, 0.1, 0.3]) * KN_MPS,
+        np.array([60.0, 600.0]),
+        np.array([0.0, 1.5]) * math.pi / 180.0,
+        np.array([0.1, 0.3, 1.0, 3.0]) * fix_sigma_m,
+    )
     return Hyperparameters(*(a.ravel() for a in np.meshgrid(*axes, indexing="ij")))
 
 
@@ -227,8 +234,10 @@ def _step_matrices(d: float, hp: Hyperparameters):
     M = hp.size
     Q = np.zeros((M, N_STATE, N_STATE))
     f = []
-    for (sig, tau), j in (((hp.current_sigma_mps, hp.current_tau_s), 4),
-                          ((hp.noise_sigma_mps, hp.noise_tau_s), 6)):
+    for (sig, tau), j in (
+        ((hp.current_sigma_mps, hp.current_tau_s), 4),
+        ((hp.noise_sigma_mps, hp.noise_tau_s), 6),
+    ):
         f_pc, phi = transition(d, tau)
         q_pp, q_pc, q_cc = gauss_markov_noise(d, sig, tau)
         Q[:, 0, 0] += q_pp
@@ -239,9 +248,21 @@ def _step_matrices(d: float, hp: Hyperparameters):
     return f, Q
 
 
-def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_rad, ref_lon_rad,
-                      leg_start_s, prior: ErrorPrior, *, hyper: Hyperparameters | None = None,
-                      step_s: float = 300.0, ref_max_gap_s: float = 5.0) -> LearnedModel:
+def learn_error_model(
+    time_s,
+    vn_w_mps,
+    ve_w_mps,
+    step_ok,
+    ref_time_s,
+    ref_lat_rad,
+    ref_lon_rad,
+    leg_start_s,
+    prior: ErrorPrior,
+    *,
+    hyper: Hyperparameters | None = None,
+    step_s: float = 300.0,
+    ref_max_gap_s: float = 5.0,
+) -> LearnedModel:
     """Run the filter over the voyage on every grid point; keep its posterior at each leg start.
 
     time_s (n,) the DR grid; vn_w_mps, ve_w_mps (n,) the velocity through the water (NaN
@@ -254,8 +275,11 @@ def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_r
     n = t.size
     vn = np.nan_to_num(np.asarray(vn_w_mps, float))
     ve = np.nan_to_num(np.asarray(ve_w_mps, float))
-    good = np.asarray(step_ok, bool) & np.isfinite(np.asarray(vn_w_mps, float)[:-1]) \
+    good = (
+        np.asarray(step_ok, bool)
+        & np.isfinite(np.asarray(vn_w_mps, float)[:-1])
         & np.isfinite(np.asarray(ve_w_mps, float)[:-1])
+    )
     # water track W (metres) and int J dt, from the velocity held over each step (B20)
     dt_good = np.where(good, np.diff(t), 0.0)
     W = _prefix_sum(np.column_stack([vn[:-1], ve[:-1]]) * dt_good[:, None])
@@ -271,8 +295,9 @@ def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_r
     firsts = after[np.r_[True, bins[1:] != bins[:-1]]] if after.size else after
     kf = unique_sorted(np.concatenate([firsts, np.searchsorted(t, starts), [n - 1]]).clip(0, n - 1))
     tf = t[kf]
-    rlat, rlon = interp_position(np.asarray(ref_time_s, float), ref_lat_rad, ref_lon_rad, tf,
-                                 ref_max_gap_s)
+    rlat, rlon = interp_position(
+        np.asarray(ref_time_s, float), ref_lat_rad, ref_lon_rad, tf, ref_max_gap_s
+    )
     has_ref = np.isfinite(rlat) & np.isfinite(rlon)
     # observation y = reference - water track, chained over small steps (local metres)
     y = np.full((tf.size, 2), np.nan)
@@ -288,12 +313,12 @@ def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_r
     x = np.zeros((M_all, N_STATE))
     P = np.zeros((M_all, N_STATE, N_STATE))
     P[:, 0, 0] = P[:, 1, 1] = _REANCHOR_M2
-    P[:, 2, 2] = P[:, 3, 3] = prior.current_sigma_mps ** 2
-    P[:, 4, 4] = P[:, 5, 5] = hp.current_sigma_mps ** 2
-    P[:, 6, 6] = P[:, 7, 7] = hp.noise_sigma_mps ** 2
+    P[:, 2, 2] = P[:, 3, 3] = prior.current_sigma_mps**2
+    P[:, 4, 4] = P[:, 5, 5] = hp.current_sigma_mps**2
+    P[:, 6, 6] = P[:, 7, 7] = hp.noise_sigma_mps**2
     P[:, EPS, EPS] = (prior.heading_sigma_rad * PRIOR_WIDENING) ** 2
     P[:, SCALE, SCALE] = (prior.scale_sigma * PRIOR_WIDENING) ** 2
-    P[:, DELTA, DELTA] = hp.turn_sigma_rad ** 2
+    P[:, DELTA, DELTA] = hp.turn_sigma_rad**2
     loglik = np.zeros(M_all)
 
     start_idx = np.searchsorted(tf, starts)
@@ -345,26 +370,31 @@ def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_r
             F[:, DELTA, DELTA] = rho_turn[i - 1]
             x = np.matmul(F, x[:, :, None])[:, :, 0]
             P = F @ P @ F.transpose(0, 2, 1) + Q
-            P[:, DELTA, DELTA] += hp.turn_sigma_rad ** 2 * (1.0 - rho_turn[i - 1] ** 2)
+            P[:, DELTA, DELTA] += hp.turn_sigma_rad**2 * (1.0 - rho_turn[i - 1] ** 2)
             if broke[i - 1]:
                 P[:, 0, 0] += _REANCHOR_M2
                 P[:, 1, 1] += _REANCHOR_M2
         if has_ref[i]:
             nu = y[i] - x[:, 0:2]
-            S = P[:, 0:2, 0:2] + (hp.fix_sigma_m ** 2)[:, None, None] * eye2
+            S = P[:, 0:2, 0:2] + (hp.fix_sigma_m**2)[:, None, None] * eye2
             det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] ** 2
             Si = np.empty_like(S)
             Si[:, 0, 0] = S[:, 1, 1] / det
             Si[:, 1, 1] = S[:, 0, 0] / det
             Si[:, 0, 1] = Si[:, 1, 0] = -S[:, 0, 1] / det
-            nis = (Si[:, 0, 0] * nu[:, 0] ** 2 + 2 * Si[:, 0, 1] * nu[:, 0] * nu[:, 1]
-                   + Si[:, 1, 1] * nu[:, 1] ** 2)
+            nis = (
+                Si[:, 0, 0] * nu[:, 0] ** 2
+                + 2 * Si[:, 0, 1] * nu[:, 0] * nu[:, 1]
+                + Si[:, 1, 1] * nu[:, 1] ** 2
+            )
             reanchor = P[0, 0, 0] > 0.5 * _REANCHOR_M2
             if not reanchor:
                 best = int(np.argmin(nis))
                 h_nis[i] = nis[best]
                 tr, dt_ = S[best, 0, 0] + S[best, 1, 1], det[best]
-                h_gate[i] = math.sqrt(OUTLIER_NIS * 0.5 * (tr + math.sqrt(max(tr * tr - 4 * dt_, 0.0))))
+                h_gate[i] = math.sqrt(
+                    OUTLIER_NIS * 0.5 * (tr + math.sqrt(max(tr * tr - 4 * dt_, 0.0)))
+                )
             if not reanchor and nis.min() > OUTLIER_NIS:
                 n_out += 1
             else:
@@ -393,7 +423,9 @@ def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_r
         if not keep.all():
             active, x, P, loglik = active[keep], x[keep], P[keep], loglik[keep]
             hp = hp_all.take(active)
-            cache = {k: ([(a[keep], b[keep]) for a, b in f], Q[keep]) for k, (f, Q) in cache.items()}
+            cache = {
+                k: ([(a[keep], b[keep]) for a, b in f], Q[keep]) for k, (f, Q) in cache.items()
+            }
             F = new_F()
     L = starts.size
     weights = np.zeros((L, M_all))
@@ -409,13 +441,32 @@ def learn_error_model(time_s, vn_w_mps, ve_w_mps, step_ok, ref_time_s, ref_lat_r
     fx = np.zeros((M_all, N_STATE))
     fP = np.zeros((M_all, N_STATE, N_STATE))
     fw[active], fx[active], fP[active] = _weights(loglik), x, P
-    hist = FilterHistory(time_s=tf, current_ne_mps=h_cur, current_sigma_mps=h_sig,
-                         heading_error_rad=h_eps, scale_error=h_s, updated=h_upd, nis=h_nis,
-                         gate_m=h_gate)
-    return LearnedModel(hyper=hp_all, prior=prior, step_s=float(step_s), start_s=starts,
-                        weights=weights, x=xs, P=Ps, learned_s=learned, n_updates=nu_before,
-                        final_weights=fw, final_x=fx, final_P=fP, n_outliers=n_out,
-                        history=hist)
+    hist = FilterHistory(
+        time_s=tf,
+        current_ne_mps=h_cur,
+        current_sigma_mps=h_sig,
+        heading_error_rad=h_eps,
+        scale_error=h_s,
+        updated=h_upd,
+        nis=h_nis,
+        gate_m=h_gate,
+    )
+    return LearnedModel(
+        hyper=hp_all,
+        prior=prior,
+        step_s=float(step_s),
+        start_s=starts,
+        weights=weights,
+        x=xs,
+        P=Ps,
+        learned_s=learned,
+        n_updates=nu_before,
+        final_weights=fw,
+        final_x=fx,
+        final_P=fP,
+        n_outliers=n_out,
+        history=hist,
+    )
 
 
 def _prefix_sum(a):
@@ -437,7 +488,9 @@ class LegForecast:
     offset_ne_m: np.ndarray  #: (n, 2) mu: add to the water track
     P_m2: np.ndarray  #: (n, 2, 2) covariance of the EP error, metres north/east
     inflation: np.ndarray  #: (L, 3) the factor on each leg's covariance, in thirds of its horizon
-    leg_nees: np.ndarray  #: (L, 3) mean NEES/2 of each leg against the reference, per third (raw model)
+    leg_nees: (
+        np.ndarray
+    )  #: (L, 3) mean NEES/2 of each leg against the reference, per third (raw model)
     components_m2: dict  #: name -> (n,) trace contribution (fix, current, current change, heading, log scale, noise)
 
 
@@ -457,8 +510,9 @@ def _horizon_span(model: LearnedModel) -> float:
 
 
 def _horizon_bin(h, model: LearnedModel):
-    return np.clip((np.asarray(h) / _horizon_span(model) * INFLATION_BINS).astype(int), 0,
-                   INFLATION_BINS - 1)
+    return np.clip(
+        (np.asarray(h) / _horizon_span(model) * INFLATION_BINS).astype(int), 0, INFLATION_BINS - 1
+    )
 
 
 def _inflation_at(h, factors, model: LearnedModel):
@@ -468,8 +522,16 @@ def _inflation_at(h, factors, model: LearnedModel):
     return np.interp(h, centres, factors)
 
 
-def forecast_legs(time_s, vn_w_mps, ve_w_mps, leg_of, model: LearnedModel, *,
-                  ref_offset_ne_m=None, horizon_step_s: float = 60.0) -> LegForecast:
+def forecast_legs(
+    time_s,
+    vn_w_mps,
+    ve_w_mps,
+    leg_of,
+    model: LearnedModel,
+    *,
+    ref_offset_ne_m=None,
+    horizon_step_s: float = 60.0,
+) -> LegForecast:
     """The EP correction and covariance at every sample of every leg (see module docstring).
 
     ``ref_offset_ne_m`` (n, 2): the reference minus the water track at each sample (NaN
@@ -506,9 +568,16 @@ def forecast_legs(time_s, vn_w_mps, ve_w_mps, leg_of, model: LearnedModel, *,
         # the legs that ended before this one started (legs run in time order): fold them in
         while folded < leg and leg_end[folded] <= model.start_s[leg]:
             has = np.isfinite(leg_nees[folded])
-            acc_num[has] = INFLATION_PRIOR_LEGS + INFLATION_FORGET * (acc_num[has] - INFLATION_PRIOR_LEGS) \
+            acc_num[has] = (
+                INFLATION_PRIOR_LEGS
+                + INFLATION_FORGET * (acc_num[has] - INFLATION_PRIOR_LEGS)
                 + np.minimum(leg_nees[folded][has], INFLATION_LEG_CAP)
-            acc_den[has] = INFLATION_PRIOR_LEGS + INFLATION_FORGET * (acc_den[has] - INFLATION_PRIOR_LEGS) + 1.0
+            )
+            acc_den[has] = (
+                INFLATION_PRIOR_LEGS
+                + INFLATION_FORGET * (acc_den[has] - INFLATION_PRIOR_LEGS)
+                + 1.0
+            )
             folded += 1
         # the factor has an inverse-gamma posterior (shape acc_den: one per leg, whose mean
         # NEES/2 is Exp(1) when the model is right; scale acc_num); the position's
@@ -520,7 +589,9 @@ def forecast_legs(time_s, vn_w_mps, ve_w_mps, leg_of, model: LearnedModel, *,
         t0 = t[k0]
         leg_end[leg] = t[k1]
         step = min(horizon_step_s, max((t[sel[-1]] - t0) / 20.0, 1.0))
-        th = unique_sorted(np.concatenate([np.arange(0.0, t[sel[-1]] - t0, step), [t[sel[-1]] - t0]]))
+        th = unique_sorted(
+            np.concatenate([np.arange(0.0, t[sel[-1]] - t0, step), [t[sel[-1]] - t0]])
+        )
         kh = np.clip(np.searchsorted(t, t0 + th), 0, n - 1)
         G = JI[kh] - JI[k0]  # (H, 2, 2)
         keep = _significant(model.weights[leg])
@@ -546,14 +617,18 @@ def forecast_legs(time_s, vn_w_mps, ve_w_mps, leg_of, model: LearnedModel, *,
         mu = np.matmul(A, xs[None, :, :, None])[..., 0]  # (H, m, 2)
         AP = np.matmul(A, Ps[None])  # (H, m, 2, 9)
         S = np.matmul(AP, A.transpose(0, 1, 3, 2))
-        qc, _, _ = gauss_markov_noise(th[:, None], hp.current_sigma_mps[None, :],
-                                      hp.current_tau_s[None, :])
-        qn, _, _ = gauss_markov_noise(th[:, None], hp.noise_sigma_mps[None, :],
-                                      hp.noise_tau_s[None, :])
-        R = hp.fix_sigma_m ** 2
+        qc, _, _ = gauss_markov_noise(
+            th[:, None], hp.current_sigma_mps[None, :], hp.current_tau_s[None, :]
+        )
+        qn, _, _ = gauss_markov_noise(
+            th[:, None], hp.noise_sigma_mps[None, :], hp.noise_tau_s[None, :]
+        )
+        R = hp.fix_sigma_m**2
         S[..., 0, 0] += qc + qn + R
         S[..., 1, 1] += qc + qn + R
-        turn_new = (hp.turn_sigma_rad ** 2)[None, :, None, None] * (Gn[:, :, None] * Gn[:, None, :])[:, None]
+        turn_new = (hp.turn_sigma_rad**2)[None, :, None, None] * (Gn[:, :, None] * Gn[:, None, :])[
+            :, None
+        ]
         S += turn_new
         mu_mix = np.einsum("m,hmi->hi", w, mu)
         dev = mu - mu_mix[:, None, :]
@@ -578,8 +653,11 @@ def forecast_legs(time_s, vn_w_mps, ve_w_mps, leg_of, model: LearnedModel, *,
                 e = mu_mix[ok] - yr[ok]
                 Sk = S_mix[ok]
                 det = Sk[:, 0, 0] * Sk[:, 1, 1] - Sk[:, 0, 1] ** 2
-                nees = (Sk[:, 1, 1] * e[:, 0] ** 2 - 2 * Sk[:, 0, 1] * e[:, 0] * e[:, 1]
-                        + Sk[:, 0, 0] * e[:, 1] ** 2) / det
+                nees = (
+                    Sk[:, 1, 1] * e[:, 0] ** 2
+                    - 2 * Sk[:, 0, 1] * e[:, 0] * e[:, 1]
+                    + Sk[:, 0, 0] * e[:, 1] ** 2
+                ) / det
                 b = _horizon_bin(th[ok], model)
                 for q in range(nb):
                     if np.any(b == q):
@@ -592,12 +670,14 @@ def forecast_legs(time_s, vn_w_mps, ve_w_mps, leg_of, model: LearnedModel, *,
                 Pout[sel, j, k] = np.interp(ts, th, S_mix[:, j, k])
         for k, v in contrib.items():
             comp[k][sel] = np.interp(ts, th, v * lam)
-    return LegForecast(offset_ne_m=off, P_m2=Pout, components_m2=comp, inflation=inflation,
-                       leg_nees=leg_nees)
+    return LegForecast(
+        offset_ne_m=off, P_m2=Pout, components_m2=comp, inflation=inflation, leg_nees=leg_nees
+    )
 
 
-def heading_prior_rad(compass_bias_rad: float, leeway_rad: float, lat_rad: float,
-                      gyro: bool) -> float:
+def heading_prior_rad(
+    compass_bias_rad: float, leeway_rad: float, lat_rad: float, gyro: bool
+) -> float:
     """Prior of the heading error: the compass bias (gyro: x sec phi, METHODS section 6)
     combined with the leeway."""
     sec = 1.0 / max(math.cos(lat_rad), 0.1) if gyro else 1.0
@@ -632,9 +712,17 @@ def step_ok_of(track: DRTrack) -> np.ndarray:
     return on & ~after_gap
 
 
-def estimate_position(track: DRTrack, ref_time_s, ref_lat_rad, ref_lon_rad, prior: ErrorPrior,
-                      *, ref_max_gap_s: float = 5.0, step_s: float | None = None,
-                      hyper: Hyperparameters | None = None) -> EstimatedPosition:
+def estimate_position(
+    track: DRTrack,
+    ref_time_s,
+    ref_lat_rad,
+    ref_lon_rad,
+    prior: ErrorPrior,
+    *,
+    ref_max_gap_s: float = 5.0,
+    step_s: float | None = None,
+    hyper: Hyperparameters | None = None,
+) -> EstimatedPosition:
     """The estimated position of every leg of a water-track DR, learned causally (module doc).
 
     ``step_s``: the filter's step; by default 300 s, shorter for logs under 8 h 20 min
@@ -644,28 +732,56 @@ def estimate_position(track: DRTrack, ref_time_s, ref_lat_rad, ref_lon_rad, prio
     span = covered_span_s(t, 60.0)
     if step_s is None:
         step_s = float(np.clip(span / 100.0, 5.0, 300.0))
-    model = learn_error_model(t, track.vn_mps, track.ve_mps, step_ok_of(track), ref_time_s,
-                              ref_lat_rad, ref_lon_rad, track.leg_start_s, prior, hyper=hyper,
-                              step_s=step_s, ref_max_gap_s=ref_max_gap_s)
-    rlat, rlon = interp_position(np.asarray(ref_time_s, float), ref_lat_rad, ref_lon_rad, t,
-                                 ref_max_gap_s)
+    model = learn_error_model(
+        t,
+        track.vn_mps,
+        track.ve_mps,
+        step_ok_of(track),
+        ref_time_s,
+        ref_lat_rad,
+        ref_lon_rad,
+        track.leg_start_s,
+        prior,
+        hyper=hyper,
+        step_s=step_s,
+        ref_max_gap_s=ref_max_gap_s,
+    )
+    rlat, rlon = interp_position(
+        np.asarray(ref_time_s, float), ref_lat_rad, ref_lon_rad, t, ref_max_gap_s
+    )
     y_n, y_e = offset_ne_m(rlat, rlon, track.lat_rad, track.lon_rad)
-    fc = forecast_legs(t, track.vn_mps, track.ve_mps, track.leg, model,
-                       ref_offset_ne_m=np.column_stack([y_n, y_e]))
+    fc = forecast_legs(
+        t, track.vn_mps, track.ve_mps, track.leg, model, ref_offset_ne_m=np.column_stack([y_n, y_e])
+    )
     on = track.leg >= 0
     lat = np.full(t.size, np.nan)
     lon = np.full(t.size, np.nan)
-    lat[on], lon[on] = add_offset_ne(track.lat_rad[on], track.lon_rad[on], fc.offset_ne_m[on, 0],
-                                     fc.offset_ne_m[on, 1])
+    lat[on], lon[on] = add_offset_ne(
+        track.lat_rad[on], track.lon_rad[on], fc.offset_ne_m[on, 0], fc.offset_ne_m[on, 1]
+    )
     P = fc.P_m2
     radius = 2.0 * np.sqrt(P[:, 0, 0] + P[:, 1, 1])  # (B30), (B31)
     smaj, smin, orient = error_ellipse(np.nan_to_num(P))
     nan = ~np.isfinite(radius)
     smaj, smin, orient = (np.where(nan, np.nan, a) for a in (smaj, smin, orient))
-    ep = replace(track, lat_rad=lat, lon_rad=lon, P_m2=P, radius_2m_m=radius, semi_major_m=smaj,
-                 semi_minor_m=smin, orientation_rad=orient)
+    ep = replace(
+        track,
+        lat_rad=lat,
+        lon_rad=lon,
+        P_m2=P,
+        radius_2m_m=radius,
+        semi_major_m=smaj,
+        semi_minor_m=smin,
+        orientation_rad=orient,
+    )
     need_s = min(MIN_LEARNED_S, track.reset_s)
     learned = (model.learned_s >= need_s) & (model.n_updates >= MIN_LEARNED_UPDATES)
     ref_sigma = math.sqrt(float(model.final_weights @ model.hyper.fix_sigma_m**2))
-    return EstimatedPosition(track=ep, water=track, model=model, forecast=fc, learned_leg=learned,
-                             reference_sigma_m=ref_sigma)
+    return EstimatedPosition(
+        track=ep,
+        water=track,
+        model=model,
+        forecast=fc,
+        learned_leg=learned,
+        reference_sigma_m=ref_sigma,
+    )

@@ -82,13 +82,21 @@ class SensorFault:
 
     def to_dict(self) -> dict:
         """JSON form (times as ISO 8601 UTC and as integer nanoseconds)."""
-        return {"source": self.source, "role": self.role, "kind": self.kind, "frame": self.frame,
-                "start": _iso(self.start_ns), "end": _iso(self.end_ns),
-                "start_ns": int(self.start_ns), "end_ns": int(self.end_ns),
-                "duration_s": self.duration_s, "n_records": int(self.n_records),
-                "first_line": int(self.first_line),
-                "values": {k: (None if not math.isfinite(v) else float(v)) for k, v in self.values},
-                "message": self.message}
+        return {
+            "source": self.source,
+            "role": self.role,
+            "kind": self.kind,
+            "frame": self.frame,
+            "start": _iso(self.start_ns),
+            "end": _iso(self.end_ns),
+            "start_ns": int(self.start_ns),
+            "end_ns": int(self.end_ns),
+            "duration_s": self.duration_s,
+            "n_records": int(self.n_records),
+            "first_line": int(self.first_line),
+            "values": {k: (None if not math.isfinite(v) else float(v)) for k, v in self.values},
+            "message": self.message,
+        }
 
 
 def _iso(t_ns: int) -> str:
@@ -127,8 +135,9 @@ def _equal_runs(*cols: np.ndarray) -> list[tuple[int, int]]:
     return [(a, b + 1) for a, b in _runs(same)]
 
 
-def _long_equal_runs(t: np.ndarray, min_records: int, min_s: float,
-                     *cols: np.ndarray) -> list[tuple[int, int]]:
+def _long_equal_runs(
+    t: np.ndarray, min_records: int, min_s: float, *cols: np.ndarray
+) -> list[tuple[int, int]]:
     """The runs of :func:`_equal_runs` with at least ``min_records`` rows spanning at
     least ``min_s`` seconds, filtered with numpy (a 1 Hz receiver giving GGA and RMC
     repeats each position once: tens of thousands of runs of two)."""
@@ -154,10 +163,11 @@ def _by_source(df: pd.DataFrame):
     # stable: time order kept within a source; int16 keys make numpy's stable sort a radix sort
     order = np.argsort(codes.astype(np.int16) if len(keys) < 1 << 15 else codes, kind="stable")
     bounds = np.searchsorted(codes[order], np.arange(len(keys) + 1))
-    numeric = {c: df[c].to_numpy() for c in df.columns
-               if pd.api.types.is_numeric_dtype(df[c].dtype)}
+    numeric = {
+        c: df[c].to_numpy() for c in df.columns if pd.api.types.is_numeric_dtype(df[c].dtype)
+    }
     for i, key in enumerate(keys):
-        rows = order[bounds[i]:bounds[i + 1]]
+        rows = order[bounds[i] : bounds[i + 1]]
         g = pd.DataFrame({c: v[rows] for c, v in numeric.items()}, copy=False)
         t = g["time_ns"].to_numpy()
         if (t[1:] < t[:-1]).any():  # canonical frames are sorted: then nothing to do
@@ -175,7 +185,9 @@ def _window(df: pd.DataFrame | None, exclude: str, a_ns: int, b_ns: int) -> pd.D
     return w if len(w) else None
 
 
-def _other_speed_mps(frames: Mapping[str, pd.DataFrame], exclude: str, a_ns: int, b_ns: int) -> float:
+def _other_speed_mps(
+    frames: Mapping[str, pd.DataFrame], exclude: str, a_ns: int, b_ns: int
+) -> float:
     """Median speed shown by the other sources over [a, b]: SOG, else the log, else NaN."""
     for kind, col in (("ground", "sog_mps"), ("water", "stw_mps")):
         w = _window(frames.get(kind), exclude, a_ns, b_ns)
@@ -187,8 +199,9 @@ def _other_speed_mps(frames: Mapping[str, pd.DataFrame], exclude: str, a_ns: int
     return math.nan
 
 
-def _other_turn_rad(frames: Mapping[str, pd.DataFrame], exclude: str, a_ns: int, b_ns: int,
-                    moving_mps: float) -> float:
+def _other_turn_rad(
+    frames: Mapping[str, pd.DataFrame], exclude: str, a_ns: int, b_ns: int, moving_mps: float
+) -> float:
     """Largest spread (max - min about the circular mean) of another heading source or of
     the COG while moving, over [a, b]; NaN without such evidence."""
     spreads = []
@@ -255,20 +268,42 @@ def _jumps(key, role, g, cfg: FaultsConfig, catch_up_from_ns: set[int]) -> list[
             out_n, out_e = offset_ne_m(lat[a], lon[a], lat[i], lon[i])
             ret_n, ret_e = offset_ne_m(lat[nxt + 1], lon[nxt + 1], lat[nxt], lon[nxt])
             back = bool(math.hypot(out_n + ret_n, out_e + ret_e) < d_m[i] / 2)
-        tail = (f"back at {_fmt_t(t[nxt + 1])} UTC after {b - a + 1} record(s)" if back
-                else (f"jumped again at {_fmt_t(t[nxt + 1])} UTC" if nxt is not None
-                      else "did not come back before its last record"))
+        tail = (
+            f"back at {_fmt_t(t[nxt + 1])} UTC after {b - a + 1} record(s)"
+            if back
+            else (
+                f"jumped again at {_fmt_t(t[nxt + 1])} UTC"
+                if nxt is not None
+                else "did not come back before its last record"
+            )
+        )
         speed = "instantaneous" if not math.isfinite(v_mps[i]) else f"{v_mps[i] / KN_MPS:,.0f} kn"
-        msg = (f"{key}: position jumped {d_m[i] / NMI_M:.2f} nmi in {dt_s[i]:g} s "
-               f"(implied {speed}) at {_fmt_t(t[a])} UTC; {tail}")
-        out.append(SensorFault(
-            source=key, role=role, kind="jump", frame="position", start_ns=int(t[a]), end_ns=int(t[b]),
-            n_records=int(b - a + 1), first_line=int(line[a]),
-            values=(("jump_nmi", float(d_m[i] / NMI_M)), ("dt_s", float(dt_s[i])),
+        msg = (
+            f"{key}: position jumped {d_m[i] / NMI_M:.2f} nmi in {dt_s[i]:g} s "
+            f"(implied {speed}) at {_fmt_t(t[a])} UTC; {tail}"
+        )
+        out.append(
+            SensorFault(
+                source=key,
+                role=role,
+                kind="jump",
+                frame="position",
+                start_ns=int(t[a]),
+                end_ns=int(t[b]),
+                n_records=int(b - a + 1),
+                first_line=int(line[a]),
+                values=(
+                    ("jump_nmi", float(d_m[i] / NMI_M)),
+                    ("dt_s", float(dt_s[i])),
                     ("implied_speed_kn", float(v_mps[i] / KN_MPS)),
-                    ("lat_before_deg", float(lat[i] / DEG_RAD)), ("lon_before_deg", float(lon[i] / DEG_RAD)),
-                    ("lat_after_deg", float(lat[a] / DEG_RAD)), ("lon_after_deg", float(lon[a] / DEG_RAD))),
-            message=msg))
+                    ("lat_before_deg", float(lat[i] / DEG_RAD)),
+                    ("lon_before_deg", float(lon[i] / DEG_RAD)),
+                    ("lat_after_deg", float(lat[a] / DEG_RAD)),
+                    ("lon_after_deg", float(lon[a] / DEG_RAD)),
+                ),
+                message=msg,
+            )
+        )
         n += 2 if back else 1  # the jump back belongs to this fault
     return out
 
@@ -290,16 +325,34 @@ def _frozen(key, role, g, frames, cfg: FaultsConfig) -> list[SensorFault]:
         v = _other_speed_mps(frames, key, int(t[a]), int(t[b - 1]))
         if math.isfinite(v) and v < cfg.moving_min_kn * KN_MPS:
             continue  # the ship lay still: a repeated position proves nothing
-        why = (f"while other sources show {v / KN_MPS:.1f} kn" if math.isfinite(v)
-               else "(no other source tells whether the ship moved)")
-        msg = (f"{key}: position frozen at {lat[a] / DEG_RAD:.6f}, {lon[a] / DEG_RAD:.6f} deg for "
-               f"{b - a} records, {_span(int(t[a]), int(t[b - 1]))}, {why}")
-        out.append(SensorFault(
-            source=key, role=role, kind="frozen", frame="position", start_ns=int(t[a]),
-            end_ns=int(t[b - 1]), n_records=int(b - a), first_line=int(line[a]),
-            values=(("lat_deg", float(lat[a] / DEG_RAD)), ("lon_deg", float(lon[a] / DEG_RAD)),
-                    ("duration_s", float(dur_s)), ("other_speed_kn", float(v / KN_MPS))),
-            message=msg))
+        why = (
+            f"while other sources show {v / KN_MPS:.1f} kn"
+            if math.isfinite(v)
+            else "(no other source tells whether the ship moved)"
+        )
+        msg = (
+            f"{key}: position frozen at {lat[a] / DEG_RAD:.6f}, {lon[a] / DEG_RAD:.6f} deg for "
+            f"{b - a} records, {_span(int(t[a]), int(t[b - 1]))}, {why}"
+        )
+        out.append(
+            SensorFault(
+                source=key,
+                role=role,
+                kind="frozen",
+                frame="position",
+                start_ns=int(t[a]),
+                end_ns=int(t[b - 1]),
+                n_records=int(b - a),
+                first_line=int(line[a]),
+                values=(
+                    ("lat_deg", float(lat[a] / DEG_RAD)),
+                    ("lon_deg", float(lon[a] / DEG_RAD)),
+                    ("duration_s", float(dur_s)),
+                    ("other_speed_kn", float(v / KN_MPS)),
+                ),
+                message=msg,
+            )
+        )
     return out
 
 
@@ -330,14 +383,29 @@ def _stuck(key, role, g, frames, cfg: FaultsConfig) -> list[SensorFault]:
         if math.isfinite(v):
             parts.append(f"other sources show {v / KN_MPS:.1f} kn")
         why = ("while " + " and ".join(parts)) if parts else "(no other source to compare with)"
-        msg = (f"{key}: heading stuck at {h[a] / DEG_RAD:.2f} deg for {b - a} records, "
-               f"{_span(ta, tb)}, {why}")
-        out.append(SensorFault(
-            source=key, role=role, kind="stuck_heading", frame="heading", start_ns=ta, end_ns=tb,
-            n_records=int(b - a), first_line=int(line[a]),
-            values=(("heading_deg", float(h[a] / DEG_RAD)), ("duration_s", float(dur_s)),
-                    ("other_turn_deg", float(turn / DEG_RAD)), ("other_speed_kn", float(v / KN_MPS))),
-            message=msg))
+        msg = (
+            f"{key}: heading stuck at {h[a] / DEG_RAD:.2f} deg for {b - a} records, "
+            f"{_span(ta, tb)}, {why}"
+        )
+        out.append(
+            SensorFault(
+                source=key,
+                role=role,
+                kind="stuck_heading",
+                frame="heading",
+                start_ns=ta,
+                end_ns=tb,
+                n_records=int(b - a),
+                first_line=int(line[a]),
+                values=(
+                    ("heading_deg", float(h[a] / DEG_RAD)),
+                    ("duration_s", float(dur_s)),
+                    ("other_turn_deg", float(turn / DEG_RAD)),
+                    ("other_speed_kn", float(v / KN_MPS)),
+                ),
+                message=msg,
+            )
+        )
     return out
 
 
@@ -350,19 +418,31 @@ def _limits(cfg: FaultsConfig) -> dict[str, list[tuple[str, float, str, object]]
         return np.abs(v) > vmax
 
     return {
-        "position": [("lat_rad", 1 / DEG_RAD, "lat_deg", lambda v: np.abs(v) > math.pi / 2),
-                     ("lon_rad", 1 / DEG_RAD, "lon_deg", lambda v: np.abs(v) > math.pi)],
-        "heading": [("heading_rad", 1 / DEG_RAD, "heading_deg", lambda v: (v < 0) | (v >= 2 * math.pi))],
-        "ground": [("cog_rad", 1 / DEG_RAD, "cog_deg", lambda v: (v < 0) | (v >= 2 * math.pi)),
-                   ("sog_mps", 1 / KN_MPS, "sog_kn", lambda v: (v < 0) | (v > vmax))],
-        "water": [(c, 1 / KN_MPS, c.replace("_mps", "_kn"), speed)
-                  for c in ("stw_mps", "stw_transverse_mps", "sog_long_mps", "sog_transverse_mps")],
+        "position": [
+            ("lat_rad", 1 / DEG_RAD, "lat_deg", lambda v: np.abs(v) > math.pi / 2),
+            ("lon_rad", 1 / DEG_RAD, "lon_deg", lambda v: np.abs(v) > math.pi),
+        ],
+        "heading": [
+            ("heading_rad", 1 / DEG_RAD, "heading_deg", lambda v: (v < 0) | (v >= 2 * math.pi))
+        ],
+        "ground": [
+            ("cog_rad", 1 / DEG_RAD, "cog_deg", lambda v: (v < 0) | (v >= 2 * math.pi)),
+            ("sog_mps", 1 / KN_MPS, "sog_kn", lambda v: (v < 0) | (v > vmax)),
+        ],
+        "water": [
+            (c, 1 / KN_MPS, c.replace("_mps", "_kn"), speed)
+            for c in ("stw_mps", "stw_transverse_mps", "sog_long_mps", "sog_transverse_mps")
+        ],
         "rot": [("rot_radps", 60 / DEG_RAD, "rot_deg_per_min", lambda v: np.abs(v) > rot_max)],
     }
 
 
-def _out_of_range(frames: Mapping[str, pd.DataFrame], roles: Mapping[str, str | None],
-                  cfg: FaultsConfig, split: dict | None = None) -> list[SensorFault]:
+def _out_of_range(
+    frames: Mapping[str, pd.DataFrame],
+    roles: Mapping[str, str | None],
+    cfg: FaultsConfig,
+    split: dict | None = None,
+) -> list[SensorFault]:
     """``split``: kind -> [(source, rows)] already made by the caller (else made here)."""
     out = []
     split = {} if split is None else split
@@ -379,22 +459,34 @@ def _out_of_range(frames: Mapping[str, pd.DataFrame], roles: Mapping[str, str | 
                 for a, b in _runs(bad):
                     lo, hi = float(np.min(v[a:b]) * scale), float(np.max(v[a:b]) * scale)
                     shown_v = f"{lo:g}" if lo == hi else f"{lo:g} to {hi:g}"
-                    msg = (f"{key}: {shown.rsplit('_', 1)[0]} {shown_v} "
-                           f"{shown.rsplit('_', 1)[1].replace('per', '/')} out of range in {b - a} "
-                           f"record(s) from {_fmt_t(t[a])} to {_fmt_t(t[b - 1])} UTC (line {line[a]})")
-                    out.append(SensorFault(
-                        source=key, role=roles.get(key), kind="out_of_range", frame=kind,
-                        start_ns=int(t[a]), end_ns=int(t[b - 1]), n_records=int(b - a),
-                        first_line=int(line[a]), values=((f"min_{shown}", lo), (f"max_{shown}", hi)),
-                        message=msg))
+                    msg = (
+                        f"{key}: {shown.rsplit('_', 1)[0]} {shown_v} "
+                        f"{shown.rsplit('_', 1)[1].replace('per', '/')} out of range in {b - a} "
+                        f"record(s) from {_fmt_t(t[a])} to {_fmt_t(t[b - 1])} UTC (line {line[a]})"
+                    )
+                    out.append(
+                        SensorFault(
+                            source=key,
+                            role=roles.get(key),
+                            kind="out_of_range",
+                            frame=kind,
+                            start_ns=int(t[a]),
+                            end_ns=int(t[b - 1]),
+                            n_records=int(b - a),
+                            first_line=int(line[a]),
+                            values=((f"min_{shown}", lo), (f"max_{shown}", hi)),
+                            message=msg,
+                        )
+                    )
     return out
 
 
 # ---------------------------------------------------------------------- public API
 
 
-def detect_faults(voyage_or_frames: Voyage | Mapping[str, pd.DataFrame],
-                  cfg: FaultsConfig | None = None) -> list[SensorFault]:
+def detect_faults(
+    voyage_or_frames: Voyage | Mapping[str, pd.DataFrame], cfg: FaultsConfig | None = None
+) -> list[SensorFault]:
     """Every sensor fault in a voyage (or a mapping kind -> canonical frame), by start time.
 
     Roles come from ``Voyage.sources`` (None for a bare mapping of frames).  ``cfg``

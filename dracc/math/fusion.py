@@ -82,7 +82,11 @@ def ecef_m(lat_rad, lon_rad):
     lon = np.asarray(lon_rad, float)
     n_m = radius_prime_vertical_m(lat)
     return np.stack(
-        [n_m * np.cos(lat) * np.cos(lon), n_m * np.cos(lat) * np.sin(lon), n_m * (1 - E2) * np.sin(lat)],
+        [
+            n_m * np.cos(lat) * np.cos(lon),
+            n_m * np.cos(lat) * np.sin(lon),
+            n_m * (1 - E2) * np.sin(lat),
+        ],
         axis=-1,
     )
 
@@ -179,7 +183,9 @@ class PositionFix:
     def __post_init__(self):
         cov = np.asarray(self.cov_m2, float)
         if cov.shape[-2:] != (2, 2) or np.any(np.linalg.eigvalsh(cov) <= 0):
-            raise GeometryError(f"PositionFix covariance must be 2x2 positive definite, got {self.cov_m2!r}")
+            raise GeometryError(
+                f"PositionFix covariance must be 2x2 positive definite, got {self.cov_m2!r}"
+            )
         object.__setattr__(self, "cov_m2", cov)
 
     @classmethod
@@ -211,7 +217,9 @@ class RangeLOP:
             raise GeometryError(f"RangeLOP range_m must be >= 0, got {self.range_m!r}")
 
     def linearise(self, lat_rad, lon_rad) -> Rows:
-        dist, az_ship_to_mark = range_azimuth(lat_rad, lon_rad, self.mark_lat_rad, self.mark_lon_rad)
+        dist, az_ship_to_mark = range_azimuth(
+            lat_rad, lon_rad, self.mark_lat_rad, self.mark_lon_rad
+        )
         # d(range)/d(N, E): unit vector from the mark towards the ship, at the ship
         g = -np.stack([np.cos(az_ship_to_mark), np.sin(az_ship_to_mark)], axis=-1)
         return _rows(g, self.range_m - dist, self.sigma_m**2, "range")
@@ -234,7 +242,9 @@ class BearingLOP:
     def __post_init__(self):
         _positive("BearingLOP sigma_rad", self.sigma_rad)
         if self.observed_at not in ("ship", "mark"):
-            raise GeometryError(f"BearingLOP observed_at must be 'ship' or 'mark', got {self.observed_at!r}")
+            raise GeometryError(
+                f"BearingLOP observed_at must be 'ship' or 'mark', got {self.observed_at!r}"
+            )
 
     def linearise(self, lat_rad, lon_rad) -> Rows:
         dist, az_sm = range_azimuth(lat_rad, lon_rad, self.mark_lat_rad, self.mark_lon_rad)
@@ -275,7 +285,9 @@ class LineLOP:
         _positive("LineLOP sigma_m", self.sigma_m)
         n, e = self._b_ne()
         if np.hypot(n, e) < 1.0:
-            raise GeometryError("LineLOP: points A and B are less than 1 m apart; the line has no direction")
+            raise GeometryError(
+                "LineLOP: points A and B are less than 1 m apart; the line has no direction"
+            )
 
     def _mid(self):
         return 0.5 * (self.a_lat_rad + self.b_lat_rad), self.a_lon_rad + 0.5 * float(
@@ -293,12 +305,16 @@ class LineLOP:
 
     def linearise(self, lat_rad, lon_rad) -> Rows:
         # right-hand unit normal of the plane through the Earth's centre, A and B
-        normal = np.cross(ecef_m(self.b_lat_rad, self.b_lon_rad), ecef_m(self.a_lat_rad, self.a_lon_rad))
+        normal = np.cross(
+            ecef_m(self.b_lat_rad, self.b_lon_rad), ecef_m(self.a_lat_rad, self.a_lon_rad)
+        )
         normal = normal / np.linalg.norm(normal)
         distance = ecef_m(lat_rad, lon_rad) @ normal  # signed distance from the plane, right +
         lat = np.asarray(lat_rad, float)
         lon = np.asarray(lon_rad, float)
-        north = np.stack([-np.sin(lat) * np.cos(lon), -np.sin(lat) * np.sin(lon), np.cos(lat)], axis=-1)
+        north = np.stack(
+            [-np.sin(lat) * np.cos(lon), -np.sin(lat) * np.sin(lon), np.cos(lat)], axis=-1
+        )
         east = np.stack([-np.sin(lon), np.cos(lon), np.zeros_like(lon)], axis=-1)
         g = np.stack([north @ normal, east @ normal], axis=-1)
         return _rows(g, self.offset_m - distance, self.sigma_m**2, "line")
@@ -347,7 +363,9 @@ class PierLine:
             )
 
     def line(self, offset_m: float = 0.0) -> LineLOP:
-        return LineLOP(self.a_lat_rad, self.a_lon_rad, self.b_lat_rad, self.b_lon_rad, self.sigma_m, offset_m)
+        return LineLOP(
+            self.a_lat_rad, self.a_lon_rad, self.b_lat_rad, self.b_lon_rad, self.sigma_m, offset_m
+        )
 
     @property
     def offset_m(self) -> float:
@@ -411,7 +429,9 @@ class NadirCircle:
         theta = np.arccos(cos_t)
         sin_t = np.sin(theta)
         if np.any(sin_t < 1e-9):
-            raise GeometryError("NadirCircle: the position is at the sub-point or its antipode; no gradient")
+            raise GeometryError(
+                "NadirCircle: the position is at the sub-point or its antipode; no gradient"
+            )
         # (30): -sin(theta) d(theta) = d(cos theta)/d(phi) d(phi) + d(cos theta)/d(lam) d(lam)
         dcos_dlat = np.cos(lat) * s_s - np.sin(lat) * c_s * np.cos(dl)
         dcos_dlon = -np.cos(lat) * c_s * np.sin(dl)
@@ -428,7 +448,9 @@ def stack_rows(observations: Sequence[Observation], lat_rad, lon_rad) -> Rows:
     k = sum(p.residual.shape[-1] for p in parts)
     batch = np.broadcast_shapes(*(p.residual.shape[:-1] for p in parts))
     g = np.concatenate([np.broadcast_to(p.g, batch + p.g.shape[-2:]) for p in parts], axis=-2)
-    z = np.concatenate([np.broadcast_to(p.residual, batch + p.residual.shape[-1:]) for p in parts], axis=-1)
+    z = np.concatenate(
+        [np.broadcast_to(p.residual, batch + p.residual.shape[-1:]) for p in parts], axis=-1
+    )
     cov = np.zeros(batch + (k, k))
     i = 0
     for p in parts:
@@ -576,8 +598,12 @@ def abeam_line(pier: PierLine, mark_lat_rad: float, mark_lon_rad: float, sigma_m
     For a ship whose reference point lies abeam of the mark: the along-pier LOP.
     """
     alpha = pier.line().azimuth_rad
-    lat_b, lon_b = add_offset_ne(mark_lat_rad, mark_lon_rad, 100.0 * np.cos(alpha + np.pi / 2),
-                                 100.0 * np.sin(alpha + np.pi / 2))
+    lat_b, lon_b = add_offset_ne(
+        mark_lat_rad,
+        mark_lon_rad,
+        100.0 * np.cos(alpha + np.pi / 2),
+        100.0 * np.sin(alpha + np.pi / 2),
+    )
     return LineLOP(mark_lat_rad, mark_lon_rad, float(lat_b), float(lon_b), sigma_m)
 
 
@@ -599,8 +625,10 @@ def alongside_reference(
     if abeam_mark is not None:
         obs.append(abeam_line(pier, abeam_mark[0], abeam_mark[1], abeam_sigma_m))
     if len(obs) == 1:
-        raise GeometryError("alongside_reference: the pier line alone gives no position along the pier; "
-                            "give an abeam mark or a fix")
+        raise GeometryError(
+            "alongside_reference: the pier line alone gives no position along the pier; "
+            "give an abeam mark or a fix"
+        )
     lat0, lon0 = pier.line()._mid()
     return fuse_fix(obs, lat0, lon0, weighted=True)
 

@@ -83,12 +83,26 @@ from dracc.math.deviation.sampling import align_at, sample_unit, unit_series_fro
 from dracc.math.ep import OUTLIER_NIS
 from dracc.math.faults import SensorFault, detect_faults
 
-__all__ = ["Check", "SourceSummary", "IntegrityResult", "check_night", "dr_innovation_check",
-           "with_dr_check", "CHECK_KINDS"]
+__all__ = [
+    "Check",
+    "SourceSummary",
+    "IntegrityResult",
+    "check_night",
+    "dr_innovation_check",
+    "with_dr_check",
+    "CHECK_KINDS",
+]
 
 #: the check families of the audit document (dracc.audit/1 ``findings[].check``)
-CHECK_KINDS = ("validity", "plausibility", "latency", "availability", "consistency",
-               "accuracy", "input")
+CHECK_KINDS = (
+    "validity",
+    "plausibility",
+    "latency",
+    "availability",
+    "consistency",
+    "accuracy",
+    "input",
+)
 CLAUSES = {
     "validity": "IMO MSC.252(83) 5.3: validity of sensor data (the source's own status flags)",
     "plausibility": "IMO MSC.252(83) 5.3: plausibility (values the ship and sensor can produce)",
@@ -219,11 +233,31 @@ def _by_source(df: pd.DataFrame):
         yield str(key), g
 
 
-def _not_checked(check: str, name: str, source: str | None, role: str | None, statistic: str,
-                 unit: str, rule: str, message: str, why: str) -> Check:
+def _not_checked(
+    check: str,
+    name: str,
+    source: str | None,
+    role: str | None,
+    statistic: str,
+    unit: str,
+    rule: str,
+    message: str,
+    why: str,
+) -> Check:
     """A check that could not be made, with why."""
-    return Check(check, name, source, role, "not_checked", _stat(statistic, None, unit),
-                 _thr(None, unit, rule), {}, 0.0, message, why_not=why)
+    return Check(
+        check,
+        name,
+        source,
+        role,
+        "not_checked",
+        _stat(statistic, None, unit),
+        _thr(None, unit, rule),
+        {},
+        0.0,
+        message,
+        why_not=why,
+    )
 
 
 def _role(voyage: Voyage, key: str) -> str | None:
@@ -241,10 +275,18 @@ def _validity(voyage: Voyage, cfg: IntegrityConfig) -> list[Check]:
     for key, g in _by_source(voyage.frames["position"]):
         parts.setdefault(key, []).append(("position", g, g["quality"].to_numpy() == 0))
     for key, g in _by_source(voyage.frames["heading"]):
-        parts.setdefault(key, []).append(("heading", g, ~np.isfinite(g["heading_rad"].to_numpy(float))))
+        parts.setdefault(key, []).append(
+            ("heading", g, ~np.isfinite(g["heading_rad"].to_numpy(float)))
+        )
     for key, g in _by_source(voyage.frames["ground"]):  # VTG mode N, RMC status V: no velocity
-        parts.setdefault(key, []).append(("ground", g, ~np.isfinite(g["cog_rad"].to_numpy(float))
-                                          & ~np.isfinite(g["sog_mps"].to_numpy(float))))
+        parts.setdefault(key, []).append(
+            (
+                "ground",
+                g,
+                ~np.isfinite(g["cog_rad"].to_numpy(float))
+                & ~np.isfinite(g["sog_mps"].to_numpy(float)),
+            )
+        )
     for key in sorted(parts):
         evidence, n_flag, n_all, longest = [], 0, 0, 0.0
         t_first, t_last = None, None
@@ -260,22 +302,47 @@ def _validity(voyage: Voyage, cfg: IntegrityConfig) -> list[Check]:
                 dur = (t[b - 1] - t[a]) / NS_PER_S
                 longest = max(longest, dur)
                 if t[b - 1] - t[a] >= spell_ns and len(evidence) < MAX_EVIDENCE:
-                    evidence.append({"start": _iso(t[a]), "end": _iso(t[b - 1]), "duration_s": dur,
-                                     "records": b - a, "frame": kind, "first_line": int(lines[a]),
-                                     "sentence": str(sent.iloc[a])})
+                    evidence.append(
+                        {
+                            "start": _iso(t[a]),
+                            "end": _iso(t[b - 1]),
+                            "duration_s": dur,
+                            "records": b - a,
+                            "frame": kind,
+                            "first_line": int(lines[a]),
+                            "sentence": str(sent.iloc[a]),
+                        }
+                    )
         failed = bool(evidence)
-        msg = (f"{key}: flagged its own data invalid for {longest:.0f} s at the longest "
-               f"({n_flag} of {n_all} records; {len(evidence)} spell(s) of {cfg.spell_min_s:g} s or more)"
-               if failed else f"{key}: {n_flag} of {n_all} records flagged invalid, no spell of "
-               f"{cfg.spell_min_s:g} s")
-        checks.append(Check("validity", "invalid_flag", key, _role(voyage, key),
-                            "fail" if failed else "pass",
-                            _stat("longest_invalid_spell", longest, "s"),
-                            _thr(cfg.spell_min_s, "s", "a spell of records the source flags "
-                                 "invalid (GGA quality 0, RMC/GLL status V, GNS/VTG mode N, "
-                                 "empty heading) at least this long"),
-                            {"start_ns": int(t_first), "end_ns": int(t_last)}, 0.0, msg,
-                            tuple(evidence), detail={"flagged_records": n_flag, "records": n_all}))
+        msg = (
+            f"{key}: flagged its own data invalid for {longest:.0f} s at the longest "
+            f"({n_flag} of {n_all} records; {len(evidence)} spell(s) of {cfg.spell_min_s:g} s or more)"
+            if failed
+            else f"{key}: {n_flag} of {n_all} records flagged invalid, no spell of "
+            f"{cfg.spell_min_s:g} s"
+        )
+        checks.append(
+            Check(
+                "validity",
+                "invalid_flag",
+                key,
+                _role(voyage, key),
+                "fail" if failed else "pass",
+                _stat("longest_invalid_spell", longest, "s"),
+                _thr(
+                    cfg.spell_min_s,
+                    "s",
+                    "a spell of records the source flags "
+                    "invalid (GGA quality 0, RMC/GLL status V, GNS/VTG mode N, "
+                    "empty heading) at least this long",
+                ),
+                {"start_ns": int(t_first), "end_ns": int(t_last)},
+                0.0,
+                msg,
+                tuple(evidence),
+                detail={"flagged_records": n_flag, "records": n_all},
+            )
+        )
     return checks
 
 
@@ -289,20 +356,34 @@ def _steps_ne(g: pd.DataFrame):
     return n, e
 
 
-def _jump(key: str, role: str | None, g: pd.DataFrame, frozen: Sequence[SensorFault],
-          cfg: IntegrityConfig) -> Check:
+def _jump(
+    key: str, role: str | None, g: pd.DataFrame, frozen: Sequence[SensorFault], cfg: IntegrityConfig
+) -> Check:
     """Step innovation against the ship's own motion (module docstring)."""
-    ok = (g["quality"].to_numpy() != 0) & np.isfinite(g["lat_rad"].to_numpy(float)) \
+    ok = (
+        (g["quality"].to_numpy() != 0)
+        & np.isfinite(g["lat_rad"].to_numpy(float))
         & np.isfinite(g["lon_rad"].to_numpy(float))
+    )
     g = g[ok]
     t = g["time_ns"].to_numpy(np.int64)
     keep = np.concatenate(([True], np.diff(t) > 0)) if len(t) else np.zeros(0, bool)
     g, t = g[keep], t[keep]
     win = _window(t)
     if len(t) < 30:
-        return Check("plausibility", "jump", key, role, "not_checked", _stat("innovation", None, "m"),
-                     _thr(None, "m", ""), win, 0.0, f"{key}: too few valid fixes ({len(t)}) "
-                     "to learn the step noise", why_not=f"{len(t)} valid fixes (30 needed)")
+        return Check(
+            "plausibility",
+            "jump",
+            key,
+            role,
+            "not_checked",
+            _stat("innovation", None, "m"),
+            _thr(None, "m", ""),
+            win,
+            0.0,
+            f"{key}: too few valid fixes ({len(t)}) to learn the step noise",
+            why_not=f"{len(t)} valid fixes (30 needed)",
+        )
     north, east = _steps_ne(g)
     dt = np.diff(t) / NS_PER_S
     dn, de = np.diff(north), np.diff(east)
@@ -330,30 +411,66 @@ def _jump(key: str, role: str | None, g: pd.DataFrame, frozen: Sequence[SensorFa
     quality = g["quality"].to_numpy()
     idx = np.flatnonzero(flagged)
     for k in idx[:MAX_EVIDENCE]:
-        evidence.append({"time": _iso(t[k + 1]), "line": int(lines[k + 1]),
-                         "step_m": float(math.hypot(dn[k], de[k])),
-                         "expected_step_m": float(math.hypot(vn[k] * dt[k], ve[k] * dt[k])),
-                         "innovation_m": float(math.hypot(rn[k], re_[k])), "dt_s": float(dt[k]),
-                         "flagged_valid": bool(quality[k + 1] > 0)})
+        evidence.append(
+            {
+                "time": _iso(t[k + 1]),
+                "line": int(lines[k + 1]),
+                "step_m": float(math.hypot(dn[k], de[k])),
+                "expected_step_m": float(math.hypot(vn[k] * dt[k], ve[k] * dt[k])),
+                "innovation_m": float(math.hypot(rn[k], re_[k])),
+                "dt_s": float(dt[k]),
+                "flagged_valid": bool(quality[k + 1] > 0),
+            }
+        )
     worst = float(np.sqrt(d2.max())) if n_steps else math.nan
     if len(idx):
         big = max(e["innovation_m"] for e in evidence)
-        msg = (f"{key}: {len(idx)} position jump(s) against the ship's motion, the largest "
-               f"{big:.0f} m (gate {min_jump:.1f} m: the night's step noise {sn:.2f}/{se:.2f} m "
-               f"N/E, at least {cfg.jump_floor_m:g} m)")
+        msg = (
+            f"{key}: {len(idx)} position jump(s) against the ship's motion, the largest "
+            f"{big:.0f} m (gate {min_jump:.1f} m: the night's step noise {sn:.2f}/{se:.2f} m "
+            f"N/E, at least {cfg.jump_floor_m:g} m)"
+        )
     else:
         msg = f"{key}: no jump; the gate would have seen a jump of {min_jump:.1f} m or more"
-    return Check("plausibility", "jump", key, role, "fail" if len(idx) else "pass",
-                 _stat("max_normalised_innovation", worst, "sigma"),
-                 _thr(math.sqrt(gate), "sigma", f"chi-square(2) gate at {cfg.false_alarm:g} per "
-                      f"night over {n_steps} steps, and an innovation beyond [integrity] "
-                      f"jump_floor_m = {cfg.jump_floor_m:g} m"), win, cfg.false_alarm, msg, tuple(evidence),
-                 detail={"min_detectable_m": min_jump, "step_sigma_n_m": sn, "step_sigma_e_m": se,
-                         "steps": n_steps, "cadence_s": cadence, "jumps": int(len(idx))})
+    return Check(
+        "plausibility",
+        "jump",
+        key,
+        role,
+        "fail" if len(idx) else "pass",
+        _stat("max_normalised_innovation", worst, "sigma"),
+        _thr(
+            math.sqrt(gate),
+            "sigma",
+            f"chi-square(2) gate at {cfg.false_alarm:g} per "
+            f"night over {n_steps} steps, and an innovation beyond [integrity] "
+            f"jump_floor_m = {cfg.jump_floor_m:g} m",
+        ),
+        win,
+        cfg.false_alarm,
+        msg,
+        tuple(evidence),
+        detail={
+            "min_detectable_m": min_jump,
+            "step_sigma_n_m": sn,
+            "step_sigma_e_m": se,
+            "steps": n_steps,
+            "cadence_s": cadence,
+            "jumps": int(len(idx)),
+        },
+    )
 
 
-def _fault_checks(voyage: Voyage, faults: Sequence[SensorFault], name: str, kinds: tuple[str, ...],
-                  frames: tuple[str, ...], rule: str, cfg_value: float, unit: str) -> list[Check]:
+def _fault_checks(
+    voyage: Voyage,
+    faults: Sequence[SensorFault],
+    name: str,
+    kinds: tuple[str, ...],
+    frames: tuple[str, ...],
+    rule: str,
+    cfg_value: float,
+    unit: str,
+) -> list[Check]:
     """One pass/fail check per source of ``frames`` from :mod:`dracc.math.faults` results."""
     checks = []
     times: dict[str, list[np.ndarray]] = {}
@@ -363,17 +480,43 @@ def _fault_checks(voyage: Voyage, faults: Sequence[SensorFault], name: str, kind
     for key in sorted(times):
         mine = [f for f in faults if f.source == key and f.kind in kinds]
         t = np.sort(np.concatenate(times[key]))
-        ev = tuple({"start": _iso(f.start_ns), "end": _iso(f.end_ns), "duration_s": f.duration_s,
-                    "records": f.n_records, "first_line": f.first_line, "kind": f.kind,
-                    "values": {k: (float(v) if math.isfinite(v) else None) for k, v in f.values}}
-                   for f in mine[:MAX_EVIDENCE])
+        ev = tuple(
+            {
+                "start": _iso(f.start_ns),
+                "end": _iso(f.end_ns),
+                "duration_s": f.duration_s,
+                "records": f.n_records,
+                "first_line": f.first_line,
+                "kind": f.kind,
+                "values": {k: (float(v) if math.isfinite(v) else None) for k, v in f.values},
+            }
+            for f in mine[:MAX_EVIDENCE]
+        )
         longest = max((f.duration_s for f in mine), default=0.0)
-        msg = "; ".join(f.message for f in mine[:3]) if mine else f"{key}: no {name.replace('_', ' ')}"
-        checks.append(Check("plausibility", name, key, _role(voyage, key), "fail" if mine else "pass",
-                            _stat("longest_s" if name != "out_of_range" else "faults",
-                                  longest if name != "out_of_range" else len(mine),
-                                  "s" if name != "out_of_range" else "count"),
-                            _thr(cfg_value, unit, rule), _window(t), 0.0, msg, ev))
+        msg = (
+            "; ".join(f.message for f in mine[:3])
+            if mine
+            else f"{key}: no {name.replace('_', ' ')}"
+        )
+        checks.append(
+            Check(
+                "plausibility",
+                name,
+                key,
+                _role(voyage, key),
+                "fail" if mine else "pass",
+                _stat(
+                    "longest_s" if name != "out_of_range" else "faults",
+                    longest if name != "out_of_range" else len(mine),
+                    "s" if name != "out_of_range" else "count",
+                ),
+                _thr(cfg_value, unit, rule),
+                _window(t),
+                0.0,
+                msg,
+                ev,
+            )
+        )
     return checks
 
 
@@ -384,22 +527,44 @@ def _plausibility(voyage: Voyage, cfg: IntegrityConfig) -> tuple[list[Check], li
     for key, g in _by_source(voyage.frames["position"]):
         frozen = [f for f in faults if f.source == key and f.kind == "frozen"]
         checks.append(_jump(key, _role(voyage, key), g, frozen, cfg))
-    checks += _fault_checks(voyage, faults, "frozen", ("frozen",), ("position",),
-                            "bit-identical positions this long while the other sources show "
-                            "the ship moving", cfg.frozen_min_s, "s")
-    checks += _fault_checks(voyage, faults, "stuck", ("stuck_heading",), ("heading",),
-                            "a bit-identical heading this long while the other sources show "
-                            "the ship turning", cfg.frozen_min_s, "s")
-    checks += _fault_checks(voyage, faults, "out_of_range", ("out_of_range",),
-                            ("position", "heading", "ground", "water", "rot"),
-                            "latitude beyond 90 deg, longitude beyond 180 deg, heading or course "
-                            "outside [0, 360) deg, negative SOG, speeds beyond [faults] "
-                            "max_speed_kn, rate of turn beyond [faults] max_rot_deg_per_min",
-                            0, "count")
+    checks += _fault_checks(
+        voyage,
+        faults,
+        "frozen",
+        ("frozen",),
+        ("position",),
+        "bit-identical positions this long while the other sources show the ship moving",
+        cfg.frozen_min_s,
+        "s",
+    )
+    checks += _fault_checks(
+        voyage,
+        faults,
+        "stuck",
+        ("stuck_heading",),
+        ("heading",),
+        "a bit-identical heading this long while the other sources show the ship turning",
+        cfg.frozen_min_s,
+        "s",
+    )
+    checks += _fault_checks(
+        voyage,
+        faults,
+        "out_of_range",
+        ("out_of_range",),
+        ("position", "heading", "ground", "water", "rot"),
+        "latitude beyond 90 deg, longitude beyond 180 deg, heading or course "
+        "outside [0, 360) deg, negative SOG, speeds beyond [faults] "
+        "max_speed_kn, rate of turn beyond [faults] max_rot_deg_per_min",
+        0,
+        "count",
+    )
     return checks, faults
 
 
-def _contradictions(voyage: Voyage, checks: Sequence[Check], faults: Sequence[SensorFault]) -> list[Check]:
+def _contradictions(
+    voyage: Voyage, checks: Sequence[Check], faults: Sequence[SensorFault]
+) -> list[Check]:
     """validity / contradiction: a source flagging as valid what fails plausibility."""
     out = []
     pos = voyage.frames["position"]
@@ -407,8 +572,11 @@ def _contradictions(voyage: Voyage, checks: Sequence[Check], faults: Sequence[Se
         events = []
         for c in checks:
             if c.source == key and c.name == "jump" and c.status == "fail":
-                events += [{"what": "jump", "time": e["time"], "line": e["line"]}
-                           for e in c.evidence if e.get("flagged_valid")]
+                events += [
+                    {"what": "jump", "time": e["time"], "line": e["line"]}
+                    for e in c.evidence
+                    if e.get("flagged_valid")
+                ]
         mask_src = (pos["source"] == key).to_numpy()
         for f in faults:
             if f.source != key or f.kind != "frozen" or not mask_src.any():
@@ -417,17 +585,35 @@ def _contradictions(voyage: Voyage, checks: Sequence[Check], faults: Sequence[Se
             q = pos["quality"].to_numpy()[mask_src]
             inside = (t >= f.start_ns) & (t <= f.end_ns)
             if (q[inside] > 0).any():
-                events.append({"what": "frozen", "time": _iso(f.start_ns), "line": f.first_line,
-                               "records_flagged_valid": int((q[inside] > 0).sum())})
+                events.append(
+                    {
+                        "what": "frozen",
+                        "time": _iso(f.start_ns),
+                        "line": f.first_line,
+                        "records_flagged_valid": int((q[inside] > 0).sum()),
+                    }
+                )
         if not events:
             continue
-        out.append(Check("validity", "contradiction", key, _role(voyage, key), "fail",
-                         _stat("implausible_records_flagged_valid", len(events), "count"),
-                         _thr(0, "count", "a record the source flags valid must pass plausibility"),
-                         {}, 0.0, f"{key}: flagged as valid what fails plausibility: "
-                         + ", ".join(f"{w} x{sum(e['what'] == w for e in events)}"
-                                     for w in sorted({e["what"] for e in events})),
-                         tuple(events[:MAX_EVIDENCE])))
+        out.append(
+            Check(
+                "validity",
+                "contradiction",
+                key,
+                _role(voyage, key),
+                "fail",
+                _stat("implausible_records_flagged_valid", len(events), "count"),
+                _thr(0, "count", "a record the source flags valid must pass plausibility"),
+                {},
+                0.0,
+                f"{key}: flagged as valid what fails plausibility: "
+                + ", ".join(
+                    f"{w} x{sum(e['what'] == w for e in events)}"
+                    for w in sorted({e["what"] for e in events})
+                ),
+                tuple(events[:MAX_EVIDENCE]),
+            )
+        )
     return out
 
 
@@ -446,8 +632,13 @@ def _latency(voyage: Voyage, cfg: IntegrityConfig) -> tuple[list[Check], dict[st
             continue
         sub = df[has]
         for key, g in _by_source(sub):
-            per.setdefault(key, []).append((g["time_ns"].to_numpy(np.int64),
-                                            g["recv_ns"].to_numpy(np.int64), g["line"].to_numpy()))
+            per.setdefault(key, []).append(
+                (
+                    g["time_ns"].to_numpy(np.int64),
+                    g["recv_ns"].to_numpy(np.int64),
+                    g["line"].to_numpy(),
+                )
+            )
     max_ns = cfg.latency_max_s * NS_PER_S
     spell_ns = int(cfg.spell_min_s * NS_PER_S)
     for key in sorted(per):
@@ -458,28 +649,59 @@ def _latency(voyage: Voyage, cfg: IntegrityConfig) -> tuple[list[Check], dict[st
         t, r, ln = t[o], r[o], ln[o]
         lat_s = (r - t) / NS_PER_S
         q = np.percentile(lat_s, [50, 95, 99])
-        dists[key] = {"n": int(len(lat_s)), "p50": float(q[0]), "p95": float(q[1]), "p99": float(q[2]),
-                      "max": float(lat_s.max()), "min": float(lat_s.min())}
+        dists[key] = {
+            "n": int(len(lat_s)),
+            "p50": float(q[0]),
+            "p95": float(q[1]),
+            "p99": float(q[2]),
+            "max": float(lat_s.max()),
+            "min": float(lat_s.min()),
+        }
         bad = np.abs(r - t) > max_ns
         evidence, longest = [], 0.0
         for a, b in _runs(bad):
             dur = (t[b - 1] - t[a]) / NS_PER_S
             longest = max(longest, dur)
             if t[b - 1] - t[a] >= spell_ns and len(evidence) < MAX_EVIDENCE:
-                evidence.append({"start": _iso(t[a]), "end": _iso(t[b - 1]), "duration_s": dur,
-                                 "records": b - a, "first_line": int(ln[a]),
-                                 "median_latency_s": float(np.median(lat_s[a:b]))})
+                evidence.append(
+                    {
+                        "start": _iso(t[a]),
+                        "end": _iso(t[b - 1]),
+                        "duration_s": dur,
+                        "records": b - a,
+                        "first_line": int(ln[a]),
+                        "median_latency_s": float(np.median(lat_s[a:b])),
+                    }
+                )
         failed = bool(evidence)
         worst = max((abs(e["median_latency_s"]) for e in evidence), default=0.0)
-        msg = (f"{key}: data {worst:.2f} s old on receipt for {longest:.0f} s at the longest "
-               f"(limit {cfg.latency_max_s:g} s; latency p50 {q[0]:.2f} s, p95 {q[1]:.2f} s)"
-               if failed else f"{key}: latency p50 {q[0]:.2f} s, p95 {q[1]:.2f} s, max "
-               f"{lat_s.max():.2f} s over {len(lat_s)} records")
-        checks.append(Check("latency", "latency", key, _role(voyage, key), "fail" if failed else "pass",
-                            _stat("longest_late_spell", longest, "s"),
-                            _thr(cfg.latency_max_s, "s", f"|receive time - time of fix| above this "
-                                 f"for at least {cfg.spell_min_s:g} s"),
-                            _window(t), 0.0, msg, tuple(evidence), detail={"latency_s": dists[key]}))
+        msg = (
+            f"{key}: data {worst:.2f} s old on receipt for {longest:.0f} s at the longest "
+            f"(limit {cfg.latency_max_s:g} s; latency p50 {q[0]:.2f} s, p95 {q[1]:.2f} s)"
+            if failed
+            else f"{key}: latency p50 {q[0]:.2f} s, p95 {q[1]:.2f} s, max "
+            f"{lat_s.max():.2f} s over {len(lat_s)} records"
+        )
+        checks.append(
+            Check(
+                "latency",
+                "latency",
+                key,
+                _role(voyage, key),
+                "fail" if failed else "pass",
+                _stat("longest_late_spell", longest, "s"),
+                _thr(
+                    cfg.latency_max_s,
+                    "s",
+                    f"|receive time - time of fix| above this for at least {cfg.spell_min_s:g} s",
+                ),
+                _window(t),
+                0.0,
+                msg,
+                tuple(evidence),
+                detail={"latency_s": dists[key]},
+            )
+        )
     return checks, dists
 
 
@@ -494,18 +716,34 @@ def _source_times(voyage: Voyage) -> dict[str, np.ndarray]:
     return {k: np.unique(np.concatenate(v)) for k, v in parts.items()}
 
 
-def _availability(voyage: Voyage, cfg: IntegrityConfig, start_ns: int, end_ns: int,
-                  times: Mapping[str, np.ndarray]) -> tuple[list[Check], dict[str, tuple[float, float]]]:
+def _availability(
+    voyage: Voyage,
+    cfg: IntegrityConfig,
+    start_ns: int,
+    end_ns: int,
+    times: Mapping[str, np.ndarray],
+) -> tuple[list[Check], dict[str, tuple[float, float]]]:
     checks, summary = [], {}
     span = max(end_ns - start_ns, 1)
     for key in sorted(times):
         t = times[key]
         if len(t) < 3:
             summary[key] = (math.nan, math.nan)
-            checks.append(Check("availability", "dropout", key, _role(voyage, key), "not_checked",
-                                _stat("longest_dropout", None, "s"), _thr(None, "s", ""), _window(t),
-                                0.0, f"{key}: {len(t)} record(s): no cadence to measure against",
-                                why_not="fewer than 3 records"))
+            checks.append(
+                Check(
+                    "availability",
+                    "dropout",
+                    key,
+                    _role(voyage, key),
+                    "not_checked",
+                    _stat("longest_dropout", None, "s"),
+                    _thr(None, "s", ""),
+                    _window(t),
+                    0.0,
+                    f"{key}: {len(t)} record(s): no cadence to measure against",
+                    why_not="fewer than 3 records",
+                )
+            )
             continue
         d = np.diff(t)
         cadence = float(np.median(d)) / NS_PER_S
@@ -519,20 +757,44 @@ def _availability(voyage: Voyage, cfg: IntegrityConfig, start_ns: int, end_ns: i
         lost = sum(b - a for a, b in gaps)
         summary[key] = (cadence, 1.0 - lost / span)
         longest = max(((b - a) / NS_PER_S for a, b in gaps), default=0.0)
-        ev = tuple({"from": _iso(a), "to": _iso(b), "duration_s": (b - a) / NS_PER_S,
-                    "cadences": (b - a) / NS_PER_S / cadence if cadence > 0 else None,
-                    "edge": "start" if a == start_ns else ("end" if b == end_ns else None)}
-                   for a, b in sorted(gaps, key=lambda g: g[0] - g[1])[:MAX_EVIDENCE])
-        msg = (f"{key}: silent for {longest:.0f} s at the longest ({len(gaps)} drop-out(s) "
-               f"beyond {thr_s:.0f} s against its {cadence:g} s cadence; available "
-               f"{100 * summary[key][1]:.1f} % of the night)" if gaps
-               else f"{key}: no drop-out beyond {thr_s:.0f} s (cadence {cadence:g} s)")
-        checks.append(Check("availability", "dropout", key, _role(voyage, key),
-                            "fail" if gaps else "pass", _stat("longest_dropout", longest, "s"),
-                            _thr(thr_s, "s", f"a gap longer than {cfg.dropout_cadences:g} of the "
-                                 f"source's own intervals and at least {cfg.dropout_min_s:g} s"),
-                            {"start_ns": start_ns, "end_ns": end_ns}, 0.0, msg, ev,
-                            detail={"cadence_s": cadence, "availability": summary[key][1]}))
+        ev = tuple(
+            {
+                "from": _iso(a),
+                "to": _iso(b),
+                "duration_s": (b - a) / NS_PER_S,
+                "cadences": (b - a) / NS_PER_S / cadence if cadence > 0 else None,
+                "edge": "start" if a == start_ns else ("end" if b == end_ns else None),
+            }
+            for a, b in sorted(gaps, key=lambda g: g[0] - g[1])[:MAX_EVIDENCE]
+        )
+        msg = (
+            f"{key}: silent for {longest:.0f} s at the longest ({len(gaps)} drop-out(s) "
+            f"beyond {thr_s:.0f} s against its {cadence:g} s cadence; available "
+            f"{100 * summary[key][1]:.1f} % of the night)"
+            if gaps
+            else f"{key}: no drop-out beyond {thr_s:.0f} s (cadence {cadence:g} s)"
+        )
+        checks.append(
+            Check(
+                "availability",
+                "dropout",
+                key,
+                _role(voyage, key),
+                "fail" if gaps else "pass",
+                _stat("longest_dropout", longest, "s"),
+                _thr(
+                    thr_s,
+                    "s",
+                    f"a gap longer than {cfg.dropout_cadences:g} of the "
+                    f"source's own intervals and at least {cfg.dropout_min_s:g} s",
+                ),
+                {"start_ns": start_ns, "end_ns": end_ns},
+                0.0,
+                msg,
+                ev,
+                detail={"cadence_s": cadence, "availability": summary[key][1]},
+            )
+        )
     return checks, summary
 
 
@@ -543,16 +805,22 @@ def _speed_accuracy_mps(speed_mps: float) -> float:
     return max(SPEED_ACCURACY_MIN_MPS, SPEED_ACCURACY_FRACTION * speed_mps)
 
 
-def _position_velocity(voyage: Voyage, cfg: IntegrityConfig, start_ns: int, end_ns: int) -> list[Check]:
+def _position_velocity(
+    voyage: Voyage, cfg: IntegrityConfig, start_ns: int, end_ns: int
+) -> list[Check]:
     """consistency / velocity of every INS against the others' mean and GNSS against the INS mean."""
     roles = [r for r in (*INS_ROLES, "gnss") if voyage.role_sources(r)]
     ins = [r for r in roles if r in INS_ROLES]
     step_s = cfg.consistency_interval_s
     lag = int(round(SCHULER_PERIOD_S / step_s))
     gate = cfg.velocity_gate_kn * KN_MPS
-    rule = ("change of the Schuler-period (84.4 min) velocity of the difference from one period "
-            "to the next beyond [integrity] velocity_gate_kn")
-    targets = [r for r in roles if (r in INS_ROLES and len(ins) >= 3) or (r == "gnss" and len(ins) >= 2)]
+    rule = (
+        "change of the Schuler-period (84.4 min) velocity of the difference from one period "
+        "to the next beyond [integrity] velocity_gate_kn"
+    )
+    targets = [
+        r for r in roles if (r in INS_ROLES and len(ins) >= 3) or (r == "gnss" and len(ins) >= 2)
+    ]
     checks: list[Check] = []
     why = None
     if (end_ns - start_ns) / NS_PER_S < 2 * SCHULER_PERIOD_S + 30 * step_s:
@@ -561,12 +829,26 @@ def _position_velocity(voyage: Voyage, cfg: IntegrityConfig, start_ns: int, end_
         why = f"{len(ins)} INS unit(s): no mean of independent units to compare with"
     for r in roles:
         if r not in targets or why:
-            reason = why or ("only two INS units: a disagreement cannot be attributed to one "
-                             "of them" if r in INS_ROLES else "fewer than two INS units")
-            checks.append(Check("consistency", "velocity", ",".join(voyage.role_sources(r)), r,
-                                "not_checked", _stat("velocity_disagreement", None, "kn"),
-                                _thr(gate / KN_MPS, "kn", rule), {}, 0.0,
-                                f"{r}: consistency not checked: {reason}", why_not=reason))
+            reason = why or (
+                "only two INS units: a disagreement cannot be attributed to one of them"
+                if r in INS_ROLES
+                else "fewer than two INS units"
+            )
+            checks.append(
+                Check(
+                    "consistency",
+                    "velocity",
+                    ",".join(voyage.role_sources(r)),
+                    r,
+                    "not_checked",
+                    _stat("velocity_disagreement", None, "kn"),
+                    _thr(gate / KN_MPS, "kn", rule),
+                    {},
+                    0.0,
+                    f"{r}: consistency not checked: {reason}",
+                    why_not=reason,
+                )
+            )
     if why or not targets:
         return checks
     instants = np.arange(start_ns, end_ns, int(step_s * NS_PER_S), dtype=np.int64)
@@ -583,7 +865,9 @@ def _position_velocity(voyage: Voyage, cfg: IntegrityConfig, start_ns: int, end_
         the change of its Schuler-averaged velocity from one period to the next."""
         d = ne[r] - np.mean([ne[x] for x in refs], axis=0)
         v = np.full(len(instants), np.nan)
-        v[2 * lag:] = np.hypot(*(d[:, 2 * lag:] - 2 * d[:, lag:-lag] + d[:, :-2 * lag])) / (lag * step_s)
+        v[2 * lag :] = np.hypot(*(d[:, 2 * lag :] - 2 * d[:, lag:-lag] + d[:, : -2 * lag])) / (
+            lag * step_s
+        )
         return v
 
     bad: list[str] = []
@@ -612,29 +896,62 @@ def _position_velocity(voyage: Voyage, cfg: IntegrityConfig, start_ns: int, end_
         v = stats[r]
         keys = ",".join(voyage.role_sources(r))
         if not np.isfinite(v).any():
-            checks.append(Check("consistency", "velocity", keys, r, "not_checked",
-                                _stat("velocity_disagreement", None, "kn"), _thr(gate / KN_MPS, "kn", rule),
-                                {}, 0.0, f"{r}: no common instants with the other units",
-                                why_not="no common instants (or no independent units left)"))
+            checks.append(
+                Check(
+                    "consistency",
+                    "velocity",
+                    keys,
+                    r,
+                    "not_checked",
+                    _stat("velocity_disagreement", None, "kn"),
+                    _thr(gate / KN_MPS, "kn", rule),
+                    {},
+                    0.0,
+                    f"{r}: no common instants with the other units",
+                    why_not="no common instants (or no independent units left)",
+                )
+            )
             continue
         over = np.isfinite(v) & (v > gate)
-        ev = tuple({"from": _iso(instants[a]), "to": _iso(instants[b - 1]),
-                    "max_kn": float(np.nanmax(v[a:b]) / KN_MPS)} for a, b in _runs(over)[:MAX_EVIDENCE])
+        ev = tuple(
+            {
+                "from": _iso(instants[a]),
+                "to": _iso(instants[b - 1]),
+                "max_kn": float(np.nanmax(v[a:b]) / KN_MPS),
+            }
+            for a, b in _runs(over)[:MAX_EVIDENCE]
+        )
         vmax = float(np.nanmax(v))
         ref = "the INS mean" if r == "gnss" else "the mean of the other INS units"
-        msg = (f"{r} ({keys}): starts drifting from {ref}: its Schuler-period velocity changes "
-               f"by up to {vmax / KN_MPS:.2f} kn (limit {gate / KN_MPS:.2f} kn), first from "
-               f"{ev[0]['from']}" if ev else
-               f"{r} ({keys}): consistent with {ref}: Schuler-period velocity changes of up to "
-               f"{vmax / KN_MPS:.2f} kn (limit {gate / KN_MPS:.2f} kn)")
-        checks.append(Check("consistency", "velocity", keys, r, "fail" if ev else "pass",
-                            _stat("velocity_disagreement", vmax / KN_MPS, "kn"),
-                            _thr(gate / KN_MPS, "kn", rule), _window(instants[np.isfinite(v)]),
-                            0.0, msg, ev))
+        msg = (
+            f"{r} ({keys}): starts drifting from {ref}: its Schuler-period velocity changes "
+            f"by up to {vmax / KN_MPS:.2f} kn (limit {gate / KN_MPS:.2f} kn), first from "
+            f"{ev[0]['from']}"
+            if ev
+            else f"{r} ({keys}): consistent with {ref}: Schuler-period velocity changes of up to "
+            f"{vmax / KN_MPS:.2f} kn (limit {gate / KN_MPS:.2f} kn)"
+        )
+        checks.append(
+            Check(
+                "consistency",
+                "velocity",
+                keys,
+                r,
+                "fail" if ev else "pass",
+                _stat("velocity_disagreement", vmax / KN_MPS, "kn"),
+                _thr(gate / KN_MPS, "kn", rule),
+                _window(instants[np.isfinite(v)]),
+                0.0,
+                msg,
+                ev,
+            )
+        )
     return checks
 
 
-def _heading_consistency(voyage: Voyage, cfg: IntegrityConfig, start_ns: int, end_ns: int) -> list[Check]:
+def _heading_consistency(
+    voyage: Voyage, cfg: IntegrityConfig, start_ns: int, end_ns: int
+) -> list[Check]:
     keys = voyage.role_sources("compass")
     ins = [r for r in INS_ROLES if voyage.role_sources(r)]
     if not keys:
@@ -642,47 +959,102 @@ def _heading_consistency(voyage: Voyage, cfg: IntegrityConfig, start_ns: int, en
     rule = "compass true heading minus the INS mean heading, its constant part removed"
 
     def skip(message: str, why: str) -> Check:
-        return _not_checked("consistency", "heading", ",".join(keys), "compass",
-                            "heading_disagreement", "deg", rule, message, why)
+        return _not_checked(
+            "consistency",
+            "heading",
+            ",".join(keys),
+            "compass",
+            "heading_disagreement",
+            "deg",
+            rule,
+            message,
+            why,
+        )
 
     if not ins:
         return [skip("compass: no INS heading to compare with", "no INS unit")]
     hd = voyage.frame("heading", "compass")
     hd = hd[(hd["reference"] == "T") & np.isfinite(hd["heading_rad"].to_numpy(float))]
     if len(hd) < 30:
-        return [skip("compass: no true heading (HDT/THS, or HDG with variation) to compare", "fewer than 30 true headings from the compass")]
-    instants = np.arange(start_ns, end_ns, int(cfg.consistency_interval_s * NS_PER_S), dtype=np.int64)
-    c, _ = align_at(hd["time_ns"].to_numpy(np.int64), hd["heading_rad"].to_numpy(float)[None, :],
-                    instants, cfg.consistency_max_gap_s, circular=(True,))
-    hs = [sample_unit(unit_series_from_voyage(voyage, r), instants, cfg.consistency_max_gap_s).heading_rad
-          for r in ins]
+        return [
+            skip(
+                "compass: no true heading (HDT/THS, or HDG with variation) to compare",
+                "fewer than 30 true headings from the compass",
+            )
+        ]
+    instants = np.arange(
+        start_ns, end_ns, int(cfg.consistency_interval_s * NS_PER_S), dtype=np.int64
+    )
+    c, _ = align_at(
+        hd["time_ns"].to_numpy(np.int64),
+        hd["heading_rad"].to_numpy(float)[None, :],
+        instants,
+        cfg.consistency_max_gap_s,
+        circular=(True,),
+    )
+    hs = [
+        sample_unit(
+            unit_series_from_voyage(voyage, r), instants, cfg.consistency_max_gap_s
+        ).heading_rad
+        for r in ins
+    ]
     m = circmean(np.vstack(hs), axis=0)
     d = angdiff(c[0], m) / DEG_RAD
     ok = np.isfinite(d)
     if ok.sum() < 30:
-        return [skip("compass: fewer than 30 instants with both compass and INS heading", "fewer than 30 common instants")]
+        return [
+            skip(
+                "compass: fewer than 30 instants with both compass and INS heading",
+                "fewer than 30 common instants",
+            )
+        ]
     x = d - np.median(d[ok])
     s = _tail_sigma(x[ok])
     z = _z_two_sided(cfg.false_alarm, int(ok.sum()))
     gate = max(cfg.heading_gate_min_deg, z * s)
     over = ok & (np.abs(x) > gate)
-    ev = tuple({"from": _iso(instants[a]), "to": _iso(instants[b - 1]),
-                "max_deg": float(np.nanmax(np.abs(x[a:b])))} for a, b in _runs(over)[:MAX_EVIDENCE])
+    ev = tuple(
+        {
+            "from": _iso(instants[a]),
+            "to": _iso(instants[b - 1]),
+            "max_deg": float(np.nanmax(np.abs(x[a:b]))),
+        }
+        for a, b in _runs(over)[:MAX_EVIDENCE]
+    )
     worst = float(np.nanmax(np.abs(x[ok])))
-    msg = (f"compass ({','.join(keys)}): departs from the INS heading by up to {worst:.2f} deg "
-           f"beyond its constant offset {np.median(d[ok]):+.2f} deg (gate {gate:.2f} deg)" if ev else
-           f"compass ({','.join(keys)}): within {worst:.2f} deg of the INS heading after its "
-           f"constant offset {np.median(d[ok]):+.2f} deg (gate {gate:.2f} deg)")
-    return [Check("consistency", "heading", ",".join(keys), "compass", "fail" if ev else "pass",
-                  _stat("heading_disagreement", worst, "deg"),
-                  _thr(gate, "deg", f"max([integrity] heading_gate_min_deg, z s): z {z:.2f} at "
-                       f"{cfg.false_alarm:g} per night, s {s:.3f} deg the robust tail sigma"),
-                  _window(instants[ok]), cfg.false_alarm, msg, ev,
-                  detail={"offset_deg": float(np.median(d[ok])), "sigma_deg": s})]
+    msg = (
+        f"compass ({','.join(keys)}): departs from the INS heading by up to {worst:.2f} deg "
+        f"beyond its constant offset {np.median(d[ok]):+.2f} deg (gate {gate:.2f} deg)"
+        if ev
+        else f"compass ({','.join(keys)}): within {worst:.2f} deg of the INS heading after its "
+        f"constant offset {np.median(d[ok]):+.2f} deg (gate {gate:.2f} deg)"
+    )
+    return [
+        Check(
+            "consistency",
+            "heading",
+            ",".join(keys),
+            "compass",
+            "fail" if ev else "pass",
+            _stat("heading_disagreement", worst, "deg"),
+            _thr(
+                gate,
+                "deg",
+                f"max([integrity] heading_gate_min_deg, z s): z {z:.2f} at "
+                f"{cfg.false_alarm:g} per night, s {s:.3f} deg the robust tail sigma",
+            ),
+            _window(instants[ok]),
+            cfg.false_alarm,
+            msg,
+            ev,
+            detail={"offset_deg": float(np.median(d[ok])), "sigma_deg": s},
+        )
+    ]
 
 
-def _log_residual(stw_mps: np.ndarray, ground_ne_mps: np.ndarray, heading_rad: np.ndarray,
-                  window: int) -> np.ndarray:
+def _log_residual(
+    stw_mps: np.ndarray, ground_ne_mps: np.ndarray, heading_rad: np.ndarray, window: int
+) -> np.ndarray:
     """Log speed less the ground speed less current, along the heading (m/s).
 
     The ground velocity is ``g = c + k u h`` (B7-B12 without leeway: ``u`` the log speed,
@@ -698,8 +1070,12 @@ def _log_residual(stw_mps: np.ndarray, ground_ne_mps: np.ndarray, heading_rad: n
     for _ in range(2):
         raw = ground_ne_mps - k * stw_mps * hv
         for i in range(2):
-            c[i] = pd.Series(np.where(ok, raw[i], np.nan)).rolling(
-                window, center=True, min_periods=max(window // 6, 3)).median().to_numpy()
+            c[i] = (
+                pd.Series(np.where(ok, raw[i], np.nan))
+                .rolling(window, center=True, min_periods=max(window // 6, 3))
+                .median()
+                .to_numpy()
+            )
         along = ((ground_ne_mps - c) * hv).sum(axis=0)
         use = ok & np.isfinite(along)
         if use.sum() < 3 or not np.any(stw_mps[use] > 0):
@@ -709,60 +1085,118 @@ def _log_residual(stw_mps: np.ndarray, ground_ne_mps: np.ndarray, heading_rad: n
     return np.where(ok, k * stw_mps - along, np.nan)
 
 
-def _speed_consistency(voyage: Voyage, cfg: IntegrityConfig, start_ns: int, end_ns: int) -> list[Check]:
+def _speed_consistency(
+    voyage: Voyage, cfg: IntegrityConfig, start_ns: int, end_ns: int
+) -> list[Check]:
     keys = voyage.role_sources("log")
     if not keys:
         return []
-    rule = ("log speed (its scale fitted) minus the ground speed less the current (1 h running "
-            "median) along the heading")
+    rule = (
+        "log speed (its scale fitted) minus the ground speed less the current (1 h running "
+        "median) along the heading"
+    )
 
     def skip(message: str, why: str) -> Check:
-        return _not_checked("consistency", "speed", ",".join(keys), "log", "speed_disagreement",
-                            "kn", rule, message, why)
+        return _not_checked(
+            "consistency",
+            "speed",
+            ",".join(keys),
+            "log",
+            "speed_disagreement",
+            "kn",
+            rule,
+            message,
+            why,
+        )
 
     wt = voyage.frame("water", "log")
     wt = wt[np.isfinite(wt["stw_mps"].to_numpy(float))]
     ref_roles = [r for r in ("gnss", *INS_ROLES) if len(voyage.frame("ground", r))]
     head_roles = [r for r in (*INS_ROLES, "compass") if len(voyage.frame("heading", r))]
     if len(wt) < 30 or not ref_roles or not head_roles:
-        why = ("no speed through the water" if len(wt) < 30 else
-               "no ground velocity (VTG/RMC)" if not ref_roles else "no heading")
+        why = (
+            "no speed through the water"
+            if len(wt) < 30
+            else "no ground velocity (VTG/RMC)"
+            if not ref_roles
+            else "no heading"
+        )
         return [skip(f"log: not checked: {why}", why)]
     step_ns = int(cfg.consistency_interval_s * NS_PER_S)
     instants = np.arange(start_ns, end_ns, step_ns, dtype=np.int64)
     gap = cfg.consistency_max_gap_s
-    stw, _ = align_at(wt["time_ns"].to_numpy(np.int64), wt["stw_mps"].to_numpy(float)[None, :], instants, gap)
+    stw, _ = align_at(
+        wt["time_ns"].to_numpy(np.int64), wt["stw_mps"].to_numpy(float)[None, :], instants, gap
+    )
     gr = voyage.frame("ground", ref_roles[0])
     gr = gr[np.isfinite(gr["sog_mps"].to_numpy(float)) & np.isfinite(gr["cog_rad"].to_numpy(float))]
     sog, cog = gr["sog_mps"].to_numpy(float), gr["cog_rad"].to_numpy(float)
-    vel, _ = align_at(gr["time_ns"].to_numpy(np.int64), np.vstack([sog * np.cos(cog), sog * np.sin(cog)]),
-                      instants, gap)
+    vel, _ = align_at(
+        gr["time_ns"].to_numpy(np.int64),
+        np.vstack([sog * np.cos(cog), sog * np.sin(cog)]),
+        instants,
+        gap,
+    )
     hd = voyage.frame("heading", head_roles[0])
     hd = hd[np.isfinite(hd["heading_rad"].to_numpy(float))]
-    h, _ = align_at(hd["time_ns"].to_numpy(np.int64), hd["heading_rad"].to_numpy(float)[None, :],
-                    instants, gap, circular=(True,))
+    h, _ = align_at(
+        hd["time_ns"].to_numpy(np.int64),
+        hd["heading_rad"].to_numpy(float)[None, :],
+        instants,
+        gap,
+        circular=(True,),
+    )
     x = _log_residual(stw[0], vel, h[0], int(round(3600.0 / cfg.consistency_interval_s)))
     ok = np.isfinite(x)
     if ok.sum() < 30:
-        return [skip("log: fewer than 30 instants with log, ground speed and heading", "fewer than 30 common instants")]
+        return [
+            skip(
+                "log: fewer than 30 instants with log, ground speed and heading",
+                "fewer than 30 common instants",
+            )
+        ]
     s = _tail_sigma(x[ok])
     z = _z_two_sided(cfg.false_alarm, int(ok.sum()))
     speed = float(np.nanmedian(stw[0]))
     gate = max(_speed_accuracy_mps(speed), z * s)
     over = ok & (np.abs(x) > gate)
-    ev = tuple({"from": _iso(instants[a]), "to": _iso(instants[b - 1]),
-                "max_kn": float(np.nanmax(np.abs(x[a:b])) / KN_MPS)} for a, b in _runs(over)[:MAX_EVIDENCE])
+    ev = tuple(
+        {
+            "from": _iso(instants[a]),
+            "to": _iso(instants[b - 1]),
+            "max_kn": float(np.nanmax(np.abs(x[a:b])) / KN_MPS),
+        }
+        for a, b in _runs(over)[:MAX_EVIDENCE]
+    )
     worst = float(np.nanmax(np.abs(x[ok])))
-    msg = (f"log ({','.join(keys)}): departs from the ground speed less current by up to "
-           f"{worst / KN_MPS:.2f} kn (gate {gate / KN_MPS:.2f} kn)" if ev else
-           f"log ({','.join(keys)}): within {worst / KN_MPS:.2f} kn of the ground speed less "
-           f"current (gate {gate / KN_MPS:.2f} kn)")
-    return [Check("consistency", "speed", ",".join(keys), "log", "fail" if ev else "pass",
-                  _stat("speed_disagreement", worst / KN_MPS, "kn"),
-                  _thr(gate / KN_MPS, "kn", f"max(A.824 speed accuracy, z s): z {z:.2f} at "
-                       f"{cfg.false_alarm:g} per night, s {s / KN_MPS:.3f} kn the robust tail sigma"),
-                  _window(instants[ok]), cfg.false_alarm, msg, ev,
-                  detail={"sigma_kn": s / KN_MPS, "reference": ref_roles[0], "heading": head_roles[0]})]
+    msg = (
+        f"log ({','.join(keys)}): departs from the ground speed less current by up to "
+        f"{worst / KN_MPS:.2f} kn (gate {gate / KN_MPS:.2f} kn)"
+        if ev
+        else f"log ({','.join(keys)}): within {worst / KN_MPS:.2f} kn of the ground speed less "
+        f"current (gate {gate / KN_MPS:.2f} kn)"
+    )
+    return [
+        Check(
+            "consistency",
+            "speed",
+            ",".join(keys),
+            "log",
+            "fail" if ev else "pass",
+            _stat("speed_disagreement", worst / KN_MPS, "kn"),
+            _thr(
+                gate / KN_MPS,
+                "kn",
+                f"max(A.824 speed accuracy, z s): z {z:.2f} at "
+                f"{cfg.false_alarm:g} per night, s {s / KN_MPS:.3f} kn the robust tail sigma",
+            ),
+            _window(instants[ok]),
+            cfg.false_alarm,
+            msg,
+            ev,
+            detail={"sigma_kn": s / KN_MPS, "reference": ref_roles[0], "heading": head_roles[0]},
+        )
+    ]
 
 
 # ------------------------------------------------------------ against the DR and its 2M
@@ -772,8 +1206,14 @@ def _speed_consistency(voyage: Voyage, cfg: IntegrityConfig, start_ns: int, end_
 DR_GATE_NIS = OUTLIER_NIS
 
 
-def dr_innovation_check(source: str | None, role: str | None, time_ns: np.ndarray, nis: np.ndarray,
-                        gate_m: np.ndarray, cfg: IntegrityConfig | None = None) -> Check:
+def dr_innovation_check(
+    source: str | None,
+    role: str | None,
+    time_ns: np.ndarray,
+    nis: np.ndarray,
+    gate_m: np.ndarray,
+    cfg: IntegrityConfig | None = None,
+) -> Check:
     """plausibility / ``dr_2m``: each reference fix against the DR from the previous ones
     with its covariance (the estimated position's filter, dracc.math.ep): the innovation
     ``nu' S^-1 nu`` is chi-square with 2 degrees of freedom for a healthy fix; above
@@ -783,26 +1223,53 @@ def dr_innovation_check(source: str | None, role: str | None, time_ns: np.ndarra
     nis = np.asarray(nis, float)
     gate_m = np.asarray(gate_m, float)
     win = _window(t)
-    rule = (f"innovation chi-square(2) beyond {DR_GATE_NIS:g} against the DR propagated from the "
-            "earlier fixes with its covariance (the estimated position's filter)")
+    rule = (
+        f"innovation chi-square(2) beyond {DR_GATE_NIS:g} against the DR propagated from the "
+        "earlier fixes with its covariance (the estimated position's filter)"
+    )
     if len(t) == 0:
-        return Check("plausibility", "dr_2m", source, role, "not_checked", _stat("max_nis", None, ""),
-                     _thr(DR_GATE_NIS, "chi2", rule), win, 0.0, "no fix weighed against the DR",
-                     why_not="no reference fix after the first")
+        return Check(
+            "plausibility",
+            "dr_2m",
+            source,
+            role,
+            "not_checked",
+            _stat("max_nis", None, ""),
+            _thr(DR_GATE_NIS, "chi2", rule),
+            win,
+            0.0,
+            "no fix weighed against the DR",
+            why_not="no reference fix after the first",
+        )
     over = nis > DR_GATE_NIS
     min_jump = float(np.nanmedian(gate_m)) if np.isfinite(gate_m).any() else math.nan
     fa = float(min(1.0, len(t) * math.exp(-DR_GATE_NIS / 2.0)))
-    ev = tuple({"time": _iso(t[k]), "nis": float(nis[k]), "gate_m": float(gate_m[k])}
-               for k in np.flatnonzero(over)[:MAX_EVIDENCE])
+    ev = tuple(
+        {"time": _iso(t[k]), "nis": float(nis[k]), "gate_m": float(gate_m[k])}
+        for k in np.flatnonzero(over)[:MAX_EVIDENCE]
+    )
     who = source or role or "the reference"
-    msg = (f"{who}: {int(over.sum())} fix(es) outside what the DR and its 2M allow (NIS up to "
-           f"{np.nanmax(nis):.0f} > {DR_GATE_NIS:g}; the gate sees jumps of about {min_jump:.0f} m)"
-           if len(ev) else f"{who}: every fix within the DR and its 2M (the gate sees jumps of "
-           f"about {min_jump:.0f} m)")
-    return Check("plausibility", "dr_2m", source, role, "fail" if len(ev) else "pass",
-                 _stat("max_nis", float(np.nanmax(nis)), "chi2"), _thr(DR_GATE_NIS, "chi2", rule),
-                 win, fa, msg, ev, detail={"min_detectable_m": min_jump, "fixes": int(len(t)),
-                                           "outliers": int(over.sum())})
+    msg = (
+        f"{who}: {int(over.sum())} fix(es) outside what the DR and its 2M allow (NIS up to "
+        f"{np.nanmax(nis):.0f} > {DR_GATE_NIS:g}; the gate sees jumps of about {min_jump:.0f} m)"
+        if len(ev)
+        else f"{who}: every fix within the DR and its 2M (the gate sees jumps of "
+        f"about {min_jump:.0f} m)"
+    )
+    return Check(
+        "plausibility",
+        "dr_2m",
+        source,
+        role,
+        "fail" if len(ev) else "pass",
+        _stat("max_nis", float(np.nanmax(nis)), "chi2"),
+        _thr(DR_GATE_NIS, "chi2", rule),
+        win,
+        fa,
+        msg,
+        ev,
+        detail={"min_detectable_m": min_jump, "fixes": int(len(t)), "outliers": int(over.sum())},
+    )
 
 
 def with_dr_check(result: IntegrityResult, check: Check) -> IntegrityResult:
@@ -833,7 +1300,15 @@ def check_night(voyage: Voyage, cfg: IntegrityConfig | None = None) -> Integrity
     checks += _position_velocity(voyage, cfg, start_ns, end_ns)
     checks += _heading_consistency(voyage, cfg, start_ns, end_ns)
     checks += _speed_consistency(voyage, cfg, start_ns, end_ns)
-    sources = tuple(SourceSummary(key, _role(voyage, key), int(len(times[key])), summary[key][0],
-                                  summary[key][1], lat.get(key)) for key in sorted(times))
+    sources = tuple(
+        SourceSummary(
+            key,
+            _role(voyage, key),
+            int(len(times[key])),
+            summary[key][0],
+            summary[key][1],
+            lat.get(key),
+        )
+        for key in sorted(times)
+    )
     return IntegrityResult(tuple(checks), sources, start_ns, end_ns, cfg.false_alarm)
-

@@ -67,8 +67,9 @@ class AuditConfig:
     pattern: str = "*"  #: glob for the log files inside a folder (e.g. "**/*.nmea")
     busy_timeout_s: float = 60.0  #: how long to wait for another audit holding the database
     #: limiting error (K8) per unit and channel; "all" applies to every unit
-    limits: Mapping[str, Mapping[str, float]] = field(default_factory=lambda: {
-        "all": {"lat_m": 1852.0, "lon_m": 1852.0, "course_deg": 0.75}})
+    limits: Mapping[str, Mapping[str, float]] = field(
+        default_factory=lambda: {"all": {"lat_m": 1852.0, "lon_m": 1852.0, "course_deg": 0.75}}
+    )
     dr_containment_min: float = 0.90  #: fraction of DR epochs with the reference inside 2M
     compass_error_max_deg: float = 1.0  #: |compass error| estimated against the reference
     log_scale_max_pct: float = 2.0  #: |log scale error|, % of speed (IMO: 2 %)
@@ -103,8 +104,10 @@ def _number(value, where: str, positive: bool = True) -> float:
 def _unknown(table: Mapping, known: Iterable[str], where: str) -> None:
     unknown = set(table) - set(known)
     if unknown:
-        raise ConfigError(f"[{where}] unknown key(s): {', '.join(sorted(map(str, unknown)))}; "
-                          f"known: {', '.join(sorted(known))}")
+        raise ConfigError(
+            f"[{where}] unknown key(s): {', '.join(sorted(map(str, unknown)))}; "
+            f"known: {', '.join(sorted(known))}"
+        )
 
 
 def audit_config(cfg: Config) -> AuditConfig:
@@ -122,10 +125,17 @@ def audit_config(cfg: Config) -> AuditConfig:
                 raise ConfigError(f"[audit] {key} must be a non-empty string, got {table[key]!r}")
             kw[key] = table[key]
     if "pattern" in kw and (Path(kw["pattern"]).is_absolute() or Path(kw["pattern"]).drive):
-        raise ConfigError(f"[audit] pattern must be a glob relative to the log folder "
-                          f"(e.g. \"*.nmea\" or \"**/*.nmea\"), got {kw['pattern']!r}")
-    for key in ("busy_timeout_s", "compass_error_max_deg", "log_scale_max_pct",
-                "rejected_rate_max_pct", "accuracy_window_h"):
+        raise ConfigError(
+            f"[audit] pattern must be a glob relative to the log folder "
+            f'(e.g. "*.nmea" or "**/*.nmea"), got {kw["pattern"]!r}'
+        )
+    for key in (
+        "busy_timeout_s",
+        "compass_error_max_deg",
+        "log_scale_max_pct",
+        "rejected_rate_max_pct",
+        "accuracy_window_h",
+    ):
         if key in table:
             kw[key] = _number(table[key], f"audit.{key}")
     if "dr_containment_min" in table:
@@ -140,22 +150,28 @@ def audit_config(cfg: Config) -> AuditConfig:
     if "required_sources" in table:
         req = table["required_sources"]
         if not isinstance(req, list) or any(r not in _ROLES for r in req):
-            raise ConfigError(f"[audit.required_sources] must be a list of roles "
-                              f"({', '.join(_ROLES)}), got {req!r}")
+            raise ConfigError(
+                f"[audit.required_sources] must be a list of roles "
+                f"({', '.join(_ROLES)}), got {req!r}"
+            )
         kw["required_sources"] = tuple(req)
     if "limits" in table:
         lim = table["limits"]
         if not isinstance(lim, dict):
-            raise ConfigError("[audit.limits] must be a table: unit or \"all\" -> "
-                              "{ lat_m, lon_m, course_deg }")
+            raise ConfigError(
+                '[audit.limits] must be a table: unit or "all" -> { lat_m, lon_m, course_deg }'
+            )
         _unknown(lim, ("all",) + UNITS, "audit.limits")
         merged = {k: dict(v) for k, v in default.limits.items()}
         for unit, values in lim.items():
             if not isinstance(values, dict):
-                raise ConfigError(f"[audit.limits.{unit}] must be a table {{ lat_m, lon_m, course_deg }}")
+                raise ConfigError(
+                    f"[audit.limits.{unit}] must be a table {{ lat_m, lon_m, course_deg }}"
+                )
             _unknown(values, CHANNEL_KEYS.values(), f"audit.limits.{unit}")
             merged.setdefault(unit, {}).update(
-                {k: _number(v, f"audit.limits.{unit}.{k}") for k, v in values.items()})
+                {k: _number(v, f"audit.limits.{unit}.{k}") for k, v in values.items()}
+            )
         kw["limits"] = merged
     return AuditConfig(**kw)
 
@@ -165,8 +181,10 @@ def apriori_seeds(cfg: Config) -> dict[tuple[str, str], float]:
     seeds: dict[tuple[str, str], float] = {}
     for unit, values in cfg.deviation.apriori.items():
         if unit not in UNITS or not isinstance(values, dict):
-            raise ConfigError(f"[deviation.apriori] {unit!r}: expected one of {', '.join(UNITS)} "
-                              "= { lat_m, lon_m, course_deg }")
+            raise ConfigError(
+                f"[deviation.apriori] {unit!r}: expected one of {', '.join(UNITS)} "
+                "= { lat_m, lon_m, course_deg }"
+            )
         _unknown(values, CHANNEL_KEYS.values(), f"deviation.apriori.{unit}")
         for key, v in values.items():
             seeds[(unit, KEY_CHANNELS[key])] = _number(v, f"deviation.apriori.{unit}.{key}")
@@ -175,8 +193,11 @@ def apriori_seeds(cfg: Config) -> dict[tuple[str, str], float]:
 
 def settings_sha256(cfg: Config) -> str:
     """SHA-256 of the settings that shape an analysis (ingest, dead reckoning, deviation)."""
-    doc = {"ingest": asdict(cfg.ingest), "dead_reckoning": asdict(cfg.dead_reckoning),
-           "deviation": asdict(cfg.deviation)}
+    doc = {
+        "ingest": asdict(cfg.ingest),
+        "dead_reckoning": asdict(cfg.dead_reckoning),
+        "deviation": asdict(cfg.deviation),
+    }
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
 
 
@@ -210,7 +231,9 @@ def apriori_chain(seed: float | None, nights: Sequence[tuple[str, float | None]]
             steps.append(RuleStep(night, m_y, None, m_y, "established"))  # mandatory by deviation
             current = m_y
         elif m_y > current:
-            steps.append(RuleStep(night, m_y, current, m_y, "raised"))  # the larger becomes a priori
+            steps.append(
+                RuleStep(night, m_y, current, m_y, "raised")
+            )  # the larger becomes a priori
             current = m_y
         else:
             steps.append(RuleStep(night, m_y, current, current, "within"))
@@ -327,17 +350,27 @@ def _sources_by_role(sources) -> dict[str, str]:
 def facts_from_analysis(doc: Mapping) -> NightFacts:
     """Read the figures the audit checks from an analysis document (``dracc.analysis/1``)."""
     if not isinstance(doc, Mapping) or not str(doc.get("schema", "")).startswith("dracc.analysis/"):
-        raise InsufficientDataError("not a dracc analysis document (schema 'dracc.analysis/…' expected)")
+        raise InsufficientDataError(
+            "not a dracc analysis document (schema 'dracc.analysis/…' expected)"
+        )
     inputs = doc.get("inputs") or []
     lines = sum(int(i.get("lines") or 0) for i in inputs) if inputs else None
     # damaged lines only: documents written before 'ignored' counted valid unused
     # sentences as the reasons 'unsupported' and 'comment'
-    rejected = sum(sum(int(n) for r, n in (i.get("rejected") or {}).items() if r not in VALID_UNUSED)
-                   for i in inputs) if inputs else None
+    rejected = (
+        sum(
+            sum(int(n) for r, n in (i.get("rejected") or {}).items() if r not in VALID_UNUSED)
+            for i in inputs
+        )
+        if inputs
+        else None
+    )
     ignored: dict[str, int] = {}
     for i in inputs:
-        for k, n in {**(i.get("ignored") or {}),
-                     **{r: n for r, n in (i.get("rejected") or {}).items() if r in VALID_UNUSED}}.items():
+        for k, n in {
+            **(i.get("ignored") or {}),
+            **{r: n for r, n in (i.get("rejected") or {}).items() if r in VALID_UNUSED},
+        }.items():
             ignored[str(k)] = ignored.get(str(k), 0) + int(n)
     rate = (rejected / lines) if lines else None
     period = doc.get("period") or {}
@@ -350,10 +383,17 @@ def facts_from_analysis(doc: Mapping) -> NightFacts:
             st = per.get(ch)
             if not isinstance(st, Mapping):
                 continue
-            channels.append(ChannelRow(unit=str(unit), channel=ch, n=int(st.get("n") or 0),
-                                       m_u=_num(st.get("m_u")), m_y=_num(st.get("m_y")),
-                                       kurtosis=_num(st.get("kurtosis")),
-                                       limit_error=_num(st.get("limit"))))
+            channels.append(
+                ChannelRow(
+                    unit=str(unit),
+                    channel=ch,
+                    n=int(st.get("n") or 0),
+                    m_u=_num(st.get("m_u")),
+                    m_y=_num(st.get("m_y")),
+                    kurtosis=_num(st.get("kurtosis")),
+                    limit_error=_num(st.get("limit")),
+                )
+            )
     dr = doc.get("dead_reckoning") or {}
     cal = doc.get("calibration") or {}
     ce, ce_s = _estimate(cal.get("compass_error_deg"))
@@ -366,26 +406,40 @@ def facts_from_analysis(doc: Mapping) -> NightFacts:
     verdict_text = _text(dr.get("verdict"))
     integ = doc.get("integrity") if isinstance(doc.get("integrity"), Mapping) else {}
     return NightFacts(
-        period_start_utc=period.get("start_utc"), period_end_utc=period.get("end_utc"),
-        inputs=tuple(str(i.get("path", "")) for i in inputs), lines=lines, rejected=rejected,
-        rejected_rate=rate, sources=_sources_by_role(doc.get("sources")),
-        channels=tuple(channels), dr_containment_2m=_num(dr.get("containment_2m")),
+        period_start_utc=period.get("start_utc"),
+        period_end_utc=period.get("end_utc"),
+        inputs=tuple(str(i.get("path", "")) for i in inputs),
+        lines=lines,
+        rejected=rejected,
+        rejected_rate=rate,
+        sources=_sources_by_role(doc.get("sources")),
+        channels=tuple(channels),
+        dr_containment_2m=_num(dr.get("containment_2m")),
         dr_n_scored=(int(dr["n_scored"]) if _num(dr.get("n_scored")) is not None else None),
-        compass_error_deg=ce, compass_error_sigma_deg=ce_s, log_scale=ls, log_scale_sigma=ls_s,
+        compass_error_deg=ce,
+        compass_error_sigma_deg=ce_s,
+        log_scale=ls,
+        log_scale_sigma=ls_s,
         missing=tuple(str(m) for m in missing) if isinstance(missing, list) else (str(missing),),
-        dr_verdict=dr_verdict_word(verdict_text), dr_verdict_text=verdict_text,
-        dr_consistent=_bool(dr.get("consistent")), dr_nees=_num(nees.get("statistic")),
-        dr_nees_lower=_num(nees.get("lower")), dr_nees_upper=_num(nees.get("upper")),
+        dr_verdict=dr_verdict_word(verdict_text),
+        dr_verdict_text=verdict_text,
+        dr_consistent=_bool(dr.get("consistent")),
+        dr_nees=_num(nees.get("statistic")),
+        dr_nees_lower=_num(nees.get("lower")),
+        dr_nees_upper=_num(nees.get("upper")),
         dr_dominant_source=_text(dr.get("dominant_source")),
         dr_dominant_key=_text(dr.get("dominant_key")),
-        duration_s=_num(period.get("duration_s")), ignored=ignored,
+        duration_s=_num(period.get("duration_s")),
+        ignored=ignored,
         integrity_checks=tuple(c for c in integ.get("checks") or [] if isinstance(c, Mapping)),
-        integrity_false_alarm=_num(integ.get("false_alarm_per_night")))
+        integrity_false_alarm=_num(integ.get("false_alarm_per_night")),
+    )
 
 
 def analyse_voyage(paths: Sequence[Path], cfg: Config, progress=None):
     """Run the pipeline (:func:`dracc.pipeline.analysis.analyse`) over one voyage's logs."""
     from dracc.pipeline import analysis as pipeline
+
     return pipeline.analyse([Path(p) for p in paths], cfg, progress=progress)
 
 
@@ -402,7 +456,7 @@ def analysis_document(paths: Sequence[Path], cfg: Config, progress=None) -> dict
 #: the clause each audit-level check cites (the integrity checks carry their own)
 AUDIT_CLAUSES = {
     "accuracy": "IMO MSC.252(83) 5.3 accuracy; INS deviations from the mean of three (seed 001, "
-                "K3b-K8): limiting error at the probability, over the accuracy window",
+    "K3b-K8): limiting error at the probability, over the accuracy window",
     "input": "IEC 61162-1: sentences that fail their checksum or structure are damaged input",
     "availability": "IMO MSC.252(83) 5.1.2: availability of the required sources",
     "consistency": "IMO MSC.252(83) 5.4: consistency of the DR and its 2M with the position fixes",
@@ -432,14 +486,40 @@ class Finding:
     false_alarm: float | None = None  #: probability per night that a healthy source fails it
 
 
-def _finding(check: str, kind: str, subject: str, value, limit, measure: str, message: str, *,
-             source=None, role=None, statistic_name: str = "", rule: str = "", window=None,
-             evidence=(), false_alarm=None) -> Finding:
-    return Finding(kind, subject, value, limit, measure, message, check=check, source=source,
-                   role=role, clause=AUDIT_CLAUSES.get(check, ""),
-                   statistic={"name": statistic_name or kind, "value": value, "unit": measure},
-                   threshold={"value": limit, "unit": measure, "rule": rule},
-                   window=dict(window or {}), evidence=tuple(evidence), false_alarm=false_alarm)
+def _finding(
+    check: str,
+    kind: str,
+    subject: str,
+    value,
+    limit,
+    measure: str,
+    message: str,
+    *,
+    source=None,
+    role=None,
+    statistic_name: str = "",
+    rule: str = "",
+    window=None,
+    evidence=(),
+    false_alarm=None,
+) -> Finding:
+    return Finding(
+        kind,
+        subject,
+        value,
+        limit,
+        measure,
+        message,
+        check=check,
+        source=source,
+        role=role,
+        clause=AUDIT_CLAUSES.get(check, ""),
+        statistic={"name": statistic_name or kind, "value": value, "unit": measure},
+        threshold={"value": limit, "unit": measure, "rule": rule},
+        window=dict(window or {}),
+        evidence=tuple(evidence),
+        false_alarm=false_alarm,
+    )
 
 
 def _not_checked(check: str, name: str, why: str, source=None, role=None) -> dict:
@@ -450,12 +530,23 @@ def _integrity_finding(c: Mapping) -> Finding:
     st = c.get("statistic") or {}
     th = c.get("threshold") or {}
     src = c.get("source")
-    return Finding(str(c.get("name")), str(src or c.get("role") or ""), _num(st.get("value")),
-                   _num(th.get("value")), str(st.get("unit") or ""), str(c.get("message") or ""),
-                   check=str(c.get("check")), source=src, role=c.get("role"),
-                   clause=str(c.get("clause") or ""), statistic=dict(st), threshold=dict(th),
-                   window=dict(c.get("window") or {}), evidence=tuple(c.get("evidence") or ()),
-                   false_alarm=_num(c.get("false_alarm")))
+    return Finding(
+        str(c.get("name")),
+        str(src or c.get("role") or ""),
+        _num(st.get("value")),
+        _num(th.get("value")),
+        str(st.get("unit") or ""),
+        str(c.get("message") or ""),
+        check=str(c.get("check")),
+        source=src,
+        role=c.get("role"),
+        clause=str(c.get("clause") or ""),
+        statistic=dict(st),
+        threshold=dict(th),
+        window=dict(c.get("window") or {}),
+        evidence=tuple(c.get("evidence") or ()),
+        false_alarm=_num(c.get("false_alarm")),
+    )
 
 
 def evaluate(facts: NightFacts, acfg: AuditConfig) -> tuple[tuple[Finding, ...], tuple[dict, ...]]:
@@ -472,18 +563,37 @@ def evaluate(facts: NightFacts, acfg: AuditConfig) -> tuple[tuple[Finding, ...],
     window = {"start_utc": facts.period_start_utc, "end_utc": facts.period_end_utc}
     for role in acfg.required_sources:
         if role not in facts.sources:
-            found.append(_finding("availability", "missing_source", role, None, None, "",
-                                  f"required source {role} is missing from the logs", role=role,
-                                  rule="[audit] required_sources", window=window, false_alarm=0.0))
+            found.append(
+                _finding(
+                    "availability",
+                    "missing_source",
+                    role,
+                    None,
+                    None,
+                    "",
+                    f"required source {role} is missing from the logs",
+                    role=role,
+                    rule="[audit] required_sources",
+                    window=window,
+                    false_alarm=0.0,
+                )
+            )
     for c in facts.integrity_checks:
         if c.get("status") == "fail":
             found.append(_integrity_finding(c))
         elif c.get("status") == "not_checked":
-            skipped.append(_not_checked(str(c.get("check")), str(c.get("name")),
-                                        str(c.get("why_not") or c.get("message") or ""),
-                                        c.get("source"), c.get("role")))
-    below = (facts.dr_containment_2m is not None
-             and facts.dr_containment_2m < acfg.dr_containment_min)
+            skipped.append(
+                _not_checked(
+                    str(c.get("check")),
+                    str(c.get("name")),
+                    str(c.get("why_not") or c.get("message") or ""),
+                    c.get("source"),
+                    c.get("role"),
+                )
+            )
+    below = (
+        facts.dr_containment_2m is not None and facts.dr_containment_2m < acfg.dr_containment_min
+    )
     if facts.dr_verdict == "inconsistent":
         # the analysis' own verdict (what `dracc analyze` says); one finding for one cause:
         # a containment below the audit's minimum is said in the same finding
@@ -491,43 +601,91 @@ def evaluate(facts: NightFacts, acfg: AuditConfig) -> tuple[tuple[Finding, ...],
     elif facts.dr_containment_2m is None:
         skipped.append(_not_checked("consistency", "dr", "no reference position or no DR track"))
     elif below:
-        found.append(_finding("consistency", "dr_containment", "DR", facts.dr_containment_2m,
-                              acfg.dr_containment_min, "fraction",
-                              f"DR: reference inside 2M at {100 * facts.dr_containment_2m:.1f} %"
-                              f" of epochs < {100 * acfg.dr_containment_min:.1f} %",
-                              statistic_name="containment_2m", rule="[audit] dr_containment_min",
-                              window=window))
+        found.append(
+            _finding(
+                "consistency",
+                "dr_containment",
+                "DR",
+                facts.dr_containment_2m,
+                acfg.dr_containment_min,
+                "fraction",
+                f"DR: reference inside 2M at {100 * facts.dr_containment_2m:.1f} %"
+                f" of epochs < {100 * acfg.dr_containment_min:.1f} %",
+                statistic_name="containment_2m",
+                rule="[audit] dr_containment_min",
+                window=window,
+            )
+        )
     if facts.dr_verdict == "undetermined":
         skipped.append(_not_checked("consistency", "dr", f"DR verdict: {facts.dr_verdict_text}"))
     if facts.compass_error_deg is None:
-        skipped.append(_not_checked("accuracy", "compass_error",
-                                    "compass error not estimated (no heading or no reference)",
-                                    role="compass"))
+        skipped.append(
+            _not_checked(
+                "accuracy",
+                "compass_error",
+                "compass error not estimated (no heading or no reference)",
+                role="compass",
+            )
+        )
     elif abs(facts.compass_error_deg) > acfg.compass_error_max_deg:
-        found.append(_finding("accuracy", "compass_error", "compass", facts.compass_error_deg,
-                              acfg.compass_error_max_deg, "deg",
-                              f"compass error {facts.compass_error_deg:+.2f}° exceeds "
-                              f"±{acfg.compass_error_max_deg:.2f}°", role="compass",
-                              rule="[audit] compass_error_max_deg", window=window))
+        found.append(
+            _finding(
+                "accuracy",
+                "compass_error",
+                "compass",
+                facts.compass_error_deg,
+                acfg.compass_error_max_deg,
+                "deg",
+                f"compass error {facts.compass_error_deg:+.2f}° exceeds "
+                f"±{acfg.compass_error_max_deg:.2f}°",
+                role="compass",
+                rule="[audit] compass_error_max_deg",
+                window=window,
+            )
+        )
     if facts.log_scale is None:
-        skipped.append(_not_checked("accuracy", "log_scale",
-                                    "log scale not estimated (no speed log or no reference)",
-                                    role="log"))
+        skipped.append(
+            _not_checked(
+                "accuracy",
+                "log_scale",
+                "log scale not estimated (no speed log or no reference)",
+                role="log",
+            )
+        )
     elif 100 * abs(facts.log_scale) > acfg.log_scale_max_pct:
-        found.append(_finding("accuracy", "log_scale", "log", 100 * facts.log_scale,
-                              acfg.log_scale_max_pct, "%",
-                              f"log scale error {100 * facts.log_scale:+.2f} % exceeds "
-                              f"±{acfg.log_scale_max_pct:.2f} %", role="log",
-                              rule="[audit] log_scale_max_pct", window=window))
+        found.append(
+            _finding(
+                "accuracy",
+                "log_scale",
+                "log",
+                100 * facts.log_scale,
+                acfg.log_scale_max_pct,
+                "%",
+                f"log scale error {100 * facts.log_scale:+.2f} % exceeds "
+                f"±{acfg.log_scale_max_pct:.2f} %",
+                role="log",
+                rule="[audit] log_scale_max_pct",
+                window=window,
+            )
+        )
     if facts.rejected_rate is not None and 100 * facts.rejected_rate > acfg.rejected_rate_max_pct:
-        found.append(_finding("input", "rejected_rate", "inputs", 100 * facts.rejected_rate,
-                              acfg.rejected_rate_max_pct, "%",
-                              f"{facts.rejected} of {facts.lines} lines damaged "
-                              f"({100 * facts.rejected_rate:.2f} % > {acfg.rejected_rate_max_pct:.2f} %)",
-                              rule="[audit] rejected_rate_max_pct: damaged lines (checksum, "
-                              "truncated, malformed) as % of all lines; valid sentences dracc "
-                              "does not use are ignored, not rejected", window=window,
-                              false_alarm=0.0))
+        found.append(
+            _finding(
+                "input",
+                "rejected_rate",
+                "inputs",
+                100 * facts.rejected_rate,
+                acfg.rejected_rate_max_pct,
+                "%",
+                f"{facts.rejected} of {facts.lines} lines damaged "
+                f"({100 * facts.rejected_rate:.2f} % > {acfg.rejected_rate_max_pct:.2f} %)",
+                rule="[audit] rejected_rate_max_pct: damaged lines (checksum, "
+                "truncated, malformed) as % of all lines; valid sentences dracc "
+                "does not use are ignored, not rejected",
+                window=window,
+                false_alarm=0.0,
+            )
+        )
     return tuple(found), tuple(skipped)
 
 
@@ -539,13 +697,23 @@ def _dr_inconsistent(facts: NightFacts, acfg: AuditConfig, below: bool) -> Findi
         key = f" (key [dead_reckoning] {facts.dr_dominant_key})" if facts.dr_dominant_key else ""
         msg += f"; the circle is dominated by {facts.dr_dominant_source}{key}"
     if below:
-        msg += (f"; {100 * facts.dr_containment_2m:.1f} % inside 2M is below the audit's minimum "
-                f"of {100 * acfg.dr_containment_min:.1f} %")
-    return _finding("consistency", "dr_inconsistent", "DR", facts.dr_nees, facts.dr_nees_upper,
-                    "NEES" if facts.dr_nees is not None else "", msg, statistic_name="nees",
-                    rule="chi-square bounds of the NEES over the scored legs (alpha 0.01)",
-                    window={"start_utc": facts.period_start_utc, "end_utc": facts.period_end_utc},
-                    false_alarm=DR_FALSE_ALARM)
+        msg += (
+            f"; {100 * facts.dr_containment_2m:.1f} % inside 2M is below the audit's minimum "
+            f"of {100 * acfg.dr_containment_min:.1f} %"
+        )
+    return _finding(
+        "consistency",
+        "dr_inconsistent",
+        "DR",
+        facts.dr_nees,
+        facts.dr_nees_upper,
+        "NEES" if facts.dr_nees is not None else "",
+        msg,
+        statistic_name="nees",
+        rule="chi-square bounds of the NEES over the scored legs (alpha 0.01)",
+        window={"start_utc": facts.period_start_utc, "end_utc": facts.period_end_utc},
+        false_alarm=DR_FALSE_ALARM,
+    )
 
 
 #: the NEES test of dracc.math.deadreckoning.dr_consistency: two-sided at alpha = 0.01
@@ -577,7 +745,9 @@ def _usable(c: ChannelRow) -> bool:
     return c.m_u is not None and math.isfinite(c.m_u) and c.n > 0
 
 
-def pool_channels(nights: Sequence[tuple[str, float, Sequence[ChannelRow]]], dev_cfg) -> list[PooledChannel]:
+def pool_channels(
+    nights: Sequence[tuple[str, float, Sequence[ChannelRow]]], dev_cfg
+) -> list[PooledChannel]:
     """Pool (night, hours, channel rows) per unit and channel: m_u^2 weighted by n (K3b over
     the union of the nights' deviations), kurtosis weighted by n, independent samples
     summed; the limiting error (K8) from those."""
@@ -588,16 +758,28 @@ def pool_channels(nights: Sequence[tuple[str, float, Sequence[ChannelRow]]], dev
         for c in rows:
             if not _usable(c):
                 continue
-            a = acc.setdefault((c.unit, c.channel), {"nights": [], "hours": 0.0, "n": 0, "ss": 0.0,
-                                                     "kn": 0.0, "neff": 0.0, "k": None,
-                                                     "measure": c.measure})
+            a = acc.setdefault(
+                (c.unit, c.channel),
+                {
+                    "nights": [],
+                    "hours": 0.0,
+                    "n": 0,
+                    "ss": 0.0,
+                    "kn": 0.0,
+                    "neff": 0.0,
+                    "k": None,
+                    "measure": c.measure,
+                },
+            )
             a["nights"].append(night)
             a["hours"] += hours
             a["n"] += c.n
-            a["ss"] += c.n * c.m_u ** 2
+            a["ss"] += c.n * c.m_u**2
             if c.kurtosis is not None and math.isfinite(c.kurtosis):
                 a["kn"] += c.n * c.kurtosis
-            a["neff"] += float(stats.effective_samples(c.n, dev_cfg.interval_s, dev_cfg.correlation_time_s))
+            a["neff"] += float(
+                stats.effective_samples(c.n, dev_cfg.interval_s, dev_cfg.correlation_time_s)
+            )
             if c.m_y is not None and c.m_u and math.isfinite(c.m_y):
                 a["k"] = c.m_y / c.m_u
     out = []
@@ -608,21 +790,43 @@ def pool_channels(nights: Sequence[tuple[str, float, Sequence[ChannelRow]]], dev
         e = a["kn"] / a["n"]
         kp = 1.0 if e <= stats.KURTOSIS_MIN else float(stats.k_pie(dev_cfg.probability, e))
         kh = float(stats.k_hm(dev_cfg.confidence, a["neff"])) if a["neff"] >= 1 else math.nan
-        out.append(PooledChannel(unit, channel, tuple(a["nights"]), a["hours"], a["n"], m_u, m_y, e,
-                                 a["neff"], kp * kh * m_y, None, a["measure"]))
+        out.append(
+            PooledChannel(
+                unit,
+                channel,
+                tuple(a["nights"]),
+                a["hours"],
+                a["n"],
+                m_u,
+                m_y,
+                e,
+                a["neff"],
+                kp * kh * m_y,
+                None,
+                a["measure"],
+            )
+        )
     return out
 
 
-def accuracy_findings(store: StateStore, vessel: str, night: str, acfg: AuditConfig, dev_cfg,
-                      tonight: tuple[float, Sequence[ChannelRow]] | None = None
-                      ) -> tuple[tuple[Finding, ...], tuple[dict, ...], dict]:
+def accuracy_findings(
+    store: StateStore,
+    vessel: str,
+    night: str,
+    acfg: AuditConfig,
+    dev_cfg,
+    tonight: tuple[float, Sequence[ChannelRow]] | None = None,
+) -> tuple[tuple[Finding, ...], tuple[dict, ...], dict]:
     """The limiting errors over the accuracy window ending with ``night``: the stored
     nights up to it, newest first, until they cover ``accuracy_window_h``.  Findings
     where a pooled limiting error exceeds its limit; not checked while the window is short.
     ``tonight``: (hours, channel rows) of ``night`` not yet stored (it replaces a stored one).
     Returns (findings, not_checked, the window as a JSON-ready dict)."""
-    candidates = [(r.night, _hours(r), r.channels) for r in store.nights(vessel)
-                  if r.night < night or (r.night == night and tonight is None)]
+    candidates = [
+        (r.night, _hours(r), r.channels)
+        for r in store.nights(vessel)
+        if r.night < night or (r.night == night and tonight is None)
+    ]
     if tonight is not None:
         candidates.append((night, float(tonight[0]), tuple(tonight[1])))
     chosen, hours = [], 0.0
@@ -633,41 +837,92 @@ def accuracy_findings(store: StateStore, vessel: str, night: str, acfg: AuditCon
         hours += h
         if hours >= acfg.accuracy_window_h:
             break
-    doc = {"window_h": acfg.accuracy_window_h, "hours": hours,
-           "nights": [n for n, _, _ in reversed(chosen)], "channels": []}
+    doc = {
+        "window_h": acfg.accuracy_window_h,
+        "hours": hours,
+        "nights": [n for n, _, _ in reversed(chosen)],
+        "channels": [],
+    }
     if not chosen:
-        return (), (_not_checked("accuracy", "limit", "no INS deviation statistics in the stored "
-                                 "nights"),), doc
+        return (
+            (),
+            (
+                _not_checked(
+                    "accuracy", "limit", "no INS deviation statistics in the stored nights"
+                ),
+            ),
+            doc,
+        )
     pooled = pool_channels(list(reversed(chosen)), dev_cfg)
     found, skipped = [], []
     complete = hours >= acfg.accuracy_window_h
     for p in pooled:
         lim = acfg.limit_for(p.unit, p.channel)
-        doc["channels"].append({"unit": p.unit, "channel": p.channel, "measure": p.measure,
-                                "n": p.n, "n_eff": _num(p.n_eff), "m_u": _num(p.m_u),
-                                "m_y": _num(p.m_y), "kurtosis": _num(p.kurtosis),
-                                "limit_error": _num(p.limit_error), "limit": lim})
+        doc["channels"].append(
+            {
+                "unit": p.unit,
+                "channel": p.channel,
+                "measure": p.measure,
+                "n": p.n,
+                "n_eff": _num(p.n_eff),
+                "m_u": _num(p.m_u),
+                "m_y": _num(p.m_y),
+                "kurtosis": _num(p.kurtosis),
+                "limit_error": _num(p.limit_error),
+                "limit": lim,
+            }
+        )
         if lim is None:
             continue
         if not complete:
             continue
         if not math.isfinite(p.limit_error):
-            skipped.append(_not_checked("accuracy", "limit", f"{p.unit} {p.channel}: no limiting "
-                                        f"error over the window (N_eff {p.n_eff:.2f})", role=p.unit))
+            skipped.append(
+                _not_checked(
+                    "accuracy",
+                    "limit",
+                    f"{p.unit} {p.channel}: no limiting "
+                    f"error over the window (N_eff {p.n_eff:.2f})",
+                    role=p.unit,
+                )
+            )
         elif p.limit_error > lim:
-            found.append(_finding(
-                "accuracy", "limit", f"{p.unit} {p.channel}", p.limit_error, lim, p.measure,
-                f"{p.unit} {p.channel}: limiting error {p.limit_error:.4g} {p.measure} over "
-                f"{hours:.0f} h ({len(p.nights)} nights) > {lim:.4g} {p.measure}", role=p.unit,
-                statistic_name="limiting_error", rule="[audit.limits]: K8 limiting error at the "
-                "configured probability, pooled over the accuracy window",
-                window={"nights": list(p.nights), "hours": p.hours},
-                evidence=({"m_y": p.m_y, "m_u": p.m_u, "n": p.n, "n_eff": p.n_eff,
-                           "kurtosis": p.kurtosis},)))
+            found.append(
+                _finding(
+                    "accuracy",
+                    "limit",
+                    f"{p.unit} {p.channel}",
+                    p.limit_error,
+                    lim,
+                    p.measure,
+                    f"{p.unit} {p.channel}: limiting error {p.limit_error:.4g} {p.measure} over "
+                    f"{hours:.0f} h ({len(p.nights)} nights) > {lim:.4g} {p.measure}",
+                    role=p.unit,
+                    statistic_name="limiting_error",
+                    rule="[audit.limits]: K8 limiting error at the "
+                    "configured probability, pooled over the accuracy window",
+                    window={"nights": list(p.nights), "hours": p.hours},
+                    evidence=(
+                        {
+                            "m_y": p.m_y,
+                            "m_u": p.m_u,
+                            "n": p.n,
+                            "n_eff": p.n_eff,
+                            "kurtosis": p.kurtosis,
+                        },
+                    ),
+                )
+            )
     if not complete:
-        skipped.append(_not_checked("accuracy", "limit", f"the limiting errors are judged over "
-                                    f"{acfg.accuracy_window_h:g} h of logs; {hours:.1f} h over "
-                                    f"{len(chosen)} night(s) so far ([audit] accuracy_window_h)"))
+        skipped.append(
+            _not_checked(
+                "accuracy",
+                "limit",
+                f"the limiting errors are judged over "
+                f"{acfg.accuracy_window_h:g} h of logs; {hours:.1f} h over "
+                f"{len(chosen)} night(s) so far ([audit] accuracy_window_h)",
+            )
+        )
     doc["complete"] = complete
     return tuple(found), tuple(skipped), doc
 
@@ -751,8 +1006,15 @@ def _not_regular(mode: int) -> str | None:
         return None
     if stat.S_ISDIR(mode):
         return "is a directory, not a log file"
-    what = ("a FIFO (named pipe)" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode)
-            else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "not a regular file")
+    what = (
+        "a FIFO (named pipe)"
+        if stat.S_ISFIFO(mode)
+        else "a socket"
+        if stat.S_ISSOCK(mode)
+        else "a device"
+        if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+        else "not a regular file"
+    )
     return f"is {what}, not a log file; save the log to a file first"
 
 
@@ -816,8 +1078,9 @@ def choose_logs(inputs: Sequence[Path], night: str | None, pattern: str) -> LogC
                     continue
                 target = outside_link(f, p)
                 if target is not None:
-                    left_out.append((f, f"symbolic link to {target}, outside the folder {p}: "
-                                        "not followed"))
+                    left_out.append(
+                        (f, f"symbolic link to {target}, outside the folder {p}: not followed")
+                    )
                     continue
                 if f.is_dir():
                     continue
@@ -829,9 +1092,16 @@ def choose_logs(inputs: Sequence[Path], night: str | None, pattern: str) -> LogC
             skipped.extend(left_out)
             if not found:
                 what = f" for {night}" if night else ""
-                also = (f" ({len(left_out)} skipped: "
+                also = (
+                    (
+                        f" ({len(left_out)} skipped: "
                         + "; ".join(f"{f.relative_to(p)}: {why}" for f, why in left_out[:3])
-                        + ("; ..." if len(left_out) > 3 else "") + ")") if left_out else ""
+                        + ("; ..." if len(left_out) > 3 else "")
+                        + ")"
+                    )
+                    if left_out
+                    else ""
+                )
                 raise NoLogsError(f"no logs{what} matching {pattern!r} in {p}{also}")
             chosen.extend(found)
         elif os.path.lexists(p):  # a FIFO, a socket, a device, a dangling link
@@ -855,8 +1125,9 @@ def file_sha256(path: Path, chunk: int = 1 << 20) -> str:
     regular file first: a FIFO put in a log's place raises IngestError, never hangs."""
     h = hashlib.sha256()
     try:
-        fd = os.open(os.fspath(path), os.O_RDONLY | getattr(os, "O_NONBLOCK", 0)
-                     | getattr(os, "O_NOCTTY", 0))
+        fd = os.open(
+            os.fspath(path), os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0)
+        )
     except OSError as err:
         raise IngestError(f"{path}: cannot read: {err.strerror or err}") from err
     try:
@@ -916,10 +1187,19 @@ class AuditOutcome:
         return ExitCode.FINDINGS if self.findings else ExitCode.OK
 
 
-def audit_document(doc: Mapping, *, store: StateStore, acfg: AuditConfig,
-                   seeds: Mapping[tuple[str, str], float], vessel: str, night: str | None,
-                   content_hash: str, settings_hash: str,
-                   now: Callable[[], dt.datetime] | None = None, dev_cfg=None) -> AuditOutcome:
+def audit_document(
+    doc: Mapping,
+    *,
+    store: StateStore,
+    acfg: AuditConfig,
+    seeds: Mapping[tuple[str, str], float],
+    vessel: str,
+    night: str | None,
+    content_hash: str,
+    settings_hash: str,
+    now: Callable[[], dt.datetime] | None = None,
+    dev_cfg=None,
+) -> AuditOutcome:
     """Audit one night given its analysis document, and record it in ``store``.
 
     Idempotent on (vessel, night, content hash, settings hash): the same night with the
@@ -936,11 +1216,15 @@ def audit_document(doc: Mapping, *, store: StateStore, acfg: AuditConfig,
     clock = now or (lambda: dt.datetime.now(dt.timezone.utc))
     # the hours tonight adds to the accuracy window: as a stored night is counted (its
     # period), from the period where the document gives no duration
-    hours = (facts.duration_s / 3600.0 if facts.duration_s is not None
-             else _period_hours(facts.period_start_utc, facts.period_end_utc))
+    hours = (
+        facts.duration_s / 3600.0
+        if facts.duration_s is not None
+        else _period_hours(facts.period_start_utc, facts.period_end_utc)
+    )
     with store.transaction():
-        acc_found, acc_skipped, acc_doc = accuracy_findings(store, vessel, night, acfg, dev_cfg,
-                                                            tonight=(hours, facts.channels))
+        acc_found, acc_skipped, acc_doc = accuracy_findings(
+            store, vessel, night, acfg, dev_cfg, tonight=(hours, facts.channels)
+        )
         findings += acc_found
         not_checked += acc_skipped
         record = _record(vessel, night, content_hash, settings_hash, clock, facts, findings)
@@ -953,30 +1237,65 @@ def audit_document(doc: Mapping, *, store: StateStore, acfg: AuditConfig,
         for e in events:
             if e.reason == "raised":
                 measure = CHANNEL_KEYS[e.channel].rsplit("_", 1)[1]
-                extra.append(_finding("accuracy", "apriori_raised", f"{e.unit} {e.channel}", e.value,
-                                      e.previous, measure, f"{e.unit} {e.channel}: a priori RMS raised "
-                                      f"from {e.previous:.4g} to {e.value:.4g} {measure}", role=e.unit,
-                                      rule="[audit] apriori_raise_is_finding"))
+                extra.append(
+                    _finding(
+                        "accuracy",
+                        "apriori_raised",
+                        f"{e.unit} {e.channel}",
+                        e.value,
+                        e.previous,
+                        measure,
+                        f"{e.unit} {e.channel}: a priori RMS raised "
+                        f"from {e.previous:.4g} to {e.value:.4g} {measure}",
+                        role=e.unit,
+                        rule="[audit] apriori_raise_is_finding",
+                    )
+                )
     fa = [f for f in (facts.integrity_false_alarm,) if f is not None]
     if facts.dr_verdict in ("consistent", "conservative", "inconsistent"):
         fa.append(DR_FALSE_ALARM)
-    return AuditOutcome(stored, findings + tuple(extra), not_checked, status, events, acc_doc,
-                        min(1.0, sum(fa)) if fa else None, ignored=dict(facts.ignored))
+    return AuditOutcome(
+        stored,
+        findings + tuple(extra),
+        not_checked,
+        status,
+        events,
+        acc_doc,
+        min(1.0, sum(fa)) if fa else None,
+        ignored=dict(facts.ignored),
+    )
 
 
-def _record(vessel, night, content_hash, settings_hash, clock, facts: NightFacts, findings) -> NightRecord:
+def _record(
+    vessel, night, content_hash, settings_hash, clock, facts: NightFacts, findings
+) -> NightRecord:
     return NightRecord(
-        vessel=vessel, night=night, content_sha256=content_hash, settings_sha256=settings_hash,
+        vessel=vessel,
+        night=night,
+        content_sha256=content_hash,
+        settings_sha256=settings_hash,
         audited_utc=clock().strftime("%Y-%m-%dT%H:%M:%SZ"),
-        period_start_utc=facts.period_start_utc, period_end_utc=facts.period_end_utc,
-        inputs=facts.inputs, sources=facts.sources, lines=facts.lines, rejected=facts.rejected,
-        rejected_rate=facts.rejected_rate, dr_containment_2m=facts.dr_containment_2m,
-        dr_n_scored=facts.dr_n_scored, compass_error_deg=facts.compass_error_deg,
-        compass_error_sigma_deg=facts.compass_error_sigma_deg, log_scale=facts.log_scale,
-        log_scale_sigma=facts.log_scale_sigma, findings=tuple(_finding_dict(f) for f in findings),
-        missing=facts.missing, channels=facts.channels, dr_verdict=facts.dr_verdict,
-        dr_verdict_text=facts.dr_verdict_text, dr_consistent=facts.dr_consistent,
-        dr_nees=facts.dr_nees)
+        period_start_utc=facts.period_start_utc,
+        period_end_utc=facts.period_end_utc,
+        inputs=facts.inputs,
+        sources=facts.sources,
+        lines=facts.lines,
+        rejected=facts.rejected,
+        rejected_rate=facts.rejected_rate,
+        dr_containment_2m=facts.dr_containment_2m,
+        dr_n_scored=facts.dr_n_scored,
+        compass_error_deg=facts.compass_error_deg,
+        compass_error_sigma_deg=facts.compass_error_sigma_deg,
+        log_scale=facts.log_scale,
+        log_scale_sigma=facts.log_scale_sigma,
+        findings=tuple(_finding_dict(f) for f in findings),
+        missing=facts.missing,
+        channels=facts.channels,
+        dr_verdict=facts.dr_verdict,
+        dr_verdict_text=facts.dr_verdict_text,
+        dr_consistent=facts.dr_consistent,
+        dr_nees=facts.dr_nees,
+    )
 
 
 def jsonable(x):
@@ -1004,16 +1323,22 @@ def _finding_dict(f: Finding) -> dict:
 def _store_night(store: StateStore, record: NightRecord, seeds) -> str:
     """Insert or replace ``record`` (inside the caller's transaction): its status word."""
     old = store.night(record.vessel, record.night)
-    if (old is not None and old.content_sha256 == record.content_sha256
-            and old.settings_sha256 == record.settings_sha256):
+    if (
+        old is not None
+        and old.content_sha256 == record.content_sha256
+        and old.settings_sha256 == record.settings_sha256
+    ):
         return "unchanged"
     store.delete_night(record.vessel, record.night)
     store.insert_night(record)
     _recompute_chain(store, record.vessel, seeds)
     sleep_s = os.environ.get(TEST_SLEEP_ENV)
     if sleep_s:  # test hook: a run killed here must leave no partial night
-        print(f"dracc audit: test hook: sleeping {sleep_s} s inside the transaction",
-              file=sys.stderr, flush=True)
+        print(
+            f"dracc audit: test hook: sleeping {sleep_s} s inside the transaction",
+            file=sys.stderr,
+            flush=True,
+        )
         time.sleep(float(sleep_s))
     return "replaced" if old is not None else "recorded"
 
@@ -1022,34 +1347,67 @@ def _store_night(store: StateStore, record: NightRecord, seeds) -> str:
 NO_DATA_SHA256 = hashlib.sha256(b"dracc: no logs for this night").hexdigest()
 
 
-def record_no_data(store: StateStore, *, vessel: str, night: str, why: str, settings_hash: str,
-                   seeds: Mapping[tuple[str, str], float],
-                   now: Callable[[], dt.datetime] | None = None) -> AuditOutcome:
+def record_no_data(
+    store: StateStore,
+    *,
+    vessel: str,
+    night: str,
+    why: str,
+    settings_hash: str,
+    seeds: Mapping[tuple[str, str], float],
+    now: Callable[[], dt.datetime] | None = None,
+) -> AuditOutcome:
     """Record ``night`` as a night without data (no logs were found): its one finding is
     the absence, so ``audit history`` shows the gap.  A night already audited with logs
     is left as it is (its logs may have been moved away since)."""
     clock = now or (lambda: dt.datetime.now(dt.timezone.utc))
-    f = _finding("availability", "no_logs", "logs", None, None, "", why,
-                 rule="logs for the night in the folder, matching the pattern", false_alarm=0.0)
+    f = _finding(
+        "availability",
+        "no_logs",
+        "logs",
+        None,
+        None,
+        "",
+        why,
+        rule="logs for the night in the folder, matching the pattern",
+        false_alarm=0.0,
+    )
     with store.transaction():
         old = store.night(vessel, night)
         if old is not None and old.content_sha256 != NO_DATA_SHA256:
             record, status = old, "unchanged"
         else:
-            record = NightRecord(vessel=vessel, night=night, content_sha256=NO_DATA_SHA256,
-                                 settings_sha256=settings_hash,
-                                 audited_utc=clock().strftime("%Y-%m-%dT%H:%M:%SZ"),
-                                 period_start_utc=None, period_end_utc=None, inputs=(), sources={},
-                                 lines=0, rejected=0, rejected_rate=None, dr_containment_2m=None,
-                                 dr_n_scored=None, compass_error_deg=None,
-                                 compass_error_sigma_deg=None, log_scale=None, log_scale_sigma=None,
-                                 findings=(_finding_dict(f),), missing=(why,), channels=())
+            record = NightRecord(
+                vessel=vessel,
+                night=night,
+                content_sha256=NO_DATA_SHA256,
+                settings_sha256=settings_hash,
+                audited_utc=clock().strftime("%Y-%m-%dT%H:%M:%SZ"),
+                period_start_utc=None,
+                period_end_utc=None,
+                inputs=(),
+                sources={},
+                lines=0,
+                rejected=0,
+                rejected_rate=None,
+                dr_containment_2m=None,
+                dr_n_scored=None,
+                compass_error_deg=None,
+                compass_error_sigma_deg=None,
+                log_scale=None,
+                log_scale_sigma=None,
+                findings=(_finding_dict(f),),
+                missing=(why,),
+                channels=(),
+            )
             status = _store_night(store, record, seeds)
             record = store.night(vessel, night) or record
     return AuditOutcome(record, (f,), (), status, (), no_data=True)
 
 
-def _recompute_chain(store: StateStore, vessel: str, seeds: Mapping[tuple[str, str], float]) -> None:
+def _recompute_chain(
+    store: StateStore, vessel: str, seeds: Mapping[tuple[str, str], float]
+) -> None:
     """Re-apply the monitoring rule over every stored night of ``vessel`` (in the transaction)."""
     series: dict[tuple[str, str], list[tuple[str, float | None]]] = {}
     for rec in store.nights(vessel):
@@ -1059,17 +1417,36 @@ def _recompute_chain(store: StateStore, vessel: str, seeds: Mapping[tuple[str, s
     for (unit, channel), nights in sorted(series.items()):
         rec_by_night = dict(nights)
         for step in apriori_chain(seeds.get((unit, channel)), nights):
-            store.set_channel_apriori(vessel, step.night, unit, channel, step.before, step.after,
-                                      step.verdict)
+            store.set_channel_apriori(
+                vessel, step.night, unit, channel, step.before, step.after, step.verdict
+            )
             if step.verdict in ("established", "raised"):
-                row = next(c for c in store.night(vessel, step.night).channels
-                           if c.unit == unit and c.channel == channel)
-                events.append(AprioriEvent(
-                    vessel, unit, channel, step.night, float(step.after), step.before, step.verdict,
-                    {"night": step.night, "m_y": rec_by_night[step.night], "m_u": row.m_u,
-                     "n": row.n, "kurtosis": row.kurtosis, "limit": row.limit_error,
-                     "previous": step.before,
-                     "seed": "config" if (unit, channel) in seeds else None}))
+                row = next(
+                    c
+                    for c in store.night(vessel, step.night).channels
+                    if c.unit == unit and c.channel == channel
+                )
+                events.append(
+                    AprioriEvent(
+                        vessel,
+                        unit,
+                        channel,
+                        step.night,
+                        float(step.after),
+                        step.before,
+                        step.verdict,
+                        {
+                            "night": step.night,
+                            "m_y": rec_by_night[step.night],
+                            "m_u": row.m_u,
+                            "n": row.n,
+                            "kurtosis": row.kurtosis,
+                            "limit": row.limit_error,
+                            "previous": step.before,
+                            "seed": "config" if (unit, channel) in seeds else None,
+                        },
+                    )
+                )
     store.replace_apriori_events(vessel, events)
 
 
@@ -1090,9 +1467,17 @@ def vessel_name(cfg: Config, acfg: AuditConfig, option: str | None) -> str:
     return "default"
 
 
-def run_audit(inputs: Sequence[Path], cfg: Config, *, db: str | Path | None = None,
-              vessel: str | None = None, night: str | None = None, pattern: str | None = None,
-              progress=None, now: dt.datetime | None = None):
+def run_audit(
+    inputs: Sequence[Path],
+    cfg: Config,
+    *,
+    db: str | Path | None = None,
+    vessel: str | None = None,
+    night: str | None = None,
+    pattern: str | None = None,
+    progress=None,
+    now: dt.datetime | None = None,
+):
     """The whole nightly audit: choose the logs, analyse them, check, record.
 
     Returns ``(outcome, analysis)``, the analysis for the reports (None for a night
@@ -1106,7 +1491,7 @@ def run_audit(inputs: Sequence[Path], cfg: Config, *, db: str | Path | None = No
     seeds = apriori_seeds(cfg)
     db_path = db or acfg.db
     if not db_path:
-        raise ConfigError("no audit database: give --db PATH or [audit] db = \"PATH\"")
+        raise ConfigError('no audit database: give --db PATH or [audit] db = "PATH"')
     has_dir = any(Path(p).is_dir() for p in inputs)
     if night is not None:
         night = parse_night(night)
@@ -1119,8 +1504,14 @@ def run_audit(inputs: Sequence[Path], cfg: Config, *, db: str | Path | None = No
         if night is None:
             raise
         with StateStore(db_path, busy_timeout_s=acfg.busy_timeout_s) as store:
-            outcome = record_no_data(store, vessel=name, night=night, why=str(e),
-                                     settings_hash=settings_sha256(cfg), seeds=seeds)
+            outcome = record_no_data(
+                store,
+                vessel=name,
+                night=night,
+                why=str(e),
+                settings_hash=settings_sha256(cfg),
+                seeds=seeds,
+            )
         return outcome, None
     paths = list(choice.paths)
     content_hash = content_sha256(paths)
@@ -1129,10 +1520,21 @@ def run_audit(inputs: Sequence[Path], cfg: Config, *, db: str | Path | None = No
 
     doc = json_report.to_dict(analysis)
     with StateStore(db_path, busy_timeout_s=acfg.busy_timeout_s) as store:
-        outcome = audit_document(doc, store=store, acfg=acfg, seeds=seeds, vessel=name, night=night,
-                                 content_hash=content_hash, settings_hash=settings_sha256(cfg),
-                                 dev_cfg=cfg.deviation)
+        outcome = audit_document(
+            doc,
+            store=store,
+            acfg=acfg,
+            seeds=seeds,
+            vessel=name,
+            night=night,
+            content_hash=content_hash,
+            settings_hash=settings_sha256(cfg),
+            dev_cfg=cfg.deviation,
+        )
     if choice.skipped:  # files of the folder not read: said in the summary and the JSON
-        outcome = replace(outcome, not_checked=outcome.not_checked + tuple(
-            _not_checked("logs", str(f), why) for f, why in choice.skipped))
+        outcome = replace(
+            outcome,
+            not_checked=outcome.not_checked
+            + tuple(_not_checked("logs", str(f), why) for f, why in choice.skipped),
+        )
     return outcome, analysis

@@ -68,14 +68,49 @@ CACHE_SCHEMA = "dracc.fleet.cache/2"
 
 #: columns of the fleet table, in order (units in the names or in ``measure``)
 TABLE_COLUMNS = (
-    "vessel", "log", "sha256", "status", "error", "period_start_utc", "period_end_utc", "day",
-    "unit", "channel", "measure", "n", "m_u", "m_y", "kurtosis", "limit", "apriori_before",
-    "apriori_after", "apriori_verdict", "dr_containment_2m", "dr_n_scored", "dr_consistent",
-    "dr_verdict", "dr_nees", "compass_error_deg", "compass_error_sigma_deg", "log_scale_pct",
-    "log_scale_sigma_pct", "rejected_rate_pct", "lines",
+    "vessel",
+    "log",
+    "sha256",
+    "status",
+    "error",
+    "period_start_utc",
+    "period_end_utc",
+    "day",
+    "unit",
+    "channel",
+    "measure",
+    "n",
+    "m_u",
+    "m_y",
+    "kurtosis",
+    "limit",
+    "apriori_before",
+    "apriori_after",
+    "apriori_verdict",
+    "dr_containment_2m",
+    "dr_n_scored",
+    "dr_consistent",
+    "dr_verdict",
+    "dr_nees",
+    "compass_error_deg",
+    "compass_error_sigma_deg",
+    "log_scale_pct",
+    "log_scale_sigma_pct",
+    "rejected_rate_pct",
+    "lines",
 )
-TREND_COLUMNS = ("vessel", "day", "unit", "channel", "measure", "logs", "n", "m_y", "apriori_after",
-                 "dr_containment_2m")
+TREND_COLUMNS = (
+    "vessel",
+    "day",
+    "unit",
+    "channel",
+    "measure",
+    "logs",
+    "n",
+    "m_y",
+    "apriori_after",
+    "dr_containment_2m",
+)
 
 
 class FleetError(DraccError):
@@ -104,8 +139,10 @@ def fleet_config(cfg: Config) -> FleetConfig:
     known = list(asdict(FleetConfig()))
     unknown = set(table) - set(known)
     if unknown:
-        raise ConfigError(f"[fleet] unknown key(s): {', '.join(sorted(unknown))}; "
-                          f"known: {', '.join(sorted(known))}")
+        raise ConfigError(
+            f"[fleet] unknown key(s): {', '.join(sorted(unknown))}; "
+            f"known: {', '.join(sorted(known))}"
+        )
     kw: dict = {}
     if "workers" in table:
         w = table["workers"]
@@ -129,8 +166,11 @@ def fleet_config(cfg: Config) -> FleetConfig:
 
 
 _UNSAFE = set('/\\:*?"<>|')
-_RESERVED = {"CON", "PRN", "AUX", "NUL"} | {f"COM{i}" for i in range(1, 10)} | {
-    f"LPT{i}" for i in range(1, 10)}
+_RESERVED = (
+    {"CON", "PRN", "AUX", "NUL"}
+    | {f"COM{i}" for i in range(1, 10)}
+    | {f"LPT{i}" for i in range(1, 10)}
+)
 
 
 def safe_name(name: str, max_len: int = 100) -> str:
@@ -139,7 +179,9 @@ def safe_name(name: str, max_len: int = 100) -> str:
     result differs from ``name``, a short hash of ``name`` is appended so that two
     different names never share a folder."""
     nfc = unicodedata.normalize("NFC", name)
-    s = "".join("_" if (c in _UNSAFE or unicodedata.category(c).startswith("C")) else c for c in nfc)
+    s = "".join(
+        "_" if (c in _UNSAFE or unicodedata.category(c).startswith("C")) else c for c in nfc
+    )
     s = s.strip(" .")[:max_len]
     if not s or s.split(".")[0].upper() in _RESERVED:
         s = "_" + s
@@ -233,13 +275,27 @@ def discover(inputs: Iterable[str | Path], pattern: str = "**/*") -> list[LogTas
                         continue
                     target = outside_link(f, m)
                     if target is not None:
-                        add(LogTask(vessel, os.path.abspath(f), rel.as_posix(), None,
-                                    f"{f}: symbolic link to {target}, outside the vessel folder "
-                                    f"{m}: not followed"))
+                        add(
+                            LogTask(
+                                vessel,
+                                os.path.abspath(f),
+                                rel.as_posix(),
+                                None,
+                                f"{f}: symbolic link to {target}, outside the vessel folder "
+                                f"{m}: not followed",
+                            )
+                        )
                     elif f.is_dir():
                         if _names_files(pattern):
-                            add(LogTask(vessel, os.path.abspath(f), rel.as_posix(), None,
-                                        f"{f}: is a directory, not a log file"))
+                            add(
+                                LogTask(
+                                    vessel,
+                                    os.path.abspath(f),
+                                    rel.as_posix(),
+                                    None,
+                                    f"{f}: is a directory, not a log file",
+                                )
+                            )
                     else:
                         add(_task(vessel, f, rel.as_posix()))
             else:  # a file, or something in a file's place (FIFO, device, dangling link)
@@ -259,15 +315,23 @@ def summarise(doc: Mapping) -> dict:
     return {
         "schema": doc.get("schema"),
         "period": {"start_utc": facts.period_start_utc, "end_utc": facts.period_end_utc},
-        "lines": facts.lines, "rejected": facts.rejected,
+        "lines": facts.lines,
+        "rejected": facts.rejected,
         "sources": facts.sources,
         "channels": [asdict(c) for c in facts.channels],
-        "dr": {"containment_2m": facts.dr_containment_2m, "n_scored": facts.dr_n_scored,
-               "consistent": facts.dr_consistent, "verdict": facts.dr_verdict,
-               "nees": facts.dr_nees},
-        "calibration": {"compass_error_deg": facts.compass_error_deg,
-                        "compass_error_sigma_deg": facts.compass_error_sigma_deg,
-                        "log_scale": facts.log_scale, "log_scale_sigma": facts.log_scale_sigma},
+        "dr": {
+            "containment_2m": facts.dr_containment_2m,
+            "n_scored": facts.dr_n_scored,
+            "consistent": facts.dr_consistent,
+            "verdict": facts.dr_verdict,
+            "nees": facts.dr_nees,
+        },
+        "calibration": {
+            "compass_error_deg": facts.compass_error_deg,
+            "compass_error_sigma_deg": facts.compass_error_sigma_deg,
+            "log_scale": facts.log_scale,
+            "log_scale_sigma": facts.log_scale_sigma,
+        },
         "missing": list(facts.missing),
     }
 
@@ -317,10 +381,18 @@ def _read_cache(p: Path) -> dict | None:
     return doc["summary"]
 
 
-def run_fleet(tasks: Sequence[LogTask], cfg: Config, out: Path, *, workers: int | None = None,
-              scheduler: str | None = None, force: bool = False, connect_timeout_s: float = 30.0,
-              progress: Callable[[int], None] | None = None,
-              analyser: Callable[[str, Config], dict] = analyse_log) -> FleetResult:
+def run_fleet(
+    tasks: Sequence[LogTask],
+    cfg: Config,
+    out: Path,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    force: bool = False,
+    connect_timeout_s: float = 30.0,
+    progress: Callable[[int], None] | None = None,
+    analyser: Callable[[str, Config], dict] = analyse_log,
+) -> FleetResult:
     """Analyse every task (or take it from the cache) and build the fleet tables.
 
     ``analyser`` must be a picklable module-level function (tests replace it).
@@ -349,10 +421,22 @@ def run_fleet(tasks: Sequence[LogTask], cfg: Config, out: Path, *, workers: int 
     def done(task: LogTask, result: dict) -> None:
         if result.get("ok"):
             summaries[task.path] = result["summary"]
-            atomic.write_text(cache_path(out, task, settings), json.dumps(
-                {"schema": CACHE_SCHEMA, "dracc_version": __version__, "sha256": task.sha256,
-                 "settings_sha256": settings, "vessel": task.vessel, "log": task.log,
-                 "summary": result["summary"]}, ensure_ascii=False, allow_nan=False))
+            atomic.write_text(
+                cache_path(out, task, settings),
+                json.dumps(
+                    {
+                        "schema": CACHE_SCHEMA,
+                        "dracc_version": __version__,
+                        "sha256": task.sha256,
+                        "settings_sha256": settings,
+                        "vessel": task.vessel,
+                        "log": task.log,
+                        "summary": result["summary"],
+                    },
+                    ensure_ascii=False,
+                    allow_nan=False,
+                ),
+            )
         else:
             failures[task.path] = str(result.get("error"))
         if progress:
@@ -366,8 +450,11 @@ def run_fleet(tasks: Sequence[LogTask], cfg: Config, out: Path, *, workers: int 
         else:
             _run_local(todo, cfg, workers or os.cpu_count() or 1, analyser, done)
     table = fleet_table(tasks, summaries, failures, seeds)
-    failed = tuple({"vessel": t.vessel, "log": t.log, "path": t.path, "error": failures[t.path]}
-                   for t in tasks if t.path in failures)
+    failed = tuple(
+        {"vessel": t.vessel, "log": t.log, "path": t.path, "error": failures[t.path]}
+        for t in tasks
+        if t.path in failures
+    )
     return FleetResult(table, fleet_trends(table), failed, len(todo), cached)
 
 
@@ -392,8 +479,11 @@ def _preload() -> None:
 def _run_local(todo, cfg, workers, analyser, done) -> None:
     if analyser is analyse_log:
         _preload()
-    with ProcessPoolExecutor(max_workers=max(1, min(workers, len(todo))), initializer=detach_worker,
-                             initargs=(os.getpid(),)) as pool:
+    with ProcessPoolExecutor(
+        max_workers=max(1, min(workers, len(todo))),
+        initializer=detach_worker,
+        initargs=(os.getpid(),),
+    ) as pool:
         pending = {pool.submit(analyser, t.path, cfg): t for t in todo}
         try:
             while pending:
@@ -423,8 +513,9 @@ def _run_dask(todo, cfg, scheduler, timeout_s, analyser, done) -> None:
         try:
             client.wait_for_workers(1, timeout=timeout_s)
         except TimeoutError as err:
-            raise FleetError(f"the Dask scheduler at {scheduler} has no workers "
-                             f"(waited {timeout_s:g} s)") from err
+            raise FleetError(
+                f"the Dask scheduler at {scheduler} has no workers (waited {timeout_s:g} s)"
+            ) from err
         futures = client.map(analyser, [t.path for t in todo], cfg=cfg, pure=False)
         by_key = {f.key: t for f, t in zip(futures, todo, strict=True)}
         for fut in as_completed(futures, loop=client.loop):
@@ -453,8 +544,12 @@ def _pct(x):
     return None if x is None else 100.0 * x
 
 
-def fleet_table(tasks: Sequence[LogTask], summaries: Mapping[str, dict], failures: Mapping[str, str],
-                seeds: Mapping[tuple[str, str], float]) -> pd.DataFrame:
+def fleet_table(
+    tasks: Sequence[LogTask],
+    summaries: Mapping[str, dict],
+    failures: Mapping[str, str],
+    seeds: Mapping[tuple[str, str], float],
+) -> pd.DataFrame:
     """One row per log, unit and channel, sorted by vessel, time, log, unit, channel."""
     rows: list[dict] = []
     for t in tasks:
@@ -468,35 +563,68 @@ def fleet_table(tasks: Sequence[LogTask], summaries: Mapping[str, dict], failure
         per = s["period"]
         cal = s["calibration"]
         rate = (s["rejected"] / s["lines"]) if s.get("lines") else None
-        common = {**base, "status": "ok", "error": None, "period_start_utc": per["start_utc"],
-                  "period_end_utc": per["end_utc"], "day": _day(per["start_utc"], per["end_utc"]),
-                  "dr_containment_2m": s["dr"]["containment_2m"], "dr_n_scored": s["dr"]["n_scored"],
-                  "dr_consistent": s["dr"]["consistent"], "dr_verdict": s["dr"].get("verdict"),
-                  "dr_nees": s["dr"].get("nees"),
-                  "compass_error_deg": cal["compass_error_deg"],
-                  "compass_error_sigma_deg": cal["compass_error_sigma_deg"],
-                  "log_scale_pct": _pct(cal["log_scale"]),
-                  "log_scale_sigma_pct": _pct(cal["log_scale_sigma"]),
-                  "rejected_rate_pct": _pct(rate), "lines": s.get("lines")}
+        common = {
+            **base,
+            "status": "ok",
+            "error": None,
+            "period_start_utc": per["start_utc"],
+            "period_end_utc": per["end_utc"],
+            "day": _day(per["start_utc"], per["end_utc"]),
+            "dr_containment_2m": s["dr"]["containment_2m"],
+            "dr_n_scored": s["dr"]["n_scored"],
+            "dr_consistent": s["dr"]["consistent"],
+            "dr_verdict": s["dr"].get("verdict"),
+            "dr_nees": s["dr"].get("nees"),
+            "compass_error_deg": cal["compass_error_deg"],
+            "compass_error_sigma_deg": cal["compass_error_sigma_deg"],
+            "log_scale_pct": _pct(cal["log_scale"]),
+            "log_scale_sigma_pct": _pct(cal["log_scale_sigma"]),
+            "rejected_rate_pct": _pct(rate),
+            "lines": s.get("lines"),
+        }
         if not s["channels"]:
             rows.append(common)
         for c in s["channels"]:
-            rows.append({**common, "unit": c["unit"], "channel": c["channel"],
-                         "measure": {"lat": "m", "lon": "m", "course": "deg"}.get(c["channel"]),
-                         "n": c["n"], "m_u": c["m_u"], "m_y": c["m_y"], "kurtosis": c["kurtosis"],
-                         "limit": c["limit_error"]})
+            rows.append(
+                {
+                    **common,
+                    "unit": c["unit"],
+                    "channel": c["channel"],
+                    "measure": {"lat": "m", "lon": "m", "course": "deg"}.get(c["channel"]),
+                    "n": c["n"],
+                    "m_u": c["m_u"],
+                    "m_y": c["m_y"],
+                    "kurtosis": c["kurtosis"],
+                    "limit": c["limit_error"],
+                }
+            )
     df = pd.DataFrame(rows, columns=list(TABLE_COLUMNS))
     df = _typed(df)
-    df = df.sort_values(["vessel", "period_start_utc", "log", "unit", "channel"],
-                        na_position="last", kind="mergesort").reset_index(drop=True)
+    df = df.sort_values(
+        ["vessel", "period_start_utc", "log", "unit", "channel"],
+        na_position="last",
+        kind="mergesort",
+    ).reset_index(drop=True)
     _apply_rule(df, seeds)
     return df
 
 
 def _typed(df: pd.DataFrame) -> pd.DataFrame:
-    floats = ["m_u", "m_y", "kurtosis", "limit", "apriori_before", "apriori_after",
-              "dr_containment_2m", "dr_nees", "compass_error_deg", "compass_error_sigma_deg",
-              "log_scale_pct", "log_scale_sigma_pct", "rejected_rate_pct"]
+    floats = [
+        "m_u",
+        "m_y",
+        "kurtosis",
+        "limit",
+        "apriori_before",
+        "apriori_after",
+        "dr_containment_2m",
+        "dr_nees",
+        "compass_error_deg",
+        "compass_error_sigma_deg",
+        "log_scale_pct",
+        "log_scale_sigma_pct",
+        "rejected_rate_pct",
+    ]
     ints = ["n", "dr_n_scored", "lines"]
     strings = [c for c in TABLE_COLUMNS if c not in floats + ints + ["dr_consistent"]]
     for c in floats:
@@ -519,10 +647,14 @@ def _apply_rule(df: pd.DataFrame, seeds: Mapping[tuple[str, str], float]) -> Non
     logs = df["log"].to_numpy(dtype=object)
     m_y = df["m_y"].to_numpy(dtype="float64")
     keys = df.iloc[ok_pos][["vessel", "unit", "channel"]]
-    for (_vessel, unit, channel), pos in keys.groupby(["vessel", "unit", "channel"], sort=False).indices.items():
+    for (_vessel, unit, channel), pos in keys.groupby(
+        ["vessel", "unit", "channel"], sort=False
+    ).indices.items():
         rows = ok_pos[pos]  # in table order: time order within the vessel
-        steps = apriori_chain(seeds.get((unit, channel)),
-                              [(str(logs[r]), None if np.isnan(m_y[r]) else float(m_y[r])) for r in rows])
+        steps = apriori_chain(
+            seeds.get((unit, channel)),
+            [(str(logs[r]), None if np.isnan(m_y[r]) else float(m_y[r])) for r in rows],
+        )
         before[rows] = [np.nan if st.before is None else st.before for st in steps]
         after[rows] = [np.nan if st.after is None else st.after for st in steps]
         verdict[rows] = [st.verdict for st in steps]
@@ -541,10 +673,19 @@ def fleet_trends(table: pd.DataFrame) -> pd.DataFrame:
     m_y = ok["m_y"].astype("float64")
     good = m_y.notna() & (n > 0)
     parts = ok[key + ["measure", "log", "apriori_after"]].assign(
-        _n=n.where(good, 0.0), _nm2=(n * m_y**2).where(good, 0.0))
-    agg = parts.groupby(key, sort=True).agg(
-        measure=("measure", "first"), logs=("log", "nunique"), n=("_n", "sum"), nm2=("_nm2", "sum"),
-        apriori_after=("apriori_after", "last")).reset_index()
+        _n=n.where(good, 0.0), _nm2=(n * m_y**2).where(good, 0.0)
+    )
+    agg = (
+        parts.groupby(key, sort=True)
+        .agg(
+            measure=("measure", "first"),
+            logs=("log", "nunique"),
+            n=("_n", "sum"),
+            nm2=("_nm2", "sum"),
+            apriori_after=("apriori_after", "last"),
+        )
+        .reset_index()
+    )
     with np.errstate(invalid="ignore", divide="ignore"):
         agg["m_y"] = np.where(agg["n"] > 0, np.sqrt(agg["nm2"] / agg["n"]), np.nan)  # pooled RMS
     per_log = ok.drop_duplicates(["vessel", "log", "sha256"])
@@ -552,7 +693,11 @@ def fleet_trends(table: pd.DataFrame) -> pd.DataFrame:
     c = per_log["dr_containment_2m"].astype("float64")
     okc = c.notna() & w.notna() & (w > 0)
     dr = per_log[["vessel", "day"]].assign(_w=w.where(okc, 0.0), _wc=(w * c).where(okc, 0.0))
-    dr = dr.groupby(["vessel", "day"], sort=True).agg(w=("_w", "sum"), wc=("_wc", "sum")).reset_index()
+    dr = (
+        dr.groupby(["vessel", "day"], sort=True)
+        .agg(w=("_w", "sum"), wc=("_wc", "sum"))
+        .reset_index()
+    )
     with np.errstate(invalid="ignore", divide="ignore"):
         dr["dr_containment_2m"] = np.where(dr["w"] > 0, dr["wc"] / dr["w"], np.nan)
     df = agg.merge(dr[["vessel", "day", "dr_containment_2m"]], on=["vessel", "day"], how="left")
@@ -590,8 +735,12 @@ def csv_text(df: pd.DataFrame) -> str:
     return safe.to_csv(index=False)
 
 
-def write_tables(result: FleetResult, out: Path, extra: Mapping[str, str] | None = None,
-                 published: list | None = None) -> list[Path]:
+def write_tables(
+    result: FleetResult,
+    out: Path,
+    extra: Mapping[str, str] | None = None,
+    published: list | None = None,
+) -> list[Path]:
     """fleet.parquet/.csv, trends.parquet/.csv, failures in fleet.json, per vessel
     ``vessels/<safe name>/fleet.csv`` and ``trends.csv``, and the ``extra`` files
     (name -> text, e.g. ``fleet.html``), published together (:func:`dracc.core.atomic.file_set`):
@@ -619,17 +768,29 @@ def write_tables(result: FleetResult, out: Path, extra: Mapping[str, str] | None
             put(Path(f"{name}.parquet"), df)
             put(Path(f"{name}.csv"), df)
         if sleep_s:  # test hook: a run interrupted here must leave the old set whole
-            print(f"dracc fleet: test hook: sleeping {sleep_s} s while writing the outputs",
-                  file=sys.stderr, flush=True)
+            print(
+                f"dracc fleet: test hook: sleeping {sleep_s} s while writing the outputs",
+                file=sys.stderr,
+                flush=True,
+            )
             time.sleep(float(sleep_s))
         for vessel in sorted(result.table["vessel"].dropna().unique()):
-            put(Path("vessels", vessel, "fleet.csv"), result.table[result.table["vessel"] == vessel])
-            put(Path("vessels", vessel, "trends.csv"), result.trends[result.trends["vessel"] == vessel])
-        summary = {"schema": "dracc.fleet/1", "dracc_version": __version__,
-                   "logs": count_logs(result.table),
-                   "vessels": sorted(result.table["vessel"].dropna().unique().tolist()),
-                   "analysed": result.analysed, "cached": result.cached,
-                   "failures": list(result.failures)}
+            put(
+                Path("vessels", vessel, "fleet.csv"), result.table[result.table["vessel"] == vessel]
+            )
+            put(
+                Path("vessels", vessel, "trends.csv"),
+                result.trends[result.trends["vessel"] == vessel],
+            )
+        summary = {
+            "schema": "dracc.fleet/1",
+            "dracc_version": __version__,
+            "logs": count_logs(result.table),
+            "vessels": sorted(result.table["vessel"].dropna().unique().tolist()),
+            "analysed": result.analysed,
+            "cached": result.cached,
+            "failures": list(result.failures),
+        }
         put(Path("fleet.json"), json.dumps(summary, indent=1, ensure_ascii=False) + "\n")
         for name, text in (extra or {}).items():
             put(Path(name), text)
@@ -637,6 +798,22 @@ def write_tables(result: FleetResult, out: Path, extra: Mapping[str, str] | None
     return [root / r for r in rels]
 
 
-__all__ = ["CHANNELS", "FleetConfig", "FleetError", "FleetResult", "LogTask", "analyse_log",
-           "count_logs", "discover", "fleet_config", "fleet_table", "fleet_trends", "inside", "run_fleet",
-           "safe_name", "summarise", "write_tables", "csv_text"]
+__all__ = [
+    "CHANNELS",
+    "FleetConfig",
+    "FleetError",
+    "FleetResult",
+    "LogTask",
+    "analyse_log",
+    "count_logs",
+    "discover",
+    "fleet_config",
+    "fleet_table",
+    "fleet_trends",
+    "inside",
+    "run_fleet",
+    "safe_name",
+    "summarise",
+    "write_tables",
+    "csv_text",
+]

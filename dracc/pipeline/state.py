@@ -56,8 +56,12 @@ from dracc.core.errors import ConfigError, DraccError
 SCHEMA_VERSION = 2
 
 #: columns added to ``nights`` after version 1: (name, SQL type), in order
-_NIGHT_COLUMNS_V2 = (("dr_verdict", "TEXT"), ("dr_verdict_text", "TEXT"),
-                     ("dr_consistent", "INTEGER"), ("dr_nees", "REAL"))
+_NIGHT_COLUMNS_V2 = (
+    ("dr_verdict", "TEXT"),
+    ("dr_verdict_text", "TEXT"),
+    ("dr_consistent", "INTEGER"),
+    ("dr_nees", "REAL"),
+)
 
 #: channels in the paper's order (latitude, longitude, course), for ORDER BY
 _CHANNEL_ORDER = "CASE channel WHEN 'lat' THEN 0 WHEN 'lon' THEN 1 WHEN 'course' THEN 2 ELSE 3 END"
@@ -266,8 +270,9 @@ class StateStore:
             # Switching a new file to WAL takes an exclusive lock, and SQLite answers
             # SQLITE_BUSY at once, without the busy handler, when another process holds
             # it (two audits creating the same new database): retried until the deadline.
-            mode = _retry_busy(lambda: self.conn.execute("PRAGMA journal_mode = WAL").fetchone()[0],
-                               deadline)
+            mode = _retry_busy(
+                lambda: self.conn.execute("PRAGMA journal_mode = WAL").fetchone()[0], deadline
+            )
             self.conn.execute("PRAGMA synchronous = FULL")
             self.conn.execute("PRAGMA foreign_keys = ON")
             _retry_busy(self._init_schema, deadline)
@@ -297,8 +302,9 @@ class StateStore:
         state and then race to write (they wait for each other up to the busy timeout).
         """
         try:
-            _retry_busy(lambda: self.conn.execute("BEGIN IMMEDIATE"),
-                        time.monotonic() + self.busy_timeout_s)
+            _retry_busy(
+                lambda: self.conn.execute("BEGIN IMMEDIATE"), time.monotonic() + self.busy_timeout_s
+            )
         except sqlite3.OperationalError as err:
             raise StateError(f"{self.path}: database busy or locked: {err}") from err
         try:
@@ -319,7 +325,9 @@ class StateStore:
                     c.execute(stmt)
             row = c.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()
             if row is None:
-                c.execute("INSERT INTO meta (key, value) VALUES ('schema', ?)", (str(SCHEMA_VERSION),))
+                c.execute(
+                    "INSERT INTO meta (key, value) VALUES ('schema', ?)", (str(SCHEMA_VERSION),)
+                )
                 return
             try:
                 version = int(row[0])
@@ -328,8 +336,10 @@ class StateStore:
             if version == 1:
                 self._migrate_1_to_2(c)
             elif version != SCHEMA_VERSION:
-                raise StateError(f"{self.path}: audit database schema {row[0]} is not the supported "
-                                 f"{SCHEMA_VERSION}")
+                raise StateError(
+                    f"{self.path}: audit database schema {row[0]} is not the supported "
+                    f"{SCHEMA_VERSION}"
+                )
 
     @staticmethod
     def _migrate_1_to_2(c: sqlite3.Connection) -> None:
@@ -344,8 +354,9 @@ class StateStore:
 
     def night(self, vessel: str, night: str) -> NightRecord | None:
         """The stored record of one night, or None."""
-        row = self.conn.execute("SELECT * FROM nights WHERE vessel = ? AND night = ?",
-                                (vessel, night)).fetchone()
+        row = self.conn.execute(
+            "SELECT * FROM nights WHERE vessel = ? AND night = ?", (vessel, night)
+        ).fetchone()
         return None if row is None else self._record(row)
 
     def nights(self, vessel: str | None = None) -> list[NightRecord]:
@@ -353,26 +364,34 @@ class StateStore:
         if vessel is None:
             rows = self.conn.execute("SELECT * FROM nights ORDER BY vessel, night").fetchall()
         else:
-            rows = self.conn.execute("SELECT * FROM nights WHERE vessel = ? ORDER BY night",
-                                     (vessel,)).fetchall()
+            rows = self.conn.execute(
+                "SELECT * FROM nights WHERE vessel = ? ORDER BY night", (vessel,)
+            ).fetchall()
         return [self._record(r) for r in rows]
 
     def vessels(self) -> list[str]:
-        return [r[0] for r in self.conn.execute("SELECT DISTINCT vessel FROM nights ORDER BY vessel")]
+        return [
+            r[0] for r in self.conn.execute("SELECT DISTINCT vessel FROM nights ORDER BY vessel")
+        ]
 
-    def history(self, vessel: str | None = None, unit: str | None = None,
-                channel: str | None = None) -> list[dict]:
+    def history(
+        self, vessel: str | None = None, unit: str | None = None, channel: str | None = None
+    ) -> list[dict]:
         """Per-night statistics, one dict per vessel, night, unit and channel, in time order."""
-        sql = ("SELECT n.vessel, n.night, s.unit, s.channel, s.measure, s.n, s.m_u, s.m_y, "
-               "s.kurtosis, s.limit_error, s.apriori_before, s.apriori_after, s.verdict, "
-               "n.dr_containment_2m, n.compass_error_deg, n.log_scale "
-               "FROM unit_stats s JOIN nights n ON n.id = s.night_id WHERE 1 = 1")
+        sql = (
+            "SELECT n.vessel, n.night, s.unit, s.channel, s.measure, s.n, s.m_u, s.m_y, "
+            "s.kurtosis, s.limit_error, s.apriori_before, s.apriori_after, s.verdict, "
+            "n.dr_containment_2m, n.compass_error_deg, n.log_scale "
+            "FROM unit_stats s JOIN nights n ON n.id = s.night_id WHERE 1 = 1"
+        )
         args: list = []
         for col, val in (("n.vessel", vessel), ("s.unit", unit), ("s.channel", channel)):
             if val is not None:
                 sql += f" AND {col} = ?"
                 args.append(val)
-        sql += f" ORDER BY n.vessel, s.unit, {_CHANNEL_ORDER.replace('channel', 's.channel')}, n.night"
+        sql += (
+            f" ORDER BY n.vessel, s.unit, {_CHANNEL_ORDER.replace('channel', 's.channel')}, n.night"
+        )
         return [dict(r) for r in self.conn.execute(sql, args)]
 
     def apriori_events(self, vessel: str | None = None) -> list[AprioriEvent]:
@@ -382,30 +401,65 @@ class StateStore:
             sql += " WHERE vessel = ?"
             args = (vessel,)
         sql += f" ORDER BY vessel, unit, {_CHANNEL_ORDER}, night"
-        return [AprioriEvent(r["vessel"], r["unit"], r["channel"], r["night"], r["value"],
-                             r["previous"], r["reason"], json.loads(r["evidence_json"]))
-                for r in self.conn.execute(sql, args)]
+        return [
+            AprioriEvent(
+                r["vessel"],
+                r["unit"],
+                r["channel"],
+                r["night"],
+                r["value"],
+                r["previous"],
+                r["reason"],
+                json.loads(r["evidence_json"]),
+            )
+            for r in self.conn.execute(sql, args)
+        ]
 
     def _channels(self, night_id: int) -> tuple[ChannelRow, ...]:
-        rows = self.conn.execute(f"SELECT * FROM unit_stats WHERE night_id = ? ORDER BY unit, {_CHANNEL_ORDER}",
-                                 (night_id,)).fetchall()
-        return tuple(ChannelRow(r["unit"], r["channel"], r["n"], r["m_u"], r["m_y"], r["kurtosis"],
-                                r["limit_error"], r["apriori_before"], r["apriori_after"],
-                                r["verdict"]) for r in rows)
+        rows = self.conn.execute(
+            f"SELECT * FROM unit_stats WHERE night_id = ? ORDER BY unit, {_CHANNEL_ORDER}",
+            (night_id,),
+        ).fetchall()
+        return tuple(
+            ChannelRow(
+                r["unit"],
+                r["channel"],
+                r["n"],
+                r["m_u"],
+                r["m_y"],
+                r["kurtosis"],
+                r["limit_error"],
+                r["apriori_before"],
+                r["apriori_after"],
+                r["verdict"],
+            )
+            for r in rows
+        )
 
     def _record(self, r: sqlite3.Row) -> NightRecord:
         return NightRecord(
-            vessel=r["vessel"], night=r["night"], content_sha256=r["content_sha256"],
-            settings_sha256=r["settings_sha256"], audited_utc=r["audited_utc"],
-            period_start_utc=r["period_start_utc"], period_end_utc=r["period_end_utc"],
-            inputs=tuple(json.loads(r["inputs_json"])), sources=json.loads(r["sources_json"]),
-            lines=r["lines"], rejected=r["rejected"], rejected_rate=r["rejected_rate"],
-            dr_containment_2m=r["dr_containment_2m"], dr_n_scored=r["dr_n_scored"],
+            vessel=r["vessel"],
+            night=r["night"],
+            content_sha256=r["content_sha256"],
+            settings_sha256=r["settings_sha256"],
+            audited_utc=r["audited_utc"],
+            period_start_utc=r["period_start_utc"],
+            period_end_utc=r["period_end_utc"],
+            inputs=tuple(json.loads(r["inputs_json"])),
+            sources=json.loads(r["sources_json"]),
+            lines=r["lines"],
+            rejected=r["rejected"],
+            rejected_rate=r["rejected_rate"],
+            dr_containment_2m=r["dr_containment_2m"],
+            dr_n_scored=r["dr_n_scored"],
             compass_error_deg=r["compass_error_deg"],
             compass_error_sigma_deg=r["compass_error_sigma_deg"],
-            log_scale=r["log_scale"], log_scale_sigma=r["log_scale_sigma"],
-            findings=tuple(json.loads(r["findings_json"])), missing=tuple(json.loads(r["missing_json"])),
-            channels=self._channels(r["id"]), dr_verdict=r["dr_verdict"],
+            log_scale=r["log_scale"],
+            log_scale_sigma=r["log_scale_sigma"],
+            findings=tuple(json.loads(r["findings_json"])),
+            missing=tuple(json.loads(r["missing_json"])),
+            channels=self._channels(r["id"]),
+            dr_verdict=r["dr_verdict"],
             dr_verdict_text=r["dr_verdict_text"],
             dr_consistent=None if r["dr_consistent"] is None else bool(r["dr_consistent"]),
             dr_nees=r["dr_nees"],
@@ -415,7 +469,9 @@ class StateStore:
 
     def delete_night(self, vessel: str, night: str) -> bool:
         """Remove one night (its statistics go with it); True if there was one."""
-        cur = self.conn.execute("DELETE FROM nights WHERE vessel = ? AND night = ?", (vessel, night))
+        cur = self.conn.execute(
+            "DELETE FROM nights WHERE vessel = ? AND night = ?", (vessel, night)
+        )
         return cur.rowcount > 0
 
     def insert_night(self, rec: NightRecord) -> int:
@@ -427,35 +483,75 @@ class StateStore:
             "compass_error_sigma_deg, log_scale, log_scale_sigma, findings_json, missing_json, "
             "dr_verdict, dr_verdict_text, dr_consistent, dr_nees) "
             "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            (rec.vessel, rec.night, rec.content_sha256, rec.settings_sha256, rec.audited_utc,
-             rec.period_start_utc, rec.period_end_utc, json.dumps(list(rec.inputs)),
-             json.dumps(rec.sources, sort_keys=True), rec.lines, rec.rejected,
-             _none_if_nan(rec.rejected_rate), _none_if_nan(rec.dr_containment_2m), rec.dr_n_scored,
-             _none_if_nan(rec.compass_error_deg), _none_if_nan(rec.compass_error_sigma_deg),
-             _none_if_nan(rec.log_scale), _none_if_nan(rec.log_scale_sigma),
-             json.dumps(list(rec.findings), sort_keys=True), json.dumps(list(rec.missing)),
-             rec.dr_verdict, rec.dr_verdict_text,
-             None if rec.dr_consistent is None else int(bool(rec.dr_consistent)),
-             _none_if_nan(rec.dr_nees)))
+            (
+                rec.vessel,
+                rec.night,
+                rec.content_sha256,
+                rec.settings_sha256,
+                rec.audited_utc,
+                rec.period_start_utc,
+                rec.period_end_utc,
+                json.dumps(list(rec.inputs)),
+                json.dumps(rec.sources, sort_keys=True),
+                rec.lines,
+                rec.rejected,
+                _none_if_nan(rec.rejected_rate),
+                _none_if_nan(rec.dr_containment_2m),
+                rec.dr_n_scored,
+                _none_if_nan(rec.compass_error_deg),
+                _none_if_nan(rec.compass_error_sigma_deg),
+                _none_if_nan(rec.log_scale),
+                _none_if_nan(rec.log_scale_sigma),
+                json.dumps(list(rec.findings), sort_keys=True),
+                json.dumps(list(rec.missing)),
+                rec.dr_verdict,
+                rec.dr_verdict_text,
+                None if rec.dr_consistent is None else int(bool(rec.dr_consistent)),
+                _none_if_nan(rec.dr_nees),
+            ),
+        )
         night_id = int(cur.lastrowid)
         self.conn.executemany(
             "INSERT INTO unit_stats (night_id, unit, channel, measure, n, m_u, m_y, kurtosis, "
             "limit_error, apriori_before, apriori_after, verdict) "
             "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            [(night_id, c.unit, c.channel, c.measure, int(c.n), _none_if_nan(c.m_u),
-              _none_if_nan(c.m_y), _none_if_nan(c.kurtosis), _none_if_nan(c.limit_error),
-              _none_if_nan(c.apriori_before), _none_if_nan(c.apriori_after), c.verdict)
-             for c in rec.channels])
+            [
+                (
+                    night_id,
+                    c.unit,
+                    c.channel,
+                    c.measure,
+                    int(c.n),
+                    _none_if_nan(c.m_u),
+                    _none_if_nan(c.m_y),
+                    _none_if_nan(c.kurtosis),
+                    _none_if_nan(c.limit_error),
+                    _none_if_nan(c.apriori_before),
+                    _none_if_nan(c.apriori_after),
+                    c.verdict,
+                )
+                for c in rec.channels
+            ],
+        )
         return night_id
 
-    def set_channel_apriori(self, vessel: str, night: str, unit: str, channel: str,
-                            before: float | None, after: float | None, verdict: str) -> None:
+    def set_channel_apriori(
+        self,
+        vessel: str,
+        night: str,
+        unit: str,
+        channel: str,
+        before: float | None,
+        after: float | None,
+        verdict: str,
+    ) -> None:
         """Store the outcome of the monitoring rule for one night, unit and channel."""
         self.conn.execute(
             "UPDATE unit_stats SET apriori_before = ?, apriori_after = ?, verdict = ? "
             "WHERE unit = ? AND channel = ? AND night_id = "
             "(SELECT id FROM nights WHERE vessel = ? AND night = ?)",
-            (_none_if_nan(before), _none_if_nan(after), verdict, unit, channel, vessel, night))
+            (_none_if_nan(before), _none_if_nan(after), verdict, unit, channel, vessel, night),
+        )
 
     def replace_apriori_events(self, vessel: str, events: Sequence[AprioriEvent]) -> None:
         """Replace the a priori history of one vessel (it is recomputed from all its nights)."""
@@ -463,5 +559,17 @@ class StateStore:
         self.conn.executemany(
             "INSERT INTO apriori (vessel, unit, channel, night, value, previous, reason, evidence_json) "
             "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-            [(e.vessel, e.unit, e.channel, e.night, float(e.value), _none_if_nan(e.previous),
-              e.reason, json.dumps(e.evidence, sort_keys=True)) for e in events])
+            [
+                (
+                    e.vessel,
+                    e.unit,
+                    e.channel,
+                    e.night,
+                    float(e.value),
+                    _none_if_nan(e.previous),
+                    e.reason,
+                    json.dumps(e.evidence, sort_keys=True),
+                )
+                for e in events
+            ],
+        )

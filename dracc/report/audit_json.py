@@ -29,8 +29,20 @@ def finding_dict(f: Finding) -> dict:
     """One finding with the contract keys first (check, source, role, clause, statistic,
     threshold, window, evidence, message)."""
     d = asdict(f)
-    head = {k: d.pop(k) for k in ("check", "source", "role", "clause", "statistic", "threshold",
-                                  "window", "evidence", "message")}
+    head = {
+        k: d.pop(k)
+        for k in (
+            "check",
+            "source",
+            "role",
+            "clause",
+            "statistic",
+            "threshold",
+            "window",
+            "evidence",
+            "message",
+        )
+    }
     head["kind"] = d.pop("kind")
     head["subject"] = d.pop("subject")
     head["false_alarm"] = d.pop("false_alarm")
@@ -40,10 +52,22 @@ def finding_dict(f: Finding) -> dict:
 def to_dict(o: AuditOutcome, analysis: Mapping | None) -> dict:
     """The audit document of one night."""
     r = o.record
-    channels = [{"unit": c.unit, "channel": c.channel, "measure": c.measure, "n": c.n, "m_u": c.m_u,
-                 "m_y": c.m_y, "kurtosis": c.kurtosis, "limit_error": c.limit_error,
-                 "apriori_before": c.apriori_before, "apriori_after": c.apriori_after,
-                 "verdict": c.verdict} for c in r.channels]
+    channels = [
+        {
+            "unit": c.unit,
+            "channel": c.channel,
+            "measure": c.measure,
+            "n": c.n,
+            "m_u": c.m_u,
+            "m_y": c.m_y,
+            "kurtosis": c.kurtosis,
+            "limit_error": c.limit_error,
+            "apriori_before": c.apriori_before,
+            "apriori_after": c.apriori_after,
+            "verdict": c.verdict,
+        }
+        for c in r.channels
+    ]
     doc = {
         "schema": SCHEMA,
         "dracc_version": __version__,
@@ -53,22 +77,42 @@ def to_dict(o: AuditOutcome, analysis: Mapping | None) -> dict:
         "exit_code": int(o.exit_code),
         "state": o.status,
         "audited_utc": r.audited_utc,
-        "logs": {"files": list(r.inputs), "lines": r.lines, "rejected": r.rejected,
-                 "rejected_rate": r.rejected_rate, "ignored": dict(o.ignored),
-                 "period": {"start_utc": r.period_start_utc, "end_utc": r.period_end_utc}},
+        "logs": {
+            "files": list(r.inputs),
+            "lines": r.lines,
+            "rejected": r.rejected,
+            "rejected_rate": r.rejected_rate,
+            "ignored": dict(o.ignored),
+            "period": {"start_utc": r.period_start_utc, "end_utc": r.period_end_utc},
+        },
         "sources": dict(r.sources),
         "findings": [finding_dict(f) for f in o.findings],
         "not_checked": [dict(n) for n in o.not_checked],
         "false_alarm_per_night": o.false_alarm_per_night,
         "accuracy": dict(o.accuracy),
         "ins": channels,
-        "apriori_events": [{"unit": e.unit, "channel": e.channel, "value": e.value,
-                            "previous": e.previous, "reason": e.reason} for e in o.apriori_events],
-        "dead_reckoning": {"verdict": r.dr_verdict, "verdict_text": r.dr_verdict_text,
-                           "containment_2m": r.dr_containment_2m, "nees": r.dr_nees},
-        "calibration": {"compass_error_deg": r.compass_error_deg,
-                        "compass_error_sigma_deg": r.compass_error_sigma_deg,
-                        "log_scale": r.log_scale, "log_scale_sigma": r.log_scale_sigma},
+        "apriori_events": [
+            {
+                "unit": e.unit,
+                "channel": e.channel,
+                "value": e.value,
+                "previous": e.previous,
+                "reason": e.reason,
+            }
+            for e in o.apriori_events
+        ],
+        "dead_reckoning": {
+            "verdict": r.dr_verdict,
+            "verdict_text": r.dr_verdict_text,
+            "containment_2m": r.dr_containment_2m,
+            "nees": r.dr_nees,
+        },
+        "calibration": {
+            "compass_error_deg": r.compass_error_deg,
+            "compass_error_sigma_deg": r.compass_error_sigma_deg,
+            "log_scale": r.log_scale,
+            "log_scale_sigma": r.log_scale_sigma,
+        },
         "missing": list(r.missing),
         "analysis": analysis,
     }
@@ -77,5 +121,6 @@ def to_dict(o: AuditOutcome, analysis: Mapping | None) -> dict:
 
 def write_json(o: AuditOutcome, analysis: Mapping | None, path: str | Path) -> None:
     """Write the audit document atomically."""
-    atomic.write_text(path, json.dumps(to_dict(o, analysis), indent=1, allow_nan=False,
-                                       ensure_ascii=False) + "\n")
+    atomic.write_text(
+        path, json.dumps(to_dict(o, analysis), indent=1, allow_nan=False, ensure_ascii=False) + "\n"
+    )

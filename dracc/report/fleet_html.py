@@ -43,9 +43,12 @@ def latest(table: pd.DataFrame) -> pd.DataFrame:
         return ok
     # logs without INS statistics keep one row (unit and channel empty) for DR and calibration
     last = ok.groupby(["vessel", "unit", "channel"], sort=True, dropna=False).tail(1).copy()
-    span = ok.groupby("vessel").agg(first_day=("day", "min"), last_day=("day", "max"),
-                                    logs=("log", "nunique"))
-    return last.join(span, on="vessel").sort_values(["vessel", "unit", "channel"], na_position="last")
+    span = ok.groupby("vessel").agg(
+        first_day=("day", "min"), last_day=("day", "max"), logs=("log", "nunique")
+    )
+    return last.join(span, on="vessel").sort_values(
+        ["vessel", "unit", "channel"], na_position="last"
+    )
 
 
 def trend_plot(trends: pd.DataFrame, vessel: str) -> bytes | None:
@@ -55,11 +58,17 @@ def trend_plot(trends: pd.DataFrame, vessel: str) -> bytes | None:
     t = trends[trends["vessel"] == vessel]
     if t.empty:
         return None
-    lines = {c: [(unit, pd.to_datetime(g["day"].astype(str)), g["m_y"], g["apriori_after"])
-                 for unit, g in t[t["channel"] == c].groupby("unit")]
-             for c in ("lat", "lon", "course") if (t["channel"] == c).any()}
-    return m_y_apriori_plot(lines, f"{vessel}: daily RMS error from deviations (pooled m_y) and a priori",
-                            2.2, dpi=_DPI)
+    lines = {
+        c: [
+            (unit, pd.to_datetime(g["day"].astype(str)), g["m_y"], g["apriori_after"])
+            for unit, g in t[t["channel"] == c].groupby("unit")
+        ]
+        for c in ("lat", "lon", "course")
+        if (t["channel"] == c).any()
+    }
+    return m_y_apriori_plot(
+        lines, f"{vessel}: daily RMS error from deviations (pooled m_y) and a priori", 2.2, dpi=_DPI
+    )
 
 
 def containment_plot(table: pd.DataFrame) -> bytes | None:
@@ -91,18 +100,39 @@ def fleet_html(res: FleetResult) -> str:
     """One self-contained page (offline): fleet table of latest figures, plots, failures."""
     e = html.escape
     _f, _fu, _s = fmt_num, fmt_num_unit, cell_text
-    parts = [page_head("dracc fleet report",
-                       "td:nth-child(-n+3),th:nth-child(-n+3){text-align:left}.bad{color:#b00}"),
-             f"<p>{count_logs(res.table)} logs of {res.table['vessel'].nunique()} vessels; "
-             f"{res.analysed} analysed in this run, {res.cached} from the cache, "
-             f"{len(res.failures)} failed.</p>"]
+    parts = [
+        page_head(
+            "dracc fleet report",
+            "td:nth-child(-n+3),th:nth-child(-n+3){text-align:left}.bad{color:#b00}",
+        ),
+        f"<p>{count_logs(res.table)} logs of {res.table['vessel'].nunique()} vessels; "
+        f"{res.analysed} analysed in this run, {res.cached} from the cache, "
+        f"{len(res.failures)} failed.</p>",
+    ]
     lt = latest(res.table)
     if not lt.empty:
-        parts.append("<h2>Latest figures per vessel, unit and channel</h2><table><tr>"
-                     + "".join(f"<th>{h}</th>" for h in (
-                         "vessel", "unit", "channel", "days", "logs", "m_y", "kurtosis",
-                         "limiting error", "a priori", "verdict", "DR in 2M", "compass error",
-                         "log scale")) + "</tr>")
+        parts.append(
+            "<h2>Latest figures per vessel, unit and channel</h2><table><tr>"
+            + "".join(
+                f"<th>{h}</th>"
+                for h in (
+                    "vessel",
+                    "unit",
+                    "channel",
+                    "days",
+                    "logs",
+                    "m_y",
+                    "kurtosis",
+                    "limiting error",
+                    "a priori",
+                    "verdict",
+                    "DR in 2M",
+                    "compass error",
+                    "log scale",
+                )
+            )
+            + "</tr>"
+        )
         for _, r in lt.iterrows():
             d = 3 if _s(r["measure"]) == "deg" else 1
             c = r["dr_containment_2m"]
@@ -114,7 +144,8 @@ def fleet_html(res: FleetResult) -> str:
                 f"<td>{_f(r['limit'], d)}</td><td>{_f(r['apriori_after'], d)}</td>"
                 f"<td>{e(_s(r['apriori_verdict']))}</td>"
                 f"<td>{'-' if pd.isna(c) else f'{100 * c:.1f} %'}</td>"
-                f"<td>{_fu(r['compass_error_deg'], 2, '°')}</td><td>{_fu(r['log_scale_pct'], 2, ' %')}</td></tr>")
+                f"<td>{_fu(r['compass_error_deg'], 2, '°')}</td><td>{_fu(r['log_scale_pct'], 2, ' %')}</td></tr>"
+            )
         parts.append("</table>")
     png = containment_plot(res.table)
     if png:
@@ -125,7 +156,9 @@ def fleet_html(res: FleetResult) -> str:
             parts.append(f"<h2>{e(str(v))}</h2>" + img_tag(png, f"trend of {e(str(v))}"))
     if res.failures:
         parts.append("<h2 class='bad'>Failures</h2><ul>")
-        parts += [f"<li>{e(f['vessel'])} / {e(f['log'])}: {e(f['error'])}</li>" for f in res.failures]
+        parts += [
+            f"<li>{e(f['vessel'])} / {e(f['log'])}: {e(f['error'])}</li>" for f in res.failures
+        ]
         parts.append("</ul>")
     parts.append(PAGE_END)
     return "\n".join(parts)

@@ -46,18 +46,27 @@ def _e(text) -> str:
 
 def _table(headers: list[str], rows: list[list[str]], left: int = 1) -> str:
     """An HTML table; cells are already escaped; the first ``left`` columns align left."""
-    head = "".join(f'<th class="l">{h}</th>' if i < left else f"<th>{h}</th>"
-                   for i, h in enumerate(headers))
-    body = "".join("<tr>" + "".join(f'<td class="l">{c}</td>' if i < left else f"<td>{c}</td>"
-                                    for i, c in enumerate(r)) + "</tr>" for r in rows)
+    head = "".join(
+        f'<th class="l">{h}</th>' if i < left else f"<th>{h}</th>" for i, h in enumerate(headers)
+    )
+    body = "".join(
+        "<tr>"
+        + "".join(
+            f'<td class="l">{c}</td>' if i < left else f"<td>{c}</td>" for i, c in enumerate(r)
+        )
+        + "</tr>"
+        for r in rows
+    )
     return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
 
 
 def _figure(png: bytes | None, alt: str, caption: str, fig_id: str) -> str:
     if png is None:
         return f'<p class="missing">{_e(caption)}: nothing to plot (see Missing).</p>'
-    return (f'<figure id="{fig_id}"><img alt="{_e(alt)}" src="{data_uri(png)}">'
-            f"<figcaption>{_e(caption)}</figcaption></figure>")
+    return (
+        f'<figure id="{fig_id}"><img alt="{_e(alt)}" src="{data_uri(png)}">'
+        f"<figcaption>{_e(caption)}</figcaption></figure>"
+    )
 
 
 def _est(e: Estimate | None, unit: str, digits: int = 2, scale: float = 1.0) -> str:
@@ -68,33 +77,64 @@ def _est(e: Estimate | None, unit: str, digits: int = 2, scale: float = 1.0) -> 
 
 def _summary(a: Analysis) -> str:
     rows = [
-        ("period", f"{short_utc(a.start_ns)} → {short_utc(a.end_ns)} ({fmt_duration(a.duration_s)})"),
-        ("inputs", "<br>".join(f"{_e(f.path)} ({_e(f.format)}, {f.lines:,} lines, "
-                               f"{f.records:,} records)" for f in a.inputs)),
-        ("rejected lines", ", ".join(f"{_e(k)}: {v:,}" for k, v in sorted(a.rejected.items()))
-         or "none"),
-        ("ignored (valid, unused)", ", ".join(f"{_e(k)}: {v:,}" for k, v in sorted(a.ignored.items()))
-         or "none"),
+        (
+            "period",
+            f"{short_utc(a.start_ns)} → {short_utc(a.end_ns)} ({fmt_duration(a.duration_s)})",
+        ),
+        (
+            "inputs",
+            "<br>".join(
+                f"{_e(f.path)} ({_e(f.format)}, {f.lines:,} lines, {f.records:,} records)"
+                for f in a.inputs
+            ),
+        ),
+        (
+            "rejected lines",
+            ", ".join(f"{_e(k)}: {v:,}" for k, v in sorted(a.rejected.items())) or "none",
+        ),
+        (
+            "ignored (valid, unused)",
+            ", ".join(f"{_e(k)}: {v:,}" for k, v in sorted(a.ignored.items())) or "none",
+        ),
     ]
     if a.integrity is not None:
         failed = a.integrity.failed
-        text = (f'<span class="bad">{len(failed)} of {len(a.integrity.checks)} checks failed</span>: '
-                + "; ".join(_e(f"[{c.check}] {c.message}") for c in failed) if failed
-                else f'<span class="ok">all {len(a.integrity.checks)} checks passed</span>')
+        text = (
+            f'<span class="bad">{len(failed)} of {len(a.integrity.checks)} checks failed</span>: '
+            + "; ".join(_e(f"[{c.check}] {c.message}") for c in failed)
+            if failed
+            else f'<span class="ok">all {len(a.integrity.checks)} checks passed</span>'
+        )
         rows.append(("integrity", text))
     te = a.time
-    rows.append(("time events", f"{te.duplicates} duplicates, {te.backsteps} back-steps, "
-                 f"{te.gaps} gaps, {te.rollovers} midnight rollovers, "
-                 f"{te.implausible_dates} implausible dates"))
+    rows.append(
+        (
+            "time events",
+            f"{te.duplicates} duplicates, {te.backsteps} back-steps, "
+            f"{te.gaps} gaps, {te.rollovers} midnight rollovers, "
+            f"{te.implausible_dates} implausible dates",
+        )
+    )
     dr = a.dead_reckoning
     if dr is not None:
         cls = "ok" if dr.consistent else ("bad" if dr.consistent is False else "")
         rows.append(("dead reckoning", f'<span class="{cls}">{_e(dr.verdict)}</span>'))
     kv = "".join(f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in rows)
-    src = _table(["source", "roles", "records", "sentences", "first", "last"],
-                 [[_e(s.key), _e("+".join(s.roles) or "(none)"), f"{s.records:,}",
-                   _e(" ".join(f"{k}:{v}" for k, v in sorted(s.sentences.items()))),
-                   short_utc(s.first_ns), short_utc(s.last_ns)] for s in a.sources], left=2)
+    src = _table(
+        ["source", "roles", "records", "sentences", "first", "last"],
+        [
+            [
+                _e(s.key),
+                _e("+".join(s.roles) or "(none)"),
+                f"{s.records:,}",
+                _e(" ".join(f"{k}:{v}" for k, v in sorted(s.sentences.items()))),
+                short_utc(s.first_ns),
+                short_utc(s.last_ns),
+            ]
+            for s in a.sources
+        ],
+        left=2,
+    )
     return f'<table class="kv">{kv}</table><h3>Sources</h3>{src}'
 
 
@@ -112,37 +152,88 @@ def _units(a: Analysis) -> str:
                 verdict = '<span class="ok">within</span>'
             else:
                 verdict = r.verdict
-            hat = "-" if not r.has_hat else ('<span class="bad">negative variance</span>'
-                                             if r.hat_negative else
-                                             f"{r.hat_sigma} [{_e(r.hat_lower)}, {_e(r.hat_upper)}]")
-            rows.append([_e(r.unit), r.channel_text, r.n, r.m_u, r.m_y, r.kurtosis, r.limit,
-                         r.apriori, verdict, hat, r.ref_rms, _e(r.k_star)])
+            hat = (
+                "-"
+                if not r.has_hat
+                else (
+                    '<span class="bad">negative variance</span>'
+                    if r.hat_negative
+                    else f"{r.hat_sigma} [{_e(r.hat_lower)}, {_e(r.hat_upper)}]"
+                )
+            )
+            rows.append(
+                [
+                    _e(r.unit),
+                    r.channel_text,
+                    r.n,
+                    r.m_u,
+                    r.m_y,
+                    r.kurtosis,
+                    r.limit,
+                    r.apriori,
+                    verdict,
+                    hat,
+                    r.ref_rms,
+                    _e(r.k_star),
+                ]
+            )
     fac = ", ".join(f"{ch} {fmt(d.factors[ch], 3)}" for ch in CHANNELS)
-    intro = (f"<p>{len(d.units)} units sampled every {fmt_duration(d.interval_s)} at "
-             f"{len(d.time_ns)} instants; m<sub>y</sub> = k·m<sub>u</sub> with k: {fac}; kurtosis is "
-             f"<em>excess</em> kurtosis (0 for a normal distribution); limits at P = {p}.</p>")
+    intro = (
+        f"<p>{len(d.units)} units sampled every {fmt_duration(d.interval_s)} at "
+        f"{len(d.time_ns)} instants; m<sub>y</sub> = k·m<sub>u</sub> with k: {fac}; kurtosis is "
+        f"<em>excess</em> kurtosis (0 for a normal distribution); limits at P = {p}.</p>"
+    )
     notes = "".join(f"<p>{_e(n)}</p>" for n in d.messages)
-    table = _table(["unit", "channel", "n", "m_u", "m_y", "excess kurtosis", f"limit {p}",
-                    "a priori", "a priori verdict", "hat σ [bounds]", "ref RMS", "k*"], rows, left=2)
+    table = _table(
+        [
+            "unit",
+            "channel",
+            "n",
+            "m_u",
+            "m_y",
+            "excess kurtosis",
+            f"limit {p}",
+            "a priori",
+            "a priori verdict",
+            "hat σ [bounds]",
+            "ref RMS",
+            "k*",
+        ],
+        rows,
+        left=2,
+    )
     windows = ""
     if d.windows:
         wrows = []
         for w in d.windows:
             for name, u in w.units.items():
                 for r in channel_rows(name, u):
-                    wrows.append([_e(w.label), _e(r.unit), r.channel, r.n, r.m_u, r.m_y,
-                                  r.kurtosis, _e(r.k_star)])
-        windows = ("<h3>Per window</h3>" + _table(["window", "unit", "channel", "n", "m_u", "m_y",
-                                                   "excess kurtosis", "k*"], wrows, left=3))
+                    wrows.append(
+                        [
+                            _e(w.label),
+                            _e(r.unit),
+                            r.channel,
+                            r.n,
+                            r.m_u,
+                            r.m_y,
+                            r.kurtosis,
+                            _e(r.k_star),
+                        ]
+                    )
+        windows = "<h3>Per window</h3>" + _table(
+            ["window", "unit", "channel", "n", "m_u", "m_y", "excess kurtosis", "k*"], wrows, left=3
+        )
     return intro + table + notes + windows
 
 
 def _nees(dr) -> str:
     if dr.nees_statistic is None or not math.isfinite(dr.nees_statistic):
         return "-"
-    return (f"{fmt(dr.nees_statistic, 1)} over {len(dr.leg_checks)} legs (χ² bounds "
-            f"{fmt(dr.nees_lower, 1)}–{fmt(dr.nees_upper, 1)}); mean per epoch "
-            f"{fmt(dr.mean_nees, 2)} (2 expected)")
+    return (
+        f"{fmt(dr.nees_statistic, 1)} over {len(dr.leg_checks)} legs (χ² bounds "
+        f"{fmt(dr.nees_lower, 1)}–{fmt(dr.nees_upper, 1)}); mean per epoch "
+        f"{fmt(dr.mean_nees, 2)} (2 expected)"
+    )
 
 
 def _learned(m: dict | None) -> str:
@@ -159,28 +250,47 @@ def _learned(m: dict | None) -> str:
         return fmt_signed(None if v is None else scale * v, digits)
 
     rows = [
-        ("current (persistent)", f"set {g('current_set_deg', 0)}° (towards), drift "
-                                 f"{g('current_drift_kn', 2)} kn"),
-        ("current variation", f"σ {g('current_variation_kn', 2)} kn per axis, τ "
-                              f"{fmt_duration(m.get('current_tau_s') or math.nan)}"),
-        ("heading correction", f"{sg('heading_correction_deg', 2)} ± "
-                               f"{g('heading_correction_sigma_deg', 2)}° (add to the DR course)"),
-        ("log scale correction", f"{sg('log_scale_correction', 2, 100.0)} ± "
-                                 f"{g('log_scale_correction_sigma', 2, 100.0)} % "
-                                 "(V<sub>true</sub> = (1 + s) V<sub>log</sub>)"),
-        ("short-term noise", f"σ {g('noise_kn', 2)} kn per axis, τ "
-                             f"{fmt_duration(m.get('noise_tau_s') or math.nan)}"),
+        (
+            "current (persistent)",
+            f"set {g('current_set_deg', 0)}° (towards), drift {g('current_drift_kn', 2)} kn",
+        ),
+        (
+            "current variation",
+            f"σ {g('current_variation_kn', 2)} kn per axis, τ "
+            f"{fmt_duration(m.get('current_tau_s') or math.nan)}",
+        ),
+        (
+            "heading correction",
+            f"{sg('heading_correction_deg', 2)} ± "
+            f"{g('heading_correction_sigma_deg', 2)}° (add to the DR course)",
+        ),
+        (
+            "log scale correction",
+            f"{sg('log_scale_correction', 2, 100.0)} ± "
+            f"{g('log_scale_correction_sigma', 2, 100.0)} % "
+            "(V<sub>true</sub> = (1 + s) V<sub>log</sub>)",
+        ),
+        (
+            "short-term noise",
+            f"σ {g('noise_kn', 2)} kn per axis, τ {fmt_duration(m.get('noise_tau_s') or math.nan)}",
+        ),
         ("fix noise", f"{g('fix_sigma_m', 1)} m per axis"),
-        ("model", f"the best of {_e(m.get('n_models', '-'))} grid models, weight "
-                  f"{g('model_weight', 3)}; filter step {g('filter_step_s', 0)} s; "
-                  f"{_e(m.get('n_fixes_used', '-'))} fixes used, {_e(m.get('n_outliers', '-'))} "
-                  "outliers left out"),
+        (
+            "model",
+            f"the best of {_e(m.get('n_models', '-'))} grid models, weight "
+            f"{g('model_weight', 3)}; filter step {g('filter_step_s', 0)} s; "
+            f"{_e(m.get('n_fixes_used', '-'))} fixes used, {_e(m.get('n_outliers', '-'))} "
+            "outliers left out",
+        ),
     ]
     kv = "".join(f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in rows)
     block = m.get("config_block")
-    pre = ("" if not block else
-           "<p>To reuse this model where there is no reference, put this block in the "
-           f'configuration (<code>--config</code>):</p><pre class="config">{_e(block)}</pre>')
+    pre = (
+        ""
+        if not block
+        else "<p>To reuse this model where there is no reference, put this block in the "
+        f'configuration (<code>--config</code>):</p><pre class="config">{_e(block)}</pre>'
+    )
     return f'<h3>Learned model</h3><table class="kv" id="dr-learned">{kv}</table>{pre}'
 
 
@@ -188,24 +298,38 @@ def _dr(a: Analysis) -> str:
     dr = a.dead_reckoning
     if dr is None:
         return '<p class="missing">Dead reckoning not computed (see Missing).</p>'
-    position = ("estimated position: the water track plus the current and the compass and log "
-                "corrections learned from earlier fixes" if dr.scored_out_of_sample else
-                "the water track (heading and log; error model as configured, nothing learned)")
+    position = (
+        "estimated position: the water track plus the current and the compass and log "
+        "corrections learned from earlier fixes"
+        if dr.scored_out_of_sample
+        else "the water track (heading and log; error model as configured, nothing learned)"
+    )
     scored = f"{dr.n_scored} epochs after a fix"
     if dr.scored_out_of_sample:
         prior = int(sum((dr.epochs.since_fix_s > 0) & ~dr.epochs.scored.astype(bool)))
-        scored += (", out of sample (each leg's model learned only from fixes before it)"
-                   + (f"; {prior} epochs of earlier legs (prior only) not scored" if prior else ""))
-    rows = [("heading", _e(dr.heading_source)), ("speed", _e(dr.speed_source)),
-            ("restart", _e(dr.reset)), ("legs", str(len(dr.legs))),
-            ("reference", _e(dr.reference_role or "none")),
-            ("position and 2M", _e(position)),
-            ("scored", _e(scored)),
-            ("2M containment", f"{fmt_pct(dr.containment_2m)} of {dr.n_scored} epochs after a fix "
-                               f"(a correct model: {fmt_pct(dr.expected_inside)})"),
-            ("RMS error / M", fmt(dr.error_over_m_rms, 2)),
-            ("NEES", _nees(dr)),
-            ("reference σ", f"{fmt(dr.reference_sigma_m, 1)} m per axis (added to P for the comparison)")]
+        scored += ", out of sample (each leg's model learned only from fixes before it)" + (
+            f"; {prior} epochs of earlier legs (prior only) not scored" if prior else ""
+        )
+    rows = [
+        ("heading", _e(dr.heading_source)),
+        ("speed", _e(dr.speed_source)),
+        ("restart", _e(dr.reset)),
+        ("legs", str(len(dr.legs))),
+        ("reference", _e(dr.reference_role or "none")),
+        ("position and 2M", _e(position)),
+        ("scored", _e(scored)),
+        (
+            "2M containment",
+            f"{fmt_pct(dr.containment_2m)} of {dr.n_scored} epochs after a fix "
+            f"(a correct model: {fmt_pct(dr.expected_inside)})",
+        ),
+        ("RMS error / M", fmt(dr.error_over_m_rms, 2)),
+        ("NEES", _nees(dr)),
+        (
+            "reference σ",
+            f"{fmt(dr.reference_sigma_m, 1)} m per axis (added to P for the comparison)",
+        ),
+    ]
     if dr.dominant_source:
         key = f" (prior: [dead_reckoning] {_e(dr.dominant_key)})" if dr.dominant_key else ""
         rows.append(("largest part of the 2M", f"{_e(dr.dominant_source)}{key}"))
@@ -217,15 +341,41 @@ def _dr(a: Analysis) -> str:
         lc = checks.get(int(leg.index))
         return "-" if lc is None else fmt(getattr(lc, field), digits)
 
-    legs = _table(["leg", "start", "end", "fix", "inside 2M", "scored", "max error [m]",
-                   "mean NEES", "last NEES", "NEES bound"],
-                  [[str(leg.index), _e(iso_utc(leg.start_ns)), _e(iso_utc(leg.end_ns)),
-                    _e(leg.fix_source), fmt_pct(leg.containment_2m), str(leg.n_scored),
-                    fmt(leg.max_error_m, 0), nees(leg, "mean_nees", 2), nees(leg, "last_nees", 2),
-                    nees(leg, "nees_upper", 2)] for leg in dr.legs], left=4)
+    legs = _table(
+        [
+            "leg",
+            "start",
+            "end",
+            "fix",
+            "inside 2M",
+            "scored",
+            "max error [m]",
+            "mean NEES",
+            "last NEES",
+            "NEES bound",
+        ],
+        [
+            [
+                str(leg.index),
+                _e(iso_utc(leg.start_ns)),
+                _e(iso_utc(leg.end_ns)),
+                _e(leg.fix_source),
+                fmt_pct(leg.containment_2m),
+                str(leg.n_scored),
+                fmt(leg.max_error_m, 0),
+                nees(leg, "mean_nees", 2),
+                nees(leg, "last_nees", 2),
+                nees(leg, "nees_upper", 2),
+            ]
+            for leg in dr.legs
+        ],
+        left=4,
+    )
     notes = "".join(f"<p>{_e(n)}</p>" for n in dr.notes)
-    return (f'<table class="kv">{kv}</table>{notes}{_learned(dr.learned)}'
-            f"<details><summary>Legs</summary>{legs}</details>")
+    return (
+        f'<table class="kv">{kv}</table>{notes}{_learned(dr.learned)}'
+        f"<details><summary>Legs</summary>{legs}</details>"
+    )
 
 
 def _calibration_current(a: Analysis) -> str:
@@ -234,19 +384,26 @@ def _calibration_current(a: Analysis) -> str:
     if c is None:
         out.append('<p class="missing">Calibration not computed (see Missing).</p>')
     else:
-        rows = [("against", f"{_e(c.reference_role)} ({c.n} segments of {c.segment_s:g} s)"),
-                ("compass error", _est(c.compass_error_deg, "°")),
-                ("log scale error", _est(c.log_scale, "%", scale=100.0)),
-                ("log offset", _est(c.log_offset_kn, "kn"))]
-        out.append('<table class="kv">' + "".join(f"<tr><td>{k}</td><td>{v}</td></tr>"
-                                                   for k, v in rows) + "</table>")
+        rows = [
+            ("against", f"{_e(c.reference_role)} ({c.n} segments of {c.segment_s:g} s)"),
+            ("compass error", _est(c.compass_error_deg, "°")),
+            ("log scale error", _est(c.log_scale, "%", scale=100.0)),
+            ("log offset", _est(c.log_offset_kn, "kn")),
+        ]
+        out.append(
+            '<table class="kv">'
+            + "".join(f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in rows)
+            + "</table>"
+        )
         out.extend(f"<p>{_e(n)}</p>" for n in c.notes)
     cur = a.current
     if cur is None:
         out.append('<p class="missing">Current not estimated (see Missing).</p>')
     else:
-        out.append(f"<p>Current: set {_est(cur.set_deg, '°', 0)} (towards), drift "
-                   f"{_est(cur.drift_kn, 'kn')}, from {cur.n_updates} fix updates.</p>")
+        out.append(
+            f"<p>Current: set {_est(cur.set_deg, '°', 0)} (towards), drift "
+            f"{_est(cur.drift_kn, 'kn')}, from {cur.n_updates} fix updates.</p>"
+        )
         out.extend(f"<p>{_e(n)}</p>" for n in cur.notes)
     return "".join(out)
 
@@ -258,41 +415,78 @@ def render_html(a: Analysis) -> str:
         title += f" {short_utc(a.start_ns)}"
     missing = ""
     if a.missing:
-        missing = ('<section id="missing"><h2>Missing</h2><div class="missing"><ul>'
-                   + "".join(f"<li>{_e(m)}</li>" for m in a.missing) + "</ul></div></section>")
+        missing = (
+            '<section id="missing"><h2>Missing</h2><div class="missing"><ul>'
+            + "".join(f"<li>{_e(m)}</li>" for m in a.missing)
+            + "</ul></div></section>"
+        )
     faults = ""
     if a.faults:  # dracc.math.faults: shown whenever found, excluded or not
-        faults = ('<section id="faults"><h2>Sensor faults</h2>'
-                  + _table(["kind", "source", "role", "start (UTC)", "end (UTC)", "records", "what was seen"],
-                           [[_e(f.kind), _e(f.source), _e(f.role or "-"), _e(short_utc(f.start_ns)),
-                             _e(short_utc(f.end_ns)), _e(f.n_records), _e(f.message)] for f in a.faults],
-                           left=3)
-                  + "</section>")
+        faults = (
+            '<section id="faults"><h2>Sensor faults</h2>'
+            + _table(
+                ["kind", "source", "role", "start (UTC)", "end (UTC)", "records", "what was seen"],
+                [
+                    [
+                        _e(f.kind),
+                        _e(f.source),
+                        _e(f.role or "-"),
+                        _e(short_utc(f.start_ns)),
+                        _e(short_utc(f.end_ns)),
+                        _e(f.n_records),
+                        _e(f.message),
+                    ]
+                    for f in a.faults
+                ],
+                left=3,
+            )
+            + "</section>"
+        )
     notes = ""
     if a.notes:
-        notes = ("<section id=\"notes\"><h2>Notes</h2><ul>"
-                 + "".join(f"<li>{_e(n)}</li>" for n in a.notes) + "</ul></section>")
+        notes = (
+            '<section id="notes"><h2>Notes</h2><ul>'
+            + "".join(f"<li>{_e(n)}</li>" for n in a.notes)
+            + "</ul></section>"
+        )
     from dracc.report import plots  # matplotlib loads only when a page is drawn
 
     dr = a.dead_reckoning
     if dr is not None and dr.scored_out_of_sample:
-        track_caption = ("Track of every source, the estimated position with its 2M circles (each hour "
-                         "since the fix, and just before each restart) and the water track (heading "
-                         "and log only, thin dashed)")
+        track_caption = (
+            "Track of every source, the estimated position with its 2M circles (each hour "
+            "since the fix, and just before each restart) and the water track (heading "
+            "and log only, thin dashed)"
+        )
     else:
-        track_caption = ("Track of every source, the dead-reckoning track (the water track: heading "
-                         "and log only) and its 2M circles (each hour since the fix, and just before "
-                         "each restart)")
-    figures = "".join([
-        _figure(plots.track_plot(a), "track plot", track_caption, "fig-track"),
-        _figure(plots.deviation_plot(a), "deviation plot",
+        track_caption = (
+            "Track of every source, the dead-reckoning track (the water track: heading "
+            "and log only) and its 2M circles (each hour since the fix, and just before "
+            "each restart)"
+        )
+    figures = "".join(
+        [
+            _figure(plots.track_plot(a), "track plot", track_caption, "fig-track"),
+            _figure(
+                plots.deviation_plot(a),
+                "deviation plot",
                 "Hourly deviations from the mean per unit and channel (the paper's Figure 1)",
-                "fig-deviations"),
-        _figure(plots.growth_plot(a), "2M growth plot",
-                "2M since the last fix against the actual DR error", "fig-growth"),
-        _figure(plots.current_plot(a), "current plot", "Estimated current (set and drift)",
-                "fig-current"),
-    ])
+                "fig-deviations",
+            ),
+            _figure(
+                plots.growth_plot(a),
+                "2M growth plot",
+                "2M since the last fix against the actual DR error",
+                "fig-growth",
+            ),
+            _figure(
+                plots.current_plot(a),
+                "current plot",
+                "Estimated current (set and drift)",
+                "fig-current",
+            ),
+        ]
+    )
     return f"""<!DOCTYPE html>
 <html lang="en">
 <head>

@@ -61,21 +61,25 @@ def _epochs(t: DRTrack) -> list[dict]:
     orient_deg = np.degrees(t.orientation_rad)
     out = []
     for i in range(len(t.time_ns)):
-        out.append({
-            "time_utc": iso_utc(int(t.time_ns[i])),
-            "lat_deg": _num(lat_deg[i]),
-            "lon_deg": _num(lon_deg[i]),
-            "since_fix_s": _num(t.since_fix_s[i]),
-            "radius_2m_m": _num(t.radius_2m_m[i]),
-            "ellipse": {"semi_major_m": _num(t.semi_major_m[i]),
-                        "semi_minor_m": _num(t.semi_minor_m[i]),
-                        "orientation_deg": _num(orient_deg[i])},
-            "ref_error_m": _num(t.ref_error_m[i]),
-            "leg": int(t.leg[i]),
-            "water_lat_deg": _num(water_lat_deg[i]),
-            "water_lon_deg": _num(water_lon_deg[i]),
-            "scored": bool(t.scored[i]),
-        })
+        out.append(
+            {
+                "time_utc": iso_utc(int(t.time_ns[i])),
+                "lat_deg": _num(lat_deg[i]),
+                "lon_deg": _num(lon_deg[i]),
+                "since_fix_s": _num(t.since_fix_s[i]),
+                "radius_2m_m": _num(t.radius_2m_m[i]),
+                "ellipse": {
+                    "semi_major_m": _num(t.semi_major_m[i]),
+                    "semi_minor_m": _num(t.semi_minor_m[i]),
+                    "orientation_deg": _num(orient_deg[i]),
+                },
+                "ref_error_m": _num(t.ref_error_m[i]),
+                "leg": int(t.leg[i]),
+                "water_lat_deg": _num(water_lat_deg[i]),
+                "water_lon_deg": _num(water_lon_deg[i]),
+                "scored": bool(t.scored[i]),
+            }
+        )
     return out
 
 
@@ -103,13 +107,20 @@ def _legs(dr: DRSection) -> list[dict]:
     out = []
     for leg in dr.legs:
         lc = checks.get(int(leg.index))
-        out.append({"index": leg.index, "start_utc": iso_utc(leg.start_ns),
-                    "end_utc": iso_utc(leg.end_ns), "fix_source": leg.fix_source,
-                    "containment_2m": _num(leg.containment_2m), "n_scored": int(leg.n_scored),
-                    "max_error_m": _num(leg.max_error_m),
-                    "mean_nees": None if lc is None else _num(lc.mean_nees),
-                    "last_nees": None if lc is None else _num(lc.last_nees),
-                    "nees_upper": None if lc is None else _num(lc.nees_upper)})
+        out.append(
+            {
+                "index": leg.index,
+                "start_utc": iso_utc(leg.start_ns),
+                "end_utc": iso_utc(leg.end_ns),
+                "fix_source": leg.fix_source,
+                "containment_2m": _num(leg.containment_2m),
+                "n_scored": int(leg.n_scored),
+                "max_error_m": _num(leg.max_error_m),
+                "mean_nees": None if lc is None else _num(lc.mean_nees),
+                "last_nees": None if lc is None else _num(lc.last_nees),
+                "nees_upper": None if lc is None else _num(lc.nees_upper),
+            }
+        )
     return out
 
 
@@ -132,8 +143,11 @@ def _dead_reckoning(dr: DRSection) -> dict:
         "legs": _legs(dr),
         "notes": list(dr.notes),
         "mean_nees": _num(dr.mean_nees),
-        "nees": {"statistic": _num(dr.nees_statistic), "lower": _num(dr.nees_lower),
-                 "upper": _num(dr.nees_upper)},
+        "nees": {
+            "statistic": _num(dr.nees_statistic),
+            "lower": _num(dr.nees_lower),
+            "upper": _num(dr.nees_upper),
+        },
         "dominant_source": dr.dominant_source,
         "dominant_key": dr.dominant_key,
         "learned_model": _learned(dr.learned),
@@ -143,22 +157,36 @@ def _dead_reckoning(dr: DRSection) -> dict:
 
 
 def _calibration(c: CalibrationSection) -> dict:
-    return {"reference_source": c.reference_role,
-            "compass_error_deg": _estimate(c.compass_error_deg),
-            "log_scale": _estimate(c.log_scale),
-            "log_offset_kn": _estimate(c.log_offset_kn),
-            "n": int(c.n), "segment_s": float(c.segment_s),
-            "residual_rms_kn": _num(c.residual_rms_kn), "notes": list(c.notes)}
+    return {
+        "reference_source": c.reference_role,
+        "compass_error_deg": _estimate(c.compass_error_deg),
+        "log_scale": _estimate(c.log_scale),
+        "log_offset_kn": _estimate(c.log_offset_kn),
+        "n": int(c.n),
+        "segment_s": float(c.segment_s),
+        "residual_rms_kn": _num(c.residual_rms_kn),
+        "notes": list(c.notes),
+    }
 
 
 def _current(c: CurrentSection) -> dict:
-    return {"set_deg": _estimate(c.set_deg), "drift_kn": _estimate(c.drift_kn),
-            "n_updates": int(c.n_updates),
-            "series": [{"time_utc": iso_utc(int(t)), "set_deg": _deg(s),
-                        "drift_kn": _num(mps_to_kn(v)), "drift_sigma_kn": _num(mps_to_kn(sv))}
-                       for t, s, v, sv in zip(c.time_ns, c.set_rad, c.drift_mps,
-                                              c.drift_sigma_mps, strict=True)],
-            "notes": list(c.notes)}
+    return {
+        "set_deg": _estimate(c.set_deg),
+        "drift_kn": _estimate(c.drift_kn),
+        "n_updates": int(c.n_updates),
+        "series": [
+            {
+                "time_utc": iso_utc(int(t)),
+                "set_deg": _deg(s),
+                "drift_kn": _num(mps_to_kn(v)),
+                "drift_sigma_kn": _num(mps_to_kn(sv)),
+            }
+            for t, s, v, sv in zip(
+                c.time_ns, c.set_rad, c.drift_mps, c.drift_sigma_mps, strict=True
+            )
+        ],
+        "notes": list(c.notes),
+    }
 
 
 def _plain(x):
@@ -188,26 +216,48 @@ def to_dict(a: Analysis) -> dict:
         "schema": a.schema,
         "dracc_version": a.dracc_version,
         "settings": _plain(a.settings),
-        "inputs": [{"path": f.path, "format": f.format, "lines": int(f.lines),
-                    "records": int(f.records), "rejected": {k: int(v) for k, v in f.rejected.items()},
-                    "ignored": {k: int(v) for k, v in f.ignored.items()}}
-                   for f in a.inputs],
+        "inputs": [
+            {
+                "path": f.path,
+                "format": f.format,
+                "lines": int(f.lines),
+                "records": int(f.records),
+                "rejected": {k: int(v) for k, v in f.rejected.items()},
+                "ignored": {k: int(v) for k, v in f.ignored.items()},
+            }
+            for f in a.inputs
+        ],
         "lines": int(a.lines),
         "rejected": {k: int(v) for k, v in a.rejected.items()},
         "ignored": {k: int(v) for k, v in a.ignored.items()},
-        "reject_examples": {k: [{"file": f, "line": int(n), "text": t} for f, n, t in v]
-                            for k, v in a.reject_examples.items()},
-        "time_events": {"duplicates": a.time.duplicates, "backsteps": a.time.backsteps,
-                        "gaps": a.time.gaps, "rollovers": a.time.rollovers,
-                        "implausible_dates": a.time.implausible_dates,
-                        "decisions": list(a.time.decisions)},
+        "reject_examples": {
+            k: [{"file": f, "line": int(n), "text": t} for f, n, t in v]
+            for k, v in a.reject_examples.items()
+        },
+        "time_events": {
+            "duplicates": a.time.duplicates,
+            "backsteps": a.time.backsteps,
+            "gaps": a.time.gaps,
+            "rollovers": a.time.rollovers,
+            "implausible_dates": a.time.implausible_dates,
+            "decisions": list(a.time.decisions),
+        },
         "sources": by_role,
-        "source_keys": {s.key: {"roles": list(s.roles), "records": int(s.records),
-                                "sentences": {k: int(v) for k, v in s.sentences.items()},
-                                "first_utc": iso_utc(s.first_ns), "last_utc": iso_utc(s.last_ns)}
-                        for s in a.sources},
-        "period": {"start_utc": iso_utc(a.start_ns), "end_utc": iso_utc(a.end_ns),
-                   "duration_s": _num(a.duration_s)},
+        "source_keys": {
+            s.key: {
+                "roles": list(s.roles),
+                "records": int(s.records),
+                "sentences": {k: int(v) for k, v in s.sentences.items()},
+                "first_utc": iso_utc(s.first_ns),
+                "last_utc": iso_utc(s.last_ns),
+            }
+            for s in a.sources
+        },
+        "period": {
+            "start_utc": iso_utc(a.start_ns),
+            "end_utc": iso_utc(a.end_ns),
+            "duration_s": _num(a.duration_s),
+        },
         "deviation": None if a.deviation is None else _deviation(a),
         "dead_reckoning": None if a.dead_reckoning is None else _dead_reckoning(a.dead_reckoning),
         "calibration": None if a.calibration is None else _calibration(a.calibration),
@@ -221,25 +271,46 @@ def to_dict(a: Analysis) -> dict:
 
 def check_dict(c: Check) -> dict:
     """One integrity check (dracc.math.integrity) as plain JSON types."""
-    window = {"start_utc": iso_utc(c.window.get("start_ns")), "end_utc": iso_utc(c.window.get("end_ns"))}
-    return {"check": c.check, "name": c.name, "source": c.source, "role": c.role,
-            "status": c.status, "clause": c.clause, "statistic": _plain(c.statistic),
-            "threshold": _plain(c.threshold), "window": window,
-            "false_alarm": _num(c.false_alarm), "message": c.message,
-            "evidence": [_plain(e) for e in c.evidence], "why_not": c.why_not,
-            "detail": _plain(c.detail)}
+    window = {
+        "start_utc": iso_utc(c.window.get("start_ns")),
+        "end_utc": iso_utc(c.window.get("end_ns")),
+    }
+    return {
+        "check": c.check,
+        "name": c.name,
+        "source": c.source,
+        "role": c.role,
+        "status": c.status,
+        "clause": c.clause,
+        "statistic": _plain(c.statistic),
+        "threshold": _plain(c.threshold),
+        "window": window,
+        "false_alarm": _num(c.false_alarm),
+        "message": c.message,
+        "evidence": [_plain(e) for e in c.evidence],
+        "why_not": c.why_not,
+        "detail": _plain(c.detail),
+    }
 
 
 def integrity_dict(r: IntegrityResult) -> dict:
     """The integrity section: every check of every source, and the per-source figures."""
-    return {"false_alarm_per_check": _num(r.alpha),
-            "false_alarm_per_night": _num(r.false_alarm_per_night),
-            "period": {"start_utc": iso_utc(r.start_ns), "end_utc": iso_utc(r.end_ns)},
-            "checks": [check_dict(c) for c in r.checks],
-            "sources": {s.source: {"role": s.role, "records": s.records, "cadence_s": _num(s.cadence_s),
-                                   "availability": _num(s.availability),
-                                   "latency_s": None if s.latency_s is None else _plain(s.latency_s)}
-                        for s in r.sources}}
+    return {
+        "false_alarm_per_check": _num(r.alpha),
+        "false_alarm_per_night": _num(r.false_alarm_per_night),
+        "period": {"start_utc": iso_utc(r.start_ns), "end_utc": iso_utc(r.end_ns)},
+        "checks": [check_dict(c) for c in r.checks],
+        "sources": {
+            s.source: {
+                "role": s.role,
+                "records": s.records,
+                "cadence_s": _num(s.cadence_s),
+                "availability": _num(s.availability),
+                "latency_s": None if s.latency_s is None else _plain(s.latency_s),
+            }
+            for s in r.sources
+        },
+    }
 
 
 def dumps(a: Analysis, indent: int | None = 1) -> str:

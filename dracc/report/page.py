@@ -11,8 +11,10 @@ import base64
 import html
 
 #: the look the audit-history and fleet pages share; each page adds its column alignment
-BASE_CSS = ("body{font-family:sans-serif;margin:1.5em}table{border-collapse:collapse}"
-            "td,th{border:1px solid #bbb;padding:2px 6px;text-align:right}")
+BASE_CSS = (
+    "body{font-family:sans-serif;margin:1.5em}table{border-collapse:collapse}"
+    "td,th{border:1px solid #bbb;padding:2px 6px;text-align:right}"
+)
 
 PAGE_END = "</body></html>\n"
 
@@ -34,6 +36,8 @@ def img_tag(png: bytes, alt_html: str) -> str:
 def page_head(title: str, css: str = "") -> str:
     """Doctype, head with the title and inline style (``BASE_CSS`` + ``css``), and the h1."""
     t = html.escape(title)
-    return (f"<!doctype html><html><head><meta charset='utf-8'>"
-            f"<meta http-equiv='Content-Security-Policy' content=\"{CSP}\"><title>{t}</title>\n"
-            f"<style>{BASE_CSS}{css}</style></head><body>\n<h1>{t}</h1>")
+    return (
+        f"<!doctype html><html><head><meta charset='utf-8'>"
+        f"<meta http-equiv='Content-Security-Policy' content=\"{CSP}\"><title>{t}</title>\n"
+        f"<style>{BASE_CSS}{css}</style></head><body>\n<h1>{t}</h1>"
+    )

@@ -29,6 +29,8 @@ _MAX_LINE_POINTS = 20000
 
 def _stride(n: int) -> int:
     return max(1, -(-n // _MAX_LINE_POINTS))
+
+
 _UNIT_COLOURS = {"ins1": "#1f77b4", "ins2": "#d62728", "ins3": "#2ca02c"}
 _ROLE_COLOURS = {"gnss": "#555555", "ins1": "#1f77b4", "ins2": "#d62728", "ins3": "#2ca02c"}
 
@@ -41,18 +43,30 @@ def png_bytes(fig, dpi: int = _DPI) -> bytes:
     return buf.getvalue()
 
 
-def m_y_apriori_plot(lines: dict[str, list[tuple[str, object, object, object]]], title: str,
-                     row_height_in: float, dpi: int = _DPI) -> bytes:
+def m_y_apriori_plot(
+    lines: dict[str, list[tuple[str, object, object, object]]],
+    title: str,
+    row_height_in: float,
+    dpi: int = _DPI,
+) -> bytes:
     """One panel per channel: each unit's m_y (points and line) and its a priori (dashed
     steps, same colour) over nights or days.  ``lines``: channel -> [(unit, times, m_y,
     a priori)], times as datetimes; NaN where a value is missing.  PNG bytes."""
-    fig, axes = plt.subplots(len(lines), 1, figsize=(8, row_height_in * len(lines)), sharex=True,
-                             squeeze=False)
+    fig, axes = plt.subplots(
+        len(lines), 1, figsize=(8, row_height_in * len(lines)), sharex=True, squeeze=False
+    )
     for ax, (ch, rows) in zip(axes[:, 0], lines.items(), strict=True):
         for unit, t, m_y, apriori in rows:
-            line, = ax.plot(t, m_y, "o-", label=f"{unit} m_y")
-            ax.step(t, apriori, "--", where="post", color=line.get_color(), alpha=0.7,
-                    label=f"{unit} a priori")
+            (line,) = ax.plot(t, m_y, "o-", label=f"{unit} m_y")
+            ax.step(
+                t,
+                apriori,
+                "--",
+                where="post",
+                color=line.get_color(),
+                alpha=0.7,
+                label=f"{unit} a priori",
+            )
         ax.set_ylabel(f"{ch} ({'deg' if ch == 'course' else 'm'})")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, ncol=3)
@@ -134,8 +148,12 @@ def track_figure(a: Analysis):
         differs = bool(np.any(np.hypot(wn - n, we - e) > 0.5))  # metres
         if differs:
             ax.plot(*_by_leg(wn, we, tr.leg), lw=0.7, ls="--", color="#7f7f7f", label=WATER_LABEL)
-        ax.plot(*_by_leg(n, e, tr.leg), lw=1.4, color="black",
-                label=EP_LABEL if learned or differs else DR_LABEL)
+        ax.plot(
+            *_by_leg(n, e, tr.leg),
+            lw=1.4,
+            color="black",
+            label=EP_LABEL if learned or differs else DR_LABEL,
+        )
         # 2M at each whole hour since the fix and at the end of every leg (just before the
         # restart, where the circle is largest)
         hour = np.floor(tr.since_fix_s / 3600.0)
@@ -146,13 +164,23 @@ def track_figure(a: Analysis):
         first = True
         for x, y, r in zip(e[pick] / 1e3, n[pick] / 1e3, tr.radius_2m_m[pick] / 1e3, strict=True):
             if np.isfinite(r) and np.isfinite(x):
-                ax.add_patch(Circle((x, y), r, fill=False, color="#ff7f0e", lw=1.2,
-                                    label="2M: each hour since the fix, and at each restart"
-                                    if first else None))
+                ax.add_patch(
+                    Circle(
+                        (x, y),
+                        r,
+                        fill=False,
+                        color="#ff7f0e",
+                        lw=1.2,
+                        label="2M: each hour since the fix, and at each restart" if first else None,
+                    )
+                )
                 first = False
     ax.set_aspect("equal", adjustable="datalim")
-    title = ("Tracks, estimated position, water track and 2M circles"
-             if dr is not None and dr.scored_out_of_sample else "Tracks, dead reckoning and 2M circles")
+    title = (
+        "Tracks, estimated position, water track and 2M circles"
+        if dr is not None and dr.scored_out_of_sample
+        else "Tracks, dead reckoning and 2M circles"
+    )
     ax.set_xlabel("east of start [km]")
     ax.set_ylabel("north of start [km]")
     ax.grid(True, alpha=0.3)
@@ -185,8 +213,9 @@ def deviation_plot(a: Analysis) -> bytes | None:
         ax.set_ylabel(f"{SAMPLE_KEYS[ch]} [{CHANNEL_UNITS[ch]}]")
         ax.grid(True, alpha=0.3)
     axes[0].legend(loc="upper right", fontsize=8, ncol=3)
-    axes[0].set_title(f"Deviations from the mean of {len(d.units)} units, "
-                      f"every {d.interval_s / 3600:g} h")
+    axes[0].set_title(
+        f"Deviations from the mean of {len(d.units)} units, every {d.interval_s / 3600:g} h"
+    )
     _utc_axis(fig, axes[-1])
     return png_bytes(fig)
 
@@ -205,13 +234,25 @@ def growth_plot(a: Analysis) -> bytes | None:
     def by_leg(y):  # a break (NaN) at each restart, so no line joins two legs
         return np.insert(y, jumps, np.nan)
 
-    ax.plot(by_leg(hours), by_leg(tr.radius_2m_m[::k]), color="#ff7f0e", lw=1.2,
-            label="2M (2 drms)")
+    ax.plot(
+        by_leg(hours), by_leg(tr.radius_2m_m[::k]), color="#ff7f0e", lw=1.2, label="2M (2 drms)"
+    )
     if np.isfinite(tr.ref_error_m).any():
-        ax.plot(by_leg(hours), by_leg(tr.ref_error_m[::k]), color="black", lw=0.8,
-                label=f"actual error vs {dr.reference_role}")
-    return _finish(fig, ax, "time since the last fix [h]", "metres",
-                   "Growth of 2M since the fix against the actual DR error", "upper left")
+        ax.plot(
+            by_leg(hours),
+            by_leg(tr.ref_error_m[::k]),
+            color="black",
+            lw=0.8,
+            label=f"actual error vs {dr.reference_role}",
+        )
+    return _finish(
+        fig,
+        ax,
+        "time since the last fix [h]",
+        "metres",
+        "Growth of 2M since the fix against the actual DR error",
+        "upper left",
+    )
 
 
 def current_plot(a: Analysis) -> bytes | None:
@@ -224,8 +265,9 @@ def current_plot(a: Analysis) -> bytes | None:
     drift_kn = c.drift_mps / (1852.0 / 3600.0)
     sig_kn = c.drift_sigma_mps / (1852.0 / 3600.0)
     ax1.plot(when, drift_kn, color="#1f77b4", lw=1.2, label="drift")
-    ax1.fill_between(when, drift_kn - sig_kn, drift_kn + sig_kn, color="#1f77b4", alpha=0.2,
-                     label="± 1σ")
+    ax1.fill_between(
+        when, drift_kn - sig_kn, drift_kn + sig_kn, color="#1f77b4", alpha=0.2, label="± 1σ"
+    )
     ax1.set_ylabel("drift [kn]")
     ax1.grid(True, alpha=0.3)
     ax1.legend(loc="upper right", fontsize=8)

@@ -78,17 +78,28 @@ def channel_rows(name: str, u: UnitStats) -> list[UnitRow]:
             verdict = WITHIN
         h = u.hat.get(ch)
         r = u.reference.get(ch)
-        rows.append(UnitRow(
-            unit=name, channel=ch, channel_unit=CHANNEL_UNITS[ch], n=str(c.n),
-            m_u=fmt(c.m_u, digits), m_y=fmt(c.m_y, digits), kurtosis=fmt(c.kurtosis, 2),
-            limit=fmt(c.limit, digits), apriori=fmt(c.apriori, digits), verdict=verdict,
-            new_apriori=fmt(c.new_apriori, digits) if verdict == EXCEEDS else "-",
-            has_hat=h is not None, hat_negative=h is not None and bool(h.negative),
-            hat_sigma="-" if h is None else fmt(h.sigma, digits),
-            hat_lower="-" if h is None else sigma_bound(h.var_lower, digits),
-            hat_upper="-" if h is None else sigma_bound(h.var_upper, digits),
-            ref_rms="-" if r is None else fmt(r.rmse, digits),
-            k_star="-" if r is None else f"{fmt(r.k_star, 2)} {r.mark}"))
+        rows.append(
+            UnitRow(
+                unit=name,
+                channel=ch,
+                channel_unit=CHANNEL_UNITS[ch],
+                n=str(c.n),
+                m_u=fmt(c.m_u, digits),
+                m_y=fmt(c.m_y, digits),
+                kurtosis=fmt(c.kurtosis, 2),
+                limit=fmt(c.limit, digits),
+                apriori=fmt(c.apriori, digits),
+                verdict=verdict,
+                new_apriori=fmt(c.new_apriori, digits) if verdict == EXCEEDS else "-",
+                has_hat=h is not None,
+                hat_negative=h is not None and bool(h.negative),
+                hat_sigma="-" if h is None else fmt(h.sigma, digits),
+                hat_lower="-" if h is None else sigma_bound(h.var_lower, digits),
+                hat_upper="-" if h is None else sigma_bound(h.var_upper, digits),
+                ref_rms="-" if r is None else fmt(r.rmse, digits),
+                k_star="-" if r is None else f"{fmt(r.k_star, 2)} {r.mark}",
+            )
+        )
     return rows
 
 

@@ -37,21 +37,23 @@ def _times(time_ns) -> pd.DatetimeIndex:
 
 def dr_frame(t: DRTrack) -> pd.DataFrame:
     """A DR track as a table."""
-    return pd.DataFrame({
-        "time_utc": _times(t.time_ns),
-        "lat_deg": np.degrees(t.lat_rad),
-        "lon_deg": np.degrees(t.lon_rad),
-        "since_fix_s": t.since_fix_s,
-        "radius_2m_m": t.radius_2m_m,
-        "semi_major_m": t.semi_major_m,
-        "semi_minor_m": t.semi_minor_m,
-        "orientation_deg": np.degrees(t.orientation_rad),
-        "ref_error_m": t.ref_error_m,
-        "leg": np.asarray(t.leg, dtype="int64"),
-        "water_lat_deg": np.degrees(t.water_lat_rad),
-        "water_lon_deg": np.degrees(t.water_lon_rad),
-        "scored": np.asarray(t.scored, dtype=bool),
-    })
+    return pd.DataFrame(
+        {
+            "time_utc": _times(t.time_ns),
+            "lat_deg": np.degrees(t.lat_rad),
+            "lon_deg": np.degrees(t.lon_rad),
+            "since_fix_s": t.since_fix_s,
+            "radius_2m_m": t.radius_2m_m,
+            "semi_major_m": t.semi_major_m,
+            "semi_minor_m": t.semi_minor_m,
+            "orientation_deg": np.degrees(t.orientation_rad),
+            "ref_error_m": t.ref_error_m,
+            "leg": np.asarray(t.leg, dtype="int64"),
+            "water_lat_deg": np.degrees(t.water_lat_rad),
+            "water_lon_deg": np.degrees(t.water_lon_rad),
+            "scored": np.asarray(t.scored, dtype=bool),
+        }
+    )
 
 
 def samples_frame(a: Analysis) -> pd.DataFrame | None:
@@ -76,22 +78,34 @@ def _window_rows(w: WindowStats) -> list[dict]:
                 continue
             h = u.hat.get(ch)
             r = u.reference.get(ch)
-            rows.append({
-                "window": w.label, "window_start_utc": pd.Timestamp(w.start_ns, unit="ns", tz="UTC"),
-                "unit_name": name, "channel": ch, "unit": CHANNEL_UNITS[ch], "n": c.n,
-                "m_u": c.m_u, "k": c.k, "m_y": c.m_y, "kurtosis_excess": c.kurtosis,
-                "k_pie": c.k_pie, "k_hm": c.k_hm, "limit": c.limit,
-                "apriori": np.nan if c.apriori is None else c.apriori,
-                "exceeds_apriori": c.exceeds_apriori, "new_apriori": c.new_apriori,
-                "r_lat_lon": u.r_lat_lon,
-                "hat_variance": np.nan if h is None else h.variance,
-                "hat_sigma": np.nan if h is None else h.sigma,
-                "hat_negative": None if h is None else h.negative,
-                "ref_rmse": np.nan if r is None else r.rmse,
-                "ref_m_x": np.nan if r is None else r.m_x,
-                "k_star": np.nan if r is None else r.k_star,
-                "mark": None if r is None else r.mark,
-            })
+            rows.append(
+                {
+                    "window": w.label,
+                    "window_start_utc": pd.Timestamp(w.start_ns, unit="ns", tz="UTC"),
+                    "unit_name": name,
+                    "channel": ch,
+                    "unit": CHANNEL_UNITS[ch],
+                    "n": c.n,
+                    "m_u": c.m_u,
+                    "k": c.k,
+                    "m_y": c.m_y,
+                    "kurtosis_excess": c.kurtosis,
+                    "k_pie": c.k_pie,
+                    "k_hm": c.k_hm,
+                    "limit": c.limit,
+                    "apriori": np.nan if c.apriori is None else c.apriori,
+                    "exceeds_apriori": c.exceeds_apriori,
+                    "new_apriori": c.new_apriori,
+                    "r_lat_lon": u.r_lat_lon,
+                    "hat_variance": np.nan if h is None else h.variance,
+                    "hat_sigma": np.nan if h is None else h.sigma,
+                    "hat_negative": None if h is None else h.negative,
+                    "ref_rmse": np.nan if r is None else r.rmse,
+                    "ref_m_x": np.nan if r is None else r.m_x,
+                    "k_star": np.nan if r is None else r.k_star,
+                    "mark": None if r is None else r.mark,
+                }
+            )
     return rows
 
 
@@ -138,7 +152,12 @@ def write_tables(a: Analysis, out_dir: str | Path) -> list[Path]:
                     # a source key like "=cmd|..." must not become a spreadsheet formula
                     csv[col] = csv[col].map(csv_cell, na_action="ignore")
                 if isinstance(csv[col].dtype, pd.DatetimeTZDtype):
-                    naive = csv[col].dt.tz_convert("UTC").dt.tz_localize(None).to_numpy("datetime64[us]")
+                    naive = (
+                        csv[col]
+                        .dt.tz_convert("UTC")
+                        .dt.tz_localize(None)
+                        .to_numpy("datetime64[us]")
+                    )
                     csv[col] = np.char.add(np.datetime_as_string(naive, unit="us"), "Z")
             pa_csv.write_csv(pa.Table.from_pandas(csv, preserve_index=False), tmp)
         written.append(csv_path)

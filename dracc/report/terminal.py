@@ -27,7 +27,6 @@ def _text(text="", style: str = "") -> Text:
     return Text(printable(text), style=style)
 
 
-
 def _est(e: Estimate | None, unit: str, digits: int = 2) -> str:
     if e is None:
         return "-"
@@ -40,26 +39,55 @@ def _heading(text: str) -> Text:
 
 def _sources_table(a: Analysis) -> Table:
     t = Table(box=None, pad_edge=False, show_edge=False, header_style="bold")
-    for col, just in (("source", "left"), ("role", "left"), ("records", "right"),
-                      ("sentences", "left"), ("first", "left"), ("last", "left")):
+    for col, just in (
+        ("source", "left"),
+        ("role", "left"),
+        ("records", "right"),
+        ("sentences", "left"),
+        ("first", "left"),
+        ("last", "left"),
+    ):
         # figures never wrap; a very long source key (it comes from the log) folds
-        t.add_column(col, justify=just, no_wrap=col != "source",  # type: ignore[arg-type]
-                     overflow="fold")
+        t.add_column(
+            col,
+            justify=just,
+            no_wrap=col != "source",  # type: ignore[arg-type]
+            overflow="fold",
+        )
     for s in a.sources:
         top = sorted(s.sentences.items(), key=lambda kv: (-kv[1], kv[0]))[:4]
         sent = " ".join(f"{k}:{v}" for k, v in top) + (" …" if len(s.sentences) > 4 else "")
-        t.add_row(_text(s.key), _text("+".join(s.roles) or "(none)"), f"{s.records:,}", _text(sent),
-                  short_utc(s.first_ns), short_utc(s.last_ns))
+        t.add_row(
+            _text(s.key),
+            _text("+".join(s.roles) or "(none)"),
+            f"{s.records:,}",
+            _text(sent),
+            short_utc(s.first_ns),
+            short_utc(s.last_ns),
+        )
     return t
 
 
 def _unit_table(d: DeviationResult) -> Table:
     p = f"{100 * d.probability:g} %"
     t = Table(box=None, pad_edge=False, show_edge=False, header_style="bold")
-    for col in ("unit", "channel", "n", "m_u", "m_y", "excess kurt.", f"limit {p}", "a priori",
-                "verdict", "hat σ", "ref RMS", "k*"):
-        t.add_column(col, justify="left" if col in ("unit", "channel", "verdict") else "right",
-                     no_wrap=True)
+    for col in (
+        "unit",
+        "channel",
+        "n",
+        "m_u",
+        "m_y",
+        "excess kurt.",
+        f"limit {p}",
+        "a priori",
+        "verdict",
+        "hat σ",
+        "ref RMS",
+        "k*",
+    ):
+        t.add_column(
+            col, justify="left" if col in ("unit", "channel", "verdict") else "right", no_wrap=True
+        )
     for name, rows in unit_rows(d):
         if rows is None:
             t.add_row(name, "-", "0", *["-"] * 9)
@@ -76,15 +104,35 @@ def _unit_table(d: DeviationResult) -> Table:
             else:
                 hat = r.hat_sigma
             # Text, not str: rich would read 'lat [m]' as markup and print 'lat'
-            t.add_row(*(_text(str(c)) for c in (name, r.channel_text, r.n, r.m_u, r.m_y, r.kurtosis,
-                                               r.limit, r.apriori, verdict, hat, r.ref_rms, r.k_star)))
+            t.add_row(
+                *(
+                    _text(str(c))
+                    for c in (
+                        name,
+                        r.channel_text,
+                        r.n,
+                        r.m_u,
+                        r.m_y,
+                        r.kurtosis,
+                        r.limit,
+                        r.apriori,
+                        verdict,
+                        hat,
+                        r.ref_rms,
+                        r.k_star,
+                    )
+                )
+            )
     return t
 
 
 def _section(title: str, body: list | None) -> list:
     """A blank line, the heading, then the body, or 'not computed' where there is none."""
-    return [_text(""), _heading(title), *(body if body is not None else
-                                         [_text("not computed (see Missing)")])]
+    return [
+        _text(""),
+        _heading(title),
+        *(body if body is not None else [_text("not computed (see Missing)")]),
+    ]
 
 
 def _bullets(title: str, items) -> list:
@@ -106,29 +154,49 @@ def _verdict_word(dr) -> str:
 def _learned_line(m: dict) -> Text:
     """The learned current and corrections in one line (DRSection.learned)."""
     scale, scale_sigma = m.get("log_scale_correction"), m.get("log_scale_correction_sigma")
-    return _text(f"learned  current set {fmt(m.get('current_set_deg'), 0)} ° drift "
-                f"{fmt(m.get('current_drift_kn'), 2)} kn; corrections: heading "
-                f"{fmt_signed(m.get('heading_correction_deg'), 2)} ± "
-                f"{fmt(m.get('heading_correction_sigma_deg'), 2)} °, log scale "
-                f"{fmt_signed(None if scale is None else 100.0 * scale, 2)} ± "
-                f"{fmt(None if scale_sigma is None else 100.0 * scale_sigma, 2)} %")
+    return _text(
+        f"learned  current set {fmt(m.get('current_set_deg'), 0)} ° drift "
+        f"{fmt(m.get('current_drift_kn'), 2)} kn; corrections: heading "
+        f"{fmt_signed(m.get('heading_correction_deg'), 2)} ± "
+        f"{fmt(m.get('heading_correction_sigma_deg'), 2)} °, log scale "
+        f"{fmt_signed(None if scale is None else 100.0 * scale, 2)} ± "
+        f"{fmt(None if scale_sigma is None else 100.0 * scale_sigma, 2)} %"
+    )
 
 
 def _dr_body(dr) -> list:
-    body = [_text(f"heading  {dr.heading_source}; speed {dr.speed_source}; "
-                 f"restart {dr.reset}; {len(dr.legs)} leg{'s' if len(dr.legs) != 1 else ''}")]
+    body = [
+        _text(
+            f"heading  {dr.heading_source}; speed {dr.speed_source}; "
+            f"restart {dr.reset}; {len(dr.legs)} leg{'s' if len(dr.legs) != 1 else ''}"
+        )
+    ]
     # the 2M is of the estimated position (water track + what was learned), or, with
     # learn = false, of the water track itself
     r2m = dr.epochs.radius_2m_m
     max2m = fmt(float(np.nanmax(r2m)) if np.isfinite(r2m).any() else None, 0)
-    of = (f"2M       of the {'estimated position' if dr.scored_out_of_sample else 'DR water track'}, "
-          f"largest {max2m} m")
+    of = (
+        f"2M       of the {'estimated position' if dr.scored_out_of_sample else 'DR water track'}, "
+        f"largest {max2m} m"
+    )
     if not dr.n_scored:
-        body.append(_text(f"{of}: " + ("no reference: consistency not scored" if dr.reference_role is None
-                                      else "no epoch scored against the reference")))
+        body.append(
+            _text(
+                f"{of}: "
+                + (
+                    "no reference: consistency not scored"
+                    if dr.reference_role is None
+                    else "no epoch scored against the reference"
+                )
+            )
+        )
     else:
-        body.append(_text(f"{of}: reference ({dr.reference_role}) inside 2M at "
-                         f"{fmt_pct(dr.containment_2m)} (model: {fmt_pct(dr.expected_inside)})"))
+        body.append(
+            _text(
+                f"{of}: reference ({dr.reference_role}) inside 2M at "
+                f"{fmt_pct(dr.containment_2m)} (model: {fmt_pct(dr.expected_inside)})"
+            )
+        )
         if dr.scored_out_of_sample:
             ep = dr.epochs
             prior = int(np.sum((ep.since_fix_s > 0) & ~np.asarray(ep.scored, dtype=bool)))
@@ -141,10 +209,14 @@ def _dr_body(dr) -> list:
         nees = "-"
         if np.isfinite(dr.nees_statistic):
             n_legs = len(dr.leg_checks)
-            nees = (f"{fmt(dr.nees_statistic, 1)} over {n_legs} leg{'s' if n_legs != 1 else ''} "
-                    f"(chi² {fmt(dr.nees_lower, 1)}-{fmt(dr.nees_upper, 1)}), mean per epoch "
-                    f"{fmt(dr.mean_nees, 2)} (2 expected)")
-        body.append(_text(f"NEES     {nees}; RMS error/M {fmt(dr.error_over_m_rms, 2)} (1 expected)"))
+            nees = (
+                f"{fmt(dr.nees_statistic, 1)} over {n_legs} leg{'s' if n_legs != 1 else ''} "
+                f"(chi² {fmt(dr.nees_lower, 1)}-{fmt(dr.nees_upper, 1)}), mean per epoch "
+                f"{fmt(dr.mean_nees, 2)} (2 expected)"
+            )
+        body.append(
+            _text(f"NEES     {nees}; RMS error/M {fmt(dr.error_over_m_rms, 2)} (1 expected)")
+        )
     if dr.learned is not None:
         body.append(_learned_line(dr.learned))
     if dr.dominant_source and _verdict_word(dr) != "consistent":
@@ -156,21 +228,33 @@ def _dr_body(dr) -> list:
 
 def _deviation_body(d: DeviationResult) -> list:
     fac = ", ".join(f"{ch} {fmt(d.factors[ch], 3)}" for ch in CHANNELS)
-    return [_text(f"{len(d.units)} units, every {fmt_duration(d.interval_s)}, "
-                 f"{len(d.time_ns)} instants; k: {fac}; excess kurtosis (normal 0)"),
-            _unit_table(d)] + _notes(d.messages)
+    return [
+        _text(
+            f"{len(d.units)} units, every {fmt_duration(d.interval_s)}, "
+            f"{len(d.time_ns)} instants; k: {fac}; excess kurtosis (normal 0)"
+        ),
+        _unit_table(d),
+    ] + _notes(d.messages)
 
 
 def _calibration_body(c) -> list:
     scale = c.log_scale and Estimate(100 * c.log_scale.value, 100 * c.log_scale.sigma)
-    return [_text(f"against {c.reference_role} ({c.n} segments of {c.segment_s:g} s): compass error "
-                 f"{_est(c.compass_error_deg, '°')}; log scale {_est(scale, '%')}; "
-                 f"log offset {_est(c.log_offset_kn, 'kn')}")] + _notes(c.notes)
+    return [
+        _text(
+            f"against {c.reference_role} ({c.n} segments of {c.segment_s:g} s): compass error "
+            f"{_est(c.compass_error_deg, '°')}; log scale {_est(scale, '%')}; "
+            f"log offset {_est(c.log_offset_kn, 'kn')}"
+        )
+    ] + _notes(c.notes)
 
 
 def _current_body(cur) -> list:
-    return [_text(f"set {_est(cur.set_deg, '°', 0)} (towards), drift {_est(cur.drift_kn, 'kn')}"
-                 f" ({cur.n_updates} fix updates)")] + _notes(cur.notes)
+    return [
+        _text(
+            f"set {_est(cur.set_deg, '°', 0)} (towards), drift {_est(cur.drift_kn, 'kn')}"
+            f" ({cur.n_updates} fix updates)"
+        )
+    ] + _notes(cur.notes)
 
 
 def summary(a: Analysis) -> Group:
@@ -178,10 +262,18 @@ def summary(a: Analysis) -> Group:
     parts: list = []
     files = len(a.inputs)
     parts.append(_heading("dracc analyze"))
-    parts.append(_text(f"period   {short_utc(a.start_ns)} → {short_utc(a.end_ns)} "
-                      f"({fmt_duration(a.duration_s)})"))
-    parts.append(_text(f"inputs   {files} file{'s' if files != 1 else ''}, {a.lines:,} lines, "
-                      f"{sum(f.records for f in a.inputs):,} records"))
+    parts.append(
+        _text(
+            f"period   {short_utc(a.start_ns)} → {short_utc(a.end_ns)} "
+            f"({fmt_duration(a.duration_s)})"
+        )
+    )
+    parts.append(
+        _text(
+            f"inputs   {files} file{'s' if files != 1 else ''}, {a.lines:,} lines, "
+            f"{sum(f.records for f in a.inputs):,} records"
+        )
+    )
     for f in a.inputs:
         parts.append(_text(f"         {f.path} ({f.format}, {f.lines:,} lines)"))
     rej = sum(a.rejected.values())
@@ -191,28 +283,50 @@ def summary(a: Analysis) -> Group:
     else:
         parts.append(_text("rejected none"))
     if a.ignored:
-        by = ", ".join(f"{k} {v:,}" for k, v in sorted(a.ignored.items(), key=lambda kv: -kv[1])[:8])
-        parts.append(_text(f"ignored  {sum(a.ignored.values()):,} valid lines dracc does not use: {by}"))
+        by = ", ".join(
+            f"{k} {v:,}" for k, v in sorted(a.ignored.items(), key=lambda kv: -kv[1])[:8]
+        )
+        parts.append(
+            _text(f"ignored  {sum(a.ignored.values()):,} valid lines dracc does not use: {by}")
+        )
     te = a.time
-    events = [f"{n} {what}" for n, what in ((te.duplicates, "duplicates"), (te.backsteps, "back-steps"),
-                                             (te.gaps, "gaps"), (te.rollovers, "midnight rollovers"),
-                                             (te.implausible_dates, "implausible dates")) if n]
+    events = [
+        f"{n} {what}"
+        for n, what in (
+            (te.duplicates, "duplicates"),
+            (te.backsteps, "back-steps"),
+            (te.gaps, "gaps"),
+            (te.rollovers, "midnight rollovers"),
+            (te.implausible_dates, "implausible dates"),
+        )
+        if n
+    ]
     parts.append(_text("time     " + (", ".join(events) if events else "no time events")))
     parts.append(_text(""))
     parts.append(_heading("Sources"))
     parts.append(_sources_table(a))
 
-    parts += _section("Dead reckoning", None if a.dead_reckoning is None else _dr_body(a.dead_reckoning))
-    parts += _section("INS deviations from the mean",
-                      None if a.deviation is None else _deviation_body(a.deviation))
-    parts += _section("Calibration", None if a.calibration is None else _calibration_body(a.calibration))
+    parts += _section(
+        "Dead reckoning", None if a.dead_reckoning is None else _dr_body(a.dead_reckoning)
+    )
+    parts += _section(
+        "INS deviations from the mean",
+        None if a.deviation is None else _deviation_body(a.deviation),
+    )
+    parts += _section(
+        "Calibration", None if a.calibration is None else _calibration_body(a.calibration)
+    )
     parts += _section("Current", None if a.current is None else _current_body(a.current))
     # dracc.math.faults: shown whenever found, excluded or not
-    parts += _bullets(f"Sensor faults ({len(a.faults)})", [f"{f.kind}: {f.message}" for f in a.faults])
+    parts += _bullets(
+        f"Sensor faults ({len(a.faults)})", [f"{f.kind}: {f.message}" for f in a.faults]
+    )
     if a.integrity is not None:
         failed = a.integrity.failed
-        parts += _bullets(f"Integrity: {len(failed)} of {len(a.integrity.checks)} checks failed",
-                          [f"[{c.check}] {c.message}" for c in failed])
+        parts += _bullets(
+            f"Integrity: {len(failed)} of {len(a.integrity.checks)} checks failed",
+            [f"[{c.check}] {c.message}" for c in failed],
+        )
     parts += _bullets("Missing", a.missing)
     parts += _bullets("Notes", a.notes)
     return Group(*parts)
@@ -220,8 +334,14 @@ def summary(a: Analysis) -> Group:
 
 def render_text(a: Analysis, width: int = 120) -> str:
     """The summary as plain text (no colour), for golden files and pipes."""
-    console = Console(width=width, record=True, color_system=None, force_terminal=False,
-                      file=_NullFile(), soft_wrap=False)
+    console = Console(
+        width=width,
+        record=True,
+        color_system=None,
+        force_terminal=False,
+        file=_NullFile(),
+        soft_wrap=False,
+    )
     console.print(summary(a))
     return console.export_text()
 

@@ -22,7 +22,9 @@ from dracc.ingest.csv_quantities import frame_quantities
 
 def iso_utc(time_ns: np.ndarray) -> np.ndarray:
     """ISO 8601 UTC strings with nanoseconds for int64 Unix nanoseconds."""
-    return np.char.add(np.datetime_as_string(np.asarray(time_ns, dtype="datetime64[ns]"), unit="ns"), "Z")
+    return np.char.add(
+        np.datetime_as_string(np.asarray(time_ns, dtype="datetime64[ns]"), unit="ns"), "Z"
+    )
 
 
 def _fmt(v: np.ndarray) -> np.ndarray:
@@ -30,7 +32,11 @@ def _fmt(v: np.ndarray) -> np.ndarray:
     s = pd.Series(v, dtype=np.float64)
     out = np.array([repr(float(x)) for x in s.to_numpy()], dtype=object)
     out[s.isna().to_numpy()] = ""
-    whole = s.notna().to_numpy() & (s.to_numpy() == np.round(s.to_numpy())) & (np.abs(s.to_numpy()) < 1e15)
+    whole = (
+        s.notna().to_numpy()
+        & (s.to_numpy() == np.round(s.to_numpy()))
+        & (np.abs(s.to_numpy()) < 1e15)
+    )
     out[whole] = np.array([str(int(x)) for x in s.to_numpy()[whole]], dtype=object)
     return out
 
@@ -67,23 +73,36 @@ def write_csv(frames: dict[str, pd.DataFrame], path, form: str = "long") -> Path
                     txt = _fmt(v)
                 if not mask.any():
                     continue
-                parts.append(pd.DataFrame({"time_ns": t[mask], "source": src[mask],
-                                           "quantity": q, "value": txt[mask]}))
+                parts.append(
+                    pd.DataFrame(
+                        {"time_ns": t[mask], "source": src[mask], "quantity": q, "value": txt[mask]}
+                    )
+                )
         if parts:
             out = pd.concat(parts, ignore_index=True).sort_values("time_ns", kind="stable")
         else:
-            out = pd.DataFrame({"time_ns": np.zeros(0, np.int64), "source": [], "quantity": [], "value": []})
+            out = pd.DataFrame(
+                {"time_ns": np.zeros(0, np.int64), "source": [], "quantity": [], "value": []}
+            )
         out.insert(0, "time_utc", iso_utc(out["time_ns"].to_numpy()))
         out = out.drop(columns="time_ns")
     else:
         merged = None
         for _kind, df, qs in _tables(frames):
-            t = pd.DataFrame({"time_ns": df["time_ns"].to_numpy(dtype=np.int64),
-                              "source": df["source"].astype(str).to_numpy(dtype=object)})
+            t = pd.DataFrame(
+                {
+                    "time_ns": df["time_ns"].to_numpy(dtype=np.int64),
+                    "source": df["source"].astype(str).to_numpy(dtype=object),
+                }
+            )
             t["occ"] = t.groupby(["time_ns", "source"]).cumcount().to_numpy()
             for q, v in qs.items():
                 t[q] = v if q == "reference" else _fmt(v)
-            merged = t if merged is None else merged.merge(t, on=["time_ns", "source", "occ"], how="outer")
+            merged = (
+                t
+                if merged is None
+                else merged.merge(t, on=["time_ns", "source", "occ"], how="outer")
+            )
         if merged is None:
             out = pd.DataFrame({"time_utc": [], "source": []})
         else:

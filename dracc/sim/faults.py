@@ -47,14 +47,31 @@ ALL_SOURCES = ("GYRO", "MAG", "LOG", "INS1", "INS2", "INS3", "GNSS")
 POSITION_SOURCES = ("INS1", "INS2", "INS3", "GNSS")
 COMPASS_SOURCES = ("GYRO", "MAG")
 #: kind -> the sources it can hit
-KIND_SOURCES = {"jump": POSITION_SOURCES, "freeze": POSITION_SOURCES + COMPASS_SOURCES,
-                "dropout": ALL_SOURCES, "drift": POSITION_SOURCES, "latency": ALL_SOURCES,
-                "invalid": POSITION_SOURCES}
-DEFAULT_SOURCE = {"jump": "GNSS", "freeze": "INS2", "dropout": "INS3", "drift": "INS1",
-                  "latency": "GNSS", "invalid": "GNSS"}
+KIND_SOURCES = {
+    "jump": POSITION_SOURCES,
+    "freeze": POSITION_SOURCES + COMPASS_SOURCES,
+    "dropout": ALL_SOURCES,
+    "drift": POSITION_SOURCES,
+    "latency": ALL_SOURCES,
+    "invalid": POSITION_SOURCES,
+}
+DEFAULT_SOURCE = {
+    "jump": "GNSS",
+    "freeze": "INS2",
+    "dropout": "INS3",
+    "drift": "INS1",
+    "latency": "GNSS",
+    "invalid": "GNSS",
+}
 #: default window lengths in seconds (inf: to the end of the voyage)
-DEFAULT_DURATION_S = {"jump": 600.0, "freeze": 2400.0, "dropout": 1500.0, "drift": math.inf,
-                      "latency": 3600.0, "invalid": 600.0}
+DEFAULT_DURATION_S = {
+    "jump": 600.0,
+    "freeze": 2400.0,
+    "dropout": 1500.0,
+    "drift": math.inf,
+    "latency": 3600.0,
+    "invalid": 600.0,
+}
 #: default sizes in SI (jump m, drift m/s, latency s); kinds without a size are absent
 DEFAULT_SIZE = {"jump": 670.0, "drift": 1.0 * KN_MPS, "latency": 3.0}
 SIZE_UNIT = {"jump": "m", "drift": "m/s", "latency": "s"}
@@ -64,12 +81,18 @@ RNG_COMPONENT = 60  #: random stream of the fault draws (see dracc.sim.model._rn
 SPEC_GRAMMAR = "KIND[:SOURCE][@START][+DURATION][=SIZE]"
 
 _TIME_UNITS = {"": 1.0, "s": 1.0, "min": 60.0, "h": 3600.0}
-_SIZE_UNITS = {"jump": {"": 1.0, "m": 1.0, "km": 1000.0},
-               "drift": {"": KN_MPS, "kn": KN_MPS, "m/s": 1.0},
-               "latency": {"": 1.0, "s": 1.0, "ms": 1e-3, "min": 60.0}}
-_SPEC = re.compile(r"(?P<kind>[A-Za-z_]+)(?::(?P<source>[^@+=]*))?(?:@(?P<start>[^+=]*))?"
-                   r"(?:\+(?P<duration>[^=]*))?(?:=(?P<size>.*))?")
-_NUM = re.compile(r"(?P<num>[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE]-?[0-9]+)?)\s*(?P<unit>[A-Za-z/]*)")
+_SIZE_UNITS = {
+    "jump": {"": 1.0, "m": 1.0, "km": 1000.0},
+    "drift": {"": KN_MPS, "kn": KN_MPS, "m/s": 1.0},
+    "latency": {"": 1.0, "s": 1.0, "ms": 1e-3, "min": 60.0},
+}
+_SPEC = re.compile(
+    r"(?P<kind>[A-Za-z_]+)(?::(?P<source>[^@+=]*))?(?:@(?P<start>[^+=]*))?"
+    r"(?:\+(?P<duration>[^=]*))?(?:=(?P<size>.*))?"
+)
+_NUM = re.compile(
+    r"(?P<num>[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE]-?[0-9]+)?)\s*(?P<unit>[A-Za-z/]*)"
+)
 
 
 @dataclass(frozen=True)
@@ -110,13 +133,16 @@ class SimFault:
 
 # --------------------------------------------------------------------------- parsing
 
+
 def _number(text: str, units: dict[str, float], what: str, spec: str, example: str) -> float:
     m = _NUM.fullmatch(text.strip())
     if m is None or m.group("unit") not in units:
         names = ", ".join(u for u in units if u) or "none"
-        raise ConfigError(f"--fault {spec!r}: {what} {text!r} is not a number with a unit "
-                          f"({names}; bare number: {next(u for u in units if u)}), e.g. "
-                          f"{example}")
+        raise ConfigError(
+            f"--fault {spec!r}: {what} {text!r} is not a number with a unit "
+            f"({names}; bare number: {next(u for u in units if u)}), e.g. "
+            f"{example}"
+        )
     v = float(m.group("num")) * units[m.group("unit")]
     if not math.isfinite(v):
         raise ConfigError(f"--fault {spec!r}: {what} {text!r} is not finite")
@@ -135,24 +161,33 @@ def parse_fault(spec: str) -> SimFault:
         raise ConfigError(f"--fault {spec!r}: expected {SPEC_GRAMMAR}, e.g. jump:GNSS@2h=670m")
     kind = m.group("kind").lower()
     if kind not in FAULT_KINDS:
-        raise ConfigError(f"--fault {spec!r}: unknown kind {m.group('kind')!r}; expected one "
-                          f"of {', '.join(FAULT_KINDS)}")
+        raise ConfigError(
+            f"--fault {spec!r}: unknown kind {m.group('kind')!r}; expected one "
+            f"of {', '.join(FAULT_KINDS)}"
+        )
     source = m.group("source")
     if source is not None:
         source = source.strip().upper()
         if source not in ALL_SOURCES:
-            raise ConfigError(f"--fault {spec!r}: unknown source {m.group('source')!r}; "
-                              f"expected one of {', '.join(KIND_SOURCES[kind])}")
+            raise ConfigError(
+                f"--fault {spec!r}: unknown source {m.group('source')!r}; "
+                f"expected one of {', '.join(KIND_SOURCES[kind])}"
+            )
     start = dur = size = None
     if m.group("start") is not None:
         start = _number(m.group("start"), _TIME_UNITS, "START", spec, "@1.5h, @40min, @600")
     if m.group("duration") is not None:
-        dur = (math.inf if m.group("duration").strip().lower() == "end" else
-               _number(m.group("duration"), _TIME_UNITS, "DURATION", spec, "+40min or +end"))
+        dur = (
+            math.inf
+            if m.group("duration").strip().lower() == "end"
+            else _number(m.group("duration"), _TIME_UNITS, "DURATION", spec, "+40min or +end")
+        )
     if m.group("size") is not None:
         if kind not in _SIZE_UNITS:
-            raise ConfigError(f"--fault {spec!r}: {kind} takes no =SIZE; expected "
-                              f"{kind}[:SOURCE][@START][+DURATION]")
+            raise ConfigError(
+                f"--fault {spec!r}: {kind} takes no =SIZE; expected "
+                f"{kind}[:SOURCE][@START][+DURATION]"
+            )
         example = {"jump": "=670m", "drift": "=1kn or =0.5m/s", "latency": "=3s"}[kind]
         size = _number(m.group("size"), _SIZE_UNITS[kind], "SIZE", spec, example)
     return SimFault(kind, source, start, dur, size)
@@ -160,12 +195,14 @@ def parse_fault(spec: str) -> SimFault:
 
 # --------------------------------------------------------------------------- resolution
 
+
 def _fmt_s(x: float) -> str:
     return f"{x / 3600:g} h" if x >= 3600 else f"{x:g} s"
 
 
-def resolve_faults(faults, voyage_s: float, seed: int, compass: str = "gyro",
-                   labels=None) -> tuple[SimFault, ...]:
+def resolve_faults(
+    faults, voyage_s: float, seed: int, compass: str = "gyro", labels=None
+) -> tuple[SimFault, ...]:
     """Every fault with its defaults filled in and checked against the voyage.
 
     Source, duration and size default per kind (:data:`DEFAULT_SOURCE`,
@@ -188,26 +225,44 @@ def resolve_faults(faults, voyage_s: float, seed: int, compass: str = "gyro",
             raise ConfigError(f"faults must be SimFault, got {type(f).__name__}")
         label = f"--fault {labels[i]!r}" if labels is not None else f"fault {f.kind}"
         if f.kind not in FAULT_KINDS:
-            raise ConfigError(f"{label}: unknown kind {f.kind!r}; expected one of "
-                              f"{', '.join(FAULT_KINDS)}")
+            raise ConfigError(
+                f"{label}: unknown kind {f.kind!r}; expected one of {', '.join(FAULT_KINDS)}"
+            )
         src = f.source if f.source is not None else DEFAULT_SOURCE[f.kind]
         if src not in KIND_SOURCES[f.kind]:
-            raise ConfigError(f"{label}: {f.kind} cannot hit source {src!r}; expected one of "
-                              f"{', '.join(KIND_SOURCES[f.kind])}")
+            raise ConfigError(
+                f"{label}: {f.kind} cannot hit source {src!r}; expected one of "
+                f"{', '.join(KIND_SOURCES[f.kind])}"
+            )
         if src not in fitted:
-            raise ConfigError(f"{label}: the voyage has no source {src} (compass {compass!r}); "
-                              f"expected one of {', '.join(s for s in KIND_SOURCES[f.kind] if s in fitted)}")
+            raise ConfigError(
+                f"{label}: the voyage has no source {src} (compass {compass!r}); "
+                f"expected one of {', '.join(s for s in KIND_SOURCES[f.kind] if s in fitted)}"
+            )
         occ = seen.get((f.kind, src), 0)
         seen[(f.kind, src)] = occ + 1
-        rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, RNG_COMPONENT,
-                                     FAULT_KINDS.index(f.kind), ALL_SOURCES.index(src), occ])
+        rng = np.random.default_rng(
+            [
+                int(seed) & 0xFFFFFFFF,
+                RNG_COMPONENT,
+                FAULT_KINDS.index(f.kind),
+                ALL_SOURCES.index(src),
+                occ,
+            ]
+        )
         u_start, u_dir = rng.uniform(0.0, 1.0, 2)  # both always drawn: stable streams
-        start = (f.start_s if f.start_s is not None
-                 else float(round((START_RANGE[0] + (START_RANGE[1] - START_RANGE[0]) * u_start)
-                                  * voyage_s)))
+        start = (
+            f.start_s
+            if f.start_s is not None
+            else float(
+                round((START_RANGE[0] + (START_RANGE[1] - START_RANGE[0]) * u_start) * voyage_s)
+            )
+        )
         if not (math.isfinite(start) and 0.0 <= start < voyage_s):
-            raise ConfigError(f"{label}: start {_fmt_s(start)} is outside the voyage; expected "
-                              f"START in [0, {_fmt_s(voyage_s)})")
+            raise ConfigError(
+                f"{label}: start {_fmt_s(start)} is outside the voyage; expected "
+                f"START in [0, {_fmt_s(voyage_s)})"
+            )
         dur = f.duration_s if f.duration_s is not None else DEFAULT_DURATION_S[f.kind]
         if math.isnan(dur) or dur <= 0:
             raise ConfigError(f"{label}: duration {dur:g} s; expected DURATION > 0")
@@ -217,8 +272,9 @@ def resolve_faults(faults, voyage_s: float, seed: int, compass: str = "gyro",
         if f.kind in DEFAULT_SIZE:
             size = size if size is not None else DEFAULT_SIZE[f.kind]
             if not (math.isfinite(size) and size >= 0):
-                raise ConfigError(f"{label}: size {size:g} {SIZE_UNIT[f.kind]}; expected a "
-                                  f"finite SIZE >= 0")
+                raise ConfigError(
+                    f"{label}: size {size:g} {SIZE_UNIT[f.kind]}; expected a finite SIZE >= 0"
+                )
         elif size is not None:
             raise ConfigError(f"{label}: {f.kind} takes no size, got {size!r}")
         direction = None
@@ -228,12 +284,22 @@ def resolve_faults(faults, voyage_s: float, seed: int, compass: str = "gyro",
                 raise ConfigError(f"{label}: direction {direction!r} is not finite")
         elif f.direction_deg is not None:
             raise ConfigError(f"{label}: {f.kind} takes no direction")
-        out.append(replace(f, source=src, start_s=float(start), duration_s=float(dur),
-                           size=None if size is None else float(size), direction_deg=direction))
+        out.append(
+            replace(
+                f,
+                source=src,
+                start_s=float(start),
+                duration_s=float(dur),
+                size=None if size is None else float(size),
+                direction_deg=direction,
+            )
+        )
     return tuple(out)
 
 
-def fault_table(faults, voyage_start_ns: int, voyage_s: float, roles: dict | None = None) -> list[dict]:
+def fault_table(
+    faults, voyage_start_ns: int, voyage_s: float, roles: dict | None = None
+) -> list[dict]:
     """The resolved faults as JSON-ready dicts (params.json ``faults``): kind, source, role,
     start_utc, end_utc (ISO 8601, ns, as truth.csv's time_utc; a fault to the end ends at
     the voyage's end), start_s, duration_s (finite), size (SI), size_unit, direction_deg."""
@@ -243,10 +309,20 @@ def fault_table(faults, voyage_start_ns: int, voyage_s: float, roles: dict | Non
         lo, hi = f.window_ns(voyage_start_ns)
         end_ns = hi if hi is not None else int(voyage_start_ns) + int(round(voyage_s * 1e9))
         dur = f.duration_s if not math.isinf(f.duration_s) else voyage_s - f.start_s
-        out.append({"kind": f.kind, "source": f.source, "role": roles.get(f.source),
-                    "start_utc": _iso(lo), "end_utc": _iso(end_ns), "start_s": f.start_s,
-                    "duration_s": dur, "size": f.size, "size_unit": SIZE_UNIT.get(f.kind),
-                    "direction_deg": f.direction_deg})
+        out.append(
+            {
+                "kind": f.kind,
+                "source": f.source,
+                "role": roles.get(f.source),
+                "start_utc": _iso(lo),
+                "end_utc": _iso(end_ns),
+                "start_s": f.start_s,
+                "duration_s": dur,
+                "size": f.size,
+                "size_unit": SIZE_UNIT.get(f.kind),
+                "direction_deg": f.direction_deg,
+            }
+        )
     return out
 
 
@@ -256,18 +332,27 @@ def _iso(t_ns: int) -> str:
 
 # --------------------------------------------------------------------------- application
 
+
 def _in(t: np.ndarray, lo: int, hi: int | None) -> np.ndarray:
     return (t >= lo) & (t < hi) if hi is not None else t >= lo
 
 
 def error_columns(source: str) -> tuple[str, str]:
     """The north and east position error columns of a position source."""
-    return ("gnss_north_m", "gnss_east_m") if source == "GNSS" else (
-        f"{source.lower()}_north_m", f"{source.lower()}_east_m")
+    return (
+        ("gnss_north_m", "gnss_east_m")
+        if source == "GNSS"
+        else (f"{source.lower()}_north_m", f"{source.lower()}_east_m")
+    )
 
 
-def apply_error_faults(faults, errors: dict[str, np.ndarray], time_ns: np.ndarray,
-                       t_s: np.ndarray, voyage_start_ns: int) -> dict[str, np.ndarray]:
+def apply_error_faults(
+    faults,
+    errors: dict[str, np.ndarray],
+    time_ns: np.ndarray,
+    t_s: np.ndarray,
+    voyage_start_ns: int,
+) -> dict[str, np.ndarray]:
     """The true errors with the jumps and drifts of ``faults`` added (a new dict; the
     arrays changed are new).  ``t_s``: seconds from the voyage start of each sample."""
     out = dict(errors)
@@ -292,9 +377,15 @@ def _frozen_columns(source: str) -> tuple[str, tuple[str, ...]]:
     return "heading", ("heading_rad", "deviation_rad") if source == "MAG" else ("heading_rad",)
 
 
-def apply_frame_faults(faults, frames: dict[str, pd.DataFrame], zda: pd.DataFrame,
-                       errors: pd.DataFrame, truth: pd.DataFrame, voyage_start_ns: int,
-                       state_in: dict | None = None):
+def apply_frame_faults(
+    faults,
+    frames: dict[str, pd.DataFrame],
+    zda: pd.DataFrame,
+    errors: pd.DataFrame,
+    truth: pd.DataFrame,
+    voyage_start_ns: int,
+    state_in: dict | None = None,
+):
     """Apply the freezes, dropouts, latencies and invalid flags of ``faults`` (in their
     order) to the canonical frames of one simulated segment.
 
@@ -351,7 +442,8 @@ def apply_frame_faults(faults, frames: dict[str, pd.DataFrame], zda: pd.DataFram
                     dropped = True
             if len(zda):
                 gone = (zda["source"].to_numpy(object) == f.source) & _in(
-                    zda["time_ns"].to_numpy(np.int64), lo, hi)
+                    zda["time_ns"].to_numpy(np.int64), lo, hi
+                )
                 if gone.any():
                     zda = zda[~gone].reset_index(drop=True)
                     dropped = True
@@ -398,8 +490,11 @@ def _frozen_errors(f: SimFault, held, errors: pd.DataFrame, truth: pd.DataFrame,
             a[w] = v
             errors[c] = a
     else:
-        col, true = (("gyro_err_rad", "heading_rad") if f.source == "GYRO"
-                     else ("mag_err_rad", "compass_course_rad"))
+        col, true = (
+            ("gyro_err_rad", "heading_rad")
+            if f.source == "GYRO"
+            else ("mag_err_rad", "compass_course_rad")
+        )
         a = errors[col].to_numpy(float).copy()
         a[w] = angdiff(held[0], truth[true].to_numpy(float)[w])
         errors[col] = a

@@ -35,34 +35,59 @@ from dracc.frames import KIND_COLUMNS, KINDS, MISSING_NS
 from dracc.ingest.csv_quantities import frame_quantities
 from dracc.ingest.mcap_cdr import compile_schema, encode_fixed
 
-LEAF = {"position": "fix", "heading": "heading", "ground": "velocity", "water": "water",
-        "distance": "distance", "rot": "rot"}
-TYPE = {"heading": "Heading", "ground": "GroundVelocity", "water": "WaterSpeed",
-        "distance": "Distance", "rot": "RateOfTurn"}
+LEAF = {
+    "position": "fix",
+    "heading": "heading",
+    "ground": "velocity",
+    "water": "water",
+    "distance": "distance",
+    "rot": "rot",
+}
+TYPE = {
+    "heading": "Heading",
+    "ground": "GroundVelocity",
+    "water": "WaterSpeed",
+    "distance": "Distance",
+    "rot": "RateOfTurn",
+}
 
 _TIME = "int32 sec\nuint32 nanosec\n"
 _HEADER = "builtin_interfaces/Time stamp\nstring frame_id\n"
 _SEP = "=" * 80
 
-NAVSATFIX = "\n".join([
-    "std_msgs/Header header",
-    "NavSatStatus status",
-    "float64 latitude",
-    "float64 longitude",
-    "float64 altitude",
-    "float64[9] position_covariance",
-    "uint8 COVARIANCE_TYPE_UNKNOWN = 0",
-    "uint8 COVARIANCE_TYPE_APPROXIMATED = 1",
-    "uint8 COVARIANCE_TYPE_DIAGONAL_KNOWN = 2",
-    "uint8 COVARIANCE_TYPE_KNOWN = 3",
-    "uint8 position_covariance_type",
-    _SEP, "MSG: std_msgs/Header", _HEADER.strip(),
-    _SEP, "MSG: builtin_interfaces/Time", _TIME.strip(),
-    _SEP, "MSG: sensor_msgs/NavSatStatus",
-    "int8 STATUS_NO_FIX = -1", "int8 STATUS_FIX = 0", "int8 STATUS_SBAS_FIX = 1",
-    "int8 STATUS_GBAS_FIX = 2", "int8 status",
-    "uint16 SERVICE_GPS = 1", "uint16 service",
-]) + "\n"
+NAVSATFIX = (
+    "\n".join(
+        [
+            "std_msgs/Header header",
+            "NavSatStatus status",
+            "float64 latitude",
+            "float64 longitude",
+            "float64 altitude",
+            "float64[9] position_covariance",
+            "uint8 COVARIANCE_TYPE_UNKNOWN = 0",
+            "uint8 COVARIANCE_TYPE_APPROXIMATED = 1",
+            "uint8 COVARIANCE_TYPE_DIAGONAL_KNOWN = 2",
+            "uint8 COVARIANCE_TYPE_KNOWN = 3",
+            "uint8 position_covariance_type",
+            _SEP,
+            "MSG: std_msgs/Header",
+            _HEADER.strip(),
+            _SEP,
+            "MSG: builtin_interfaces/Time",
+            _TIME.strip(),
+            _SEP,
+            "MSG: sensor_msgs/NavSatStatus",
+            "int8 STATUS_NO_FIX = -1",
+            "int8 STATUS_FIX = 0",
+            "int8 STATUS_SBAS_FIX = 1",
+            "int8 STATUS_GBAS_FIX = 2",
+            "int8 status",
+            "uint16 SERVICE_GPS = 1",
+            "uint16 service",
+        ]
+    )
+    + "\n"
+)
 
 
 def _dracc_msg(kind: str) -> str:
@@ -73,8 +98,14 @@ def _dracc_msg(kind: str) -> str:
             lines.append("uint8 reference  # 84 'T' true, 77 'M' magnetic")
         else:
             lines.append(f"float64 {c}  # NaN where absent")
-    lines += [_SEP, "MSG: std_msgs/Header", _HEADER.strip(), _SEP, "MSG: builtin_interfaces/Time",
-              _TIME.strip()]
+    lines += [
+        _SEP,
+        "MSG: std_msgs/Header",
+        _HEADER.strip(),
+        _SEP,
+        "MSG: builtin_interfaces/Time",
+        _TIME.strip(),
+    ]
     return "\n".join(lines) + "\n"
 
 
@@ -100,18 +131,38 @@ def _json_messages(kind: str, src: str, df: pd.DataFrame) -> tuple[str, bytes, l
         alt = df["alt_m"].to_numpy(dtype=np.float64).tolist()
         q = df["quality"].to_numpy(dtype=np.int64).tolist()
         hdop = df["hdop"].to_numpy(dtype=np.float64).tolist()
-        msgs = [json.dumps({"timestamp": {"sec": s, "nsec": ns}, "frame_id": src, "latitude": a,
-                            "longitude": b, "altitude": _clean(c), "position_covariance": [0.0] * 9,
-                            "position_covariance_type": 0, "quality": qq, "hdop": _clean(h)},
-                           separators=(",", ":")).encode()
-                for s, ns, a, b, c, qq, h in zip(sec, nsec, lat, lon, alt, q, hdop, strict=False)]
-        schema = {"title": "foxglove.LocationFix", "type": "object",
-                  "properties": {"timestamp": {"type": "object"}, "frame_id": {"type": "string"},
-                                 "latitude": {"type": "number"}, "longitude": {"type": "number"},
-                                 "altitude": {"type": ["number", "null"]},
-                                 "position_covariance": {"type": "array"},
-                                 "position_covariance_type": {"type": "integer"},
-                                 "quality": {"type": "integer"}, "hdop": {"type": ["number", "null"]}}}
+        msgs = [
+            json.dumps(
+                {
+                    "timestamp": {"sec": s, "nsec": ns},
+                    "frame_id": src,
+                    "latitude": a,
+                    "longitude": b,
+                    "altitude": _clean(c),
+                    "position_covariance": [0.0] * 9,
+                    "position_covariance_type": 0,
+                    "quality": qq,
+                    "hdop": _clean(h),
+                },
+                separators=(",", ":"),
+            ).encode()
+            for s, ns, a, b, c, qq, h in zip(sec, nsec, lat, lon, alt, q, hdop, strict=False)
+        ]
+        schema = {
+            "title": "foxglove.LocationFix",
+            "type": "object",
+            "properties": {
+                "timestamp": {"type": "object"},
+                "frame_id": {"type": "string"},
+                "latitude": {"type": "number"},
+                "longitude": {"type": "number"},
+                "altitude": {"type": ["number", "null"]},
+                "position_covariance": {"type": "array"},
+                "position_covariance_type": {"type": "integer"},
+                "quality": {"type": "integer"},
+                "hdop": {"type": ["number", "null"]},
+            },
+        }
         return "foxglove.LocationFix", json.dumps(schema).encode(), msgs
     qs = frame_quantities(kind, df)
     names = list(qs)
@@ -122,26 +173,37 @@ def _json_messages(kind: str, src: str, df: pd.DataFrame) -> tuple[str, bytes, l
         for n, c in zip(names, cols, strict=False):
             obj[n] = c[i]
         msgs.append(json.dumps(obj, separators=(",", ":")).encode())
-    schema = {"title": f"dracc.{TYPE[kind]}", "type": "object",
-              "properties": {"timestamp": {"type": "object"},
-                             **{n: {"type": ["string" if n == "reference" else "number", "null"]}
-                                for n in names}}}
+    schema = {
+        "title": f"dracc.{TYPE[kind]}",
+        "type": "object",
+        "properties": {
+            "timestamp": {"type": "object"},
+            **{n: {"type": ["string" if n == "reference" else "number", "null"]} for n in names},
+        },
+    }
     return f"dracc.{TYPE[kind]}", json.dumps(schema).encode(), msgs
 
 
 def _ros2_messages(kind: str, src: str, df: pd.DataFrame) -> tuple[str, bytes, list[bytes]]:
     t = df["time_ns"].to_numpy(dtype=np.int64)
     n = len(df)
-    cols: dict[str, np.ndarray] = {"header.stamp.sec": t // 1_000_000_000,
-                                   "header.stamp.nanosec": t % 1_000_000_000}
+    cols: dict[str, np.ndarray] = {
+        "header.stamp.sec": t // 1_000_000_000,
+        "header.stamp.nanosec": t % 1_000_000_000,
+    }
     if kind == "position":
         name, text = "sensor_msgs/msg/NavSatFix", NAVSATFIX
         q = df["quality"].to_numpy(dtype=np.int64)
         status = np.select([q == 0, q == 1, q == 2, (q == 4) | (q == 5)], [-1, 0, 1, 2], 0)
-        cols.update({"latitude": df["lat_rad"].to_numpy() * 180.0 / math.pi,
-                     "longitude": df["lon_rad"].to_numpy() * 180.0 / math.pi,
-                     "altitude": df["alt_m"].to_numpy(dtype=np.float64),
-                     "status.status": status, "status.service": np.ones(n, np.int64)})
+        cols.update(
+            {
+                "latitude": df["lat_rad"].to_numpy() * 180.0 / math.pi,
+                "longitude": df["lon_rad"].to_numpy() * 180.0 / math.pi,
+                "altitude": df["alt_m"].to_numpy(dtype=np.float64),
+                "status.status": status,
+                "status.service": np.ones(n, np.int64),
+            }
+        )
     else:
         name, text = f"dracc_msgs/msg/{TYPE[kind]}", _dracc_msg(kind)
         for c in KIND_COLUMNS[kind]:
@@ -167,16 +229,22 @@ def _proto_classes():
     pool.Add(ts_file)
     files = {"google/protobuf/timestamp.proto": ts_file}
 
-    fox = descriptor_pb2.FileDescriptorProto(name="foxglove/LocationFix.proto", package="foxglove",
-                                             syntax="proto3",
-                                             dependency=["google/protobuf/timestamp.proto"])
+    fox = descriptor_pb2.FileDescriptorProto(
+        name="foxglove/LocationFix.proto",
+        package="foxglove",
+        syntax="proto3",
+        dependency=["google/protobuf/timestamp.proto"],
+    )
     m = fox.message_type.add(name="LocationFix")
     for num, fname, ftype, label in (
-            (6, "timestamp", fdp.TYPE_MESSAGE, fdp.LABEL_OPTIONAL), (7, "frame_id", fdp.TYPE_STRING, fdp.LABEL_OPTIONAL),
-            (1, "latitude", fdp.TYPE_DOUBLE, fdp.LABEL_OPTIONAL), (2, "longitude", fdp.TYPE_DOUBLE, fdp.LABEL_OPTIONAL),
-            (3, "altitude", fdp.TYPE_DOUBLE, fdp.LABEL_OPTIONAL),
-            (4, "position_covariance", fdp.TYPE_DOUBLE, fdp.LABEL_REPEATED),
-            (8, "color", fdp.TYPE_MESSAGE, fdp.LABEL_OPTIONAL)):
+        (6, "timestamp", fdp.TYPE_MESSAGE, fdp.LABEL_OPTIONAL),
+        (7, "frame_id", fdp.TYPE_STRING, fdp.LABEL_OPTIONAL),
+        (1, "latitude", fdp.TYPE_DOUBLE, fdp.LABEL_OPTIONAL),
+        (2, "longitude", fdp.TYPE_DOUBLE, fdp.LABEL_OPTIONAL),
+        (3, "altitude", fdp.TYPE_DOUBLE, fdp.LABEL_OPTIONAL),
+        (4, "position_covariance", fdp.TYPE_DOUBLE, fdp.LABEL_REPEATED),
+        (8, "color", fdp.TYPE_MESSAGE, fdp.LABEL_OPTIONAL),
+    ):
         if fname == "color":
             continue  # foxglove.Color is optional display styling; not written
         f = m.field.add(name=fname, number=num, type=ftype, label=label)
@@ -184,16 +252,24 @@ def _proto_classes():
             f.type_name = ".google.protobuf.Timestamp"
     pool.Add(fox)
     files[fox.name] = fox
-    dr = descriptor_pb2.FileDescriptorProto(name="dracc/messages.proto", package="dracc", syntax="proto3",
-                                            dependency=["google/protobuf/timestamp.proto"])
+    dr = descriptor_pb2.FileDescriptorProto(
+        name="dracc/messages.proto",
+        package="dracc",
+        syntax="proto3",
+        dependency=["google/protobuf/timestamp.proto"],
+    )
     for kind, tname in TYPE.items():
         m = dr.message_type.add(name=tname)
         f = m.field.add(name="timestamp", number=1, type=fdp.TYPE_MESSAGE, label=fdp.LABEL_OPTIONAL)
         f.type_name = ".google.protobuf.Timestamp"
         m.field.add(name="frame_id", number=2, type=fdp.TYPE_STRING, label=fdp.LABEL_OPTIONAL)
         for i, c in enumerate(KIND_COLUMNS[kind]):
-            m.field.add(name=c, number=3 + i, type=fdp.TYPE_STRING if c == "reference" else fdp.TYPE_DOUBLE,
-                        label=fdp.LABEL_OPTIONAL)
+            m.field.add(
+                name=c,
+                number=3 + i,
+                type=fdp.TYPE_STRING if c == "reference" else fdp.TYPE_DOUBLE,
+                label=fdp.LABEL_OPTIONAL,
+            )
     pool.Add(dr)
     files[dr.name] = dr
     classes = {"position": GetMessageClass(pool.FindMessageTypeByName("foxglove.LocationFix"))}
@@ -212,7 +288,9 @@ def _proto_classes():
     return classes, sets
 
 
-def _proto_messages(kind: str, src: str, df: pd.DataFrame, protos) -> tuple[str, bytes, list[bytes]]:
+def _proto_messages(
+    kind: str, src: str, df: pd.DataFrame, protos
+) -> tuple[str, bytes, list[bytes]]:
     classes, sets = protos
     cls = classes[kind]
     t = df["time_ns"].to_numpy(dtype=np.int64)
@@ -227,8 +305,14 @@ def _proto_messages(kind: str, src: str, df: pd.DataFrame, protos) -> tuple[str,
             m.timestamp.seconds, m.timestamp.nanos = s, ns
             msgs.append(m.SerializeToString())
         return "foxglove.LocationFix", sets[kind], msgs
-    cols = {c: (df[c].astype(object).to_numpy() if c == "reference" else df[c].to_numpy(dtype=np.float64))
-            for c in KIND_COLUMNS[kind]}
+    cols = {
+        c: (
+            df[c].astype(object).to_numpy()
+            if c == "reference"
+            else df[c].to_numpy(dtype=np.float64)
+        )
+        for c in KIND_COLUMNS[kind]
+    }
     for i, (s, ns) in enumerate(zip(sec, nsec, strict=False)):
         m = cls(frame_id=src)
         m.timestamp.seconds, m.timestamp.nanos = s, ns
@@ -252,9 +336,15 @@ def _log_times(df: pd.DataFrame) -> np.ndarray:
     return np.where(r != MISSING_NS, r, t)
 
 
-def write_mcap(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None, path,
-               encoding: str = "json", chunk_size: int = 1 << 20, compression: str | None = "zstd",
-               indexed: bool = True) -> Path:
+def write_mcap(
+    frames: dict[str, pd.DataFrame],
+    roles: dict[str, str] | None,
+    path,
+    encoding: str = "json",
+    chunk_size: int = 1 << 20,
+    compression: str | None = "zstd",
+    indexed: bool = True,
+) -> Path:
     """Write ``frames`` (kind -> canonical frame) as MCAP at ``path`` atomically; return the path.
 
     ``roles`` (source key -> role) goes into a ``dracc.roles`` metadata record and, for
@@ -266,8 +356,12 @@ def write_mcap(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None, pa
 
     if encoding not in ("json", "ros2", "protobuf", "nmea"):
         raise ValueError(f"encoding must be json, ros2, protobuf or nmea, got {encoding!r}")
-    comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, None: CompressionType.NONE,
-            "none": CompressionType.NONE}.get(compression)
+    comp = {
+        "zstd": CompressionType.ZSTD,
+        "lz4": CompressionType.LZ4,
+        None: CompressionType.NONE,
+        "none": CompressionType.NONE,
+    }.get(compression)
     if comp is None:
         raise ValueError(f"compression must be 'zstd', 'lz4' or None, got {compression!r}")
     path = Path(path)
@@ -279,8 +373,17 @@ def write_mcap(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None, pa
         src = np.asarray(src, dtype=object)
         for s in sorted(set(src.tolist())):
             m = src == s
-            streams.append((f"/{s.strip('/')}/nmea", "", "", b"", "nmea0183", np.asarray(t)[m],
-                            [ln for ln, k in zip(lines, m, strict=False) if k]))
+            streams.append(
+                (
+                    f"/{s.strip('/')}/nmea",
+                    "",
+                    "",
+                    b"",
+                    "nmea0183",
+                    np.asarray(t)[m],
+                    [ln for ln, k in zip(lines, m, strict=False) if k],
+                )
+            )
     else:
         protos = _proto_classes() if encoding == "protobuf" else None
         for kind, src, df in _kind_tables(frames):
@@ -293,18 +396,29 @@ def write_mcap(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None, pa
             else:
                 name, sdata, msgs = _proto_messages(kind, src, df, protos)
                 senc, menc = "protobuf", "protobuf"
-            streams.append((f"/{src.strip('/')}/{LEAF[kind]}", name, senc, sdata, menc,
-                            _log_times(df), msgs))
+            streams.append(
+                (f"/{src.strip('/')}/{LEAF[kind]}", name, senc, sdata, menc, _log_times(df), msgs)
+            )
     # one global log-time order over all channels (a recorder writes in arrival order)
     t_all = np.concatenate([s[5] for s in streams]) if streams else np.zeros(0, np.int64)
     ch_all = np.repeat(np.arange(len(streams)), [len(s[5]) for s in streams])
-    row_all = np.concatenate([np.arange(len(s[5])) for s in streams]) if streams else np.zeros(0, np.int64)
+    row_all = (
+        np.concatenate([np.arange(len(s[5])) for s in streams])
+        if streams
+        else np.zeros(0, np.int64)
+    )
     order = np.lexsort((ch_all, t_all))
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        w = Writer(fh, chunk_size=chunk_size, compression=comp,
-                   index_types=IndexType.ALL if indexed else IndexType.NONE,
-                   repeat_channels=indexed, repeat_schemas=indexed, use_statistics=indexed,
-                   use_summary_offsets=indexed)
+        w = Writer(
+            fh,
+            chunk_size=chunk_size,
+            compression=comp,
+            index_types=IndexType.ALL if indexed else IndexType.NONE,
+            repeat_channels=indexed,
+            repeat_schemas=indexed,
+            use_statistics=indexed,
+            use_summary_offsets=indexed,
+        )
         w.start(profile="ros2" if encoding == "ros2" else "", library="dracc")
         ids = []
         schema_ids: dict[tuple[str, bytes], int] = {}
@@ -313,13 +427,23 @@ def write_mcap(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None, pa
             if name:
                 sid = schema_ids.get((name, sdata))
                 if sid is None:
-                    sid = schema_ids[(name, sdata)] = w.register_schema(name=name, encoding=senc, data=sdata)
+                    sid = schema_ids[(name, sdata)] = w.register_schema(
+                        name=name, encoding=senc, data=sdata
+                    )
             ids.append(w.register_channel(topic=topic, message_encoding=menc, schema_id=sid))
         seq = [0] * len(streams)
         add = w.add_message
-        for c, r, t in zip(ch_all[order].tolist(), row_all[order].tolist(), t_all[order].tolist(), strict=False):
+        for c, r, t in zip(
+            ch_all[order].tolist(), row_all[order].tolist(), t_all[order].tolist(), strict=False
+        ):
             seq[c] += 1
-            add(channel_id=ids[c], log_time=t, data=streams[c][6][r], publish_time=t, sequence=seq[c])
+            add(
+                channel_id=ids[c],
+                log_time=t,
+                data=streams[c][6][r],
+                publish_time=t,
+                sequence=seq[c],
+            )
         if roles:
             w.add_metadata("dracc.roles", {str(k): str(v) for k, v in roles.items()})
         w.finish()

@@ -118,17 +118,40 @@ class InsErrorParams:
 #: three realistic, unequal units: INS2 clearly the worst (RMS ~550 m N, ~800 m E over a day)
 DEFAULT_INS = (
     InsErrorParams(),
-    InsErrorParams(schuler_n_m=350.0, schuler_e_m=450.0, day_n_m=700.0, day_e_m=1000.0,
-                   drift_n_mps=-0.004, drift_e_mps=0.005, gm_m=GM(60.0, 3600.0), white_m=5.0,
-                   heading_bias_deg=-0.08, heading_schuler_deg=0.04, heading_day_deg=0.15,
-                   heading_gm_deg=GM(0.04, 1800.0), heading_white_deg=0.01),
-    InsErrorParams(schuler_n_m=180.0, schuler_e_m=220.0, day_n_m=320.0, day_e_m=400.0,
-                   drift_n_mps=-0.002, drift_e_mps=0.0025, gm_m=GM(40.0, 3600.0), white_m=3.0,
-                   heading_bias_deg=0.03, heading_schuler_deg=0.015, heading_day_deg=0.06,
-                   heading_gm_deg=GM(0.015, 1800.0), heading_white_deg=0.005),
+    InsErrorParams(
+        schuler_n_m=350.0,
+        schuler_e_m=450.0,
+        day_n_m=700.0,
+        day_e_m=1000.0,
+        drift_n_mps=-0.004,
+        drift_e_mps=0.005,
+        gm_m=GM(60.0, 3600.0),
+        white_m=5.0,
+        heading_bias_deg=-0.08,
+        heading_schuler_deg=0.04,
+        heading_day_deg=0.15,
+        heading_gm_deg=GM(0.04, 1800.0),
+        heading_white_deg=0.01,
+    ),
+    InsErrorParams(
+        schuler_n_m=180.0,
+        schuler_e_m=220.0,
+        day_n_m=320.0,
+        day_e_m=400.0,
+        drift_n_mps=-0.002,
+        drift_e_mps=0.0025,
+        gm_m=GM(40.0, 3600.0),
+        white_m=3.0,
+        heading_bias_deg=0.03,
+        heading_schuler_deg=0.015,
+        heading_day_deg=0.06,
+        heading_gm_deg=GM(0.015, 1800.0),
+        heading_white_deg=0.005,
+    ),
 )
-NO_INS_ERROR = InsErrorParams(**{f.name: (GM(0.0, math.inf) if f.type in ("GM", GM) else 0.0)
-                                 for f in fields(InsErrorParams)})
+NO_INS_ERROR = InsErrorParams(
+    **{f.name: (GM(0.0, math.inf) if f.type in ("GM", GM) else 0.0) for f in fields(InsErrorParams)}
+)
 
 
 @dataclass(frozen=True)
@@ -212,12 +235,27 @@ class SimParams:
         sentence reads the truth (to its written precision).  ``overrides`` apply last."""
         zero = GM(0.0, math.inf)
         base = dict(
-            gyro_offset_deg=0.0, gyro_bias_deg=zero, gyro_noise_deg=zero, gyro_white_deg=0.0, rot_white_dpm=0.0,
-            mag_noise_deg=zero, mag_white_deg=0.0, log_scale=0.0, log_bias_kn=0.0,
-            log_noise_kn=zero, log_white_kn=0.0, leeway_deg=0.0, leeway_noise_deg=zero,
-            current_drift_kn=0.0, current_noise_kn=zero, yaw_amp_deg=0.0,
-            ins=(NO_INS_ERROR,) * 3, ins_velocity_white_kn=0.0, gnss_noise_m=zero,
-            gnss_white_m=0.0, gnss_speed_white_kn=0.0,
+            gyro_offset_deg=0.0,
+            gyro_bias_deg=zero,
+            gyro_noise_deg=zero,
+            gyro_white_deg=0.0,
+            rot_white_dpm=0.0,
+            mag_noise_deg=zero,
+            mag_white_deg=0.0,
+            log_scale=0.0,
+            log_bias_kn=0.0,
+            log_noise_kn=zero,
+            log_white_kn=0.0,
+            leeway_deg=0.0,
+            leeway_noise_deg=zero,
+            current_drift_kn=0.0,
+            current_noise_kn=zero,
+            yaw_amp_deg=0.0,
+            ins=(NO_INS_ERROR,) * 3,
+            ins_velocity_white_kn=0.0,
+            gnss_noise_m=zero,
+            gnss_white_m=0.0,
+            gnss_speed_white_kn=0.0,
         )
         base.update(overrides)
         return cls(**base)
@@ -228,6 +266,7 @@ class SimParams:
 
     def to_dict(self) -> dict:
         """A JSON-ready dict (GM as {"sigma", "tau_s"}, inf as the string "inf")."""
+
         def conv(v):
             if isinstance(v, GM):
                 return {"sigma": conv(v.sigma), "tau_s": conv(v.tau_s)}
@@ -240,6 +279,7 @@ class SimParams:
             if isinstance(v, float) and math.isinf(v):
                 return "inf"
             return v
+
         return {f.name: conv(getattr(self, f.name)) for f in fields(self) if f.name != "state"}
 
 
@@ -263,8 +303,16 @@ class SimVoyage:
 
 # --------------------------------------------------------------------------- processes
 
-def gauss_markov(n: int, dt_s: float, sigma: float, tau_s: float, rng: np.random.Generator,
-                 runs: int | None = None, x0: float | None = None) -> np.ndarray:
+
+def gauss_markov(
+    n: int,
+    dt_s: float,
+    sigma: float,
+    tau_s: float,
+    rng: np.random.Generator,
+    runs: int | None = None,
+    x0: float | None = None,
+) -> np.ndarray:
     """First-order Gauss-Markov samples, started stationary (variance sigma^2 throughout).
 
     ``x[0] = sigma w0``, ``x[k+1] = a x[k] + sigma sqrt(1 - a^2) w[k+1]``,
@@ -315,8 +363,9 @@ def compass_course_rad(heading_rad, coeffs_rad, variation_rad) -> np.ndarray:
     return wrap_2pi(kk)
 
 
-def integrate_track(lat0_rad: float, lon0_rad: float, vn_mps: np.ndarray, ve_mps: np.ndarray,
-                    dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+def integrate_track(
+    lat0_rad: float, lon0_rad: float, vn_mps: np.ndarray, ve_mps: np.ndarray, dt_s: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Position on the WGS-84 ellipsoid from north/east ground velocity (B16-B22).
 
     ``phi[k+1] = phi[k] + k_phi(phi_mid) VN_mid dt`` and ``lambda[k+1] = lambda[k] +
@@ -334,8 +383,14 @@ def integrate_track(lat0_rad: float, lon0_rad: float, vn_mps: np.ndarray, ve_mps
     return lat, wrap_pi(lon)
 
 
-def ins_errors(p: InsErrorParams, t_s: np.ndarray, dt_s: float, rng: np.random.Generator,
-               phases: np.ndarray | None = None, gm=None):
+def ins_errors(
+    p: InsErrorParams,
+    t_s: np.ndarray,
+    dt_s: float,
+    rng: np.random.Generator,
+    phases: np.ndarray | None = None,
+    gm=None,
+):
     """One INS unit's errors (north_m, east_m, heading_rad, vn_mps, ve_mps) at times ``t_s``.
 
     The velocity errors are the time derivative of the smooth part of the position error
@@ -345,37 +400,60 @@ def ins_errors(p: InsErrorParams, t_s: np.ndarray, dt_s: float, rng: np.random.G
     n = len(t_s)
     ph = rng.uniform(0.0, 2 * np.pi, 6) if phases is None else phases
     if gm is None:
+
         def gm(key, sigma, tau_s, r):
             return gauss_markov(n, dt_s, sigma, tau_s, r)
+
     ws = 2 * np.pi / SCHULER_PERIOD_S
     wd = 2 * np.pi / DAY_PERIOD_S
     gm_n = gm("north", p.gm_m.sigma, p.gm_m.tau_s, rng)
     gm_e = gm("east", p.gm_m.sigma, p.gm_m.tau_s, rng)
-    smooth_n = (p.schuler_n_m * np.sin(ws * t_s + ph[0]) + p.day_n_m * np.sin(wd * t_s + ph[1])
-                + p.drift_n_mps * t_s + gm_n)
-    smooth_e = (p.schuler_e_m * np.sin(ws * t_s + ph[2]) + p.day_e_m * np.sin(wd * t_s + ph[3])
-                + p.drift_e_mps * t_s + gm_e)
+    smooth_n = (
+        p.schuler_n_m * np.sin(ws * t_s + ph[0])
+        + p.day_n_m * np.sin(wd * t_s + ph[1])
+        + p.drift_n_mps * t_s
+        + gm_n
+    )
+    smooth_e = (
+        p.schuler_e_m * np.sin(ws * t_s + ph[2])
+        + p.day_e_m * np.sin(wd * t_s + ph[3])
+        + p.drift_e_mps * t_s
+        + gm_e
+    )
     north = smooth_n + p.white_m * rng.standard_normal(n)
     east = smooth_e + p.white_m * rng.standard_normal(n)
     hb = gm("heading", p.heading_gm_deg.sigma, p.heading_gm_deg.tau_s, rng)
-    heading = DEG_RAD * (p.heading_bias_deg + p.heading_schuler_deg * np.sin(ws * t_s + ph[4])
-                         + p.heading_day_deg * np.sin(wd * t_s + ph[5]) + hb
-                         + p.heading_white_deg * rng.standard_normal(n))
+    heading = DEG_RAD * (
+        p.heading_bias_deg
+        + p.heading_schuler_deg * np.sin(ws * t_s + ph[4])
+        + p.heading_day_deg * np.sin(wd * t_s + ph[5])
+        + hb
+        + p.heading_white_deg * rng.standard_normal(n)
+    )
     # d/dt of the oscillations and the drift, and the mean-reverting part -x/tau of the GM
     # (its white driving term is not a velocity an INS would show)
     gm_rate = 0.0 if not np.isfinite(p.gm_m.tau_s) or p.gm_m.tau_s == 0 else 1.0 / p.gm_m.tau_s
-    vn = (p.schuler_n_m * ws * np.cos(ws * t_s + ph[0]) + p.day_n_m * wd * np.cos(wd * t_s + ph[1])
-          + p.drift_n_mps - gm_rate * gm_n)
-    ve = (p.schuler_e_m * ws * np.cos(ws * t_s + ph[2]) + p.day_e_m * wd * np.cos(wd * t_s + ph[3])
-          + p.drift_e_mps - gm_rate * gm_e)
+    vn = (
+        p.schuler_n_m * ws * np.cos(ws * t_s + ph[0])
+        + p.day_n_m * wd * np.cos(wd * t_s + ph[1])
+        + p.drift_n_mps
+        - gm_rate * gm_n
+    )
+    ve = (
+        p.schuler_e_m * ws * np.cos(ws * t_s + ph[2])
+        + p.day_e_m * wd * np.cos(wd * t_s + ph[3])
+        + p.drift_e_mps
+        - gm_rate * gm_e
+    )
     return north, east, heading, vn, ve
 
 
 # --------------------------------------------------------------------------- quantisation
 
+
 def q_angle_rad(a_rad) -> np.ndarray:
     """An angle in [0, 2pi) as written: degrees to ANGLE_DEC decimals (360.000 -> 0.000)."""
-    s = 10.0 ** ANGLE_DEC
+    s = 10.0**ANGLE_DEC
     v = np.rint(np.asarray(wrap_2pi(a_rad), float) / DEG_RAD * s)
     v = np.where(v >= 360 * s, v - 360 * s, v)
     return v / s * DEG_RAD
@@ -383,7 +461,7 @@ def q_angle_rad(a_rad) -> np.ndarray:
 
 def q_signed(x, scale: float, dec: int) -> np.ndarray:
     """``x`` (SI) written as ``x / scale`` to ``dec`` decimals, read back in SI."""
-    s = 10.0 ** dec
+    s = 10.0**dec
     return np.rint(np.asarray(x, float) / scale * s) / s * scale
 
 
@@ -397,6 +475,7 @@ def q_latlon_rad(a_rad) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- simulate
+
 
 def _rng(seed: int, component: int, segment: int = 0) -> np.random.Generator:
     """An independent stream per component (and segment), so adding one never changes the
@@ -462,12 +541,17 @@ def _check(p: SimParams) -> float:
     if not -89.0 < p.start_lat_deg < 89.0:
         raise ConfigError(f"start latitude {p.start_lat_deg} deg is outside (-89, 89)")
     if len(p.ins_talkers) != 3 or not all(
-            len(t) == 2 and t.isascii() and t.isalnum() and t.isupper() for t in p.ins_talkers):
+        len(t) == 2 and t.isascii() and t.isalnum() and t.isupper() for t in p.ins_talkers
+    ):
         raise ConfigError(f"three two-letter INS talker IDs are needed, got {p.ins_talkers!r}")
     if len(p.ins) != 3:
         raise ConfigError(f"three INS error models are needed, got {len(p.ins)}")
-    rates = {"compass_hz": p.compass_hz, "log_hz": p.log_hz, "ins_hz": p.ins_hz,
-             "gnss_hz": p.gnss_hz}
+    rates = {
+        "compass_hz": p.compass_hz,
+        "log_hz": p.log_hz,
+        "ins_hz": p.ins_hz,
+        "gnss_hz": p.gnss_hz,
+    }
     for k, v in rates.items():
         if not v > 0:
             raise ConfigError(f"{k} must be positive, got {v}")
@@ -479,12 +563,16 @@ def _check(p: SimParams) -> float:
             continue
         step = base / v
         if abs(step - round(step)) > 1e-9:
-            raise ConfigError(f"{k}={v} does not divide the fastest rate {base} Hz into whole steps")
+            raise ConfigError(
+                f"{k}={v} does not divide the fastest rate {base} Hz into whole steps"
+            )
     if base * p.duration_s > MAX_SAMPLES:
-        raise ConfigError(f"{base} Hz over {p.duration_s:g} s is {base * p.duration_s:.3g} samples "
-                          f"(about {base * p.duration_s * 1.7e-6:.0f} GB); more than "
-                          f"{MAX_SAMPLES:.0e} in one piece: use simulate_segments (as "
-                          f"`dracc simulate` does) or lower the rates")
+        raise ConfigError(
+            f"{base} Hz over {p.duration_s:g} s is {base * p.duration_s:.3g} samples "
+            f"(about {base * p.duration_s * 1.7e-6:.0f} GB); more than "
+            f"{MAX_SAMPLES:.0e} in one piece: use simulate_segments (as "
+            f"`dracc simulate` does) or lower the rates"
+        )
     return base
 
 
@@ -536,24 +624,28 @@ def simulate(params: SimParams) -> SimVoyage:
     p = replace(p, legs=tuple((float(a), float(b)) for a, b in legs))  # explicit in the result
     if faults:
         p = replace(p, faults=faults)
-    psi_steer, rot_steer = _heading_profile(t_s, legs, p.initial_heading_deg,
-                                            p.turn_rate_deg_s * DEG_RAD)
+    psi_steer, rot_steer = _heading_profile(
+        t_s, legs, p.initial_heading_deg, p.turn_rate_deg_s * DEG_RAD
+    )
     wy = 2 * np.pi / p.yaw_period_s if p.yaw_period_s > 0 else 0.0
     yaw_amp = p.yaw_amp_deg * DEG_RAD
     psi = wrap_2pi(psi_steer + yaw_amp * np.sin(wy * t_s))
     rot = rot_steer + yaw_amp * wy * np.cos(wy * t_s)
     rng_env = _rng(p.seed, 2, seg)
     alpha = p.leeway_deg * DEG_RAD + DEG_RAD * gm(
-        "leeway", p.leeway_noise_deg.sigma, p.leeway_noise_deg.tau_s, rng_env)
+        "leeway", p.leeway_noise_deg.sigma, p.leeway_noise_deg.tau_s, rng_env
+    )
     v_mps = np.full(n, p.speed_kn * KN_MPS)
     vx = v_mps * np.cos(alpha)  # (B5): alpha = atan(Vy/Vx)
     vy = v_mps * np.sin(alpha)
     kdw = psi + alpha  # course through the water (B3, B4 with beta = 0 here)
     set_rad = p.current_set_deg * DEG_RAD
     cn = p.current_drift_kn * KN_MPS * math.cos(set_rad) + KN_MPS * gm(
-        "current_n", p.current_noise_kn.sigma, p.current_noise_kn.tau_s, rng_env)
+        "current_n", p.current_noise_kn.sigma, p.current_noise_kn.tau_s, rng_env
+    )
     ce = p.current_drift_kn * KN_MPS * math.sin(set_rad) + KN_MPS * gm(
-        "current_e", p.current_noise_kn.sigma, p.current_noise_kn.tau_s, rng_env)
+        "current_e", p.current_noise_kn.sigma, p.current_noise_kn.tau_s, rng_env
+    )
     vn = v_mps * np.cos(kdw) + cn  # (B7-B9)
     ve = v_mps * np.sin(kdw) + ce  # (B10-B12), corrected: sin Kp
     lat, lon = integrate_track(p.start_lat_deg * DEG_RAD, p.start_lon_deg * DEG_RAD, vn, ve, dt)
@@ -566,40 +658,68 @@ def simulate(params: SimParams) -> SimVoyage:
     kk = compass_course_rad(psi, coeffs, var_rad)
     dev_true = deviation_curve_rad(kk, coeffs)
     water_dist = state_in.get("water_distance_m", 0.0) + np.concatenate(
-        ([0.0], np.cumsum(0.5 * (vx[1:] + vx[:-1]) * dt)))
+        ([0.0], np.cumsum(0.5 * (vx[1:] + vx[:-1]) * dt))
+    )
     state_out["water_distance_m"] = float(water_dist[-1])
 
-    truth = pd.DataFrame({
-        "time_ns": time_ns, "t_s": t_s, "lat_rad": lat, "lon_rad": lon, "heading_rad": psi,
-        "rot_radps": rot, "leeway_rad": alpha, "course_water_rad": wrap_2pi(kdw),
-        "stw_mps": v_mps, "stw_long_mps": vx, "stw_transverse_mps": vy,
-        "vn_mps": vn, "ve_mps": ve, "cog_rad": cog, "sog_mps": sog,
-        "sog_long_mps": g_long, "sog_transverse_mps": g_trans,
-        "current_n_mps": cn, "current_e_mps": ce,
-        "current_set_rad": wrap_2pi(np.arctan2(ce, cn)), "current_drift_mps": np.hypot(cn, ce),
-        "compass_course_rad": kk, "deviation_rad": dev_true,
-        "variation_rad": np.full(n, var_rad), "water_distance_m": water_dist,
-    })
+    truth = pd.DataFrame(
+        {
+            "time_ns": time_ns,
+            "t_s": t_s,
+            "lat_rad": lat,
+            "lon_rad": lon,
+            "heading_rad": psi,
+            "rot_radps": rot,
+            "leeway_rad": alpha,
+            "course_water_rad": wrap_2pi(kdw),
+            "stw_mps": v_mps,
+            "stw_long_mps": vx,
+            "stw_transverse_mps": vy,
+            "vn_mps": vn,
+            "ve_mps": ve,
+            "cog_rad": cog,
+            "sog_mps": sog,
+            "sog_long_mps": g_long,
+            "sog_transverse_mps": g_trans,
+            "current_n_mps": cn,
+            "current_e_mps": ce,
+            "current_set_rad": wrap_2pi(np.arctan2(ce, cn)),
+            "current_drift_mps": np.hypot(cn, ce),
+            "compass_course_rad": kk,
+            "deviation_rad": dev_true,
+            "variation_rad": np.full(n, var_rad),
+            "water_distance_m": water_dist,
+        }
+    )
 
     # ---- sensor errors
     errors: dict[str, np.ndarray] = {"time_ns": time_ns}
     r = _rng(p.seed, 3, seg)
     errors["gyro_err_rad"] = DEG_RAD * (
-        p.gyro_offset_deg + gm("gyro_bias", p.gyro_bias_deg.sigma, p.gyro_bias_deg.tau_s, r)
+        p.gyro_offset_deg
+        + gm("gyro_bias", p.gyro_bias_deg.sigma, p.gyro_bias_deg.tau_s, r)
         + gm("gyro_noise", p.gyro_noise_deg.sigma, p.gyro_noise_deg.tau_s, r)
-        + p.gyro_white_deg * r.standard_normal(n))
+        + p.gyro_white_deg * r.standard_normal(n)
+    )
     rot_noise = p.rot_white_dpm * DEG_RAD / 60.0 * r.standard_normal(n)
     r = _rng(p.seed, 4, seg)
     errors["mag_err_rad"] = DEG_RAD * (
         gm("mag_noise", p.mag_noise_deg.sigma, p.mag_noise_deg.tau_s, r)
-        + p.mag_white_deg * r.standard_normal(n))
+        + p.mag_white_deg * r.standard_normal(n)
+    )
     r = _rng(p.seed, 5, seg)
     errors["log_scale"] = np.full(n, float(p.log_scale))
     errors["log_bias_mps"] = np.full(n, p.log_bias_kn * KN_MPS)
-    for name in ("log_noise_long_mps", "log_noise_transverse_mps",
-                 "log_ground_noise_long_mps", "log_ground_noise_transverse_mps"):
-        errors[name] = KN_MPS * (gm(name, p.log_noise_kn.sigma, p.log_noise_kn.tau_s, r)
-                                 + p.log_white_kn * r.standard_normal(n))
+    for name in (
+        "log_noise_long_mps",
+        "log_noise_transverse_mps",
+        "log_ground_noise_long_mps",
+        "log_ground_noise_transverse_mps",
+    ):
+        errors[name] = KN_MPS * (
+            gm(name, p.log_noise_kn.sigma, p.log_noise_kn.tau_s, r)
+            + p.log_white_kn * r.standard_normal(n)
+        )
     errors["leeway_rad"] = alpha
     errors["current_n_mps"] = cn
     errors["current_e_mps"] = ce
@@ -618,10 +738,12 @@ def simulate(params: SimParams) -> SimVoyage:
         errors[f"ins{j}_vn_mps"] = evn + wv * r.standard_normal(n)
         errors[f"ins{j}_ve_mps"] = eve + wv * r.standard_normal(n)
     r = _rng(p.seed, 20, seg)
-    errors["gnss_north_m"] = (gm("gnss_north", p.gnss_noise_m.sigma, p.gnss_noise_m.tau_s, r)
-                              + p.gnss_white_m * r.standard_normal(n))
-    errors["gnss_east_m"] = (gm("gnss_east", p.gnss_noise_m.sigma, p.gnss_noise_m.tau_s, r)
-                             + p.gnss_white_m * r.standard_normal(n))
+    errors["gnss_north_m"] = gm(
+        "gnss_north", p.gnss_noise_m.sigma, p.gnss_noise_m.tau_s, r
+    ) + p.gnss_white_m * r.standard_normal(n)
+    errors["gnss_east_m"] = gm(
+        "gnss_east", p.gnss_noise_m.sigma, p.gnss_noise_m.tau_s, r
+    ) + p.gnss_white_m * r.standard_normal(n)
     errors["gnss_vn_mps"] = p.gnss_speed_white_kn * KN_MPS * r.standard_normal(n)
     errors["gnss_ve_mps"] = p.gnss_speed_white_kn * KN_MPS * r.standard_normal(n)
     if faults:  # jumps and drifts are position errors: frames and errors.csv agree
@@ -654,7 +776,7 @@ def simulate(params: SimParams) -> SimVoyage:
     line_all = np.empty(len(order), np.int64)
     line_all[order] = np.arange(1, len(order) + 1)
     offs = np.concatenate(([0], np.cumsum(sizes)))
-    lines = {(s[0], s[1]): line_all[offs[i]:offs[i + 1]] for i, s in enumerate(plan)}
+    lines = {(s[0], s[1]): line_all[offs[i] : offs[i + 1]] for i, s in enumerate(plan)}
 
     parts: dict[str, list[dict]] = {kind: [] for kind in KINDS}
     talkers = {k: v[1] for k, v in SOURCES.items()}
@@ -665,26 +787,58 @@ def simulate(params: SimParams) -> SimVoyage:
 
     def rec(kind: str, src: str, sent: str, kidx: np.ndarray, **cols) -> None:
         m = len(kidx)
-        d = {"time_ns": time_ns[kidx], "source": const(m, src), "talker": const(m, talkers[src]),
-             "sentence": const(m, sent), "line": lines[(src, sent)]}
+        d = {
+            "time_ns": time_ns[kidx],
+            "source": const(m, src),
+            "talker": const(m, talkers[src]),
+            "sentence": const(m, sent),
+            "line": lines[(src, sent)],
+        }
         d.update(cols)
         parts[kind].append(d)
 
     gyro_hdg = psi + errors["gyro_err_rad"]
     if p.compass in ("gyro", "both"):
-        rec("heading", "GYRO", "HDT", ic, heading_rad=q_angle_rad(gyro_hdg[ic]),
-            reference=np.full(len(ic), "T", dtype=object))
-        rec("heading", "GYRO", "THS", ia, heading_rad=q_angle_rad(gyro_hdg[ia]),
-            reference=np.full(len(ia), "T", dtype=object))
-        rec("rot", "GYRO", "ROT", ia,
-            rot_radps=q_signed(rot[ia] + rot_noise[ia], DEG_RAD / 60.0, ROT_DEC))
+        rec(
+            "heading",
+            "GYRO",
+            "HDT",
+            ic,
+            heading_rad=q_angle_rad(gyro_hdg[ic]),
+            reference=np.full(len(ic), "T", dtype=object),
+        )
+        rec(
+            "heading",
+            "GYRO",
+            "THS",
+            ia,
+            heading_rad=q_angle_rad(gyro_hdg[ia]),
+            reference=np.full(len(ia), "T", dtype=object),
+        )
+        rec(
+            "rot",
+            "GYRO",
+            "ROT",
+            ia,
+            rot_radps=q_signed(rot[ia] + rot_noise[ia], DEG_RAD / 60.0, ROT_DEC),
+        )
     if p.compass in ("magnetic", "both"):
         kk_meas = q_angle_rad(kk[ic] + errors["mag_err_rad"][ic])
-        dev_w = (q_signed(deviation_curve_rad(kk_meas, coeffs), DEG_RAD, ANGLE_DEC)
-                 if p.hdg_deviation_field else np.full(len(ic), np.nan))
-        rec("heading", "MAG", "HDG", ic, heading_rad=kk_meas,
-            reference=np.full(len(ic), "M", dtype=object), deviation_rad=dev_w,
-            variation_rad=np.full(len(ic), float(q_signed(var_rad, DEG_RAD, ANGLE_DEC))))
+        dev_w = (
+            q_signed(deviation_curve_rad(kk_meas, coeffs), DEG_RAD, ANGLE_DEC)
+            if p.hdg_deviation_field
+            else np.full(len(ic), np.nan)
+        )
+        rec(
+            "heading",
+            "MAG",
+            "HDG",
+            ic,
+            heading_rad=kk_meas,
+            reference=np.full(len(ic), "M", dtype=object),
+            deviation_rad=dev_w,
+            variation_rad=np.full(len(ic), float(q_signed(var_rad, DEG_RAD, ANGLE_DEC))),
+        )
     s1 = 1.0 + p.log_scale
     b = p.log_bias_kn * KN_MPS
     m_long = s1 * vx + b + errors["log_noise_long_mps"]
@@ -692,50 +846,103 @@ def simulate(params: SimParams) -> SimVoyage:
     m_glong = s1 * g_long + b + errors["log_ground_noise_long_mps"]
     m_gtrans = s1 * g_trans + errors["log_ground_noise_transverse_mps"]
     rec("water", "LOG", "VHW", il, stw_mps=q_signed(m_long[il], KN_MPS, SPEED_DEC))
-    rec("water", "LOG", "VBW", il, stw_mps=q_signed(m_long[il], KN_MPS, SPEED_DEC),
+    rec(
+        "water",
+        "LOG",
+        "VBW",
+        il,
+        stw_mps=q_signed(m_long[il], KN_MPS, SPEED_DEC),
         stw_transverse_mps=q_signed(m_trans[il], KN_MPS, SPEED_DEC),
         sog_long_mps=q_signed(m_glong[il], KN_MPS, SPEED_DEC),
-        sog_transverse_mps=q_signed(m_gtrans[il], KN_MPS, SPEED_DEC))
+        sog_transverse_mps=q_signed(m_gtrans[il], KN_MPS, SPEED_DEC),
+    )
     trip = state_in.get("trip_m", 0.0) + np.concatenate(
-        ([0.0], np.cumsum(0.5 * (m_long[1:] + m_long[:-1]) * dt)))
+        ([0.0], np.cumsum(0.5 * (m_long[1:] + m_long[:-1]) * dt))
+    )
     state_out["trip_m"] = float(trip[-1])
-    rec("distance", "LOG", "VLW", il,
+    rec(
+        "distance",
+        "LOG",
+        "VLW",
+        il,
         total_water_m=q_signed(p.log_total_start_nmi * NMI_M + trip[il], NMI_M, DIST_DEC),
-        trip_water_m=q_signed(trip[il], NMI_M, DIST_DEC))
+        trip_water_m=q_signed(trip[il], NMI_M, DIST_DEC),
+    )
     unit_rms: dict[str, dict[str, float]] = {}
     for j in (1, 2, 3):
         src = f"INS{j}"
-        la, lo = add_offset_ne(lat[ii], lon[ii], errors[f"ins{j}_north_m"][ii],
-                               errors[f"ins{j}_east_m"][ii])
+        la, lo = add_offset_ne(
+            lat[ii], lon[ii], errors[f"ins{j}_north_m"][ii], errors[f"ins{j}_east_m"][ii]
+        )
         qla, qlo = q_latlon_rad(la), q_latlon_rad(lo)
-        rec("position", src, "GGA", ii, lat_rad=qla, lon_rad=qlo,
-            alt_m=np.full(len(ii), round(p.alt_m, ALT_DEC)), quality=np.ones(len(ii), np.int8))
+        rec(
+            "position",
+            src,
+            "GGA",
+            ii,
+            lat_rad=qla,
+            lon_rad=qlo,
+            alt_m=np.full(len(ii), round(p.alt_m, ALT_DEC)),
+            quality=np.ones(len(ii), np.int8),
+        )
         qh = q_angle_rad(psi[ii] + errors[f"ins{j}_heading_rad"][ii])
-        rec("heading", src, "HDT", ii, heading_rad=qh, reference=np.full(len(ii), "T", dtype=object))
+        rec(
+            "heading", src, "HDT", ii, heading_rad=qh, reference=np.full(len(ii), "T", dtype=object)
+        )
         gvn = vn[ii] + errors[f"ins{j}_vn_mps"][ii]
         gve = ve[ii] + errors[f"ins{j}_ve_mps"][ii]
-        rec("ground", src, "VTG", ii, cog_rad=q_angle_rad(np.arctan2(gve, gvn)),
-            sog_mps=q_signed(np.hypot(gvn, gve), KN_MPS, SPEED_DEC))
+        rec(
+            "ground",
+            src,
+            "VTG",
+            ii,
+            cog_rad=q_angle_rad(np.arctan2(gve, gvn)),
+            sog_mps=q_signed(np.hypot(gvn, gve), KN_MPS, SPEED_DEC),
+        )
         # RMS of the written errors (K: the m_y a reference would measure)
         en_w = (qla - lat[ii]) / k_phi(lat[ii])
         ee_w = angdiff(qlo, lon[ii]) / k_lambda(lat[ii])
         eh_w = angdiff(qh, psi[ii])
-        def rms(x: np.ndarray) -> float:
-            return float(np.sqrt(np.mean(x ** 2))) if len(x) else float("nan")  # no sample: NaN
 
-        unit_rms[f"ins{j}"] = {"lat_m": rms(en_w), "lon_m": rms(ee_w),
-                               "course_deg": rms(eh_w) / DEG_RAD}
+        def rms(x: np.ndarray) -> float:
+            return float(np.sqrt(np.mean(x**2))) if len(x) else float("nan")  # no sample: NaN
+
+        unit_rms[f"ins{j}"] = {
+            "lat_m": rms(en_w),
+            "lon_m": rms(ee_w),
+            "course_deg": rms(eh_w) / DEG_RAD,
+        }
     la, lo = add_offset_ne(lat[ig], lon[ig], errors["gnss_north_m"][ig], errors["gnss_east_m"][ig])
     qla, qlo = q_latlon_rad(la), q_latlon_rad(lo)
     for sent in ("GGA", "RMC"):
-        extra = ({"alt_m": np.full(len(ig), round(p.alt_m, ALT_DEC)),
-                  "hdop": np.full(len(ig), round(p.gnss_hdop, HDOP_DEC))} if sent == "GGA" else {})
-        rec("position", "GNSS", sent, ig, lat_rad=qla, lon_rad=qlo,
-            quality=np.ones(len(ig), np.int8), **extra)
+        extra = (
+            {
+                "alt_m": np.full(len(ig), round(p.alt_m, ALT_DEC)),
+                "hdop": np.full(len(ig), round(p.gnss_hdop, HDOP_DEC)),
+            }
+            if sent == "GGA"
+            else {}
+        )
+        rec(
+            "position",
+            "GNSS",
+            sent,
+            ig,
+            lat_rad=qla,
+            lon_rad=qlo,
+            quality=np.ones(len(ig), np.int8),
+            **extra,
+        )
     gvn = vn[ig] + errors["gnss_vn_mps"][ig]
     gve = ve[ig] + errors["gnss_ve_mps"][ig]
-    rec("ground", "GNSS", "RMC", ig, cog_rad=q_angle_rad(np.arctan2(gve, gvn)),
-        sog_mps=q_signed(np.hypot(gvn, gve), KN_MPS, SPEED_DEC))
+    rec(
+        "ground",
+        "GNSS",
+        "RMC",
+        ig,
+        cog_rad=q_angle_rad(np.arctan2(gve, gvn)),
+        sog_mps=q_signed(np.hypot(gvn, gve), KN_MPS, SPEED_DEC),
+    )
 
     frames = {}
     for kind in KINDS:
@@ -749,37 +956,59 @@ def simulate(params: SimParams) -> SimVoyage:
                 cat[c] = union_categoricals([d[c] for d in parts[kind]])
             else:
                 # a column one sentence lacks (e.g. HDOP in RMC) is missing there: NaN, never 0
-                cat[c] = np.concatenate([d[c] if c in d else np.full(len(d["time_ns"]), np.nan)
-                                         for d in parts[kind]])
+                cat[c] = np.concatenate(
+                    [d[c] if c in d else np.full(len(d["time_ns"]), np.nan) for d in parts[kind]]
+                )
         o = np.argsort(cat["line"], kind="stable")
         frames[kind] = make_frame(kind, {c: v[o] for c, v in cat.items()})
 
     # With both compasses fitted the gyro holds the role 'compass'; MAG is left unassigned.
     roles = {s: SOURCES[s][0] for s, _, _ in plan if not (s == "MAG" and p.compass == "both")}
-    zda = pd.DataFrame({"time_ns": time_ns[ig], "source": np.full(len(ig), "GNSS", dtype=object),
-                        "line": lines[("GNSS", "ZDA")]})
+    zda = pd.DataFrame(
+        {
+            "time_ns": time_ns[ig],
+            "source": np.full(len(ig), "GNSS", dtype=object),
+            "line": lines[("GNSS", "ZDA")],
+        }
+    )
     if faults:
-        frames, zda, err, fstate = apply_frame_faults(faults, frames, zda, err, truth, v0_ns,
-                                                      state_in)
+        frames, zda, err, fstate = apply_frame_faults(
+            faults, frames, zda, err, truth, v0_ns, state_in
+        )
         state_out.update(fstate)
         if "voyage_s" in state_in:
             state_out["voyage_s"] = voyage_s
         unit_rms = _unit_rms(frames, time_ns, lat, lon, psi)
-    state_out.update(lat_rad=float(lat[-1]), lon_rad=float(lon[-1]), t0_s=float(t_s[-1]),
-                     segment=seg)
+    state_out.update(
+        lat_rad=float(lat[-1]), lon_rad=float(lon[-1]), t0_s=float(t_s[-1]), segment=seg
+    )
     if p.skip_first:
         truth = truth.iloc[1:].reset_index(drop=True)
         err = err.iloc[1:].reset_index(drop=True)
-    return SimVoyage(truth=truth, frames=frames, roles=roles, errors=err, unit_rms=unit_rms,
-                     params=p, zda=zda, state=state_out)
+    return SimVoyage(
+        truth=truth,
+        frames=frames,
+        roles=roles,
+        errors=err,
+        unit_rms=unit_rms,
+        params=p,
+        zda=zda,
+        state=state_out,
+    )
 
 
-def _unit_rms(frames: dict[str, pd.DataFrame], time_ns: np.ndarray, lat: np.ndarray,
-              lon: np.ndarray, psi: np.ndarray) -> dict[str, dict[str, float]]:
+def _unit_rms(
+    frames: dict[str, pd.DataFrame],
+    time_ns: np.ndarray,
+    lat: np.ndarray,
+    lon: np.ndarray,
+    psi: np.ndarray,
+) -> dict[str, dict[str, float]]:
     """RMS of each INS unit's written errors, from the frames (as :func:`simulate` computes
     it from the readings; used when faults changed the frames)."""
+
     def rms(x: np.ndarray) -> float:
-        return float(np.sqrt(np.mean(x ** 2))) if len(x) else float("nan")
+        return float(np.sqrt(np.mean(x**2))) if len(x) else float("nan")
 
     out = {}
     pos, hd = frames["position"], frames["heading"]
@@ -819,16 +1048,21 @@ def simulate_segments(params: SimParams, segment_s: float = 6 * 3600.0):
     total = params.duration_s
     t0, k, state = 0.0, 0, None
     if params.faults:  # resolved over the whole voyage; each segment applies its part
-        params = replace(params, faults=resolve_faults(params.faults, total, params.seed,
-                                                       params.compass))
+        params = replace(
+            params, faults=resolve_faults(params.faults, total, params.seed, params.compass)
+        )
         state = {"voyage_s": total}
     while True:
         seg_len = min(segment_s, total - t0)
-        p = replace(params, legs=legs, duration_s=seg_len, t0_s=t0, segment=k,
-                    skip_first=k > 0, state=state)
+        p = replace(
+            params, legs=legs, duration_s=seg_len, t0_s=t0, segment=k, skip_first=k > 0, state=state
+        )
         if state is not None and "lat_rad" in state:
-            p = replace(p, start_lat_deg=state["lat_rad"] / DEG_RAD,
-                        start_lon_deg=state["lon_rad"] / DEG_RAD)
+            p = replace(
+                p,
+                start_lat_deg=state["lat_rad"] / DEG_RAD,
+                start_lon_deg=state["lon_rad"] / DEG_RAD,
+            )
         v = simulate(p)
         yield v
         state = v.state

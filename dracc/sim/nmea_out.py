@@ -53,14 +53,20 @@ KMH_MPS = 1000.0 / 3600.0
 FORMS = ("tag", "prefix", "bare")
 CHUNK_ROWS = 200_000  #: sentences formatted per block (bounds memory)
 GNSS_TALKERS = ("GP", "GN", "GA", "GL", "GB", "BD", "GQ", "GI")
-ROLE_TALKER = {"compass": "HE", "log": "VW", "ins1": "IN", "ins2": "IN", "ins3": "IN",
-               "gnss": "GP"}
-KIND_TALKER = {"position": "GP", "heading": "HE", "ground": "GP", "water": "VW",
-               "distance": "VW", "rot": "HE"}
+ROLE_TALKER = {"compass": "HE", "log": "VW", "ins1": "IN", "ins2": "IN", "ins3": "IN", "gnss": "GP"}
+KIND_TALKER = {
+    "position": "GP",
+    "heading": "HE",
+    "ground": "GP",
+    "water": "VW",
+    "distance": "VW",
+    "rot": "HE",
+}
 _HEX = np.frombuffer(b"0123456789ABCDEF", dtype=np.uint8)
 
 
 # --------------------------------------------------------------------------- byte blocks
+
 
 class _Row:
     """Accumulates column blocks (uint8 matrix, keep mask) for ``n`` rows."""
@@ -98,7 +104,7 @@ class _Row:
         '-' where negative; NaN (or ``valid`` False) gives an empty field."""
         x = np.asarray(x, float)
         ok = np.isfinite(x) if valid is None else (np.asarray(valid, bool) & np.isfinite(x))
-        scale = 10 ** dec
+        scale = 10**dec
         sc = np.rint(np.abs(np.where(ok, x, 0.0)) * scale).astype(np.int64)
         neg = ok & (x < 0) & (sc > 0)
         ip = sc // scale
@@ -149,6 +155,7 @@ def _hex2(cs: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- fields
 
+
 def _hms(r: _Row, t_ns: np.ndarray) -> np.ndarray:
     """hhmmss.ss (UTC time of day, rounded to 1/100 s); returns the rounded centiseconds."""
     cs = (t_ns + 5_000_000) // 10_000_000
@@ -178,8 +185,11 @@ def _date(cs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     days = (cs // 8_640_000).astype("datetime64[D]")
     y = days.astype("datetime64[Y]")
     mo = days.astype("datetime64[M]")
-    return ((days - mo).astype(np.int64) + 1, (mo - y).astype(np.int64) + 1,
-            y.astype(np.int64) + 1970)
+    return (
+        (days - mo).astype(np.int64) + 1,
+        (mo - y).astype(np.int64) + 1,
+        y.astype(np.int64) + 1970,
+    )
 
 
 def _col(df: pd.DataFrame, name: str) -> np.ndarray:
@@ -191,7 +201,7 @@ def _col(df: pd.DataFrame, name: str) -> np.ndarray:
 def _angle_deg(a_rad) -> np.ndarray:
     """A heading or course in degrees [0, 360) as written: 359.9996 rounds to 0.000, not 360."""
     a = np.asarray(a_rad, float)
-    deg = np.rint(np.mod(a / DEG_RAD, 360.0) * 10 ** ANGLE_DEC) / 10 ** ANGLE_DEC
+    deg = np.rint(np.mod(a / DEG_RAD, 360.0) * 10**ANGLE_DEC) / 10**ANGLE_DEC
     return np.where(deg >= 360.0, deg - 360.0, deg)
 
 
@@ -205,8 +215,10 @@ def _gga(r, d):
     hdop = d["hdop"]
     r.lit(b",").uint(np.clip(q, 0, 9), 1).lit(b",")
     has_h = np.isfinite(hdop)
-    r.add(np.broadcast_to(np.frombuffer(b"10", np.uint8), (r.n, 2)),
-          np.broadcast_to(has_h[:, None], (r.n, 2)))
+    r.add(
+        np.broadcast_to(np.frombuffer(b"10", np.uint8), (r.n, 2)),
+        np.broadcast_to(has_h[:, None], (r.n, 2)),
+    )
     r.lit(b",").num(hdop, HDOP_DEC).lit(b",").num(d["alt_m"], ALT_DEC).lit(b",M,,M,,")
 
 
@@ -232,6 +244,7 @@ def _zda(r, d):
 def _hdt_like(code: bytes):
     def f(r, d):
         r.num(_angle_deg(d["heading_rad"]), ANGLE_DEC).lit(b"," + code)
+
     return f
 
 
@@ -239,8 +252,9 @@ def _hdg(r, d):
     r.num(_angle_deg(d["heading_rad"]), ANGLE_DEC)
     for name in ("deviation_rad", "variation_rad"):
         v = d[name] / DEG_RAD
-        r.lit(b",").num(np.abs(v), ANGLE_DEC).lit(b",").choice(v >= 0, b"E", b"W",
-                                                                valid=np.isfinite(v))
+        r.lit(b",").num(np.abs(v), ANGLE_DEC).lit(b",").choice(
+            v >= 0, b"E", b"W", valid=np.isfinite(v)
+        )
 
 
 def _rot(r, d):
@@ -274,18 +288,38 @@ def _vtg(r, d):
     r.lit(b",K,").choice(valid, b"A", b"N")
 
 
-_LAYOUT = {"GGA": _gga, "RMC": _rmc, "ZDA": _zda, "HDT": _hdt_like(b"T"),
-           "THS": _hdt_like(b"A"), "HDM": _hdt_like(b"M"), "HDG": _hdg, "ROT": _rot,
-           "VHW": _vhw, "VBW": _vbw, "VLW": _vlw, "VTG": _vtg}
-_NUMERIC = {"GGA": ("lat_rad", "lon_rad", "hdop", "alt_m"), "RMC": ("lat_rad", "lon_rad",
-            "sog_mps", "cog_rad"), "ZDA": (), "HDT": ("heading_rad",), "THS": ("heading_rad",),
-            "HDM": ("heading_rad",), "HDG": ("heading_rad", "deviation_rad", "variation_rad"),
-            "ROT": ("rot_radps",), "VHW": ("stw_mps",), "VBW": ("stw_mps", "stw_transverse_mps",
-            "sog_long_mps", "sog_transverse_mps"), "VLW": ("total_water_m", "trip_water_m"),
-            "VTG": ("cog_rad", "sog_mps")}
+_LAYOUT = {
+    "GGA": _gga,
+    "RMC": _rmc,
+    "ZDA": _zda,
+    "HDT": _hdt_like(b"T"),
+    "THS": _hdt_like(b"A"),
+    "HDM": _hdt_like(b"M"),
+    "HDG": _hdg,
+    "ROT": _rot,
+    "VHW": _vhw,
+    "VBW": _vbw,
+    "VLW": _vlw,
+    "VTG": _vtg,
+}
+_NUMERIC = {
+    "GGA": ("lat_rad", "lon_rad", "hdop", "alt_m"),
+    "RMC": ("lat_rad", "lon_rad", "sog_mps", "cog_rad"),
+    "ZDA": (),
+    "HDT": ("heading_rad",),
+    "THS": ("heading_rad",),
+    "HDM": ("heading_rad",),
+    "HDG": ("heading_rad", "deviation_rad", "variation_rad"),
+    "ROT": ("rot_radps",),
+    "VHW": ("stw_mps",),
+    "VBW": ("stw_mps", "stw_transverse_mps", "sog_long_mps", "sog_transverse_mps"),
+    "VLW": ("total_water_m", "trip_water_m"),
+    "VTG": ("cog_rad", "sog_mps"),
+}
 
 
 # --------------------------------------------------------------------------- frames -> sentences
+
 
 def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None):
     """Group frame rows into sentence tables: {type: DataFrame with time_ns, source, talker,
@@ -294,14 +328,25 @@ def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | No
     tables: list[tuple[str, pd.DataFrame]] = []
 
     def base(df: pd.DataFrame, kind: str) -> pd.DataFrame:
-        out = pd.DataFrame({"time_ns": df["time_ns"].to_numpy(np.int64),
-                            "source": df["source"].astype(str).to_numpy(object),
-                            "line": (df["line"].to_numpy(np.int64) if "line" in df
-                                     else np.zeros(len(df), np.int64)),
-                            "recv_ns": (df["recv_ns"].to_numpy(np.int64) if "recv_ns" in df
-                                        else np.full(len(df), MISSING_NS, np.int64))})
-        talker = (df["talker"].astype(str).to_numpy(object) if "talker" in df
-                  else np.full(len(df), "", object))
+        out = pd.DataFrame(
+            {
+                "time_ns": df["time_ns"].to_numpy(np.int64),
+                "source": df["source"].astype(str).to_numpy(object),
+                "line": (
+                    df["line"].to_numpy(np.int64) if "line" in df else np.zeros(len(df), np.int64)
+                ),
+                "recv_ns": (
+                    df["recv_ns"].to_numpy(np.int64)
+                    if "recv_ns" in df
+                    else np.full(len(df), MISSING_NS, np.int64)
+                ),
+            }
+        )
+        talker = (
+            df["talker"].astype(str).to_numpy(object)
+            if "talker" in df
+            else np.full(len(df), "", object)
+        )
         empty = talker == ""
         if empty.any():
             role = pd.Series(out["source"].to_numpy(object)[empty]).map(roles)
@@ -333,8 +378,11 @@ def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | No
         gga = pos[~is_rmc]
         if len(gga):
             b = table(gga, "position", ("lat_rad", "lon_rad", "hdop", "alt_m"))
-            b["quality"] = (gga["quality"].to_numpy(np.int64) if "quality" in gga
-                            else np.ones(len(gga), np.int64))
+            b["quality"] = (
+                gga["quality"].to_numpy(np.int64)
+                if "quality" in gga
+                else np.ones(len(gga), np.int64)
+            )
             tables.append(("GGA", b))
         rmc_pos = pos[is_rmc]
     rmc_gnd = pd.DataFrame()
@@ -350,8 +398,11 @@ def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | No
     if len(rmc_pos) or len(rmc_gnd):
         bp = table(rmc_pos, "position", ("lat_rad", "lon_rad")) if len(rmc_pos) else None
         if bp is not None:
-            bp["quality"] = (rmc_pos["quality"].to_numpy(np.int64) if "quality" in rmc_pos
-                             else np.ones(len(rmc_pos), np.int64))
+            bp["quality"] = (
+                rmc_pos["quality"].to_numpy(np.int64)
+                if "quality" in rmc_pos
+                else np.ones(len(rmc_pos), np.int64)
+            )
         bg = table(rmc_gnd, "ground", ("cog_rad", "sog_mps")) if len(rmc_gnd) else None
         keys = ["time_ns", "source", "line", "talker", "sub", "recv_ns"]
         if bp is None:
@@ -373,11 +424,17 @@ def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | No
     hd = frames.get("heading")
     if hd is not None and len(hd):
         s = sent(hd)
-        ref = (hd["reference"].astype(str).to_numpy(object) if "reference" in hd
-               else np.full(len(hd), "T", object))
+        ref = (
+            hd["reference"].astype(str).to_numpy(object)
+            if "reference" in hd
+            else np.full(len(hd), "T", object)
+        )
         has_dv = np.isfinite(_col(hd, "deviation_rad")) | np.isfinite(_col(hd, "variation_rad"))
-        typ = np.where(np.isin(s, ["HDT", "THS", "HDG", "HDM"]), s,
-                       np.where(ref == "M", np.where(has_dv, "HDG", "HDM"), "HDT"))
+        typ = np.where(
+            np.isin(s, ["HDT", "THS", "HDG", "HDM"]),
+            s,
+            np.where(ref == "M", np.where(has_dv, "HDG", "HDM"), "HDT"),
+        )
         for t in ("HDT", "THS", "HDG", "HDM"):
             sub = hd[typ == t]
             if len(sub):
@@ -385,8 +442,11 @@ def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | No
     w = frames.get("water")
     if w is not None and len(w):
         s = sent(w)
-        has_vbw = (np.isfinite(_col(w, "stw_transverse_mps")) | np.isfinite(_col(w, "sog_long_mps"))
-                   | np.isfinite(_col(w, "sog_transverse_mps")))
+        has_vbw = (
+            np.isfinite(_col(w, "stw_transverse_mps"))
+            | np.isfinite(_col(w, "sog_long_mps"))
+            | np.isfinite(_col(w, "sog_transverse_mps"))
+        )
         typ = np.where(np.isin(s, ["VHW", "VBW"]), s, np.where(has_vbw, "VBW", "VHW"))
         for t in ("VHW", "VBW"):
             sub = w[typ == t]
@@ -426,8 +486,7 @@ def _order(tables):
     return tid[o], row[o], rcv[o]
 
 
-def _format_block(typ: str, d: dict[str, np.ndarray], form: str, tag_time: str,
-                  newline: bytes):
+def _format_block(typ: str, d: dict[str, np.ndarray], form: str, tag_time: str, newline: bytes):
     """Byte matrix and mask of complete lines (with terminator) for the rows of ``d``."""
     n = len(d["time_ns"])
     head = _Row(n)
@@ -437,11 +496,13 @@ def _format_block(typ: str, d: dict[str, np.ndarray], form: str, tag_time: str,
         unit = 1_000_000_000 if tag_time == "s" else 1_000_000
         tag.uint(stamp // unit, _width(stamp // unit))
         tm, tk = tag.build()
-        head.lit(b"\\").add(tm, tk).lit(b"*").add(_hex2(checksum(tm, tk)),
-                                                   np.ones((n, 2), bool)).lit(b"\\")
+        head.lit(b"\\").add(tm, tk).lit(b"*").add(
+            _hex2(checksum(tm, tk)), np.ones((n, 2), bool)
+        ).lit(b"\\")
     elif form == "prefix":
-        iso = np.datetime_as_string(stamp.astype("datetime64[ns]").astype("datetime64[ms]"),
-                                    unit="ms")
+        iso = np.datetime_as_string(
+            stamp.astype("datetime64[ns]").astype("datetime64[ms]"), unit="ms"
+        )
         head.strs(iso).lit(b"Z ")
     body = _Row(n).strs(d["talker"]).lit(typ.encode() + b",")
     _LAYOUT[typ](body, d)
@@ -468,10 +529,12 @@ def _fix_valid(pos: pd.DataFrame | None, vtg: pd.DataFrame) -> np.ndarray:
     bad = pos["quality"].to_numpy(np.int64) == 0
     if not bad.any():
         return ok
-    keys = pd.MultiIndex.from_arrays([pos["source"].astype(str).to_numpy(object)[bad],
-                                      pos["time_ns"].to_numpy(np.int64)[bad]])
-    mine = pd.MultiIndex.from_arrays([vtg["source"].to_numpy(object),
-                                      vtg["time_ns"].to_numpy(np.int64)])
+    keys = pd.MultiIndex.from_arrays(
+        [pos["source"].astype(str).to_numpy(object)[bad], pos["time_ns"].to_numpy(np.int64)[bad]]
+    )
+    mine = pd.MultiIndex.from_arrays(
+        [vtg["source"].to_numpy(object), vtg["time_ns"].to_numpy(np.int64)]
+    )
     ok[mine.isin(keys)] = 0
     return ok
 
@@ -487,9 +550,14 @@ def _check_form(form: str, tag_time: str) -> None:
         raise DraccError(f"TAG block time unit must be 's' or 'ms', got {tag_time!r}")
 
 
-def iter_blocks(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None = None,
-                form: str = "bare", tag_time: str = "s", newline: bytes = b"\r\n",
-                chunk_rows: int = CHUNK_ROWS):
+def iter_blocks(
+    frames: dict[str, pd.DataFrame],
+    roles: dict[str, str] | None = None,
+    form: str = "bare",
+    tag_time: str = "s",
+    newline: bytes = b"\r\n",
+    chunk_rows: int = CHUNK_ROWS,
+):
     """Yield ``(time_ns, source, bytes)`` blocks of complete lines in time-of-fix order
     (``source`` as an ASCII bytes array; ``time_ns`` the time a logger stamps each line:
     ``recv_ns`` where set, else ``time_ns``).  TAG ``c:`` and prefix times are those
@@ -500,7 +568,7 @@ def iter_blocks(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None = 
         return
     tid, row, t = _order(tables)
     for start in range(0, len(tid), chunk_rows):
-        ctid, crow = tid[start:start + chunk_rows], row[start:start + chunk_rows]
+        ctid, crow = tid[start : start + chunk_rows], row[start : start + chunk_rows]
         m = len(ctid)
         parts = []
         src = np.empty(m, dtype="S32")
@@ -518,7 +586,7 @@ def iter_blocks(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None = 
             w = mat.shape[1]
             big[sel, :w] = mat
             keep[sel, :w] = mask
-        yield t[start:start + m], src, big[keep].tobytes()
+        yield t[start : start + m], src, big[keep].tobytes()
 
 
 def frames_to_lines(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None = None):
@@ -535,8 +603,14 @@ def frames_to_lines(frames: dict[str, pd.DataFrame], roles: dict[str, str] | Non
     return np.concatenate(ts), np.concatenate(srcs).astype("U"), lines
 
 
-def write_nmea(voyage_or_frames, path: str | Path, form: str = "tag", tag_time: str = "s",
-               roles: dict[str, str] | None = None, newline: bytes = b"\r\n") -> None:
+def write_nmea(
+    voyage_or_frames,
+    path: str | Path,
+    form: str = "tag",
+    tag_time: str = "s",
+    roles: dict[str, str] | None = None,
+    newline: bytes = b"\r\n",
+) -> None:
     """Write a simulated voyage (or canonical frames) as an NMEA 0183 text log, atomically.
 
     ``form``: 'tag' (IEC 61162-450 TAG block with ``s:`` source and ``c:`` time), 'prefix'
@@ -549,6 +623,5 @@ def write_nmea(voyage_or_frames, path: str | Path, form: str = "tag", tag_time: 
         frames = voyage_or_frames.frames
         roles = roles if roles is not None else voyage_or_frames.roles
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        for _, _, blob in iter_blocks(frames, roles, form=form, tag_time=tag_time,
-                                      newline=newline):
+        for _, _, blob in iter_blocks(frames, roles, form=form, tag_time=tag_time, newline=newline):
             fh.write(blob)

@@ -35,8 +35,23 @@ from dracc.math.deviation.sampling import (
 )
 
 __all__ = [
-    "CHANNELS", "ChannelMode", "ChannelStats", "DeviationResult", "HatEstimate", "HatStats",
-    "KurtosisWindow", "ReferenceAverage", "ReferenceStats", "UnitSeries", "UnitStats",
-    "WindowStats", "analyse_deviations", "check_config", "sample_unit", "sampling_instants",
-    "three_cornered_hat", "unit_series_from_frames", "unit_series_from_voyage",
+    "CHANNELS",
+    "ChannelMode",
+    "ChannelStats",
+    "DeviationResult",
+    "HatEstimate",
+    "HatStats",
+    "KurtosisWindow",
+    "ReferenceAverage",
+    "ReferenceStats",
+    "UnitSeries",
+    "UnitStats",
+    "WindowStats",
+    "analyse_deviations",
+    "check_config",
+    "sample_unit",
+    "sampling_instants",
+    "three_cornered_hat",
+    "unit_series_from_frames",
+    "unit_series_from_voyage",
 ]

@@ -93,13 +93,24 @@ class ChannelStats:
     notes: tuple[str, ...] = ()  #: why a figure is missing or how it was obtained
 
     def to_dict(self) -> dict:
-        return {"n": int(self.n), "m_u": _f(self.m_u), "k": _f(self.k), "m_y": _f(self.m_y),
-                "kurtosis": _f(self.kurtosis), "kurtosis_kind": "excess",
-                "kurtosis_for_limit": _f(self.kurtosis_for_limit), "n_eff": _f(self.n_eff),
-                "k_pie": _f(self.k_pie), "k_hm": _f(self.k_hm), "limit": _f(self.limit),
-                "apriori": _f(self.apriori), "exceeds_apriori": self.exceeds_apriori,
-                "new_apriori": _f(self.new_apriori), "verdict": self.verdict,
-                "notes": list(self.notes)}
+        return {
+            "n": int(self.n),
+            "m_u": _f(self.m_u),
+            "k": _f(self.k),
+            "m_y": _f(self.m_y),
+            "kurtosis": _f(self.kurtosis),
+            "kurtosis_kind": "excess",
+            "kurtosis_for_limit": _f(self.kurtosis_for_limit),
+            "n_eff": _f(self.n_eff),
+            "k_pie": _f(self.k_pie),
+            "k_hm": _f(self.k_hm),
+            "limit": _f(self.limit),
+            "apriori": _f(self.apriori),
+            "exceeds_apriori": self.exceeds_apriori,
+            "new_apriori": _f(self.new_apriori),
+            "verdict": self.verdict,
+            "notes": list(self.notes),
+        }
 
 
 @dataclass(frozen=True)
@@ -123,10 +134,17 @@ class HatStats:
     dof: float = math.nan
 
     def to_dict(self) -> dict:
-        return {"n": int(self.n), "variance": _f(self.variance), "sigma": _f(self.sigma),
-                "var_lower": _f(self.var_lower), "var_upper": _f(self.var_upper),
-                "negative": bool(self.negative), "m_y_factor": _f(self.m_y_factor),
-                "disagree": self.disagree, "dof": _f(self.dof)}
+        return {
+            "n": int(self.n),
+            "variance": _f(self.variance),
+            "sigma": _f(self.sigma),
+            "var_lower": _f(self.var_lower),
+            "var_upper": _f(self.var_upper),
+            "negative": bool(self.negative),
+            "m_y_factor": _f(self.m_y_factor),
+            "disagree": self.disagree,
+            "dof": _f(self.dof),
+        }
 
 
 @dataclass(frozen=True)
@@ -150,15 +168,25 @@ class ReferenceStats:
     n_independent: float = math.nan
 
     def to_dict(self) -> dict:
-        return {"n": int(self.n), "rmse": _f(self.rmse), "m_x": _f(self.m_x), "m_u": _f(self.m_u),
-                "k_star": _f(self.k_star), "k": _f(self.k), "mark": self.mark,
-                "kurtosis_error": _f(self.kurtosis_error),
-                "kurtosis_deviation": _f(self.kurtosis_deviation),
-                "kurtosis_mark": self.kurtosis_mark, "mark_k": _f(self.mark_k),
-                "k_upper_fisher": _f(self.k_upper), "k_fd": _f(self.k_fd),
-                "n_independent": _f(self.n_independent),
-                "within_fisher": None if math.isnan(self.k_star) or math.isnan(self.k_upper)
-                else bool(self.k_star <= self.k_upper)}
+        return {
+            "n": int(self.n),
+            "rmse": _f(self.rmse),
+            "m_x": _f(self.m_x),
+            "m_u": _f(self.m_u),
+            "k_star": _f(self.k_star),
+            "k": _f(self.k),
+            "mark": self.mark,
+            "kurtosis_error": _f(self.kurtosis_error),
+            "kurtosis_deviation": _f(self.kurtosis_deviation),
+            "kurtosis_mark": self.kurtosis_mark,
+            "mark_k": _f(self.mark_k),
+            "k_upper_fisher": _f(self.k_upper),
+            "k_fd": _f(self.k_fd),
+            "n_independent": _f(self.n_independent),
+            "within_fisher": None
+            if math.isnan(self.k_star) or math.isnan(self.k_upper)
+            else bool(self.k_star <= self.k_upper),
+        }
 
 
 @dataclass(frozen=True)
@@ -171,8 +199,12 @@ class ReferenceAverage:
     k_star: float  #: m_x / m_u
 
     def to_dict(self) -> dict:
-        return {"days": self.days, "m_x": _f(self.m_x), "m_u": _f(self.m_u),
-                "k_star": _f(self.k_star)}
+        return {
+            "days": self.days,
+            "m_x": _f(self.m_x),
+            "m_u": _f(self.m_u),
+            "k_star": _f(self.k_star),
+        }
 
 
 @dataclass(frozen=True)
@@ -202,13 +234,22 @@ class WindowStats:
     units: dict[str, UnitStats]
 
     def to_dict(self) -> dict:
-        return {"label": self.label, "start_utc": iso_utc(self.start_ns),
-                "end_utc": iso_utc(self.end_ns),
-                "units": {u: s.to_dict() for u, s in self.units.items()},
-                "hat": {u: {c: h.to_dict() for c, h in s.hat.items()}
-                        for u, s in self.units.items() if s.hat},
-                "reference": {u: {c: r.to_dict() for c, r in s.reference.items()}
-                              for u, s in self.units.items() if s.reference}}
+        return {
+            "label": self.label,
+            "start_utc": iso_utc(self.start_ns),
+            "end_utc": iso_utc(self.end_ns),
+            "units": {u: s.to_dict() for u, s in self.units.items()},
+            "hat": {
+                u: {c: h.to_dict() for c, h in s.hat.items()}
+                for u, s in self.units.items()
+                if s.hat
+            },
+            "reference": {
+                u: {c: r.to_dict() for c, r in s.reference.items()}
+                for u, s in self.units.items()
+                if s.reference
+            },
+        }
 
 
 @dataclass(frozen=True)
@@ -221,8 +262,12 @@ class KurtosisWindow:
     kurtosis: float
 
     def to_dict(self) -> dict:
-        return {"length_s": self.length_s, "start_utc": iso_utc(self.start_ns), "n": self.n,
-                "kurtosis": _f(self.kurtosis)}
+        return {
+            "length_s": self.length_s,
+            "start_utc": iso_utc(self.start_ns),
+            "n": self.n,
+            "kurtosis": _f(self.kurtosis),
+        }
 
 
 @dataclass(frozen=True)
@@ -235,8 +280,12 @@ class ChannelMode:
     message: str | None
 
     def to_dict(self) -> dict:
-        return {"units": list(self.units), "mode": self.mode, "factor": _f(self.factor),
-                "message": self.message}
+        return {
+            "units": list(self.units),
+            "mode": self.mode,
+            "factor": _f(self.factor),
+            "message": self.message,
+        }
 
 
 @dataclass(frozen=True, eq=False)  # holds arrays: identity, not elementwise ==
@@ -289,8 +338,9 @@ class DeviationResult:
         if arcmin:
             dlat_am, dlon_am = {}, {}
             for u in self.units:
-                dlat_am[u], dlon_am[u] = metres_to_arcmin(self.samples[u]["lat"],
-                                                          self.samples[u]["lon"], self.lat_mean_rad)
+                dlat_am[u], dlon_am[u] = metres_to_arcmin(
+                    self.samples[u]["lat"], self.samples[u]["lon"], self.lat_mean_rad
+                )
         for i, t in enumerate(self.time_ns):
             row: dict = {"time_utc": iso_utc(t)}
             for u in self.units:
@@ -305,8 +355,11 @@ class DeviationResult:
             for u, s in self.whole.units.items():
                 for c in ("lat", "lon"):
                     if c in s.channels:
-                        conv = metres_to_arcmin(1.0, 0.0, lat_ref)[0] if c == "lat" else \
-                            metres_to_arcmin(0.0, 1.0, lat_ref)[1]
+                        conv = (
+                            metres_to_arcmin(1.0, 0.0, lat_ref)[0]
+                            if c == "lat"
+                            else metres_to_arcmin(0.0, 1.0, lat_ref)[1]
+                        )
                         units[u][c]["m_u_arcmin"] = _f(s.channels[c].m_u * conv)
                         units[u][c]["m_y_arcmin"] = _f(s.channels[c].m_y * conv)
         for u, chans in self.kurtosis_upper.items():
@@ -314,15 +367,21 @@ class DeviationResult:
                 if u in units and c in units[u]:
                     units[u][c]["kurtosis_upper"] = _f(e)
                     units[u][c]["kurtosis_windows"] = [
-                        w.to_dict() for w in self.kurtosis_windows[u][c]]
-        reference = {u: {c: r.to_dict() for c, r in s.reference.items()}
-                     for u, s in self.whole.units.items() if s.reference}
+                        w.to_dict() for w in self.kurtosis_windows[u][c]
+                    ]
+        reference = {
+            u: {c: r.to_dict() for c, r in s.reference.items()}
+            for u, s in self.whole.units.items()
+            if s.reference
+        }
         for u, chans in self.reference_average.items():
             for c, avg in chans.items():
                 reference.setdefault(u, {}).setdefault(c, {})["weighted"] = avg.to_dict()
         return {
-            "interval_s": self.interval_s, "offset_s": self.offset_s,
-            "probability": self.probability, "confidence": self.confidence,
+            "interval_s": self.interval_s,
+            "offset_s": self.offset_s,
+            "probability": self.probability,
+            "confidence": self.confidence,
             "factors": {c: _f(k) for c, k in self.factors.items()},
             "factor_alternatives": factor_alternatives(),
             "channels": {c: m.to_dict() for c, m in self.channels.items()},
@@ -331,8 +390,11 @@ class DeviationResult:
             "skipped": self.skipped,
             "samples": samples,
             "units": units,
-            "hat": {u: {c: h.to_dict() for c, h in s.hat.items()}
-                    for u, s in self.whole.units.items() if s.hat},
+            "hat": {
+                u: {c: h.to_dict() for c, h in s.hat.items()}
+                for u, s in self.whole.units.items()
+                if s.hat
+            },
             "reference": reference,
             "windows": [w.to_dict() for w in self.windows],
             "messages": list(self.messages),
@@ -349,11 +411,13 @@ def factor_alternatives() -> dict:
     """The factors beside the fixed ones (seeds/001), for the reader to compare: (K5a)'s
     first approximation sqrt(3/2); the second approximation through r from (K4) and (K3a)
     as printed, and with its cross term once; the paper's stated 1.32."""
-    return {"first_approximation": math.sqrt(1.5),
-            "second_approximation_r": float(stats.k_second_approximation()),
-            "second_approximation_r_cross_once": float(stats.k_second_approximation(cross=1)),
-            "paper_stated_second": 1.32, "paper_stated_longitude": 1.49}
-
+    return {
+        "first_approximation": math.sqrt(1.5),
+        "second_approximation_r": float(stats.k_second_approximation()),
+        "second_approximation_r_cross_once": float(stats.k_second_approximation(cross=1)),
+        "paper_stated_second": 1.32,
+        "paper_stated_longitude": 1.49,
+    }
 
 
 def check_config(cfg: DeviationConfig) -> None:
@@ -365,17 +429,24 @@ def check_config(cfg: DeviationConfig) -> None:
         elif isinstance(default, int):
             ok = isinstance(value, int) and not isinstance(value, bool)
         elif isinstance(default, float):
-            ok = isinstance(value, (int, float)) and not isinstance(value, bool) \
+            ok = (
+                isinstance(value, (int, float))
+                and not isinstance(value, bool)
                 and math.isfinite(value)
+            )
         else:
             continue
         if not ok:
-            raise ConfigError(f"[deviation] {f.name} = {value!r}: must be "
-                              f"{type(default).__name__ if not isinstance(default, float) else 'a finite number'}")
+            raise ConfigError(
+                f"[deviation] {f.name} = {value!r}: must be "
+                f"{type(default).__name__ if not isinstance(default, float) else 'a finite number'}"
+            )
     if cfg.interval_s <= 0 or cfg.window_s <= 0:
         raise ConfigError("[deviation] interval_s and window_s must be positive")
     if cfg.velocity_min_gap_s < 0:
-        raise ConfigError(f"[deviation] velocity_min_gap_s must be >= 0, got {cfg.velocity_min_gap_s}")
+        raise ConfigError(
+            f"[deviation] velocity_min_gap_s must be >= 0, got {cfg.velocity_min_gap_s}"
+        )
     if cfg.max_interp_gap_s < 0:
         raise ConfigError(f"[deviation] max_interp_gap_s must be >= 0, got {cfg.max_interp_gap_s}")
     for name in ("confidence", "hat_confidence"):
@@ -383,7 +454,9 @@ def check_config(cfg: DeviationConfig) -> None:
         if not 0.5 <= v < 1.0:
             raise ConfigError(f"[deviation] {name} must be in [0.5, 1), got {v}")
     if cfg.correlation_time_s < 0:
-        raise ConfigError(f"[deviation] correlation_time_s must be >= 0, got {cfg.correlation_time_s}")
+        raise ConfigError(
+            f"[deviation] correlation_time_s must be >= 0, got {cfg.correlation_time_s}"
+        )
     if any(w <= 0 for w in cfg.kurtosis_windows_s):
         raise ConfigError("[deviation] kurtosis_windows_s must all be positive")
     if cfg.hat_draws < 100:
@@ -391,15 +464,23 @@ def check_config(cfg: DeviationConfig) -> None:
     keys = set(SAMPLE_KEYS.values())
     for unit, table in cfg.apriori.items():
         if unit not in INS_ROLES:
-            raise ConfigError(f"[deviation.apriori] {unit!r}: unit must be one of {', '.join(INS_ROLES)}")
+            raise ConfigError(
+                f"[deviation.apriori] {unit!r}: unit must be one of {', '.join(INS_ROLES)}"
+            )
         if not isinstance(table, dict):
-            raise ConfigError(f"[deviation.apriori] {unit} must be a table of {', '.join(sorted(keys))}")
+            raise ConfigError(
+                f"[deviation.apriori] {unit} must be a table of {', '.join(sorted(keys))}"
+            )
         for key, value in table.items():
             if key not in keys:
-                raise ConfigError(f"[deviation.apriori.{unit}] unknown key {key!r}; known: "
-                                  f"{', '.join(sorted(keys))}")
+                raise ConfigError(
+                    f"[deviation.apriori.{unit}] unknown key {key!r}; known: "
+                    f"{', '.join(sorted(keys))}"
+                )
             if not isinstance(value, (int, float)) or not value > 0:
-                raise ConfigError(f"[deviation.apriori.{unit}] {key} = {value!r}: must be a positive number")
+                raise ConfigError(
+                    f"[deviation.apriori.{unit}] {key} = {value!r}: must be a positive number"
+                )
 
 
 def _factors(cfg: DeviationConfig) -> dict[str, float]:
@@ -424,13 +505,17 @@ def _channel_stats(u, factor, kurt_limit, unit, channel, cfg: DeviationConfig) -
         # (a bias), through its n - 1.45.  The family's limit at E -> -2 is the two-point
         # law, whose limiting error is its RMS: K_PIE = 1.
         kp = 1.0
-        notes.append(f"kurtosis {e_lim:.2f} <= -2 (nearly constant deviations): "
-                     "K_PIE = 1, the two-point limit")
+        notes.append(
+            f"kurtosis {e_lim:.2f} <= -2 (nearly constant deviations): "
+            "K_PIE = 1, the two-point limit"
+        )
     kh = stats.k_hm(cfg.confidence, n_eff) if n_eff >= 1 else math.nan  # (K8)
     if n_eff < 1:
-        notes.append(f"fewer than one independent sample (N_eff = {n_eff:.2f} with a "
-                     f"{cfg.correlation_time_s / 3600:g} h correlation time): no upper "
-                     "confidence bound, no limiting error")
+        notes.append(
+            f"fewer than one independent sample (N_eff = {n_eff:.2f} with a "
+            f"{cfg.correlation_time_s / 3600:g} h correlation time): no upper "
+            "confidence bound, no limiting error"
+        )
     limit = kp * kh * m_y  # (K8)
     apriori = cfg.apriori.get(unit, {}).get(SAMPLE_KEYS[channel])
     if apriori is None:
@@ -441,11 +526,23 @@ def _channel_stats(u, factor, kurt_limit, unit, channel, cfg: DeviationConfig) -
         exceeds = bool(m_y > apriori)
         new = max(float(apriori), m_y)  # conclusions: the larger becomes the new a priori
         verdict = "exceeds" if exceeds else "within"
-    return ChannelStats(n=n, m_u=m_u, k=factor, m_y=m_y, kurtosis=e, kurtosis_for_limit=e_lim,
-                        n_eff=n_eff, k_pie=float(kp), k_hm=float(kh), limit=float(limit),
-                        apriori=None if apriori is None else float(apriori),
-                        exceeds_apriori=exceeds, new_apriori=float(new), verdict=verdict,
-                        notes=tuple(notes))
+    return ChannelStats(
+        n=n,
+        m_u=m_u,
+        k=factor,
+        m_y=m_y,
+        kurtosis=e,
+        kurtosis_for_limit=e_lim,
+        n_eff=n_eff,
+        k_pie=float(kp),
+        k_hm=float(kh),
+        limit=float(limit),
+        apriori=None if apriori is None else float(apriori),
+        exceeds_apriori=exceeds,
+        new_apriori=float(new),
+        verdict=verdict,
+        notes=tuple(notes),
+    )
 
 
 def _mode(units: list[str], channel: str, factor: float) -> ChannelMode:
@@ -453,19 +550,30 @@ def _mode(units: list[str], channel: str, factor: float) -> ChannelMode:
     if len(units) >= 3:
         return ChannelMode(tuple(units), "three", factor, None)
     if len(units) == 2:
-        return ChannelMode(tuple(units), "two", stats.K_FIRST_APPROX_TWO,
-                           f"{channel}: only two units ({names}): deviations from their mean are "
-                           "half their difference; m_y uses the first-approximation factor "
-                           "sqrt(2) = 1.414, and no three-cornered hat is possible")
+        return ChannelMode(
+            tuple(units),
+            "two",
+            stats.K_FIRST_APPROX_TWO,
+            f"{channel}: only two units ({names}): deviations from their mean are "
+            "half their difference; m_y uses the first-approximation factor "
+            "sqrt(2) = 1.414, and no three-cornered hat is possible",
+        )
     if len(units) == 1:
-        return ChannelMode(tuple(units), "one", math.nan,
-                           f"{channel}: only one unit ({names}): no deviation statistics "
-                           "(the method needs at least two units, three for its factors)")
+        return ChannelMode(
+            tuple(units),
+            "one",
+            math.nan,
+            f"{channel}: only one unit ({names}): no deviation statistics "
+            "(the method needs at least two units, three for its factors)",
+        )
     return ChannelMode((), "none", math.nan, f"{channel}: no INS data")
 
 
-def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None = None,
-                       reference: UnitSeries | None = None) -> DeviationResult:
+def analyse_deviations(
+    units: dict[str, UnitSeries],
+    cfg: DeviationConfig | None = None,
+    reference: UnitSeries | None = None,
+) -> DeviationResult:
     """INS accuracy from deviations from the mean of three (METHODS section 4, K1-K8).
 
     ``units``: role ('ins1'..'ins3') -> readings; ``reference``: GNSS (or berth)
@@ -485,26 +593,34 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
         # candidate instants over the readings of all units; whether a channel may use
         # an instant is decided below from each unit's own span and gaps (never widened:
         # a reading is not held past the end of a unit's data, nor before its start)
-        instants = sampling_instants(min(s[0] for s in spans), max(s[1] for s in spans),
-                                     cfg.interval_s, cfg.offset_s)
+        instants = sampling_instants(
+            min(s[0] for s in spans), max(s[1] for s in spans), cfg.interval_s, cfg.offset_s
+        )
     else:
         instants = np.empty(0, np.int64)
-    sampled = {u: sample_unit(units[u], instants, cfg.max_interp_gap_s, cfg.velocity_min_gap_s)
-               for u in names}
+    sampled = {
+        u: sample_unit(units[u], instants, cfg.max_interp_gap_s, cfg.velocity_min_gap_s)
+        for u in names
+    }
     # which units each channel has (any reading at all), and why an instant is not used
     # in a channel: outside the span of one of its units, or a gap too long in one
-    chan_units = {"lat": [u for u in names if len(_valid_times(units[u], "pos"))],
-                  "course": [u for u in names if len(_valid_times(units[u], "hdg"))]}
+    chan_units = {
+        "lat": [u for u in names if len(_valid_times(units[u], "pos"))],
+        "course": [u for u in names if len(_valid_times(units[u], "hdg"))],
+    }
     chan_units["lon"] = chan_units["lat"]
     chan_reason = {}
     for c in CHANNELS:
-        rs = [sampled[u].pos_reason if c != "course" else sampled[u].hdg_reason
-              for u in chan_units[c]]
+        rs = [
+            sampled[u].pos_reason if c != "course" else sampled[u].hdg_reason for u in chan_units[c]
+        ]
         if rs:
             rs = np.vstack(rs)
-            chan_reason[c] = np.where(np.any(rs == OUTSIDE_SPAN, axis=0), OUTSIDE_SPAN,
-                                      np.where(np.any(rs == GAP_TOO_LONG, axis=0),
-                                               GAP_TOO_LONG, SAMPLED))
+            chan_reason[c] = np.where(
+                np.any(rs == OUTSIDE_SPAN, axis=0),
+                OUTSIDE_SPAN,
+                np.where(np.any(rs == GAP_TOO_LONG, axis=0), GAP_TOO_LONG, SAMPLED),
+            )
         else:
             chan_reason[c] = np.full(len(instants), OUTSIDE_SPAN, np.int8)
     # an instant at which no unit has a reading (a pause in the recording, or a stray
@@ -516,8 +632,11 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
     for su in sampled.values():
         keep |= ~np.isnan(su.lat_rad) | ~np.isnan(su.heading_rad)
     # every candidate instant a channel does not use, by its reason
-    skipped = {c: {REASONS[k]: int(np.sum(chan_reason[c] == k)) for k in (OUTSIDE_SPAN, GAP_TOO_LONG)}
-               for c in CHANNELS if chan_units[c]}
+    skipped = {
+        c: {REASONS[k]: int(np.sum(chan_reason[c] == k)) for k in (OUTSIDE_SPAN, GAP_TOO_LONG)}
+        for c in CHANNELS
+        if chan_units[c]
+    }
     if not keep.all():
         instants = instants[keep]
         sampled = {u: su.select(keep) for u, su in sampled.items()}
@@ -544,17 +663,23 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
         crs = np.degrees(stats.deviations_course_rad(hdg))  # (K1) on the circle, degrees
         for j, u in enumerate(crs_units):
             dev[u]["course"] = crs[j]
-    missing = {u: {"lat": int(np.sum(np.isnan(sampled[u].lat_rad))),
-                   "lon": int(np.sum(np.isnan(sampled[u].lon_rad))),
-                   "course": int(np.sum(np.isnan(sampled[u].heading_rad)))} for u in present}
+    missing = {
+        u: {
+            "lat": int(np.sum(np.isnan(sampled[u].lat_rad))),
+            "lon": int(np.sum(np.isnan(sampled[u].lon_rad))),
+            "course": int(np.sum(np.isnan(sampled[u].heading_rad))),
+        }
+        for u in present
+    }
 
     # reference errors at the instants (Table 1)
     err: dict[str, dict[str, np.ndarray]] = {}
     if reference is not None and n_inst:
         ref = sample_unit(reference, instants, cfg.max_interp_gap_s, cfg.velocity_min_gap_s)
         for u in present:
-            xn, xe = position_errors_m(sampled[u].lat_rad, sampled[u].lon_rad,
-                                       ref.lat_rad, ref.lon_rad)
+            xn, xe = position_errors_m(
+                sampled[u].lat_rad, sampled[u].lon_rad, ref.lat_rad, ref.lon_rad
+            )
             xc = np.degrees(course_errors_rad(sampled[u].heading_rad, ref.heading_rad))
             err[u] = {"lat": xn, "lon": xe, "course": xc}
 
@@ -572,13 +697,20 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
                 idx = stats.window_index(instants, length_s, origin)
                 for k in np.unique(idx):
                     sel = dev[u][c][idx == k]
-                    wins.append(KurtosisWindow(float(length_s),
-                                               origin + int(k) * int(round(length_s * 1e9)),
-                                               int(stats.count_valid(sel)),
-                                               float(stats.excess_kurtosis_k6(sel))))
+                    wins.append(
+                        KurtosisWindow(
+                            float(length_s),
+                            origin + int(k) * int(round(length_s * 1e9)),
+                            int(stats.count_valid(sel)),
+                            float(stats.excess_kurtosis_k6(sel)),
+                        )
+                    )
             kwin[u][c] = tuple(wins)
-            good = [w.kurtosis for w in wins
-                    if w.n >= cfg.min_kurtosis_samples and not math.isnan(w.kurtosis)]
+            good = [
+                w.kurtosis
+                for w in wins
+                if w.n >= cfg.min_kurtosis_samples and not math.isnan(w.kurtosis)
+            ]
             kup[u][c] = max(good) if good else math.nan
 
     def window(label: str, sel: np.ndarray, start_ns: int, end_ns: int, whole: bool) -> WindowStats:
@@ -605,19 +737,40 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
                         e_x = float(stats.excess_kurtosis_k6(xb))
                         e_u = float(stats.excess_kurtosis_k6(ub))
                         k_it, k_fd, n_ind = stats.k_upper_fisher(
-                            m.factor, int(both.sum()), cfg.interval_s, cfg.correlation_time_s,
-                            FISHER_PROBABILITY)
+                            m.factor,
+                            int(both.sum()),
+                            cfg.interval_s,
+                            cfg.correlation_time_s,
+                            FISHER_PROBABILITY,
+                        )
                         refs[c] = ReferenceStats(
-                            n=int(both.sum()), rmse=float(stats.rms_plain(xb)), m_x=m_x, m_u=m_uu,
-                            k_star=ks, k=m.factor, mark=k_star_mark(ks, m.factor, c),
-                            kurtosis_error=e_x, kurtosis_deviation=e_u,
+                            n=int(both.sum()),
+                            rmse=float(stats.rms_plain(xb)),
+                            m_x=m_x,
+                            m_u=m_uu,
+                            k_star=ks,
+                            k=m.factor,
+                            mark=k_star_mark(ks, m.factor, c),
+                            kurtosis_error=e_x,
+                            kurtosis_deviation=e_u,
                             kurtosis_mark=kurtosis_mark(e_x, e_u, cfg.kurtosis_tol),
-                            mark_k=table1_mark_k(m.factor, c), k_upper=float(k_it),
-                            k_fd=float(k_fd), n_independent=float(n_ind))
-            cov, r = (stats.lat_lon_covariance(dev[u]["lat"][sel], dev[u]["lon"][sel])
-                      if "lat" in chans else (math.nan, math.nan))  # (K7)
-            out[u] = UnitStats(channels=chans, cov_lat_lon_m2=float(cov), r_lat_lon=float(r),
-                               hat={}, reference=refs)
+                            mark_k=table1_mark_k(m.factor, c),
+                            k_upper=float(k_it),
+                            k_fd=float(k_fd),
+                            n_independent=float(n_ind),
+                        )
+            cov, r = (
+                stats.lat_lon_covariance(dev[u]["lat"][sel], dev[u]["lon"][sel])
+                if "lat" in chans
+                else (math.nan, math.nan)
+            )  # (K7)
+            out[u] = UnitStats(
+                channels=chans,
+                cov_lat_lon_m2=float(cov),
+                r_lat_lon=float(r),
+                hat={},
+                reference=refs,
+            )
         # three-cornered hat per channel with three units
         block = max(1, math.ceil(cfg.correlation_time_s / cfg.interval_s))
         for c in CHANNELS:
@@ -625,30 +778,56 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
             if m.mode != "three":
                 continue
             y = np.vstack([dev[u][c][sel] for u in m.units])
-            h = three_cornered_hat(y, circular=False, confidence=cfg.hat_confidence, block=block,
-                                   draws=cfg.hat_draws, seed=cfg.seed,
-                                   corr_instants=cfg.correlation_time_s / cfg.interval_s)
+            h = three_cornered_hat(
+                y,
+                circular=False,
+                confidence=cfg.hat_confidence,
+                block=block,
+                draws=cfg.hat_draws,
+                seed=cfg.seed,
+                corr_instants=cfg.correlation_time_s / cfg.interval_s,
+            )
             for j, u in enumerate(m.units):
                 m_y = out[u].channels[c].m_y
                 lo, hi = h.var_lower[j], h.var_upper[j]
-                disagree = None if (np.isnan(lo) or np.isnan(m_y)) else bool(
-                    not lo <= m_y * m_y <= hi)
-                out[u].hat[c] = HatStats(n=h.n, variance=float(h.variance[j]),
-                                         sigma=float(h.sigma[j]), var_lower=float(lo),
-                                         var_upper=float(hi), negative=bool(h.negative[j]),
-                                         m_y_factor=m_y, disagree=disagree, dof=float(h.dof))
+                disagree = (
+                    None if (np.isnan(lo) or np.isnan(m_y)) else bool(not lo <= m_y * m_y <= hi)
+                )
+                out[u].hat[c] = HatStats(
+                    n=h.n,
+                    variance=float(h.variance[j]),
+                    sigma=float(h.sigma[j]),
+                    var_lower=float(lo),
+                    var_upper=float(hi),
+                    negative=bool(h.negative[j]),
+                    m_y_factor=m_y,
+                    disagree=disagree,
+                    dof=float(h.dof),
+                )
         return WindowStats(label, start_ns, end_ns, out)
 
     if n_inst:
-        whole = window("all", np.ones(n_inst, bool), int(instants[0]),
-                       int(instants[-1]) + int(round(cfg.interval_s * 1e9)), True)
+        whole = window(
+            "all",
+            np.ones(n_inst, bool),
+            int(instants[0]),
+            int(instants[-1]) + int(round(cfg.interval_s * 1e9)),
+            True,
+        )
         idx = stats.window_index(instants, cfg.window_s, origin)
         w_ns = int(round(cfg.window_s * 1e9))
         windows = tuple(
-            window(str(iso_utc(origin + int(k) * w_ns))[:10] if cfg.window_s == 86400.0
-                   else str(iso_utc(origin + int(k) * w_ns)),
-                   idx == k, origin + int(k) * w_ns, origin + (int(k) + 1) * w_ns, False)
-            for k in np.unique(idx))
+            window(
+                str(iso_utc(origin + int(k) * w_ns))[:10]
+                if cfg.window_s == 86400.0
+                else str(iso_utc(origin + int(k) * w_ns)),
+                idx == k,
+                origin + int(k) * w_ns,
+                origin + (int(k) + 1) * w_ns,
+                False,
+            )
+            for k in np.unique(idx)
+        )
     else:
         whole = WindowStats("all", 0, 0, {})
         windows = ()
@@ -657,15 +836,19 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
     ref_avg: dict[str, dict[str, ReferenceAverage]] = {}
     for u in present:
         for c in CHANNELS:
-            rows = [w.units[u].reference[c] for w in windows
-                    if u in w.units and c in w.units[u].reference]
+            rows = [
+                w.units[u].reference[c]
+                for w in windows
+                if u in w.units and c in w.units[u].reference
+            ]
             if rows:
                 n = [r.n for r in rows]
                 mx = stats.weighted_rms([r.m_x for r in rows], n)
                 mu = stats.weighted_rms([r.m_u for r in rows], n)
                 used = sum(1 for r in rows if r.n >= 2 and not math.isnan(r.m_x))
                 ref_avg.setdefault(u, {})[c] = ReferenceAverage(
-                    used, mx, mu, mx / mu if mu > 0 else math.nan)
+                    used, mx, mu, mx / mu if mu > 0 else math.nan
+                )
 
     messages = [m.message for m in modes.values() if m.message]
     if reference is not None and not err:
@@ -675,19 +858,35 @@ def analyse_deviations(units: dict[str, UnitSeries], cfg: DeviationConfig | None
     for u in present:
         for c, k in missing[u].items():
             if k and u in modes[c].units:
-                messages.append(f"{u} {c}: missing at {k} of {n_inst} instants "
-                                f"(outside its data, or no reading within "
-                                f"{cfg.max_interp_gap_s:g} s on each side)")
+                messages.append(
+                    f"{u} {c}: missing at {k} of {n_inst} instants "
+                    f"(outside its data, or no reading within "
+                    f"{cfg.max_interp_gap_s:g} s on each side)"
+                )
     for c, why in skipped.items():
         if sum(why.values()) and modes[c].mode in ("three", "two"):
-            messages.append(f"{c}: instants not used: " + ", ".join(
-                f"{k} {n}" for k, n in why.items() if n))
+            messages.append(
+                f"{c}: instants not used: " + ", ".join(f"{k} {n}" for k, n in why.items() if n)
+            )
     return DeviationResult(
-        interval_s=cfg.interval_s, offset_s=cfg.offset_s, probability=cfg.probability,
-        confidence=cfg.confidence, units=present, channels=modes, time_ns=instants,
-        samples=dev, missing=missing, skipped=skipped, lat_mean_rad=lat_mean, whole=whole, windows=windows,
+        interval_s=cfg.interval_s,
+        offset_s=cfg.offset_s,
+        probability=cfg.probability,
+        confidence=cfg.confidence,
+        units=present,
+        channels=modes,
+        time_ns=instants,
+        samples=dev,
+        missing=missing,
+        skipped=skipped,
+        lat_mean_rad=lat_mean,
+        whole=whole,
+        windows=windows,
         kurtosis_windows=kwin,
-        kurtosis_upper=kup, reference_average=ref_avg, messages=tuple(dedupe(messages)))
+        kurtosis_upper=kup,
+        reference_average=ref_avg,
+        messages=tuple(dedupe(messages)),
+    )
 
 
 def _valid_times(unit: UnitSeries, part: str) -> np.ndarray:

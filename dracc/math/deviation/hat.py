@@ -98,9 +98,9 @@ def hat_variances(s2):
     """
     s2 = np.asarray(s2, dtype=float)
     s12, s13, s23 = s2[..., 0], s2[..., 1], s2[..., 2]
-    return np.stack([0.5 * (s12 + s13 - s23),
-                     0.5 * (s12 + s23 - s13),
-                     0.5 * (s13 + s23 - s12)], axis=-1)
+    return np.stack(
+        [0.5 * (s12 + s13 - s23), 0.5 * (s12 + s23 - s13), 0.5 * (s13 + s23 - s12)], axis=-1
+    )
 
 
 def block_bootstrap_indices(n: int, block: int, draws: int, rng: np.random.Generator):
@@ -166,9 +166,15 @@ def hat_pivot_draws(d, dof: float, draws: int, rng: np.random.Generator):
     return np.stack([s12, sig[:, 0, 0] - s12, sig[:, 1, 1] - s12], axis=-1)
 
 
-def three_cornered_hat(y, circular: bool = False, confidence: float = 0.9, block: int = 5,
-                       draws: int = 1000, seed: int = 0,
-                       corr_instants: float | None = None) -> HatEstimate:
+def three_cornered_hat(
+    y,
+    circular: bool = False,
+    confidence: float = 0.9,
+    block: int = 5,
+    draws: int = 1000,
+    seed: int = 0,
+    corr_instants: float | None = None,
+) -> HatEstimate:
     """Three-cornered hat of ``y`` (shape (3, n), readings or deviations of three units).
 
     Deviations from the mean give the same differences as the readings
@@ -197,5 +203,13 @@ def three_cornered_hat(y, circular: bool = False, confidence: float = 0.9, block
         lo, hi = np.quantile(piv, [alpha, 1.0 - alpha], axis=0)
     with np.errstate(invalid="ignore"):
         sigma = np.where(var >= 0, np.sqrt(np.abs(var)), np.nan)
-    return HatEstimate(variance=var, sigma=sigma, var_lower=lo, var_upper=hi,
-                       negative=var < 0, n=n, confidence=confidence, dof=dof)
+    return HatEstimate(
+        variance=var,
+        sigma=sigma,
+        var_lower=lo,
+        var_upper=hi,
+        negative=var < 0,
+        n=n,
+        confidence=confidence,
+        dof=dof,
+    )

@@ -71,8 +71,9 @@ class UnitSeries:
 
     def span_ns(self) -> tuple[int, int] | None:
         """(first, last) reading time over positions and headings, None if no readings."""
-        t = np.concatenate([np.asarray(self.pos_time_ns, np.int64),
-                            np.asarray(self.hdg_time_ns, np.int64)])
+        t = np.concatenate(
+            [np.asarray(self.pos_time_ns, np.int64), np.asarray(self.hdg_time_ns, np.int64)]
+        )
         return (int(t.min()), int(t.max())) if len(t) else None
 
 
@@ -89,9 +90,13 @@ class SampledUnit:
 
     def select(self, keep: np.ndarray) -> SampledUnit:
         """The unit at the instants where ``keep`` is true."""
-        return SampledUnit(self.lat_rad[keep], self.lon_rad[keep], self.heading_rad[keep],
-                           None if self.pos_reason is None else self.pos_reason[keep],
-                           None if self.hdg_reason is None else self.hdg_reason[keep])
+        return SampledUnit(
+            self.lat_rad[keep],
+            self.lon_rad[keep],
+            self.heading_rad[keep],
+            None if self.pos_reason is None else self.pos_reason[keep],
+            None if self.hdg_reason is None else self.hdg_reason[keep],
+        )
 
 
 def sampling_instants(first_ns: int, last_ns: int, interval_s: float, offset_s: float = 0.0):
@@ -182,8 +187,15 @@ def _clean_index(t_ns, values):
     return idx
 
 
-def align_at(t_ns, values, instants_ns, max_gap_s: float, circular=(False,), rates=None,
-             velocity_min_gap_s: float = 0.0):
+def align_at(
+    t_ns,
+    values,
+    instants_ns,
+    max_gap_s: float,
+    circular=(False,),
+    rates=None,
+    velocity_min_gap_s: float = 0.0,
+):
     """One unit's readings at the common ``instants_ns`` (rules in the module docstring).
 
     ``values``: (C, m) channels at ``t_ns`` (m,); ``circular[c]``: channel c is an angle
@@ -245,8 +257,9 @@ def align_at(t_ns, values, instants_ns, max_gap_s: float, circular=(False,), rat
     return out, reason
 
 
-def sample_unit(unit: UnitSeries, instants_ns, max_gap_s: float,
-                velocity_min_gap_s: float = 0.1) -> SampledUnit:
+def sample_unit(
+    unit: UnitSeries, instants_ns, max_gap_s: float, velocity_min_gap_s: float = 0.1
+) -> SampledUnit:
     """Position and heading of one unit at the instants (NaN where not sampled), each
     interpolated to the instant (:func:`align_at`); positions follow the unit's own ground
     velocity between readings where it has one (VTG/RMC within ``max_gap_s``)."""
@@ -254,16 +267,31 @@ def sample_unit(unit: UnitSeries, instants_ns, max_gap_s: float,
     lat = np.asarray(unit.lat_rad, float)
     rates = None
     if len(unit.vel_time_ns) and len(pos_t):
-        vel, _ = align_at(unit.vel_time_ns, np.vstack([unit.vn_mps, unit.ve_mps]), pos_t,
-                          max_gap_s)
+        vel, _ = align_at(unit.vel_time_ns, np.vstack([unit.vn_mps, unit.ve_mps]), pos_t, max_gap_s)
         rates = np.vstack([vel[0] * k_phi(lat), vel[1] * k_lambda(lat)])  # rad/s (B18, B19)
-    pos, pos_reason = align_at(pos_t, np.vstack([lat, unit.lon_rad]), instants_ns, max_gap_s,
-                               circular=(False, True), rates=rates,
-                               velocity_min_gap_s=velocity_min_gap_s)
-    hdg, hdg_reason = align_at(unit.hdg_time_ns, np.asarray(unit.heading_rad, float)[None, :],
-                               instants_ns, max_gap_s, circular=(True,))
-    return SampledUnit(lat_rad=pos[0], lon_rad=pos[1], heading_rad=wrap_2pi(hdg[0]),
-                       pos_reason=pos_reason, hdg_reason=hdg_reason)
+    pos, pos_reason = align_at(
+        pos_t,
+        np.vstack([lat, unit.lon_rad]),
+        instants_ns,
+        max_gap_s,
+        circular=(False, True),
+        rates=rates,
+        velocity_min_gap_s=velocity_min_gap_s,
+    )
+    hdg, hdg_reason = align_at(
+        unit.hdg_time_ns,
+        np.asarray(unit.heading_rad, float)[None, :],
+        instants_ns,
+        max_gap_s,
+        circular=(True,),
+    )
+    return SampledUnit(
+        lat_rad=pos[0],
+        lon_rad=pos[1],
+        heading_rad=wrap_2pi(hdg[0]),
+        pos_reason=pos_reason,
+        hdg_reason=hdg_reason,
+    )
 
 
 def unit_series_from_frames(position, heading, ground=None) -> UnitSeries:
@@ -276,21 +304,30 @@ def unit_series_from_frames(position, heading, ground=None) -> UnitSeries:
     kw: dict = {}
     if position is not None and len(position):
         pos = position[position["quality"] != 0]
-        kw.update(pos_time_ns=pos["time_ns"].to_numpy(np.int64),
-                  lat_rad=pos["lat_rad"].to_numpy(float), lon_rad=pos["lon_rad"].to_numpy(float))
+        kw.update(
+            pos_time_ns=pos["time_ns"].to_numpy(np.int64),
+            lat_rad=pos["lat_rad"].to_numpy(float),
+            lon_rad=pos["lon_rad"].to_numpy(float),
+        )
     if heading is not None and len(heading):
         hdg = heading[heading["reference"] == "T"]
-        kw.update(hdg_time_ns=hdg["time_ns"].to_numpy(np.int64),
-                  heading_rad=hdg["heading_rad"].to_numpy(float))
+        kw.update(
+            hdg_time_ns=hdg["time_ns"].to_numpy(np.int64),
+            heading_rad=hdg["heading_rad"].to_numpy(float),
+        )
     if ground is not None and len(ground):
         cog, sog = ground["cog_rad"].to_numpy(float), ground["sog_mps"].to_numpy(float)
-        kw.update(vel_time_ns=ground["time_ns"].to_numpy(np.int64),
-                  vn_mps=sog * np.cos(cog), ve_mps=sog * np.sin(cog))
+        kw.update(
+            vel_time_ns=ground["time_ns"].to_numpy(np.int64),
+            vn_mps=sog * np.cos(cog),
+            ve_mps=sog * np.sin(cog),
+        )
     return UnitSeries(**kw)
 
 
 def unit_series_from_voyage(voyage, role: str) -> UnitSeries:
     """Readings of ``role`` from a :class:`dracc.frames.Voyage`
     (see :func:`unit_series_from_frames` for what is left out)."""
-    return unit_series_from_frames(voyage.frame("position", role), voyage.frame("heading", role),
-                                   voyage.frame("ground", role))
+    return unit_series_from_frames(
+        voyage.frame("position", role), voyage.frame("heading", role), voyage.frame("ground", role)
+    )

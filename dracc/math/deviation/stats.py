@@ -235,8 +235,9 @@ def k_hm(confidence, n_eff):
     """
     nu = np.asarray(n_eff, dtype=float)
     with np.errstate(invalid="ignore", divide="ignore"):
-        out = np.where(nu > 0, np.sqrt(nu / dist.chi2_ppf(1.0 - confidence, np.where(nu > 0, nu, 1.0))),
-                       np.nan)
+        out = np.where(
+            nu > 0, np.sqrt(nu / dist.chi2_ppf(1.0 - confidence, np.where(nu > 0, nu, 1.0))), np.nan
+        )
     return out if out.ndim else float(out)
 
 
@@ -248,6 +249,7 @@ def limiting_error(m_y, probability, kurtosis, confidence, n_eff):
     kp = k_pie(probability, kurtosis)
     kh = k_hm(confidence, n_eff)
     return kp * kh * np.asarray(m_y, dtype=float), kp, kh  # (K8)
+
 
 # ------------------------------------- beside the fixed factors: (3a)-(5b) and K_FD
 
@@ -341,14 +343,14 @@ def k_fd(probability, n1, n2=None, squared: bool = False):
     n1 = np.asarray(n1, dtype=float)
     n2 = n1 if n2 is None else np.asarray(n2, dtype=float)
     ok = (n1 > 0) & (n2 > 0)
-    f = np.where(ok, dist.f_ppf(probability, np.where(ok, n1, 1.0), np.where(ok, n2, 1.0)),
-                 np.nan)
+    f = np.where(ok, dist.f_ppf(probability, np.where(ok, n1, 1.0), np.where(ok, n2, 1.0)), np.nan)
     out = f if squared else np.sqrt(f)
     return out if out.ndim else float(out)
 
 
-def k_upper_fisher(k, n, interval_s, correlation_time_s, probability: float = 0.99,
-                   squared: bool = False):
+def k_upper_fisher(
+    k, n, interval_s, correlation_time_s, probability: float = 0.99, squared: bool = False
+):
     """Upper confidence bound of the factor, k_it = k * K_FD(P; N, N), with N the number
     of independent samples among n taken every ``interval_s``: N = n dt / tau
     (:func:`effective_samples`, tau the INS error correlation time, 4-6 h).
