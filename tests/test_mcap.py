@@ -665,16 +665,16 @@ def test_store_codes_widen_past_127_labels():
 
 
 def test_mapped_columns_are_separate_writable_and_sized():
-    from dracc.ingest.mcap import _mapped_columns
+    from dracc.ingest.memory import mapped_columns
 
-    a, b, c = _mapped_columns(1001, [np.int16, np.float64, np.int8])
+    a, b, c = mapped_columns(1001, [np.int16, np.float64, np.int8])
     a[:] = np.arange(1001)
     b[:] = -1.5
     c[:] = 7
     assert [x.dtype for x in (a, b, c)] == [np.int16, np.float64, np.int8]
     assert all(len(x) == 1001 and x.flags.writeable and x.ctypes.data % 64 == 0 for x in (a, b, c))
     assert a[1000] == 1000 and (b == -1.5).all() and (c == 7).all()  # no column overlaps another
-    assert [len(x) for x in _mapped_columns(0, [np.float64, np.int8])] == [0, 0]
+    assert [len(x) for x in mapped_columns(0, [np.float64, np.int8])] == [0, 0]
 
 
 @pytest.mark.parametrize("encoding", ["json", "ros2"])

@@ -75,10 +75,8 @@ from __future__ import annotations
 
 import json
 import math
-import mmap
 import re
 import struct
-import sys
 import zlib
 from dataclasses import dataclass, field
 from io import BytesIO
@@ -104,6 +102,7 @@ from dracc.ingest.mcap_cdr import (
     scalar_paths,
     string_paths,
 )
+from dracc.ingest.memory import mapped_columns, trim_heap
 from dracc.ingest.references import ASCII_CODES, ros_constants
 from dracc.ingest.timebase import drop_implausible_ext
 
@@ -1234,15 +1233,15 @@ class _Reader:
         del frames
         self.untrimmed += n
         if self.untrimmed >= _TRIM_RECORDS:
-            _trim_heap()
+            trim_heap()
             self.untrimmed = 0
 
     def result(self) -> FileResult:
-        _trim_heap()
+        trim_heap()
         for ch in self.channels.values():
             self._json_flush(ch)
             self._to_pieces(ch)
-        _trim_heap()
+        trim_heap()
         res = FileResult(
             path=self.file,
             format="mcap",
@@ -1265,7 +1264,7 @@ class _Reader:
             if store.total:
                 res.frames[kind] = store.frame()
             del store
-        _trim_heap()
+        trim_heap()
         res.notes[:0] = self.notes + self._channel_notes()
         for ch in self.channels.values():  # valid messages on channels dracc does not decode
             n = ch.messages - ch.bad
@@ -1444,55 +1443,6 @@ def _const_cat(value: str, n: int) -> pd.Categorical:
 _CONST_DTYPES: dict[str, pd.CategoricalDtype] = {}
 
 
-def _trim_heap() -> None:
-    """Give the free memory of the C heap (glibc ``malloc_trim``) and of pyarrow's pool
-    back to the kernel.  Freed blocks in the middle of the heap otherwise stay in the
-    process, and their amount drifts with the file: a few tens of MiB of decoding
-    buffers would sit beside the frames.  Without glibc only pyarrow's pool is trimmed."""
-    global _LIBC
-    if _LIBC is None:
-        try:
-            import ctypes
-
-            _LIBC = ctypes.CDLL(None).malloc_trim
-        except (OSError, AttributeError, TypeError):  # pragma: no cover - not glibc
-            _LIBC = False
-    if _LIBC:
-        _LIBC(0)
-    if "pyarrow" in sys.modules:  # the JSON parser's buffers (arrow's own allocator keeps them)
-        sys.modules["pyarrow"].default_memory_pool().release_unused()
-
-
-_LIBC = None
-
-
-def _mapped_columns(n: int, dtypes: list) -> list[np.ndarray]:
-    """Uninitialised arrays of ``n`` items, one per dtype, together in one anonymous
-    memory mapping: when all of them are garbage the pages go back to the kernel at once
-    (a freed malloc block of a few hundred KiB usually stays in the heap, so a run's
-    memory would outlive the run).  Pages count towards the RSS only once written.
-    Plain arrays where there is no anonymous mmap (not POSIX) or the kernel refuses one
-    (e.g. too many mappings)."""
-    dts = [np.dtype(d) for d in dtypes]
-    offs, size = [], 0
-    for dt in dts:
-        offs.append(size)
-        size += -(-n * dt.itemsize // 64) * 64  # each column 64-byte aligned
-    flags = getattr(mmap, "MAP_PRIVATE", None)
-    anon = getattr(mmap, "MAP_ANONYMOUS", None)
-    if flags is not None and anon is not None and size > 0:
-        try:
-            mm = mmap.mmap(-1, size, flags=flags | anon)
-        except OSError:  # pragma: no cover - the kernel's mapping limit
-            mm = None
-        if mm is not None:
-            return [
-                np.frombuffer(mm, dtype=dt, count=n, offset=o)
-                for dt, o in zip(dts, offs, strict=True)
-            ]
-    return [np.empty(n, dtype=dt) for dt in dts]
-
-
 def _code_dtype(ncat: int) -> np.dtype:
     """The integer type pandas gives the codes of ``ncat`` categories (the smallest)."""
     for t in (np.int8, np.int16, np.int32):
@@ -1528,7 +1478,7 @@ class _KindStore:
 
     Each piece (a canonical frame of a few ten thousand records) is ordered by
     (time_ns, line) (a stable sort of the piece alone) and copied into a run whose
-    columns live in one memory mapping of its own (:func:`_mapped_columns`); string columns
+    columns live in one memory mapping of its own (:func:`mapped_columns`); string columns
     are kept as the smallest integer codes into one label list per column.  The runs
     together are the size of the frame.  :meth:`frame` merges them into the output
     columns, allocated once at their final size, a step of at most about ``step``
@@ -1574,7 +1524,7 @@ class _KindStore:
             v = self._codes(c, df[c]) if c in self.labels else df[c].to_numpy()
             vals[c] = v if order is None else v[order]
         cols = dict(
-            zip(self.names, _mapped_columns(n, [v.dtype for v in vals.values()]), strict=True)
+            zip(self.names, mapped_columns(n, [v.dtype for v in vals.values()]), strict=True)
         )
         for c, v in vals.items():
             cols[c][:] = v
@@ -1706,7 +1656,7 @@ def _join_lines(buf: bytes, starts: np.ndarray, ends: np.ndarray) -> bytes:
 def _json_columns(joined: bytes, n: int, plan: dict) -> dict[str, np.ndarray] | None:
     """Columns of one channel's JSON messages (one per line) in one pyarrow parse, or None
     if pyarrow cannot (the caller then parses message by message).  The parse allocates
-    from the C heap (pyarrow's system pool), which ``_trim_heap`` gives back: pyarrow's
+    from the C heap (pyarrow's system pool), which ``trim_heap`` gives back: pyarrow's
     default pool (mimalloc) kept freed parse buffers, 9 MiB more at 24 h than at 6 h
     (``benchmarks/bench_mcap.py``)."""
     import pyarrow as pa
