@@ -43,8 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-ROLES = ("compass", "log", "ins1", "ins2", "ins3", "gnss")
-INS_ROLES = ("ins1", "ins2", "ins3")
+from dracc.core.vocabulary import INS_ROLES, ROLES  # noqa: F401  (the frames speak this vocabulary)
 
 #: the heading reference: two letters as a categorical (a string column of a million
 #: rows costs more to filter, sort and concatenate than all the numbers beside it)

@@ -9,10 +9,9 @@ import pytest
 from test_audit_helpers import make_doc
 
 from dracc.core.config import config_from_dict
-from dracc.core.errors import ConfigError, ExitCode, IngestError, InsufficientDataError
+from dracc.core.errors import ConfigError, ExitCode, IngestError, InsufficientDataError, NoLogsError
 from dracc.pipeline.audit import (
     AuditConfig,
-    NoLogsError,
     apriori_chain,
     apriori_seeds,
     audit_config,

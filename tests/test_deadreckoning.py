@@ -16,10 +16,10 @@ from hypothesis import strategies as st
 from scipy.optimize import brentq
 
 from dracc.core.config import DeadReckoningConfig, ErrorSource
+from dracc.core.durations import WATCH_S, parse_reset_s
 from dracc.core.errors import ConfigError, InsufficientDataError
 from dracc.core.geodesy import A_M, E2, distance_m, k_lambda, k_phi
 from dracc.math.deadreckoning import (
-    WATCH_S,
     course_gyro_rad,
     course_magnetic_rad,
     covariance_b23_rad2,
@@ -27,7 +27,6 @@ from dracc.math.deadreckoning import (
     dead_reckon,
     deviation_curve_rad,
     deviation_table_rad,
-    error_ellipse,
     error_processes,
     gauss_markov_position_covariance_m2,
     honest_covariance_m2,
@@ -35,7 +34,6 @@ from dracc.math.deadreckoning import (
     interp_deviation_rad,
     leeway_from_log_rad,
     mean_error_m,
-    parse_reset_s,
     prob_inside_2m,
     sigma_course_rad,
     speed_covariance_rad2,
@@ -45,6 +43,7 @@ from dracc.math.deadreckoning import (
     velocity_ground_ne_mps,
     velocity_water_ne_mps,
 )
+from dracc.math.ellipse import error_ellipse
 
 geographiclib = pytest.importorskip("geographiclib.geodesic")
 GEOD = geographiclib.Geodesic.WGS84

@@ -11,9 +11,8 @@ import pytest
 from test_audit_helpers import make_doc
 
 from dracc.core.config import config_from_dict
-from dracc.core.errors import ConfigError, IngestError
+from dracc.core.errors import ConfigError, FleetError, IngestError
 from dracc.pipeline.fleet import (
-    FleetError,
     discover,
     fleet_config,
     inside,

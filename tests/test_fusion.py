@@ -8,21 +8,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from dracc.core.errors import DraccError
-from dracc.core.geodesy import add_offset_ne, offset_ne_m
+from dracc.core.errors import DraccError, GeometryError
+from dracc.core.geodesy import add_offset_ne, offset_ne_m, range_azimuth
+from dracc.math.ellipse import error_ellipse
 from dracc.math.fusion import (
     OMEGA_E_RADPS,
     BearingLOP,
-    GeometryError,
     LineLOP,
     NadirCircle,
     PierLine,
     PositionFix,
     RangeLOP,
     alongside_reference,
-    error_ellipse,
     fuse_fix,
-    range_azimuth,
     stack_rows,
 )
 

@@ -15,7 +15,8 @@ import pytest
 
 from dracc.core.config import Config
 from dracc.core.geodesy import offset_ne_m
-from dracc.frames import INS_ROLES, KINDS, Rejects, TimeEvents, Voyage, empty_frame
+from dracc.core.vocabulary import INS_ROLES
+from dracc.frames import KINDS, Rejects, TimeEvents, Voyage, empty_frame
 from dracc.ingest.sources import summarize
 from dracc.pipeline.analysis import SCHEMA, analyse, analyse_voyage
 from dracc.sim import GM, SimParams, simulate

@@ -22,6 +22,7 @@ import pytest
 from dracc.core.config import DeviationConfig
 from dracc.core.distributions import chi2_ppf
 from dracc.core.geodesy import add_offset_ne
+from dracc.core.timefmt import iso_utc
 from dracc.math.deadreckoning import LegConsistency
 from dracc.math.deviation import UnitSeries, analyse_deviations
 from dracc.pipeline.analysis import (
@@ -38,7 +39,7 @@ from dracc.pipeline.analysis import (
     TimeSummary,
     Track,
 )
-from dracc.report import iso_utc, json_report, tables, terminal
+from dracc.report import json_report, tables, terminal
 
 GOLDEN = Path(__file__).parent / "golden"
 T0_NS = 1_772_323_200 * 10**9  # 2026-03-01T00:00:00Z

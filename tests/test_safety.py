@@ -14,8 +14,8 @@ import pytest
 
 from dracc.cli.main import main
 from dracc.core.config import load_config
-from dracc.core.errors import ConfigError, ExitCode
-from dracc.pipeline.fleet import FleetError, inside, safe_name
+from dracc.core.errors import ConfigError, ExitCode, FleetError
+from dracc.pipeline.fleet import inside, safe_name
 
 REPO = Path(__file__).resolve().parents[1]
 SAMPLES = REPO / "sample_logs"

@@ -8,8 +8,8 @@ from dataclasses import replace
 
 import pytest
 
-from dracc.core.errors import ConfigError, ExitCode
-from dracc.pipeline.state import AprioriEvent, ChannelRow, NightRecord, StateError, StateStore
+from dracc.core.errors import ConfigError, ExitCode, StateError
+from dracc.pipeline.state import AprioriEvent, ChannelRow, NightRecord, StateStore
 
 
 def _record(night: str = "2026-11-20", m_y: float = 100.0, vessel: str = "Aurora") -> NightRecord:

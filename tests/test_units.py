@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from dracc.core import units
+from dracc.core.numbers import finite_or_none
 
 
 def test_knots_exact():
@@ -30,6 +31,6 @@ def test_knots_exact():
     ],
 )
 def test_finite_or_none(x, want):
-    got = units.finite_or_none(x)
+    got = finite_or_none(x)
     assert got == want
     assert got is None or type(got) is float

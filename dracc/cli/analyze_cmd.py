@@ -9,8 +9,6 @@ goes there), ``--json`` (file or ``-``), ``--html`` (one offline file) and ``--o
 from __future__ import annotations
 
 import gc
-import math
-import re
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import replace
@@ -32,36 +30,10 @@ from dracc.cli.app import (
 )
 from dracc.core import atomic
 from dracc.core.config import load_config, validate
+from dracc.core.durations import parse_duration_s, parse_reset_s
 from dracc.core.errors import ConfigError, DraccError
-from dracc.frames import ROLES
+from dracc.core.vocabulary import ROLES
 from dracc.ingest.sources import keys_must_match
-from dracc.math.deadreckoning import parse_reset_s
-
-_DURATION = re.compile(r"^\s*([0-9]*\.?[0-9]+)\s*(s|sec|min|m|h|hr|d)?\s*$", re.IGNORECASE)
-_UNIT_S = {
-    None: 1.0,
-    "s": 1.0,
-    "sec": 1.0,
-    "min": 60.0,
-    "m": 60.0,
-    "h": 3600.0,
-    "hr": 3600.0,
-    "d": 86400.0,
-}
-
-
-def parse_duration_s(text: str, option: str) -> float:
-    """'1h', '2h', '90min', '30s', '1d' or plain seconds ('3600') -> seconds (> 0)."""
-    m = _DURATION.match(text)
-    if not m:
-        raise ConfigError(
-            f"{option} {text!r}: expected a duration such as 1h, 2h, 90min, 30s or 3600"
-        )
-    unit = m.group(2).lower() if m.group(2) else None
-    value = float(m.group(1)) * _UNIT_S[unit]
-    if not value > 0 or not math.isfinite(value):
-        raise ConfigError(f"{option} {text!r}: must be positive")
-    return value
 
 
 def parse_roles(items: list[str]) -> dict[str, str]:

@@ -74,14 +74,7 @@ from rich.console import Console  # noqa: E402
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn  # noqa: E402
 
 from dracc import __version__  # noqa: E402
-from dracc.core.errors import ConfigError, DraccError, ExitCode, OptionError  # noqa: E402
-
-
-class Interrupted(DraccError):
-    """Ctrl-C or SIGTERM, with what a command knows about its outputs at that moment
-    (``error: interrupted; …``, exit 130)."""
-
-    exit_code = ExitCode.INTERRUPTED
+from dracc.core.errors import ConfigError, OptionError  # noqa: E402
 
 
 class _Typer(typer.Typer):

@@ -18,17 +18,11 @@ from typer.core import TyperGroup
 from dracc.cli.app import ConfigOption, app, check_choice, check_date, check_pattern, out, progress
 from dracc.core import atomic
 from dracc.core.config import load_config
-from dracc.core.errors import ConfigError, ExitCode
+from dracc.core.errors import ConfigError, ExitCode, StateError
 from dracc.core.safetext import printable
-from dracc.pipeline.audit import (
-    CHANNEL_KEYS,
-    CHANNELS,
-    UNITS,
-    AuditOutcome,
-    audit_config,
-    run_audit,
-)
-from dracc.pipeline.state import StateError, StateStore
+from dracc.core.vocabulary import CHANNEL_KEYS, CHANNELS
+from dracc.pipeline.audit import UNITS, AuditOutcome, audit_config, run_audit
+from dracc.pipeline.state import StateStore
 from dracc.report.audit_html import fmt_value as _f
 from dracc.report.audit_html import history_html
 from dracc.report.audit_html import measure_digits as _digits

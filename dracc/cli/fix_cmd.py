@@ -26,7 +26,12 @@ from rich.table import Table
 
 from dracc.cli.app import app, out
 from dracc.core.distributions import chi2_ppf
-from dracc.core.errors import ConfigError, ExitCode, IngestError
+from dracc.core.errors import (
+    FixFileError,
+    FixUsageError,
+    GeometryError,
+    IngestError,
+)
 from dracc.core.geodesy import (
     add_offset_ne,
     circmean,
@@ -35,12 +40,11 @@ from dracc.core.geodesy import (
     radius_prime_vertical_m,
     wrap_pi,
 )
+from dracc.core.numbers import finite_or_none as _finite
 from dracc.core.units import CABLE_M, NMI_M
-from dracc.core.units import finite_or_none as _finite
 from dracc.math.fusion import (
     BearingLOP,
     FixSolution,
-    GeometryError,
     LineLOP,
     NadirCircle,
     Observation,
@@ -70,18 +74,6 @@ DEFAULT_NADIR_SIGMA_DEG = 1.0 / 60.0
 #: radar range, IMO MSC.192(79): 30 m or 1 % of the range scale (95 %), taken as 2 sigma
 RADAR_RANGE_FLOOR_M = 30.0
 RADAR_RANGE_FRACTION = 0.01
-
-
-class FixUsageError(ConfigError):
-    """A bad value on the ``dracc fix`` command line (exit 2, like any usage error)."""
-
-    exit_code = ExitCode.USAGE
-
-
-class FixFileError(ConfigError):
-    """An invalid observation file (exit 4, like an invalid configuration file)."""
-
-    exit_code = ExitCode.CONFIG
 
 
 # --------------------------------------------------------------------- the edge: parsing

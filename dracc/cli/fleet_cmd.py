@@ -9,9 +9,9 @@ import typer
 from rich.table import Table
 from rich.text import Text
 
-from dracc.cli.app import ConfigOption, Interrupted, app, check_pattern, err, out, progress
+from dracc.cli.app import ConfigOption, app, check_pattern, err, out, progress
 from dracc.core.config import load_config
-from dracc.core.errors import ConfigError, ExitCode, OptionError
+from dracc.core.errors import ConfigError, ExitCode, Interrupted, OptionError
 from dracc.core.safetext import printable
 from dracc.pipeline.fleet import FleetResult, discover, fleet_config, run_fleet, write_tables
 from dracc.report.fleet_html import cell_text as _s

@@ -7,7 +7,6 @@ documented in ``docs/ingest.md``.
 
 from __future__ import annotations
 
-import datetime as dt
 import json
 from collections import Counter
 from pathlib import Path
@@ -30,19 +29,12 @@ from dracc.cli.app import (
 )
 from dracc.core.config import load_config, with_overrides
 from dracc.core.safetext import printable
+from dracc.core.timefmt import iso_utc
 from dracc.frames import Rejects, TimeEvents
 from dracc.ingest import detect_format, read_file
 from dracc.ingest.nmea import StreamState, iter_nmea_blocks
 from dracc.ingest.sources import assign_roles, merge_infos, separate_files, summarize
 from dracc.ingest.timebase import EventCounter
-
-
-def _iso(ns: int | None) -> str | None:
-    if ns is None:
-        return None
-    t = dt.datetime.fromtimestamp(ns // 1_000_000_000, tz=dt.timezone.utc)
-    frac = ns % 1_000_000_000
-    return t.strftime("%Y-%m-%dT%H:%M:%S") + (f".{frac // 1_000_000:03d}" if frac else "") + "Z"
 
 
 def inspect_logs(paths: list[Path], cfg, show_progress: bool = True) -> dict:
@@ -144,8 +136,8 @@ def inspect_logs(paths: list[Path], cfg, show_progress: bool = True) -> dict:
             "records": s.records,
             "sentences": dict(sorted(s.sentences.items())),
             "talkers": dict(sorted(s.talkers.items())),
-            "first_utc": _iso(s.first_ns),
-            "last_utc": _iso(s.last_ns),
+            "first_utc": iso_utc(s.first_ns),
+            "last_utc": iso_utc(s.last_ns),
             "span_s": span_s,
             "rate_hz": (nsent - 1) / span_s if span_s > 0 else None,
             "gaps": ev["gaps"],

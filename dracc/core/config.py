@@ -30,9 +30,10 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
+from dracc.core.durations import parse_reset_s
 from dracc.core.errors import ConfigError
-from dracc.frames import INS_ROLES, ROLES
-from dracc.ingest.csv_quantities import QUANTITIES
+from dracc.core.quantities import QUANTITIES
+from dracc.core.vocabulary import CHANNEL_KEYS, INS_ROLES, ROLES
 
 
 @dataclass(frozen=True)
@@ -445,38 +446,6 @@ def _check_quantities(table: dict[str, str], section: str, key: str) -> dict[str
     return table
 
 
-WATCH_S = 4 * 3600.0  #: one watch
-_DURATION = re.compile(r"^\s*([0-9]*\.?[0-9]+)\s*(s|sec|min|m|h|hr|d)\s*$", re.IGNORECASE)
-_UNIT_S = {"s": 1.0, "sec": 1.0, "min": 60.0, "m": 60.0, "h": 3600.0, "hr": 3600.0, "d": 86400.0}
-
-
-def parse_reset_s(text: str | float) -> float:
-    """Restart interval in seconds: "1h", "30min", "90s", "watch" (4 h), "never" (inf).
-
-    The grammar of ``[dead_reckoning] reset`` (besides "auto", which depends on the log);
-    here so that the configuration is checked when it is read; dracc.math.deadreckoning uses it
-    (it imports this module, not the reverse).
-    """
-    if isinstance(text, (int, float)) and not isinstance(text, bool):
-        value = float(text)
-    else:
-        word = str(text).strip().lower()
-        if word == "never":
-            return math.inf
-        if word == "watch":
-            return WATCH_S
-        m = _DURATION.match(word)
-        if not m:
-            raise ConfigError(
-                f'[dead_reckoning] reset = {text!r}: expected a duration such as "1h", '
-                '"30min", "90s", or "watch" or "never"'
-            )
-        value = float(m.group(1)) * _UNIT_S[m.group(2).lower()]
-    if not value > 0:
-        raise ConfigError(f"[dead_reckoning] reset = {text!r}: must be positive")
-    return value
-
-
 def _check_reset(value: str, section: str, key: str) -> str:
     if value.strip().lower() != "auto":
         try:
@@ -526,9 +495,8 @@ def _check_deviation_table(table: dict[str, float], section: str, key: str) -> d
     return table
 
 
-#: the channels of an a priori RMS (dracc.math.deviation.analysis.SAMPLE_KEYS; not imported: it
-#: imports this module)
-_APRIORI_KEYS = ("course_deg", "lat_m", "lon_m")
+#: the channels of an a priori RMS
+_APRIORI_KEYS = tuple(sorted(CHANNEL_KEYS.values()))
 
 
 def _check_apriori(table: dict[str, dict[str, float]], section: str, key: str):

@@ -56,3 +56,40 @@ class InsufficientDataError(DraccError):
 
 class AmbiguousSourceError(ConfigError):
     """Roles cannot be assigned automatically; the message names the candidates."""
+
+
+class GeometryError(DraccError):
+    """Observations that cannot fix a position (too few, parallel, or inconsistent)."""
+
+    exit_code = ExitCode.INPUT
+
+
+class NoLogsError(IngestError):
+    """A folder holds no log for the night: the night is recorded without data (exit 3)."""
+
+
+class StateError(DraccError):
+    """The state database cannot be opened or is not a dracc audit database."""
+
+
+class FleetError(DraccError):
+    """The batch cannot run (no logs found, scheduler unreachable, output unusable)."""
+
+
+class FixUsageError(ConfigError):
+    """A bad value on the ``dracc fix`` command line (exit 2, like any usage error)."""
+
+    exit_code = ExitCode.USAGE
+
+
+class FixFileError(ConfigError):
+    """An invalid observation file (exit 4, like an invalid configuration file)."""
+
+    exit_code = ExitCode.CONFIG
+
+
+class Interrupted(DraccError):
+    """Ctrl-C or SIGTERM, with what a command knows about its outputs at that moment
+    (``error: interrupted; …``, exit 130)."""
+
+    exit_code = ExitCode.INTERRUPTED

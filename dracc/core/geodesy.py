@@ -146,3 +146,39 @@ def interp_position(t, lat_rad, lon_rad, t_query, max_gap):
     out_lat[use] = np.interp(xq, x, lat)
     out_lon[use] = wrap_pi(np.interp(xq, x, lon))
     return out_lat, out_lon
+
+
+def ecef_m(lat_rad, lon_rad):
+    """ECEF coordinates (..., 3) in metres of points on the WGS-84 ellipsoid (height 0)."""
+    lat = np.asarray(lat_rad, float)
+    lon = np.asarray(lon_rad, float)
+    n_m = radius_prime_vertical_m(lat)
+    return np.stack(
+        [
+            n_m * np.cos(lat) * np.cos(lon),
+            n_m * np.cos(lat) * np.sin(lon),
+            n_m * (1 - E2) * np.sin(lat),
+        ],
+        axis=-1,
+    )
+
+
+def range_azimuth(lat1_rad, lon1_rad, lat2_rad, lon2_rad):
+    """Distance (m) and azimuth at point 1 towards point 2 (rad, [0, 2pi)); broadcasts.
+
+    Azimuth: the chord X2 - X1 (ECEF) projected on the horizon of point 1 (the normal
+    section azimuth).  Distance: s = 2 R asin(c / 2R), c the chord, R = sqrt(R_M R_N)
+    at the mid latitude (the Gaussian mean radius).
+    """
+    lat1 = np.asarray(lat1_rad, float)
+    lon1 = np.asarray(lon1_rad, float)
+    d = ecef_m(lat2_rad, lon2_rad) - ecef_m(lat1, lon1)
+    sl, cl = np.sin(lon1), np.cos(lon1)
+    sp, cp = np.sin(lat1), np.cos(lat1)
+    east = -sl * d[..., 0] + cl * d[..., 1]
+    north = -sp * cl * d[..., 0] - sp * sl * d[..., 1] + cp * d[..., 2]
+    chord = np.linalg.norm(d, axis=-1)
+    lat_mid = 0.5 * (lat1 + np.asarray(lat2_rad, float))
+    r_m = np.sqrt(radius_meridian_m(lat_mid) * radius_prime_vertical_m(lat_mid))
+    dist = 2.0 * r_m * np.arcsin(np.minimum(chord / (2.0 * r_m), 1.0))
+    return dist, wrap_2pi(np.arctan2(east, north))

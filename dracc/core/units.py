@@ -24,11 +24,3 @@ def kn_to_mps(speed_kn):
 def mps_to_kn(speed_mps):
     """Metres per second to knots."""
     return speed_mps / KN_MPS
-
-
-def finite_or_none(x) -> float | None:
-    """A JSON-ready float: ``float(x)``, or None for None, NaN and +-inf (JSON has no NaN)."""
-    if x is None:
-        return None
-    v = float(x)
-    return v if math.isfinite(v) else None

@@ -53,10 +53,9 @@ import pandas as pd
 
 from dracc.core.config import IngestConfig
 from dracc.core.errors import IngestError
+from dracc.core.quantities import QUANTITIES, REF_QUANTITIES
 from dracc.frames import FileResult, Rejects, concat_blocks
 from dracc.ingest.csv_quantities import (
-    QUANTITIES,
-    REF_QUANTITIES,
     UNITLESS_HINTS,
     add_rejects,
     build_frames,

@@ -42,73 +42,19 @@ an integer in [0, 9], hdop non-negative.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
-from dracc.core.units import DEG_RAD, KMH_MPS, KN_MPS, NMI_M
+from dracc.core.quantities import BOOLEAN_FIELDS, QUANTITIES, Quantity
+from dracc.core.quantities import REF_QUANTITIES  # noqa: F401  TODO(issue 16): mcap imports it from here
+from dracc.core.units import DEG_RAD, KN_MPS, NMI_M
 from dracc.frames import KIND_COLUMNS, Rejects, make_frame
 from dracc.ingest.references import (
-    BOOLEAN_FIELDS,
     REJECT_REASON,
     normalize_boolean,
     normalize_reference,
 )
-
-_ANGLE = {"deg": DEG_RAD, "rad": 1.0}
-_SPEED = {"kn": KN_MPS, "mps": 1.0, "kmh": KMH_MPS}
-_LENGTH = {"m": 1.0, "nmi": NMI_M}
-_RATE = {"radps": 1.0, "degps": DEG_RAD, "degpmin": DEG_RAD / 60.0}
-
-#: base name -> (kind, canonical column, unit suffix -> factor to the canonical unit)
-_BASES: dict[str, tuple[str, str, dict[str, float]]] = {
-    "lat": ("position", "lat_rad", _ANGLE),
-    "lon": ("position", "lon_rad", _ANGLE),
-    "alt": ("position", "alt_m", {"m": 1.0}),
-    "heading": ("heading", "heading_rad", _ANGLE),
-    "deviation": ("heading", "deviation_rad", _ANGLE),
-    "variation": ("heading", "variation_rad", _ANGLE),
-    "cog": ("ground", "cog_rad", _ANGLE),
-    "sog": ("ground", "sog_mps", _SPEED),
-    "stw": ("water", "stw_mps", _SPEED),
-    "stw_transverse": ("water", "stw_transverse_mps", _SPEED),
-    "sog_long": ("water", "sog_long_mps", _SPEED),
-    "sog_transverse": ("water", "sog_transverse_mps", _SPEED),
-    "total_water": ("distance", "total_water_m", _LENGTH),
-    "trip_water": ("distance", "trip_water_m", _LENGTH),
-    "rot": ("rot", "rot_radps", _RATE),
-}
-
-
-@dataclass(frozen=True)
-class Quantity:
-    """One named quantity: where it goes and the factor from its unit to the canonical one."""
-
-    name: str  #: e.g. 'stw_kn'
-    kind: str  #: canonical frame kind, e.g. 'water'
-    column: str  #: canonical column, e.g. 'stw_mps'
-    factor: float  #: canonical = value * factor (e.g. 1852/3600 for knots)
-
-
-def _build_table() -> dict[str, Quantity]:
-    table: dict[str, Quantity] = {}
-    for base, (kind, column, units) in _BASES.items():
-        for unit, factor in units.items():
-            name = f"{base}_{unit}"
-            table[name] = Quantity(name, kind, column, factor)
-    for name, kind in (("quality", "position"), ("hdop", "position"), ("reference", "heading")):
-        table[name] = Quantity(name, kind, name, 1.0)
-    for name in BOOLEAN_FIELDS:  # 'is_true' etc.: a boolean that gives the reference
-        table[name] = Quantity(name, "heading", "reference", 1.0)
-    return table
-
-
-#: every quantity name dracc understands, e.g. QUANTITIES['stw_kn'].factor == 1852/3600
-QUANTITIES: dict[str, Quantity] = _build_table()
-
-#: the quantity names whose values are a heading reference (text or boolean), not numbers
-REF_QUANTITIES = frozenset(n for n, q in QUANTITIES.items() if q.column == "reference")
 
 #: names that look like a physical quantity but carry no unit: a hint for the user
 UNITLESS_HINTS = {

@@ -28,20 +28,14 @@ import re
 import numpy as np
 import pandas as pd
 
+from dracc.core.quantities import BOOLEAN_FIELDS  # noqa: F401  (the boolean field names)
+
 TRUE_WORDS = frozenset(
     {"t", "true", "true north", "true_north", "truenorth", "true-north", "geographic", "gyro"}
 )
 MAGNETIC_WORDS = frozenset(
     {"m", "mag", "magnetic", "magnetic north", "magnetic_north", "magneticnorth", "magnetic-north"}
 )
-#: boolean fields: name -> the reference their ``true`` means
-BOOLEAN_FIELDS = {
-    "is_true": "T",
-    "true_heading": "T",
-    "is_true_heading": "T",
-    "is_magnetic": "M",
-    "magnetic_heading": "M",
-}
 _YES = frozenset({"true", "1", "yes", "y"})
 _NO = frozenset({"false", "0", "no", "n"})
 ASCII_CODES = {84: "T", 77: "M"}

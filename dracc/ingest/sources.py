@@ -36,7 +36,8 @@ import numpy as np
 import pandas as pd
 
 from dracc.core.errors import AmbiguousSourceError, ConfigError
-from dracc.frames import INS_ROLES, ROLES, SourceInfo
+from dracc.frames import SourceInfo
+from dracc.core.vocabulary import INS_ROLES, ROLES
 
 GNSS_FAMILY = ("GP", "GN", "GA", "GL", "GB", "GI", "GQ", "BD")
 INS_TALKERS = ("IN", "II", "IR")

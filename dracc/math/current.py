@@ -69,7 +69,8 @@ import numpy as np
 from dracc.core.errors import InsufficientDataError
 from dracc.core.geodesy import add_offset_ne, k_lambda, k_phi, offset_ne_m, wrap_2pi, wrap_pi
 from dracc.core.units import DEG_RAD, KN_MPS
-from dracc.math.fusion import Ellipse, Observation, PositionFix, error_ellipse
+from dracc.math.ellipse import Ellipse, error_ellipse
+from dracc.math.fusion import Observation, PositionFix
 
 #: tau = 0 (white noise) means a value independent from one WHITE_NOISE_STEP_S to the next
 WHITE_NOISE_STEP_S = 1.0

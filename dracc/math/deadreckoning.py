@@ -42,13 +42,14 @@ import numpy as np
 
 from dracc.core import distributions as dist
 from dracc.core.arrays import unique_sorted
-from dracc.core.config import WATCH_S, DeadReckoningConfig, ErrorSource, parse_reset_s
+from dracc.core.config import DeadReckoningConfig, ErrorSource
+from dracc.core.durations import parse_reset_s
 from dracc.core.errors import ConfigError, InsufficientDataError
 from dracc.core.geodesy import interp_position, k_lambda, k_phi, offset_ne_m, wrap_2pi, wrap_pi
 from dracc.core.units import DEG_RAD, KN_MPS
+from dracc.math.ellipse import error_ellipse
 
 __all__ = [
-    "WATCH_S",
     "DRTrack",
     "Consistency",
     "ErrorProcess",
@@ -64,7 +65,6 @@ __all__ = [
     "dr_consistency",
     "covered_span_s",
     "dr_schedule",
-    "error_ellipse",
     "error_processes",
     "gauss_markov_position_covariance_m2",
     "honest_covariance_m2",
@@ -72,7 +72,6 @@ __all__ = [
     "interp_deviation_rad",
     "leeway_from_log_rad",
     "mean_error_m",
-    "parse_reset_s",
     "prob_inside_2m",
     "sigma_course_rad",
     "speed_covariance_rad2",
@@ -391,25 +390,6 @@ def mean_error_m(P_rad2, lat_rad):
     return np.sqrt(
         P[..., 0, 0] / k_phi(lat_rad) ** 2 + P[..., 1, 1] / k_lambda(lat_rad) ** 2
     )  # (B30)
-
-
-def error_ellipse(P_m2):
-    """1-sigma error ellipse of a north/east covariance (..., 2, 2) in m^2.
-
-    Returns (semi_major_m, semi_minor_m, orientation_rad): the semi-axes are the square
-    roots of the eigenvalues, the orientation the azimuth of the major axis from north
-    towards east in [0, pi).  Closed-form eigen-decomposition of a symmetric 2x2 matrix.
-    """
-    P = np.asarray(P_m2, float)
-    a, b, c = P[..., 0, 0], P[..., 0, 1], P[..., 1, 1]
-    mean = 0.5 * (a + c)
-    half_diff = np.hypot(0.5 * (a - c), b)
-    lam1 = mean + half_diff
-    lam2 = mean - half_diff
-    # rounding can leave a singular P a hair below zero; a truly indefinite P stays NaN
-    lam2 = np.where((lam2 < 0) & (lam2 > -1e-9 * lam1), 0.0, lam2)
-    orientation = np.mod(0.5 * np.arctan2(2 * b, a - c), np.pi)
-    return np.sqrt(lam1), np.sqrt(lam2), orientation
 
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(64)

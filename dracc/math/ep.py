@@ -56,7 +56,8 @@ from dracc.core.arrays import unique_sorted
 from dracc.core.geodesy import add_offset_ne, interp_position, offset_ne_m, wrap_pi
 from dracc.core.units import KN_MPS
 from dracc.math.current import gauss_markov_noise, transition
-from dracc.math.deadreckoning import DRTrack, covered_span_s, error_ellipse
+from dracc.math.deadreckoning import DRTrack, covered_span_s
+from dracc.math.ellipse import error_ellipse
 
 __all__ = [
     "ErrorPrior",

@@ -47,6 +47,7 @@ import pandas as pd
 from dracc.core.config import FaultsConfig
 from dracc.core.errors import ConfigError
 from dracc.core.geodesy import angdiff, circmean, distance_m, offset_ne_m
+from dracc.core.timefmt import iso_utc
 from dracc.core.units import DEG_RAD, KN_MPS, NMI_M, NS_PER_S
 from dracc.frames import Voyage
 
@@ -87,8 +88,8 @@ class SensorFault:
             "role": self.role,
             "kind": self.kind,
             "frame": self.frame,
-            "start": _iso(self.start_ns),
-            "end": _iso(self.end_ns),
+            "start": iso_utc(unit="us", time_ns=self.start_ns),
+            "end": iso_utc(unit="us", time_ns=self.end_ns),
             "start_ns": int(self.start_ns),
             "end_ns": int(self.end_ns),
             "duration_s": self.duration_s,
@@ -97,10 +98,6 @@ class SensorFault:
             "values": {k: (None if not math.isfinite(v) else float(v)) for k, v in self.values},
             "message": self.message,
         }
-
-
-def _iso(t_ns: int) -> str:
-    return pd.Timestamp(int(t_ns), unit="ns", tz="UTC").strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 
 def check_config(cfg: FaultsConfig) -> FaultsConfig:

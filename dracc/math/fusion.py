@@ -51,94 +51,23 @@ from typing import Literal
 
 import numpy as np
 
-from dracc.core.errors import DraccError, ExitCode
+from dracc.core.errors import GeometryError
 from dracc.core.geodesy import (
-    E2,
     add_offset_ne,
     angdiff,
+    ecef_m,
     k_lambda,
     k_phi,
     offset_ne_m,
-    radius_meridian_m,
-    radius_prime_vertical_m,
+    range_azimuth,
     wrap_2pi,
 )
+from dracc.math.ellipse import Ellipse, error_ellipse
 
 OMEGA_E_RADPS = 7.292115e-5  #: WGS-84 Earth rotation rate (seeds/002 (1): omega_e)
 
 
-class GeometryError(DraccError):
-    """Observations that cannot fix a position (too few, parallel, or inconsistent)."""
-
-    exit_code = ExitCode.INPUT
-
-
-# --------------------------------------------------------------------------- geodesy
-
-
-def ecef_m(lat_rad, lon_rad):
-    """ECEF coordinates (..., 3) in metres of points on the WGS-84 ellipsoid (height 0)."""
-    lat = np.asarray(lat_rad, float)
-    lon = np.asarray(lon_rad, float)
-    n_m = radius_prime_vertical_m(lat)
-    return np.stack(
-        [
-            n_m * np.cos(lat) * np.cos(lon),
-            n_m * np.cos(lat) * np.sin(lon),
-            n_m * (1 - E2) * np.sin(lat),
-        ],
-        axis=-1,
-    )
-
-
-def range_azimuth(lat1_rad, lon1_rad, lat2_rad, lon2_rad):
-    """Distance (m) and azimuth at point 1 towards point 2 (rad, [0, 2pi)); broadcasts.
-
-    Azimuth: the chord X2 - X1 (ECEF) projected on the horizon of point 1 (the normal
-    section azimuth).  Distance: s = 2 R asin(c / 2R), c the chord, R = sqrt(R_M R_N)
-    at the mid latitude (the Gaussian mean radius).
-    """
-    lat1 = np.asarray(lat1_rad, float)
-    lon1 = np.asarray(lon1_rad, float)
-    d = ecef_m(lat2_rad, lon2_rad) - ecef_m(lat1, lon1)
-    sl, cl = np.sin(lon1), np.cos(lon1)
-    sp, cp = np.sin(lat1), np.cos(lat1)
-    east = -sl * d[..., 0] + cl * d[..., 1]
-    north = -sp * cl * d[..., 0] - sp * sl * d[..., 1] + cp * d[..., 2]
-    chord = np.linalg.norm(d, axis=-1)
-    lat_mid = 0.5 * (lat1 + np.asarray(lat2_rad, float))
-    r_m = np.sqrt(radius_meridian_m(lat_mid) * radius_prime_vertical_m(lat_mid))
-    dist = 2.0 * r_m * np.arcsin(np.minimum(chord / (2.0 * r_m), 1.0))
-    return dist, wrap_2pi(np.arctan2(east, north))
-
-
-# ------------------------------------------------------------------ ellipse, rows
-
-
-@dataclass(frozen=True)
-class Ellipse:
-    """1-sigma error ellipse of a north/east covariance (metres; broadcasts).
-
-    ``orientation_rad`` is the azimuth of the semi-major axis, in [0, pi).
-    """
-
-    semi_major_m: np.ndarray | float
-    semi_minor_m: np.ndarray | float
-    orientation_rad: np.ndarray | float
-
-
-def error_ellipse(cov_m2) -> Ellipse:
-    """Semi-axes and orientation from P (..., 2, 2) in metres (closed-form eigen-decomposition).
-
-    lambda = (a + c)/2 +- sqrt(((a - c)/2)^2 + b^2), azimuth = atan2(2b, a - c)/2, for
-    P = [[a, b], [b, c]] in (north, east).
-    """
-    p = np.asarray(cov_m2, float)
-    a, b, c = p[..., 0, 0], p[..., 0, 1], p[..., 1, 1]
-    mean = 0.5 * (a + c)
-    rad = np.hypot(0.5 * (a - c), b)
-    orient = np.mod(0.5 * np.arctan2(2.0 * b, a - c), np.pi)
-    return Ellipse(np.sqrt(mean + rad), np.sqrt(np.maximum(mean - rad, 0.0)), orient)
+# ------------------------------------------------------------------ rows
 
 
 @dataclass(frozen=True)
@@ -636,7 +565,6 @@ def alongside_reference(
 __all__ = [
     "OMEGA_E_RADPS",
     "BearingLOP",
-    "Ellipse",
     "FixSolution",
     "GeometryError",
     "LineLOP",
@@ -648,10 +576,7 @@ __all__ = [
     "Rows",
     "abeam_line",
     "alongside_reference",
-    "ecef_m",
-    "error_ellipse",
     "fuse_fix",
-    "range_azimuth",
     "stack_rows",
     "to_metres",
 ]

@@ -77,8 +77,10 @@ import pandas as pd
 from dracc.core import distributions as dist
 from dracc.core.config import FaultsConfig, IntegrityConfig
 from dracc.core.geodesy import angdiff, circmean, offset_ne_m
+from dracc.core.timefmt import iso_utc
 from dracc.core.units import DEG_RAD, KN_MPS, NS_PER_S
-from dracc.frames import INS_ROLES, MISSING_NS, Voyage
+from dracc.core.vocabulary import INS_ROLES
+from dracc.frames import MISSING_NS, Voyage
 from dracc.math.deviation.sampling import align_at, sample_unit, unit_series_from_voyage
 from dracc.math.ep import OUTLIER_NIS
 from dracc.math.faults import SensorFault, detect_faults
@@ -171,10 +173,6 @@ class IntegrityResult:
 
 
 # ------------------------------------------------------------------------ helpers
-
-
-def _iso(t_ns: int) -> str:
-    return pd.Timestamp(int(t_ns), unit="ns", tz="UTC").strftime("%Y-%m-%dT%H:%M:%S.%fZ")[:-4] + "Z"
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -304,8 +302,8 @@ def _validity(voyage: Voyage, cfg: IntegrityConfig) -> list[Check]:
                 if t[b - 1] - t[a] >= spell_ns and len(evidence) < MAX_EVIDENCE:
                     evidence.append(
                         {
-                            "start": _iso(t[a]),
-                            "end": _iso(t[b - 1]),
+                            "start": iso_utc(unit="ms", time_ns=t[a]),
+                            "end": iso_utc(unit="ms", time_ns=t[b - 1]),
                             "duration_s": dur,
                             "records": b - a,
                             "frame": kind,
@@ -413,7 +411,7 @@ def _jump(
     for k in idx[:MAX_EVIDENCE]:
         evidence.append(
             {
-                "time": _iso(t[k + 1]),
+                "time": iso_utc(unit="ms", time_ns=t[k + 1]),
                 "line": int(lines[k + 1]),
                 "step_m": float(math.hypot(dn[k], de[k])),
                 "expected_step_m": float(math.hypot(vn[k] * dt[k], ve[k] * dt[k])),
@@ -482,8 +480,8 @@ def _fault_checks(
         t = np.sort(np.concatenate(times[key]))
         ev = tuple(
             {
-                "start": _iso(f.start_ns),
-                "end": _iso(f.end_ns),
+                "start": iso_utc(unit="ms", time_ns=f.start_ns),
+                "end": iso_utc(unit="ms", time_ns=f.end_ns),
                 "duration_s": f.duration_s,
                 "records": f.n_records,
                 "first_line": f.first_line,
@@ -588,7 +586,7 @@ def _contradictions(
                 events.append(
                     {
                         "what": "frozen",
-                        "time": _iso(f.start_ns),
+                        "time": iso_utc(unit="ms", time_ns=f.start_ns),
                         "line": f.first_line,
                         "records_flagged_valid": int((q[inside] > 0).sum()),
                     }
@@ -665,8 +663,8 @@ def _latency(voyage: Voyage, cfg: IntegrityConfig) -> tuple[list[Check], dict[st
             if t[b - 1] - t[a] >= spell_ns and len(evidence) < MAX_EVIDENCE:
                 evidence.append(
                     {
-                        "start": _iso(t[a]),
-                        "end": _iso(t[b - 1]),
+                        "start": iso_utc(unit="ms", time_ns=t[a]),
+                        "end": iso_utc(unit="ms", time_ns=t[b - 1]),
                         "duration_s": dur,
                         "records": b - a,
                         "first_line": int(ln[a]),
@@ -759,8 +757,8 @@ def _availability(
         longest = max(((b - a) / NS_PER_S for a, b in gaps), default=0.0)
         ev = tuple(
             {
-                "from": _iso(a),
-                "to": _iso(b),
+                "from": iso_utc(unit="ms", time_ns=a),
+                "to": iso_utc(unit="ms", time_ns=b),
                 "duration_s": (b - a) / NS_PER_S,
                 "cadences": (b - a) / NS_PER_S / cadence if cadence > 0 else None,
                 "edge": "start" if a == start_ns else ("end" if b == end_ns else None),
@@ -915,8 +913,8 @@ def _position_velocity(
         over = np.isfinite(v) & (v > gate)
         ev = tuple(
             {
-                "from": _iso(instants[a]),
-                "to": _iso(instants[b - 1]),
+                "from": iso_utc(unit="ms", time_ns=instants[a]),
+                "to": iso_utc(unit="ms", time_ns=instants[b - 1]),
                 "max_kn": float(np.nanmax(v[a:b]) / KN_MPS),
             }
             for a, b in _runs(over)[:MAX_EVIDENCE]
@@ -1015,8 +1013,8 @@ def _heading_consistency(
     over = ok & (np.abs(x) > gate)
     ev = tuple(
         {
-            "from": _iso(instants[a]),
-            "to": _iso(instants[b - 1]),
+            "from": iso_utc(unit="ms", time_ns=instants[a]),
+            "to": iso_utc(unit="ms", time_ns=instants[b - 1]),
             "max_deg": float(np.nanmax(np.abs(x[a:b]))),
         }
         for a, b in _runs(over)[:MAX_EVIDENCE]
@@ -1162,8 +1160,8 @@ def _speed_consistency(
     over = ok & (np.abs(x) > gate)
     ev = tuple(
         {
-            "from": _iso(instants[a]),
-            "to": _iso(instants[b - 1]),
+            "from": iso_utc(unit="ms", time_ns=instants[a]),
+            "to": iso_utc(unit="ms", time_ns=instants[b - 1]),
             "max_kn": float(np.nanmax(np.abs(x[a:b])) / KN_MPS),
         }
         for a, b in _runs(over)[:MAX_EVIDENCE]
@@ -1245,7 +1243,7 @@ def dr_innovation_check(
     min_jump = float(np.nanmedian(gate_m)) if np.isfinite(gate_m).any() else math.nan
     fa = float(min(1.0, len(t) * math.exp(-DR_GATE_NIS / 2.0)))
     ev = tuple(
-        {"time": _iso(t[k]), "nis": float(nis[k]), "gate_m": float(gate_m[k])}
+        {"time": iso_utc(unit="ms", time_ns=t[k]), "nis": float(nis[k]), "gate_m": float(gate_m[k])}
         for k in np.flatnonzero(over)[:MAX_EVIDENCE]
     )
     who = source or role or "the reference"

@@ -32,7 +32,8 @@ from dracc.core.config import Config, DeadReckoningConfig
 from dracc.core.errors import InsufficientDataError
 from dracc.core.geodesy import circmean, interp_position, offset_ne_m, wrap_2pi, wrap_pi
 from dracc.core.units import DEG_RAD, KN_MPS, NS_PER_S
-from dracc.frames import INS_ROLES, Voyage
+from dracc.core.vocabulary import CHANNEL_KEYS, CHANNEL_UNITS, CHANNELS, INS_ROLES
+from dracc.frames import Voyage
 from dracc.math.current import CurrentModel, estimate_current
 from dracc.math.deadreckoning import (
     course_magnetic_rad,
@@ -46,7 +47,6 @@ from dracc.math.deadreckoning import (
     speed_from_components_mps,
 )
 from dracc.math.deviation import DeviationResult, analyse_deviations, unit_series_from_voyage
-from dracc.math.deviation.analysis import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS
 from dracc.math.ep import (
     MIN_LEARNED_S,
     OUTLIER_NIS,
@@ -64,7 +64,7 @@ __all__ = [
     "SCHEMA",
     "CHANNELS",
     "CHANNEL_UNITS",
-    "SAMPLE_KEYS",
+    "CHANNEL_KEYS",
     "Analysis",
     "analyse",
     "analyse_voyage",

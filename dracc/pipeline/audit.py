@@ -42,13 +42,13 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 from dracc.core.config import Config
-from dracc.core.errors import ConfigError, ExitCode, IngestError, InsufficientDataError
+from dracc.core.errors import ConfigError, ExitCode, IngestError, InsufficientDataError, NoLogsError
+from dracc.core.numbers import finite_or_none, jsonable
+from dracc.core.timefmt import parse_utc
+from dracc.core.vocabulary import CHANNEL_KEYS, CHANNELS, INS_ROLES, ROLES
 from dracc.pipeline.state import AprioriEvent, ChannelRow, NightRecord, StateStore
 
-UNITS = ("ins1", "ins2", "ins3")
-CHANNELS = ("lat", "lon", "course")
-#: the config key of each channel's value (a priori and limits), with its unit
-CHANNEL_KEYS = {"lat": "lat_m", "lon": "lon_m", "course": "course_deg"}
+UNITS = INS_ROLES
 KEY_CHANNELS = {v: k for k, v in CHANNEL_KEYS.items()}
 
 #: test hook: seconds to sleep inside the recording transaction (simulates a slow or killed run)
@@ -87,9 +87,6 @@ class AuditConfig:
             return float(own[key])
         value = self.limits.get("all", {}).get(key)
         return None if value is None else float(value)
-
-
-_ROLES = ("compass", "log", "ins1", "ins2", "ins3", "gnss")
 
 
 def _number(value, where: str, positive: bool = True) -> float:
@@ -149,10 +146,10 @@ def audit_config(cfg: Config) -> AuditConfig:
         kw["apriori_raise_is_finding"] = table["apriori_raise_is_finding"]
     if "required_sources" in table:
         req = table["required_sources"]
-        if not isinstance(req, list) or any(r not in _ROLES for r in req):
+        if not isinstance(req, list) or any(r not in ROLES for r in req):
             raise ConfigError(
                 f"[audit.required_sources] must be a list of roles "
-                f"({', '.join(_ROLES)}), got {req!r}"
+                f"({', '.join(ROLES)}), got {req!r}"
             )
         kw["required_sources"] = tuple(req)
     if "limits" in table:
@@ -243,22 +240,11 @@ def apriori_chain(seed: float | None, nights: Sequence[tuple[str, float | None]]
 # --------------------------------------------------------------------- the analysis
 
 
-def _num(x) -> float | None:
-    """A finite float, or None for null/NaN/absent."""
-    if x is None or isinstance(x, bool):
-        return None
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        return None
-    return v if math.isfinite(v) else None
-
-
 def _estimate(x) -> tuple[float | None, float | None]:
     """(value, sigma) from ``{"value": …, "sigma": …}`` or a bare number."""
     if isinstance(x, Mapping):
-        return _num(x.get("value")), _num(x.get("sigma"))
-    return _num(x), None
+        return finite_or_none(x.get("value")), finite_or_none(x.get("sigma"))
+    return finite_or_none(x), None
 
 
 @dataclass(frozen=True)
@@ -388,10 +374,10 @@ def facts_from_analysis(doc: Mapping) -> NightFacts:
                     unit=str(unit),
                     channel=ch,
                     n=int(st.get("n") or 0),
-                    m_u=_num(st.get("m_u")),
-                    m_y=_num(st.get("m_y")),
-                    kurtosis=_num(st.get("kurtosis")),
-                    limit_error=_num(st.get("limit")),
+                    m_u=finite_or_none(st.get("m_u")),
+                    m_y=finite_or_none(st.get("m_y")),
+                    kurtosis=finite_or_none(st.get("kurtosis")),
+                    limit_error=finite_or_none(st.get("limit")),
                 )
             )
     dr = doc.get("dead_reckoning") or {}
@@ -414,8 +400,10 @@ def facts_from_analysis(doc: Mapping) -> NightFacts:
         rejected_rate=rate,
         sources=_sources_by_role(doc.get("sources")),
         channels=tuple(channels),
-        dr_containment_2m=_num(dr.get("containment_2m")),
-        dr_n_scored=(int(dr["n_scored"]) if _num(dr.get("n_scored")) is not None else None),
+        dr_containment_2m=finite_or_none(dr.get("containment_2m")),
+        dr_n_scored=(
+            int(dr["n_scored"]) if finite_or_none(dr.get("n_scored")) is not None else None
+        ),
         compass_error_deg=ce,
         compass_error_sigma_deg=ce_s,
         log_scale=ls,
@@ -424,15 +412,15 @@ def facts_from_analysis(doc: Mapping) -> NightFacts:
         dr_verdict=dr_verdict_word(verdict_text),
         dr_verdict_text=verdict_text,
         dr_consistent=_bool(dr.get("consistent")),
-        dr_nees=_num(nees.get("statistic")),
-        dr_nees_lower=_num(nees.get("lower")),
-        dr_nees_upper=_num(nees.get("upper")),
+        dr_nees=finite_or_none(nees.get("statistic")),
+        dr_nees_lower=finite_or_none(nees.get("lower")),
+        dr_nees_upper=finite_or_none(nees.get("upper")),
         dr_dominant_source=_text(dr.get("dominant_source")),
         dr_dominant_key=_text(dr.get("dominant_key")),
-        duration_s=_num(period.get("duration_s")),
+        duration_s=finite_or_none(period.get("duration_s")),
         ignored=ignored,
         integrity_checks=tuple(c for c in integ.get("checks") or [] if isinstance(c, Mapping)),
-        integrity_false_alarm=_num(integ.get("false_alarm_per_night")),
+        integrity_false_alarm=finite_or_none(integ.get("false_alarm_per_night")),
     )
 
 
@@ -533,8 +521,8 @@ def _integrity_finding(c: Mapping) -> Finding:
     return Finding(
         str(c.get("name")),
         str(src or c.get("role") or ""),
-        _num(st.get("value")),
-        _num(th.get("value")),
+        finite_or_none(st.get("value")),
+        finite_or_none(th.get("value")),
         str(st.get("unit") or ""),
         str(c.get("message") or ""),
         check=str(c.get("check")),
@@ -545,7 +533,7 @@ def _integrity_finding(c: Mapping) -> Finding:
         threshold=dict(th),
         window=dict(c.get("window") or {}),
         evidence=tuple(c.get("evidence") or ()),
-        false_alarm=_num(c.get("false_alarm")),
+        false_alarm=finite_or_none(c.get("false_alarm")),
     )
 
 
@@ -864,11 +852,11 @@ def accuracy_findings(
                 "channel": p.channel,
                 "measure": p.measure,
                 "n": p.n,
-                "n_eff": _num(p.n_eff),
-                "m_u": _num(p.m_u),
-                "m_y": _num(p.m_y),
-                "kurtosis": _num(p.kurtosis),
-                "limit_error": _num(p.limit_error),
+                "n_eff": finite_or_none(p.n_eff),
+                "m_u": finite_or_none(p.m_u),
+                "m_y": finite_or_none(p.m_y),
+                "kurtosis": finite_or_none(p.kurtosis),
+                "limit_error": finite_or_none(p.limit_error),
                 "limit": lim,
             }
         )
@@ -934,17 +922,13 @@ def _hours(rec: NightRecord) -> float:
 def _period_hours(start_utc: str | None, end_utc: str | None) -> float:
     if not start_utc or not end_utc:
         return 0.0
-    return (_parse_utc(end_utc) - _parse_utc(start_utc)).total_seconds() / 3600.0
+    return (parse_utc(end_utc) - parse_utc(start_utc)).total_seconds() / 3600.0
 
 
 # --------------------------------------------------------------- choosing the logs
 
 
 _DATE_FORMS = ("%Y-%m-%d", "%Y%m%d", "%Y_%m_%d")
-
-
-class NoLogsError(IngestError):
-    """A folder holds no log for the night: the night is recorded without data (exit 3)."""
 
 
 def parse_night(text: str) -> str:
@@ -1148,14 +1132,9 @@ def night_of(facts: NightFacts) -> str:
     """The night a log belongs to when no --date is given: the UTC date of the period's middle."""
     if not facts.period_start_utc or not facts.period_end_utc:
         raise InsufficientDataError("the logs carry no dated records; give the night with --date")
-    t0 = _parse_utc(facts.period_start_utc)
-    t1 = _parse_utc(facts.period_end_utc)
+    t0 = parse_utc(facts.period_start_utc)
+    t1 = parse_utc(facts.period_end_utc)
     return (t0 + (t1 - t0) / 2).date().isoformat()
-
-
-def _parse_utc(text: str) -> dt.datetime:
-    t = dt.datetime.fromisoformat(text.replace("Z", "+00:00"))
-    return t if t.tzinfo else t.replace(tzinfo=dt.timezone.utc)
 
 
 # -------------------------------------------------------------------- the audit
@@ -1296,24 +1275,6 @@ def _record(
         dr_consistent=facts.dr_consistent,
         dr_nees=facts.dr_nees,
     )
-
-
-def jsonable(x):
-    """``x`` in JSON types: NaN and infinities become None, tuples lists, numpy scalars
-    Python numbers, anything else its text."""
-    if isinstance(x, Mapping):
-        return {str(k): jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [jsonable(v) for v in x]
-    if isinstance(x, float):
-        return x if math.isfinite(x) else None
-    if x is None or isinstance(x, (bool, int, str)):
-        return x
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        return str(x)
-    return v if math.isfinite(v) else None
 
 
 def _finding_dict(f: Finding) -> dict:

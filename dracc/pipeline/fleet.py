@@ -49,10 +49,10 @@ import pandas as pd
 from dracc import __version__
 from dracc.core import atomic
 from dracc.core.config import Config
-from dracc.core.errors import ConfigError, DraccError, IngestError
+from dracc.core.errors import ConfigError, DraccError, FleetError, IngestError
+from dracc.core.vocabulary import CHANNELS
 from dracc.core.workers import detach_worker
 from dracc.pipeline.audit import (
-    CHANNELS,
     apriori_chain,
     apriori_seeds,
     facts_from_analysis,
@@ -111,10 +111,6 @@ TREND_COLUMNS = (
     "apriori_after",
     "dr_containment_2m",
 )
-
-
-class FleetError(DraccError):
-    """The batch cannot run (no logs found, scheduler unreachable, output unusable)."""
 
 
 # ------------------------------------------------------------------------ config

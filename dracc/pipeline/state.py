@@ -51,7 +51,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-from dracc.core.errors import ConfigError, DraccError
+from dracc.core.errors import ConfigError, StateError
 
 SCHEMA_VERSION = 2
 
@@ -130,10 +130,6 @@ CREATE TABLE IF NOT EXISTS apriori (
 );
 CREATE INDEX IF NOT EXISTS nights_vessel_night ON nights (vessel, night);
 """
-
-
-class StateError(DraccError):
-    """The state database cannot be opened or is not a dracc audit database."""
 
 
 @dataclass(frozen=True)

@@ -13,19 +13,6 @@ from datetime import datetime, timezone
 import numpy as np
 
 
-def iso_utc(time_ns: int | None) -> str | None:
-    """ISO 8601 UTC with a 'Z', to the millisecond where the time has a fraction."""
-    if time_ns is None:
-        return None
-    t = int(time_ns)
-    sec, frac_ns = divmod(t, 1_000_000_000)
-    dt = datetime.fromtimestamp(sec, tz=timezone.utc)
-    base = dt.strftime("%Y-%m-%dT%H:%M:%S")
-    if frac_ns:
-        return f"{base}.{frac_ns // 1_000_000:03d}Z"
-    return base + "Z"
-
-
 def short_utc(time_ns: int | None) -> str:
     """'2026-03-01 12:00Z' for tables; '-' for None."""
     if time_ns is None:

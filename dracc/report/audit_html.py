@@ -10,6 +10,7 @@ from __future__ import annotations
 import html
 import math
 
+from dracc.core.numbers import none_to_nan
 from dracc.report.page import PAGE_END, img_tag, page_head
 
 _DPI = 90
@@ -37,16 +38,13 @@ def history_plot(doc: dict, vessel: str) -> bytes | None:
     if not series:
         return None
 
-    def nan_for_none(values):
-        return [math.nan if v is None else v for v in values]
-
     lines = {
         c: [
             (
                 s["unit"],
                 pd.to_datetime([n["night"] for n in s["nights"]]),
-                nan_for_none(n["m_y"] for n in s["nights"]),
-                nan_for_none(n["apriori_after"] for n in s["nights"]),
+                none_to_nan(n["m_y"] for n in s["nights"]),
+                none_to_nan(n["apriori_after"] for n in s["nights"]),
             )
             for s in series
             if s["channel"] == c

@@ -15,7 +15,8 @@ from pathlib import Path
 
 from dracc import __version__
 from dracc.core import atomic
-from dracc.pipeline.audit import AuditOutcome, Finding, jsonable
+from dracc.core.numbers import jsonable
+from dracc.pipeline.audit import AuditOutcome, Finding
 
 SCHEMA = "dracc.audit/1"
 SCHEMA_PATH = Path(__file__).with_name("audit.schema.json")

@@ -15,7 +15,8 @@ from typing import Any
 import numpy as np
 
 from dracc.core import atomic
-from dracc.core.units import finite_or_none as _num
+from dracc.core.numbers import finite_or_none as _num
+from dracc.core.timefmt import iso_utc
 from dracc.core.units import mps_to_kn
 from dracc.math.integrity import Check, IntegrityResult
 from dracc.pipeline.analysis import (
@@ -26,7 +27,6 @@ from dracc.pipeline.analysis import (
     DRTrack,
     Estimate,
 )
-from dracc.report import iso_utc
 
 SCHEMA_PATH = Path(__file__).with_name("analysis.schema.json")
 

@@ -19,7 +19,8 @@ import numpy as np  # noqa: E402
 from matplotlib.patches import Circle  # noqa: E402
 
 from dracc.core.geodesy import offset_ne_m  # noqa: E402
-from dracc.pipeline.analysis import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS, Analysis  # noqa: E402
+from dracc.core.vocabulary import CHANNEL_KEYS, CHANNEL_UNITS, CHANNELS
+from dracc.pipeline.analysis import Analysis
 
 _DPI = 96
 #: lines are drawn through at most this many points (every k-th sample); circles and
@@ -210,7 +211,7 @@ def deviation_plot(a: Analysis) -> bytes | None:
                 continue
             ax.plot(when, y, marker="o", ms=3, lw=1.0, color=_UNIT_COLOURS.get(unit), label=unit)
         ax.axhline(0.0, color="black", lw=0.6)
-        ax.set_ylabel(f"{SAMPLE_KEYS[ch]} [{CHANNEL_UNITS[ch]}]")
+        ax.set_ylabel(f"{CHANNEL_KEYS[ch]} [{CHANNEL_UNITS[ch]}]")
         ax.grid(True, alpha=0.3)
     axes[0].legend(loc="upper right", fontsize=8, ncol=3)
     axes[0].set_title(

@@ -13,8 +13,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from dracc.core.vocabulary import CHANNEL_UNITS, CHANNELS
 from dracc.math.deviation import UnitStats
-from dracc.pipeline.analysis import CHANNEL_UNITS, CHANNELS, DeviationResult
+from dracc.pipeline.analysis import DeviationResult
 from dracc.report import fmt
 
 #: the verdict against the a priori RMS

@@ -27,8 +27,9 @@ import pyarrow.csv as pa_csv
 
 from dracc.core import atomic
 from dracc.core.safetext import csv_cell
+from dracc.core.vocabulary import CHANNEL_KEYS, CHANNEL_UNITS, CHANNELS
 from dracc.math.deviation import WindowStats
-from dracc.pipeline.analysis import CHANNEL_UNITS, CHANNELS, SAMPLE_KEYS, Analysis, DRTrack
+from dracc.pipeline.analysis import Analysis, DRTrack
 
 
 def _times(time_ns) -> pd.DatetimeIndex:
@@ -65,7 +66,7 @@ def samples_frame(a: Analysis) -> pd.DataFrame | None:
     for unit in d.units:
         for ch in CHANNELS:
             if ch in d.samples[unit]:
-                cols[f"{unit}_{SAMPLE_KEYS[ch]}"] = np.asarray(d.samples[unit][ch], dtype=float)
+                cols[f"{unit}_{CHANNEL_KEYS[ch]}"] = np.asarray(d.samples[unit][ch], dtype=float)
     return pd.DataFrame(cols)
 
 

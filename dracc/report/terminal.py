@@ -17,7 +17,8 @@ from rich.table import Table
 from rich.text import Text
 
 from dracc.core.safetext import printable
-from dracc.pipeline.analysis import CHANNELS, Analysis, DeviationResult, Estimate
+from dracc.core.vocabulary import CHANNELS
+from dracc.pipeline.analysis import Analysis, DeviationResult, Estimate
 from dracc.report import fmt, fmt_duration, fmt_pct, fmt_signed, short_utc
 from dracc.report.rows import EXCEEDS, unit_rows
 

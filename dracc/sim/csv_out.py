@@ -16,15 +16,9 @@ import numpy as np
 import pandas as pd
 
 from dracc.core.atomic import atomic_path
+from dracc.core.timefmt import iso_utc
 from dracc.frames import KINDS
 from dracc.ingest.csv_quantities import frame_quantities
-
-
-def iso_utc(time_ns: np.ndarray) -> np.ndarray:
-    """ISO 8601 UTC strings with nanoseconds for int64 Unix nanoseconds."""
-    return np.char.add(
-        np.datetime_as_string(np.asarray(time_ns, dtype="datetime64[ns]"), unit="ns"), "Z"
-    )
 
 
 def _fmt(v: np.ndarray) -> np.ndarray:
@@ -84,7 +78,7 @@ def write_csv(frames: dict[str, pd.DataFrame], path, form: str = "long") -> Path
             out = pd.DataFrame(
                 {"time_ns": np.zeros(0, np.int64), "source": [], "quantity": [], "value": []}
             )
-        out.insert(0, "time_utc", iso_utc(out["time_ns"].to_numpy()))
+        out.insert(0, "time_utc", iso_utc(unit="ns", time_ns=out["time_ns"].to_numpy()))
         out = out.drop(columns="time_ns")
     else:
         merged = None
@@ -107,7 +101,7 @@ def write_csv(frames: dict[str, pd.DataFrame], path, form: str = "long") -> Path
             out = pd.DataFrame({"time_utc": [], "source": []})
         else:
             merged = merged.sort_values(["time_ns", "source", "occ"], kind="stable")
-            merged.insert(0, "time_utc", iso_utc(merged["time_ns"].to_numpy()))
+            merged.insert(0, "time_utc", iso_utc(unit="ns", time_ns=merged["time_ns"].to_numpy()))
             out = merged.drop(columns=["time_ns", "occ"]).fillna("")
     with atomic_path(path) as tmp:
         out.to_csv(tmp, index=False, lineterminator="\n")

@@ -39,6 +39,7 @@ import pandas as pd
 
 from dracc.core.errors import ConfigError
 from dracc.core.geodesy import angdiff, offset_ne_m
+from dracc.core.timefmt import iso_utc
 from dracc.core.units import KN_MPS
 
 FAULT_KINDS = ("jump", "freeze", "dropout", "drift", "latency", "invalid")
@@ -314,8 +315,8 @@ def fault_table(
                 "kind": f.kind,
                 "source": f.source,
                 "role": roles.get(f.source),
-                "start_utc": _iso(lo),
-                "end_utc": _iso(end_ns),
+                "start_utc": iso_utc(unit="ns", time_ns=lo),
+                "end_utc": iso_utc(unit="ns", time_ns=end_ns),
                 "start_s": f.start_s,
                 "duration_s": dur,
                 "size": f.size,
@@ -324,10 +325,6 @@ def fault_table(
             }
         )
     return out
-
-
-def _iso(t_ns: int) -> str:
-    return str(np.datetime_as_string(np.datetime64(int(t_ns), "ns"), unit="ns")) + "Z"
 
 
 # --------------------------------------------------------------------------- application

@@ -11,8 +11,8 @@ Pure numpy/scipy; no I/O.
 
 from __future__ import annotations
 
+from dracc.core.vocabulary import CHANNELS
 from dracc.math.deviation.analysis import (
-    CHANNELS,
     ChannelMode,
     ChannelStats,
     DeviationResult,

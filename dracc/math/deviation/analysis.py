@@ -23,9 +23,10 @@ import numpy as np
 from dracc.core.config import DeviationConfig
 from dracc.core.errors import ConfigError
 from dracc.core.geodesy import k_lambda, k_phi
+from dracc.core.numbers import finite_or_none as _f
+from dracc.core.timefmt import iso_utc
 from dracc.core.units import ARCMIN_RAD
-from dracc.core.units import finite_or_none as _f
-from dracc.frames import INS_ROLES
+from dracc.core.vocabulary import CHANNEL_KEYS, CHANNELS, INS_ROLES
 from dracc.math.deviation import stats
 from dracc.math.deviation.hat import three_cornered_hat
 from dracc.math.deviation.reference import (
@@ -46,11 +47,6 @@ from dracc.math.deviation.sampling import (
     sampling_instants,
 )
 
-CHANNELS = ("lat", "lon", "course")
-#: the sample key of each channel (JSON ``deviation.samples``) and the a priori config key
-SAMPLE_KEYS = {"lat": "lat_m", "lon": "lon_m", "course": "course_deg"}
-CHANNEL_UNITS = {"lat": "m", "lon": "m", "course": "deg"}
-
 
 def metres_to_arcmin(north_m, east_m, lat_rad):
     """North/east metres to arc-minutes of latitude and longitude at ``lat_rad``:
@@ -59,14 +55,6 @@ def metres_to_arcmin(north_m, east_m, lat_rad):
     dlat = np.asarray(north_m, dtype=float) * k_phi(lat) / ARCMIN_RAD  # (B18)
     dlon = np.asarray(east_m, dtype=float) * k_lambda(lat) / ARCMIN_RAD  # (B19)
     return dlat, dlon
-
-
-def iso_utc(time_ns) -> str:
-    """ISO 8601 UTC with a Z ('2026-11-21T13:00:00Z'); milliseconds only when needed."""
-    t = np.asarray(time_ns, dtype=np.int64)
-    unit = "s" if np.all(t % 1_000_000_000 == 0) else "ms"
-    out = np.datetime_as_string(t.astype("datetime64[ns]"), unit=unit, timezone="UTC")
-    return str(out) if out.ndim == 0 else out
 
 
 # ------------------------------------------------------------------------- results
@@ -344,7 +332,7 @@ class DeviationResult:
         for i, t in enumerate(self.time_ns):
             row: dict = {"time_utc": iso_utc(t)}
             for u in self.units:
-                row[u] = {SAMPLE_KEYS[c]: _f(self.samples[u][c][i]) for c in CHANNELS}
+                row[u] = {CHANNEL_KEYS[c]: _f(self.samples[u][c][i]) for c in CHANNELS}
                 if arcmin:
                     row[u]["lat_arcmin"] = _f(dlat_am[u][i])
                     row[u]["lon_arcmin"] = _f(dlon_am[u][i])
@@ -461,7 +449,7 @@ def check_config(cfg: DeviationConfig) -> None:
         raise ConfigError("[deviation] kurtosis_windows_s must all be positive")
     if cfg.hat_draws < 100:
         raise ConfigError(f"[deviation] hat_draws must be >= 100, got {cfg.hat_draws}")
-    keys = set(SAMPLE_KEYS.values())
+    keys = set(CHANNEL_KEYS.values())
     for unit, table in cfg.apriori.items():
         if unit not in INS_ROLES:
             raise ConfigError(
@@ -517,7 +505,7 @@ def _channel_stats(u, factor, kurt_limit, unit, channel, cfg: DeviationConfig) -
             "confidence bound, no limiting error"
         )
     limit = kp * kh * m_y  # (K8)
-    apriori = cfg.apriori.get(unit, {}).get(SAMPLE_KEYS[channel])
+    apriori = cfg.apriori.get(unit, {}).get(CHANNEL_KEYS[channel])
     if apriori is None:
         exceeds, new, verdict = None, m_y, "no a priori: the deviation estimate is mandatory"
     elif math.isnan(m_y):
