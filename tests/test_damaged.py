@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import REAL, real_path
 
 from dracc.core.config import IngestConfig
 from dracc.core.errors import ExitCode
@@ -19,7 +20,6 @@ from dracc.ingest import read_file
 
 REPO = Path(__file__).resolve().parents[1]
 SAMPLES = REPO / "sample_logs"
-REAL = Path(os.environ.get("DRACC_REAL_DATA", REPO.parent / "shared" / "data" / "real"))
 
 
 def _one_line_error(code: int, err: str, *needles: str) -> None:
@@ -193,9 +193,7 @@ def test_mcap_corrupted_bytes(run_cli, tmp_path, mcap_full, seed):
 
 @pytest.mark.parametrize("name", ["keelson/4a625f9/test.mcap", "rosbag2/talker.mcap"])
 def test_real_mcap_cut_in_half(run_cli, tmp_path, name):
-    src = REAL / name
-    if not src.exists():
-        pytest.skip(f"{src} not present")
+    src = real_path(name)
     data = src.read_bytes()
     p = tmp_path / "half.mcap"
     p.write_bytes(data[: len(data) // 2])

@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from pathlib import Path
 
 import jsonschema
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import real_path
 
 from dracc.core.config import Config, FaultsConfig, IngestConfig, config_from_dict, load_config
 from dracc.core.errors import ConfigError
@@ -25,7 +25,6 @@ from dracc.report import html as html_report
 from dracc.report import json_report, terminal
 from dracc.sim import SimParams, simulate
 
-REAL = Path("/work/shared/data/real")
 H = 3600 * NS_PER_S
 
 
@@ -86,9 +85,7 @@ def test_clean_simulated_voyage_has_no_fault(sim):
     ],
 )
 def test_real_logs_have_no_fault(name):
-    path = REAL / name
-    if not path.exists():
-        pytest.skip(f"{path} not present")
+    path = real_path(name)
     v = read_logs([path], IngestConfig(date="2014-08-01"))
     assert detect_faults(v) == []
 

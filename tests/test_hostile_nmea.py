@@ -28,7 +28,16 @@ import pytest
 from dracc.core.config import IngestConfig
 from dracc.core.errors import ExitCode, IngestError
 from dracc.ingest import detect_format, nmea, read_logs
-from dracc.ingest.nmea import StreamState, iter_nmea_blocks, parse_buffer, read_nmea
+from dracc.ingest.memory import HANDOVER_PREFIX, sweep_handover
+from dracc.ingest.nmea import (
+    StreamState,
+    engine_c,
+    engine_numpy,
+    iter_nmea_blocks,
+    parse_buffer,
+    read_nmea,
+)
+from dracc.ingest.nmea.blocks import block_ranges
 
 REPO = Path(__file__).resolve().parents[1]
 SAMPLES = REPO / "sample_logs"
@@ -182,7 +191,7 @@ def test_lines_too_long_give_the_same_result_whatever_the_blocks(tmp_path, monke
     block cuts (found by the block splitter, never read whole) give the same records,
     rejects and examples, with either engine; a block is never longer than its size plus
     ``max_line_bytes``."""
-    monkeypatch.setattr(nmea, "ENGINE", engine)
+    monkeypatch.setattr(engine_c, "ENGINE", engine)
     lines = _sample_lines()[:400]
     tag = lines[7]
     damaged = list(lines)
@@ -207,7 +216,7 @@ def test_lines_too_long_give_the_same_result_whatever_the_blocks(tmp_path, monke
     for block_bytes in (256, 999, 4096, 30_000):
         _same_result(_read_blocks(p, cfg, block_bytes), whole)
     # the splitter: blocks bounded although a line holds no line end for 5 000 bytes
-    ranges = list(nmea._block_ranges(p, 256, max_line_bytes=1000))
+    ranges = list(block_ranges(p, 256, max_line_bytes=1000))
     assert max(ln for _, ln, too_long in ranges if not too_long) <= 256 + 1000 + 3
     assert sum(ln for _, ln, _ in ranges) == p.stat().st_size
     assert [too_long for _, _, too_long in ranges].count(True) >= 3
@@ -234,8 +243,8 @@ def test_numpy_path_parses_dense_junk_in_pieces(monkeypatch):
     ]
 
     def parse(data, engine, budget, chunk):
-        monkeypatch.setattr(nmea, "PIECE_BUDGET", budget)
-        monkeypatch.setattr(nmea, "NUMPY_CHUNK_BYTES", chunk)
+        monkeypatch.setattr(engine_numpy, "PIECE_BUDGET", budget)
+        monkeypatch.setattr(engine_numpy, "NUMPY_CHUNK_BYTES", chunk)
         return parse_buffer(data, engine=engine)
 
     for data in datas:
@@ -273,13 +282,13 @@ def _check_like_lf(tmp_path: Path, voyage, newline_of, name: str) -> None:
         want = read_nmea(lf, IngestConfig(), workers=1)
         assert want.records > 0 and not want.rejects.counts
         for engine in ("c", "numpy"):
-            old = nmea.ENGINE
-            nmea.ENGINE = engine
+            old = engine_c.ENGINE
+            engine_c.ENGINE = engine
             try:
                 _same_result(read_nmea(other, IngestConfig(), workers=1), want)
                 _same_result(_read_blocks(other, IngestConfig(), 16384), want)
             finally:
-                nmea.ENGINE = old
+                engine_c.ENGINE = old
 
 
 def test_cr_only_line_ends_give_records(tmp_path, voyage):
@@ -324,7 +333,7 @@ def test_line_ends_cut_at_every_block_boundary(tmp_path, name):
     p.write_bytes(data)
     starts = set(line_starts(data)) | {len(data)}
     for block_bytes in range(40, 110):  # the cut falls at every offset of the lines
-        cuts = [off + ln for off, ln, _ in nmea._block_ranges(p, block_bytes)]
+        cuts = [off + ln for off, ln, _ in block_ranges(p, block_bytes)]
         assert set(cuts) <= starts, block_bytes
     want = read_nmea(p, IngestConfig(), workers=1)
     assert want.lines == 40 and not want.rejects.counts
@@ -548,7 +557,7 @@ def test_worker_init_sets_the_death_signal_and_silences_the_streams(tmp_path):
     script = textwrap.dedent("""
         import ctypes, os, sys
         from concurrent.futures import ProcessPoolExecutor
-        from dracc.ingest.nmea import _worker_init
+        from dracc.ingest.nmea.pool import worker_init
 
         def probe():
             libc = ctypes.CDLL(None)
@@ -556,7 +565,7 @@ def test_worker_init_sets_the_death_signal_and_silences_the_streams(tmp_path):
             libc.prctl(2, ctypes.byref(sig), 0, 0, 0)  # PR_GET_PDEATHSIG
             return sig.value, [os.path.realpath(f"/proc/self/fd/{fd}") for fd in (0, 1, 2)]
 
-        with ProcessPoolExecutor(1, initializer=_worker_init, initargs=(os.getpid(),)) as ex:
+        with ProcessPoolExecutor(1, initializer=worker_init, initargs=(os.getpid(),)) as ex:
             print(ex.submit(probe).result())
     """)
     if not sys.platform.startswith("linux"):
@@ -571,14 +580,14 @@ def test_handover_folder_of_a_killed_reader_is_removed(tmp_path):
     reader's process id); the next reader removes it, and never a live reader's."""
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
-    stale = tmp_path / f"{nmea._HANDOVER_PREFIX}{dead.pid}-abc"
+    stale = tmp_path / f"{HANDOVER_PREFIX}{dead.pid}-abc"
     stale.mkdir()
     (stale / "block-3").write_bytes(b"x" * 1000)
-    live = tmp_path / f"{nmea._HANDOVER_PREFIX}{os.getpid()}-def"
+    live = tmp_path / f"{HANDOVER_PREFIX}{os.getpid()}-def"
     live.mkdir()
     other = tmp_path / "dracc-ingest-notapid"
     other.mkdir()
-    nmea._sweep_handover(str(tmp_path))
+    sweep_handover(str(tmp_path))
     assert not stale.exists() and live.exists() and other.exists()
 
 

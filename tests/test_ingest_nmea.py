@@ -409,7 +409,7 @@ def test_worker_blocks_come_back_through_files_that_are_removed(tmp_path, monkey
     or a --strict error stops it."""
     import tempfile
 
-    from dracc.ingest import nmea as mod
+    from dracc.ingest.nmea import reader as mod
 
     handover = tmp_path / "handover"
     handover.mkdir()
@@ -420,7 +420,7 @@ def test_worker_blocks_come_back_through_files_that_are_removed(tmp_path, monkey
         made.append(d.name)
         return d
 
-    monkeypatch.setattr(mod, "_handover_dir", here)
+    monkeypatch.setattr(mod, "handover_dir", here)
     p = tmp_path / "sim.nmea"
     p.write_text(_sim_lines(300))
     par = list(iter_nmea_blocks(p, IngestConfig(), block_bytes=20000, workers=2))
@@ -442,7 +442,8 @@ def test_without_room_for_the_handover_blocks_come_through_the_pipe(tmp_path, mo
     pool's pipe, and the frames are the same."""
     import os as os_mod
 
-    from dracc.ingest import nmea as mod
+    from dracc.ingest import memory
+    from dracc.ingest.nmea import ParsedBlock, pool
 
     p = tmp_path / "sim.nmea"
     p.write_text(_sim_lines(300))
@@ -451,8 +452,8 @@ def test_without_room_for_the_handover_blocks_come_through_the_pipe(tmp_path, mo
     class Full:
         f_bavail, f_frsize = 0, 4096
 
-    monkeypatch.setattr(mod.os, "statvfs", lambda path: Full())
-    with mod._handover_dir(1) as folder:
+    monkeypatch.setattr(memory.os, "statvfs", lambda path: Full())
+    with memory.handover_dir(1) as folder:
         assert folder is None
     piped = list(iter_nmea_blocks(p, IngestConfig(), block_bytes=20000, workers=2))
     assert [b.lines for b in piped] == [b.lines for b in with_files]
@@ -460,23 +461,23 @@ def test_without_room_for_the_handover_blocks_come_through_the_pipe(tmp_path, mo
         for kind, f in b.frames.items():
             assert a.frames[kind].equals(f), kind
     # a worker that cannot write its file hands the block back itself
-    pb = mod._parse_range_to_file(
+    pb = pool.parse_range_to_file(
         str(tmp_path / "no" / "such" / "folder"), 0, str(p), 0, p.stat().st_size, False, True
     )
-    assert isinstance(pb, mod.ParsedBlock) and mod._load_parsed(pb) is pb
+    assert isinstance(pb, ParsedBlock) and pool.load_parsed(pb) is pb
     assert not os_mod.path.exists(tmp_path / "no")
 
 
 def test_a_parsed_block_survives_the_file_handover_unchanged(tmp_path):
-    from dracc.ingest import nmea as mod
+    from dracc.ingest.nmea import blocks, pool
 
     p = tmp_path / "sim.nmea"
     p.write_text(_sim_lines(50))
-    direct = mod._parse_range(str(p), 0, p.stat().st_size, False, True)
-    meta, sizes, name = mod._parse_range_to_file(
+    direct = blocks.parse_range(str(p), 0, p.stat().st_size, False, True)
+    meta, sizes, name = pool.parse_range_to_file(
         str(tmp_path), 0, str(p), 0, p.stat().st_size, False, True
     )
-    back = mod._load_parsed((meta, sizes, name))
+    back = pool.load_parsed((meta, sizes, name))
     assert not Path(name).exists()
     assert back.n_lines == direct.n_lines and back.source_names == direct.source_names
     for kind, cols in direct.kinds.items():
@@ -540,7 +541,8 @@ def test_parse_sentences_sources_and_anchor():
 def test_broken_worker_pool_falls_back_to_this_process(tmp_path, monkeypatch):
     import os
 
-    from dracc.ingest import nmea as mod
+    from dracc.ingest.nmea import StreamState
+    from dracc.ingest.nmea import blocks as mod
 
     p = tmp_path / "sim.nmea"
     p.write_text(_sim_lines(100))
@@ -553,16 +555,16 @@ def test_broken_worker_pool_falls_back_to_this_process(tmp_path, monkeypatch):
         return real(*args, **kw)
 
     monkeypatch.setattr(mod, "parse_buffer", dying)  # the forked workers inherit the patch
-    st = mod.StreamState(str(p))
+    st = StreamState(str(p))
     blocks = list(iter_nmea_blocks(p, IngestConfig(), st, block_bytes=20000, workers=2))
     assert sum(len(b.frames["heading"]) for b in blocks) == 1000
     assert any("worker pool failed" in n for n in st.notes())
 
 
 def _pool_ok_in_child(q):
-    from dracc.ingest import nmea
+    from dracc.ingest.nmea.pool import pool_ok
 
-    q.put(nmea._pool_ok())
+    q.put(pool_ok())
 
 
 def test_regression_reader_parses_alone_inside_a_daemonic_process():
@@ -600,7 +602,7 @@ def test_recv_ns_is_the_external_time_of_records_with_their_own_fix(
     """A GGA fixed at 22:13:20.00 and received 1.5 s later (2 s for TAG c: in seconds) has
     recv_ns - time_ns = its latency; the RMC's ground row too; an HDT and a VTG (no time
     of fix) have none, nor a fix without an external time."""
-    from dracc.ingest import nmea as mod
+    from dracc.ingest.nmea import engine_c as mod
 
     monkeypatch.setattr(mod, "ENGINE", engine)
     lag = 2.0 if form == "tag_s" else 1.5
@@ -744,7 +746,8 @@ def test_valid_unused_lines_are_ignored_by_type_and_never_fail_strict(tmp_path):
 
 
 def test_ignored_counts_are_the_same_from_every_engine_and_block_size(tmp_path, monkeypatch):
-    from dracc.ingest import nmea as mod
+    from dracc.ingest.nmea import StreamState
+    from dracc.ingest.nmea import engine_c as mod
 
     body = "\n".join(
         [
@@ -766,7 +769,7 @@ def test_ignored_counts_are_the_same_from_every_engine_and_block_size(tmp_path, 
             {"workers": 1, "block_bytes": 3000},
             {"workers": 2, "block_bytes": 20000},
         ):
-            st_ = mod.StreamState(str(p))
+            st_ = StreamState(str(p))
             list(iter_nmea_blocks(p, IngestConfig(), st_, **kw))
             assert st_.ignored == want, (engine, kw)
             assert [e[1] for e in st_.ignored_examples["GSV"]] == [2, 8, 14], (engine, kw)
@@ -822,6 +825,7 @@ def test_invalid_velocity_flags_leave_the_velocity_empty(tmp_path):
     (both engines), so no DR uses them and the integrity audit counts them as flagged."""
     from dracc.core.config import IngestConfig
     from dracc.ingest import nmea as nm
+    from dracc.ingest.nmea import engine_c
 
     def s(body: str) -> str:
         cs = 0
@@ -840,14 +844,14 @@ def test_invalid_velocity_flags_leave_the_velocity_empty(tmp_path):
     log = tmp_path / "v.nmea"
     log.write_text(text)
     for engine in ("numpy", "c"):
-        if engine == "c" and nm._nmeascan is None:
+        if engine == "c" and engine_c._nmeascan is None:
             continue
-        old = nm.ENGINE
-        nm.ENGINE = engine
+        old = engine_c.ENGINE
+        engine_c.ENGINE = engine
         try:
             g = nm.read_nmea(log, IngestConfig()).frames["ground"]
         finally:
-            nm.ENGINE = old
+            engine_c.ENGINE = old
         sog = g["sog_mps"].to_numpy()
         assert (
             np.isfinite(sog[0]) and np.isnan(sog[1]) and np.isfinite(sog[2]) and np.isnan(sog[3])

@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import re
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import REAL, REAL_MISSING
 
 from dracc.cli.inspect_cmd import inspect_logs
 from dracc.core.config import IngestConfig
@@ -19,11 +19,6 @@ from dracc.core.errors import IngestError
 from dracc.ingest import detect_format, read_logs
 from dracc.ingest.nmea import REASONS, read_nmea
 
-REAL = Path(
-    os.environ.get(
-        "DRACC_REAL_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
-    )
-)
 SKIP_SUFFIXES = {".chk", ".mcap", ".json", ".md"}
 NMEA_FILES = (
     sorted(
@@ -32,7 +27,7 @@ NMEA_FILES = (
         if p.is_file() and p.suffix not in SKIP_SUFFIXES
     )
     if REAL.is_dir()
-    else []
+    else [pytest.param(None, marks=pytest.mark.skip(reason=REAL_MISSING))]
 )
 D = 180.0 / math.pi
 
@@ -202,7 +197,7 @@ ALL_FILES = (
         if p.is_file() and p.suffix not in {".chk", ".json", ".md"}
     )
     if REAL.is_dir()
-    else []
+    else [pytest.param(None, marks=pytest.mark.skip(reason=REAL_MISSING))]
 )
 
 

@@ -26,7 +26,7 @@ from hypothesis import strategies as st
 
 from dracc.core.config import IngestConfig
 from dracc.ingest import nmea
-from dracc.ingest.nmea import ParsedBlock, parse_buffer, read_nmea
+from dracc.ingest.nmea import ParsedBlock, engine_c, parse_buffer, read_nmea
 
 _nmeascan = pytest.importorskip("dracc.ingest._nmeascan", reason="compiled kernel not built")
 
@@ -115,7 +115,7 @@ def test_real_logs_exist_and_kernel_decodes_most_lines():
     hake = [p for p in logs if p.name == "Hakefjord.txt"]
     if hake:
         data = hake[0].read_bytes()[:MAX_BYTES]
-        r = nmea._scan_c(data)
+        r = engine_c.scan_c(data)
         n = parse_buffer(data, engine="numpy")
         seqs = [k["seq"] for k in n.kinds.values()] + ([n.clock["seq"]] if n.clock else [])
         used = np.unique(np.concatenate(seqs))
@@ -151,7 +151,7 @@ def test_simulated_forms(voyage, tmp_path, form, tag_time):
     write_nmea(voyage, p, form=form, tag_time=tag_time)
     data = p.read_bytes()
     c, _ = both(data)
-    r = nmea._scan_c(data)
+    r = engine_c.scan_c(data)
     if form in ("tag", "bare"):  # every line clean: the kernel reads them all
         assert len(r["fb_line"]) == 0
         assert len(r["sentence"]) == c.n_lines
@@ -171,7 +171,7 @@ def test_kernel_values_against_hand_calculation():
     ]
     data = b"".join(b"%s*%02X\r\n" % (s, _xor(s[1:])) for s in lines)
     c, _ = both(data)
-    r = nmea._scan_c(data)
+    r = engine_c.scan_c(data)
     assert len(r["fb_line"]) == 0
     deg = math.pi / 180
     pos = c.kinds["position"]
@@ -373,7 +373,7 @@ def test_many_tag_sources_overflow_the_kernel_table():
 
 def test_scan_checks_its_output_buffers():
     data = GOOD + b"\n"
-    r = nmea._scan_c(data)
+    r = engine_c.scan_c(data)
     assert r["n_lines"] == 1 and len(r["sentence"]) == 1
     assert _nmeascan.sizes(data) == (2, 1) and _nmeascan.sizes(b"a\rb\r\nc\r\r\n") == (5, 0)
     a = [np.empty(1, np.uint8)] * 16
@@ -450,7 +450,7 @@ def test_nmea_like_token_soup(tokens):
 
 # ------------------------------------------------------------------ whole files, streamed
 def _read(path: Path, engine: str, monkeypatch, **cfg):
-    monkeypatch.setattr(nmea, "ENGINE", engine)
+    monkeypatch.setattr(engine_c, "ENGINE", engine)
     return read_nmea(path, IngestConfig(**cfg), workers=1)
 
 
@@ -517,15 +517,15 @@ def test_streamed_small_blocks_equal(voyage, tmp_path):
     p.write_bytes(b"\r\n".join(lines[:-1]))  # no final newline
     out = {}
     for eng in ("c", "numpy"):
-        old = nmea.ENGINE
-        nmea.ENGINE = eng
+        old = engine_c.ENGINE
+        engine_c.ENGINE = eng
         try:
             st_ = nmea.StreamState(str(p))
             blocks = list(
                 nmea.iter_nmea_blocks(p, IngestConfig(), st_, block_bytes=4096, workers=1)
             )
         finally:
-            nmea.ENGINE = old
+            engine_c.ENGINE = old
         out[eng] = (blocks, st_)
     (bc, sc), (bn, sn) = out["c"], out["numpy"]
     assert len(bc) == len(bn) > 10
@@ -541,7 +541,7 @@ def test_without_the_kernel_the_numpy_path_reads(monkeypatch):
     """A machine without a compiler: ``_nmeascan`` missing, ``engine="c"`` falls back."""
     data = (_tag(b"s:GP1,c:1700000000") + GOOD + b"\r\n") * 3 + b"garbage\r\n"
     want = parse_buffer(data, engine="numpy")
-    monkeypatch.setattr(nmea, "_nmeascan", None)
+    monkeypatch.setattr(engine_c, "_nmeascan", None)
     assert not nmea.engine_available()
     got = parse_buffer(data, engine="c")
     assert_same_block(got, want)

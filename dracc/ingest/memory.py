@@ -3,15 +3,24 @@ logs grow, and gives it back when a file is done.
 
 - :func:`trim_heap`: glibc ``malloc_trim`` and pyarrow's pool, after each file's decoding;
 - :func:`mapped_columns`: output columns in one anonymous mapping, returned to the kernel
-  at once when the frames are dropped.
+  at once when the frames are dropped;
+- the file hand-over between processes: a worker writes an object's buffers to a file in
+  shared memory (:func:`handover_dir`, :func:`write_handover`) and the reader maps them
+  copy-on-write (:func:`load_handover`) instead of receiving them through a pipe; folders
+  left by a reader that was killed are removed by the next (:func:`sweep_handover`).
 
 ``docs/design/process.md`` explains why each is there and what it measured.
 """
 
 from __future__ import annotations
 
+import contextlib
 import mmap
+import os
+import pickle
 import sys
+import tempfile
+from typing import Any
 
 import numpy as np
 
@@ -35,7 +44,7 @@ def trim_heap() -> None:
         sys.modules["pyarrow"].default_memory_pool().release_unused()
 
 
-_MALLOC_TRIM = None
+_MALLOC_TRIM: Any = None
 
 
 def mapped_columns(n: int, dtypes: list) -> list[np.ndarray]:
@@ -63,3 +72,89 @@ def mapped_columns(n: int, dtypes: list) -> list[np.ndarray]:
                 for dt, o in zip(dts, offs, strict=True)
             ]
     return [np.empty(n, dtype=dt) for dt in dts]
+
+
+HANDOVER_PREFIX = "dracc-ingest-"
+
+
+def handover_dir(
+    needed_bytes: int,
+) -> tempfile.TemporaryDirectory[str] | contextlib.nullcontext[None]:
+    """Where workers leave parsed blocks for the main process: shared memory (tmpfs), else
+    the temporary directory, whichever has room for ``needed_bytes`` (a reader of a whole
+    file keeps its blocks until the end; a container's /dev/shm may hold only 64 MB); a
+    context giving None where neither has: the blocks then come through the pool's pipe.
+    The folder's name carries this process's id: folders left by a reader that was killed
+    (SIGKILL cannot be caught) are removed by the next reader (:func:`sweep_handover`)."""
+    for base in ("/dev/shm", tempfile.gettempdir()):
+        try:
+            st = os.statvfs(base)
+        except OSError:
+            continue
+        if os.access(base, os.W_OK):
+            sweep_handover(base)
+            if st.f_bavail * st.f_frsize >= needed_bytes:
+                return tempfile.TemporaryDirectory(
+                    prefix=f"{HANDOVER_PREFIX}{os.getpid()}-", dir=base
+                )
+    return contextlib.nullcontext(None)
+
+
+def sweep_handover(base: str) -> None:
+    """Remove hand-over folders in ``base`` of this user whose reader process is gone."""
+    import shutil
+
+    try:
+        names = [n for n in os.listdir(base) if n.startswith(HANDOVER_PREFIX)]
+    except OSError:
+        return
+    for name in names:
+        parts = name[len(HANDOVER_PREFIX) :].split("-", 1)
+        if len(parts) != 2 or not parts[0].isdigit():  # not <pid>-<random>: not ours to judge
+            continue
+        pid_s = parts[0]
+        path = os.path.join(base, name)
+        try:
+            if os.lstat(path).st_uid != os.getuid():
+                continue
+            os.kill(int(pid_s), 0)
+        except ProcessLookupError:  # the reader is gone: its folder is debris
+            shutil.rmtree(path, ignore_errors=True)
+        except (OSError, AttributeError):  # alive (or not ours to ask about)
+            continue
+
+
+def write_handover(obj: Any, name: str) -> tuple[bytes, list[int], str] | None:
+    """``obj`` pickled with its buffers out of band (protocol 5), the buffers written to
+    the file ``name`` (in a folder of :func:`handover_dir`): returns (the pickle without
+    its buffers, the buffers' sizes, the file) for :func:`load_handover`; None where the
+    file cannot be written (a full disk), and then no file is left."""
+    buffers: list[pickle.PickleBuffer] = []
+    meta = pickle.dumps(obj, protocol=5, buffer_callback=buffers.append)
+    views = [b.raw() for b in buffers]
+    try:
+        with open(name, "wb") as fh:
+            for v in views:
+                fh.write(v)
+    except OSError:
+        with contextlib.suppress(OSError):
+            os.unlink(name)
+        return None
+    return meta, [v.nbytes for v in views], name
+
+
+def load_handover(handed: tuple[bytes, list[int], str]) -> Any:
+    """The object :func:`write_handover` left in a file: its buffers are views of the file
+    mapped copy-on-write (no copy; the pages are already in memory) and the file is
+    removed at once: the mapping lives as long as the views do."""
+    meta, sizes, name = handed
+    with open(name, "rb") as fh:
+        whole = (
+            memoryview(mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_COPY)) if sum(sizes) else None
+        )
+    os.unlink(name)
+    views, at = [], 0
+    for size in sizes:
+        views.append(whole[at : at + size])  # type: ignore[index]
+        at += size
+    return pickle.loads(meta, buffers=views)

@@ -1,0 +1,260 @@
+"""The NMEA text file reader: a file streamed as resolved blocks with bounded memory
+(:func:`iter_nmea_blocks`; large files parsed by two worker processes), talkers
+fingerprinted in the first block, and a whole file read into a :class:`FileResult`
+(:func:`read_nmea`, after :func:`check_readable`)."""
+
+from __future__ import annotations
+
+import os
+import stat
+from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from dracc.core.errors import IngestError
+from dracc.frames import FileResult, concat_blocks
+from dracc.ingest.memory import handover_dir
+from dracc.ingest.nmea.assemble import assemble, talker_str, time_arrays
+from dracc.ingest.nmea.blocks import block_ranges, parse_range
+from dracc.ingest.nmea.parsed import ParsedBlock
+from dracc.ingest.nmea.pool import load_parsed, parse_range_to_file, pool_ok, worker_init
+from dracc.ingest.nmea.sentences import MAX_LINE_BYTES, SENTENCES
+from dracc.ingest.nmea.state import Block, StreamState
+from dracc.ingest.timebase import days_from_civil, valid_civil
+
+if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
+    from dracc.core.config import IngestConfig
+
+FIRST_BLOCK_BYTES = 16 * 1024 * 1024  #: the first block (where talkers are fingerprinted)
+#: the first block when workers parse the others: parsed by the main process while they
+#: start (about 70 000 lines, plenty to fingerprint talkers)
+MAIN_FIRST_BLOCK_BYTES = 4 * 1024 * 1024
+#: the later blocks: small enough that a worker reuses its memory (fresh pages are dear)
+BLOCK_BYTES = 8 * 1024 * 1024
+PARALLEL_MIN_BYTES = 32 * 1024 * 1024  #: files at least this large use two processes
+
+
+def iter_nmea_blocks(
+    path: str | Path,
+    cfg: IngestConfig,
+    state: StreamState | None = None,
+    block_bytes: int | None = None,
+    workers: int | None = None,
+    progress=None,
+) -> Iterator[Block]:
+    """Stream an NMEA text file as resolved blocks with bounded memory.
+
+    ``state`` (a :class:`StreamState`, created if None) accumulates rejections, time
+    events and statistics while iterating; read it after the loop.  Files of at least
+    ``PARALLEL_MIN_BYTES`` are parsed by up to two worker processes, at most four blocks
+    ahead, which hand their blocks over as files (:func:`parse_range_to_file`) and die
+    with this process (:func:`worker_init`); this process parses the first block itself
+    while they start, then resolves times and builds frames in order.  Blocks are cut
+    after a line end; a line longer than ``cfg.max_line_bytes`` across a cut is a block of
+    its own, read only at its ends (:func:`block_ranges`).  ``block_bytes`` None: a first block of ``FIRST_BLOCK_BYTES``
+    (``MAIN_FIRST_BLOCK_BYTES`` with workers), then blocks of about ``BLOCK_BYTES``, as
+    many as the workers share evenly (none waits alone at the end); a number: blocks of that
+    size.  ``progress(n_bytes)`` is called as blocks finish.  Raises IngestError in
+    ``cfg.strict`` mode at the first rejected line.
+    """
+    path = Path(path)
+    file = str(path)
+    st = state if state is not None else StreamState(file)
+    st.path = file
+    if cfg.date is not None:
+        try:
+            y, m, d = (int(x) for x in cfg.date.split("-"))
+            if not valid_civil(y, m, d):
+                raise ValueError
+            st.timebase.cfg_date_days = int(days_from_civil(y, m, d))
+        except ValueError as err:
+            raise IngestError(f"--date {cfg.date!r}: expected YYYY-MM-DD") from err
+    st.events.gap_s = cfg.gap_s
+    st.events.tolerance_s = cfg.backstep_tolerance_s
+    size = path.stat().st_size
+    nworkers = (
+        workers if workers is not None else (2 if size >= PARALLEL_MIN_BYTES and pool_ok() else 1)
+    )
+    max_line = int(getattr(cfg, "max_line_bytes", MAX_LINE_BYTES))
+    if block_bytes is not None:
+        ranges = list(block_ranges(path, block_bytes, max_line_bytes=max_line))
+    else:
+        first_bytes = MAIN_FIRST_BLOCK_BYTES if nworkers > 1 else FIRST_BLOCK_BYTES
+        rest = max(size - first_bytes, 0)
+        n_rest = -(-rest // BLOCK_BYTES)
+        if n_rest % nworkers:  # the workers share the blocks after the first evenly
+            n_rest += nworkers - n_rest % nworkers
+        later = max(-(-rest // n_rest), 1) if n_rest else BLOCK_BYTES
+        ranges = list(block_ranges(path, later, first_bytes, max_line))
+    held: list = []
+    first_parsed = [True]  # talkers are fingerprinted in the first block read (not a line too long)
+
+    def handle(pb: ParsedBlock, nbytes: int):
+        line0 = st.count_block(pb, cfg.strict)
+        st.bytes += nbytes
+        for kind, cols in pb.kinds.items():
+            sc = (
+                cols["sentence"][cols["sentence"] != SENTENCES.index("RMC")]
+                if kind == "ground"
+                else cols["sentence"]
+            )
+            c = np.bincount(sc.astype(np.int64), minlength=len(SENTENCES))
+            st.sentences.update({SENTENCES[i]: int(c[i]) for i in np.flatnonzero(c).tolist()})
+            if kind == "position" and first_parsed[0] and not st.split_talkers:
+                _fingerprint(cols, st, pb.source_names)
+        if pb.clock:
+            st.sentences["ZDA"] += len(pb.clock["seq"])
+        if pb.n_lines and not (pb.n_lines == 1 and pb.reject_counts.get("too_long") == 1):
+            first_parsed[0] = False
+        tod, date, ext, split = time_arrays(pb)
+        held.append((pb, split, line0, nbytes))
+        done = st.timebase.feed(tod, date, ext)
+        yield from _release(done)
+
+    def _release(done):
+        for t in done:
+            pb, split, line0, nbytes = held.pop(0)
+            frames = assemble(pb, split(t), st, file, line0, cfg)
+            if progress is not None:
+                progress(nbytes)
+            yield Block(frames, pb.n_lines, line0, nbytes)
+
+    at_eof = [i == len(ranges) - 1 for i in range(len(ranges))]
+
+    def local(i: int) -> ParsedBlock:
+        off, ln, too_long = ranges[i]
+        return parse_range(file, off, ln, cfg.ignore_checksum, at_eof[i], max_line, too_long)
+
+    if nworkers <= 1 or len(ranges) <= 1:
+        for i, (_off, ln, _long) in enumerate(ranges):
+            yield from handle(local(i), ln)
+    else:
+        # at most nworkers + 2 blocks in flight; a broken pool (a worker killed, e.g. out of
+        # memory) falls back to parsing the remaining blocks in this process
+        pending = list(range(len(ranges)))
+        broken = False
+        with (
+            handover_dir(2 * size) as folder,
+            ProcessPoolExecutor(
+                max_workers=nworkers, initializer=worker_init, initargs=(os.getpid(),)
+            ) as ex,
+        ):
+            futures = []
+
+            def submit():
+                i = pending.pop(0)
+                off, ln, too_long = ranges[i]
+                fut = (
+                    None
+                    if too_long
+                    else ex.submit(
+                        parse_range_to_file,
+                        folder,
+                        i,
+                        file,
+                        off,
+                        ln,
+                        cfg.ignore_checksum,
+                        at_eof[i],
+                        max_line,
+                    )
+                )
+                futures.append((fut, i))  # None: read here (a line too long: a few bytes)
+
+            # the first block is parsed here while the workers start and take the next ones
+            i0 = pending.pop(0)
+            while pending and len(futures) < nworkers + 2:
+                submit()
+            yield from handle(local(i0), ranges[i0][1])
+            while futures:
+                fut, i = futures.pop(0)
+                try:
+                    pb = load_parsed(fut.result()) if fut is not None and not broken else None
+                except BrokenProcessPool:
+                    broken = True
+                    pb = None
+                if pb is None:
+                    pb = local(i)
+                if pending and not broken:
+                    try:
+                        submit()
+                    except BrokenProcessPool:
+                        broken = True
+                if broken and pending and not futures:
+                    futures.append((None, pending.pop(0)))
+                yield from handle(pb, ranges[i][1])
+        if broken:
+            st.stats["pool_fallback"] += 1
+    yield from _release(st.timebase.finish())
+
+
+def _fingerprint(cols: dict[str, np.ndarray], st: StreamState, pb_names: list[str]) -> None:
+    """Split a talker whose position sentences come with different numbers of decimals
+    of minutes (two receivers behind one talker, e.g. Hakefjord.txt): each decimal
+    count seen in at least 10 % of that talker's positions (and >= 10 of them) in the
+    file's first block becomes its own source key ``<talker>/<n>dp``."""
+    names = np.array([bool(n) for n in pb_names]) if pb_names else np.zeros(1, bool)
+    untagged = ~names[cols["tag_source"]] if pb_names else np.ones(len(cols["talker"]), bool)
+    talker = cols["talker"]
+    dec = cols["dec"]
+    for tk in np.unique(talker[untagged]).tolist():
+        sel = (talker == tk) & untagged & (dec >= 0)
+        u, c = np.unique(dec[sel], return_counts=True)
+        big = u[(c >= 10) & (c >= 0.1 * sel.sum())]
+        if len(big) >= 2:
+            st.split_talkers[talker_str(tk)] = set(int(x) for x in u)
+
+
+def check_readable(path: Path) -> None:
+    """Raise IngestError for a path that is not a readable file."""
+    if not path.exists():
+        raise IngestError(f"{path}: no such file")
+    if path.is_dir():
+        raise IngestError(f"{path}: is a directory, not a log file")
+    mode = path.stat().st_mode
+    if not stat.S_ISREG(mode):  # a FIFO would block on open; a device reads as size 0
+        what = (
+            "a FIFO (named pipe)"
+            if stat.S_ISFIFO(mode)
+            else "a socket"
+            if stat.S_ISSOCK(mode)
+            else "a device"
+            if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+            else "not a regular file"
+        )
+        raise IngestError(f"{path}: is {what}, not a log file; save the log to a file first")
+    try:
+        with path.open("rb") as fh:
+            fh.read(1)
+    except OSError as err:
+        raise IngestError(f"{path}: cannot read: {err.strerror or err}") from err
+
+
+def read_nmea(
+    path: str | Path, cfg: IngestConfig, progress=None, workers: int | None = None
+) -> FileResult:
+    """Read a whole NMEA 0183 text file into a :class:`FileResult` (frames sorted by time)."""
+    path = Path(path)
+    check_readable(path)
+    st = StreamState(str(path))
+    blocks = [b.frames for b in iter_nmea_blocks(path, cfg, st, progress=progress, workers=workers)]
+    frames = concat_blocks(blocks)
+    res = FileResult(
+        path=str(path),
+        format="nmea",
+        frames=frames,
+        lines=st.lines,
+        rejects=st.rejects,
+        time_events=st.time_events(),
+        notes=st.notes(),
+        ignored=st.ignored,
+        ignored_examples=st.ignored_examples,
+    )
+    res.notes.extend(
+        f"{k}: {v}" for k, v in st.events.per_source.items() if v["backsteps"] or v["gaps"]
+    )
+    return res
