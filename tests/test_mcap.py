@@ -84,13 +84,13 @@ def test_raw_nmea_parsed_in_chunks_equals_one_parse(tmp_path, monkeypatch):
     chunk, not the file): chunks of 7 sentences give the frames, rejects, time events
     and message numbers of one parse over everything."""
     pytest.importorskip("dracc.sim.nmea_out")
-    import dracc.ingest.mcap as mcap_mod
+    import dracc.ingest.mcap.assembly as mcap_assembly
 
     fr = voyage_frames()
     fr = {k: fr[k] for k in ("position", "heading", "water")}
     p = write_mcap(fr, ROLES, tmp_path / "n.mcap", encoding="nmea")
     whole = read_mcap(p, CFG)
-    monkeypatch.setattr(mcap_mod, "_NMEA_CHUNK", 7)
+    monkeypatch.setattr(mcap_assembly, "_NMEA_CHUNK", 7)
     chunked = read_mcap(p, CFG)
     assert chunked.lines == whole.lines and chunked.records == whole.records
     for kind, f in whole.frames.items():
@@ -608,7 +608,7 @@ def test_store_merge_equals_a_stable_sort_of_all_pieces(seed, step):
     pieces concatenated in the order they were added (ties included)."""
     import pandas as pd
 
-    from dracc.ingest.mcap import _KindStore
+    from dracc.ingest.mcap.columns import _KindStore
 
     rng = np.random.default_rng(seed)
     pieces = _random_pieces(rng, int(rng.integers(1, 12)), np.array(["INS1", "GYRO", "INS2", "A"]))
@@ -636,7 +636,7 @@ def test_store_codes_widen_past_127_labels():
     """More labels than int8 codes hold: codes widen, every label stays right."""
     import pandas as pd
 
-    from dracc.ingest.mcap import _KindStore
+    from dracc.ingest.mcap.columns import _KindStore
 
     store = _KindStore(step=50)
     names = [f"S{i:03d}" for i in range(300)]
@@ -683,16 +683,17 @@ def test_frames_do_not_depend_on_piece_and_queue_sizes(tmp_path, monkeypatch, en
     the C heap trimmed after every piece) give the same frames as the defaults."""
     import pandas as pd
 
-    import dracc.ingest.mcap as mc
+    import dracc.ingest.mcap.assembly as mc_assembly
+    import dracc.ingest.mcap.json_messages as mc_json
 
     fr = voyage_frames(n=300)
     p = write_mcap(fr, ROLES, tmp_path / "v.mcap", encoding=encoding, chunk_size=1 << 12)
     want = read_mcap(p, CFG)
-    monkeypatch.setattr(mc, "_PIECE_RECORDS", 7)
-    monkeypatch.setattr(mc, "_PENDING_RECORDS", 11)
-    monkeypatch.setattr(mc, "_JSON_BATCH", 5)
-    monkeypatch.setattr(mc, "_JSON_QUEUED", 5)
-    monkeypatch.setattr(mc, "_TRIM_RECORDS", 1)
+    monkeypatch.setattr(mc_assembly, "_PIECE_RECORDS", 7)
+    monkeypatch.setattr(mc_assembly, "_PENDING_RECORDS", 11)
+    monkeypatch.setattr(mc_json, "_JSON_BATCH", 5)
+    monkeypatch.setattr(mc_json, "_JSON_QUEUED", 5)
+    monkeypatch.setattr(mc_assembly, "_TRIM_RECORDS", 1)
     got = read_mcap(p, CFG)
     assert want.frames.keys() == got.frames.keys() and want.notes == got.notes
     for kind, f in want.frames.items():

@@ -33,7 +33,7 @@ import pandas as pd
 from dracc.core.atomic import atomic_path
 from dracc.frames import KIND_COLUMNS, KINDS, MISSING_NS
 from dracc.ingest.csv_quantities import frame_quantities
-from dracc.ingest.mcap_cdr import compile_schema, encode_fixed
+from dracc.ingest.mcap.cdr import compile_schema, encode_fixed
 
 LEAF = {
     "position": "fix",

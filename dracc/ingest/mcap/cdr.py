@@ -21,6 +21,7 @@ import contextlib
 import io
 import re
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -211,7 +212,7 @@ def decode_channel(
     starts: np.ndarray,
     ends: np.ndarray,
     wanted: list[str],
-    want_strings: list[str] = (),
+    want_strings: Sequence[str] = (),
 ):
     """Decode the messages ``buf[starts[i]:ends[i]]`` of one channel.
 
