@@ -46,8 +46,12 @@ import math
 import numpy as np
 import pandas as pd
 
-from dracc.core.quantities import BOOLEAN_FIELDS, QUANTITIES, Quantity
-from dracc.core.quantities import REF_QUANTITIES  # noqa: F401  TODO(issue 16): mcap imports it from here
+from dracc.core.quantities import (
+    BOOLEAN_FIELDS,
+    QUANTITIES,
+    REF_QUANTITIES,  # noqa: F401  TODO(issue 16): mcap imports it from here
+    Quantity,
+)
 from dracc.core.units import DEG_RAD, KN_MPS, NMI_M
 from dracc.frames import KIND_COLUMNS, Rejects, make_frame
 from dracc.ingest.references import (

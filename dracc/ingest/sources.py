@@ -36,8 +36,8 @@ import numpy as np
 import pandas as pd
 
 from dracc.core.errors import AmbiguousSourceError, ConfigError
-from dracc.frames import SourceInfo
 from dracc.core.vocabulary import INS_ROLES, ROLES
+from dracc.frames import SourceInfo
 
 GNSS_FAMILY = ("GP", "GN", "GA", "GL", "GB", "GI", "GQ", "BD")
 INS_TALKERS = ("IN", "II", "IR")

@@ -15,8 +15,9 @@ from io import BytesIO
 
 import numpy as np
 
+from dracc.core.quantities import REF_QUANTITIES
 from dracc.frames import MISSING_NS
-from dracc.ingest.csv_quantities import REF_QUANTITIES, add_rejects
+from dracc.ingest.csv_quantities import add_rejects
 from dracc.ingest.mcap.channels import DecodeContext, _Channel, message_times, quantities_of
 
 _JSON_BATCH = 50000  #: JSON messages of one channel parsed together

@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from dracc.core.quantities import REF_QUANTITIES
 from dracc.frames import MISSING_NS
-from dracc.ingest.csv_quantities import REF_QUANTITIES, add_rejects
+from dracc.ingest.csv_quantities import add_rejects
 from dracc.ingest.mcap.channels import _NMEA_START, DecodeContext, _Channel, quantities_of
 from dracc.ingest.mcap.json_messages import _join_lines, json_queue
 
