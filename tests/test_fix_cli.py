@@ -11,14 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dracc.cli.fix_cmd import (
-    JSON_SCHEMA,
-    format_dm,
-    parse_coordinate_deg,
-    parse_distance_m,
-    standardised_residuals,
-)
 from dracc.core.errors import ExitCode
+from dracc.ingest.observations import parse_coordinate_deg, parse_distance_m
+from dracc.math.fix import standardised_residuals
+from dracc.report.fix_report import JSON_SCHEMA, format_dm
 
 geographiclib = pytest.importorskip("geographiclib.geodesic")
 GEOD = geographiclib.Geodesic.WGS84
@@ -26,7 +22,7 @@ DOCS = Path(__file__).resolve().parents[1] / "docs" / "fix.md"
 
 
 def fix_json(run_cli, *args):
-    code, out, err = run_cli("fix", *args, "--json")
+    code, out, err = run_cli("fix", *args, "--json", "-")
     assert code == ExitCode.OK, err
     return json.loads(out)
 
@@ -286,11 +282,26 @@ def test_json_is_strict_json_without_nan(run_cli):
         "--prior",
         "54.62,18.78",
         "--json",
+        "-",
     )
     assert code == 0
     j = json.loads(out, parse_constant=lambda c: pytest.fail(f"non-JSON constant {c}"))
     assert j["chi2_bound_95"] is None and j["consistent"] is None
     assert all(r["w"] is None for r in j["residuals"])
+
+
+def test_json_to_a_file_keeps_the_tables(run_cli, tmp_path):
+    """``--json PATH`` writes the document (the same as ``--json -`` prints) and the
+    tables still go to stdout; a bare ``--json`` is a usage error (it takes a PATH)."""
+    args = ["--range", "54.63,18.73,3000m", "--range", "54.59,18.71,3500m"]
+    args += ["--prior", "54.62,18.78"]
+    path = tmp_path / "fix.json"
+    code, out, err = run_cli("fix", *args, "--json", path)
+    assert code == ExitCode.OK, err
+    assert "residuals" in out and "verdict:" in out and f"wrote {path}" in err
+    assert json.loads(path.read_text(encoding="utf-8")) == fix_json(run_cli, *args)
+    code, _, _ = run_cli("fix", *args, "--json")
+    assert code == ExitCode.USAGE
 
 
 def _three_ranges(sigmas):
@@ -408,6 +419,17 @@ def test_errors_are_one_line_with_documented_exit_code(run_cli, args, code, word
     assert "Traceback" not in err
     for w in words:
         assert w in err
+
+
+def test_the_first_error_in_solving_order_is_reported(run_cli):
+    """Observations are checked one by one in solving order: a pier the library refuses
+    (exit 3) is reported before a bad value of a later abeam mark (exit 2)."""
+    got, _, err = run_cli(
+        "fix", "--pier", f"{A_B},45,port,10", "--abeam", "54.5011,18.6,-2", "--fix", "54.5,18.6"
+    )
+    assert got == ExitCode.INPUT and "not along the pier" in err
+    got, _, err = run_cli("fix", "--pier", f"{A_B},0,port,10", "--abeam", "54.5011,18.6,-2")
+    assert got == ExitCode.USAGE and "--abeam" in err and "SIGMA_M" in err
 
 
 def test_file_errors(run_cli, tmp_path):
