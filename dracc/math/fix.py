@@ -118,7 +118,7 @@ def _library_object(m: MeasuredObservation, piers: Sequence[PierLine]) -> Observ
         return PierLine(
             *ends,
             _rad(v["heading_deg"]) % (2 * math.pi),
-            m.side,  # type: ignore[arg-type]
+            m.side,  # type: ignore[arg-type]  # str | None; ObsSpec checks port/starboard
             v["half_breadth_m"],
             m.sigma,
             ref_transverse_m=v["ref_stbd_m"],

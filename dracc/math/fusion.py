@@ -47,10 +47,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, cast
 
 import numpy as np
 
+from dracc.core.arrays import ArrayLike, FloatArray
 from dracc.core.errors import GeometryError
 from dracc.core.geodesy import (
     add_offset_ne,
@@ -79,20 +80,20 @@ class Rows:
     measurement's own unit (m or rad).  ``kinds``: one label per row.
     """
 
-    g: np.ndarray
-    residual: np.ndarray
-    cov: np.ndarray
+    g: FloatArray
+    residual: FloatArray
+    cov: FloatArray
     kinds: tuple[str, ...]
 
 
-def _rows(g, residual, var, kind: str) -> Rows:
+def _rows(g: ArrayLike, residual: ArrayLike, var: ArrayLike, kind: str) -> Rows:
     g = np.asarray(g, float)
     residual = np.asarray(residual, float)
     var = np.broadcast_to(np.asarray(var, float), residual.shape)
     return Rows(g[..., None, :], residual[..., None], var[..., None, None], (kind,))
 
 
-def _positive(name: str, value) -> None:
+def _positive(name: str, value: ArrayLike) -> None:
     v = np.asarray(value, float)
     if not np.all(np.isfinite(v)) or np.any(v <= 0):
         raise GeometryError(f"{name} must be finite and > 0, got {value!r}")
@@ -105,11 +106,11 @@ def _positive(name: str, value) -> None:
 class PositionFix:
     """A full position fix with its north/east covariance ``cov_m2`` (2x2, m^2)."""
 
-    lat_rad: float | np.ndarray
-    lon_rad: float | np.ndarray
-    cov_m2: np.ndarray
+    lat_rad: float | FloatArray
+    lon_rad: float | FloatArray
+    cov_m2: FloatArray
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         cov = np.asarray(self.cov_m2, float)
         if cov.shape[-2:] != (2, 2) or np.any(np.linalg.eigvalsh(cov) <= 0):
             raise GeometryError(
@@ -118,12 +119,14 @@ class PositionFix:
         object.__setattr__(self, "cov_m2", cov)
 
     @classmethod
-    def from_sigma(cls, lat_rad, lon_rad, sigma_m: float) -> PositionFix:
+    def from_sigma(
+        cls, lat_rad: float | FloatArray, lon_rad: float | FloatArray, sigma_m: float
+    ) -> PositionFix:
         """A fix with sigma_m per axis (circular)."""
         _positive("PositionFix sigma_m", sigma_m)
         return cls(lat_rad, lon_rad, np.eye(2) * sigma_m**2)
 
-    def linearise(self, lat_rad, lon_rad) -> Rows:
+    def linearise(self, lat_rad: ArrayLike, lon_rad: ArrayLike) -> Rows:
         n_m, e_m = offset_ne_m(self.lat_rad, self.lon_rad, lat_rad, lon_rad)
         residual = np.stack(np.broadcast_arrays(n_m, e_m), axis=-1)
         g = np.broadcast_to(np.eye(2), residual.shape[:-1] + (2, 2))
@@ -137,15 +140,15 @@ class RangeLOP:
 
     mark_lat_rad: float
     mark_lon_rad: float
-    range_m: float | np.ndarray
+    range_m: float | FloatArray
     sigma_m: float
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         _positive("RangeLOP sigma_m", self.sigma_m)
         if np.any(np.asarray(self.range_m) < 0):
             raise GeometryError(f"RangeLOP range_m must be >= 0, got {self.range_m!r}")
 
-    def linearise(self, lat_rad, lon_rad) -> Rows:
+    def linearise(self, lat_rad: ArrayLike, lon_rad: ArrayLike) -> Rows:
         dist, az_ship_to_mark = range_azimuth(
             lat_rad, lon_rad, self.mark_lat_rad, self.mark_lon_rad
         )
@@ -164,18 +167,18 @@ class BearingLOP:
 
     mark_lat_rad: float
     mark_lon_rad: float
-    bearing_rad: float | np.ndarray
+    bearing_rad: float | FloatArray
     sigma_rad: float
     observed_at: Literal["ship", "mark"] = "ship"
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         _positive("BearingLOP sigma_rad", self.sigma_rad)
         if self.observed_at not in ("ship", "mark"):
             raise GeometryError(
                 f"BearingLOP observed_at must be 'ship' or 'mark', got {self.observed_at!r}"
             )
 
-    def linearise(self, lat_rad, lon_rad) -> Rows:
+    def linearise(self, lat_rad: ArrayLike, lon_rad: ArrayLike) -> Rows:
         dist, az_sm = range_azimuth(lat_rad, lon_rad, self.mark_lat_rad, self.mark_lon_rad)
         if np.any(dist < 1.0):
             raise GeometryError("BearingLOP: the ship is on the mark; a bearing is undefined there")
@@ -208,9 +211,9 @@ class LineLOP:
     b_lat_rad: float
     b_lon_rad: float
     sigma_m: float
-    offset_m: float | np.ndarray = 0.0
+    offset_m: float | FloatArray = 0.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         _positive("LineLOP sigma_m", self.sigma_m)
         n, e = self._b_ne()
         if np.hypot(n, e) < 1.0:
@@ -218,12 +221,12 @@ class LineLOP:
                 "LineLOP: points A and B are less than 1 m apart; the line has no direction"
             )
 
-    def _mid(self):
+    def _mid(self) -> tuple[float, float]:
         return 0.5 * (self.a_lat_rad + self.b_lat_rad), self.a_lon_rad + 0.5 * float(
             angdiff(self.b_lon_rad, self.a_lon_rad)
         )
 
-    def _b_ne(self):
+    def _b_ne(self) -> tuple[float, float]:
         return offset_ne_m(self.b_lat_rad, self.b_lon_rad, self.a_lat_rad, self.a_lon_rad)
 
     @property
@@ -232,7 +235,7 @@ class LineLOP:
         n, e = self._b_ne()
         return float(wrap_2pi(np.arctan2(e, n)))
 
-    def linearise(self, lat_rad, lon_rad) -> Rows:
+    def linearise(self, lat_rad: ArrayLike, lon_rad: ArrayLike) -> Rows:
         # right-hand unit normal of the plane through the Earth's centre, A and B
         normal = np.cross(
             ecef_m(self.b_lat_rad, self.b_lon_rad), ecef_m(self.a_lat_rad, self.a_lon_rad)
@@ -275,7 +278,7 @@ class PierLine:
     gap_m: float = 0.0
     max_misalignment_rad: float = np.deg2rad(15.0)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.side not in ("port", "starboard"):
             raise GeometryError(f"PierLine side must be 'port' or 'starboard', got {self.side!r}")
         if self.half_breadth_m <= 0 or self.gap_m < 0:
@@ -307,7 +310,7 @@ class PierLine:
         """The shifted line of position of the reference point."""
         return self.line(self.offset_m)
 
-    def linearise(self, lat_rad, lon_rad) -> Rows:
+    def linearise(self, lat_rad: ArrayLike, lon_rad: ArrayLike) -> Rows:
         rows = self.as_line().linearise(lat_rad, lon_rad)
         return Rows(rows.g, rows.residual, rows.cov, ("pier",))
 
@@ -326,14 +329,16 @@ class NadirCircle:
 
     sub_lat_rad: float
     sub_lon_rad: float
-    nadir_rad: float | np.ndarray
+    nadir_rad: float | FloatArray
     sigma_rad: float
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         _positive("NadirCircle sigma_rad", self.sigma_rad)
 
     @classmethod
-    def from_gyro_vector(cls, u_inertial, t_s: float, nadir_rad, sigma_rad: float) -> NadirCircle:
+    def from_gyro_vector(
+        cls, u_inertial: ArrayLike, t_s: float, nadir_rad: float | FloatArray, sigma_rad: float
+    ) -> NadirCircle:
         """The circle of a gyro spin-axis unit vector u (inertial frame) at time t_s (seeds/002 (1))."""
         u = np.asarray(u_inertial, float)
         norm = np.linalg.norm(u)
@@ -343,14 +348,15 @@ class NadirCircle:
         sub_lon = float(angdiff(np.arctan2(-u[1], -u[0]) - OMEGA_E_RADPS * t_s, 0.0))
         return cls(float(sub_lat), sub_lon, nadir_rad, sigma_rad)
 
-    def cos_nadir(self, lat_rad, lon_rad):
+    def cos_nadir(self, lat_rad: ArrayLike, lon_rad: ArrayLike) -> FloatArray:
         """cos(theta) at a position: (1) written with the sub-point."""
         lat = np.asarray(lat_rad, float)
         dl = np.asarray(lon_rad, float) - self.sub_lon_rad
         s_s, c_s = np.sin(self.sub_lat_rad), np.cos(self.sub_lat_rad)
-        return np.sin(lat) * s_s + np.cos(lat) * c_s * np.cos(dl)  # (1)
+        # cast: numpy's stubs type np.sin(float) as Any
+        return cast(FloatArray, np.sin(lat) * s_s + np.cos(lat) * c_s * np.cos(dl))  # (1)
 
-    def linearise(self, lat_rad, lon_rad) -> Rows:
+    def linearise(self, lat_rad: ArrayLike, lon_rad: ArrayLike) -> Rows:
         lat = np.asarray(lat_rad, float)
         dl = np.asarray(lon_rad, float) - self.sub_lon_rad
         s_s, c_s = np.sin(self.sub_lat_rad), np.cos(self.sub_lat_rad)
@@ -371,7 +377,7 @@ class NadirCircle:
 Observation = PositionFix | RangeLOP | BearingLOP | LineLOP | PierLine | NadirCircle
 
 
-def stack_rows(observations: Sequence[Observation], lat_rad, lon_rad) -> Rows:
+def stack_rows(observations: Sequence[Observation], lat_rad: ArrayLike, lon_rad: ArrayLike) -> Rows:
     """All observations linearised at one position, stacked (R block-diagonal)."""
     parts = [obs.linearise(lat_rad, lon_rad) for obs in observations]
     k = sum(p.residual.shape[-1] for p in parts)
@@ -416,28 +422,28 @@ class FixSolution:
     line; ``chi2`` = r^T R^-1 r with ``redundancy`` = rows - 2 degrees of freedom.
     """
 
-    lat_rad: float | np.ndarray
-    lon_rad: float | np.ndarray
-    cov_m2: np.ndarray
+    lat_rad: float | FloatArray
+    lon_rad: float | FloatArray
+    cov_m2: FloatArray
     ellipse: Ellipse
-    drms_m: float | np.ndarray
-    two_drms_m: float | np.ndarray
-    cofactor: np.ndarray
-    dop: float | np.ndarray
-    residuals_m: np.ndarray
+    drms_m: float | FloatArray
+    two_drms_m: float | FloatArray
+    cofactor: FloatArray
+    dop: float | FloatArray
+    residuals_m: FloatArray
     kinds: tuple[str, ...]
-    chi2: float | np.ndarray
+    chi2: float | FloatArray
     redundancy: int
     iterations: int
     weighted: bool
 
     @property
-    def variance_factor(self) -> float | np.ndarray:
+    def variance_factor(self) -> float | FloatArray:
         """A posteriori variance of unit weight chi2/redundancy (NaN when redundancy is 0)."""
         return self.chi2 / self.redundancy if self.redundancy > 0 else float("nan")
 
 
-def _t(m):
+def _t(m: FloatArray) -> FloatArray:
     return np.swapaxes(m, -1, -2)
 
 
@@ -489,10 +495,12 @@ def fuse_fix(
             )
     rows = to_metres(stack_rows(observations, lat, lon))
     psi, z, r_m2 = rows.g, rows.residual, rows.cov
-    q = np.linalg.inv(_t(psi) @ psi)  # cofactor matrix, seeds/002 (35)
+    # casts: numpy's stubs type np.linalg.inv as returning floating[Any]
+    q = cast(FloatArray, np.linalg.inv(_t(psi) @ psi))  # cofactor matrix, seeds/002 (35)
     r_inv = np.linalg.inv(r_m2)
+    cov: FloatArray
     if weighted:
-        cov = np.linalg.inv(_t(psi) @ r_inv @ psi)  # (W3)
+        cov = cast(FloatArray, np.linalg.inv(_t(psi) @ r_inv @ psi))  # (W3)
     else:
         cov = q @ _t(psi) @ r_m2 @ psi @ q  # covariance of the LS (W1) estimate
     cov = 0.5 * (cov + _t(cov))
@@ -500,7 +508,7 @@ def fuse_fix(
     dop = np.sqrt(q[..., 0, 0] + q[..., 1, 1])  # (37) in the trace form, METHODS §5
     chi2 = np.einsum("...i,...ij,...j->...", z, r_inv, z)
 
-    def out(v):
+    def out(v: FloatArray) -> float | FloatArray:
         return float(v) if np.ndim(v) == 0 else v
 
     return FixSolution(
