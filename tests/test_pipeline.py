@@ -314,3 +314,56 @@ def test_ground_log_when_there_is_no_water_speed():
     assert dr is not None and "over the ground" in dr.speed_source
     assert np.nanmax(dr.track.ref_error_m) < 10.0
     assert a.current is None and any("over the ground" in m for m in a.missing)
+
+
+def test_magnetic_compass_true_heading_is_true_heading_rad():
+    """On a magnetic-compass log the pipeline's true heading (B2) is
+    dracc.math.deadreckoning.true_heading_rad of the compass's own fields: one
+    implementation.  The variation is blank at every other sample (the configured one
+    fills it) and so is the deviation at every third (0 without a table, in both)."""
+    from dataclasses import replace
+
+    from dracc.core.config import DeadReckoningConfig
+    from dracc.core.geodesy import angdiff
+    from dracc.math.deadreckoning import true_heading_rad
+    from dracc.pipeline.selection import dedupe_sorted, heading_series
+
+    sv = simulate(
+        SimParams.noiseless(
+            duration_s=1800.0, seed=7, compass="magnetic", compass_hz=1.0, aux_hz=0.0
+        )
+    )
+    v = voyage_from_sim(sv)
+    hdg = v.frames["heading"].copy()
+    mag = np.flatnonzero((hdg["source"].astype(str) == "MAG").to_numpy())
+    hdg.loc[mag[::2], "variation_rad"] = np.nan
+    hdg.loc[mag[::3], "deviation_rad"] = np.nan
+    v.frames["heading"] = hdg
+    cfg = DeadReckoningConfig(variation_deg=5.0)  # the simulator's variation
+
+    missing: list[str] = []
+    notes: list[str] = []
+    got = heading_series(v, cfg, missing, notes)
+    assert got is not None and "magnetic" in got[2] and not missing
+    t, h, _ = got
+
+    m = hdg.iloc[mag]
+    t_m, kk, dev, var = dedupe_sorted(
+        m["time_ns"].to_numpy(np.int64),
+        m["heading_rad"].to_numpy(float),
+        m["deviation_rad"].to_numpy(float),
+        m["variation_rad"].to_numpy(float),
+    )
+    want = true_heading_rad(kk, m["reference"].astype(str).to_numpy()[0], dev, var, errors=cfg)
+    assert want.n_magnetic == kk.size and want.n_variation_from_config == int(np.sum(np.isnan(var)))
+    np.testing.assert_array_equal(t, t_m)
+    np.testing.assert_array_equal(h, want.heading_rad)
+    # and where the compass sent its deviation, that is the true heading of the simulator
+    tr = sv.truth
+    i = np.searchsorted(tr["time_ns"].to_numpy(), t)
+    sent_dev = np.isfinite(dev)
+    err = angdiff(h, tr["heading_rad"].to_numpy()[i])
+    assert np.max(np.abs(err[sent_dev])) < 1e-6
+    # the DR runs on that heading
+    a = analyse_voyage(v, replace(Config(), dead_reckoning=cfg))
+    assert a.dead_reckoning is not None and "magnetic" in a.dead_reckoning.heading_source
