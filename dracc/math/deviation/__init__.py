@@ -4,7 +4,10 @@
 - :mod:`.stats`     (K1)-(K8): deviations, m_u, m_y, excess kurtosis, covariance, limiting errors
 - :mod:`.hat`       the three-cornered hat (each unit's own variance), bootstrap bounds
 - :mod:`.reference` the paper's Table 1 check against a reference, and its marks
-- :mod:`.analysis`  :func:`analyse_deviations`, the single entry point, and the result types
+- :mod:`.channels`  each channel's mode and factor, and its (K3b)-(K8) in one window
+- :mod:`.results`   the result types (``to_dict`` gives the report's ``deviation`` section)
+- :mod:`.validation` :func:`check_config`, the ``[deviation]`` values the method can use
+- :mod:`.analysis`  :func:`analyse_deviations`, the single entry point
 
 Pure numpy/scipy; no I/O.
 """
@@ -12,7 +15,9 @@ Pure numpy/scipy; no I/O.
 from __future__ import annotations
 
 from dracc.core.vocabulary import CHANNELS
-from dracc.math.deviation.analysis import (
+from dracc.math.deviation.analysis import analyse_deviations
+from dracc.math.deviation.hat import HatEstimate, three_cornered_hat
+from dracc.math.deviation.results import (
     ChannelMode,
     ChannelStats,
     DeviationResult,
@@ -22,10 +27,7 @@ from dracc.math.deviation.analysis import (
     ReferenceStats,
     UnitStats,
     WindowStats,
-    analyse_deviations,
-    check_config,
 )
-from dracc.math.deviation.hat import HatEstimate, three_cornered_hat
 from dracc.math.deviation.sampling import (
     UnitSeries,
     sample_unit,
@@ -33,6 +35,7 @@ from dracc.math.deviation.sampling import (
     unit_series_from_frames,
     unit_series_from_voyage,
 )
+from dracc.math.deviation.validation import check_config
 
 __all__ = [
     "CHANNELS",

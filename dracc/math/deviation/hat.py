@@ -46,8 +46,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from dracc.core.geodesy import angdiff
+
+FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True, eq=False)  # holds arrays: identity, not elementwise ==
@@ -60,24 +63,25 @@ class HatEstimate:
     bounds of the variance at ``confidence`` (may be negative; NaN where ``dof`` < 2).
     """
 
-    variance: np.ndarray
-    sigma: np.ndarray
-    var_lower: np.ndarray
-    var_upper: np.ndarray
-    negative: np.ndarray
+    variance: FloatArray
+    sigma: FloatArray
+    var_lower: FloatArray
+    var_upper: FloatArray
+    negative: NDArray[np.bool_]
     n: int
     confidence: float
     dof: float = float("nan")  #: Wishart degrees of freedom of the bounds (n if independent)
 
 
-def pairwise_mean_squares(y, circular: bool = False):
+def pairwise_mean_squares(y: ArrayLike, circular: bool = False) -> FloatArray:
     """s_jk^2 = mean_i (y_ji - y_ki)^2 over instants valid in both, for the pairs
     (1,2), (1,3), (2,3) of ``y`` with shape (3, n).  Returns shape (3,) in that order."""
     d = pair_differences(y, circular)
-    return np.nanmean(d * d, axis=-1)
+    s2: FloatArray = np.nanmean(d * d, axis=-1)
+    return s2
 
 
-def pair_differences(y, circular: bool = False):
+def pair_differences(y: ArrayLike, circular: bool = False) -> FloatArray:
     """The difference series y_1 - y_2, y_1 - y_3, y_2 - y_3; shape (3, n).
     Angles (``circular``) are differenced through :func:`angdiff`."""
     y = np.asarray(y, dtype=float)
@@ -89,7 +93,7 @@ def pair_differences(y, circular: bool = False):
     return np.stack([y[a] - y[b] for a, b in pairs])
 
 
-def hat_variances(s2):
+def hat_variances(s2: ArrayLike) -> FloatArray:
     """Each unit's variance from the pairwise mean squares s2 = (s12^2, s13^2, s23^2), last axis:
 
     sigma_1^2 = 1/2 (s12^2 + s13^2 - s23^2)
@@ -103,7 +107,9 @@ def hat_variances(s2):
     )
 
 
-def block_bootstrap_indices(n: int, block: int, draws: int, rng: np.random.Generator):
+def block_bootstrap_indices(
+    n: int, block: int, draws: int, rng: np.random.Generator
+) -> NDArray[np.int64]:
     """Moving-block bootstrap: ``draws`` index sets of length n, blocks of ``block`` instants.
 
     No longer used for the hat's bounds (it under-covers with few blocks, see the module
@@ -119,7 +125,7 @@ def block_bootstrap_indices(n: int, block: int, draws: int, rng: np.random.Gener
 MIN_DOF = 2.0
 
 
-def gauss_markov_dof(n, corr_instants):
+def gauss_markov_dof(n: int, corr_instants: float) -> float:
     """Degrees of freedom of a mean square of n samples of a Gauss-Markov (AR(1)) series
     with correlation time ``corr_instants`` sampling intervals (rho = exp(-1/corr)):
 
@@ -138,7 +144,7 @@ def gauss_markov_dof(n, corr_instants):
     return float(n * n / (n + 2.0 * np.sum((n - k) * r2**k)))
 
 
-def hat_pivot_draws(d, dof: float, draws: int, rng: np.random.Generator):
+def hat_pivot_draws(d: ArrayLike, dof: float, draws: int, rng: np.random.Generator) -> FloatArray:
     """Draws of the generalized pivotal quantity of the three units' variances, shape (draws, 3).
 
     ``d``: the pair differences (3, n) at complete instants (d12, d13, d23); ``dof``: the
@@ -167,7 +173,7 @@ def hat_pivot_draws(d, dof: float, draws: int, rng: np.random.Generator):
 
 
 def three_cornered_hat(
-    y,
+    y: ArrayLike,
     circular: bool = False,
     confidence: float = 0.9,
     block: int = 5,

@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from dracc.core.geodesy import angdiff, k_lambda, k_phi
 from dracc.math.deviation.stats import K_EMPIRICAL_LON
@@ -31,8 +32,12 @@ from dracc.math.deviation.stats import K_EMPIRICAL_LON
 #: the paper's mark threshold k' for its longitude (and course) factor 1.49 (Table 1 notes)
 K_MARK_LON = 1.5
 
+FloatArray = NDArray[np.float64]
 
-def position_errors_m(lat_rad, lon_rad, ref_lat_rad, ref_lon_rad):
+
+def position_errors_m(
+    lat_rad: ArrayLike, lon_rad: ArrayLike, ref_lat_rad: ArrayLike, ref_lon_rad: ArrayLike
+) -> tuple[FloatArray, FloatArray]:
     """North and east errors in metres of positions against the reference position.
 
     x_north = (phi - phi_ref) / k_phi(phi_ref)          (B18)
@@ -40,17 +45,18 @@ def position_errors_m(lat_rad, lon_rad, ref_lat_rad, ref_lon_rad):
     Broadcasts (units along a leading axis against a reference of shape (n,)).
     """
     ref_lat = np.asarray(ref_lat_rad, dtype=float)
-    north = (np.asarray(lat_rad, dtype=float) - ref_lat) / k_phi(ref_lat)  # (B18)
-    east = angdiff(lon_rad, ref_lon_rad) / k_lambda(ref_lat)  # (B19)
+    north: FloatArray = (np.asarray(lat_rad, dtype=float) - ref_lat) / k_phi(ref_lat)  # (B18)
+    east: FloatArray = angdiff(lon_rad, ref_lon_rad) / k_lambda(ref_lat)  # (B19)
     return north, east
 
 
-def course_errors_rad(heading_rad, ref_heading_rad):
+def course_errors_rad(heading_rad: ArrayLike, ref_heading_rad: ArrayLike) -> FloatArray:
     """Heading errors against the reference heading, on the circle, in (-pi, pi]."""
-    return angdiff(heading_rad, ref_heading_rad)
+    errors: FloatArray = angdiff(heading_rad, ref_heading_rad)
+    return errors
 
 
-def table1_mark_k(k, channel: str | None = None) -> float:
+def table1_mark_k(k: float, channel: str | None = None) -> float:
     """The threshold the Table 1 mark compares k* with, for the factor ``k`` in use.
 
     The paper's rule (notes under Table 1): latitude k* <= k = 1.32, longitude
@@ -66,7 +72,7 @@ def table1_mark_k(k, channel: str | None = None) -> float:
     return k
 
 
-def k_star_mark(k_star, k, channel: str | None = None):
+def k_star_mark(k_star: float, k: float, channel: str | None = None) -> str:
     """Table 1 mark: '+' where k* <= k', '-' where k* > k', '' where k* is NaN; k' is
     :func:`table1_mark_k` of the factor ``k`` (1.5 for the paper's 1.49)."""
     if np.isnan(k_star):
@@ -74,7 +80,7 @@ def k_star_mark(k_star, k, channel: str | None = None):
     return "+" if k_star <= table1_mark_k(k, channel) else "-"
 
 
-def kurtosis_mark(kurtosis_error, kurtosis_deviation, tol: float = 0.05):
+def kurtosis_mark(kurtosis_error: float, kurtosis_deviation: float, tol: float = 0.05) -> str:
     """Table 1 mark for the kurtosis of deviations against that of errors:
     '<' where E_dev < E_err - tol, '>' where E_dev > E_err + tol, '=' otherwise,
     '' where either is NaN."""

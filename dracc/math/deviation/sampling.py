@@ -27,11 +27,23 @@ canonical frames.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from dracc.core.geodesy import angdiff, k_lambda, k_phi, wrap_2pi, wrap_pi
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from dracc.frames import Voyage
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+ReasonArray = NDArray[np.int8]  #: SAMPLED, OUTSIDE_SPAN or GAP_TOO_LONG per instant
 
 DAY_NS = 86_400 * 1_000_000_000
 #: reason codes of :func:`align_at` (0: sampled)
@@ -52,14 +64,14 @@ class UnitSeries:
     Any part may be empty.  Readings need not be sorted; NaN readings are ignored.
     """
 
-    pos_time_ns: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
-    lat_rad: np.ndarray = field(default_factory=lambda: np.empty(0))
-    lon_rad: np.ndarray = field(default_factory=lambda: np.empty(0))
-    hdg_time_ns: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
-    heading_rad: np.ndarray = field(default_factory=lambda: np.empty(0))
-    vel_time_ns: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
-    vn_mps: np.ndarray = field(default_factory=lambda: np.empty(0))
-    ve_mps: np.ndarray = field(default_factory=lambda: np.empty(0))
+    pos_time_ns: IntArray = field(default_factory=lambda: np.empty(0, np.int64))
+    lat_rad: FloatArray = field(default_factory=lambda: np.empty(0))
+    lon_rad: FloatArray = field(default_factory=lambda: np.empty(0))
+    hdg_time_ns: IntArray = field(default_factory=lambda: np.empty(0, np.int64))
+    heading_rad: FloatArray = field(default_factory=lambda: np.empty(0))
+    vel_time_ns: IntArray = field(default_factory=lambda: np.empty(0, np.int64))
+    vn_mps: FloatArray = field(default_factory=lambda: np.empty(0))
+    ve_mps: FloatArray = field(default_factory=lambda: np.empty(0))
 
     def __post_init__(self) -> None:
         if not (len(self.pos_time_ns) == len(self.lat_rad) == len(self.lon_rad)):
@@ -82,13 +94,13 @@ class SampledUnit:
     """One unit at the sampling instants; NaN where missing, with the reason codes
     (:data:`REASONS`; 0 where sampled) of positions and headings (None: not given)."""
 
-    lat_rad: np.ndarray
-    lon_rad: np.ndarray
-    heading_rad: np.ndarray
-    pos_reason: np.ndarray | None = None
-    hdg_reason: np.ndarray | None = None
+    lat_rad: FloatArray
+    lon_rad: FloatArray
+    heading_rad: FloatArray
+    pos_reason: ReasonArray | None = None
+    hdg_reason: ReasonArray | None = None
 
-    def select(self, keep: np.ndarray) -> SampledUnit:
+    def select(self, keep: NDArray[np.bool_]) -> SampledUnit:
         """The unit at the instants where ``keep`` is true."""
         return SampledUnit(
             self.lat_rad[keep],
@@ -99,7 +111,9 @@ class SampledUnit:
         )
 
 
-def sampling_instants(first_ns: int, last_ns: int, interval_s: float, offset_s: float = 0.0):
+def sampling_instants(
+    first_ns: int, last_ns: int, interval_s: float, offset_s: float = 0.0
+) -> IntArray:
     """Instants ``t_k = midnight(first) + offset + k * interval`` lying in [first, last].
 
     ``midnight(first)`` is 00:00 UTC of the day of ``first_ns``.  int64 ns, sorted.
@@ -116,7 +130,7 @@ def sampling_instants(first_ns: int, last_ns: int, interval_s: float, offset_s: 
     return origin + np.arange(k0, k1 + 1, dtype=np.int64) * step
 
 
-def _clean(t_ns, values):
+def _clean(t_ns: ArrayLike, values: ArrayLike) -> tuple[IntArray, FloatArray]:
     """Sorted (stable) readings with NaN values removed."""
     t = np.asarray(t_ns, dtype=np.int64)
     v = np.asarray(values, dtype=float)
@@ -131,7 +145,13 @@ def _clean(t_ns, values):
     return t, v
 
 
-def interpolate_at(t_ns, values, instants_ns, max_gap_s: float, circular=(False,)):
+def interpolate_at(
+    t_ns: ArrayLike,
+    values: ArrayLike,
+    instants_ns: ArrayLike,
+    max_gap_s: float,
+    circular: Sequence[bool] = (False,),
+) -> FloatArray:
     """Interpolate readings to ``instants_ns``, holding the nearer reading where only one
     side lies within ``max_gap_s`` (also past the ends of the data).  The method does not
     use this rule (it invents values past a unit's data); it samples with :func:`align_at`.
@@ -175,7 +195,7 @@ def interpolate_at(t_ns, values, instants_ns, max_gap_s: float, circular=(False,
     return out
 
 
-def _clean_index(t_ns, values):
+def _clean_index(t_ns: ArrayLike, values: ArrayLike) -> NDArray[np.intp]:
     """Indices of the valid (non-NaN) readings, sorted (stable) by time."""
     t = np.asarray(t_ns, dtype=np.int64)
     v = np.asarray(values, dtype=float)
@@ -188,14 +208,14 @@ def _clean_index(t_ns, values):
 
 
 def align_at(
-    t_ns,
-    values,
-    instants_ns,
+    t_ns: ArrayLike,
+    values: ArrayLike,
+    instants_ns: ArrayLike,
     max_gap_s: float,
-    circular=(False,),
-    rates=None,
+    circular: Sequence[bool] = (False,),
+    rates: ArrayLike | None = None,
     velocity_min_gap_s: float = 0.0,
-):
+) -> tuple[FloatArray, ReasonArray]:
     """One unit's readings at the common ``instants_ns`` (rules in the module docstring).
 
     ``values``: (C, m) channels at ``t_ns`` (m,); ``circular[c]``: channel c is an angle
@@ -258,7 +278,7 @@ def align_at(
 
 
 def sample_unit(
-    unit: UnitSeries, instants_ns, max_gap_s: float, velocity_min_gap_s: float = 0.1
+    unit: UnitSeries, instants_ns: ArrayLike, max_gap_s: float, velocity_min_gap_s: float = 0.1
 ) -> SampledUnit:
     """Position and heading of one unit at the instants (NaN where not sampled), each
     interpolated to the instant (:func:`align_at`); positions follow the unit's own ground
@@ -294,14 +314,18 @@ def sample_unit(
     )
 
 
-def unit_series_from_frames(position, heading, ground=None) -> UnitSeries:
+def unit_series_from_frames(
+    position: pd.DataFrame | None,
+    heading: pd.DataFrame | None,
+    ground: pd.DataFrame | None = None,
+) -> UnitSeries:
     """Readings of one unit from canonical ``position``, ``heading`` and ``ground`` frames
     (any None); ``ground`` (VTG/RMC course and speed over ground) gives the velocity.
 
     Positions with GGA fix quality 0 (invalid) are left out; headings only where the
     reference is true ('T': HDT, THS) — a magnetic heading is not an INS course.
     """
-    kw: dict = {}
+    kw: dict[str, Any] = {}
     if position is not None and len(position):
         pos = position[position["quality"] != 0]
         kw.update(
@@ -325,7 +349,7 @@ def unit_series_from_frames(position, heading, ground=None) -> UnitSeries:
     return UnitSeries(**kw)
 
 
-def unit_series_from_voyage(voyage, role: str) -> UnitSeries:
+def unit_series_from_voyage(voyage: Voyage, role: str) -> UnitSeries:
     """Readings of ``role`` from a :class:`dracc.frames.Voyage`
     (see :func:`unit_series_from_frames` for what is left out)."""
     return unit_series_from_frames(

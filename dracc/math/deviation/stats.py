@@ -23,8 +23,10 @@ ones); nothing is filled.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from dracc.core import distributions as dist
 from dracc.core.geodesy import angdiff, circmean, k_lambda, k_phi
@@ -41,11 +43,14 @@ K_EMPIRICAL_LON = 1.49
 #: lowest excess kurtosis of any distribution (the symmetric two-point law)
 KURTOSIS_MIN = -2.0
 
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
 
 # ----------------------------------------------------------------- deviations (K1)
 
 
-def deviations_linear(y):
+def deviations_linear(y: ArrayLike) -> FloatArray:
     """Deviations from the mean of the units for a linear channel.
 
     ``y`` has shape (J, ...) with the units along axis 0; instants where any unit is
@@ -55,11 +60,13 @@ def deviations_linear(y):
     u_ji = y_ji - y*_i                                       (K1a)
     """
     y = np.asarray(y, dtype=float)
-    mean = np.mean(y, axis=0)  # (K1b); NaN propagates: incomplete instants stay NaN
+    mean: FloatArray = np.mean(y, axis=0)  # (K1b); NaN propagates: incomplete instants stay NaN
     return y - mean  # (K1a)
 
 
-def deviations_position_m(lat_rad, lon_rad):
+def deviations_position_m(
+    lat_rad: ArrayLike, lon_rad: ArrayLike
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """North and east deviations in metres of each unit's position from the mean position.
 
     ``lat_rad``, ``lon_rad``: shape (J, n).  The mean latitude is the arithmetic mean;
@@ -83,7 +90,7 @@ def deviations_position_m(lat_rad, lon_rad):
     return north_m, east_m, lat_mean
 
 
-def deviations_course_rad(heading_rad):
+def deviations_course_rad(heading_rad: ArrayLike) -> FloatArray:
     """Course deviations on the circle  (K1a, K1b).
 
     ``heading_rad``: shape (J, n).  The headings are unwrapped around their circular
@@ -106,12 +113,12 @@ def deviations_course_rad(heading_rad):
 # ------------------------------------------------------------------- (K3b)-(K7)
 
 
-def count_valid(u, axis=-1):
+def count_valid(u: ArrayLike, axis: int = -1) -> Any:
     """Number of non-NaN values along ``axis``."""
     return np.sum(~np.isnan(np.asarray(u, dtype=float)), axis=axis)
 
 
-def rms_k3b(u, axis=-1):
+def rms_k3b(u: ArrayLike, axis: int = -1) -> FloatArray:
     """RMS with the paper's denominator: m = sqrt( sum u^2 / (n - 1.45) )   (K3b).
 
     NaNs ignored; NaN where n < 2 (the denominator must stay positive).
@@ -124,7 +131,7 @@ def rms_k3b(u, axis=-1):
     return np.where(n >= 2, m, np.nan)
 
 
-def rms_plain(x, axis=-1):
+def rms_plain(x: ArrayLike, axis: int = -1) -> FloatArray:
     """Plain RMS sqrt( sum x^2 / n ), NaNs ignored; NaN where n = 0."""
     x = np.asarray(x, dtype=float)
     n = count_valid(x, axis)
@@ -132,7 +139,7 @@ def rms_plain(x, axis=-1):
         return np.where(n > 0, np.sqrt(np.nansum(x * x, axis=axis) / n), np.nan)
 
 
-def excess_kurtosis_k6(u, axis=-1):
+def excess_kurtosis_k6(u: ArrayLike, axis: int = -1) -> FloatArray:
     """Excess kurtosis of deviations, with the (K3b) RMS in the denominator  (K6).
 
     E = (1/n) sum u^4 / m_u^4 - 3,   m_u^2 = sum u^2 / (n - 1.45)
@@ -148,7 +155,9 @@ def excess_kurtosis_k6(u, axis=-1):
     return np.where(n >= 4, e, np.nan)
 
 
-def lat_lon_covariance(u_lat, u_lon, axis=-1):
+def lat_lon_covariance(
+    u_lat: ArrayLike, u_lon: ArrayLike, axis: int = -1
+) -> tuple[FloatArray, FloatArray]:
     """Covariance and correlation of latitude and longitude deviations  (K7).
 
     R = (1/n) sum u_lat,i u_lon,i                                   (K7a)
@@ -176,7 +185,7 @@ def lat_lon_covariance(u_lat, u_lon, axis=-1):
 # --------------------------------------------------------------------------- (K8)
 
 
-def k_pie(probability, kurtosis):
+def k_pie(probability: ArrayLike, kurtosis: ArrayLike) -> FloatArray | float:
     """K_PIE(P, E): two-sided quantile at probability P of a unit-variance symmetric law
     with excess kurtosis E  (K8).
 
@@ -212,7 +221,7 @@ def k_pie(probability, kurtosis):
     return out if out.ndim else float(out)
 
 
-def effective_samples(n, interval_s, correlation_time_s):
+def effective_samples(n: ArrayLike, interval_s: float, correlation_time_s: float) -> FloatArray:
     """Effective number of independent samples among n taken every ``interval_s``.
 
     INS errors are correlated over 4-6 h (the paper's conclusions), so samples closer
@@ -222,10 +231,11 @@ def effective_samples(n, interval_s, correlation_time_s):
     n = np.asarray(n, dtype=float)
     if correlation_time_s <= 0:
         return n
-    return np.minimum(n, n * interval_s / correlation_time_s)
+    n_eff: FloatArray = np.minimum(n, n * interval_s / correlation_time_s)
+    return n_eff
 
 
-def k_hm(confidence, n_eff):
+def k_hm(confidence: float, n_eff: ArrayLike) -> FloatArray | float:
     """K_hm: upper confidence factor of an RMS estimated from N_eff independent samples (K8).
 
     With m^2 ~ sigma^2 chi^2(N_eff) / N_eff, the one-sided upper bound of sigma at
@@ -241,7 +251,9 @@ def k_hm(confidence, n_eff):
     return out if out.ndim else float(out)
 
 
-def limiting_error(m_y, probability, kurtosis, confidence, n_eff):
+def limiting_error(
+    m_y: ArrayLike, probability: ArrayLike, kurtosis: ArrayLike, confidence: float, n_eff: ArrayLike
+) -> tuple[FloatArray | float, FloatArray | float, FloatArray | float]:
     """Limiting error y^(P) = K_PIE(P, E) * K_hm * m_y   (K8).
 
     Returns (limit, k_pie, k_hm), each NaN where its input does not allow it.
@@ -254,7 +266,7 @@ def limiting_error(m_y, probability, kurtosis, confidence, n_eff):
 # ------------------------------------- beside the fixed factors: (3a)-(5b) and K_FD
 
 
-def r_deviation_mean_k4(m_u, m_y_star):
+def r_deviation_mean_k4(m_u: ArrayLike, m_y_star: ArrayLike) -> FloatArray:
     """Correlation of a unit's deviation u with the mean of three y*, as the paper takes it  (4):
 
     r_{u,y*} = m_o6^2 / (m_u m_y*),   m_o6^2 ~ (1/3) m_y*^2   ->   r = m_y* / (3 m_u)
@@ -268,7 +280,9 @@ def r_deviation_mean_k4(m_u, m_y_star):
         return np.asarray(m_y_star, dtype=float) / (3.0 * m_u)  # (4)
 
 
-def m_y_k3a(m_u, r, cross: float = 2.0, mean_share: float = 1.0 / 3.0):
+def m_y_k3a(
+    m_u: ArrayLike, r: ArrayLike, cross: float = 2.0, mean_share: float = 1.0 / 3.0
+) -> FloatArray | float:
     """RMS error m_y solving (3a) for a given correlation r:
 
     m_y^2 = m_u^2 + m_y*^2 + cross * r * m_u * m_y*                 (3, a), cross = 2 as printed
@@ -288,7 +302,9 @@ def m_y_k3a(m_u, r, cross: float = 2.0, mean_share: float = 1.0 / 3.0):
     return out if out.ndim else float(out)
 
 
-def k_second_approximation(r=None, cross: float = 2.0, iterations: int = 1):
+def k_second_approximation(
+    r: ArrayLike | None = None, cross: float = 2.0, iterations: int = 1
+) -> FloatArray | float:
     """Factor k = m_y / m_u of the paper's second approximation (5b), from its text:
 
     "determine the correlation coefficient r plugging the obtained values [of (5a)] in (4)
@@ -310,20 +326,24 @@ def k_second_approximation(r=None, cross: float = 2.0, iterations: int = 1):
     """
     if r is not None:
         return m_y_k3a(1.0, r, cross)
-    k = K_FIRST_APPROX_THREE  # (5, a)
+    k: FloatArray | float = K_FIRST_APPROX_THREE  # (5, a)
     for _ in range(int(iterations)):
         r_k = float(r_deviation_mean_k4(1.0, k / math.sqrt(3.0)))  # (4) at the current k
         k = m_y_k3a(1.0, r_k, cross)  # (3, a)
     return k
 
 
-def m_y_second_approximation(m_u, r=None, cross: float = 2.0, iterations: int = 1):
+def m_y_second_approximation(
+    m_u: ArrayLike, r: ArrayLike | None = None, cross: float = 2.0, iterations: int = 1
+) -> FloatArray | float:
     """m_y = k m_u with k from :func:`k_second_approximation` (3a), (4), (5b).  Broadcasts."""
     out = k_second_approximation(r, cross, iterations) * np.asarray(m_u, dtype=float)
     return out if np.ndim(out) else float(out)
 
 
-def k_fd(probability, n1, n2=None, squared: bool = False):
+def k_fd(
+    probability: float, n1: ArrayLike, n2: ArrayLike | None = None, squared: bool = False
+) -> FloatArray | float:
     """Fisher factor K_FD: upper confidence bound at ``probability`` of the ratio of two
     RMS estimated from n1 and n2 independent samples, relative to the true ratio
     (seeds/001, analysis of Table 1: "the upper confidence bound for the RMS ratio is
@@ -349,8 +369,13 @@ def k_fd(probability, n1, n2=None, squared: bool = False):
 
 
 def k_upper_fisher(
-    k, n, interval_s, correlation_time_s, probability: float = 0.99, squared: bool = False
-):
+    k: float,
+    n: ArrayLike,
+    interval_s: float,
+    correlation_time_s: float,
+    probability: float = 0.99,
+    squared: bool = False,
+) -> tuple[FloatArray | float, FloatArray | float, FloatArray | float]:
     """Upper confidence bound of the factor, k_it = k * K_FD(P; N, N), with N the number
     of independent samples among n taken every ``interval_s``: N = n dt / tau
     (:func:`effective_samples`, tau the INS error correlation time, 4-6 h).
@@ -366,7 +391,7 @@ def k_upper_fisher(
 # ------------------------------------------------------------ windows and averages
 
 
-def weighted_rms(rms, n):
+def weighted_rms(rms: ArrayLike, n: ArrayLike) -> float:
     """Weighted average of (K3b) RMS values over windows (the last row of the paper's Table 1):
 
     m_w = sqrt( sum_d (n_d - 1.45) m_d^2 / sum_d (n_d - 1.45) )
@@ -383,7 +408,8 @@ def weighted_rms(rms, n):
     return float(np.sqrt(np.sum(w[ok] * m[ok] ** 2) / np.sum(w[ok])))
 
 
-def window_index(time_ns, window_s, origin_ns):
+def window_index(time_ns: ArrayLike, window_s: float, origin_ns: int) -> IntArray:
     """Index of the window [origin + k W, origin + (k+1) W) holding each instant."""
     w_ns = int(round(window_s * 1e9))
-    return (np.asarray(time_ns, dtype=np.int64) - np.int64(origin_ns)) // w_ns
+    index: IntArray = (np.asarray(time_ns, dtype=np.int64) - np.int64(origin_ns)) // w_ns
+    return index

@@ -1,0 +1,235 @@
+"""Integrity checks of every source over one night: validity, plausibility, latency,
+availability and consistency (IMO MSC.252(83) section 5.3-5.4; IEC 61924-2 tests them).
+
+Pure functions over the canonical frames (:mod:`dracc.frames`); no I/O.  Each
+check of each source gives one :class:`Check`: ``pass``, ``fail`` (with its evidence) or
+``not_checked`` (with why).  The nightly audit turns failed checks into findings.
+
+The checks and their rules (thresholds in :class:`dracc.core.config.IntegrityConfig`)
+------------------------------------------------------------------------------
+validity / ``invalid_flag``
+    the source's own flags: position records flagged invalid (GGA quality 0, RMC/GLL
+    status V or mode N, GNS mode N: ``quality == 0``), heading records with an empty
+    heading field, course/speed records without either (VTG mode N and RMC status V
+    leave them empty).  Flagged spells of at least ``spell_min_s`` fail.  Rule on recorded
+    flags: a healthy source cannot trigger it (false-alarm probability 0).
+validity / ``contradiction``
+    a source flagging fixes valid while they fail a plausibility check.
+plausibility / ``jump``
+    the step between consecutive fixes against the step the ship's own motion predicts:
+    innovation ``r_k = (p_k - p_{k-1}) - v_k dt_k`` with ``v_k`` the running median of
+    the source's velocity over 11 steps (what the ship can do: it follows manoeuvres but
+    not one displaced fix).  ``r`` is scaled per axis by its robust sigma learned from
+    the night (the larger of the MAD sigma and the one its 99th percentile implies); ``(r_n/s_n)^2 + (r_e/s_e)^2`` is chi-square with 2 degrees of freedom
+    for Gaussian fix noise, so the gate ``-2 ln(alpha / N)`` over the N steps holds the
+    night's false-alarm probability at ``alpha`` (Bonferroni).  A step within
+    ``jump_floor_m`` (10 m: the 95 % accuracy IMO A.1046(27) asks of a receiver) is not a
+    finding however sure the statistics are (a satellite change moves a fix by metres).
+    The check reports the smallest jump it could have seen,
+    ``max(sqrt(gate) max(s_n, s_e), jump_floor_m)``.
+plausibility / ``dr_2m``
+    each reference fix against the DR propagated from the earlier fixes with its
+    covariance (:func:`dr_innovation_check`, made by the pipeline after the DR).
+plausibility / ``frozen``, ``stuck``, ``out_of_range``
+    :mod:`dracc.math.faults` with the integrity windows (``frozen_min_s``): bit-identical
+    positions while the other sources show the ship moving, a heading repeating while
+    they show it turning, values no sensor can produce.  Rules: probability 0.
+latency
+    receive time (TAG ``c:``, logger prefix, MCAP log time) minus the record's own time
+    of fix, per source, as a distribution (p50, p95, p99, max); spells of at least
+    ``spell_min_s`` with ``|latency| > latency_max_s`` fail.
+availability / ``dropout``
+    gaps in a source's records longer than ``dropout_cadences`` of its own median
+    interval and at least ``dropout_min_s`` (also a late start or an early end within the
+    night).
+consistency / ``velocity``
+    each INS against the mean of the others, GNSS against the INS mean: the difference
+    ``d(t)`` sampled every ``consistency_interval_s``, and the change of its velocity
+    averaged over one Schuler period T (84.4 min) from one period to the next,
+    ``|d(t) - 2 d(t - T) + d(t - 2T)| / T``.  The Schuler oscillation of an INS cancels
+    in it, its slow 24 h and drift terms nearly so; a unit that starts to drift shows its
+    drift rate.  It fails beyond ``velocity_gate_kn`` (0.6 kn: three times the 0.2 kn the
+    standards ask of a speed sensor, IMO A.824(19)); healthy simulated units of randomised
+    quality stay below about 0.4 kn (``benchmarks/bench_integrity_false_alarms.py`` prints
+    the margin), a real INS slower still.  The worst unit is
+    judged first; one found inconsistent is left out of the others' mean.  A drift
+    present from the first hour is an accuracy matter (m_y), not seen here.
+consistency / ``heading``
+    compass true heading against the INS mean heading, its constant part (the compass
+    error, an accuracy figure) removed: fails beyond ``max(heading_gate_min_deg, z s)`` with ``s`` the robust sigma of the difference and ``z`` the Bonferroni
+    normal quantile at ``alpha`` over the instants.
+consistency / ``speed``
+    log speed against the ground speed less current along the heading (the current a
+    one-hour running median of the vector difference, the log's scale fitted over the
+    night: both accuracy figures,
+    :func:`~dracc.math.integrity.consistency.log_residual`): fails beyond
+    ``max(A.824 speed accuracy, z s)``.
+
+The modules
+-----------
+- :mod:`.results`        :class:`Check`, :class:`SourceSummary`, :class:`IntegrityResult`
+- :mod:`.helpers`        runs, robust sigmas, the statistic/threshold records, ``not_checked``
+- :mod:`.validity`       ``invalid_flag``, ``contradiction``
+- :mod:`.plausibility`   ``jump`` (and the fault checks below)
+- :mod:`.sensor_faults`  ``frozen``, ``stuck``, ``out_of_range``
+- :mod:`.latency`        ``latency``
+- :mod:`.availability`   ``dropout``
+- :mod:`.consistency`    ``velocity``, ``heading``, ``speed``
+- this package           :func:`check_night`, :func:`dr_innovation_check` (``dr_2m``),
+  :func:`with_dr_check`
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from dracc.core.config import IntegrityConfig
+from dracc.core.timefmt import iso_utc
+from dracc.frames import Voyage
+from dracc.math.ep import OUTLIER_NIS
+from dracc.math.integrity.availability import availability_checks, source_times
+from dracc.math.integrity.consistency import (
+    heading_consistency,
+    speed_consistency,
+    velocity_consistency,
+)
+from dracc.math.integrity.helpers import (
+    MAX_EVIDENCE,
+    FloatArray,
+    IntArray,
+    not_checked,
+    role_of,
+    statistic,
+    threshold,
+    time_window,
+)
+from dracc.math.integrity.latency import latency_checks
+from dracc.math.integrity.plausibility import plausibility_checks
+from dracc.math.integrity.results import CHECK_KINDS, Check, IntegrityResult, SourceSummary
+from dracc.math.integrity.validity import contradiction_checks, validity_checks
+
+__all__ = [
+    "Check",
+    "SourceSummary",
+    "IntegrityResult",
+    "check_night",
+    "dr_innovation_check",
+    "with_dr_check",
+    "CHECK_KINDS",
+]
+
+#: a fix whose innovation against the DR exceeds this chi^2_2 value is an outlier, left
+#: out of the estimated position (probability exp(-30) ~ 1e-13 per healthy fix)
+DR_GATE_NIS = OUTLIER_NIS
+
+
+def dr_innovation_check(
+    source: str | None,
+    role: str | None,
+    time_ns: IntArray,
+    nis: FloatArray,
+    gate_m: FloatArray,
+    cfg: IntegrityConfig | None = None,
+) -> Check:
+    """plausibility / ``dr_2m``: each reference fix against the DR from the previous ones
+    with its covariance (the estimated position's filter, dracc.math.ep): the innovation
+    ``nu' S^-1 nu`` is chi-square with 2 degrees of freedom for a healthy fix; above
+    :data:`DR_GATE_NIS` it is a jump the DR and its 2M cannot explain.  The smallest such
+    jump, ``sqrt(gate * largest eigenvalue of S)``, is stated (its median over the fixes)."""
+    t = np.asarray(time_ns, np.int64)
+    nis = np.asarray(nis, float)
+    gate_m = np.asarray(gate_m, float)
+    win = time_window(t)
+    rule = (
+        f"innovation chi-square(2) beyond {DR_GATE_NIS:g} against the DR propagated from the "
+        "earlier fixes with its covariance (the estimated position's filter)"
+    )
+    if len(t) == 0:
+        return not_checked(
+            "plausibility",
+            "dr_2m",
+            source,
+            role,
+            "max_nis",
+            "",
+            rule,
+            "no fix weighed against the DR",
+            "no reference fix after the first",
+            threshold_value=DR_GATE_NIS,
+            threshold_unit="chi2",
+            window=win,
+        )
+    over = nis > DR_GATE_NIS
+    min_jump = float(np.nanmedian(gate_m)) if np.isfinite(gate_m).any() else math.nan
+    fa = float(min(1.0, len(t) * math.exp(-DR_GATE_NIS / 2.0)))
+    ev = tuple(
+        {"time": iso_utc(unit="ms", time_ns=t[k]), "nis": float(nis[k]), "gate_m": float(gate_m[k])}
+        for k in np.flatnonzero(over)[:MAX_EVIDENCE]
+    )
+    who = source or role or "the reference"
+    msg = (
+        f"{who}: {int(over.sum())} fix(es) outside what the DR and its 2M allow (NIS up to "
+        f"{np.nanmax(nis):.0f} > {DR_GATE_NIS:g}; the gate sees jumps of about {min_jump:.0f} m)"
+        if len(ev)
+        else f"{who}: every fix within the DR and its 2M (the gate sees jumps of "
+        f"about {min_jump:.0f} m)"
+    )
+    return Check(
+        "plausibility",
+        "dr_2m",
+        source,
+        role,
+        "fail" if len(ev) else "pass",
+        statistic("max_nis", float(np.nanmax(nis)), "chi2"),
+        threshold(DR_GATE_NIS, "chi2", rule),
+        win,
+        fa,
+        msg,
+        ev,
+        detail={"min_detectable_m": min_jump, "fixes": int(len(t)), "outliers": int(over.sum())},
+    )
+
+
+def with_dr_check(result: IntegrityResult, check: Check) -> IntegrityResult:
+    """``result`` with the DR check added."""
+    return replace(result, checks=result.checks + (check,))
+
+
+# ------------------------------------------------------------------------ the night
+
+
+def check_night(voyage: Voyage, cfg: IntegrityConfig | None = None) -> IntegrityResult | None:
+    """Every integrity check of every source of ``voyage`` (None without records)."""
+    cfg = cfg or IntegrityConfig()
+    times = source_times(voyage)
+    if not times:
+        return None
+    start_ns = int(min(t[0] for t in times.values()))
+    end_ns = int(max(t[-1] for t in times.values()))
+    checks: list[Check] = []
+    checks += validity_checks(voyage, cfg)
+    plaus, faults = plausibility_checks(voyage, cfg)
+    checks += plaus
+    checks += contradiction_checks(voyage, plaus, faults)
+    lat_checks, lat = latency_checks(voyage, cfg)
+    checks += lat_checks
+    avail, summary = availability_checks(voyage, cfg, start_ns, end_ns, times)
+    checks += avail
+    checks += velocity_consistency(voyage, cfg, start_ns, end_ns)
+    checks += heading_consistency(voyage, cfg, start_ns, end_ns)
+    checks += speed_consistency(voyage, cfg, start_ns, end_ns)
+    sources = tuple(
+        SourceSummary(
+            key,
+            role_of(voyage, key),
+            int(len(times[key])),
+            summary[key][0],
+            summary[key][1],
+            lat.get(key),
+        )
+        for key in sorted(times)
+    )
+    return IntegrityResult(tuple(checks), sources, start_ns, end_ns, cfg.false_alarm)

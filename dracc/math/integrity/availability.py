@@ -1,0 +1,118 @@
+"""availability / ``dropout``: gaps in a source's records longer than
+``dropout_cadences`` of its own median interval and at least ``dropout_min_s``
+(a late start or an early end within the night too)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from dracc.core.config import IntegrityConfig
+from dracc.core.timefmt import iso_utc
+from dracc.core.units import NS_PER_S
+from dracc.frames import Voyage
+from dracc.math.integrity.helpers import (
+    MAX_EVIDENCE,
+    IntArray,
+    by_source,
+    not_checked,
+    role_of,
+    statistic,
+    threshold,
+    time_window,
+)
+from dracc.math.integrity.results import Check
+
+__all__ = ["source_times", "availability_checks"]
+
+
+def source_times(voyage: Voyage) -> dict[str, IntArray]:
+    """Each source's distinct record times over every frame, sorted."""
+    parts: dict[str, list[IntArray]] = {}
+    for df in voyage.frames.values():
+        for key, g in by_source(df):
+            parts.setdefault(key, []).append(g["time_ns"].to_numpy(np.int64))
+    return {k: np.unique(np.concatenate(v)) for k, v in parts.items()}
+
+
+def availability_checks(
+    voyage: Voyage,
+    cfg: IntegrityConfig,
+    start_ns: int,
+    end_ns: int,
+    times: Mapping[str, IntArray],
+) -> tuple[list[Check], dict[str, tuple[float, float]]]:
+    checks, summary = [], {}
+    span = max(end_ns - start_ns, 1)
+    for key in sorted(times):
+        t = times[key]
+        if len(t) < 3:
+            summary[key] = (math.nan, math.nan)
+            checks.append(
+                not_checked(
+                    "availability",
+                    "dropout",
+                    key,
+                    role_of(voyage, key),
+                    "longest_dropout",
+                    "s",
+                    "",
+                    f"{key}: {len(t)} record(s): no cadence to measure against",
+                    "fewer than 3 records",
+                    window=time_window(t),
+                )
+            )
+            continue
+        d = np.diff(t)
+        cadence = float(np.median(d)) / NS_PER_S
+        thr_s = max(cfg.dropout_cadences * cadence, cfg.dropout_min_s)
+        thr = int(thr_s * NS_PER_S)
+        gaps = [(int(t[i]), int(t[i + 1])) for i in np.flatnonzero(d > thr)]
+        if t[0] - start_ns > thr:
+            gaps.insert(0, (start_ns, int(t[0])))
+        if end_ns - t[-1] > thr:
+            gaps.append((int(t[-1]), end_ns))
+        lost = sum(b - a for a, b in gaps)
+        summary[key] = (cadence, 1.0 - lost / span)
+        longest = max(((b - a) / NS_PER_S for a, b in gaps), default=0.0)
+        ev = tuple(
+            {
+                "from": iso_utc(unit="ms", time_ns=a),
+                "to": iso_utc(unit="ms", time_ns=b),
+                "duration_s": (b - a) / NS_PER_S,
+                "cadences": (b - a) / NS_PER_S / cadence if cadence > 0 else None,
+                "edge": "start" if a == start_ns else ("end" if b == end_ns else None),
+            }
+            for a, b in sorted(gaps, key=lambda g: g[0] - g[1])[:MAX_EVIDENCE]
+        )
+        msg = (
+            f"{key}: silent for {longest:.0f} s at the longest ({len(gaps)} drop-out(s) "
+            f"beyond {thr_s:.0f} s against its {cadence:g} s cadence; available "
+            f"{100 * summary[key][1]:.1f} % of the night)"
+            if gaps
+            else f"{key}: no drop-out beyond {thr_s:.0f} s (cadence {cadence:g} s)"
+        )
+        checks.append(
+            Check(
+                "availability",
+                "dropout",
+                key,
+                role_of(voyage, key),
+                "fail" if gaps else "pass",
+                statistic("longest_dropout", longest, "s"),
+                threshold(
+                    thr_s,
+                    "s",
+                    f"a gap longer than {cfg.dropout_cadences:g} of the "
+                    f"source's own intervals and at least {cfg.dropout_min_s:g} s",
+                ),
+                {"start_ns": start_ns, "end_ns": end_ns},
+                0.0,
+                msg,
+                ev,
+                detail={"cadence_s": cadence, "availability": summary[key][1]},
+            )
+        )
+    return checks, summary

@@ -1,0 +1,123 @@
+"""Helpers shared by the integrity checks: runs of a mask, robust sigmas and the
+Bonferroni gate, the statistic/threshold/window records of a :class:`Check`, the
+per-source grouping of a frame, and :func:`not_checked` for every check that could not
+be made."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from dracc.core import distributions as dist
+from dracc.frames import Voyage
+from dracc.math.integrity.results import Check
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+MAX_EVIDENCE = 10  #: events shown per check (the count of all is in the statistic)
+
+
+def runs(mask: NDArray[Any]) -> list[tuple[int, int]]:
+    """[start, stop) index pairs of the runs of True in ``mask``."""
+    m = np.concatenate(([False], np.asarray(mask, dtype=bool), [False]))
+    edges = np.flatnonzero(m[1:] != m[:-1])
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
+
+
+def robust_sigma(x: FloatArray) -> float:
+    """1.4826 MAD: the normal sigma, unmoved by a minority of outliers."""
+    x = x[np.isfinite(x)]
+    if len(x) == 0:
+        return math.nan
+    return float(1.4826 * np.median(np.abs(x - np.median(x))))
+
+
+def tail_sigma(x: FloatArray) -> float:
+    """The larger of the MAD sigma and the sigma the 99th percentile of |x| implies (2.576
+    sigma for a normal law): a night whose noise has heavier tails than normal widens its
+    own gate instead of raising false alarms, and one displaced fix in a hundred moves
+    neither."""
+    x = x[np.isfinite(x)]
+    if len(x) == 0:
+        return math.nan
+    med = np.median(x)
+    return max(robust_sigma(x), float(np.percentile(np.abs(x - med), 99.0) / 2.576))
+
+
+def z_two_sided(alpha: float, n: int) -> float:
+    """Normal quantile with two-sided tail alpha / n (Bonferroni over n instants)."""
+    return float(dist.norm_ppf(1.0 - alpha / (2.0 * max(n, 1))))
+
+
+def time_window(t_ns: IntArray) -> dict[str, int]:
+    """{"start_ns", "end_ns"} of sorted times, {} without any."""
+    if len(t_ns) == 0:
+        return {}
+    return {"start_ns": int(t_ns[0]), "end_ns": int(t_ns[-1])}
+
+
+def statistic(name: str, value: float | None, unit: str) -> dict[str, Any]:
+    """A check's ``statistic`` record (value None where not finite)."""
+    v = None if value is None or not np.isfinite(value) else float(value)
+    return {"name": name, "value": v, "unit": unit}
+
+
+def threshold(value: float | None, unit: str, rule: str) -> dict[str, Any]:
+    """A check's ``threshold`` record (value None where not finite)."""
+    v = None if value is None or not np.isfinite(value) else float(value)
+    return {"value": v, "unit": unit, "rule": rule}
+
+
+def by_source(df: pd.DataFrame | None) -> Iterator[tuple[str, pd.DataFrame]]:
+    """(source key, its rows) for each source of a frame, rows in time order."""
+    if df is None or len(df) == 0:
+        return
+    for key, g in df.groupby("source", sort=True, observed=True):
+        yield str(key), g
+
+
+def role_of(voyage: Voyage, key: str) -> str | None:
+    """The role of source ``key`` (None for a source the voyage does not describe)."""
+    s = voyage.sources.get(key)
+    return s.role if s is not None else None
+
+
+def not_checked(
+    check: str,
+    name: str,
+    source: str | None,
+    role: str | None,
+    statistic_name: str,
+    unit: str,
+    rule: str,
+    message: str,
+    why: str,
+    *,
+    threshold_value: float | None = None,
+    threshold_unit: str | None = None,
+    window: dict[str, int] | None = None,
+) -> Check:
+    """A check that could not be made, with why.
+
+    ``unit`` is the statistic's (and, unless ``threshold_unit``, the threshold's);
+    ``threshold_value`` the gate the check would have used where it is known;
+    ``window`` the records it would have looked at ({} by default)."""
+    return Check(
+        check,
+        name,
+        source,
+        role,
+        "not_checked",
+        statistic(statistic_name, None, unit),
+        threshold(threshold_value, unit if threshold_unit is None else threshold_unit, rule),
+        dict(window or {}),
+        0.0,
+        message,
+        why_not=why,
+    )

@@ -1,0 +1,116 @@
+"""latency: receive time minus the record's own time of fix, per source, as a
+distribution (p50, p95, p99, max, min); spells of at least ``spell_min_s`` beyond
+``latency_max_s`` fail."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dracc.core.config import IntegrityConfig
+from dracc.core.timefmt import iso_utc
+from dracc.core.units import NS_PER_S
+from dracc.frames import MISSING_NS, Voyage
+from dracc.math.integrity.helpers import (
+    MAX_EVIDENCE,
+    IntArray,
+    by_source,
+    role_of,
+    runs,
+    statistic,
+    threshold,
+    time_window,
+)
+from dracc.math.integrity.results import Check
+
+__all__ = ["latency_checks"]
+
+
+def latency_checks(
+    voyage: Voyage, cfg: IntegrityConfig
+) -> tuple[list[Check], dict[str, dict[str, float]]]:
+    checks, dists = [], {}
+    per: dict[str, list[tuple[IntArray, IntArray, NDArray[Any]]]] = {}
+    for df in voyage.frames.values():
+        if len(df) == 0 or "recv_ns" not in df:
+            continue
+        recv = df["recv_ns"].to_numpy(np.int64)
+        has = recv != MISSING_NS
+        if not has.any():
+            continue
+        sub = df[has]
+        for key, g in by_source(sub):
+            per.setdefault(key, []).append(
+                (
+                    g["time_ns"].to_numpy(np.int64),
+                    g["recv_ns"].to_numpy(np.int64),
+                    g["line"].to_numpy(),
+                )
+            )
+    max_ns = cfg.latency_max_s * NS_PER_S
+    spell_ns = int(cfg.spell_min_s * NS_PER_S)
+    for key in sorted(per):
+        t = np.concatenate([p[0] for p in per[key]])
+        r = np.concatenate([p[1] for p in per[key]])
+        ln = np.concatenate([p[2] for p in per[key]])
+        o = np.argsort(t, kind="stable")
+        t, r, ln = t[o], r[o], ln[o]
+        lat_s = (r - t) / NS_PER_S
+        q = np.percentile(lat_s, [50, 95, 99])
+        dists[key] = {
+            "n": int(len(lat_s)),
+            "p50": float(q[0]),
+            "p95": float(q[1]),
+            "p99": float(q[2]),
+            "max": float(lat_s.max()),
+            "min": float(lat_s.min()),
+        }
+        bad = np.abs(r - t) > max_ns
+        evidence: list[dict[str, Any]] = []
+        longest = 0.0
+        for a, b in runs(bad):
+            dur = (t[b - 1] - t[a]) / NS_PER_S
+            longest = max(longest, dur)
+            if t[b - 1] - t[a] >= spell_ns and len(evidence) < MAX_EVIDENCE:
+                evidence.append(
+                    {
+                        "start": iso_utc(unit="ms", time_ns=t[a]),
+                        "end": iso_utc(unit="ms", time_ns=t[b - 1]),
+                        "duration_s": dur,
+                        "records": b - a,
+                        "first_line": int(ln[a]),
+                        "median_latency_s": float(np.median(lat_s[a:b])),
+                    }
+                )
+        failed = bool(evidence)
+        worst = max((abs(e["median_latency_s"]) for e in evidence), default=0.0)
+        msg = (
+            f"{key}: data {worst:.2f} s old on receipt for {longest:.0f} s at the longest "
+            f"(limit {cfg.latency_max_s:g} s; latency p50 {q[0]:.2f} s, p95 {q[1]:.2f} s)"
+            if failed
+            else f"{key}: latency p50 {q[0]:.2f} s, p95 {q[1]:.2f} s, max "
+            f"{lat_s.max():.2f} s over {len(lat_s)} records"
+        )
+        checks.append(
+            Check(
+                "latency",
+                "latency",
+                key,
+                role_of(voyage, key),
+                "fail" if failed else "pass",
+                statistic("longest_late_spell", longest, "s"),
+                threshold(
+                    cfg.latency_max_s,
+                    "s",
+                    f"|receive time - time of fix| above this for at least {cfg.spell_min_s:g} s",
+                ),
+                time_window(t),
+                0.0,
+                msg,
+                tuple(evidence),
+                detail={"latency_s": dists[key]},
+            )
+        )
+    return checks, dists

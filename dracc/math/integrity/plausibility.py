@@ -1,0 +1,191 @@
+"""plausibility / ``jump``: the step between consecutive fixes against the step the
+ship's own motion predicts (the package docstring gives the rule), and
+:func:`plausibility_checks`, which adds the frozen/stuck/out-of-range checks of
+:mod:`dracc.math.integrity.sensor_faults`."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from dracc.core.config import FaultsConfig, IntegrityConfig
+from dracc.core.geodesy import offset_ne_m
+from dracc.core.timefmt import iso_utc
+from dracc.core.units import NS_PER_S
+from dracc.frames import Voyage
+from dracc.math.faults import SensorFault, detect_faults
+from dracc.math.integrity.helpers import (
+    MAX_EVIDENCE,
+    FloatArray,
+    by_source,
+    not_checked,
+    role_of,
+    statistic,
+    tail_sigma,
+    threshold,
+    time_window,
+)
+from dracc.math.integrity.results import Check
+from dracc.math.integrity.sensor_faults import fault_checks
+
+__all__ = ["jump_check", "plausibility_checks"]
+
+
+def steps_ne(g: pd.DataFrame) -> tuple[FloatArray, FloatArray]:
+    """North/east metres of the fixes of ``g`` from its first fix."""
+    lat = g["lat_rad"].to_numpy(float)
+    lon = g["lon_rad"].to_numpy(float)
+    n, e = offset_ne_m(lat, lon, lat[0], lon[0])
+    return n, e
+
+
+def jump_check(
+    key: str, role: str | None, g: pd.DataFrame, frozen: Sequence[SensorFault], cfg: IntegrityConfig
+) -> Check:
+    """Step innovation against the ship's own motion (module docstring)."""
+    ok = (
+        (g["quality"].to_numpy() != 0)
+        & np.isfinite(g["lat_rad"].to_numpy(float))
+        & np.isfinite(g["lon_rad"].to_numpy(float))
+    )
+    g = g[ok]
+    t = g["time_ns"].to_numpy(np.int64)
+    keep = np.concatenate(([True], np.diff(t) > 0)) if len(t) else np.zeros(0, bool)
+    g, t = g[keep], t[keep]
+    win = time_window(t)
+    if len(t) < 30:
+        return not_checked(
+            "plausibility",
+            "jump",
+            key,
+            role,
+            "innovation",
+            "m",
+            "",
+            f"{key}: too few valid fixes ({len(t)}) to learn the step noise",
+            f"{len(t)} valid fixes (30 needed)",
+            window=win,
+        )
+    north, east = steps_ne(g)
+    dt = np.diff(t) / NS_PER_S
+    dn, de = np.diff(north), np.diff(east)
+    cadence = float(np.median(dt))
+    vn = pd.Series(dn / dt).rolling(11, center=True, min_periods=3).median().to_numpy()
+    ve = pd.Series(de / dt).rolling(11, center=True, min_periods=3).median().to_numpy()
+    rn, re_ = dn - vn * dt, de - ve * dt
+    # steps over a drop-out (availability) or out of a frozen run (the unit catching
+    # up, a 'frozen' fault) are not jumps
+    usable = dt <= 10.0 * cadence
+    for f in frozen:
+        usable &= ~((t[1:] >= f.start_ns) & (t[1:] <= f.end_ns + int(3 * cadence * NS_PER_S)))
+    quantum = 0.05  # m: below any logged resolution that can show a jump
+    sn = max(tail_sigma(rn[usable]), quantum)
+    se = max(tail_sigma(re_[usable]), quantum)
+    n_steps = int(usable.sum())
+    gate = -2.0 * math.log(cfg.false_alarm / max(n_steps, 1))  # chi2_2 survival exp(-x/2)
+    d2 = np.where(usable, (rn / sn) ** 2 + (re_ / se) ** 2, 0.0)
+    # a step within the position accuracy the standards ask of a receiver is not a finding,
+    # however sure the statistics are that the fix moved (a satellite change, multipath)
+    flagged = (d2 > gate) & (np.hypot(rn, re_) > cfg.jump_floor_m)
+    min_jump = max(math.sqrt(gate) * max(sn, se), cfg.jump_floor_m)
+    evidence: list[dict[str, Any]] = []
+    lines = g["line"].to_numpy()
+    quality = g["quality"].to_numpy()
+    idx = np.flatnonzero(flagged)
+    for k in idx[:MAX_EVIDENCE]:
+        evidence.append(
+            {
+                "time": iso_utc(unit="ms", time_ns=t[k + 1]),
+                "line": int(lines[k + 1]),
+                "step_m": float(math.hypot(dn[k], de[k])),
+                "expected_step_m": float(math.hypot(vn[k] * dt[k], ve[k] * dt[k])),
+                "innovation_m": float(math.hypot(rn[k], re_[k])),
+                "dt_s": float(dt[k]),
+                "flagged_valid": bool(quality[k + 1] > 0),
+            }
+        )
+    worst = float(np.sqrt(d2.max())) if n_steps else math.nan
+    if len(idx):
+        big = max(e["innovation_m"] for e in evidence)
+        msg = (
+            f"{key}: {len(idx)} position jump(s) against the ship's motion, the largest "
+            f"{big:.0f} m (gate {min_jump:.1f} m: the night's step noise {sn:.2f}/{se:.2f} m "
+            f"N/E, at least {cfg.jump_floor_m:g} m)"
+        )
+    else:
+        msg = f"{key}: no jump; the gate would have seen a jump of {min_jump:.1f} m or more"
+    return Check(
+        "plausibility",
+        "jump",
+        key,
+        role,
+        "fail" if len(idx) else "pass",
+        statistic("max_normalised_innovation", worst, "sigma"),
+        threshold(
+            math.sqrt(gate),
+            "sigma",
+            f"chi-square(2) gate at {cfg.false_alarm:g} per "
+            f"night over {n_steps} steps, and an innovation beyond [integrity] "
+            f"jump_floor_m = {cfg.jump_floor_m:g} m",
+        ),
+        win,
+        cfg.false_alarm,
+        msg,
+        tuple(evidence),
+        detail={
+            "min_detectable_m": min_jump,
+            "step_sigma_n_m": sn,
+            "step_sigma_e_m": se,
+            "steps": n_steps,
+            "cadence_s": cadence,
+            "jumps": int(len(idx)),
+        },
+    )
+
+
+def plausibility_checks(
+    voyage: Voyage, cfg: IntegrityConfig
+) -> tuple[list[Check], list[SensorFault]]:
+    fcfg = FaultsConfig(frozen_min_s=cfg.frozen_min_s, stuck_min_s=cfg.frozen_min_s)
+    faults = detect_faults(voyage, fcfg)
+    checks = []
+    for key, g in by_source(voyage.frames["position"]):
+        frozen = [f for f in faults if f.source == key and f.kind == "frozen"]
+        checks.append(jump_check(key, role_of(voyage, key), g, frozen, cfg))
+    checks += fault_checks(
+        voyage,
+        faults,
+        "frozen",
+        ("frozen",),
+        ("position",),
+        "bit-identical positions this long while the other sources show the ship moving",
+        cfg.frozen_min_s,
+        "s",
+    )
+    checks += fault_checks(
+        voyage,
+        faults,
+        "stuck",
+        ("stuck_heading",),
+        ("heading",),
+        "a bit-identical heading this long while the other sources show the ship turning",
+        cfg.frozen_min_s,
+        "s",
+    )
+    checks += fault_checks(
+        voyage,
+        faults,
+        "out_of_range",
+        ("out_of_range",),
+        ("position", "heading", "ground", "water", "rot"),
+        "latitude beyond 90 deg, longitude beyond 180 deg, heading or course "
+        "outside [0, 360) deg, negative SOG, speeds beyond [faults] "
+        "max_speed_kn, rate of turn beyond [faults] max_rot_deg_per_min",
+        0,
+        "count",
+    )
+    return checks, faults
