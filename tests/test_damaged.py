@@ -32,7 +32,7 @@ def _one_line_error(code: int, err: str, *needles: str) -> None:
 
 
 def _inspect(run_cli, path: Path) -> tuple[int, dict | None, str]:
-    code, out, err = run_cli("inspect", "--json", path)
+    code, out, err = run_cli("inspect", "--json", "-", path)
     assert "Traceback" not in err and code != ExitCode.INTERNAL, err
     return code, (json.loads(out) if code == ExitCode.OK else None), err
 

@@ -291,7 +291,7 @@ def _hdg_voyage(tmp_path, variation_fields: list[str]):
 @pytest.mark.parametrize("configured", [None, 5.0])
 def test_configured_variation_wins_over_a_zero_placeholder(tmp_path, configured):
     from dracc.core.config import DeadReckoningConfig
-    from dracc.pipeline.analysis import _heading_series
+    from dracc.pipeline.selection import heading_series as _heading_series
 
     v = _hdg_voyage(tmp_path, ["0.0,E", "0.0,E", "2.0,W", ","])
     missing, notes = [], []
@@ -319,7 +319,7 @@ def test_real_hakefjord_zero_variation_and_the_option(real_dir):
 
     from dracc.core.config import DeadReckoningConfig
     from dracc.ingest import read_logs
-    from dracc.pipeline.analysis import _heading_series
+    from dracc.pipeline.selection import heading_series as _heading_series
 
     v = read_logs([real_dir / "VDRplayer" / "Hakefjord.txt"], CFG)
     base = _heading_series(v, DeadReckoningConfig(), [], [])

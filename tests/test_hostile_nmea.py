@@ -345,7 +345,7 @@ def test_cr_only_log_through_dracc_inspect(run_cli, tmp_path):
     lines = _sample_lines()[:300]
     p = tmp_path / "mac.nmea"
     p.write_bytes(b"\r".join(lines) + b"\r")
-    code, out, err = run_cli("inspect", p, "--json")
+    code, out, err = run_cli("inspect", p, "--json", "-")
     assert code == ExitCode.OK, err
     doc = json.loads(out)
     assert doc["lines"] == 300 and doc["rejected"] == {}

@@ -18,7 +18,8 @@ from dracc.core.geodesy import offset_ne_m
 from dracc.core.vocabulary import INS_ROLES
 from dracc.frames import KINDS, Rejects, TimeEvents, Voyage, empty_frame
 from dracc.ingest.sources import summarize
-from dracc.pipeline.analysis import SCHEMA, analyse, analyse_voyage
+from dracc.pipeline.analysis import analyse, analyse_voyage
+from dracc.pipeline.results import SCHEMA
 from dracc.sim import GM, SimParams, simulate
 from dracc.sim.model import NO_INS_ERROR
 
@@ -225,7 +226,7 @@ def test_files_of_one_voyage_merge_by_time(tmp_path):
 def test_recording_spells_cut_where_no_frame_has_a_record():
     import pandas as pd
 
-    from dracc.pipeline.analysis import recording_spells
+    from dracc.pipeline.overview import recording_spells
 
     h = 3_600_000_000_000
     frames = {

@@ -25,14 +25,14 @@ from dracc.core.geodesy import add_offset_ne
 from dracc.core.timefmt import iso_utc
 from dracc.math.deadreckoning import LegConsistency
 from dracc.math.deviation import UnitSeries, analyse_deviations
-from dracc.pipeline.analysis import (
+from dracc.pipeline.results import (
     SCHEMA,
     Analysis,
     CalibrationSection,
     CurrentSection,
     DRLeg,
     DRSection,
-    DRTrack,
+    DRTrackResult,
     Estimate,
     InputFile,
     SourceRow,
@@ -81,7 +81,7 @@ def _deviation():
     return analyse_deviations(units, cfg, ref)
 
 
-def _dr_track(n: int, step_s: float, with_ref: bool) -> DRTrack:
+def _dr_track(n: int, step_s: float, with_ref: bool) -> DRTrackResult:
     t = T0_NS + (np.arange(n) * step_s * 1e9).astype("int64")
     since = np.mod(np.arange(n) * step_s, 3600.0)
     leg = (np.arange(n) * step_s // 3600.0).astype("int64")
@@ -92,7 +92,7 @@ def _dr_track(n: int, step_s: float, with_ref: bool) -> DRTrack:
     # north-east that the EP learned (it starts at each leg's fix as the EP does)
     water_lat = lat - since * 0.25 * math.cos(math.radians(45.0)) / 6_371_000.0
     water_lon = lon - since * 0.25 * math.sin(math.radians(45.0)) / 3_750_000.0
-    return DRTrack(
+    return DRTrackResult(
         time_ns=t,
         lat_rad=lat,
         lon_rad=lon,
@@ -270,7 +270,7 @@ def make_analysis(kind: str = "full") -> Analysis:
     dev = _deviation()
     track = _dr_track(25 * 360, 10.0, with_ref=True)
     pick = np.arange(0, len(track.time_ns), 60)
-    epochs = DRTrack(**{f: getattr(track, f)[pick] for f in track.__dataclass_fields__})
+    epochs = DRTrackResult(**{f: getattr(track, f)[pick] for f in track.__dataclass_fields__})
     checks = _leg_checks()
     legs = tuple(
         DRLeg(

@@ -10,7 +10,8 @@ import pytest
 from conftest import SAMPLES
 
 from dracc.core.config import Config
-from dracc.pipeline.analysis import _dedupe_sorted, analyse
+from dracc.pipeline.analysis import analyse
+from dracc.pipeline.selection import dedupe_sorted as _dedupe_sorted
 from dracc.report.json_report import to_dict
 
 FILES = [

@@ -92,7 +92,7 @@ def test_overlapping_files_are_two_sources_in_inspect_too(run_cli, tmp_path):
     a, b = tmp_path / "ship_gps1.log", tmp_path / "ship_gps2.log"
     gga_log(a, 0, 300, "30.000")
     gga_log(b, 100, 300, "30.024")
-    code, out, err = run_cli("inspect", a, b, "--json")
+    code, out, err = run_cli("inspect", a, b, "--json", "-")
     assert code == 0, err
     rep = json.loads(out)
     assert set(rep["sources"]) == {"gps1:GP", "gps2:GP"}
@@ -144,7 +144,7 @@ def test_real_skytraq_gnss_compass_is_not_the_compass(real_dir):
     assert "compass" not in v.sources["GN"].roles
     assert any("GN not given the compass role" in d for d in v.time_events.decisions)
     from dracc.core.config import DeadReckoningConfig
-    from dracc.pipeline.analysis import _heading_series
+    from dracc.pipeline.selection import heading_series as _heading_series
 
     missing, notes = [], []
     got = _heading_series(v, DeadReckoningConfig(), missing, notes)

@@ -15,7 +15,7 @@ from pathlib import Path
 from dracc.core import atomic
 from dracc.core.timefmt import iso_utc
 from dracc.core.vocabulary import CHANNELS
-from dracc.pipeline.analysis import Analysis, Estimate
+from dracc.pipeline.results import Analysis, Estimate
 from dracc.report import fmt, fmt_duration, fmt_pct, fmt_signed, short_utc
 from dracc.report.page import CSP, data_uri  # one policy and one data URI for every page
 from dracc.report.rows import EXCEEDS, WITHIN, channel_rows, unit_rows

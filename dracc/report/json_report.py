@@ -19,12 +19,12 @@ from dracc.core.numbers import finite_or_none as _num
 from dracc.core.timefmt import iso_utc
 from dracc.core.units import mps_to_kn
 from dracc.math.integrity import Check, IntegrityResult
-from dracc.pipeline.analysis import (
+from dracc.pipeline.results import (
     Analysis,
     CalibrationSection,
     CurrentSection,
     DRSection,
-    DRTrack,
+    DRTrackResult,
     Estimate,
 )
 
@@ -53,7 +53,7 @@ def _deviation(a: Analysis) -> dict:
     return d
 
 
-def _epochs(t: DRTrack) -> list[dict]:
+def _epochs(t: DRTrackResult) -> list[dict]:
     lat_deg = np.degrees(t.lat_rad)
     lon_deg = np.degrees(t.lon_rad)
     water_lat_deg = np.degrees(t.water_lat_rad)

@@ -20,7 +20,7 @@ from matplotlib.patches import Circle  # noqa: E402
 
 from dracc.core.geodesy import offset_ne_m  # noqa: E402
 from dracc.core.vocabulary import CHANNEL_KEYS, CHANNEL_UNITS, CHANNELS
-from dracc.pipeline.analysis import Analysis
+from dracc.pipeline.results import Analysis
 
 _DPI = 96
 #: lines are drawn through at most this many points (every k-th sample); circles and

@@ -14,8 +14,7 @@ import math
 from dataclasses import dataclass
 
 from dracc.core.vocabulary import CHANNEL_UNITS, CHANNELS
-from dracc.math.deviation import UnitStats
-from dracc.pipeline.analysis import DeviationResult
+from dracc.math.deviation import DeviationResult, UnitStats
 from dracc.report import fmt
 
 #: the verdict against the a priori RMS

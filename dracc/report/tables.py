@@ -29,14 +29,14 @@ from dracc.core import atomic
 from dracc.core.safetext import csv_cell
 from dracc.core.vocabulary import CHANNEL_KEYS, CHANNEL_UNITS, CHANNELS
 from dracc.math.deviation import WindowStats
-from dracc.pipeline.analysis import Analysis, DRTrack
+from dracc.pipeline.results import Analysis, DRTrackResult
 
 
 def _times(time_ns) -> pd.DatetimeIndex:
     return pd.to_datetime(np.asarray(time_ns, dtype="int64"), unit="ns", utc=True)
 
 
-def dr_frame(t: DRTrack) -> pd.DataFrame:
+def dr_frame(t: DRTrackResult) -> pd.DataFrame:
     """A DR track as a table."""
     return pd.DataFrame(
         {

@@ -18,7 +18,8 @@ from rich.text import Text
 
 from dracc.core.safetext import printable
 from dracc.core.vocabulary import CHANNELS
-from dracc.pipeline.analysis import Analysis, DeviationResult, Estimate
+from dracc.math.deviation import DeviationResult
+from dracc.pipeline.results import Analysis, Estimate
 from dracc.report import fmt, fmt_duration, fmt_pct, fmt_signed, short_utc
 from dracc.report.rows import EXCEEDS, unit_rows
 
