@@ -1,13 +1,28 @@
-"""Small array helpers shared by the math modules."""
+"""Small array helpers shared by the math modules, and the numpy array type aliases.
+
+``FloatArray``, ``IntArray`` and ``BoolArray`` are the annotations of float64, int64 and
+boolean arrays everywhere in dracc; ``ArrayLike`` (re-exported from ``numpy.typing``)
+annotates what accepts a scalar, a sequence or an array, ``FloatOrArray`` what numpy
+returns for either.
+"""
 
 from __future__ import annotations
 
+from typing import Any, TypeAlias
+
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["unique_sorted"]
+__all__ = ["ArrayLike", "BoolArray", "FloatArray", "FloatOrArray", "IntArray", "unique_sorted"]
+
+FloatArray: TypeAlias = NDArray[np.float64]  #: an array of float64
+IntArray: TypeAlias = NDArray[np.int64]  #: an array of int64 (times in nanoseconds)
+BoolArray: TypeAlias = NDArray[np.bool_]  #: an array of booleans (masks)
+#: what numpy gives for scalar inputs (a float64, or a 0-d array) or for arrays
+FloatOrArray: TypeAlias = "float | FloatArray"
 
 
-def unique_sorted(a) -> np.ndarray:
+def unique_sorted(a: ArrayLike) -> NDArray[Any]:
     """The sorted distinct values of ``a`` (as ``np.unique(a)``).
 
     By a sort and a comparison of neighbours: numpy 2.4's ``np.unique`` hashes integer

@@ -26,10 +26,12 @@ import stat
 import tempfile
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
 from pathlib import Path
+from types import FrameType
+from typing import Any
 
 #: (temporary, target) renames waiting for the end of the innermost ``together`` block
 _PENDING: ContextVar[list[tuple[Path, Path]] | None] = ContextVar(
@@ -45,7 +47,7 @@ def _discard(tmp: Path) -> None:
 
 
 @contextmanager
-def together():
+def together() -> Iterator[None]:
     """Files written atomically inside this block appear together at its end.
 
     Each is written and synced to its temporary file as usual; the renames onto the
@@ -73,7 +75,7 @@ def together():
 
 
 @contextmanager
-def atomic_path(path: str | Path):
+def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success rename it onto ``path`` (at the
     end of the enclosing :func:`together` block, if any).
 
@@ -175,7 +177,9 @@ def deferred_signals() -> Iterator[list[int]]:
         yield held
         return
     sigs = [signal.SIGINT, signal.SIGTERM]
-    old = {s: signal.getsignal(s) for s in sigs}
+    old: dict[int, Callable[[int, FrameType | None], Any] | int | None] = {
+        s: signal.getsignal(s) for s in sigs
+    }
     for s in sigs:
         signal.signal(s, lambda signum, _frame: held.append(signum))
     try:
@@ -288,7 +292,7 @@ def _alive(pid: int) -> bool:
 
 
 @contextmanager
-def file_set(folder: str | Path, published: list | None = None) -> Iterator[Path]:
+def file_set(folder: str | Path, published: list[str] | None = None) -> Iterator[Path]:
     """Yield a staging folder; the files written into it replace the set published in
     ``folder`` as one, at the end of the block.
 
@@ -326,7 +330,7 @@ def file_set(folder: str | Path, published: list | None = None) -> Iterator[Path
         _publish_by_renames(folder, final, names, flag)
 
 
-def _publish_by_link(folder: Path, final: Path, names: list[str], flag: list) -> None:
+def _publish_by_link(folder: Path, final: Path, names: list[str], flag: list[str]) -> None:
     runs = folder / RUNS
     _adopt(folder, names)
     for n in names:  # links made once; they lead to nothing until the first set is current
@@ -350,7 +354,7 @@ def _publish_by_link(folder: Path, final: Path, names: list[str], flag: list) ->
     _collect(runs, {final.name, *([previous] if previous else [])})
 
 
-def _publish_by_renames(folder: Path, final: Path, names: list[str], flag: list) -> None:
+def _publish_by_renames(folder: Path, final: Path, names: list[str], flag: list[str]) -> None:
     runs = folder / RUNS
     with deferred_signals():
         for n in names:

@@ -20,10 +20,10 @@ import re
 import sys
 import types
 import typing
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeGuard, cast
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -189,7 +189,7 @@ _SECTIONS: dict[str, type] = {
 }
 
 
-def _build(cls, table: dict, where: str):
+def _build(cls: type[Any], table: object, where: str) -> Any:
     """Dataclass ``cls`` from a TOML table, rejecting unknown keys; the values are checked
     and converted by :func:`validate` (the one place that knows the schema)."""
     if not isinstance(table, dict):
@@ -198,7 +198,7 @@ def _build(cls, table: dict, where: str):
     return cls(**table)
 
 
-def _no_unknown(table: dict, known, where: str) -> None:
+def _no_unknown(table: dict[Any, Any], known: Collection[str], where: str) -> None:
     unknown = set(table) - set(known)
     if unknown:
         raise ConfigError(
@@ -252,7 +252,7 @@ _TYPE_ONLY = _Rule()
 _POS = _Rule(_POSITIVE)
 
 
-def _key(k) -> str:
+def _key(k: object) -> str:
     """A key as TOML writes it: bare where it can be, else quoted."""
     k = str(k)
     return (
@@ -260,12 +260,12 @@ def _key(k) -> str:
     )
 
 
-def _show(value) -> str:
+def _show(value: object) -> str:
     text = repr(value)
     return text if len(text) <= 80 else text[:77] + "..."
 
 
-def _kind(value) -> str:
+def _kind(value: object) -> str:
     """The TOML name of a value's type, for 'got ...'."""
     if isinstance(value, bool):
         return "a boolean"
@@ -288,19 +288,19 @@ def _kind(value) -> str:
     return type(value).__name__
 
 
-def _fail(section: str, key: str, value, what: str) -> ConfigError:
+def _fail(section: str, key: str, value: object, what: str) -> ConfigError:
     return ConfigError(f"[{section}] {_key(key)} = {_show(value)}: {what}")
 
 
-def _wrong(section: str, key: str, value, expected: str) -> ConfigError:
+def _wrong(section: str, key: str, value: object, expected: str) -> ConfigError:
     return _fail(section, key, value, f"expected {expected}, got {_kind(value)}")
 
 
-def _is_number(value) -> bool:
+def _is_number(value: object) -> TypeGuard[int | float]:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
-def _number(value, section: str, key: str, rng: _Range | None) -> float:
+def _number(value: object, section: str, key: str, rng: _Range | None) -> float:
     if not _is_number(value):
         raise _wrong(section, key, value, "a number")
     v = float(value)
@@ -311,7 +311,7 @@ def _number(value, section: str, key: str, rng: _Range | None) -> float:
     return v
 
 
-def _integer(value, section: str, key: str, rng: _Range | None) -> int:
+def _integer(value: object, section: str, key: str, rng: _Range | None) -> int:
     if isinstance(value, float) and math.isfinite(value) and value.is_integer():
         value = int(value)  # 1e3 is an integer; 1.5 is not
     if isinstance(value, bool) or not isinstance(value, int):
@@ -321,7 +321,7 @@ def _integer(value, section: str, key: str, rng: _Range | None) -> int:
     return value
 
 
-def _tau(value, section: str, key: str) -> float:
+def _tau(value: object, section: str, key: str) -> float:
     if isinstance(value, str) and value.strip().lower() in ("inf", "infinity"):
         return math.inf
     if not _is_number(value):
@@ -335,7 +335,7 @@ def _tau(value, section: str, key: str) -> float:
 _SOURCE_FORM = 'a number (a bias) or a table {sigma = ..., tau_s = ... | "inf"}'
 
 
-def _error_source(value, section: str, key: str) -> ErrorSource:
+def _error_source(value: object, section: str, key: str) -> ErrorSource:
     """An ErrorSource from a number (a bias), a table {sigma, tau_s} or an ErrorSource."""
     inner = f"{section}.{_key(key)}"
     if _is_number(value):
@@ -354,7 +354,7 @@ def _error_source(value, section: str, key: str) -> ErrorSource:
     return ErrorSource(_number(sigma, inner, "sigma", _NON_NEGATIVE), _tau(tau, inner, "tau_s"))
 
 
-def _describe(tp) -> str:
+def _describe(tp: Any) -> str:
     if tp is bool:
         return "true or false"
     if tp is int:
@@ -368,10 +368,10 @@ def _describe(tp) -> str:
         return "a table"
     if origin is tuple:
         return f"an array of {_describe(typing.get_args(tp)[0])[2:]}s"
-    return tp.__name__
+    return cast(str, tp.__name__)
 
 
-def _typed(value, tp, section: str, key: str, rng: _Range | None):
+def _typed(value: object, tp: Any, section: str, key: str, rng: _Range | None) -> Any:
     """``value`` checked against the annotation ``tp`` (and numbers against ``rng``), converted
     to it: an int where a float belongs becomes a float, an array a tuple."""
     origin, args = typing.get_origin(tp), typing.get_args(tp)
@@ -409,7 +409,7 @@ def _typed(value, tp, section: str, key: str, rng: _Range | None):
 # -------------------------------------------------------------- rules on names and forms
 
 
-def _toml_date(value):
+def _toml_date(value: object) -> object:
     """A TOML date (``date = 2026-03-01``, unquoted) is the date its text names."""
     if isinstance(value, _dt.date) and not isinstance(value, _dt.datetime):
         return value.isoformat()
@@ -462,7 +462,7 @@ def _check_reset(value: str, section: str, key: str) -> str:
 
 
 def _one_of(*choices: str) -> Callable[[Any, str, str], Any]:
-    def check(value, section: str, key: str):
+    def check(value: Any, section: str, key: str) -> Any:
         if value not in choices:
             raise _fail(section, key, value, f"expected one of {', '.join(map(repr, choices))}")
         return value
@@ -499,7 +499,9 @@ def _check_deviation_table(table: dict[str, float], section: str, key: str) -> d
 _APRIORI_KEYS = tuple(sorted(CHANNEL_KEYS.values()))
 
 
-def _check_apriori(table: dict[str, dict[str, float]], section: str, key: str):
+def _check_apriori(
+    table: dict[str, dict[str, float]], section: str, key: str
+) -> dict[str, dict[str, float]]:
     for unit, values in table.items():
         if unit not in INS_ROLES:
             raise ConfigError(
@@ -609,15 +611,16 @@ _RULES: dict[type, dict[str, _Rule]] = {
 
 
 @functools.cache
-def _hints(cls) -> dict[str, Any]:
+def _hints(cls: type[Any]) -> dict[str, Any]:
     return typing.get_type_hints(cls)
 
 
-def _section(sec, name: str):
+def _section(sec: Any, name: str) -> Any:
     """A section's dataclass with every value checked and converted (see :func:`_typed`)."""
     cls = type(sec)
-    rules, hints = _RULES[cls], _hints(cls)
-    values = {}
+    # a class is hashable; mypy's Hashable protocol does not see it for type[Any]
+    rules, hints = _RULES[cls], _hints(cls)  # type: ignore[arg-type]
+    values: dict[str, Any] = {}
     for f in fields(cls):
         rule = rules[f.name]
         value = getattr(sec, f.name)
@@ -662,7 +665,7 @@ def load_config(path: str | Path | None = None) -> Config:
     return config_from_dict(data, str(p))
 
 
-def config_from_dict(data: dict, where: str = "config") -> Config:
+def config_from_dict(data: dict[str, Any], where: str = "config") -> Config:
     """Build a validated Config from a parsed TOML document."""
     unknown = set(data) - set(_SECTIONS) - _KNOWN_EXTRA
     if unknown:
@@ -677,7 +680,7 @@ def config_from_dict(data: dict, where: str = "config") -> Config:
     return validate(Config(**kwargs))
 
 
-def with_overrides(cfg: Config, section: str, **values) -> Config:
+def with_overrides(cfg: Config, section: str, **values: Any) -> Config:
     """A copy of ``cfg`` with some keys of one section replaced (CLI options); None values are skipped."""
     values = {k: v for k, v in values.items() if v is not None}
     if not values:

@@ -15,6 +15,9 @@ front of such a text so that it is shown as text.  Parquet keeps the raw value.
 from __future__ import annotations
 
 import unicodedata
+from typing import TypeVar
+
+_T = TypeVar("_T")
 
 #: the bidirectional controls (Unicode category Cf) that reorder what a terminal shows
 _BIDI = frozenset("\u061c\u200e\u200f\u202a\u202b\u202c\u202d\u202e\u2066\u2067\u2068\u2069")
@@ -28,7 +31,7 @@ def _escape(c: str) -> str:
     return f"\\x{n:02x}" if n < 0x100 else f"\\u{n:04x}"
 
 
-def printable(text, keep: str = "") -> str:
+def printable(text: object, keep: str = "") -> str:
     """``text`` with every control character (C0, DEL, C1: ESC, CR, LF, tab, NUL, ...),
     bidirectional control and lone surrogate (an undecodable byte of a file name) shown
     as a visible escape; printable text unchanged.  ``keep``: characters left as they
@@ -44,7 +47,7 @@ def printable(text, keep: str = "") -> str:
     )
 
 
-def csv_cell(value):
+def csv_cell(value: _T) -> _T | str:
     """A CSV cell value: a text starting like a formula gets a leading single quote;
     anything else (numbers, missing values) is returned as it is."""
     if isinstance(value, str) and value.startswith(FORMULA_START):

@@ -6,9 +6,10 @@ Times inside dracc are int64 nanoseconds since the Unix epoch (``time_ns``).
 from __future__ import annotations
 
 import datetime as dt
-from typing import overload
+from typing import Any, Literal, cast, overload
 
 import numpy as np
+from numpy.typing import NDArray
 
 from dracc.core.units import NS_PER_S
 
@@ -21,8 +22,10 @@ def iso_utc(time_ns: None, unit: str = "auto") -> None: ...
 @overload
 def iso_utc(time_ns: int | np.integer, unit: str = "auto") -> str: ...
 @overload
-def iso_utc(time_ns: np.ndarray, unit: str = "auto") -> np.ndarray: ...
-def iso_utc(time_ns, unit: str = "auto"):
+def iso_utc(time_ns: NDArray[Any], unit: str = "auto") -> NDArray[np.str_]: ...
+def iso_utc(
+    time_ns: int | np.integer | NDArray[Any] | None, unit: str = "auto"
+) -> str | NDArray[np.str_] | None:
     """'2026-11-21T13:00:00Z' (or '…:00.250Z'): ISO 8601 UTC of int64 Unix nanoseconds.
 
     A scalar gives a ``str``, an array an array of ``str``, None gives None.  ``unit`` is
@@ -36,7 +39,8 @@ def iso_utc(time_ns, unit: str = "auto"):
     t = np.asarray(time_ns, dtype=np.int64)
     if unit == "auto":
         unit = "s" if np.all(t % NS_PER_S == 0) else "ms"
-    out = np.datetime_as_string(t.astype("datetime64[ns]"), unit=unit, timezone="UTC")
+    precision = cast(Literal["s", "ms", "us", "ns"], unit)  # one of UNITS, "auto" resolved
+    out = np.datetime_as_string(t.astype("datetime64[ns]"), unit=precision, timezone="UTC")
     return str(out) if out.ndim == 0 else out
 
 

@@ -6,6 +6,12 @@ Exact definitions: 1 international nautical mile = 1852 m; 1 knot = 1852/3600 m/
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING, Any, overload
+
+if TYPE_CHECKING:
+    from numpy.typing import NDArray
+
+    from dracc.core.arrays import FloatArray
 
 NMI_M = 1852.0  #: metres per nautical mile (exact)
 CABLE_M = 185.2  #: metres per cable (0.1 nmi)
@@ -16,11 +22,19 @@ ARCMIN_RAD = math.pi / (180.0 * 60.0)  #: radians per arc-minute
 NS_PER_S = 1_000_000_000
 
 
-def kn_to_mps(speed_kn):
+@overload
+def kn_to_mps(speed_kn: float) -> float: ...
+@overload
+def kn_to_mps(speed_kn: NDArray[Any]) -> FloatArray: ...
+def kn_to_mps(speed_kn: float | NDArray[Any]) -> float | FloatArray:
     """Knots to metres per second."""
     return speed_kn * KN_MPS
 
 
-def mps_to_kn(speed_mps):
+@overload
+def mps_to_kn(speed_mps: float) -> float: ...
+@overload
+def mps_to_kn(speed_mps: NDArray[Any]) -> FloatArray: ...
+def mps_to_kn(speed_mps: float | NDArray[Any]) -> float | FloatArray:
     """Metres per second to knots."""
     return speed_mps / KN_MPS

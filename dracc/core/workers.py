@@ -33,7 +33,7 @@ def die_with_parent(parent_pid: int | None) -> None:
     if os.getppid() != ppid:  # the parent died before the death signal was set
         os._exit(1)
 
-    def watch():
+    def watch() -> None:
         while True:
             time.sleep(WATCHDOG_S)
             if os.getppid() != ppid:

@@ -42,11 +42,14 @@ Three estimators:
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
 from dracc.core import distributions as dist
+from dracc.core.arrays import ArrayLike, BoolArray, FloatArray, IntArray
 from dracc.core.errors import InsufficientDataError
 from dracc.core.geodesy import angdiff, offset_ne_m, wrap_pi
 
@@ -63,14 +66,19 @@ __all__ = [
 
 @dataclass(frozen=True)
 class LeastSquaresSolution:
-    x: np.ndarray
-    fun: np.ndarray  #: residuals at x
-    jac: np.ndarray  #: Jacobian at x
+    x: FloatArray
+    fun: FloatArray  #: residuals at x
+    jac: FloatArray  #: Jacobian at x
     n_iter: int
 
 
 def levenberg_marquardt(
-    resid, jac, x0: np.ndarray, ftol: float = 1e-10, xtol: float = 1e-10, max_iter: int = 200
+    resid: Callable[[FloatArray], FloatArray],
+    jac: Callable[[FloatArray], FloatArray],
+    x0: ArrayLike,
+    ftol: float = 1e-10,
+    xtol: float = 1e-10,
+    max_iter: int = 200,
 ) -> LeastSquaresSolution:
     """min ||resid(x)||^2 by Levenberg-Marquardt with Marquardt's scaling.
 
@@ -114,12 +122,14 @@ def levenberg_marquardt(
     return LeastSquaresSolution(x, r, J, it)
 
 
-def _block_ids(time_s, block_s):
+def _block_ids(time_s: ArrayLike, block_s: float) -> IntArray:
     t = np.asarray(time_s, float)
-    return np.floor((t - t[0]) / block_s).astype(np.int64)
+    return cast(IntArray, np.floor((t - t[0]) / block_s).astype(np.int64))
 
 
-def block_means(time_s, values, block_s: float, *, min_samples: int = 2):
+def block_means(
+    time_s: ArrayLike, values: ArrayLike, block_s: float, *, min_samples: int = 2
+) -> tuple[FloatArray, FloatArray, IntArray]:
     """Means of ``values`` (n,) or (n, k) over consecutive blocks of ``block_s`` seconds.
 
     Returns (block_time_s, means, counts) for blocks with at least ``min_samples``
@@ -160,18 +170,18 @@ class CompassErrorEstimate:
     n_samples: int
     n_blocks: int
     block_s: float
-    window_start_s: np.ndarray
-    window_error_rad: np.ndarray
-    window_sigma_rad: np.ndarray
+    window_start_s: FloatArray
+    window_error_rad: FloatArray
+    window_sigma_rad: FloatArray
     chi2_constant: float
     p_constant: float
     varying: bool
 
 
 def compass_error_from_heading(
-    time_s,
-    compass_rad,
-    reference_rad,
+    time_s: ArrayLike,
+    compass_rad: ArrayLike,
+    reference_rad: ArrayLike,
     *,
     block_s: float = 600.0,
     window_s: float = 3600.0,
@@ -239,24 +249,24 @@ def compass_error_from_heading(
 class DeviationEstimate:
     """Deviation curve coefficients (A, B, C, D, E) in radians with their covariance."""
 
-    coefficients_rad: np.ndarray  #: (5,) A, B, C, D, E
-    covariance_rad2: np.ndarray  #: (5, 5)
-    sigma_rad: np.ndarray  #: (5,) standard errors
+    coefficients_rad: FloatArray  #: (5,) A, B, C, D, E
+    covariance_rad2: FloatArray  #: (5, 5)
+    sigma_rad: FloatArray  #: (5,) standard errors
     residual_rms_rad: float  #: of the block means about the curve
     n_blocks: int
     heading_coverage_rad: float  #: largest heading gap left uncovered (2 pi minus it is covered)
 
 
-def _curve_basis(k_rad):
+def _curve_basis(k_rad: ArrayLike) -> FloatArray:
     k = np.asarray(k_rad, float)
     return np.stack([np.ones_like(k), np.sin(k), np.cos(k), np.sin(2 * k), np.cos(2 * k)], -1)
 
 
 def deviation_from_heading(
-    time_s,
-    compass_rad,
-    reference_true_rad,
-    variation_rad,
+    time_s: ArrayLike,
+    compass_rad: ArrayLike,
+    reference_true_rad: ArrayLike,
+    variation_rad: ArrayLike,
     *,
     block_s: float = 120.0,
 ) -> DeviationEstimate:
@@ -297,7 +307,7 @@ def deviation_from_heading(
     s2 = float(res @ res) / dof
     cov = s2 * np.linalg.inv(X.T @ X)
     return DeviationEstimate(
-        coefficients_rad=coef,
+        coefficients_rad=cast(FloatArray, coef),  # lstsq is typed floating[Any]
         covariance_rad2=cov,
         sigma_rad=np.sqrt(np.diag(cov)),
         residual_rms_rad=math.sqrt(float(np.mean(res**2))),
@@ -323,25 +333,31 @@ class TrackCalibration:
     """
 
     heading_model: str
-    heading_error_rad: np.ndarray  #: (1,) eps; (5,) A-E of delta; or eps at heading_knot_s
-    heading_error_sigma_rad: np.ndarray
-    heading_knot_s: np.ndarray  #: knot times of the 'varying' model (empty otherwise)
+    heading_error_rad: FloatArray  #: (1,) eps; (5,) A-E of delta; or eps at heading_knot_s
+    heading_error_sigma_rad: FloatArray
+    heading_knot_s: FloatArray  #: knot times of the 'varying' model (empty otherwise)
     heading_constant_p: float  #: 'varying': chi-square p-value that eps is constant (NaN otherwise)
     log_scale: float  #: s in V_log = (1 + s) V_true + b
     log_scale_sigma: float
     log_offset_mps: float  #: b (0 and sigma NaN when not fitted)
     log_offset_sigma_mps: float
-    current_knot_s: np.ndarray  #: (m,) knot times of the piecewise-linear current
-    current_ne_mps: np.ndarray  #: (m, 2) current north/east at the knots
-    current_sigma_ne_mps: np.ndarray  #: (m, 2)
-    covariance: np.ndarray  #: of all parameters, in the order heading, s, [b], currents
+    current_knot_s: FloatArray  #: (m,) knot times of the piecewise-linear current
+    current_ne_mps: FloatArray  #: (m, 2) current north/east at the knots
+    current_sigma_ne_mps: FloatArray  #: (m, 2)
+    covariance: FloatArray  #: of all parameters, in the order heading, s, [b], currents
     residual_rms_mps: float  #: segment velocity residuals (per axis)
     residual_lag1_correlation: float  #: rho used to inflate the covariance by (1+rho)/(1-rho)
     n_segments: int
     segment_s: float
 
 
-def _segment_reference_velocity(ref_t, ref_lat, ref_lon, edges_s, max_ref_gap_s):
+def _segment_reference_velocity(
+    ref_t: ArrayLike,
+    ref_lat: ArrayLike,
+    ref_lon: ArrayLike,
+    edges_s: FloatArray,
+    max_ref_gap_s: float,
+) -> tuple[FloatArray, BoolArray]:
     """Mean reference velocity (north, east) over each segment from its end positions."""
     rt = np.asarray(ref_t, float)
     ok = np.isfinite(rt) & np.isfinite(ref_lat) & np.isfinite(ref_lon)
@@ -375,12 +391,12 @@ ILL_CONDITIONED = 1e-3
 
 
 def calibrate_from_track(
-    time_s,
-    heading_rad,
-    speed_mps,
-    ref_time_s,
-    ref_lat_rad,
-    ref_lon_rad,
+    time_s: ArrayLike,
+    heading_rad: ArrayLike,
+    speed_mps: ArrayLike,
+    ref_time_s: ArrayLike,
+    ref_lat_rad: ArrayLike,
+    ref_lon_rad: ArrayLike,
     *,
     heading_model: str = "constant",
     fit_log_offset: bool = True,
@@ -389,7 +405,7 @@ def calibrate_from_track(
     heading_knot_s: float = 6 * 3600.0,
     max_ref_gap_s: float = 5.0,
     min_coverage: float = 0.9,
-    variation_rad=0.0,
+    variation_rad: ArrayLike = 0.0,
 ) -> TrackCalibration:
     """Heading error, log scale and offset, and current from reference positions.
 
@@ -472,34 +488,35 @@ def calibrate_from_track(
         Hd, h_knots = Hd[:, keep_h], h_knots[keep_h]
     else:
         Hd = np.ones((hs.size, 1))
-    n_h = Hd.shape[1]
+    n_h: int = Hd.shape[1]
     n_b = 1 if fit_log_offset else 0
     vspan = float(np.ptp(vs))
 
-    def speed_course(theta):
+    def speed_course(theta: FloatArray) -> tuple[FloatArray, FloatArray, float]:
         """Log speed corrected by scale s and offset b, (vs - b) / (1 + s); course hs - eps."""
         s = theta[n_h]
         b = theta[n_h + 1] if n_b else 0.0
         return (vs - b) / (1.0 + s), hs - Hd @ theta[:n_h], s
 
-    def model(theta):
+    def model(theta: FloatArray) -> FloatArray:
         spd, c, _ = speed_course(theta)
         mn = np.bincount(si, weights=wn * spd * np.cos(c), minlength=m)
         me = np.bincount(si, weights=wn * spd * np.sin(c), minlength=m)
         cur = theta[n_h + 1 + n_b :].reshape(2, nk)
         return np.column_stack([mn + B @ cur[0], me + B @ cur[1]])
 
-    def resid(theta):
+    def resid(theta: FloatArray) -> FloatArray:
         return (model(theta) - u_ref[seg_ids]).ravel()
 
-    def jac(theta):
+    def jac(theta: FloatArray) -> FloatArray:
         """Analytic Jacobian of ``resid`` (rows: segment j north, j east)."""
         spd, c, s = speed_course(theta)
         cos_c, sin_c = np.cos(c), np.sin(c)
         out = np.zeros((m, 2, n_par))
 
-        def seg_sum(x):
-            return np.bincount(si, weights=wn * x, minlength=m)
+        def seg_sum(x: FloatArray) -> FloatArray:
+            # numpy's stubs type bincount as integer; with weights it is float64
+            return cast(FloatArray, np.bincount(si, weights=wn * x, minlength=m))
 
         # d/d eps of spd [cos c, sin c] = spd [sin c, -cos c]
         for k in range(n_h):  # eps = Hd @ theta

@@ -63,20 +63,26 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, cast, overload
 
 import numpy as np
+from numpy.typing import NDArray
 
+from dracc.core.arrays import ArrayLike, FloatArray, FloatOrArray
 from dracc.core.errors import InsufficientDataError
 from dracc.core.geodesy import add_offset_ne, k_lambda, k_phi, offset_ne_m, wrap_2pi, wrap_pi
 from dracc.core.units import DEG_RAD, KN_MPS
 from dracc.math.ellipse import Ellipse, error_ellipse
 from dracc.math.fusion import Observation, PositionFix
 
+if TYPE_CHECKING:
+    from dracc.core.config import DeadReckoningConfig
+
 #: tau = 0 (white noise) means a value independent from one WHITE_NOISE_STEP_S to the next
 WHITE_NOISE_STEP_S = 1.0
 
 
-def _psd(sigma, tau_s):
+def _psd(sigma: float, tau_s: float) -> float:
     """Power spectral density of a (sigma, tau) process seen as white noise at long
     horizons: 2 sigma^2 tau; sigma^2 WHITE_NOISE_STEP_S for tau = 0; 0 for a bias (tau = inf,
     which is not white noise at all: see the module doc)."""
@@ -107,7 +113,7 @@ class CurrentModel:
     heading_tau_s: float = 120.0
     initial_current_sigma_mps: float | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ("current_tau_s", "speed_tau_s", "heading_tau_s"):
             v = getattr(self, name)
             if not v >= 0:  # also NaN; inf is a bias, 0 white noise
@@ -131,7 +137,7 @@ class CurrentModel:
         s = self.initial_current_sigma_mps
         return self.current_sigma_mps if s is None else s
 
-    def water_bias_cov(self, course_rad, speed_mps):
+    def water_bias_cov(self, course_rad: ArrayLike, speed_mps: ArrayLike) -> FloatArray:
         """(..., 2, 2) north/east covariance (m^2/s^2) of the log and compass errors that
         are biases (tau = inf): sigma^2 along track, (V sigma_C)^2 across; zero otherwise."""
         course = np.nan_to_num(np.asarray(course_rad, float))  # a lone last epoch may lack them
@@ -150,7 +156,7 @@ class CurrentModel:
         return out
 
     @classmethod
-    def from_config(cls, cfg) -> CurrentModel:
+    def from_config(cls, cfg: DeadReckoningConfig) -> CurrentModel:
         """From a :class:`dracc.core.config.DeadReckoningConfig`: its ``current_kn``,
         ``log_noise_kn`` and ``compass_noise_deg`` error sources, in any of their forms
         (a number or ``tau_s = "inf"``: a bias; ``tau_s = 0``: white noise)."""
@@ -167,13 +173,17 @@ class CurrentModel:
 # ------------------------------------------------------------------------ kernels
 
 
-def _regular(tau) -> bool:
+def _regular(tau: ArrayLike) -> bool:
     """Every tau finite and > 0 (the closed forms apply as written)."""
     t = np.asarray(tau, float)
     return bool(np.all(np.isfinite(t) & (t > 0)))
 
 
-def transition(dt_s, tau_s):
+@overload
+def transition(dt_s: float, tau_s: float) -> tuple[FloatOrArray, FloatOrArray]: ...
+@overload
+def transition(dt_s: ArrayLike, tau_s: float | NDArray[Any]) -> tuple[FloatArray, FloatArray]: ...
+def transition(dt_s: ArrayLike, tau_s: float | NDArray[Any]) -> tuple[Any, Any]:
     """Exact discretisation of the integrated Gauss-Markov current: (F_pc, phi).
 
     F = [[I, F_pc I], [0, phi I]], F_pc = tau (1 - exp(-dt/tau)), phi = exp(-dt/tau).
@@ -193,12 +203,24 @@ def transition(dt_s, tau_s):
     return f_pc, phi
 
 
-def _current_noise(dt_s, model: CurrentModel):
+def _current_noise(
+    dt_s: ArrayLike, model: CurrentModel
+) -> tuple[FloatOrArray, FloatOrArray, FloatOrArray]:
     """(q_pp, q_pc, q_cc) of the integrated Gauss-Markov current over dt (module doc)."""
     return gauss_markov_noise(dt_s, model.current_sigma_mps, model.current_tau_s)
 
 
-def gauss_markov_noise(dt_s, sigma, tau_s):
+@overload
+def gauss_markov_noise(
+    dt_s: float, sigma: float, tau_s: float
+) -> tuple[FloatOrArray, FloatOrArray, FloatOrArray]: ...
+@overload
+def gauss_markov_noise(
+    dt_s: ArrayLike, sigma: ArrayLike, tau_s: float | NDArray[Any]
+) -> tuple[FloatArray, FloatArray, FloatArray]: ...
+def gauss_markov_noise(
+    dt_s: ArrayLike, sigma: ArrayLike, tau_s: float | NDArray[Any]
+) -> tuple[Any, Any, Any]:
     """(q_pp, q_pc, q_cc): the driving noise over dt of a first-order Gauss-Markov process
     (sigma, tau) and of its integral (module doc), arrays broadcast.
 
@@ -224,7 +246,9 @@ def gauss_markov_noise(dt_s, sigma, tau_s):
     return q_pp, q_pc, q_cc
 
 
-def _gauss_markov_noise_special(dt_s, sigma, tau_s):
+def _gauss_markov_noise_special(
+    dt_s: ArrayLike, sigma: ArrayLike, tau_s: ArrayLike
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """gauss_markov_noise where some tau is inf or 0 (the regular ones by the closed form)."""
     dt = np.asarray(dt_s, float)
     tau = np.asarray(tau_s, float)
@@ -239,7 +263,9 @@ def _gauss_markov_noise_special(dt_s, sigma, tau_s):
     return q_pp, q_pc, q_cc
 
 
-def _water_noise(dt_s, course_rad, speed_mps, model: CurrentModel):
+def _water_noise(
+    dt_s: ArrayLike, course_rad: ArrayLike, speed_mps: ArrayLike, model: CurrentModel
+) -> tuple[FloatOrArray, FloatOrArray, FloatOrArray]:
     """(v_nn, v_ee, v_ne): position noise from the water velocity over dt, white noise of
     PSD 2 sigma^2 tau along track (log) and across track (V sigma_C, compass); sigma^2 * 1 s
     for tau = 0, none for a bias (tau = inf: absorbed by the current, module doc)."""
@@ -262,7 +288,9 @@ def _water_noise(dt_s, course_rad, speed_mps, model: CurrentModel):
     return v_nn, v_ee, v_ne
 
 
-def process_noise(dt_s, course_rad, speed_mps, model: CurrentModel):
+def process_noise(
+    dt_s: ArrayLike, course_rad: ArrayLike, speed_mps: ArrayLike, model: CurrentModel
+) -> FloatArray:
     """Q (..., 4, 4) over dt for state (p_N, p_E, c_N, c_E) (metres, m/s); see module doc."""
     q_pp, q_pc, q_cc = _current_noise(dt_s, model)
     v_nn, v_ee, v_ne = _water_noise(dt_s, course_rad, speed_mps, model)
@@ -276,7 +304,7 @@ def process_noise(dt_s, course_rad, speed_mps, model: CurrentModel):
     return q
 
 
-def _transition_matrix(dt_s, tau_s: float):
+def _transition_matrix(dt_s: ArrayLike, tau_s: float) -> FloatArray:
     f_pc, phi = transition(dt_s, tau_s)
     f = np.zeros(np.shape(f_pc) + (4, 4))
     f[..., 0, 0] = f[..., 1, 1] = 1.0
@@ -287,13 +315,21 @@ def _transition_matrix(dt_s, tau_s: float):
 
 @dataclass
 class _State:
-    lat: np.ndarray  # (R,)
-    lon: np.ndarray  # (R,)
-    c: np.ndarray  # (R, 2)
-    p: np.ndarray  # (R, 4, 4)
+    lat: FloatArray  # (R,)
+    lon: FloatArray  # (R,)
+    c: FloatArray  # (R, 2)
+    p: FloatArray  # (R, 4, 4)
 
 
-def _propagate(st: _State, t_from: float, targets, t_s, course, speed, model: CurrentModel):
+def _propagate(
+    st: _State,
+    t_from: float,
+    targets: ArrayLike,
+    t_s: FloatArray,
+    course: FloatArray,
+    speed: FloatArray,
+    model: CurrentModel,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Predict from t_from to each of ``targets`` (m,), ascending, >= t_from, no update between.
 
     Vectorised over the segment: with s = target - t_from, F(s) and the current part of Q
@@ -354,10 +390,10 @@ class UpdateRecord:
 
     t_s: float
     kinds: tuple[str, ...]
-    nis: np.ndarray
+    nis: FloatArray
     dof: int
-    cov_before_m2: np.ndarray
-    cov_after_m2: np.ndarray
+    cov_before_m2: FloatArray
+    cov_after_m2: FloatArray
 
 
 def _update(st: _State, obs: Observation, t_s: float) -> UpdateRecord:
@@ -395,53 +431,57 @@ class CurrentTrack:
     ``cov`` (..., n, 4, 4): state covariance, (p_N, p_E) in metres, (c_N, c_E) in m/s.
     """
 
-    t_s: np.ndarray
-    lat_rad: np.ndarray
-    lon_rad: np.ndarray
-    current_north_mps: np.ndarray
-    current_east_mps: np.ndarray
-    cov: np.ndarray
+    t_s: FloatArray
+    lat_rad: FloatArray
+    lon_rad: FloatArray
+    current_north_mps: FloatArray
+    current_east_mps: FloatArray
+    cov: FloatArray
     updates: tuple[UpdateRecord, ...]
 
     @property
-    def position_cov_m2(self) -> np.ndarray:
+    def position_cov_m2(self) -> FloatArray:
         return self.cov[..., :2, :2]
 
     @property
-    def current_cov_m2ps2(self) -> np.ndarray:
+    def current_cov_m2ps2(self) -> FloatArray:
         return self.cov[..., 2:, 2:]
 
     @property
-    def set_rad(self) -> np.ndarray:
+    def set_rad(self) -> FloatArray:
         """Direction the current flows TOWARDS, [0, 2pi): atan2(c_E, c_N)."""
         return wrap_2pi(np.arctan2(self.current_east_mps, self.current_north_mps))
 
     @property
-    def drift_mps(self) -> np.ndarray:
+    def drift_mps(self) -> FloatArray:
         return np.hypot(self.current_north_mps, self.current_east_mps)
 
     @property
-    def drift_kn(self) -> np.ndarray:
+    def drift_kn(self) -> FloatArray:
         return self.drift_mps / KN_MPS
 
     @property
-    def set_deg(self) -> np.ndarray:
+    def set_deg(self) -> FloatArray:
         return np.rad2deg(self.set_rad)
 
     @property
-    def drift_sigma_mps(self) -> np.ndarray:
+    def drift_sigma_mps(self) -> FloatArray:
         """1-sigma of drift: sqrt(u^T P_c u), u the unit vector along the current."""
         u = np.stack([np.cos(self.set_rad), np.sin(self.set_rad)], axis=-1)
-        return np.sqrt(np.einsum("...i,...ij,...j->...", u, self.current_cov_m2ps2, u))
+        # np.einsum is typed as returning Any
+        return cast(
+            FloatArray, np.sqrt(np.einsum("...i,...ij,...j->...", u, self.current_cov_m2ps2, u))
+        )
 
     @property
-    def set_sigma_rad(self) -> np.ndarray:
+    def set_sigma_rad(self) -> FloatArray:
         """1-sigma of set: sqrt(v^T P_c v) / drift, v across the current (linearised)."""
         v = np.stack([-np.sin(self.set_rad), np.cos(self.set_rad)], axis=-1)
         with np.errstate(divide="ignore", invalid="ignore"):
-            return (
+            return cast(
+                FloatArray,
                 np.sqrt(np.einsum("...i,...ij,...j->...", v, self.current_cov_m2ps2, v))
-                / self.drift_mps
+                / self.drift_mps,
             )
 
     @property
@@ -450,20 +490,20 @@ class CurrentTrack:
         return error_ellipse(self.position_cov_m2)
 
     @property
-    def two_drms_m(self) -> np.ndarray:
+    def two_drms_m(self) -> FloatArray:
         """The 2M circle radius, 2 sqrt(trace P_pos) (B30, B31)."""
         return 2.0 * np.sqrt(self.cov[..., 0, 0] + self.cov[..., 1, 1])
 
 
 def estimate_current(
-    t_s,
-    course_rad,
-    speed_mps,
+    t_s: ArrayLike,
+    course_rad: ArrayLike,
+    speed_mps: ArrayLike,
     start: PositionFix,
     fixes: Sequence[tuple[float, Observation]] = (),
     model: CurrentModel | None = None,
     *,
-    current0_ne_mps=(0.0, 0.0),
+    current0_ne_mps: ArrayLike = (0.0, 0.0),
 ) -> CurrentTrack:
     """Run the filter over DR epochs ``t_s`` (n,) with course and speed through the water.
 
@@ -559,9 +599,9 @@ class OpenLoopComparison:
 
 
 def open_loop_vs_blended(
-    t_s,
-    course_rad,
-    speed_mps,
+    t_s: ArrayLike,
+    course_rad: ArrayLike,
+    speed_mps: ArrayLike,
     start: PositionFix,
     fixes: Sequence[tuple[float, Observation]],
     model: CurrentModel | None = None,
@@ -581,25 +621,25 @@ def open_loop_vs_blended(
 class SimulatedVoyage:
     """Truth of a simulated voyage (runs, n) and the DR inputs that go with it."""
 
-    t_s: np.ndarray
-    lat_rad: np.ndarray
-    lon_rad: np.ndarray
-    current_ne_mps: np.ndarray  # (runs, n, 2)
-    course_rad: np.ndarray  # (n,) course through the water, as measured
-    speed_mps: np.ndarray  # (n,)
+    t_s: FloatArray
+    lat_rad: FloatArray
+    lon_rad: FloatArray
+    current_ne_mps: FloatArray  # (runs, n, 2)
+    course_rad: FloatArray  # (n,) course through the water, as measured
+    speed_mps: FloatArray  # (n,)
 
 
 def simulate_voyage(
     rng: np.random.Generator,
-    t_s,
-    course_rad,
-    speed_mps,
+    t_s: ArrayLike,
+    course_rad: ArrayLike,
+    speed_mps: ArrayLike,
     start_lat_rad: float,
     start_lon_rad: float,
     model: CurrentModel,
     runs: int,
     *,
-    current0_ne_mps=None,
+    current0_ne_mps: ArrayLike | None = None,
     start_sigma_m: float = 0.0,
 ) -> SimulatedVoyage:
     """Sample ``runs`` true voyages from exactly the filter's model (seeded).
@@ -639,7 +679,7 @@ def simulate_voyage(
     return SimulatedVoyage(t, lats, lons, curs, np.array(course), np.array(speed))
 
 
-def nees(track: CurrentTrack, voyage: SimulatedVoyage) -> np.ndarray:
+def nees(track: CurrentTrack, voyage: SimulatedVoyage) -> FloatArray:
     """Normalised estimation error squared (runs, n) of the 4-state against the truth
     (chi-square with 4 degrees of freedom for a consistent filter)."""
     d_n, d_e = offset_ne_m(voyage.lat_rad, voyage.lon_rad, track.lat_rad, track.lon_rad)
@@ -652,7 +692,10 @@ def nees(track: CurrentTrack, voyage: SimulatedVoyage) -> np.ndarray:
         ],
         axis=-1,
     )
-    return np.einsum("...i,...i->...", err, np.linalg.solve(track.cov, err[..., None])[..., 0])
+    return cast(
+        FloatArray,
+        np.einsum("...i,...i->...", err, np.linalg.solve(track.cov, err[..., None])[..., 0]),
+    )
 
 
 __all__ = [

@@ -11,7 +11,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numpy.typing import ArrayLike
+
+from dracc.core.arrays import ArrayLike, FloatArray
 
 
 class Ellipse(NamedTuple):
@@ -21,9 +22,9 @@ class Ellipse(NamedTuple):
     in [0, pi).  Unpacks as ``(semi_major_m, semi_minor_m, orientation_rad)``.
     """
 
-    semi_major_m: np.ndarray
-    semi_minor_m: np.ndarray
-    orientation_rad: np.ndarray
+    semi_major_m: FloatArray
+    semi_minor_m: FloatArray
+    orientation_rad: FloatArray
 
 
 def error_ellipse(cov_m2: ArrayLike) -> Ellipse:

@@ -49,10 +49,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Any, cast
 
 import numpy as np
+from numpy.typing import NDArray
 
-from dracc.core.arrays import unique_sorted
+from dracc.core.arrays import ArrayLike, BoolArray, FloatArray, IntArray, unique_sorted
 from dracc.core.geodesy import add_offset_ne, interp_position, offset_ne_m, wrap_pi
 from dracc.core.units import KN_MPS
 from dracc.math.current import gauss_markov_noise, transition
@@ -106,22 +108,22 @@ class ErrorPrior:
 class Hyperparameters:
     """The grid of models the filter weighs, each (M,)."""
 
-    current_sigma_mps: np.ndarray  #: sigma_c of the current's variation c
-    current_tau_s: np.ndarray  #: tau_c
-    noise_sigma_mps: np.ndarray  #: sigma_n of the short-term velocity noise n
-    noise_tau_s: np.ndarray  #: tau_n
-    turn_sigma_rad: np.ndarray  #: sigma of the heading-dependent error delta
-    fix_sigma_m: np.ndarray  #: the reference fixes' noise, per axis
+    current_sigma_mps: FloatArray  #: sigma_c of the current's variation c
+    current_tau_s: FloatArray  #: tau_c
+    noise_sigma_mps: FloatArray  #: sigma_n of the short-term velocity noise n
+    noise_tau_s: FloatArray  #: tau_n
+    turn_sigma_rad: FloatArray  #: sigma of the heading-dependent error delta
+    fix_sigma_m: FloatArray  #: the reference fixes' noise, per axis
 
     @property
     def size(self) -> int:
         return int(self.current_sigma_mps.size)
 
-    def take(self, idx) -> Hyperparameters:
+    def take(self, idx: NDArray[Any]) -> Hyperparameters:
         return Hyperparameters(*(getattr(self, f)[idx] for f in self.__dataclass_fields__))
 
     @property
-    def noise_psd_m2ps(self) -> np.ndarray:
+    def noise_psd_m2ps(self) -> FloatArray:
         """The short-term noise as white noise at horizons beyond tau_n: 2 sigma_n^2 tau_n."""
         return 2.0 * self.noise_sigma_mps**2 * self.noise_tau_s
 
@@ -146,7 +148,9 @@ def hyperparameter_grid(fix_sigma_m: float = 10.0) -> Hyperparameters:
 SENSITIVITY_WINDOW_S = 900.0
 
 
-def _smooth_velocity(time_s, vn, ve, window_s: float = SENSITIVITY_WINDOW_S):
+def _smooth_velocity(
+    time_s: ArrayLike, vn: FloatArray, ve: FloatArray, window_s: float = SENSITIVITY_WINDOW_S
+) -> tuple[FloatArray, FloatArray]:
     """The water velocity averaged over ``window_s`` (centred, in time).
 
     The sensitivities must not carry the log's and compass's own noise: J_s = v_w with the
@@ -171,12 +175,12 @@ def _smooth_velocity(time_s, vn, ve, window_s: float = SENSITIVITY_WINDOW_S):
     return out[0], out[1]
 
 
-def _sensitivity_steps(t, vn, ve, dt):
+def _sensitivity_steps(t: FloatArray, vn: FloatArray, ve: FloatArray, dt: FloatArray) -> FloatArray:
     """(n-1, 2, 2): J dt over each step, J from the smoothed water velocity held over it."""
     return sensitivities(*_smooth_velocity(t, vn, ve))[:-1] * dt[:, None, None]
 
 
-def sensitivities(vn_w_mps, ve_w_mps):
+def sensitivities(vn_w_mps: ArrayLike, ve_w_mps: ArrayLike) -> FloatArray:
     """(n, 2, 2): d v / d[eps, s] per sample, columns J_eps = (-v_E, v_N), J_s = (v_N, v_E)."""
     vn = np.asarray(vn_w_mps, float)
     ve = np.asarray(ve_w_mps, float)
@@ -187,19 +191,19 @@ def sensitivities(vn_w_mps, ve_w_mps):
 class FilterHistory:
     """The filter at its steps (after each update), mixed over the grid: for the current plot."""
 
-    time_s: np.ndarray  #: (K,)
-    current_ne_mps: np.ndarray  #: (K, 2): cbar + c
-    current_sigma_mps: np.ndarray  #: (K,): sqrt of half the trace of its covariance
-    heading_error_rad: np.ndarray  #: (K,) eps: add to the DR course
-    scale_error: np.ndarray  #: (K,) s: V_true = (1 + s) V_log
-    updated: np.ndarray  #: (K,) bool: a fix was used at this step
+    time_s: FloatArray  #: (K,)
+    current_ne_mps: FloatArray  #: (K, 2): cbar + c
+    current_sigma_mps: FloatArray  #: (K,): sqrt of half the trace of its covariance
+    heading_error_rad: FloatArray  #: (K,) eps: add to the DR course
+    scale_error: FloatArray  #: (K,) s: V_true = (1 + s) V_log
+    updated: BoolArray  #: (K,) bool: a fix was used at this step
     #: (K,) the fix's innovation against the DR with its covariance, chi^2_2 for the most
     #: favourable grid model (NaN where no fix or while re-anchoring); a fix above
     #: OUTLIER_NIS is an outlier, left out
-    nis: np.ndarray | None = None
+    nis: FloatArray | None = None
     #: (K,) the smallest innovation (m, along the worst axis) the outlier gate can see:
     #: sqrt(OUTLIER_NIS * largest eigenvalue of S) of the most favourable model
-    gate_m: np.ndarray | None = None
+    gate_m: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -211,26 +215,30 @@ class LearnedModel:
     hyper: Hyperparameters
     prior: ErrorPrior
     step_s: float
-    start_s: np.ndarray  #: (L,) leg start times
-    weights: np.ndarray  #: (L, M) grid weights at each start
-    x: np.ndarray  #: (L, M, 10) posterior mean at each start
-    P: np.ndarray  #: (L, M, 10, 10) posterior covariance at each start
-    learned_s: np.ndarray  #: (L,) span of reference data the start's posterior has seen
-    n_updates: np.ndarray  #: (L,) fixes used before each start
-    final_weights: np.ndarray  #: (M,)
-    final_x: np.ndarray  #: (M, 10)
-    final_P: np.ndarray  #: (M, 10, 10)
+    start_s: FloatArray  #: (L,) leg start times
+    weights: FloatArray  #: (L, M) grid weights at each start
+    x: FloatArray  #: (L, M, 10) posterior mean at each start
+    P: FloatArray  #: (L, M, 10, 10) posterior covariance at each start
+    learned_s: FloatArray  #: (L,) span of reference data the start's posterior has seen
+    n_updates: IntArray  #: (L,) fixes used before each start
+    final_weights: FloatArray  #: (M,)
+    final_x: FloatArray  #: (M, 10)
+    final_P: FloatArray  #: (M, 10, 10)
     n_outliers: int  #: fixes left out as outliers
     history: FilterHistory
 
 
-def _weights(loglik):
+def _weights(loglik: FloatArray) -> FloatArray:
     """Grid weights from cumulative log-likelihoods (..., M), uniform prior over the grid."""
     w = np.exp(loglik - loglik.max(axis=-1, keepdims=True))
-    return w / w.sum(axis=-1, keepdims=True)
+    return cast(FloatArray, w / w.sum(axis=-1, keepdims=True))  # np.exp is typed Any
 
 
-def _step_matrices(d: float, hp: Hyperparameters):
+#: F entries ((f_pc, phi) of the current and of the noise) and Q over one step
+_StepMatrices = tuple[list[tuple[FloatArray, FloatArray]], FloatArray]
+
+
+def _step_matrices(d: float, hp: Hyperparameters) -> _StepMatrices:
     """F entries and Q (M, 11, 11) over a step d for the two Gauss-Markov processes."""
     M = hp.size
     Q = np.zeros((M, N_STATE, N_STATE))
@@ -250,14 +258,14 @@ def _step_matrices(d: float, hp: Hyperparameters):
 
 
 def learn_error_model(
-    time_s,
-    vn_w_mps,
-    ve_w_mps,
-    step_ok,
-    ref_time_s,
-    ref_lat_rad,
-    ref_lon_rad,
-    leg_start_s,
+    time_s: ArrayLike,
+    vn_w_mps: ArrayLike,
+    ve_w_mps: ArrayLike,
+    step_ok: ArrayLike,
+    ref_time_s: ArrayLike,
+    ref_lat_rad: ArrayLike,
+    ref_lon_rad: ArrayLike,
+    leg_start_s: ArrayLike,
     prior: ErrorPrior,
     *,
     hyper: Hyperparameters | None = None,
@@ -325,7 +333,7 @@ def learn_error_model(
     start_idx = np.searchsorted(tf, starts)
     want = np.zeros(tf.size, bool)
     want[start_idx[start_idx < tf.size]] = True
-    snaps: dict[int, tuple] = {}
+    snaps: dict[int, tuple[NDArray[Any], FloatArray, FloatArray, FloatArray, float, int]] = {}
     first_ref_t = math.nan
     n_upd = 0
     n_out = 0
@@ -346,10 +354,10 @@ def learn_error_model(
     turn = np.where(np.hypot(dW[:, 0], dW[:, 1]) > 1.0, turn, 0.0)
     rho_turn = np.exp(-turn / TURN_DECORRELATION_RAD)
     broke = bad_before[kf[1:]] > bad_before[kf[:-1]]
-    cache: dict[float, tuple] = {}
+    cache: dict[float, _StepMatrices] = {}
     eye2 = np.eye(2)
 
-    def new_F():
+    def new_F() -> FloatArray:
         F = np.zeros((active.size, N_STATE, N_STATE))
         F[:, range(N_STATE), range(N_STATE)] = 1.0
         return F
@@ -470,12 +478,12 @@ def learn_error_model(
     )
 
 
-def _prefix_sum(a):
+def _prefix_sum(a: NDArray[Any]) -> FloatArray:
     """Cumulative sums along axis 0 with a leading zero: sums over [i, k) are S[k] - S[i]."""
     return np.concatenate([np.zeros((1,) + a.shape[1:]), np.cumsum(a, axis=0)])
 
 
-def _significant(w, mass: float = 1.0 - 1e-4):
+def _significant(w: FloatArray, mass: float = 1.0 - 1e-4) -> NDArray[np.intp]:
     """Indices of the largest weights that together hold ``mass`` of the total."""
     order = np.argsort(w)[::-1]
     n = int(np.searchsorted(np.cumsum(w[order]), mass * w.sum())) + 1
@@ -486,13 +494,15 @@ def _significant(w, mass: float = 1.0 - 1e-4):
 class LegForecast:
     """The EP's correction to the water track and its covariance, per DR sample."""
 
-    offset_ne_m: np.ndarray  #: (n, 2) mu: add to the water track
-    P_m2: np.ndarray  #: (n, 2, 2) covariance of the EP error, metres north/east
-    inflation: np.ndarray  #: (L, 3) the factor on each leg's covariance, in thirds of its horizon
+    offset_ne_m: FloatArray  #: (n, 2) mu: add to the water track
+    P_m2: FloatArray  #: (n, 2, 2) covariance of the EP error, metres north/east
+    inflation: FloatArray  #: (L, 3) the factor on each leg's covariance, in thirds of its horizon
     leg_nees: (
-        np.ndarray
-    )  #: (L, 3) mean NEES/2 of each leg against the reference, per third (raw model)
-    components_m2: dict  #: name -> (n,) trace contribution (fix, current, current change, heading, log scale, noise)
+        FloatArray  #: (L, 3) mean NEES/2 of each leg against the reference, per third (raw model)
+    )
+    components_m2: dict[
+        str, FloatArray
+    ]  #: name -> (n,) trace contribution (fix, current, current change, heading, log scale, noise)
 
 
 #: covariance matching over earlier legs: prior weight (in legs) of an inflation of 1, the
@@ -510,13 +520,14 @@ def _horizon_span(model: LearnedModel) -> float:
     return float(np.median(np.diff(starts))) if starts.size > 1 else 3600.0
 
 
-def _horizon_bin(h, model: LearnedModel):
-    return np.clip(
+def _horizon_bin(h: FloatArray, model: LearnedModel) -> NDArray[np.int_]:
+    bins: NDArray[np.int_] = np.clip(
         (np.asarray(h) / _horizon_span(model) * INFLATION_BINS).astype(int), 0, INFLATION_BINS - 1
     )
+    return bins
 
 
-def _inflation_at(h, factors, model: LearnedModel):
+def _inflation_at(h: FloatArray, factors: FloatArray, model: LearnedModel) -> FloatArray:
     """The factor at horizons h: linear between the parts' centres, constant beyond."""
     span = _horizon_span(model)
     centres = (np.arange(INFLATION_BINS) + 0.5) * span / INFLATION_BINS
@@ -524,13 +535,13 @@ def _inflation_at(h, factors, model: LearnedModel):
 
 
 def forecast_legs(
-    time_s,
-    vn_w_mps,
-    ve_w_mps,
-    leg_of,
+    time_s: ArrayLike,
+    vn_w_mps: ArrayLike,
+    ve_w_mps: ArrayLike,
+    leg_of: ArrayLike,
     model: LearnedModel,
     *,
-    ref_offset_ne_m=None,
+    ref_offset_ne_m: ArrayLike | None = None,
     horizon_step_s: float = 60.0,
 ) -> LegForecast:
     """The EP correction and covariance at every sample of every leg (see module docstring).
@@ -669,8 +680,8 @@ def forecast_legs(
             off[sel, j] = np.interp(ts, th, mu_mix[:, j])
             for k in range(2):
                 Pout[sel, j, k] = np.interp(ts, th, S_mix[:, j, k])
-        for k, v in contrib.items():
-            comp[k][sel] = np.interp(ts, th, v * lam)
+        for name, v in contrib.items():
+            comp[name][sel] = np.interp(ts, th, v * lam)
     return LegForecast(
         offset_ne_m=off, P_m2=Pout, components_m2=comp, inflation=inflation, leg_nees=leg_nees
     )
@@ -699,25 +710,25 @@ class EstimatedPosition:
     water: DRTrack  #: the water track (no current, no corrections), as dead_reckon gave it
     model: LearnedModel
     forecast: LegForecast
-    learned_leg: np.ndarray  #: (L,) bool: the leg's model was learned from earlier fixes
+    learned_leg: BoolArray  #: (L,) bool: the leg's model was learned from earlier fixes
     reference_sigma_m: float  #: the fixes' noise per axis, as learned over the whole voyage
 
 
-def step_ok_of(track: DRTrack) -> np.ndarray:
+def step_ok_of(track: DRTrack) -> BoolArray:
     """(n-1,) steps along which the water track runs continuously (resets included, breaks not)."""
     leg = track.leg
     on = (leg[:-1] >= 0) & (leg[1:] >= 0)
     new_leg = leg[1:] != leg[:-1]
     reasons = np.asarray(track.leg_start_reason + ("",), dtype=object)
     after_gap = new_leg & (reasons[np.where(leg[1:] >= 0, leg[1:], -1)] == "after-gap")
-    return on & ~after_gap
+    return cast(BoolArray, on & ~after_gap)  # == on an object array is typed Any
 
 
 def estimate_position(
     track: DRTrack,
-    ref_time_s,
-    ref_lat_rad,
-    ref_lon_rad,
+    ref_time_s: ArrayLike,
+    ref_lat_rad: ArrayLike,
+    ref_lon_rad: ArrayLike,
     prior: ErrorPrior,
     *,
     ref_max_gap_s: float = 5.0,

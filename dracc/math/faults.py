@@ -38,12 +38,15 @@ nautical miles appear only in the messages and the ``values`` shown to a reader.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, fields, replace
+from typing import Any, cast
 
 import numpy as np
 import pandas as pd
+from numpy.typing import NDArray
 
+from dracc.core.arrays import BoolArray, FloatArray, IntArray
 from dracc.core.config import FaultsConfig
 from dracc.core.errors import ConfigError
 from dracc.core.geodesy import angdiff, circmean, distance_m, offset_ne_m
@@ -81,7 +84,7 @@ class SensorFault:
     def duration_s(self) -> float:
         return (self.end_ns - self.start_ns) / NS_PER_S
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """JSON form (times as ISO 8601 UTC and as integer nanoseconds)."""
         return {
             "source": self.source,
@@ -116,14 +119,14 @@ def check_config(cfg: FaultsConfig) -> FaultsConfig:
 # ---------------------------------------------------------------------- helpers
 
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+def _runs(mask: NDArray[Any]) -> list[tuple[int, int]]:
     """[start, stop) index pairs of the runs of True in ``mask``."""
     m = np.concatenate(([False], np.asarray(mask, dtype=bool), [False]))
     edges = np.flatnonzero(m[1:] != m[:-1])
     return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
 
 
-def _equal_runs(*cols: np.ndarray) -> list[tuple[int, int]]:
+def _equal_runs(*cols: NDArray[Any]) -> list[tuple[int, int]]:
     """[start, stop) of the runs of consecutive rows where every column repeats exactly."""
     same = np.ones(len(cols[0]) - 1, dtype=bool) if len(cols[0]) > 1 else np.zeros(0, bool)
     for c in cols:
@@ -133,7 +136,7 @@ def _equal_runs(*cols: np.ndarray) -> list[tuple[int, int]]:
 
 
 def _long_equal_runs(
-    t: np.ndarray, min_records: int, min_s: float, *cols: np.ndarray
+    t: IntArray, min_records: int, min_s: float, *cols: NDArray[Any]
 ) -> list[tuple[int, int]]:
     """The runs of :func:`_equal_runs` with at least ``min_records`` rows spanning at
     least ``min_s`` seconds, filtered with numpy (a 1 Hz receiver giving GGA and RMC
@@ -148,7 +151,7 @@ def _long_equal_runs(
     return list(zip(a[keep].tolist(), b[keep].tolist(), strict=True))
 
 
-def _by_source(df: pd.DataFrame):
+def _by_source(df: pd.DataFrame | None) -> Iterator[tuple[str, pd.DataFrame]]:
     """(source key, its rows sorted by time) for each source, sorted by key.
 
     The rows carry the numeric columns only (the checks read nothing else): taking the
@@ -222,7 +225,7 @@ def _other_turn_rad(
 
 
 def _fmt_t(t_ns: int) -> str:
-    return pd.Timestamp(int(t_ns), unit="ns", tz="UTC").strftime("%Y-%m-%d %H:%M:%S")
+    return cast(str, pd.Timestamp(int(t_ns), unit="ns", tz="UTC").strftime("%Y-%m-%d %H:%M:%S"))
 
 
 def _span(a_ns: int, b_ns: int) -> str:
@@ -232,7 +235,9 @@ def _span(a_ns: int, b_ns: int) -> str:
 # ---------------------------------------------------------------------- detectors
 
 
-def _jumps(key, role, g, cfg: FaultsConfig, catch_up_from_ns: set[int]) -> list[SensorFault]:
+def _jumps(
+    key: str, role: str | None, g: pd.DataFrame, cfg: FaultsConfig, catch_up_from_ns: set[int]
+) -> list[SensorFault]:
     la, lo = g["lat_rad"].to_numpy(float), g["lon_rad"].to_numpy(float)
     with np.errstate(invalid="ignore"):  # out-of-range positions are their own fault
         ok = (np.abs(la) <= math.pi / 2) & (np.abs(lo) <= math.pi) & (g["quality"].to_numpy() != 0)
@@ -266,7 +271,8 @@ def _jumps(key, role, g, cfg: FaultsConfig, catch_up_from_ns: set[int]) -> list[
             ret_n, ret_e = offset_ne_m(lat[nxt + 1], lon[nxt + 1], lat[nxt], lon[nxt])
             back = bool(math.hypot(out_n + ret_n, out_e + ret_e) < d_m[i] / 2)
         tail = (
-            f"back at {_fmt_t(t[nxt + 1])} UTC after {b - a + 1} record(s)"
+            # back is True only when nxt is an index
+            f"back at {_fmt_t(t[nxt + 1])} UTC after {b - a + 1} record(s)"  # type: ignore[operator]
             if back
             else (
                 f"jumped again at {_fmt_t(t[nxt + 1])} UTC"
@@ -305,7 +311,13 @@ def _jumps(key, role, g, cfg: FaultsConfig, catch_up_from_ns: set[int]) -> list[
     return out
 
 
-def _frozen(key, role, g, frames, cfg: FaultsConfig) -> list[SensorFault]:
+def _frozen(
+    key: str,
+    role: str | None,
+    g: pd.DataFrame,
+    frames: Mapping[str, pd.DataFrame],
+    cfg: FaultsConfig,
+) -> list[SensorFault]:
     ok = np.isfinite(g["lat_rad"].to_numpy(float)) & np.isfinite(g["lon_rad"].to_numpy(float))
     g = g[ok]
     if len(g) < cfg.min_records:
@@ -353,7 +365,13 @@ def _frozen(key, role, g, frames, cfg: FaultsConfig) -> list[SensorFault]:
     return out
 
 
-def _stuck(key, role, g, frames, cfg: FaultsConfig) -> list[SensorFault]:
+def _stuck(
+    key: str,
+    role: str | None,
+    g: pd.DataFrame,
+    frames: Mapping[str, pd.DataFrame],
+    cfg: FaultsConfig,
+) -> list[SensorFault]:
     h = g["heading_rad"].to_numpy(float)
     g = g[np.isfinite(h)]
     if len(g) < cfg.min_records:
@@ -406,12 +424,16 @@ def _stuck(key, role, g, frames, cfg: FaultsConfig) -> list[SensorFault]:
     return out
 
 
-def _limits(cfg: FaultsConfig) -> dict[str, list[tuple[str, float, str, object]]]:
+#: a predicate of bad values: True where a reading is out of range
+_BadValue = Callable[[FloatArray], BoolArray]
+
+
+def _limits(cfg: FaultsConfig) -> dict[str, list[tuple[str, float, str, _BadValue]]]:
     """frame -> [(column, scale to the shown unit, shown name, predicate of a bad value)]."""
     vmax = cfg.max_speed_kn * KN_MPS
     rot_max = cfg.max_rot_deg_per_min * DEG_RAD / 60.0
 
-    def speed(v):
+    def speed(v: FloatArray) -> BoolArray:
         return np.abs(v) > vmax
 
     return {
@@ -438,7 +460,7 @@ def _out_of_range(
     frames: Mapping[str, pd.DataFrame],
     roles: Mapping[str, str | None],
     cfg: FaultsConfig,
-    split: dict | None = None,
+    split: dict[str, list[tuple[str, pd.DataFrame]]] | None = None,
 ) -> list[SensorFault]:
     """``split``: kind -> [(source, rows)] already made by the caller (else made here)."""
     out = []
@@ -490,6 +512,7 @@ def detect_faults(
     defaults to :class:`FaultsConfig` (); invalid thresholds raise ConfigError.
     """
     cfg = check_config(cfg or FaultsConfig())
+    frames: Mapping[str, pd.DataFrame]
     if isinstance(voyage_or_frames, Voyage):
         frames = voyage_or_frames.frames
         roles = {k: s.role for k, s in voyage_or_frames.sources.items()}
