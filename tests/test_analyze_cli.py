@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from dracc.cli.analyze_cmd import parse_roles
+from dracc.cli.options import parse_roles
 from dracc.core.durations import parse_duration_s
 from dracc.core.errors import ConfigError, ExitCode
 from dracc.report.json_report import load_schema

@@ -62,7 +62,7 @@ def test_help(run_cli):
 
 
 def test_json_report(run_cli, tmp_path):
-    code, out, err = run_cli("inspect", _log(tmp_path), "--json")
+    code, out, err = run_cli("inspect", _log(tmp_path), "--json", "-")
     assert code == 0, err
     rep = json.loads(out)
     assert rep["lines"] == 601
@@ -95,6 +95,15 @@ def test_json_report(run_cli, tmp_path):
     } <= set(rep["time"])
 
 
+def test_json_to_a_file_beside_the_tables(run_cli, tmp_path):
+    """``--json PATH`` as in every command: the JSON to PATH, the tables still on stdout."""
+    code, out, err = run_cli("inspect", _log(tmp_path), "--json", tmp_path / "i.json")
+    assert code == 0, err
+    assert "time base" in out and f"wrote {tmp_path / 'i.json'}" in err
+    code, same, _ = run_cli("inspect", _log(tmp_path), "--json", "-")
+    assert json.loads((tmp_path / "i.json").read_text(encoding="utf-8")) == json.loads(same)
+
+
 def test_table_output(run_cli, tmp_path):
     code, out, _ = run_cli("inspect", _log(tmp_path))
     assert (
@@ -112,11 +121,11 @@ def test_strict_and_missing_and_bad_date(run_cli, tmp_path):
 
 
 def test_date_option_places_a_dateless_log(run_cli, tmp_path, real_dir):
-    code, out, _ = run_cli("inspect", real_dir / "gpsbabel" / "adddate.nmea", "--json")
+    code, out, _ = run_cli("inspect", real_dir / "gpsbabel" / "adddate.nmea", "--json", "-")
     rep = json.loads(out)
     assert code == 0 and rep["sources"] == {} and rep["rejected"] == {"no_date": 500}
     code, out, _ = run_cli(
-        "inspect", real_dir / "gpsbabel" / "adddate.nmea", "--json", "--date", "2019-03-09"
+        "inspect", real_dir / "gpsbabel" / "adddate.nmea", "--json", "-", "--date", "2019-03-09"
     )
     rep = json.loads(out)
     assert rep["sources"]["GP"]["first_utc"] == "2019-03-09T23:56:00Z"
@@ -127,7 +136,7 @@ def test_date_option_places_a_dateless_log(run_cli, tmp_path, real_dir):
 
 def test_ignore_checksum(run_cli, real_dir):
     f = real_dir / "anemomind/Irene/2013/Flensburg2013/entrainement_31.7/NMEA0023.TXT"
-    code, out, _ = run_cli("inspect", f, "--json", "--ignore-checksum")
+    code, out, _ = run_cli("inspect", f, "--json", "-", "--ignore-checksum")
     rep = json.loads(out)
     assert code == 0 and rep["sources"]["II"]["role"] == "compass+log"
     assert any("wrong checksums accepted" in n for n in rep["notes"])

@@ -413,6 +413,25 @@ def test_cli_help_legs_and_noiseless(tmp_path, capsys):
     assert first == b"$HEHDT,10.000,T*" + b"%02X" % xor(b"HEHDT,10.000,T")
 
 
+def test_cli_help_lists_every_log_format():
+    """The --format help names every format the writer knows, though the CLI spells them
+    out itself: importing :mod:`dracc.sim` (scipy) would slow every command's start."""
+    import subprocess
+    import sys
+
+    import typer.main
+
+    from dracc.cli import simulate_cmd  # noqa: F401
+    from dracc.cli.app import app
+    from dracc.sim.output import FORMATS
+
+    command = typer.main.get_command(app).commands["simulate"]
+    fmt = next(p for p in command.params if p.name == "fmt")
+    assert fmt.help == "Log format: " + ", ".join(FORMATS) + "."
+    code = "import sys, dracc.cli.simulate_cmd; assert 'dracc.sim' not in sys.modules"
+    assert subprocess.run([sys.executable, "-c", code], timeout=120).returncode == 0
+
+
 def test_cli_segments_write_one_continuous_log(tmp_path):
     one, seg = tmp_path / "one", tmp_path / "seg"
     args = ("simulate", "--hours", "0.1", "--compass-hz", "1", "--form", "prefix", "--seed", "4")

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import os
 import signal
 import sys
 import traceback
 
 try:  # Ctrl-C while the libraries load (seconds on a busy machine): one line, no traceback
-    from dracc.cli.app import QUICK_EXIT, VERBOSE, app, err
+    from dracc.cli import quick_exit, raise_interrupt
+    from dracc.cli.app import ABORT, CLICK_ERROR, EXIT, QUICK_EXIT, VERBOSE, app, err
     from dracc.core.errors import DraccError, ExitCode
 
     # Commands register themselves on ``app`` when imported.
@@ -23,62 +23,18 @@ except KeyboardInterrupt:
     sys.exit(130)
 
 
-def _click_exceptions():
-    """The Exit/Abort/ClickException classes the CLI layer may raise: typer's own (typer >=
-    0.20 vendors click and no longer installs it) and, for older typer, click's."""
-    import typer
-
-    exits, aborts, errors = [typer.Exit], [typer.Abort], []
-    try:
-        import typer._click.exceptions as vendored
-
-        errors.append(vendored.ClickException)
-    except ImportError:
-        pass
-    try:
-        import click.exceptions  # typer < 0.20 runs on click itself
-
-        exits.append(click.exceptions.Exit)
-        aborts.append(click.exceptions.Abort)
-        errors.append(click.exceptions.ClickException)
-    except ImportError:
-        pass
-    return tuple(exits), tuple(aborts), tuple(errors)
-
-
-_EXIT, _ABORT, _CLICK_ERROR = _click_exceptions()
-
-
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; return (and exit with) a documented :class:`ExitCode`."""
     args = sys.argv[1:] if argv is None else list(argv)
     VERBOSE["on"] = "--verbose" in args or "-v" in args
     if argv is None:  # the real process: a kill (SIGTERM) unwinds like Ctrl-C, nothing partial
-        signal.signal(signal.SIGTERM, _terminate)
+        signal.signal(signal.SIGTERM, raise_interrupt)
     code = _run(args)
     if argv is None:
         if QUICK_EXIT["on"] and code == ExitCode.OK:
-            _quick_exit(code)
+            quick_exit(code)
         sys.exit(int(code))
     return int(code)
-
-
-def _quick_exit(code: int) -> None:
-    """End the process now.  The command has written, closed and renamed everything; what
-    normal interpreter shutdown would add is freeing the frames of a voyage object by
-    object and running exit hooks with nothing left to do: 0.1-0.3 s after a day's log
-    (benchmarks/bench_analyze.py).  Only the standard streams need flushing."""
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):  # a closed pipe or stream: nothing more can be said
-            pass
-    os._exit(int(code))
-
-
-def _terminate(signum, frame) -> None:
-    """SIGTERM handler: raise KeyboardInterrupt so atomic writes and transactions roll back."""
-    raise KeyboardInterrupt(f"signal {signum}")
 
 
 def _run(args: list[str]) -> int:
@@ -87,19 +43,19 @@ def _run(args: list[str]) -> int:
         if result == ExitCode.INTERRUPTED:  # typer turns KeyboardInterrupt into a silent 130
             raise KeyboardInterrupt
         return int(result) if isinstance(result, int) else ExitCode.OK
-    except _EXIT as e:
-        return e.exit_code
-    except _ABORT:
+    except EXIT as e:
+        return int(e.exit_code)
+    except ABORT:
         err.print("error: interrupted", style="red", highlight=False)
         return ExitCode.INTERRUPTED
-    except _CLICK_ERROR as e:
+    except CLICK_ERROR as e:
         e.show()
         return ExitCode.USAGE
     except DraccError as e:
         if VERBOSE["on"]:
             traceback.print_exc()
         err.print(f"error: {e}", style="red", highlight=False, markup=False)
-        return e.exit_code
+        return int(e.exit_code)
     except KeyboardInterrupt:
         err.print("error: interrupted; nothing partial was written", style="red", highlight=False)
         return ExitCode.INTERRUPTED

@@ -1,11 +1,30 @@
-"""Option types every command shares, so that an option means one thing everywhere."""
+"""Option types and checks every command shares, so that an option means one thing everywhere.
+
+A value given on the command line that dracc cannot use is a usage error (exit 2, README
+"Exit codes"): typer's own checks, the checks below (OptionError), or the validation of the
+configuration the options were merged into (a ConfigError, see :func:`option_values`).
+"""
 
 from __future__ import annotations
 
-from pathlib import Path
-from typing import Annotated
+import datetime as dt
+import functools
+import re
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
+from pathlib import Path, PurePath
+from typing import Annotated, Any
 
 import typer
+
+from dracc.core.errors import ConfigError, OptionError
+from dracc.core.vocabulary import ROLES
+
+_LOGS_HELP = "Log files (NMEA text, CSV or MCAP); several files of one voyage merge by time."
+_CONFIG_HELP = "TOML configuration file (see README)."
+
+LogFiles = Annotated[list[Path], typer.Argument(help=_LOGS_HELP)]
+ConfigFile = Annotated[Path | None, typer.Option("--config", "-c", help=_CONFIG_HELP)]
 
 #: ``--json PATH``: the command's JSON document to PATH (atomic), or ``-`` for stdout
 #: (written by :func:`dracc.report.output.emit_json`).
@@ -23,3 +42,99 @@ HtmlOut = Annotated[
     Path | None,
     typer.Option("--html", metavar="PATH", help="Write one self-contained offline HTML page."),
 ]
+
+#: ``--role KEY=ROLE`` (repeatable), read by :func:`parse_roles`
+Roles = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--role",
+        help="Map a source to a role, KEY=ROLE (repeatable), "
+        "e.g. --role INS2=ins2 --role II=compass.",
+    ),
+]
+Strict = Annotated[bool, typer.Option("--strict", help="Fail on the first rejected line.")]
+IgnoreChecksum = Annotated[
+    bool,
+    typer.Option("--ignore-checksum", help="Accept lines with wrong checksums (still counted)."),
+]
+LogDate = Annotated[
+    str | None, typer.Option("--date", help="UTC date YYYY-MM-DD for logs that carry none.")
+]
+
+#: the same two as defaults, for commands that declare ``config: Path | None = ConfigOption``
+ConfigOption = typer.Option(None, "--config", "-c", exists=False, help=_CONFIG_HELP)
+LogsArgument = typer.Argument(..., help=_LOGS_HELP)
+
+
+@contextmanager
+def option_values() -> Iterator[None]:
+    """Read the command-line option values inside this block: a :class:`ConfigError`
+    raised here names a bad option value and becomes an :class:`OptionError` (exit 2).
+    Load the configuration file before the block (its errors stay exit 4)."""
+    try:
+        yield
+    except ConfigError as e:
+        raise OptionError(str(e)) from e
+
+
+def options_only(command: Callable[..., Any]) -> Callable[..., Any]:
+    """Decorator for a command that reads no configuration file (``simulate``): every
+    :class:`ConfigError` it raises comes from its options, a usage error (exit 2)."""
+
+    @functools.wraps(command)
+    def run(*args: Any, **kwargs: Any) -> Any:
+        with option_values():
+            return command(*args, **kwargs)
+
+    return run
+
+
+def parse_roles(items: list[str]) -> dict[str, str]:
+    """['INS2=ins2', 'II=compass'] -> {'INS2': 'ins2', 'II': 'compass'}."""
+    roles: dict[str, str] = {}
+    for item in items:
+        key, sep, role = item.partition("=")
+        key, role = key.strip(), role.strip().lower()
+        if not sep or not key:
+            raise ConfigError(f"--role {item!r}: expected KEY=ROLE, e.g. --role INS2=ins2")
+        if role not in ROLES:
+            raise ConfigError(f"--role {item!r}: role must be one of {', '.join(ROLES)}")
+        roles[key] = role
+    return roles
+
+
+def check_choice(
+    value: str | None, known: Iterable[str], option: str, none_known: str = "nothing to choose from"
+) -> str | None:
+    """``value`` if it is one of ``known`` (or None); else an OptionError listing them
+    (``none_known`` says why the list is empty)."""
+    known = list(known)
+    if value is None or value in known:
+        return value
+    if not known:
+        raise OptionError(f"{option} {value!r}: {none_known}")
+    raise OptionError(f"{option} {value!r}: expected one of {', '.join(known)}")
+
+
+def check_date(value: str | None, option: str = "--date") -> str | None:
+    """A calendar date ``YYYY-MM-DD`` (or None); else an OptionError."""
+    if value is None:
+        return None
+    try:
+        if not re.fullmatch(r"\d{4}-\d{2}-\d{2}", value.strip()):
+            raise ValueError
+        return dt.date.fromisoformat(value.strip()).isoformat()
+    except ValueError:
+        raise OptionError(f"{option} {value!r}: expected a date YYYY-MM-DD") from None
+
+
+def check_pattern(value: str | None, option: str = "--pattern") -> str | None:
+    """A relative glob for the files inside a folder (``*.nmea``, ``**/*.nmea``) or None."""
+    if value is None:
+        return None
+    if not value.strip() or PurePath(value).is_absolute() or PurePath(value).drive:
+        raise OptionError(
+            f"{option} {value!r}: expected a glob relative to the folder, "
+            "e.g. '*.nmea' or '**/*.nmea'"
+        )
+    return value

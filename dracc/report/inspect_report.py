@@ -1,0 +1,93 @@
+"""``dracc inspect`` on the terminal: the inspection report (:mod:`dracc.ingest.inspect`)
+as a sources table, a table of the lines not used, and the time-base decisions."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+from rich.table import Table
+from rich.text import Text
+
+from dracc.core.safetext import printable
+
+
+def render_inspection(rep: dict[str, Any], out: Console) -> None:
+    """The report of :func:`dracc.ingest.inspect.inspect_logs` as rich tables on ``out``.  Every text from the log (source keys, talkers, sentence
+    types, file names, rejected lines, notes) is shown as Text, never markup, with its
+    control characters escaped (:func:`dracc.core.safetext.printable`): a source key
+    holding ESC sequences cannot command the terminal."""
+
+    def cell(x: object) -> Text:
+        return Text(printable(x))
+
+    t = Table(title=f"sources ({rep['lines']} lines read)")
+    for c in (
+        "source",
+        "role",
+        "talkers",
+        "sentences",
+        "records",
+        "rate Hz",
+        "first UTC",
+        "last UTC",
+        "gaps",
+        "max gap s",
+        "dup",
+        "back",
+    ):
+        t.add_column(
+            c,
+            justify="right"
+            if c in ("records", "rate Hz", "gaps", "max gap s", "dup", "back")
+            else "left",
+        )
+    for key, s in rep["sources"].items():
+        t.add_row(
+            *(
+                cell(x)
+                for x in (
+                    key,
+                    s["role"] or "-",
+                    " ".join(s["talkers"]) or "-",
+                    " ".join(f"{k}:{v}" for k, v in s["sentences"].items()),
+                    str(s["records"]),
+                    f"{s['rate_hz']:.2f}" if s["rate_hz"] else "-",
+                    s["first_utc"] or "-",
+                    s["last_utc"] or "-",
+                    str(s["gaps"]),
+                    f"{s['max_gap_s']:.1f}",
+                    str(s["duplicates"]),
+                    str(s["backsteps"]),
+                )
+            )
+        )
+    out.print(t)
+    if rep["rejected"]:
+        r = Table(title="lines not used, by reason")
+        for c in ("reason", "count", "first examples (file:line text)"):
+            r.add_column(c)
+        for reason, n in rep["rejected"].items():
+            ex = rep["rejected_examples"].get(reason, [])[:2]
+            # one example per line: the escapes keep a line's own CR/LF from breaking it up
+            r.add_row(
+                cell(reason),
+                cell(str(n)),
+                Text(
+                    "\n".join(
+                        printable(f"{Path(e['file']).name}:{e['line']} {e['text'][:70]}")
+                        for e in ex
+                    )
+                ),
+            )
+        out.print(r)
+    tm = rep["time"]
+    out.print(
+        f"time base: {tm['duplicates']} duplicates, {tm['backsteps']} back-steps, {tm['gaps']} gaps, "
+        f"{tm['rollovers']} midnight rollovers, {tm['implausible_dates']} implausible dates",
+        highlight=False,
+        markup=False,
+    )
+    for d in tm["decisions"] + rep["notes"] + rep["roles"]:
+        out.print(cell(f"  - {d}"), highlight=False)
