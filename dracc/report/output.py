@@ -14,17 +14,20 @@ from dracc.core import atomic
 STDOUT = "-"
 
 
-def json_text(doc: Any, indent: int | None = 1) -> str:
-    """Strict JSON text (no NaN literals; callers give JSON types, see core.numbers.jsonable)."""
-    return json.dumps(doc, indent=indent, allow_nan=False, ensure_ascii=False) + "\n"
+def json_text(doc: Any, indent: int | None = 1, ascii_only: bool = False) -> str:
+    """Strict JSON text (no NaN literals; callers give JSON types, see core.numbers.jsonable).
+
+    ``ascii_only`` escapes every non-ASCII character (``\\u0085``): what goes to a terminal
+    then holds no C1 control character a log's text could smuggle in."""
+    return json.dumps(doc, indent=indent, allow_nan=False, ensure_ascii=ascii_only) + "\n"
 
 
 def emit_json(doc: Any, target: str | Path) -> str | None:
-    """Write ``doc`` to ``target`` ('-' for stdout); returns the path written, None for stdout."""
-    text = json_text(doc)
+    """Write ``doc`` to ``target`` ('-' for stdout, ASCII-escaped); returns the path written,
+    None for stdout."""
     if str(target) == STDOUT:
-        sys.stdout.write(text)
+        sys.stdout.write(json_text(doc, ascii_only=True))
         sys.stdout.flush()
         return None
-    atomic.write_text(target, text)
+    atomic.write_text(target, json_text(doc))
     return str(target)

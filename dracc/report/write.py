@@ -12,7 +12,7 @@ from rich.console import Console
 
 from dracc.core import atomic
 from dracc.core.errors import DraccError
-from dracc.report.output import STDOUT
+from dracc.report.output import STDOUT, json_text
 
 if TYPE_CHECKING:  # the pipeline loads when the command runs, not when the CLI starts
     from dracc.pipeline.analysis import Analysis
@@ -49,7 +49,7 @@ def write_reports(
     said = []
     with writing("the reports"), atomic.together():
         if json_path == STDOUT:
-            console.file.write(json_report.dumps(result))
+            console.file.write(json_text(json_report.to_dict(result), ascii_only=True))
             console.file.flush()
         else:
             terminal.print_summary(result, console)
