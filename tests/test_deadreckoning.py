@@ -607,6 +607,81 @@ def test_true_heading_magnetic_without_variation_raises():
         true_heading_rad(np.array([0.3]), "M")
 
 
+def _variation_counts(th):
+    """(from sentence, placeholder, from config, missing): a partition of the magnetic samples."""
+    counts = (
+        th.n_variation_from_sentence,
+        th.n_variation_placeholder,
+        th.n_variation_from_config,
+        th.n_variation_missing,
+    )
+    assert sum(counts) == th.n_magnetic
+    return counts
+
+
+def test_true_heading_configured_variation_replaces_a_zero_placeholder():
+    """HDG ...,0.0,E: with variation_deg set, a 0.0 field is a placeholder and the
+    configured 4 deg is applied; a non-zero field is kept; no field is filled."""
+    th = true_heading_rad(
+        np.array([10.0, 20.0, 30.0, 40.0]) * D,
+        "M",
+        deviation_rad=np.zeros(4),
+        variation_rad=[0.0, 3.0 * D, np.nan, 0.0],
+        errors=DeadReckoningConfig(variation_deg=4.0),
+    )
+    np.testing.assert_allclose(th.heading_rad, np.array([14.0, 23.0, 34.0, 44.0]) * D, atol=1e-12)
+    assert _variation_counts(th) == (1, 2, 1, 0)
+
+
+def test_true_heading_without_configured_variation_uses_a_zero_as_sent():
+    th = true_heading_rad(
+        np.array([10.0, 20.0]) * D, "M", np.zeros(2), [0.0, 3.0 * D], errors=DeadReckoningConfig()
+    )
+    np.testing.assert_allclose(th.heading_rad, np.array([10.0, 23.0]) * D, atol=1e-12)
+    assert _variation_counts(th) == (1, 1, 0, 0)
+
+
+def test_true_heading_missing_variation_zero_takes_0_and_counts_it():
+    """No variation sent and none configured: "raise" (the default) refuses, "zero"
+    takes 0 there and says how many samples."""
+    h = np.array([10.0, 20.0, 30.0]) * D
+    var = [np.nan, 2.0 * D, 0.0]
+    with pytest.raises(InsufficientDataError, match="^1 magnetic heading samples have no"):
+        true_heading_rad(h, "M", np.zeros(3), var)
+    with pytest.raises(InsufficientDataError, match="variation_deg"):
+        true_heading_rad(h, "M", np.zeros(3), var, missing_variation="raise")
+    th = true_heading_rad(h, "M", np.zeros(3), var, missing_variation="zero")
+    np.testing.assert_allclose(th.heading_rad, np.array([10.0, 22.0, 30.0]) * D, atol=1e-12)
+    assert _variation_counts(th) == (1, 1, 0, 1)
+    # a configured variation fills the gap in either mode: nothing is missing
+    cfg = DeadReckoningConfig(variation_deg=-1.5)
+    th = true_heading_rad(h, "M", np.zeros(3), var, errors=cfg, missing_variation="zero")
+    np.testing.assert_allclose(th.heading_rad, np.array([8.5, 22.0, 28.5]) * D, atol=1e-12)
+    assert _variation_counts(th) == (1, 1, 1, 0)
+
+
+def test_true_heading_reference_per_sample_in_any_container():
+    """The reference per sample as a list, an object array with None/NaN, a pandas
+    Categorical or Series: 'M' or 'm' is magnetic, anything else (missing too) is not."""
+    pd = pytest.importorskip("pandas")
+    h = np.array([10.0, 20.0, 30.0, 40.0, 50.0]) * D
+    refs = ["M", "T", None, "m", "T"]
+    want = np.array([13.0, 20.0, 30.0, 43.0, 50.0]) * D
+    cfg = DeadReckoningConfig(variation_deg=3.0)
+    for ref in (
+        refs,
+        np.array(refs, dtype=object),
+        np.array(["M", "T", np.nan, "m", "T"], dtype=object),
+        pd.Categorical(refs),
+        pd.Series(refs, dtype="category"),
+        pd.array(refs, dtype="string"),
+    ):
+        th = true_heading_rad(h, ref, np.zeros(5), errors=cfg)
+        np.testing.assert_allclose(th.heading_rad, want, atol=1e-12)
+        assert (th.n_magnetic, th.n_variation_from_config) == (2, 2)
+    assert true_heading_rad(h, "t", errors=cfg).n_magnetic == 0
+
+
 # ---------------------------------------------------------------- properties (hypothesis)
 
 

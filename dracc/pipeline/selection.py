@@ -18,11 +18,11 @@ import pandas as pd
 
 from dracc.core.arrays import unique_sorted
 from dracc.core.config import DeadReckoningConfig
-from dracc.core.geodesy import circmean, interp_position, wrap_2pi, wrap_pi
+from dracc.core.geodesy import circmean, interp_position, wrap_pi
 from dracc.core.units import NS_PER_S
 from dracc.core.vocabulary import INS_ROLES
 from dracc.frames import Voyage
-from dracc.math.deadreckoning import true_heading_rad
+from dracc.math.deadreckoning import TrueHeading, true_heading_rad
 from dracc.math.ep import EstimatedPosition
 
 #: the DR time base: heading and speed held onto a grid of this step (seconds)
@@ -146,27 +146,26 @@ def heading_series(
             f"magnetic heading without deviation at {n_nan} of {dev.size} samples and no "
             "[dead_reckoning] deviation_table: deviation taken as 0 there"
         )
-    var, var_desc = _variation_to_apply(var, cfg, missing, notes)
-    # deviation: the sentence's, else the configured table, else 0 (true_heading_rad)
-    heading = true_heading_rad(kk, "M", dev, var, errors=cfg).heading_rad  # (B2)
-    return t, wrap_2pi(heading), desc + var_desc + ")"
+    # deviation: the sentence's, else the configured table, else 0; variation: the
+    # sentence's, a configured one over none or a 0.0 placeholder, else 0 (true_heading_rad)
+    th = true_heading_rad(kk, "M", dev, var, errors=cfg, missing_variation="zero")  # (B2)
+    return t, th.heading_rad, desc + _variation_notes(th, cfg, missing, notes) + ")"
 
 
-def _variation_to_apply(
-    var: np.ndarray, cfg: DeadReckoningConfig, missing: list[str], notes: list[str]
-) -> tuple[np.ndarray, str]:
-    """The compass's variation field prepared for :func:`true_heading_rad`, which fills
-    NaN with ``[dead_reckoning] variation_deg``: (variation, description suffix).
+def _variation_notes(
+    th: TrueHeading, cfg: DeadReckoningConfig, missing: list[str], notes: list[str]
+) -> str:
+    """Say where the compass's variation came from, from :func:`true_heading_rad`'s counts;
+    returns the heading description's suffix.
 
     Many compasses send a zero placeholder (HDG ...,0.0,E): a configured variation
     (--variation, [dead_reckoning] variation_deg) wins over a zero field, never over a
-    non-zero one.  With none sent and none configured the DR takes 0 and says so (the
-    analysis reports what a log lacks instead of failing).  The notes say which was used
-    where.
+    non-zero one.  With none sent and none configured the DR takes 0 and says so in
+    ``missing`` (the analysis reports what a log lacks instead of failing).
     """
-    n_var = int(np.sum(~np.isfinite(var)))
-    n_zero = int(np.sum(var == 0.0))
-    n_own = int(np.sum(np.isfinite(var) & (var != 0.0)))
+    n_var = th.n_variation_from_config + th.n_variation_missing
+    n_zero = th.n_variation_placeholder
+    n_own = th.n_variation_from_sentence
     if cfg.variation_deg is not None and (n_var or n_zero):
         what = " and ".join(
             x
@@ -178,27 +177,23 @@ def _variation_to_apply(
         )
         notes.append(
             f"magnetic variation: the configured {cfg.variation_deg:g}° used at "
-            f"{n_var + n_zero} of {var.size} compass samples (the compass sent {what})"
+            f"{n_var + n_zero} of {th.n_magnetic} compass samples (the compass sent {what})"
             + (f"; the compass's own non-zero variation kept at {n_own}" if n_own else "")
         )
-        # the placeholders become missing: true_heading_rad fills them from the config
-        return np.where(var == 0.0, np.nan, var), (
-            f", variation {cfg.variation_deg:g}° from the configuration"
-        )
-    if n_zero and cfg.variation_deg is None:
+        return f", variation {cfg.variation_deg:g}° from the configuration"
+    if n_zero:  # none configured: the 0.0 is used as sent
         notes.append(
-            f"magnetic variation: the compass sends 0.0 at {n_zero} of {var.size} samples "
+            f"magnetic variation: the compass sends 0.0 at {n_zero} of {th.n_magnetic} samples "
             "(often a placeholder); it is used as sent (give --variation DEG if the local "
             "variation is not zero)"
         )
-    if n_var:  # none sent, none configured
+    if th.n_variation_missing:  # none sent, none configured: taken as 0
         missing.append(
-            f"magnetic variation: the compass sends none at {n_var} of {var.size} "
-            "samples and none is configured; the DR takes it as 0 there, so its "
-            "course is off by the local variation (give --variation DEG)"
+            f"magnetic variation: the compass sends none at {th.n_variation_missing} of "
+            f"{th.n_magnetic} samples and none is configured; the DR takes it as 0 there, so "
+            "its course is off by the local variation (give --variation DEG)"
         )
-        var = np.where(np.isfinite(var), var, 0.0)
-    return var, ""
+    return ""
 
 
 # -------------------------------------------------------------------------- speed

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -19,7 +20,7 @@ from dracc.core.config import DeadReckoningConfig
 from dracc.core.errors import ConfigError, InsufficientDataError
 from dracc.core.geodesy import wrap_2pi
 from dracc.core.units import DEG_RAD
-from dracc.math.deadreckoning.arraytypes import FloatArray
+from dracc.math.deadreckoning.arraytypes import BoolArray, FloatArray
 
 __all__ = [
     "TrueHeading",
@@ -140,13 +141,23 @@ def interp_deviation_rad(
 
 @dataclass(frozen=True)
 class TrueHeading:
-    """True heading per sample and where its corrections came from (for the report)."""
+    """True heading per sample and where its corrections came from (for the report).
+
+    The four variation counts split the magnetic samples by what the sentence sent and
+    what was applied: a non-zero field, a 0.0 field, no field filled from the config, no
+    field taken as 0.
+    """
 
     heading_rad: FloatArray  #: (n,) in [0, 2 pi); NaN where the input heading is NaN
     n_magnetic: int  #: samples from a magnetic compass ((B2) applied)
-    n_variation_from_sentence: int
-    n_variation_from_config: int
+    n_variation_from_sentence: int  #: the sentence's non-zero variation applied
+    n_variation_from_config: int  #: no variation sent: ``variation_deg`` applied
     deviation_source: str  #: 'sentence', 'curve', 'table', 'none' (0), or 'mixed'
+    #: the sentence sent 0.0 (often a placeholder): ``variation_deg`` applied where set,
+    #: else the 0 as sent
+    n_variation_placeholder: int = 0
+    #: no variation sent and none configured: 0 applied (``missing_variation="zero"``)
+    n_variation_missing: int = 0
 
 
 def _per_sample_or_nan(values_rad: ArrayLike | None, n: int) -> FloatArray:
@@ -154,6 +165,27 @@ def _per_sample_or_nan(values_rad: ArrayLike | None, n: int) -> FloatArray:
     if values_rad is None:
         return np.full(n, np.nan)
     return np.broadcast_to(np.asarray(values_rad, float), (n,))
+
+
+def _is_magnetic(reference: str | ArrayLike, n: int) -> BoolArray:
+    """True where the heading reference is 'M' (either case), per sample, vectorised.
+
+    Anything else is not magnetic: 'T', None, NaN, pandas' <NA>.  A pandas Categorical
+    (or a Series of one) is tested on its few categories, not on every sample.
+    """
+    if isinstance(reference, str):
+        return np.full(n, reference.upper() == "M")
+    ref_obj = getattr(reference, "array", reference)  # a pandas Series: its values
+    categories = getattr(ref_obj, "categories", None)
+    codes = getattr(ref_obj, "codes", None)
+    if categories is not None and codes is not None:  # code -1 (missing): the trailing False
+        is_m = np.array([str(c).upper() == "M" for c in categories] + [False])
+        return np.broadcast_to(is_m[np.asarray(codes)], (n,))
+    ref = np.asarray(ref_obj)
+    if ref.dtype.kind == "O":  # None, NaN and <NA> become text other than 'M'
+        ref = ref.astype(str)
+    magnetic: BoolArray = np.broadcast_to((ref == "M") | (ref == "m"), (n,))
+    return magnetic
 
 
 def true_heading_rad(
@@ -165,6 +197,7 @@ def true_heading_rad(
     errors: DeadReckoningConfig | None = None,
     deviation_coefficients_rad: Iterable[float] | None = None,
     gyro_correction_rad: FloatArray | float = 0.0,
+    missing_variation: Literal["raise", "zero"] = "raise",
 ) -> TrueHeading:
     """True heading from the canonical heading columns, (B2) for magnetic, (B3) for true.
 
@@ -172,31 +205,36 @@ def true_heading_rad(
     sample or one string.  Deviation delta: the sentence's field where given, else the
     curve A-E (``deviation_coefficients_rad``), else the config's deviation table, else 0
     (the compass error sources then carry it).  Variation d: the sentence's field where
-    given, else ``[dead_reckoning] variation_deg``; a magnetic heading with neither
-    raises InsufficientDataError (dracc does not assume zero variation).  Leeway is added
-    later (dead_reckon's ``transverse_mps``).
+    given and non-zero; where it is absent, or exactly 0.0 (many compasses send a zero
+    placeholder, HDG ...,0.0,E), ``[dead_reckoning] variation_deg`` when set; else a 0.0
+    field is used as sent.  A magnetic heading with no variation sent and none configured
+    raises InsufficientDataError (``missing_variation="raise"``: dracc does not assume
+    zero variation) or takes 0 there (``"zero"``: counted in ``n_variation_missing`` for
+    the caller to report).  Leeway is added later (dead_reckon's ``transverse_mps``).
     """
     cfg = errors if errors is not None else DeadReckoningConfig()
     h = np.asarray(heading_rad, float)
     n = h.size
-    ref = np.broadcast_to(np.asarray(reference, dtype=object), (n,))
-    magnetic = np.array([str(r).upper() == "M" for r in ref], dtype=bool) & np.isfinite(h)
+    magnetic = _is_magnetic(reference, n) & np.isfinite(h)
     dev_in = _per_sample_or_nan(deviation_rad, n)
     var_in = _per_sample_or_nan(variation_rad, n)
     out = np.asarray(course_gyro_rad(h, gyro_correction_rad), float).copy()  # (B3)
     if not magnetic.any():
         return TrueHeading(out, 0, 0, 0, "none")
     var = var_in.copy()
-    from_sentence = magnetic & np.isfinite(var_in)
-    missing = magnetic & ~np.isfinite(var)
-    if missing.any():
-        if cfg.variation_deg is None:
+    absent = magnetic & ~np.isfinite(var_in)
+    placeholder = magnetic & (var_in == 0.0)
+    from_sentence = magnetic & np.isfinite(var_in) & ~placeholder
+    if cfg.variation_deg is not None:
+        var[absent | placeholder] = cfg.variation_deg * DEG_RAD
+    elif absent.any():
+        if missing_variation != "zero":
             raise InsufficientDataError(
-                f"{int(missing.sum())} magnetic heading samples have no variation and "
+                f"{int(absent.sum())} magnetic heading samples have no variation and "
                 "[dead_reckoning] variation_deg is not set; give the local variation "
                 "(east positive) in the config"
             )
-        var[missing] = cfg.variation_deg * DEG_RAD
+        var[absent] = 0.0
     dev = dev_in.copy()
     sources = {"sentence"} if np.any(magnetic & np.isfinite(dev_in)) else set()
     need = magnetic & ~np.isfinite(dev)
@@ -212,10 +250,14 @@ def true_heading_rad(
             dev[need] = 0.0
             sources.add("none")
     out[magnetic] = course_magnetic_rad(h[magnetic], var[magnetic], dev[magnetic])  # (B2)
+    n_absent = int(absent.sum())
+    configured = cfg.variation_deg is not None
     return TrueHeading(
         heading_rad=out,
         n_magnetic=int(magnetic.sum()),
         n_variation_from_sentence=int(from_sentence.sum()),
-        n_variation_from_config=int(missing.sum()),
+        n_variation_from_config=n_absent if configured else 0,
         deviation_source=sources.pop() if len(sources) == 1 else "mixed",
+        n_variation_placeholder=int(placeholder.sum()),
+        n_variation_missing=0 if configured else n_absent,
     )
