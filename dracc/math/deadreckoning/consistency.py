@@ -14,8 +14,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from dracc.core import distributions as dist
+from dracc.core.arrays import BoolArray, FloatArray, IntArray
 from dracc.core.geodesy import interp_position, offset_ne_m
-from dracc.math.deadreckoning.arraytypes import BoolArray, FloatArray, IntArray
 from dracc.math.deadreckoning.paper_covariance import prob_inside_2m
 from dracc.math.deadreckoning.track import DRTrack
 

@@ -28,11 +28,10 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
-from dracc.core.arrays import unique_sorted
+from dracc.core.arrays import FloatArray, IntArray, unique_sorted
 from dracc.core.config import DeadReckoningConfig, ErrorSource
 from dracc.core.errors import ConfigError
 from dracc.core.units import DEG_RAD, KN_MPS
-from dracc.math.deadreckoning.arraytypes import FloatArray, IntArray
 
 __all__ = [
     "ErrorProcess",

@@ -16,11 +16,11 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
+from dracc.core.arrays import BoolArray, FloatArray
 from dracc.core.config import DeadReckoningConfig
 from dracc.core.errors import ConfigError, InsufficientDataError
 from dracc.core.geodesy import wrap_2pi
 from dracc.core.units import DEG_RAD
-from dracc.math.deadreckoning.arraytypes import BoolArray, FloatArray
 
 __all__ = [
     "TrueHeading",

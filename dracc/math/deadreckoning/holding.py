@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dracc.core.arrays import BoolArray, FloatArray, IntArray
 from dracc.core.geodesy import wrap_2pi
-from dracc.math.deadreckoning.arraytypes import BoolArray, FloatArray, IntArray
 from dracc.math.deadreckoning.heading import (
     leeway_from_log_rad,
     speed_from_components_mps,

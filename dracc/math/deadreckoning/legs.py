@@ -16,8 +16,8 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
+from dracc.core.arrays import FloatArray
 from dracc.core.errors import InsufficientDataError
-from dracc.math.deadreckoning.arraytypes import FloatArray
 from dracc.math.deadreckoning.holding import HeldSamples
 from dracc.math.deadreckoning.propagation import integrate_ne
 

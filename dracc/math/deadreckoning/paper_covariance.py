@@ -12,8 +12,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from dracc.core import distributions as dist
+from dracc.core.arrays import FloatArray
 from dracc.core.geodesy import k_lambda, k_phi
-from dracc.math.deadreckoning.arraytypes import FloatArray
 from dracc.math.ellipse import error_ellipse
 
 __all__ = [

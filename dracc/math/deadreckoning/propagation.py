@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from dracc.core.arrays import FloatArray
 from dracc.core.geodesy import k_lambda, k_phi, wrap_pi
-from dracc.math.deadreckoning.arraytypes import FloatArray
 
 __all__ = ["integrate_ne", "velocity_ground_ne_mps", "velocity_water_ne_mps"]
 

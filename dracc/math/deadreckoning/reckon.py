@@ -10,10 +10,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from dracc.core.arrays import unique_sorted
+from dracc.core.arrays import FloatArray, IntArray, unique_sorted
 from dracc.core.config import DeadReckoningConfig
 from dracc.core.errors import ConfigError, InsufficientDataError
-from dracc.math.deadreckoning.arraytypes import FloatArray, IntArray
 from dracc.math.deadreckoning.error_processes import (
     ErrorProcess,
     error_processes,

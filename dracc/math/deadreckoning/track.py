@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from dracc.math.deadreckoning.arraytypes import FloatArray, IntArray
+from dracc.core.arrays import FloatArray, IntArray
 
 __all__ = ["DRTrack", "Gap"]
 

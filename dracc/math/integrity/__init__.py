@@ -86,6 +86,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from dracc.core.arrays import FloatArray, IntArray
 from dracc.core.config import IntegrityConfig
 from dracc.core.timefmt import iso_utc
 from dracc.frames import Voyage
@@ -98,8 +99,6 @@ from dracc.math.integrity.consistency import (
 )
 from dracc.math.integrity.helpers import (
     MAX_EVIDENCE,
-    FloatArray,
-    IntArray,
     not_checked,
     role_of,
     statistic,

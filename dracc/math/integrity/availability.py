@@ -9,13 +9,13 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from dracc.core.arrays import IntArray
 from dracc.core.config import IntegrityConfig
 from dracc.core.timefmt import iso_utc
 from dracc.core.units import NS_PER_S
 from dracc.frames import Voyage
 from dracc.math.integrity.helpers import (
     MAX_EVIDENCE,
-    IntArray,
     by_source,
     not_checked,
     role_of,

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from dracc.core.arrays import FloatArray
 from dracc.core.config import IntegrityConfig
 from dracc.core.geodesy import angdiff, circmean, offset_ne_m
 from dracc.core.timefmt import iso_utc
@@ -16,7 +17,6 @@ from dracc.frames import Voyage
 from dracc.math.deviation.sampling import align_at, sample_unit, unit_series_from_voyage
 from dracc.math.integrity.helpers import (
     MAX_EVIDENCE,
-    FloatArray,
     not_checked,
     runs,
     statistic,

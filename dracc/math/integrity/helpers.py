@@ -14,11 +14,9 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from dracc.core import distributions as dist
+from dracc.core.arrays import FloatArray, IntArray
 from dracc.frames import Voyage
 from dracc.math.integrity.results import Check
-
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
 
 MAX_EVIDENCE = 10  #: events shown per check (the count of all is in the statistic)
 

@@ -9,13 +9,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dracc.core.arrays import IntArray
 from dracc.core.config import IntegrityConfig
 from dracc.core.timefmt import iso_utc
 from dracc.core.units import NS_PER_S
 from dracc.frames import MISSING_NS, Voyage
 from dracc.math.integrity.helpers import (
     MAX_EVIDENCE,
-    IntArray,
     by_source,
     role_of,
     runs,

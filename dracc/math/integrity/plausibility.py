@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from dracc.core.arrays import FloatArray
 from dracc.core.config import FaultsConfig, IntegrityConfig
 from dracc.core.geodesy import offset_ne_m
 from dracc.core.timefmt import iso_utc
@@ -20,7 +21,6 @@ from dracc.frames import Voyage
 from dracc.math.faults import SensorFault, detect_faults
 from dracc.math.integrity.helpers import (
     MAX_EVIDENCE,
-    FloatArray,
     by_source,
     not_checked,
     role_of,

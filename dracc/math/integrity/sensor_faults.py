@@ -9,12 +9,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from dracc.core.arrays import IntArray
 from dracc.core.timefmt import iso_utc
 from dracc.frames import Voyage
 from dracc.math.faults import SensorFault
 from dracc.math.integrity.helpers import (
     MAX_EVIDENCE,
-    IntArray,
     by_source,
     role_of,
     statistic,
