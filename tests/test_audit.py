@@ -6,7 +6,7 @@ import datetime as dt
 import math
 
 import pytest
-from test_audit_helpers import make_doc
+from test_audit_helpers import make_analysis
 
 from dracc.core.config import config_from_dict
 from dracc.core.errors import ConfigError, ExitCode, IngestError, InsufficientDataError, NoLogsError
@@ -15,7 +15,7 @@ from dracc.pipeline.audit import (
     apriori_chain,
     apriori_seeds,
     audit_config,
-    audit_document,
+    audit_night,
     content_sha256,
     evaluate,
     facts_from_analysis,
@@ -114,7 +114,7 @@ def _kinds(findings):
 
 
 def test_no_findings_within_limits():
-    found, skipped = evaluate(facts_from_analysis(make_doc()), AuditConfig())
+    found, skipped = evaluate(facts_from_analysis(make_analysis()), AuditConfig())
     assert found == () and skipped == ()
 
 
@@ -128,7 +128,7 @@ def test_each_threshold_triggers_just_above_not_at():
         log_scale_max_pct=2.0,
         rejected_rate_max_pct=1.0,
     )
-    at = make_doc(
+    at = make_analysis(
         containment=0.9,
         compass_deg=-1.0,
         log_scale=-0.02,
@@ -137,7 +137,7 @@ def test_each_threshold_triggers_just_above_not_at():
         roles=("ins1", "ins2", "ins3"),
     )
     assert evaluate(facts_from_analysis(at), a)[0] == ()
-    above = make_doc(
+    above = make_analysis(
         containment=0.8999,
         compass_deg=-1.01,
         log_scale=0.0201,
@@ -168,9 +168,9 @@ def _window_nights(store, lat, *, acfg, hours=24.0):
     outs = []
     for i, v in enumerate(lat):
         night = f"2026-11-{17 + i}"
-        doc = make_doc(night, m_y={"ins1": {"lat": v}})
         end = dt.datetime.fromisoformat(f"{night}T00:00:00+00:00") + dt.timedelta(hours=hours)
-        doc["period"]["end_utc"] = end.strftime("%Y-%m-%dT%H:%M:%SZ")
+        period = (f"{night}T00:00:00Z", end.strftime("%Y-%m-%dT%H:%M:%SZ"))
+        doc = make_analysis(night, m_y={"ins1": {"lat": v}}, period=period)
         outs.append(_audit(store, doc, acfg=acfg))
     return outs
 
@@ -247,16 +247,16 @@ def test_accuracy_window_short_nights_are_not_checked(tmp_path):
 
 
 def test_accuracy_window_without_duration_counts_the_period(tmp_path):
-    # a document without period.duration_s (older ones) counts its period, as stored nights do
+    # tonight adds the hours of its period to the window, as stored nights are counted
     acfg = AuditConfig(accuracy_window_h=20.0)
     with StateStore(tmp_path / "s.sqlite") as store:
-        out = _audit(store, make_doc("2026-11-20"), acfg=acfg)
+        out = _audit(store, make_analysis("2026-11-20"), acfg=acfg)
     assert out.accuracy["nights"] == ["2026-11-20"] and out.accuracy["complete"] is True
     assert out.accuracy["hours"] == pytest.approx(24.0, abs=0.01) and _accuracy_skips(out) == []
 
 
 def test_missing_figures_are_not_checked_and_said_so(tmp_path):
-    doc = make_doc(
+    doc = make_analysis(
         containment=None, compass_deg=None, log_scale=None, m_y={"ins1": {"lat": math.nan}}
     )
     found, skipped = evaluate(facts_from_analysis(doc), AuditConfig())
@@ -308,7 +308,7 @@ def test_dr_verdict_word(text, word):
 def test_inconsistent_dr_is_a_finding_even_with_containment_above_the_minimum():
     """Issue: the audit passed a log that analyze called inconsistent (90 % containment
     met, the analysis' NEES test failed)."""
-    doc = make_doc(containment=0.933, verdict=INCONSISTENT, nees=(80.2, 6.3, 37.2))
+    doc = make_analysis(containment=0.933, verdict=INCONSISTENT, nees=(80.2, 6.3, 37.2))
     facts = facts_from_analysis(doc)
     assert (facts.dr_verdict, facts.dr_consistent, facts.dr_nees) == ("inconsistent", False, 80.2)
     found, skipped = evaluate(facts, AuditConfig())
@@ -324,7 +324,9 @@ def test_inconsistent_dr_is_a_finding_even_with_containment_above_the_minimum():
 
 
 def test_inconsistent_dr_below_the_minimum_is_one_finding():
-    doc = make_doc(containment=0.5, verdict=INCONSISTENT, dominant=("the current", "current_kn"))
+    doc = make_analysis(
+        containment=0.5, verdict=INCONSISTENT, dominant=("the current", "current_kn")
+    )
     (f,) = evaluate(facts_from_analysis(doc), AuditConfig())[0]
     assert f.kind == "dr_inconsistent" and f.measure == "" and f.value is None  # no NEES given
     assert "the circle is dominated by the current (key [dead_reckoning] current_kn)" in f.message
@@ -334,7 +336,7 @@ def test_inconsistent_dr_below_the_minimum_is_one_finding():
         INCONSISTENT + "; the circle is dominated by the current (key [dead_reckoning] current_kn)"
     )
     (g,) = evaluate(
-        facts_from_analysis(make_doc(verdict=said, dominant=("the current", "current_kn"))),
+        facts_from_analysis(make_analysis(verdict=said, dominant=("the current", "current_kn"))),
         AuditConfig(),
     )[0]
     assert g.message == f"DR: {said}"
@@ -344,16 +346,16 @@ def test_inconsistent_dr_below_the_minimum_is_one_finding():
     "verdict", ["consistent: inside at 97.8 %", "conservative: every epoch inside"]
 )
 def test_consistent_or_conservative_dr_keeps_the_containment_check(verdict):
-    assert evaluate(facts_from_analysis(make_doc(verdict=verdict)), AuditConfig()) == ((), ())
-    (f,) = evaluate(facts_from_analysis(make_doc(verdict=verdict, containment=0.8)), AuditConfig())[
-        0
-    ]
+    assert evaluate(facts_from_analysis(make_analysis(verdict=verdict)), AuditConfig()) == ((), ())
+    (f,) = evaluate(
+        facts_from_analysis(make_analysis(verdict=verdict, containment=0.8)), AuditConfig()
+    )[0]
     assert f.kind == "dr_containment"
 
 
 def test_undetermined_dr_is_not_checked_and_said_so():
     text = "undetermined: no epoch of a leg whose model was learned from earlier fixes"
-    found, skipped = evaluate(facts_from_analysis(make_doc(verdict=text)), AuditConfig())
+    found, skipped = evaluate(facts_from_analysis(make_analysis(verdict=text)), AuditConfig())
     assert found == () and skipped == (
         {
             "check": "consistency",
@@ -365,18 +367,12 @@ def test_undetermined_dr_is_not_checked_and_said_so():
     )
 
 
-def test_not_an_analysis_document():
-    with pytest.raises(InsufficientDataError, match="not a dracc analysis"):
-        facts_from_analysis({"schema": "something/1"})
-
-
 def test_night_of_period_middle_and_missing_period():
-    f = facts_from_analysis(make_doc("2026-11-20"))
+    f = facts_from_analysis(make_analysis("2026-11-20"))
     assert night_of(f) == "2026-11-20"
-    doc = make_doc()
-    doc["period"] = {"start_utc": "2026-11-20T20:00:00Z", "end_utc": "2026-11-21T10:00:00Z"}
+    doc = make_analysis(period=("2026-11-20T20:00:00Z", "2026-11-21T10:00:00Z"))
     assert night_of(facts_from_analysis(doc)) == "2026-11-21"
-    doc["period"] = {"start_utc": None, "end_utc": None}
+    doc = make_analysis(period=(None, None))
     with pytest.raises(InsufficientDataError, match="--date"):
         night_of(facts_from_analysis(doc))
 
@@ -385,14 +381,15 @@ def test_night_of_period_middle_and_missing_period():
 
 
 def _audit(store, doc, *, seeds=None, acfg=None, night=None, content=None, settings="s"):
-    return audit_document(
-        doc,
+    facts = facts_from_analysis(doc)
+    return audit_night(
+        facts,
         store=store,
         acfg=acfg or AuditConfig(),
         seeds=seeds or {},
         vessel="Aurora",
         night=night,
-        content_hash=content or doc["period"]["start_utc"],
+        content_hash=content or facts.period_start_utc,
         settings_hash=settings,
     )
 
@@ -403,7 +400,7 @@ def test_apriori_rule_over_several_nights(tmp_path):
     with StateStore(tmp_path / "s.sqlite") as store:
         outs = []
         for night, v in lat.items():
-            doc = make_doc(night, m_y={"ins1": {"lat": v, "lon": 10.0 * len(outs) + 5.0}})
+            doc = make_analysis(night, m_y={"ins1": {"lat": v, "lon": 10.0 * len(outs) + 5.0}})
             outs.append(_audit(store, doc, seeds=seeds))
         assert [o.status for o in outs] == ["recorded"] * 4
         hist = store.history(vessel="Aurora", unit="ins1", channel="lat")
@@ -429,9 +426,9 @@ def test_apriori_rule_over_several_nights(tmp_path):
 
 def test_night_audited_late_recomputes_the_chain(tmp_path):
     with StateStore(tmp_path / "s.sqlite") as store:
-        _audit(store, make_doc("2026-11-18", m_y={"ins1": {"lat": 100.0}}))
-        _audit(store, make_doc("2026-11-20", m_y={"ins1": {"lat": 120.0}}))
-        _audit(store, make_doc("2026-11-19", m_y={"ins1": {"lat": 150.0}}))  # arrives late
+        _audit(store, make_analysis("2026-11-18", m_y={"ins1": {"lat": 100.0}}))
+        _audit(store, make_analysis("2026-11-20", m_y={"ins1": {"lat": 120.0}}))
+        _audit(store, make_analysis("2026-11-19", m_y={"ins1": {"lat": 150.0}}))  # arrives late
         hist = store.history(unit="ins1", channel="lat")
         assert [h["night"] for h in hist] == ["2026-11-18", "2026-11-19", "2026-11-20"]
         assert [h["apriori_after"] for h in hist] == [100.0, 150.0, 150.0]
@@ -440,7 +437,7 @@ def test_night_audited_late_recomputes_the_chain(tmp_path):
 
 def test_same_night_twice_is_recorded_once(tmp_path):
     with StateStore(tmp_path / "s.sqlite") as store:
-        doc = make_doc("2026-11-20")
+        doc = make_analysis("2026-11-20")
         first = _audit(store, doc, content="abc")
         before = store.conn.execute("SELECT audited_utc FROM nights").fetchall()
         second = _audit(
@@ -457,23 +454,23 @@ def test_same_night_twice_is_recorded_once(tmp_path):
 
 def test_changed_log_replaces_the_night(tmp_path):
     with StateStore(tmp_path / "s.sqlite") as store:
-        _audit(store, make_doc("2026-11-20", m_y={"ins1": {"lat": 100.0}}), content="v1")
-        out = _audit(store, make_doc("2026-11-20", m_y={"ins1": {"lat": 90.0}}), content="v2")
+        _audit(store, make_analysis("2026-11-20", m_y={"ins1": {"lat": 100.0}}), content="v1")
+        out = _audit(store, make_analysis("2026-11-20", m_y={"ins1": {"lat": 90.0}}), content="v2")
         assert out.status == "replaced"
         (row,) = store.history()
         assert row["m_y"] == 90.0 and row["apriori_after"] == 90.0
         assert store.night("Aurora", "2026-11-20").content_sha256 == "v2"
         # other settings with the same content also replace it (the statistics depend on them)
         assert (
-            _audit(store, make_doc("2026-11-20"), content="v2", settings="other").status
+            _audit(store, make_analysis("2026-11-20"), content="v2", settings="other").status
             == "replaced"
         )
 
 
 def test_exit_code_follows_findings(tmp_path):
     with StateStore(tmp_path / "s.sqlite") as store:
-        ok = _audit(store, make_doc("2026-11-19"))
-        bad = _audit(store, make_doc("2026-11-20", containment=0.5))
+        ok = _audit(store, make_analysis("2026-11-19"))
+        bad = _audit(store, make_analysis("2026-11-20", containment=0.5))
         assert ok.exit_code == ExitCode.OK and bad.exit_code == ExitCode.FINDINGS
         assert [f["kind"] for f in store.night("Aurora", "2026-11-20").findings] == [
             "dr_containment"
@@ -483,9 +480,11 @@ def test_exit_code_follows_findings(tmp_path):
 def test_inconsistent_night_exits_1_and_is_stored_with_its_verdict(tmp_path):
     with StateStore(tmp_path / "s.sqlite") as store:
         ok = _audit(
-            store, make_doc("2026-11-19", verdict="consistent: fine", nees=(9.0, 5.1, 34.3))
+            store, make_analysis("2026-11-19", verdict="consistent: fine", nees=(9.0, 5.1, 34.3))
         )
-        bad = _audit(store, make_doc("2026-11-20", verdict=INCONSISTENT, nees=(80.2, 6.3, 37.2)))
+        bad = _audit(
+            store, make_analysis("2026-11-20", verdict=INCONSISTENT, nees=(80.2, 6.3, 37.2))
+        )
         assert ok.exit_code == ExitCode.OK and bad.exit_code == ExitCode.FINDINGS
         assert [f.kind for f in bad.findings] == ["dr_inconsistent"]
         rec = store.night("Aurora", "2026-11-20")
@@ -494,7 +493,9 @@ def test_inconsistent_night_exits_1_and_is_stored_with_its_verdict(tmp_path):
         assert rec.dr_verdict_text == INCONSISTENT
         assert store.night("Aurora", "2026-11-19").dr_consistent is True
         # audited again unchanged: the finding is evaluated again, nothing written
-        again = _audit(store, make_doc("2026-11-20", verdict=INCONSISTENT, nees=(80.2, 6.3, 37.2)))
+        again = _audit(
+            store, make_analysis("2026-11-20", verdict=INCONSISTENT, nees=(80.2, 6.3, 37.2))
+        )
         assert again.status == "unchanged" and again.exit_code == ExitCode.FINDINGS
 
 
@@ -503,7 +504,7 @@ def test_apriori_raise_as_finding_when_configured(tmp_path):
     with StateStore(tmp_path / "s.sqlite") as store:
         out = _audit(
             store,
-            make_doc("2026-11-20", m_y={"ins2": {"lon": 300.0}}),
+            make_analysis("2026-11-20", m_y={"ins2": {"lon": 300.0}}),
             seeds={("ins2", "lon"): 250.0},
             acfg=a,
         )
@@ -515,7 +516,7 @@ def test_apriori_raise_as_finding_when_configured(tmp_path):
 
 def test_rollback_leaves_state_untouched(tmp_path):
     with StateStore(tmp_path / "s.sqlite") as store:
-        _audit(store, make_doc("2026-11-19"))
+        _audit(store, make_analysis("2026-11-19"))
         with pytest.raises(RuntimeError):
             with store.transaction():
                 store.delete_night("Aurora", "2026-11-19")

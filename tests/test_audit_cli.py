@@ -11,7 +11,7 @@ import jsonschema
 import numpy as np
 import pytest
 
-import dracc.pipeline.audit as audit_mod
+import dracc.pipeline.audit.run as audit_mod  # run_audit looks its helpers up here
 from dracc.cli.main import main
 from dracc.core.errors import ExitCode
 from dracc.report.audit_json import load_schema
@@ -240,9 +240,78 @@ def test_exit_3_folder_without_the_nights_logs_is_a_night_without_data(run_cli, 
     # the same again: recorded once; history shows the gap
     code, out, _ = run_cli("audit", logs, "--date", "2026-11-20", "--db", db)
     assert code == ExitCode.INPUT and "state: unchanged" in out
-    code, out, _ = run_cli("audit", "history", "--db", db, "--json")
+    code, out, _ = run_cli("audit", "history", "--db", db, "--json", "-")
     (night,) = json.loads(out)["nights"]
     assert night["night"] == "2026-11-20" and night["findings"][0]["kind"] == "no_logs"
+
+
+def test_json_on_stdout_and_history_json_to_a_file(run_cli, ship, tmp_path):
+    """`--json -` prints the audit document on stdout instead of the summary; `audit
+    history --json PATH` writes the history document and still shows the tables."""
+    db = tmp_path / "s.sqlite"
+    log = ship / "nav-2026-11-18.nmea"
+    code, out, err = run_cli(
+        "audit", log, "--db", db, "--config", _cfg(tmp_path, LOOSE), "--json", "-"
+    )
+    assert code == ExitCode.OK, err
+    doc = json.loads(out)
+    jsonschema.validate(doc, load_schema())
+    assert doc["verdict"] == "ok" and doc["analysis"]["schema"] == "dracc.analysis/1"
+    code, out, _ = run_cli("audit", "history", "--db", db, "--json", tmp_path / "h.json")
+    assert code == ExitCode.OK and "2026-11-18" in out
+    hist = json.loads((tmp_path / "h.json").read_text())
+    assert hist["schema"] == "dracc.audit.history/1" and len(hist["nights"]) == 1
+
+
+def test_facts_from_the_typed_analysis_match_its_json_document(ship):
+    """The audit reads the typed analysis; every figure it takes is the one the analysis
+    JSON document (dracc.analysis/1) gives."""
+    from dracc.core.config import config_from_dict
+    from dracc.pipeline.audit import facts_from_analysis
+    from dracc.report import json_report
+
+    a = audit_mod.analyse_voyage([ship / "nav-2026-11-19.nmea"], config_from_dict({}))
+    f = facts_from_analysis(a)
+    doc = json_report.to_dict(a)
+    assert (f.period_start_utc, f.period_end_utc) == (
+        doc["period"]["start_utc"],
+        doc["period"]["end_utc"],
+    )
+    assert (
+        f.lines == sum(i["lines"] for i in doc["inputs"])
+        and f.duration_s == doc["period"]["duration_s"]
+    )
+    assert f.sources == {r: ",".join(v["keys"]) for r, v in doc["sources"].items()}
+    rows = {(c.unit, c.channel): c for c in f.channels}
+    for unit, per in doc["deviation"]["units"].items():
+        for ch in ("lat", "lon", "course"):
+            c = rows[(unit, ch)]
+            assert (c.n, c.m_u, c.m_y, c.kurtosis, c.limit_error) == tuple(
+                per[ch][k] for k in ("n", "m_u", "m_y", "kurtosis", "limit")
+            )
+    dr = doc["dead_reckoning"]
+    assert (f.dr_containment_2m, f.dr_n_scored, f.dr_verdict_text, f.dr_consistent) == (
+        dr["containment_2m"],
+        dr["n_scored"],
+        dr["verdict"],
+        dr["consistent"],
+    )
+    assert (f.dr_nees, f.dr_nees_lower, f.dr_nees_upper) == tuple(
+        dr["nees"][k] for k in ("statistic", "lower", "upper")
+    )
+    cal = doc["calibration"]
+    assert (f.compass_error_deg, f.compass_error_sigma_deg) == (
+        cal["compass_error_deg"]["value"],
+        cal["compass_error_deg"]["sigma"],
+    )
+    assert (f.log_scale, f.log_scale_sigma) == (
+        cal["log_scale"]["value"],
+        cal["log_scale"]["sigma"],
+    )
+    assert f.integrity_false_alarm == doc["integrity"]["false_alarm_per_night"]
+    assert [c.status for c in f.integrity_checks] == [
+        c["status"] for c in doc["integrity"]["checks"]
+    ]
 
 
 def test_exit_4_config_errors(run_cli, ship, tmp_path):
@@ -293,7 +362,7 @@ def test_rule_over_nights_idempotence_and_history(run_cli, ship, tmp_path):
     con = sqlite3.connect(db)
     assert con.execute("SELECT COUNT(*) FROM nights").fetchone()[0] == 3
 
-    code, out, _ = run_cli("audit", "history", "--db", db, "--json")
+    code, out, _ = run_cli("audit", "history", "--db", db, "--json", "-")
     assert code == ExitCode.OK
     hist = json.loads(out)
     assert {(s["unit"], s["channel"]) for s in hist["series"]} == {
@@ -461,17 +530,19 @@ def test_calibration_checks_against_known_sensor_errors(run_cli, tmp_path):
 
 
 def test_summary_text_by_hand(tmp_path):
-    from test_audit_helpers import make_doc
+    from test_audit_helpers import make_analysis
 
-    from dracc.cli.audit_cmd import format_summary
-    from dracc.pipeline.audit import AuditConfig, audit_document
+    from dracc.pipeline.audit import AuditConfig, audit_night, facts_from_analysis
     from dracc.pipeline.state import StateStore
+    from dracc.report.audit_text import format_summary
 
     with StateStore(tmp_path / "s.sqlite") as store:
 
         def run(night, lat, **kw):
-            return audit_document(
-                make_doc(night, m_y={"ins1": {"lat": lat, "course": 0.1}}, **kw),
+            return audit_night(
+                facts_from_analysis(
+                    make_analysis(night, m_y={"ins1": {"lat": lat, "course": 0.1}}, **kw)
+                ),
                 store=store,
                 acfg=AuditConfig(required_sources=("ins1",)),
                 seeds={},
@@ -532,17 +603,17 @@ INCONSISTENT = (
 
 
 def test_summary_carries_the_dr_verdict(tmp_path):
-    from test_audit_helpers import make_doc
+    from test_audit_helpers import make_analysis
 
-    from dracc.cli.audit_cmd import format_summary
-    from dracc.pipeline.audit import AuditConfig, audit_document
+    from dracc.pipeline.audit import AuditConfig, audit_night, facts_from_analysis
     from dracc.pipeline.state import StateStore
+    from dracc.report.audit_text import format_summary
 
     with StateStore(tmp_path / "s.sqlite") as store:
 
         def run(night, **kw):
-            return audit_document(
-                make_doc(night, **kw),
+            return audit_night(
+                facts_from_analysis(make_analysis(night, **kw)),
                 store=store,
                 acfg=AuditConfig(),
                 seeds={},
@@ -564,7 +635,7 @@ def test_summary_carries_the_dr_verdict(tmp_path):
                 dominant=("the current", "current_kn"),
             )
         )
-        old = format_summary(run("2026-11-21"))  # a document without a verdict
+        old = format_summary(run("2026-11-21"))  # an analysis without a verdict
     assert "DR: consistent: reference inside 2M at 97.5 %" in good.splitlines()
     assert good.rstrip().endswith("exit 0 (ok)")
     lines = bad.splitlines()
@@ -584,15 +655,12 @@ def test_summary_carries_the_dr_verdict(tmp_path):
 def test_cli_exit_1_when_the_analysis_calls_the_dr_inconsistent(
     run_cli, ship, tmp_path, monkeypatch
 ):
-    """End to end through `dracc audit` with the analysis document replaced by a hand-built
-    one: 'inconsistent' -> a dr_inconsistent finding, exit 1, the JSON history carries it."""
-    from test_audit_helpers import make_doc
+    """End to end through `dracc audit` with the analysis replaced by a hand-built one:
+    'inconsistent' -> a dr_inconsistent finding, exit 1, the JSON history carries it."""
+    from test_audit_helpers import make_analysis
 
-    import dracc.report.json_report as json_report
-
-    doc = make_doc("2026-11-18", verdict=INCONSISTENT, nees=(80.2, 6.3, 37.2))
-    monkeypatch.setattr(audit_mod, "analyse_voyage", lambda paths, cfg, progress=None: object())
-    monkeypatch.setattr(json_report, "to_dict", lambda analysis: doc)
+    doc = make_analysis("2026-11-18", verdict=INCONSISTENT, nees=(80.2, 6.3, 37.2))
+    monkeypatch.setattr(audit_mod, "analyse_voyage", lambda paths, cfg, progress=None: doc)
     db = tmp_path / "s.sqlite"
     code, out, err = run_cli(
         "audit", ship / "nav-2026-11-18.nmea", "--db", db, "--config", _cfg(tmp_path, LOOSE)
@@ -600,7 +668,7 @@ def test_cli_exit_1_when_the_analysis_calls_the_dr_inconsistent(
     assert code == ExitCode.FINDINGS, err
     assert f"  - [consistency] DR: {INCONSISTENT}" in out.splitlines()
     assert out.rstrip().endswith("exit 1 (findings)")
-    code, out, _ = run_cli("audit", "history", "--db", db, "--json")
+    code, out, _ = run_cli("audit", "history", "--db", db, "--json", "-")
     (night,) = json.loads(out)["nights"]
     assert (night["dr_verdict"], night["dr_consistent"], night["dr_nees"]) == (
         "inconsistent",
@@ -609,8 +677,8 @@ def test_cli_exit_1_when_the_analysis_calls_the_dr_inconsistent(
     )
     assert [f["kind"] for f in night["findings"]] == ["dr_inconsistent"]
     # the same log called consistent (a fresh database): exit 0
-    doc = make_doc("2026-11-18", verdict="consistent: reference inside 2M at 97.5 %")
-    monkeypatch.setattr(json_report, "to_dict", lambda analysis: doc)
+    doc = make_analysis("2026-11-18", verdict="consistent: reference inside 2M at 97.5 %")
+    monkeypatch.setattr(audit_mod, "analyse_voyage", lambda paths, cfg, progress=None: doc)
     code, out, err = run_cli(
         "audit",
         ship / "nav-2026-11-18.nmea",
@@ -665,6 +733,7 @@ def test_history_known_selection_and_an_empty_database(run_cli, recorded, tmp_pa
         "--channel",
         "lon",
         "--json",
+        "-",
     )
     assert code == ExitCode.OK
     assert [n["vessel"] for n in json.loads(out)["nights"]] == ["Nordlys"]

@@ -101,7 +101,7 @@ def test_cron_line_under_env_i_mails_the_night_without_logs(tmp_path):
     assert doc["verdict"] == "no data" and doc["exit_code"] == 3 and doc["analysis"] is None
     # the night is recorded: history shows the gap
     hist = subprocess.run(
-        [str(DRACC), "audit", "history", "--db", str(state / "audit.sqlite"), "--json"],
+        [str(DRACC), "audit", "history", "--db", str(state / "audit.sqlite"), "--json", "-"],
         capture_output=True,
         text=True,
         check=True,

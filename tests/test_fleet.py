@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from test_audit_helpers import make_doc
+from test_audit_helpers import make_analysis
 
 from dracc.core.config import config_from_dict
 from dracc.core.errors import ConfigError, FleetError, IngestError
@@ -31,7 +31,7 @@ def fake_analyser(path: str, cfg) -> dict:
     if text.startswith("BAD"):
         return {"ok": False, "error": f"{path}: line 1: not a log"}
     p = json.loads(text)
-    doc = make_doc(
+    doc = make_analysis(
         p["night"],
         m_y={"ins1": {"lat": p["lat"], "lon": 200.0}, "ins2": {"lat": 90.0, "lon": 210.0}},
         containment=p.get("containment", 0.95),
@@ -272,13 +272,13 @@ def test_unreachable_scheduler_is_one_clear_error(tmp_path):
 def test_an_unexpected_error_in_one_log_is_reported_not_raised(monkeypatch, tmp_path):
     # (the reader's own pool inside a daemonic Dask worker used to raise here; the reader now
     # parses alone there: tests/test_ingest_nmea.py)
-    import dracc.pipeline.audit
+    import dracc.pipeline.fleet.batch as batch
     from dracc.pipeline.fleet import analyse_log
 
     def boom(paths, cfg, progress=None):
         raise AssertionError("an unforeseen state")
 
-    monkeypatch.setattr(dracc.pipeline.audit, "analysis_document", boom)
+    monkeypatch.setattr(batch, "analyse_voyage", boom)
     res = analyse_log(str(tmp_path / "big.nmea"), CFG)
     assert not res["ok"] and res["error"].startswith("internal error (AssertionError")
 
@@ -307,7 +307,7 @@ def test_cache_of_another_version_or_schema_is_redone(tmp_path, tamper):
 
 
 def test_table_rule_equals_the_reference_chain():
-    # the fleet table applies dracc.pipeline.audit.apriori_chain per vessel, unit and channel
+    # the fleet table applies dracc.pipeline.audit.rule.apriori_chain per vessel, unit and channel
     import numpy as np
 
     from dracc.pipeline.audit import apriori_chain
@@ -319,7 +319,7 @@ def test_table_rule_equals_the_reference_chain():
         vessel = "AB"[i % 2]
         night = f"2026-11-{10 + i // 2:02d}"
         lat = float(rng.lognormal(5, 0.4)) if i % 5 else float("nan")
-        doc = make_doc(night, m_y={"ins1": {"lat": lat, "lon": float(rng.lognormal(5, 0.4))}})
+        doc = make_analysis(night, m_y={"ins1": {"lat": lat, "lon": float(rng.lognormal(5, 0.4))}})
         t = LogTask(vessel, f"/x/{vessel}/{night}.nmea", f"{night}.nmea", f"{i:064d}")
         tasks.append(t)
         summaries[t.path] = summarise(doc)

@@ -107,7 +107,7 @@ def test_fleet_names_cannot_escape_the_output_folder(tmp_path, name):
 
 
 def test_inside_refuses_an_escape_it_is_handed(tmp_path, monkeypatch):
-    import dracc.pipeline.fleet as fleet
+    import dracc.pipeline.fleet.tasks as fleet  # inside() looks safe_name up here
 
     monkeypatch.setattr(fleet, "safe_name", lambda s, max_len=100: s)  # a broken sanitiser
     with pytest.raises(FleetError, match="escape"):
@@ -156,7 +156,7 @@ def test_odd_file_names(tmp_path, monkeypatch, run_cli, name):
     monkeypatch.chdir(tmp_path)
     lines = (SAMPLES / "voyage_tag.nmea").read_bytes().split(b"\r\n")[:600]
     Path(name).write_bytes(b"\r\n".join(lines) + b"\r\n")
-    code, out, err = run_cli("inspect", "--json", "--", name)
+    code, out, err = run_cli("inspect", "--json", "-", "--", name)
     assert code == ExitCode.OK, err
     assert json.loads(out)["inputs"][0]["path"] == name
     code, out, err = run_cli("analyze", "--json", "r.json", "--", name)

@@ -3,29 +3,29 @@
 ``dracc audit LOG…|DIR`` (same as ``dracc audit run …``) analyses the last day's logs,
 checks them against the ``[audit]`` limits, records the night in the SQLite state and
 exits 0 (all checks passed), 1 (findings), 2 (bad option value), 3 (no logs for the night,
-or no usable logs) or 4 (config error).
+or no usable logs) or 4 (config error).  The work is :func:`dracc.pipeline.audit.run_audit`;
+the reports are :mod:`dracc.report.audit_text`, ``audit_json`` and ``audit_html``.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import typer
-from rich.table import Table
 from typer.core import TyperGroup
 
-from dracc.cli.app import ConfigOption, app, check_choice, check_date, check_pattern, out, progress
+from dracc.cli.app import app, out, progress
+from dracc.cli.options import ConfigFile, JsonOut, check_choice, check_date, check_pattern
 from dracc.core import atomic
 from dracc.core.config import load_config
-from dracc.core.errors import ConfigError, ExitCode, StateError
+from dracc.core.errors import ExitCode
 from dracc.core.safetext import printable
-from dracc.core.vocabulary import CHANNEL_KEYS, CHANNELS
-from dracc.pipeline.audit import UNITS, AuditOutcome, audit_config, run_audit
-from dracc.pipeline.state import StateStore
-from dracc.report.audit_html import fmt_value as _f
-from dracc.report.audit_html import history_html
-from dracc.report.audit_html import measure_digits as _digits
+from dracc.core.vocabulary import CHANNELS
+from dracc.pipeline.audit import UNITS, open_state, run_audit
+from dracc.report import audit_json
+from dracc.report.audit_html import audit_page, history_html
+from dracc.report.audit_text import format_summary, print_history
+from dracc.report.output import STDOUT, emit_json
 
 
 class _DefaultRun(TyperGroup):
@@ -47,137 +47,7 @@ audit_app = typer.Typer(
 )
 app.add_typer(audit_app, name="audit")
 
-
-# --------------------------------------------------------------------- the summary
-
-
-_STATUS = {
-    "recorded": "recorded (a new night)",
-    "unchanged": "unchanged: this night was already audited with the same logs and settings; "
-    "nothing written",
-    "replaced": "replaced: the logs (or settings) changed since this night was last audited; "
-    "the stored night was replaced in one transaction",
-}
-
-
-def _finding_line(f) -> str:
-    who = f.source or f.subject
-    role = f" ({f.role})" if f.role and f.role != who else ""
-    msg = f.message
-    for name in dict.fromkeys((who, f.subject)):  # messages name their source: said once
-        if name and msg.startswith(f"{name}: "):
-            msg = msg[len(name) + 2 :]
-            break
-    return f"  - [{f.check}] {who}{role}: {msg}"
-
-
-def format_summary(o: AuditOutcome, probability: float | None = None) -> str:
-    """The plain-text summary (e-mail or log): the verdict and the findings first, then
-    what was not checked and the evidence."""
-    r = o.record
-    n = len(o.findings)
-    if o.no_data:
-        lines = [
-            f"dracc audit: {r.vessel}, night {r.night}: NO DATA: {r.missing[0] if r.missing else ''}",
-            f"state: {_STATUS[o.status]}; recorded as a night without data",
-        ]
-        lines.append(f"exit {int(o.exit_code)} (no logs)")
-        return "\n".join(lines) + "\n"
-    head = "all checks passed" if n == 0 else f"{n} finding{'s' if n > 1 else ''}"
-    if o.not_checked:
-        k = len(o.not_checked)
-        head += f" ({k} check{'s' if k > 1 else ''} could not be made: see 'not checked')"
-    lines = [f"dracc audit: {r.vessel}, night {r.night}: {head}"]
-    if o.findings:
-        lines.append("findings:")
-        lines += [_finding_line(f) for f in o.findings]
-    lines.append(f"state: {_STATUS[o.status]}")
-    rate = "-" if r.rejected_rate is None else f"{100 * r.rejected_rate:.2f} %"
-    lines.append(
-        f"logs: {len(r.inputs)} file(s), {_f(r.lines, 0)} lines, {_f(r.rejected, 0)} "
-        f"damaged ({rate}); period {r.period_start_utc or '-'} to {r.period_end_utc or '-'}"
-    )
-    if o.ignored:
-        shown = ", ".join(
-            f"{k} {v}" for k, v in sorted(o.ignored.items(), key=lambda kv: -kv[1])[:8]
-        )
-        lines.append(f"ignored (valid, not used): {sum(o.ignored.values())} ({shown})")
-    if r.sources:
-        lines.append("sources: " + ", ".join(f"{k}={v}" for k, v in sorted(r.sources.items())))
-    if o.false_alarm_per_night is not None:
-        lines.append(
-            f"false-alarm probability of tonight's statistical checks: at most "
-            f"{100 * o.false_alarm_per_night:.2f} %"
-        )
-    if r.channels:
-        p = f" at P = {probability:g}" if probability else ""
-        lines.append(
-            f"INS tonight (m_y = k m_u; limiting error{p}; the larger of a priori and m_y "
-            "becomes the a priori):"
-        )
-        lines.append(
-            f"  {'unit':<5} {'chan':<6} {'n':>4} {'m_y':>12} {'limit':>12} "
-            f"{'a priori':>12}  verdict"
-        )
-        for c in r.channels:
-            d = _digits(c.measure)
-            lines.append(
-                f"  {c.unit:<5} {c.channel:<6} {c.n:>4} {_f(c.m_y, d, c.measure):>12} "
-                f"{_f(c.limit_error, d, c.measure):>12} "
-                f"{_f(c.apriori_after, d, c.measure):>12}  {c.verdict or '-'}"
-            )
-    acc = o.accuracy or {}
-    if acc.get("channels"):
-        lines.append(
-            f"accuracy window: {acc['hours']:.1f} h of {acc['window_h']:g} h over "
-            f"{len(acc['nights'])} night(s)"
-            + ("" if acc.get("complete") else " (limits judged once the window is full)")
-        )
-    established = [e for e in o.apriori_events if e.reason == "established"]
-    if established:
-        lines.append(
-            f"a priori established for {len(established)} unit channel(s) without a "
-            "previous value: tonight's m_y (shown in the table)"
-        )
-    for e in o.apriori_events:
-        if e.reason != "raised":
-            continue
-        measure = CHANNEL_KEYS[e.channel].rsplit("_", 1)[1]
-        d = _digits(measure)
-        lines.append(
-            f"a priori raised: {e.unit} {e.channel} {_f(e.previous, d, measure)} -> "
-            f"{_f(e.value, d, measure)} (tonight's m_y is larger)"
-        )
-    if r.dr_verdict_text:  # the analysis' verdict: the same sentence as `dracc analyze`
-        lines.append(f"DR: {r.dr_verdict_text}")
-    elif r.dr_containment_2m is not None:
-        lines.append(
-            f"DR: reference inside 2M at {100 * r.dr_containment_2m:.1f} % of "
-            f"{_f(r.dr_n_scored, 0)} epochs"
-        )
-    cal = []
-    if r.compass_error_deg is not None:
-        cal.append(
-            f"compass error {r.compass_error_deg:+.2f} ± {_f(r.compass_error_sigma_deg, 2)} deg"
-        )
-    if r.log_scale is not None:
-        sig = "-" if r.log_scale_sigma is None else f"{100 * r.log_scale_sigma:.2f}"
-        cal.append(f"log scale {100 * r.log_scale:+.2f} ± {sig} %")
-    if cal:
-        lines.append("calibration: " + "; ".join(cal))
-    for nc in o.not_checked:
-        who = (
-            f" {nc['source']}" if nc.get("source") else (f" {nc['role']}" if nc.get("role") else "")
-        )
-        lines.append(f"not checked: {nc['check']} {nc['name']}{who}: {nc['why']}")
-    for m in r.missing:
-        lines.append(f"missing: {m}")
-    code = o.exit_code
-    lines.append(f"exit {int(code)} ({'findings' if code == ExitCode.FINDINGS else 'ok'})")
-    return "\n".join(lines) + "\n"
-
-
-# --------------------------------------------------------------------------- run
+DbOption = typer.Option(None, "--db", help="SQLite state file ([audit] db).")
 
 
 def _check_date(value: str | None) -> str | None:
@@ -192,30 +62,23 @@ def audit_run(
         None,
         "--date",
         callback=_check_date,
-        help="The night to audit, YYYY-MM-DD (files "
-        "in folders must carry it in their name). Default for "
-        "folders: yesterday (UTC).",
+        help="The night to audit, YYYY-MM-DD (files in folders must carry it in their "
+        "name). Default for folders: yesterday (UTC).",
     ),
     pattern: str | None = typer.Option(
         None,
         "--pattern",
-        help="Glob for the log files inside "
-        "folders, e.g. '*.nmea' or '**/*.nmea' ([audit] pattern).",
+        help="Glob for the log files inside folders, e.g. '*.nmea' or '**/*.nmea' "
+        "([audit] pattern).",
     ),
     vessel: str | None = typer.Option(
         None,
         "--vessel",
         help="Vessel name in the state ([audit] vessel, else [vessel] name, else 'default').",
     ),
-    db: Path | None = typer.Option(None, "--db", help="SQLite state file ([audit] db)."),
-    config: Path | None = ConfigOption,
-    json_out: Path | None = typer.Option(
-        None,
-        "--json",
-        help="Write the audit document "
-        "(schema dracc.audit/1: verdict, findings, not "
-        "checked, and the analysis it rests on).",
-    ),
+    db: Path | None = DbOption,
+    config: ConfigFile = None,
+    json_out: JsonOut = None,
     html_out: Path | None = typer.Option(
         None,
         "--html",
@@ -228,7 +91,9 @@ def audit_run(
     """Audit one night: analyse, check the limits, record the night; exit 0/1/2/3/4.
 
     Same as 'dracc audit LOG…'.  Auditing the same night again with the same logs records
-    it once; with changed logs the night is replaced.
+    it once; with changed logs the night is replaced.  --json writes the audit document
+    (dracc.audit/1: verdict, findings, not checked, and the analysis it rests on); with
+    '--json -' it is printed on stdout instead of the summary.
     """
     pattern = check_pattern(pattern, "--pattern")
     cfg = load_config(config)
@@ -240,167 +105,47 @@ def audit_run(
             last[0] += step
             advance(step)
 
-        outcome, analysis = run_audit(
+        outcome = run_audit(
             logs, cfg, db=db, vessel=vessel, night=date, pattern=pattern, progress=report
         )
-    from dracc.report import audit_json
-
-    analysis_doc = None
-    if analysis is not None:
-        from dracc.report import json_report
-
-        analysis_doc = json_report.to_dict(analysis)
+    doc = audit_json.to_dict(outcome) if (json_out or html_out) else None
     if json_out is not None:
-        audit_json.write_json(outcome, analysis_doc, json_out)
+        emit_json(doc, json_out)
     if html_out is not None:
-        from dracc.report import html as html_report
-        from dracc.report.audit_html import night_html
-
-        body, css = html_report.render_sections(analysis) if analysis is not None else ("", "")
-        atomic.write_text(
-            html_out, night_html(audit_json.to_dict(outcome, analysis_doc), body, css)
-        )
+        atomic.write_text(html_out, audit_page(outcome, doc))
     text = format_summary(outcome, cfg.deviation.probability)
     if summary_out is not None:  # mailed: a log's control characters shown, not sent
         atomic.write_text(summary_out, printable(text, keep="\n"))
-    else:
+    elif json_out != STDOUT:
         out.print(text, end="", markup=False, highlight=False)
     return int(outcome.exit_code)
 
 
-# ----------------------------------------------------------------------- history
-
-
-def _open_existing(db: Path | None, config: Path | None) -> StateStore:
-    cfg = load_config(config)
-    acfg = audit_config(cfg)
-    path = db or (Path(acfg.db) if acfg.db else None)
-    if path is None:
-        raise ConfigError('no audit database: give --db PATH or [audit] db = "PATH"')
-    if not Path(path).is_file():
-        raise StateError(f"{path}: no audit database here (run 'dracc audit' first)")
-    return StateStore(path, busy_timeout_s=acfg.busy_timeout_s)
-
-
-def history_document(store: StateStore, vessel=None, unit=None, channel=None) -> dict:
-    """The trend as a JSON-ready dict (schema ``dracc.audit.history/1``)."""
-    series: dict[tuple, dict] = {}
-    for h in store.history(vessel, unit, channel):
-        key = (h["vessel"], h["unit"], h["channel"])
-        s = series.setdefault(
-            key,
-            {
-                "vessel": key[0],
-                "unit": key[1],
-                "channel": key[2],
-                "measure": h["measure"],
-                "nights": [],
-            },
-        )
-        s["nights"].append(
-            {
-                k: h[k]
-                for k in (
-                    "night",
-                    "n",
-                    "m_u",
-                    "m_y",
-                    "kurtosis",
-                    "limit_error",
-                    "apriori_before",
-                    "apriori_after",
-                    "verdict",
-                )
-            }
-        )
-    nights = [
-        {
-            "vessel": r.vessel,
-            "night": r.night,
-            "audited_utc": r.audited_utc,
-            "content_sha256": r.content_sha256,
-            "dr_containment_2m": r.dr_containment_2m,
-            "dr_verdict": r.dr_verdict,
-            "dr_consistent": r.dr_consistent,
-            "dr_nees": r.dr_nees,
-            "compass_error_deg": r.compass_error_deg,
-            "log_scale": r.log_scale,
-            "rejected_rate": r.rejected_rate,
-            "findings": list(r.findings),
-        }
-        for v in ([vessel] if vessel else store.vessels())
-        for r in store.nights(v)
-    ]
-    events = [
-        {
-            "vessel": e.vessel,
-            "unit": e.unit,
-            "channel": e.channel,
-            "night": e.night,
-            "value": e.value,
-            "previous": e.previous,
-            "reason": e.reason,
-            "evidence": e.evidence,
-        }
-        for e in store.apriori_events(vessel)
-        if (unit is None or e.unit == unit) and (channel is None or e.channel == channel)
-    ]
-    return {
-        "schema": "dracc.audit.history/1",
-        "series": list(series.values()),
-        "nights": nights,
-        "apriori_events": events,
-    }
-
-
 @audit_app.command("history")
 def audit_history(
-    db: Path | None = typer.Option(None, "--db", help="SQLite state file ([audit] db)."),
+    db: Path | None = DbOption,
     vessel: str | None = typer.Option(None, "--vessel", help="Only this vessel."),
     unit: str | None = typer.Option(None, "--unit", help="Only this unit (ins1, ins2, ins3)."),
     channel: str | None = typer.Option(
         None, "--channel", help="Only this channel (lat, lon, course)."
     ),
-    as_json: bool = typer.Option(False, "--json", help="Print the history as JSON on stdout."),
+    json_out: JsonOut = None,
     html_out: Path | None = typer.Option(None, "--html", help="Write an HTML page with plots."),
-    config: Path | None = ConfigOption,
+    config: ConfigFile = None,
 ) -> int:
-    """The trend per vessel, unit and channel: m_y, limiting error, a priori and verdict per night."""
+    """The trend per vessel, unit and channel: m_y, limiting error, a priori and verdict per
+    night (--json: the history document, dracc.audit.history/1)."""
     check_choice(unit, UNITS, "--unit")
     check_choice(channel, CHANNELS, "--channel")
-    with _open_existing(db, config) as store:
+    with open_state(load_config(config), db) as store:
         check_choice(
             vessel, store.vessels(), "--vessel", "no vessel is recorded in this database yet"
         )
-        doc = history_document(store, vessel, unit, channel)
+        doc = audit_json.history_document(store, vessel, unit, channel)
     if html_out is not None:
         atomic.write_text(html_out, history_html(doc))
-    if as_json:
-        out.print(json.dumps(doc, indent=1, ensure_ascii=False), markup=False, highlight=False)
-        return int(ExitCode.OK)
-    if not doc["series"]:
-        out.print("no nights recorded for this selection", markup=False, highlight=False)
-        return int(ExitCode.OK)
-    for s in doc["series"]:
-        d = _digits(s["measure"])
-        t = Table(title=f"{s['vessel']} {s['unit']} {s['channel']} ({s['measure']})")
-        for col in ("night", "n", "m_u", "m_y", "kurtosis", "limit", "a priori", "verdict"):
-            t.add_column(
-                col,
-                justify="left" if col in ("night", "verdict") else "right",
-                no_wrap=True,
-                min_width=10 if col == "night" else None,
-            )
-        for n in s["nights"]:
-            t.add_row(
-                n["night"],
-                str(n["n"]),
-                _f(n["m_u"], d),
-                _f(n["m_y"], d),
-                _f(n["kurtosis"], 2),
-                _f(n["limit_error"], d),
-                _f(n["apriori_after"], d),
-                n["verdict"] or "-",
-            )
-        out.print(t)
+    if json_out is not None:
+        emit_json(doc, json_out)
+    if json_out != STDOUT:
+        print_history(doc, out)
     return int(ExitCode.OK)

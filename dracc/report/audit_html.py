@@ -1,7 +1,9 @@
-"""The ``dracc audit history`` page: per vessel a plot of the nights and their tables.
+"""The audit pages: one audited night (:func:`audit_page`) and ``dracc audit history``.
 
-Renders the history document built by :func:`dracc.cli.audit_cmd.history_document`
-(schema ``dracc.audit.history/1``); nothing is computed here.  The page is one
+:func:`audit_page` renders the audit document of one night (``dracc.audit/1``) with the
+analysis report's sections below; :func:`history_html` renders the history document built
+by :func:`dracc.report.audit_json.history_document` (schema ``dracc.audit.history/1``), per
+vessel a plot of the nights and their tables.  Nothing is computed here.  The page is one
 self-contained file (:mod:`dracc.report.page`); matplotlib loads only when a plot is drawn.
 """
 
@@ -9,9 +11,13 @@ from __future__ import annotations
 
 import html
 import math
+from typing import TYPE_CHECKING
 
 from dracc.core.numbers import none_to_nan
 from dracc.report.page import PAGE_END, img_tag, page_head
+
+if TYPE_CHECKING:
+    from dracc.pipeline.audit import AuditOutcome
 
 _DPI = 90
 
@@ -264,3 +270,13 @@ def night_html(doc: dict, analysis_body: str = "", analysis_css: str = "") -> st
         parts.append(f"<section id='analysis'><h2>The analysis</h2>{analysis_body}</section>")
     parts.append(PAGE_END)
     return "\n".join(parts)
+
+
+def audit_page(o: AuditOutcome, doc: dict | None = None) -> str:
+    """The audit page of one night: :func:`night_html` of its audit document (``doc``, or
+    :func:`dracc.report.audit_json.to_dict` of ``o``) above the analysis report's sections."""
+    from dracc.report import audit_json
+    from dracc.report import html as html_report
+
+    body, css = ("", "") if o.analysis is None else html_report.render_sections(o.analysis)
+    return night_html(audit_json.to_dict(o) if doc is None else doc, body, css)

@@ -4,19 +4,22 @@ What one night's audit found, in the terms of the integrity standards (IMO MSC.2
 5.1.2, 5.3-5.4): the verdict, the findings with their check, source, role, clause,
 statistic, threshold, window and evidence, the checks that could not be made and why,
 the accuracy window, and the analysis document (``dracc.analysis/1``) it rests on.
+
+Also the history document of ``dracc audit history`` (schema ``dracc.audit.history/1``):
+the trend per vessel, unit and channel, the nights and the a priori events.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
 from dataclasses import asdict
 from pathlib import Path
 
 from dracc import __version__
-from dracc.core import atomic
 from dracc.core.numbers import jsonable
 from dracc.pipeline.audit import AuditOutcome, Finding
+from dracc.pipeline.state import StateStore
+from dracc.report.output import emit_json
 
 SCHEMA = "dracc.audit/1"
 SCHEMA_PATH = Path(__file__).with_name("audit.schema.json")
@@ -50,8 +53,10 @@ def finding_dict(f: Finding) -> dict:
     return jsonable(head)
 
 
-def to_dict(o: AuditOutcome, analysis: Mapping | None) -> dict:
-    """The audit document of one night."""
+def to_dict(o: AuditOutcome) -> dict:
+    """The audit document of one night, with the analysis document it rests on."""
+    from dracc.report import json_report  # the analysis' renderer: loaded when one is given
+
     r = o.record
     channels = [
         {
@@ -115,13 +120,90 @@ def to_dict(o: AuditOutcome, analysis: Mapping | None) -> dict:
             "log_scale_sigma": r.log_scale_sigma,
         },
         "missing": list(r.missing),
-        "analysis": analysis,
+        "analysis": None if o.analysis is None else json_report.to_dict(o.analysis),
     }
     return jsonable(doc)
 
 
-def write_json(o: AuditOutcome, analysis: Mapping | None, path: str | Path) -> None:
-    """Write the audit document atomically."""
-    atomic.write_text(
-        path, json.dumps(to_dict(o, analysis), indent=1, allow_nan=False, ensure_ascii=False) + "\n"
-    )
+def write_json(o: AuditOutcome, target: str | Path) -> None:
+    """Write the audit document to ``target`` (atomically), or on stdout for '-'."""
+    emit_json(to_dict(o), target)
+
+
+# ------------------------------------------------------------------------- history
+
+HISTORY_SCHEMA = "dracc.audit.history/1"
+
+#: the figures of one night in a series of the history
+_SERIES_NIGHT_KEYS = (
+    "night",
+    "n",
+    "m_u",
+    "m_y",
+    "kurtosis",
+    "limit_error",
+    "apriori_before",
+    "apriori_after",
+    "verdict",
+)
+
+
+def history_document(
+    store: StateStore,
+    vessel: str | None = None,
+    unit: str | None = None,
+    channel: str | None = None,
+) -> dict:
+    """The trend as a JSON-ready dict (schema ``dracc.audit.history/1``)."""
+    series: dict[tuple, dict] = {}
+    for h in store.history(vessel, unit, channel):
+        key = (h["vessel"], h["unit"], h["channel"])
+        s = series.setdefault(
+            key,
+            {
+                "vessel": key[0],
+                "unit": key[1],
+                "channel": key[2],
+                "measure": h["measure"],
+                "nights": [],
+            },
+        )
+        s["nights"].append({k: h[k] for k in _SERIES_NIGHT_KEYS})
+    nights = [
+        {
+            "vessel": r.vessel,
+            "night": r.night,
+            "audited_utc": r.audited_utc,
+            "content_sha256": r.content_sha256,
+            "dr_containment_2m": r.dr_containment_2m,
+            "dr_verdict": r.dr_verdict,
+            "dr_consistent": r.dr_consistent,
+            "dr_nees": r.dr_nees,
+            "compass_error_deg": r.compass_error_deg,
+            "log_scale": r.log_scale,
+            "rejected_rate": r.rejected_rate,
+            "findings": list(r.findings),
+        }
+        for v in ([vessel] if vessel else store.vessels())
+        for r in store.nights(v)
+    ]
+    events = [
+        {
+            "vessel": e.vessel,
+            "unit": e.unit,
+            "channel": e.channel,
+            "night": e.night,
+            "value": e.value,
+            "previous": e.previous,
+            "reason": e.reason,
+            "evidence": e.evidence,
+        }
+        for e in store.apriori_events(vessel)
+        if (unit is None or e.unit == unit) and (channel is None or e.channel == channel)
+    ]
+    return {
+        "schema": HISTORY_SCHEMA,
+        "series": list(series.values()),
+        "nights": nights,
+        "apriori_events": events,
+    }

@@ -1,8 +1,9 @@
-"""The ``dracc fleet`` page: latest figures per vessel, DR containment and trend plots.
+"""The ``dracc fleet`` reports: the page (latest figures per vessel, DR containment and
+trend plots) and the terminal table of the latest figures (:func:`print_fleet_table`).
 
 Renders a :class:`~dracc.pipeline.fleet.FleetResult`; nothing is estimated here.  The page is one
 self-contained file (:mod:`dracc.report.page`); matplotlib loads only when a plot is drawn.
-The cell formatters and :func:`latest` are shared with the terminal table of ``dracc fleet``.
+The cell formatters and :func:`latest` are shared by the page and the terminal table.
 """
 
 from __future__ import annotations
@@ -11,7 +12,11 @@ import html
 import math
 
 import pandas as pd
+from rich.console import Console
+from rich.table import Table
+from rich.text import Text
 
+from dracc.core.safetext import printable
 from dracc.pipeline.fleet import FleetResult, count_logs
 from dracc.report.page import PAGE_END, img_tag, page_head
 
@@ -162,3 +167,53 @@ def fleet_html(res: FleetResult) -> str:
         parts.append("</ul>")
     parts.append(PAGE_END)
     return "\n".join(parts)
+
+
+def print_fleet_table(res: FleetResult, console: Console) -> None:
+    """The latest figures per vessel, unit and channel, compact enough for 80 columns."""
+    lt = latest(res.table)
+    t = Table(title="fleet: latest log per vessel, unit and channel", padding=(0, 1))
+    for col in (
+        "vessel",
+        "unit",
+        "m_y",
+        "kurt",
+        "limit",
+        "a priori",
+        "verdict",
+        "DR 2M",
+        "compass",
+        "log",
+    ):
+        left = col in ("vessel", "unit", "verdict")
+        t.add_column(
+            col,
+            justify="left" if left else "right",
+            no_wrap=col in ("vessel", "unit"),
+            overflow="fold",
+        )
+    for _, r in lt.iterrows():
+        d = 3 if cell_text(r["measure"]) == "deg" else 0
+        c = r["dr_containment_2m"]
+        unit = "-" if pd.isna(r["unit"]) else f"{r['unit']} {r['channel']}"
+        measure = "" if pd.isna(r["measure"]) else r["measure"]
+        # Text, not str: a vessel folder named '[red]x' is not markup; control
+        # characters from names are shown escaped, never sent to the terminal
+        t.add_row(
+            *(
+                Text(printable(x))
+                for x in (
+                    cell_text(r["vessel"]),
+                    unit,
+                    fmt_num_unit(r["m_y"], d, measure),
+                    fmt_num(r["kurtosis"], 1),
+                    fmt_num(r["limit"], d),
+                    fmt_num(r["apriori_after"], d),
+                    cell_text(r["apriori_verdict"]),
+                    "-" if pd.isna(c) else f"{100 * c:.0f}%",
+                    fmt_num_unit(r["compass_error_deg"], 2, "°"),
+                    fmt_num_unit(r["log_scale_pct"], 1, "%"),
+                )
+            )
+        )
+    console.print(t)

@@ -1,0 +1,62 @@
+"""Batch fleet reports: many vessels' logs analysed in parallel, resumable.
+
+The modules, in reading order:
+
+``tasks``   the ``[fleet]`` settings, safe output names, :func:`discover` (one task per log)
+``batch``   :func:`run_fleet`: analyse every log on a local pool or on Dask, with a cache
+``tables``  the fleet table, the a priori rule per vessel, the per-day trends, publication
+
+The names below are the package's API, importable from ``dracc.pipeline.fleet``.
+"""
+
+from __future__ import annotations
+
+from dracc.core.errors import FleetError
+from dracc.core.vocabulary import CHANNELS
+from dracc.pipeline.fleet.batch import CACHE_SCHEMA, analyse_log, cache_path, run_fleet, summarise
+from dracc.pipeline.fleet.tables import (
+    TABLE_COLUMNS,
+    TEST_SLEEP_ENV,
+    TREND_COLUMNS,
+    FleetResult,
+    count_logs,
+    csv_text,
+    fleet_table,
+    fleet_trends,
+    write_tables,
+)
+from dracc.pipeline.fleet.tasks import (
+    FleetConfig,
+    LogTask,
+    check_scheduler,
+    discover,
+    fleet_config,
+    inside,
+    safe_name,
+)
+
+__all__ = [
+    "CACHE_SCHEMA",
+    "CHANNELS",
+    "TABLE_COLUMNS",
+    "TEST_SLEEP_ENV",
+    "TREND_COLUMNS",
+    "FleetConfig",
+    "FleetError",
+    "FleetResult",
+    "LogTask",
+    "analyse_log",
+    "cache_path",
+    "check_scheduler",
+    "count_logs",
+    "csv_text",
+    "discover",
+    "fleet_config",
+    "fleet_table",
+    "fleet_trends",
+    "inside",
+    "run_fleet",
+    "safe_name",
+    "summarise",
+    "write_tables",
+]

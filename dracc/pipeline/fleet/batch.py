@@ -1,0 +1,249 @@
+"""Running the fleet batch: every log analysed on a local pool or on Dask, cached.
+
+Each log file is one task.  Workers run :func:`analyse_log` (the pipeline) and send back
+:func:`summarise`: a small JSON-ready summary of the analysis (no samples, no DR
+epochs).  The parent caches every summary under ``OUT/cache/`` keyed by the SHA-256 of
+the log's bytes and of the analysis settings (``dracc.fleet.cache/2``, written
+atomically; entries written by another dracc version are analysed again), so a re-run
+skips what was done unless ``force``; a failing log becomes a row with
+``status='failed'`` and an entry in ``failures``, never the end of the batch.
+
+Engines: a local :class:`concurrent.futures.ProcessPoolExecutor` (``workers``), or an
+existing Dask distributed scheduler (``scheduler='tcp://host:port'``, through
+:class:`distributed.Client`).  The workers must see the log paths (a shared disk).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import asdict
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from dracc import __version__
+from dracc.core import atomic
+from dracc.core.config import Config
+from dracc.core.errors import DraccError, FleetError
+from dracc.core.workers import detach_worker
+from dracc.pipeline.audit.facts import facts_from_analysis
+from dracc.pipeline.audit.limits import apriori_seeds, settings_sha256
+from dracc.pipeline.audit.run import analyse_voyage
+from dracc.pipeline.fleet.tables import FleetResult, fleet_table, fleet_trends
+from dracc.pipeline.fleet.tasks import LogTask
+
+if TYPE_CHECKING:
+    from dracc.pipeline.analysis import Analysis
+
+#: /2: the summary's "dr" carries the verdict word and the NEES statistic (a /1 entry is
+#: analysed again)
+CACHE_SCHEMA = "dracc.fleet.cache/2"
+
+
+def summarise(analysis: Analysis) -> dict:
+    """The part of an analysis the fleet keeps and caches (small: no samples, no epochs)."""
+    facts = facts_from_analysis(analysis)
+    return {
+        "schema": analysis.schema,
+        "period": {"start_utc": facts.period_start_utc, "end_utc": facts.period_end_utc},
+        "lines": facts.lines,
+        "rejected": facts.rejected,
+        "sources": facts.sources,
+        "channels": [asdict(c) for c in facts.channels],
+        "dr": {
+            "containment_2m": facts.dr_containment_2m,
+            "n_scored": facts.dr_n_scored,
+            "consistent": facts.dr_consistent,
+            "verdict": facts.dr_verdict,
+            "nees": facts.dr_nees,
+        },
+        "calibration": {
+            "compass_error_deg": facts.compass_error_deg,
+            "compass_error_sigma_deg": facts.compass_error_sigma_deg,
+            "log_scale": facts.log_scale,
+            "log_scale_sigma": facts.log_scale_sigma,
+        },
+        "missing": list(facts.missing),
+    }
+
+
+def analyse_log(path: str, cfg: Config) -> dict:
+    """Worker: analyse one log; ``{"ok": True, "summary": …}`` or ``{"ok": False, "error": …}``.
+
+    Never raises for a bad log: the batch goes on.
+    """
+    try:
+        return {"ok": True, "summary": summarise(analyse_voyage([Path(path)], cfg))}
+    except DraccError as err:
+        return {"ok": False, "error": str(err)}
+    except Exception as err:  # a dracc bug on one log must not stop the fleet
+        return {"ok": False, "error": f"internal error ({type(err).__name__}: {err})"}
+
+
+def cache_path(out: Path, task: LogTask, settings: str) -> Path:
+    """Where the summary of ``task`` under ``settings`` (their SHA-256) is cached."""
+    sha = str(task.sha256)  # only readable logs (hashed) are analysed and cached
+    return out / "cache" / sha[:2] / f"{sha}-{settings[:16]}.json"
+
+
+def _read_cache(p: Path) -> dict | None:
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None  # absent or unreadable: analysed again (and rewritten)
+    if doc.get("schema") != CACHE_SCHEMA or not isinstance(doc.get("summary"), dict):
+        return None
+    if doc.get("dracc_version") != __version__:  # another dracc may analyse differently
+        return None
+    return doc["summary"]
+
+
+def run_fleet(
+    tasks: Sequence[LogTask],
+    cfg: Config,
+    out: Path,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    force: bool = False,
+    connect_timeout_s: float = 30.0,
+    progress: Callable[[int], None] | None = None,
+    analyser: Callable[[str, Config], dict] = analyse_log,
+) -> FleetResult:
+    """Analyse every task (or take it from the cache) and build the fleet tables.
+
+    ``analyser`` must be a picklable module-level function (tests replace it).
+    """
+    out = Path(out)
+    settings = settings_sha256(cfg)
+    seeds = apriori_seeds(cfg)
+    summaries: dict[str, dict] = {}
+    failures: dict[str, str] = {}
+    todo: list[LogTask] = []
+    for t in tasks:
+        if t.error is not None:  # not a readable file: listed as failed, never opened
+            failures[t.path] = t.error
+            if progress:
+                progress(1)
+            continue
+        s = None if force else _read_cache(cache_path(out, t, settings))
+        if s is None:
+            todo.append(t)
+        else:
+            summaries[t.path] = s
+            if progress:
+                progress(1)
+    cached = len(summaries)
+
+    def done(task: LogTask, result: dict) -> None:
+        if result.get("ok"):
+            summaries[task.path] = result["summary"]
+            atomic.write_text(
+                cache_path(out, task, settings),
+                json.dumps(
+                    {
+                        "schema": CACHE_SCHEMA,
+                        "dracc_version": __version__,
+                        "sha256": task.sha256,
+                        "settings_sha256": settings,
+                        "vessel": task.vessel,
+                        "log": task.log,
+                        "summary": result["summary"],
+                    },
+                    ensure_ascii=False,
+                    allow_nan=False,
+                ),
+            )
+        else:
+            failures[task.path] = str(result.get("error"))
+        if progress:
+            progress(1)
+
+    if todo:
+        # largest first: the last tasks to finish are short ones (less idle time at the end)
+        todo.sort(key=lambda t: _size(t.path), reverse=True)
+        if scheduler:
+            _run_dask(todo, cfg, scheduler, connect_timeout_s, analyser, done)
+        else:
+            _run_local(todo, cfg, workers or os.cpu_count() or 1, analyser, done)
+    table = fleet_table(tasks, summaries, failures, seeds)
+    failed = tuple(
+        {"vessel": t.vessel, "log": t.log, "path": t.path, "error": failures[t.path]}
+        for t in tasks
+        if t.path in failures
+    )
+    return FleetResult(table, fleet_trends(table), failed, len(todo), cached)
+
+
+def _size(path: str) -> int:
+    try:
+        return os.path.getsize(path)
+    except OSError:
+        return 0
+
+
+def _preload() -> None:
+    """Import the pipeline in the parent so that forked workers start with it loaded."""
+    import importlib
+
+    for name in ("dracc.pipeline.analysis", "dracc.ingest"):
+        try:
+            importlib.import_module(name)
+        except ImportError:  # pragma: no cover - the worker reports it per log
+            pass
+
+
+def _run_local(todo, cfg, workers, analyser, done) -> None:
+    if analyser is analyse_log:
+        _preload()
+    with ProcessPoolExecutor(
+        max_workers=max(1, min(workers, len(todo))),
+        initializer=detach_worker,
+        initargs=(os.getpid(),),
+    ) as pool:
+        pending = {pool.submit(analyser, t.path, cfg): t for t in todo}
+        try:
+            while pending:
+                finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in finished:
+                    task = pending.pop(fut)
+                    try:
+                        result = fut.result()
+                    except BrokenProcessPool as err:
+                        result = {"ok": False, "error": f"worker process died ({err})"}
+                    done(task, result)
+        except BaseException:
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+
+
+def _run_dask(todo, cfg, scheduler, timeout_s, analyser, done) -> None:
+    try:
+        from distributed import Client, as_completed
+    except ImportError as err:
+        raise FleetError("--scheduler needs Dask distributed: pip install 'dracc[dask]'") from err
+    try:
+        client = Client(scheduler, timeout=timeout_s, set_as_default=False)
+    except (OSError, TimeoutError) as err:
+        raise FleetError(f"cannot reach the Dask scheduler at {scheduler}: {err}") from err
+    try:
+        try:
+            client.wait_for_workers(1, timeout=timeout_s)
+        except TimeoutError as err:
+            raise FleetError(
+                f"the Dask scheduler at {scheduler} has no workers (waited {timeout_s:g} s)"
+            ) from err
+        futures = client.map(analyser, [t.path for t in todo], cfg=cfg, pure=False)
+        by_key = {f.key: t for f, t in zip(futures, todo, strict=True)}
+        for fut in as_completed(futures, loop=client.loop):
+            task = by_key[fut.key]
+            try:
+                result = fut.result()
+            except Exception as err:  # a worker lost or killed: that log failed, the batch goes on
+                result = {"ok": False, "error": f"dask task failed ({type(err).__name__}: {err})"}
+            done(task, result)
+    finally:
+        client.close()

@@ -1,0 +1,356 @@
+"""The fleet's tables and their publication: one row per log, unit and channel; trends.
+
+The fleet table has one row per log, unit and channel (a log without INS statistics has
+one row with empty unit and channel).  The a priori verdict applies the monitoring rule
+(:func:`dracc.pipeline.audit.rule.apriori_chain`) per vessel, unit and channel in time
+order, seeded with ``[deviation.apriori]``.  The per-day trend pools the RMS of the
+day's logs::
+
+    m_y,day = sqrt( sum_i n_i m_y,i^2 / sum_i n_i )        (pooled RMS, weights n_i)
+
+The outputs (tables, trends, per-vessel CSV, ``fleet.json`` and extra pages such as
+``fleet.html``) are written to a staging folder and published together by one rename
+(:func:`dracc.core.atomic.file_set`); CSV cells that a spreadsheet would read as a
+formula get a leading single quote.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from dracc import __version__
+from dracc.core import atomic
+from dracc.pipeline.audit.rule import apriori_chain
+from dracc.pipeline.fleet.tasks import LogTask, inside
+
+#: columns of the fleet table, in order (units in the names or in ``measure``)
+TABLE_COLUMNS = (
+    "vessel",
+    "log",
+    "sha256",
+    "status",
+    "error",
+    "period_start_utc",
+    "period_end_utc",
+    "day",
+    "unit",
+    "channel",
+    "measure",
+    "n",
+    "m_u",
+    "m_y",
+    "kurtosis",
+    "limit",
+    "apriori_before",
+    "apriori_after",
+    "apriori_verdict",
+    "dr_containment_2m",
+    "dr_n_scored",
+    "dr_consistent",
+    "dr_verdict",
+    "dr_nees",
+    "compass_error_deg",
+    "compass_error_sigma_deg",
+    "log_scale_pct",
+    "log_scale_sigma_pct",
+    "rejected_rate_pct",
+    "lines",
+)
+TREND_COLUMNS = (
+    "vessel",
+    "day",
+    "unit",
+    "channel",
+    "measure",
+    "logs",
+    "n",
+    "m_y",
+    "apriori_after",
+    "dr_containment_2m",
+)
+
+
+@dataclass(frozen=True)
+class FleetResult:
+    """The fleet table, the per-day trends, and what happened to each log."""
+
+    table: pd.DataFrame
+    trends: pd.DataFrame
+    failures: tuple[dict, ...]  #: {"vessel", "log", "path", "error"}
+    analysed: int  #: logs analysed in this run
+    cached: int  #: logs taken from the cache
+
+
+def _day(start: str | None, end: str | None) -> str | None:
+    if not start or not end:
+        return None
+    t0 = pd.Timestamp(start)
+    t1 = pd.Timestamp(end)
+    return (t0 + (t1 - t0) / 2).date().isoformat()
+
+
+def _pct(x):
+    return None if x is None else 100.0 * x
+
+
+def fleet_table(
+    tasks: Sequence[LogTask],
+    summaries: Mapping[str, dict],
+    failures: Mapping[str, str],
+    seeds: Mapping[tuple[str, str], float],
+) -> pd.DataFrame:
+    """One row per log, unit and channel, sorted by vessel, time, log, unit, channel."""
+    rows: list[dict] = []
+    for t in tasks:
+        base = {"vessel": t.vessel, "log": t.log, "sha256": t.sha256}
+        if t.path in failures:
+            rows.append({**base, "status": "failed", "error": failures[t.path]})
+            continue
+        s = summaries.get(t.path)
+        if s is None:
+            continue
+        per = s["period"]
+        cal = s["calibration"]
+        rate = (s["rejected"] / s["lines"]) if s.get("lines") else None
+        common = {
+            **base,
+            "status": "ok",
+            "error": None,
+            "period_start_utc": per["start_utc"],
+            "period_end_utc": per["end_utc"],
+            "day": _day(per["start_utc"], per["end_utc"]),
+            "dr_containment_2m": s["dr"]["containment_2m"],
+            "dr_n_scored": s["dr"]["n_scored"],
+            "dr_consistent": s["dr"]["consistent"],
+            "dr_verdict": s["dr"].get("verdict"),
+            "dr_nees": s["dr"].get("nees"),
+            "compass_error_deg": cal["compass_error_deg"],
+            "compass_error_sigma_deg": cal["compass_error_sigma_deg"],
+            "log_scale_pct": _pct(cal["log_scale"]),
+            "log_scale_sigma_pct": _pct(cal["log_scale_sigma"]),
+            "rejected_rate_pct": _pct(rate),
+            "lines": s.get("lines"),
+        }
+        if not s["channels"]:
+            rows.append(common)
+        for c in s["channels"]:
+            rows.append(
+                {
+                    **common,
+                    "unit": c["unit"],
+                    "channel": c["channel"],
+                    "measure": {"lat": "m", "lon": "m", "course": "deg"}.get(c["channel"]),
+                    "n": c["n"],
+                    "m_u": c["m_u"],
+                    "m_y": c["m_y"],
+                    "kurtosis": c["kurtosis"],
+                    "limit": c["limit_error"],
+                }
+            )
+    df = pd.DataFrame(rows, columns=list(TABLE_COLUMNS))
+    df = _typed(df)
+    df = df.sort_values(
+        ["vessel", "period_start_utc", "log", "unit", "channel"],
+        na_position="last",
+        kind="mergesort",
+    ).reset_index(drop=True)
+    _apply_rule(df, seeds)
+    return df
+
+
+def _typed(df: pd.DataFrame) -> pd.DataFrame:
+    floats = [
+        "m_u",
+        "m_y",
+        "kurtosis",
+        "limit",
+        "apriori_before",
+        "apriori_after",
+        "dr_containment_2m",
+        "dr_nees",
+        "compass_error_deg",
+        "compass_error_sigma_deg",
+        "log_scale_pct",
+        "log_scale_sigma_pct",
+        "rejected_rate_pct",
+    ]
+    ints = ["n", "dr_n_scored", "lines"]
+    strings = [c for c in TABLE_COLUMNS if c not in floats + ints + ["dr_consistent"]]
+    for c in floats:
+        df[c] = pd.to_numeric(df[c], errors="coerce").astype("float64")
+    for c in ints:
+        df[c] = pd.to_numeric(df[c], errors="coerce").astype("Int64")
+    for c in strings:
+        df[c] = df[c].astype("string")
+    df["dr_consistent"] = df["dr_consistent"].astype("boolean")
+    return df
+
+
+def _apply_rule(df: pd.DataFrame, seeds: Mapping[tuple[str, str], float]) -> None:
+    """The monitoring rule per vessel, unit and channel, log after log in time order
+    (:func:`dracc.pipeline.audit.apriori_chain` on each series; one assignment per column)."""
+    ok_pos = np.flatnonzero(((df["status"] == "ok") & df["unit"].notna()).to_numpy(dtype=bool))
+    before = np.full(len(df), np.nan)
+    after = np.full(len(df), np.nan)
+    verdict = np.full(len(df), None, dtype=object)
+    logs = df["log"].to_numpy(dtype=object)
+    m_y = df["m_y"].to_numpy(dtype="float64")
+    keys = df.iloc[ok_pos][["vessel", "unit", "channel"]]
+    for (_vessel, unit, channel), pos in keys.groupby(
+        ["vessel", "unit", "channel"], sort=False
+    ).indices.items():
+        rows = ok_pos[pos]  # in table order: time order within the vessel
+        steps = apriori_chain(
+            seeds.get((unit, channel)),
+            [(str(logs[r]), None if np.isnan(m_y[r]) else float(m_y[r])) for r in rows],
+        )
+        before[rows] = [np.nan if st.before is None else st.before for st in steps]
+        after[rows] = [np.nan if st.after is None else st.after for st in steps]
+        verdict[rows] = [st.verdict for st in steps]
+    df["apriori_before"] = before
+    df["apriori_after"] = after
+    df["apriori_verdict"] = pd.array(verdict, dtype="string")
+
+
+def fleet_trends(table: pd.DataFrame) -> pd.DataFrame:
+    """Per vessel, day, unit and channel: pooled RMS m_y (weights n), the a priori at the
+    day's end, and the DR containment of the vessel's logs that day pooled over their
+    scored epochs (weights ``dr_n_scored``)."""
+    ok = table[(table["status"] == "ok") & table["unit"].notna() & table["day"].notna()]
+    key = ["vessel", "day", "unit", "channel"]
+    n = ok["n"].astype("float64")
+    m_y = ok["m_y"].astype("float64")
+    good = m_y.notna() & (n > 0)
+    parts = ok[key + ["measure", "log", "apriori_after"]].assign(
+        _n=n.where(good, 0.0), _nm2=(n * m_y**2).where(good, 0.0)
+    )
+    agg = (
+        parts.groupby(key, sort=True)
+        .agg(
+            measure=("measure", "first"),
+            logs=("log", "nunique"),
+            n=("_n", "sum"),
+            nm2=("_nm2", "sum"),
+            apriori_after=("apriori_after", "last"),
+        )
+        .reset_index()
+    )
+    with np.errstate(invalid="ignore", divide="ignore"):
+        agg["m_y"] = np.where(agg["n"] > 0, np.sqrt(agg["nm2"] / agg["n"]), np.nan)  # pooled RMS
+    per_log = ok.drop_duplicates(["vessel", "log", "sha256"])
+    w = per_log["dr_n_scored"].astype("float64")
+    c = per_log["dr_containment_2m"].astype("float64")
+    okc = c.notna() & w.notna() & (w > 0)
+    dr = per_log[["vessel", "day"]].assign(_w=w.where(okc, 0.0), _wc=(w * c).where(okc, 0.0))
+    dr = (
+        dr.groupby(["vessel", "day"], sort=True)
+        .agg(w=("_w", "sum"), wc=("_wc", "sum"))
+        .reset_index()
+    )
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dr["dr_containment_2m"] = np.where(dr["w"] > 0, dr["wc"] / dr["w"], np.nan)
+    df = agg.merge(dr[["vessel", "day", "dr_containment_2m"]], on=["vessel", "day"], how="left")
+    df = df[list(TREND_COLUMNS)].copy()
+    for col in ("vessel", "day", "unit", "channel", "measure"):
+        df[col] = df[col].astype("string")
+    for col in ("logs", "n"):
+        df[col] = df[col].round().astype("Int64")
+    for col in ("m_y", "apriori_after", "dr_containment_2m"):
+        df[col] = df[col].astype("float64")
+    return df.reset_index(drop=True)
+
+
+def count_logs(table: pd.DataFrame) -> int:
+    """The number of logs in a fleet table (a log has one row per unit and channel)."""
+    return len(table.drop_duplicates(["vessel", "log", "sha256"]))
+
+
+#: test hook: seconds to sleep half-way through writing the outputs (interruption tests)
+TEST_SLEEP_ENV = "DRACC_FLEET_TEST_SLEEP_S"
+
+
+def csv_text(df: pd.DataFrame) -> str:
+    """``df`` as CSV for a spreadsheet: a text cell starting with ``=``, ``+``, ``-``,
+    ``@``, a tab or a CR (a vessel or file name, an error message) gets a leading single
+    quote, so that no cell is read as a formula (:func:`dracc.core.safetext.csv_cell`).
+    Numbers are left alone (-0.5 stays a number); Parquet keeps the raw text."""
+    from dracc.core.safetext import csv_cell
+
+    safe = df.copy()
+    for col in safe.columns:
+        if not (pd.api.types.is_string_dtype(safe[col]) or safe[col].dtype == object):
+            continue
+        safe[col] = safe[col].map(csv_cell, na_action="ignore")
+    return safe.to_csv(index=False)
+
+
+def write_tables(
+    result: FleetResult,
+    out: Path,
+    extra: Mapping[str, str] | None = None,
+    published: list | None = None,
+) -> list[Path]:
+    """fleet.parquet/.csv, trends.parquet/.csv, failures in fleet.json, per vessel
+    ``vessels/<safe name>/fleet.csv`` and ``trends.csv``, and the ``extra`` files
+    (name -> text, e.g. ``fleet.html``), published together (:func:`dracc.core.atomic.file_set`):
+    a reader, an interrupt or a kill at any moment finds the previous complete set in
+    ``out`` or the new complete set, never a mix (``published``: see
+    :func:`~dracc.core.atomic.file_set`).  Returns the paths of the outputs."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    rels: list[Path] = []
+    sleep_s = os.environ.get(TEST_SLEEP_ENV)
+    with atomic.file_set(out, published) as stage:
+
+        def put(rel: Path, data: str | pd.DataFrame) -> None:
+            path = inside(stage, *rel.parts)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            if isinstance(data, str):
+                path.write_text(data, encoding="utf-8")
+            elif path.suffix == ".parquet":
+                data.to_parquet(path, index=False)
+            else:
+                path.write_text(csv_text(data), encoding="utf-8")
+            rels.append(path.relative_to(stage.resolve()))
+
+        for name, df in (("fleet", result.table), ("trends", result.trends)):
+            put(Path(f"{name}.parquet"), df)
+            put(Path(f"{name}.csv"), df)
+        if sleep_s:  # test hook: a run interrupted here must leave the old set whole
+            print(
+                f"dracc fleet: test hook: sleeping {sleep_s} s while writing the outputs",
+                file=sys.stderr,
+                flush=True,
+            )
+            time.sleep(float(sleep_s))
+        for vessel in sorted(result.table["vessel"].dropna().unique()):
+            put(
+                Path("vessels", vessel, "fleet.csv"), result.table[result.table["vessel"] == vessel]
+            )
+            put(
+                Path("vessels", vessel, "trends.csv"),
+                result.trends[result.trends["vessel"] == vessel],
+            )
+        summary = {
+            "schema": "dracc.fleet/1",
+            "dracc_version": __version__,
+            "logs": count_logs(result.table),
+            "vessels": sorted(result.table["vessel"].dropna().unique().tolist()),
+            "analysed": result.analysed,
+            "cached": result.cached,
+            "failures": list(result.failures),
+        }
+        put(Path("fleet.json"), json.dumps(summary, indent=1, ensure_ascii=False) + "\n")
+        for name, text in (extra or {}).items():
+            put(Path(name), text)
+    root = out.resolve()
+    return [root / r for r in rels]
