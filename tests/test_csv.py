@@ -329,14 +329,16 @@ def test_small_blocks_and_unsorted_rows_give_the_same_frames(tmp_path, monkeypat
     shuffled.write_text(
         head + "".join(body[i] for i in rng.permutation(len(body))), encoding="utf-8"
     )
+    import dracc.ingest.csv_long as csv_long
+
     passes = []
-    real_pass = csv_mod._read_long_pass
+    real_pass = csv_long.read_long_pass
 
     def counted(*args, streaming):
         passes.append(streaming)
         return real_pass(*args, streaming=streaming)
 
-    monkeypatch.setattr(csv_mod, "_read_long_pass", counted)
+    monkeypatch.setattr(csv_long, "read_long_pass", counted)
     mixed = read_csv(shuffled, IngestConfig())
     if form == "long":
         assert passes == [True, False]  # the unsorted rows were noticed and the file read again

@@ -29,8 +29,10 @@ from dracc.sim.faults import (
     FAULT_KINDS,
     fault_table,
 )
-from dracc.sim.model import SOURCES, simulate_segments, start_ns
+from dracc.sim.model import simulate_segments
 from dracc.sim.nmea_out import frames_to_lines, write_nmea
+from dracc.sim.readings import SOURCES
+from dracc.sim.truth import start_ns
 
 #: a short voyage, every sensor at 1 Hz, both compasses (so MAG exists)
 BASE = dict(duration_s=3600.0, seed=11, compass="both", compass_hz=1.0, aux_hz=1.0)

@@ -25,6 +25,10 @@ numbers since the Unix epoch whose unit follows from their size (below 1e11 seco
 below 1e14 milliseconds, below 1e17 microseconds, else nanoseconds: unambiguous for dates
 between 1973 and 5138).
 
+The cell parsers are in :mod:`dracc.ingest.csv_cells`, the long form's records in
+:mod:`dracc.ingest.csv_long`; this module tells the forms apart, scans and streams the
+file, and reads the wide and raw forms.
+
 Reading streams the file in blocks (pyarrow's incremental CSV reader), so memory holds
 one block of text plus the compact numeric columns.  Bad rows are counted by reason with
 their line numbers (line 1 is the header): wrong number of fields, blank line, bad time,
@@ -45,6 +49,7 @@ from __future__ import annotations
 import codecs
 import functools
 import io
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -53,8 +58,20 @@ import pandas as pd
 
 from dracc.core.config import IngestConfig
 from dracc.core.errors import IngestError
-from dracc.core.quantities import QUANTITIES, REF_QUANTITIES
+from dracc.core.quantities import REF_QUANTITIES
 from dracc.frames import FileResult, Rejects, concat_blocks
+from dracc.ingest.csv_cells import (
+    RAW_COLUMNS,
+    TIME_COLUMNS,
+    Columns,
+    cell_numbers,
+    drop_blank_rows,
+    find_column,
+    parse_times,
+    row_times,
+    sorted_frames,
+)
+from dracc.ingest.csv_long import FramesAndRows, read_long
 from dracc.ingest.csv_quantities import (
     UNITLESS_HINTS,
     add_rejects,
@@ -64,18 +81,8 @@ from dracc.ingest.csv_quantities import (
     renumber_examples,
 )
 
-TIME_COLUMNS = (
-    "time_utc",
-    "time_ns",
-    "received_at",
-    "timestamp",
-    "time",
-    "datetime",
-    "date_time",
-    "utc",
-    "log_time",
-)
-RAW_COLUMNS = ("raw_data", "raw", "nmea", "raw_sentence", "sentence_raw")
+__all__ = ["RAW_COLUMNS", "TIME_COLUMNS", "looks_like_csv", "parse_times", "read_csv"]
+
 _BLOCK_BYTES = 4 << 20
 
 
@@ -92,21 +99,13 @@ def _split_header(head: bytes) -> list[str] | None:
     return [c.strip().strip('"').strip() for c in text.split(",")]
 
 
-def _find(cols: list[str], names: tuple[str, ...]) -> str | None:
-    low = {c.lower(): c for c in cols}
-    for n in names:
-        if n in low:
-            return low[n]
-    return None
-
-
 def looks_like_csv(head: bytes) -> bool:
     """True when the first line of ``head`` is a header dracc reads: a time column and
     either ``quantity,value``, a raw-sentence column, or at least one other column."""
     cols = _split_header(head)
     if not cols or len(cols) < 2:
         return False
-    if _find(cols, TIME_COLUMNS) is None:
+    if find_column(cols, TIME_COLUMNS) is None:
         return False
     return True
 
@@ -115,41 +114,9 @@ def _form(cols: list[str]) -> str:
     low = {c.lower() for c in cols}
     if {"quantity", "value"} <= low:
         return "csv-long"
-    if _find(cols, RAW_COLUMNS) is not None:
+    if find_column(cols, RAW_COLUMNS) is not None:
         return "csv-raw"
     return "csv-wide"
-
-
-def parse_times(text: np.ndarray, column: str) -> tuple[np.ndarray, np.ndarray]:
-    """(time_ns int64, ok bool) from a column of strings; see the module docstring."""
-    s = pd.Series(text, dtype=object)
-    n = len(s)
-    out = np.zeros(n, dtype=np.int64)
-    if column.lower() == "time_ns":
-        num = pd.to_numeric(s, errors="coerce")
-        ok = num.notna().to_numpy()
-        out[ok] = s[ok].astype(np.int64).to_numpy()
-        return out, ok
-    num = pd.to_numeric(s, errors="coerce").to_numpy(dtype=np.float64)
-    isnum = ~np.isnan(num)
-    if isnum.any():
-        mag = np.abs(num[isnum])
-        scale = np.where(mag < 1e11, 1e9, np.where(mag < 1e14, 1e6, np.where(mag < 1e17, 1e3, 1.0)))
-        out[isnum] = np.round(num[isnum] * scale).astype(np.int64)
-    rest = ~isnum
-    ok = isnum.copy()
-    if rest.any():
-        dt = pd.to_datetime(s[rest], utc=True, format="ISO8601", errors="coerce")
-        good = dt.notna().to_numpy()
-        vals = (
-            dt[good].dt.as_unit("ns").astype("int64").to_numpy()
-            if good.any()
-            else np.zeros(0, np.int64)
-        )
-        idx = np.flatnonzero(rest)
-        out[idx[good]] = vals
-        ok[idx[good]] = True
-    return out, ok
 
 
 def _line_numbers(k0: int, n: int, invalid_lines: list[int]) -> np.ndarray:
@@ -312,7 +279,9 @@ codecs.register(
 )
 
 
-def _iter_blocks(path: Path, cols: list[str], rejects: Rejects, file: str, scan: _Scan):
+def _iter_blocks(
+    path: Path, cols: list[str], rejects: Rejects, file: str, scan: _Scan
+) -> Iterator[tuple[Columns, np.ndarray]]:
     """Yield (dict column -> object array, line numbers) per block of the CSV, the rows
     ``scan`` found too long left out (counted by the caller)."""
     import pyarrow as pa
@@ -376,57 +345,6 @@ def _iter_blocks(path: Path, cols: list[str], rejects: Rejects, file: str, scan:
             source.close()
 
 
-def _drop_blank(
-    data: dict, lines: np.ndarray, rejects: Rejects, file: str
-) -> tuple[dict, np.ndarray]:
-    blank = np.ones(len(lines), dtype=bool)
-    for v in data.values():
-        blank &= v == ""
-    if blank.any():
-        add_rejects(rejects, "blank line", file, lines[blank], [""] * 5)
-        keep = ~blank
-        data = {k: v[keep] for k, v in data.items()}
-        lines = lines[keep]
-    return data, lines
-
-
-def _times(data: dict, lines: np.ndarray, tcol: str, rejects: Rejects, file: str):
-    t_ns, ok = parse_times(data[tcol], tcol)
-    if not ok.all():
-        bad = ~ok
-        add_rejects(rejects, "bad time", file, lines[bad], [str(x) for x in data[tcol][bad][:5]])
-    return t_ns, ok
-
-
-def _nan_text(text: np.ndarray, where: np.ndarray) -> np.ndarray:
-    """True where ``text`` (an object array of strings) spells NaN in any case, looked at
-    only where ``where``: string by string, never as a fixed-width array (``astype(str)``,
-    ``np.char``), which would be the number of rows times the longest value in size."""
-    out = np.zeros(len(text), dtype=bool)
-    idx = np.flatnonzero(where)
-    if len(idx):
-        out[idx] = np.fromiter(
-            (isinstance(x, str) and len(x) == 3 and x.lower() == "nan" for x in text[idx].tolist()),
-            dtype=bool,
-            count=len(idx),
-        )
-    return out
-
-
-def _numbers(
-    text: np.ndarray, lines: np.ndarray, name: str, rejects: Rejects, file: str
-) -> np.ndarray:
-    """Floats from strings: '' is absent (NaN); anything else non-numeric is counted."""
-    v = pd.to_numeric(pd.Series(text, dtype=object), errors="coerce").to_numpy(dtype=np.float64)
-    maybe = np.isnan(v) & (text != "")
-    bad = maybe & ~_nan_text(text, maybe)
-    if bad.any():
-        add_rejects(
-            rejects, "value not a number", file, lines[bad], [f"{name}={x}" for x in text[bad][:5]]
-        )
-    return v
-
-
 def read_csv(path, cfg: IngestConfig) -> FileResult:
     """Read a CSV voyage log (long, wide or raw form) into canonical frames.
 
@@ -443,7 +361,7 @@ def read_csv(path, cfg: IngestConfig) -> FileResult:
     except OSError as err:
         raise IngestError(f"{file}: cannot read: {err}") from err
     cols = _split_header(head)
-    if not cols or _find(cols, TIME_COLUMNS) is None:
+    if not cols or find_column(cols, TIME_COLUMNS) is None:
         first = head.split(b"\n", 1)[0][:80].decode("utf-8", "replace")
         raise IngestError(
             f"{file}:1: not a dracc CSV header (needs a time column such as "
@@ -481,7 +399,9 @@ def read_csv(path, cfg: IngestConfig) -> FileResult:
                 f"{limit} (--strict)"
             )
     if form == "csv-long":
-        frames, rows = _read_long(p, cols, declared, rejects, file, scan)
+        frames, rows = read_long(
+            lambda r: _iter_blocks(p, cols, r, file, scan), p.stem, cols, declared, rejects, file
+        )
     elif form == "csv-wide":
         frames, rows = _read_wide(p, cols, declared, rejects, notes, file, scan)
     else:
@@ -497,201 +417,17 @@ def read_csv(path, cfg: IngestConfig) -> FileResult:
     )
 
 
-class _Labels:
-    """Strings as small integer codes, the same code for the same string in every block
-    (one Python string per distinct label, not one per row)."""
-
-    def __init__(self):
-        self.code: dict[str, int] = {}
-
-    def codes(self, text: np.ndarray) -> np.ndarray:
-        local, uniq = pd.factorize(text)
-        lut = np.array(
-            [self.code.setdefault(str(u), len(self.code)) for u in uniq] or [0], dtype=np.int32
-        )
-        return lut[local]
-
-    def labels(self) -> np.ndarray:
-        return np.array(list(self.code), dtype=object)
-
-
-class _Unsorted(Exception):
-    """A long-form CSV row whose time was already made into records (the file is not
-    sorted by time): the file is read again, all rows at once."""
-
-
-def _read_long(p: Path, cols: list[str], declared: dict, rejects: Rejects, file: str, scan: _Scan):
-    """One value per row: rows become records by (time, source, occurrence).
-
-    In a file sorted by time, the rows of a time are complete once a later time is seen:
-    each block's rows up to its last time become records at once, so the memory holds a
-    block and its frames.  A row older than rows already made into records means the file
-    is not sorted: it is then read again with every row kept as numbers (time in ns, source
-    and quantity as codes, the value, the line: about 40 bytes a row) and the rows of the
-    whole file become records together.  Both give the same frames."""
-    mine = Rejects()
-    try:
-        frames, rows = _read_long_pass(p, cols, declared, mine, file, scan, streaming=True)
-    except _Unsorted:
-        mine = Rejects()  # what the first pass counted is counted again
-        frames, rows = _read_long_pass(p, cols, declared, mine, file, scan, streaming=False)
-    rejects.merge(mine)
-    return frames, rows
-
-
-def _read_long_pass(
-    p: Path,
-    cols: list[str],
-    declared: dict,
-    rejects: Rejects,
-    file: str,
-    scan: _Scan,
-    streaming: bool,
-):
-    tcol = _find(cols, TIME_COLUMNS)
-    scol = _find(cols, ("source",))
-    qcol = _find(cols, ("quantity",))
-    vcol = _find(cols, ("value",))
-    sources, quantities = _Labels(), _Labels()
-    held: list[
-        tuple
-    ] = []  #: rows not yet made into records: (t, source, quantity, value, line, reference text)
-    parts: list[dict[str, pd.DataFrame]] = []
-    done_upto: int | None = None  #: the latest time made into records (streaming)
-    rows = 0
-    stem = p.stem
-    for data, lines in _iter_blocks(p, cols, rejects, file, scan):
-        rows += len(lines)
-        data, lines = _drop_blank(data, lines, rejects, file)
-        t_ns, ok = _times(data, lines, tcol, rejects, file)
-        qname = data[qcol]
-        qmapped = np.array([declared.get(q, q) for q in qname], dtype=object) if declared else qname
-        known = np.isin(qmapped, list(QUANTITIES))
-        unk = ok & ~known
-        if unk.any():
-            add_rejects(
-                rejects, "unknown quantity", file, lines[unk], [str(q) for q in qname[unk][:5]]
-            )
-        val = data[vcol]
-        empty = ok & known & (val == "")
-        if empty.any():
-            add_rejects(
-                rejects, "empty value", file, lines[empty], [str(q) for q in qname[empty][:5]]
-            )
-        keep = ok & known & ~empty
-        isref = np.isin(qmapped, list(REF_QUANTITIES))
-        num = np.full(len(val), np.nan)
-        nr = keep & ~isref
-        if nr.any():
-            num[nr] = _numbers(val[nr], lines[nr], "value", rejects, file)
-            maybe = nr & np.isnan(num)
-            keep &= ~(maybe & ~_nan_text(val, maybe))
-        src = data[scol] if scol else np.full(len(val), stem, dtype=object)
-        k = np.flatnonzero(keep)
-        if len(k) == 0:
-            continue
-        ref = np.where(isref[k], val[k], None)
-        block = (
-            t_ns[k],
-            sources.codes(src[k]),
-            quantities.codes(qmapped[k]),
-            num[k],
-            lines[k],
-            ref,
-        )
-        if not streaming:
-            held.append(block)
-            continue
-        if done_upto is not None and block[0].min() <= done_upto:
-            raise _Unsorted
-        rows_now = tuple(np.concatenate([h[i] for h in held] + [block[i]]) for i in range(6))
-        t_last = rows_now[0].max()
-        complete = rows_now[0] < t_last
-        if complete.any():
-            parts.append(
-                _records(*(x[complete] for x in rows_now), sources, quantities, file, rejects)
-            )
-            done_upto = int(rows_now[0][complete].max())
-        held = [tuple(x[~complete] for x in rows_now)]
-    if held and len(held[0][0]):
-        rows_now = tuple(np.concatenate([h[i] for h in held]) for i in range(6))
-        held = []
-        parts.append(_records(*rows_now, sources, quantities, file, rejects))
-    return _sorted(concat_blocks(parts, every_kind=False)), rows
-
-
-def _records(
-    t_ns,
-    sc,
-    qc,
-    num,
-    lines,
-    ref,
-    sources: _Labels,
-    quantities: _Labels,
-    file: str,
-    rejects: Rejects,
-) -> dict[str, pd.DataFrame]:
-    """Frames from long-form rows: one record per (time, source, occurrence), the n-th value
-    of a quantity at one time and source belonging to the n-th record there (a GGA and an
-    RMC fix of one receiver at one time)."""
-    occ = _occurrence(t_ns, sc, qc)
-    order = np.lexsort((occ, sc, t_ns))  # records: runs of equal (time, source, occurrence)
-    ts, ss, os_ = t_ns[order], sc[order], occ[order]
-    starts = np.r_[True, (ts[1:] != ts[:-1]) | (ss[1:] != ss[:-1]) | (os_[1:] != os_[:-1])]
-    rec = np.empty(len(order), dtype=np.int64)
-    rec[order] = np.cumsum(starts) - 1
-    t_rec, s_codes = ts[starts], ss[starts]
-    del ts, ss, os_, order
-    nrec = len(t_rec)
-    first_line = np.full(nrec, np.iinfo(np.int64).max)
-    np.minimum.at(first_line, rec, lines)
-    values: dict[str, np.ndarray] = {}
-    qlabels = quantities.labels()
-    for code in pd.unique(qc):
-        m = qc == code
-        r = rec[m]  # distinct within a quantity, by construction of the key
-        q = str(qlabels[code])
-        if q in REF_QUANTITIES:
-            arr = np.full(nrec, None, dtype=object)
-            arr[r] = ref[m]
-        else:
-            arr = np.full(nrec, np.nan)
-            arr[r] = num[m]
-        values[q] = arr
-    return build_frames(t_rec, sources.labels()[s_codes], first_line, "csv", values, file, rejects)
-
-
-def _occurrence(t: np.ndarray, s: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """For each row, how many rows before it (in file order) have its time, source and
-    quantity: 0 for the first value of a quantity at a time and source, 1 for the second."""
-    order = np.lexsort((q, s, t))  # stable: file order within equal keys
-    ts, ss, qs = t[order], s[order], q[order]
-    idx = np.arange(len(order))
-    new = np.r_[True, (ts[1:] != ts[:-1]) | (ss[1:] != ss[:-1]) | (qs[1:] != qs[:-1])]
-    occ = np.empty(len(order), dtype=np.int32)
-    occ[order] = idx - np.maximum.accumulate(np.where(new, idx, 0))
-    return occ
-
-
-def _sorted(frames: dict[str, pd.DataFrame]) -> dict[str, pd.DataFrame]:
-    return {
-        k: f.sort_values(["time_ns", "line"], kind="stable").reset_index(drop=True)
-        for k, f in frames.items()
-    }
-
-
 def _read_wide(
     p: Path,
     cols: list[str],
-    declared: dict,
+    declared: dict[str, str],
     rejects: Rejects,
     notes: list[str],
     file: str,
     scan: _Scan,
-):
-    tcol = _find(cols, TIME_COLUMNS)
-    scol = _find(cols, ("source",))
+) -> FramesAndRows:
+    tcol = find_column(cols, TIME_COLUMNS)
+    scol = find_column(cols, ("source",))
     qcols: dict[str, str] = {}
     ignored = []
     for c in cols:
@@ -717,24 +453,24 @@ def _read_wide(
             f"{file}:1: no column names a quantity (e.g. lat_deg, heading_deg, stw_kn); "
             f"columns: {', '.join(cols)}"
         )
-    parts: list[tuple] = []
+    parts: list[dict[str, pd.DataFrame]] = []
     rows = 0
     for data, lines in _iter_blocks(p, cols, rejects, file, scan):
         rows += len(lines)
-        data, lines = _drop_blank(data, lines, rejects, file)
-        t_ns, ok = _times(data, lines, tcol, rejects, file)
-        vals = {}
+        data, lines = drop_blank_rows(data, lines, rejects, file)
+        t_ns, ok = row_times(data, lines, tcol, rejects, file)
+        vals: dict[str, np.ndarray] = {}
         for c, qname in qcols.items():
             text = data[c][ok]
             if qname in REF_QUANTITIES:
                 vals[qname] = np.where(text == "", None, text)
             else:
-                vals[qname] = _numbers(text, lines[ok], c, rejects, file)
+                vals[qname] = cell_numbers(text, lines[ok], c, rejects, file)
         src = data[scol][ok] if scol else np.full(int(ok.sum()), p.stem, dtype=object)
         # a row is a record: each block becomes compact frames at once (a float for every
         # column of every row, and a string per row, made memory grow with the file)
         parts.append(build_frames(t_ns[ok], src, lines[ok], "csv", vals, file, rejects))
-    return _sorted(concat_blocks(parts, every_kind=False)), rows
+    return sorted_frames(concat_blocks(parts, every_kind=False)), rows
 
 
 def _read_raw(
@@ -748,10 +484,10 @@ def _read_raw(
 ) -> FileResult:
     from dracc.ingest.nmea import parse_sentences
 
-    tcol = _find(cols, TIME_COLUMNS)
-    rcol = _find(cols, RAW_COLUMNS)
-    scol = _find(cols, ("source",))
-    pcol = _find(cols, ("protocol",))
+    tcol = find_column(cols, TIME_COLUMNS)
+    rcol = find_column(cols, RAW_COLUMNS)
+    scol = find_column(cols, ("source",))
+    pcol = find_column(cols, ("protocol",))
     all_lines: list[bytes] = []
     times: list[np.ndarray] = []
     sources: list[np.ndarray] = []
@@ -761,7 +497,7 @@ def _read_raw(
     n2k_examples: list[tuple[str, int, str]] = []
     for data, lines in _iter_blocks(p, cols, rejects, file, scan):
         rows += len(lines)
-        data, lines = _drop_blank(data, lines, rejects, file)
+        data, lines = drop_blank_rows(data, lines, rejects, file)
         keep = np.ones(len(lines), dtype=bool)
         if pcol:  # valid rows of a protocol dracc does not decode: ignored, not rejected
             n2k = np.fromiter(

@@ -1,21 +1,16 @@
 """Voyage simulator with known truth (:func:`simulate`) and its NMEA 0183 writer.
 
-See :mod:`dracc.sim.model` for the truth, the sensor error processes and the written
-precision, :mod:`dracc.sim.nmea_out` for the sentence layouts and line forms, and
+See :mod:`dracc.sim.model` for :func:`simulate` and its glossary, :mod:`dracc.sim.params`
+for the parameters, :mod:`dracc.sim.truth` for the true track, :mod:`dracc.sim.processes`
+for the sensor error processes, :mod:`dracc.sim.readings` for the written precision and the
+canonical frames, :mod:`dracc.sim.nmea_out` for the sentence layouts and line forms, and
 :mod:`dracc.sim.faults` for the seeded sensor faults (``SimParams(faults=...)``).
 """
 
 from dracc.sim.faults import FAULT_KINDS, SimFault, parse_fault, resolve_faults
-from dracc.sim.model import (
-    DEFAULT_INS,
-    GM,
-    InsErrorParams,
-    SimParams,
-    SimVoyage,
-    gauss_markov,
-    simulate,
-    simulate_segments,
-)
+from dracc.sim.model import SimVoyage, simulate, simulate_segments
+from dracc.sim.params import DEFAULT_INS, GM, InsErrorParams, SimParams
+from dracc.sim.processes import gauss_markov
 
 __all__ = [
     "GM",
