@@ -34,3 +34,16 @@ def test_finite_or_none(x, want):
     got = finite_or_none(x)
     assert got == want
     assert got is None or type(got) is float
+
+
+def test_jsonable_keeps_types_and_drops_nan():
+    from pathlib import Path
+
+    from dracc.core.numbers import jsonable
+
+    got = jsonable(
+        {1: (np.int64(3), np.float32(0.5), np.bool_(True)), "x": [math.nan, -math.inf, "a"]}
+    )
+    assert got == {"1": [3, 0.5, True], "x": [None, None, "a"]}
+    assert type(got["1"][0]) is int and type(got["1"][2]) is bool
+    assert jsonable(Path("a/b")) == "a/b" and jsonable(None) is None

@@ -10,6 +10,8 @@ import math
 from collections.abc import Iterable, Mapping
 from typing import Any
 
+import numpy as np
+
 
 def finite_or_none(x: Any) -> float | None:
     """``float(x)`` when it is a finite number; None for None, NaN, +-inf, booleans and
@@ -24,21 +26,20 @@ def finite_or_none(x: Any) -> float | None:
 
 
 def jsonable(x: Any) -> Any:
-    """``x`` in JSON types: NaN and infinities become None, tuples lists, numpy scalars
-    Python numbers, mappings dicts with text keys, anything else its text."""
+    """``x`` in JSON types: integers (numpy's too) as ``int``, floats as ``float`` with NaN
+    and infinities as None, booleans and text as they are, tuples and lists as lists,
+    mappings as dicts with text keys, anything else (a path, a date) as its text."""
     if isinstance(x, Mapping):
         return {str(k): jsonable(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
         return [jsonable(v) for v in x]
-    if isinstance(x, float):
-        return x if math.isfinite(x) else None
-    if x is None or isinstance(x, (bool, int, str)):
-        return x
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        return str(x)
-    return v if math.isfinite(v) else None
+    if isinstance(x, (bool, str, np.bool_)) or x is None:
+        return bool(x) if isinstance(x, np.bool_) else x
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return finite_or_none(x)
+    return str(x)
 
 
 def none_to_nan(values: Iterable[float | None]) -> list[float]:

@@ -12,9 +12,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from dracc.core.numbers import finite_or_none
+from dracc.core.numbers import finite_or_none, jsonable
 from dracc.core.timefmt import iso_utc
 from dracc.pipeline.audit.facts import NightFacts
 from dracc.pipeline.audit.limits import AuditConfig
@@ -100,26 +98,10 @@ def not_checked(
     return {"check": check, "name": name, "source": source, "role": role, "why": why}
 
 
-def _json_types(x: Any) -> Any:
-    """A check's figures in JSON types, as the analysis document gives them: numpy
-    numbers as Python numbers, NaN as None, tuples as lists, anything else its text."""
-    if isinstance(x, dict):
-        return {str(k): _json_types(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_json_types(v) for v in x]
-    if isinstance(x, (bool, str)) or x is None:
-        return x
-    if isinstance(x, (int, np.integer)):
-        return int(x)
-    if isinstance(x, (float, np.floating)):
-        return finite_or_none(x)
-    return str(x)
-
-
 def integrity_finding(c: Check) -> Finding:
     """A failed integrity check of the analysis as a finding (its own clause and figures)."""
-    st = _json_types(c.statistic or {})
-    th = _json_types(c.threshold or {})
+    st = jsonable(c.statistic or {})
+    th = jsonable(c.threshold or {})
     return Finding(
         str(c.name),
         str(c.source or c.role or ""),
@@ -137,7 +119,7 @@ def integrity_finding(c: Check) -> Finding:
             "start_utc": iso_utc(c.window.get("start_ns")),
             "end_utc": iso_utc(c.window.get("end_ns")),
         },
-        evidence=tuple(_json_types(e) for e in c.evidence),
+        evidence=tuple(jsonable(e) for e in c.evidence),
         false_alarm=finite_or_none(c.false_alarm),
     )
 
