@@ -32,7 +32,7 @@ from dracc.core.distributions import binom_cdf  # noqa: E402
 from dracc.core.geodesy import offset_ne_m  # noqa: E402
 from dracc.pipeline.analysis import analyse_voyage  # noqa: E402
 from dracc.sim import simulate  # noqa: E402
-from dracc.sim.model import generated_legs  # noqa: E402
+from dracc.sim.truth import generated_legs
 
 
 def one(seed: int, hours: float):

@@ -55,7 +55,8 @@ print(json.dumps({"base_kib": base, "peak_kib": peak, "held_kib": held, "frames_
 
 def make_files(hours: float, workdir: Path) -> dict[str, Path]:
     from dracc.sim.mcap_out import write_mcap
-    from dracc.sim.model import SimParams, simulate
+    from dracc.sim.model import simulate
+    from dracc.sim.params import SimParams
 
     out = {enc: workdir / f"voyage_{hours:g}h_{enc}.mcap" for enc in ("json", "ros2", "nmea")}
     if all(p.exists() for p in out.values()):

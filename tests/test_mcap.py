@@ -483,8 +483,9 @@ def test_one_simulated_voyage_reads_the_same_from_every_container(tmp_path):
     kind, the same roles, the same values (to the resolution of NMEA sentence fields)."""
     from dracc.ingest import read_logs
     from dracc.sim.csv_out import write_csv
-    from dracc.sim.model import SimParams, simulate
+    from dracc.sim.model import simulate
     from dracc.sim.nmea_out import write_nmea
+    from dracc.sim.params import SimParams
 
     v = simulate(SimParams(duration_s=300, compass_hz=1))
     paths = {"nmea": tmp_path / "v.nmea"}

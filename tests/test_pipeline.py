@@ -21,7 +21,7 @@ from dracc.ingest.sources import summarize
 from dracc.pipeline.analysis import analyse, analyse_voyage
 from dracc.pipeline.results import SCHEMA
 from dracc.sim import GM, SimParams, simulate
-from dracc.sim.model import NO_INS_ERROR
+from dracc.sim.params import NO_INS_ERROR
 
 
 def voyage_from_sim(sv, drop_kinds=(), drop_roles=()) -> Voyage:

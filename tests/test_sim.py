@@ -14,13 +14,8 @@ from dracc.core.geodesy import E2, angdiff, k_lambda, k_phi, offset_ne_m
 from dracc.core.units import DEG_RAD, KN_MPS, NMI_M
 from dracc.frames import KIND_COLUMNS, KINDS
 from dracc.sim import GM, InsErrorParams, SimParams, gauss_markov, simulate
-from dracc.sim.model import (
-    SCHULER_PERIOD_S,
-    compass_course_rad,
-    deviation_curve_rad,
-    ins_errors,
-    integrate_track,
-)
+from dracc.sim.processes import SCHULER_PERIOD_S, ins_errors
+from dracc.sim.truth import compass_course_rad, deviation_curve_rad, integrate_track
 
 SHORT = dict(duration_s=900.0, compass_hz=2.0)
 Q_ANGLE = 0.0005 * DEG_RAD + 1e-12  # half a unit of the 3rd decimal of a degree

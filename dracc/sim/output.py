@@ -23,14 +23,9 @@ from dracc import __version__
 from dracc.core.atomic import atomic_path, write_text
 from dracc.core.errors import ConfigError, DraccError
 from dracc.sim.faults import SimFault, fault_table, parse_fault, resolve_faults
-from dracc.sim.model import (
-    SimParams,
-    SimVoyage,
-    generated_legs,
-    simulate,
-    simulate_segments,
-    start_ns,
-)
+from dracc.sim.model import SimVoyage, simulate, simulate_segments
+from dracc.sim.params import SimParams
+from dracc.sim.truth import generated_legs, start_ns
 
 FORMATS = ("nmea", "csv-long", "csv-wide", "mcap-json", "mcap-ros2", "mcap-protobuf", "mcap-nmea")
 EXT = {
