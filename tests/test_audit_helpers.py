@@ -1,4 +1,4 @@
-"""Helper for the audit tests: typed analyses (:class:`dracc.pipeline.analysis.Analysis`)
+"""Helper for the audit tests: typed analyses (:class:`dracc.pipeline.results.Analysis`)
 built by hand, holding just what the audit and the fleet read."""
 
 from __future__ import annotations
@@ -10,11 +10,11 @@ import numpy as np
 from dracc.core.timefmt import parse_utc
 from dracc.math.deviation import DeviationResult
 from dracc.math.deviation.analysis import ChannelStats, UnitStats, WindowStats
-from dracc.pipeline.analysis import (
+from dracc.pipeline.results import (
     Analysis,
     CalibrationSection,
     DRSection,
-    DRTrack,
+    DRTrackResult,
     Estimate,
     InputFile,
     SourceRow,
@@ -63,7 +63,7 @@ def _deviation(units: dict[str, dict[str, ChannelStats]], start: int, end: int) 
 
 def _dr_section(containment, verdict, consistent, nees, dominant) -> DRSection:
     arr = np.array([])
-    track = DRTrack(*([arr] * 13))
+    track = DRTrackResult(*([arr] * 13))
     stat, lower, upper = nees if nees is not None else (nan, nan, nan)
     source, key = dominant if dominant is not None else (None, None)
     return DRSection(

@@ -34,9 +34,7 @@ from pathlib import Path
 
 from dracc import __version__
 from dracc.core.config import Config
-from dracc.core.vocabulary import CHANNEL_KEYS, CHANNEL_UNITS, CHANNELS
 from dracc.frames import Voyage
-from dracc.math.deviation import DeviationResult
 from dracc.math.integrity import check_night, dr_innovation_check, with_dr_check
 from dracc.pipeline import overview
 from dracc.pipeline.calibration_stage import calibration as calibration_section
@@ -44,55 +42,9 @@ from dracc.pipeline.current_stage import current as current_section
 from dracc.pipeline.deviation_stage import deviation as deviation_section
 from dracc.pipeline.dr_stage import dead_reckoning
 from dracc.pipeline.faults_stage import sensor_faults
+from dracc.pipeline.results import SCHEMA, Analysis
 
-# re-exported, importable from here as before: recording_spells and the result types
-# (their homes: dracc.pipeline.overview, dracc.pipeline.results)
-from dracc.pipeline.overview import recording_spells
-from dracc.pipeline.results import (
-    SCHEMA,
-    Analysis,
-    CalibrationSection,
-    CurrentSection,
-    DRLeg,
-    DRSection,
-    DRTrackResult,
-    Estimate,
-    InputFile,
-    SourceRow,
-    TimeSummary,
-    Track,
-)
-from dracc.pipeline.selection import dedupe_sorted, heading_series
-
-#: the old name of :class:`~dracc.pipeline.results.DRTrackResult` (not the integrator's
-#: :class:`dracc.math.deadreckoning.DRTrack`); kept until its importers are repointed
-DRTrack = DRTrackResult
-#: old private names some tests still import
-_heading_series = heading_series
-_dedupe_sorted = dedupe_sorted
-
-__all__ = [
-    "SCHEMA",
-    "CHANNELS",
-    "CHANNEL_UNITS",
-    "CHANNEL_KEYS",
-    "Analysis",
-    "analyse",
-    "analyse_voyage",
-    "DeviationResult",
-    "CalibrationSection",
-    "CurrentSection",
-    "DRLeg",
-    "DRSection",
-    "DRTrack",
-    "DRTrackResult",
-    "Estimate",
-    "InputFile",
-    "SourceRow",
-    "TimeSummary",
-    "Track",
-    "recording_spells",
-]
+__all__ = ["analyse", "analyse_voyage"]
 
 #: ``progress(stage, fraction)``: called with a stage name and 0..1 while work goes on
 Progress = Callable[[str, float], None]

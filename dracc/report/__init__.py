@@ -1,4 +1,4 @@
-"""Reports: render an :class:`~dracc.pipeline.analysis.Analysis`; never compute.
+"""Reports: render an :class:`~dracc.pipeline.results.Analysis`; never compute.
 
 ``terminal`` (rich summary), ``json_report`` (versioned JSON + schema), ``html`` with
 ``plots`` (one self-contained offline file), ``tables`` (CSV and Parquet).  This
@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from datetime import datetime, timezone
+from typing import Any
 
 import numpy as np
 
@@ -35,7 +36,7 @@ def fmt_duration(seconds: float) -> str:
     return f"{sec} s"
 
 
-def fmt(x, digits: int = 1, none: str = "-") -> str:
+def fmt(x: Any, digits: int = 1, none: str = "-") -> str:
     """A number with ``digits`` decimals; ``none`` for None/NaN."""
     if x is None:
         return none
@@ -48,13 +49,13 @@ def fmt(x, digits: int = 1, none: str = "-") -> str:
     return f"{v:,.{digits}f}"
 
 
-def fmt_signed(x, digits: int = 2) -> str:
+def fmt_signed(x: Any, digits: int = 2) -> str:
     """A correction with its sign ('+0.31', '-0.02'); '-' for None/NaN."""
     text = fmt(x, digits)
     return text if text == "-" or text.startswith("-") else "+" + text
 
 
-def fmt_pct(x, digits: int = 1) -> str:
+def fmt_pct(x: Any, digits: int = 1) -> str:
     """A fraction as a percentage; '-' for None/NaN."""
     if x is None or not np.isfinite(x):
         return "-"

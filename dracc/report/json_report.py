@@ -1,6 +1,6 @@
 """The JSON report, schema ``dracc.analysis/1`` (``analysis.schema.json`` beside this file).
 
-:func:`to_dict` turns an :class:`~dracc.pipeline.analysis.Analysis` into plain JSON types; NaN
+:func:`to_dict` turns an :class:`~dracc.pipeline.results.Analysis` into plain JSON types; NaN
 and infinities become ``null``; times are ISO 8601 UTC strings (``*_utc``); angles in
 degrees and speeds in knots appear only here, with the unit in the key.
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -31,29 +31,30 @@ from dracc.pipeline.results import (
 SCHEMA_PATH = Path(__file__).with_name("analysis.schema.json")
 
 
-def load_schema() -> dict:
+def load_schema() -> dict[str, Any]:
     """The JSON Schema (draft 2020-12) of the report."""
-    return json.loads(SCHEMA_PATH.read_text(encoding="utf-8"))
+    return cast(dict[str, Any], json.loads(SCHEMA_PATH.read_text(encoding="utf-8")))
 
 
-def _deg(x_rad) -> float | None:
+def _deg(x_rad: Any) -> float | None:
     v = _num(x_rad)
     return None if v is None else math.degrees(v)
 
 
-def _estimate(e: Estimate | None) -> dict | None:
+def _estimate(e: Estimate | None) -> dict[str, Any] | None:
     return None if e is None else {"value": _num(e.value), "sigma": _num(e.sigma)}
 
 
-def _deviation(a: Analysis) -> dict:
+def _deviation(a: Analysis) -> dict[str, Any]:
     """The deviation section: :meth:`DeviationResult.to_dict` (its owner settles the keys),
     plus where the reference came from."""
+    assert a.deviation is not None  # called only when the analysis has a deviation section
     d = a.deviation.to_dict()
     d["reference_source"] = a.deviation_reference
     return d
 
 
-def _epochs(t: DRTrackResult) -> list[dict]:
+def _epochs(t: DRTrackResult) -> list[dict[str, Any]]:
     lat_deg = np.degrees(t.lat_rad)
     lon_deg = np.degrees(t.lon_rad)
     water_lat_deg = np.degrees(t.water_lat_rad)
@@ -83,7 +84,7 @@ def _epochs(t: DRTrackResult) -> list[dict]:
     return out
 
 
-def _learned(learned: dict | None) -> dict | None:
+def _learned(learned: dict[str, object] | None) -> dict[str, Any] | None:
     """The model learned from the voyage's fixes (``DRSection.learned``): numbers (NaN ->
     null), counts and the ``config_block`` text as they are."""
     if learned is None:
@@ -101,7 +102,7 @@ def _learned(learned: dict | None) -> dict | None:
     return out
 
 
-def _legs(dr: DRSection) -> list[dict]:
+def _legs(dr: DRSection) -> list[dict[str, Any]]:
     """The legs; the NEES figures where the leg was scored (``dr.leg_checks``), else null."""
     checks = {int(lc.leg): lc for lc in dr.leg_checks}
     out = []
@@ -124,7 +125,7 @@ def _legs(dr: DRSection) -> list[dict]:
     return out
 
 
-def _dead_reckoning(dr: DRSection) -> dict:
+def _dead_reckoning(dr: DRSection) -> dict[str, Any]:
     return {
         "heading_source": dr.heading_source,
         "speed_source": dr.speed_source,
@@ -156,7 +157,7 @@ def _dead_reckoning(dr: DRSection) -> dict:
     }
 
 
-def _calibration(c: CalibrationSection) -> dict:
+def _calibration(c: CalibrationSection) -> dict[str, Any]:
     return {
         "reference_source": c.reference_role,
         "compass_error_deg": _estimate(c.compass_error_deg),
@@ -169,7 +170,7 @@ def _calibration(c: CalibrationSection) -> dict:
     }
 
 
-def _current(c: CurrentSection) -> dict:
+def _current(c: CurrentSection) -> dict[str, Any]:
     return {
         "set_deg": _estimate(c.set_deg),
         "drift_kn": _estimate(c.drift_kn),
@@ -189,7 +190,7 @@ def _current(c: CurrentSection) -> dict:
     }
 
 
-def _plain(x):
+def _plain(x: Any) -> Any:
     """Settings may hold numpy scalars, tuples or paths: make them JSON types."""
     if isinstance(x, dict):
         return {str(k): _plain(v) for k, v in x.items()}
@@ -204,7 +205,7 @@ def _plain(x):
     return str(x)
 
 
-def to_dict(a: Analysis) -> dict:
+def to_dict(a: Analysis) -> dict[str, Any]:
     """The report as plain JSON types (validates against ``analysis.schema.json``)."""
     by_role: dict[str, dict[str, Any]] = {}
     for s in a.sources:
@@ -269,7 +270,7 @@ def to_dict(a: Analysis) -> dict:
     }
 
 
-def check_dict(c: Check) -> dict:
+def check_dict(c: Check) -> dict[str, Any]:
     """One integrity check (dracc.math.integrity) as plain JSON types."""
     window = {
         "start_utc": iso_utc(c.window.get("start_ns")),
@@ -293,7 +294,7 @@ def check_dict(c: Check) -> dict:
     }
 
 
-def integrity_dict(r: IntegrityResult) -> dict:
+def integrity_dict(r: IntegrityResult) -> dict[str, Any]:
     """The integrity section: every check of every source, and the per-source figures."""
     return {
         "false_alarm_per_check": _num(r.alpha),

@@ -1,6 +1,6 @@
 """The report's plots, drawn with matplotlib (Agg) and returned as PNG bytes.
 
-Each function takes a part of an :class:`~dracc.pipeline.analysis.Analysis` and draws it;
+Each function takes a part of an :class:`~dracc.pipeline.results.Analysis` and draws it;
 nothing is estimated here.  The only arithmetic is the plotting projection: positions
 are shown as kilometres north/east of the first DR fix (or the first position), where
 the 2M circles are true circles (local tangent plane, :func:`dracc.core.geodesy.offset_ne_m`).
@@ -9,6 +9,7 @@ the 2M circles are true circles (local tangent plane, :func:`dracc.core.geodesy.
 from __future__ import annotations
 
 import io
+from collections.abc import Mapping, Sequence
 
 import matplotlib
 
@@ -16,8 +17,12 @@ matplotlib.use("Agg")
 import matplotlib.dates as mdates  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.axes import Axes  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Circle  # noqa: E402
+from matplotlib.typing import LegendLocType  # noqa: E402
 
+from dracc.core.arrays import ArrayLike, FloatArray  # noqa: E402
 from dracc.core.geodesy import offset_ne_m  # noqa: E402
 from dracc.core.vocabulary import CHANNEL_KEYS, CHANNEL_UNITS, CHANNELS
 from dracc.pipeline.results import Analysis
@@ -36,7 +41,7 @@ _UNIT_COLOURS = {"ins1": "#1f77b4", "ins2": "#d62728", "ins3": "#2ca02c"}
 _ROLE_COLOURS = {"gnss": "#555555", "ins1": "#1f77b4", "ins2": "#d62728", "ins3": "#2ca02c"}
 
 
-def png_bytes(fig, dpi: int = _DPI) -> bytes:
+def png_bytes(fig: Figure, dpi: int = _DPI) -> bytes:
     """The figure as PNG bytes (no software tag, so the bytes are reproducible); closes it."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight", metadata={"Software": None})
@@ -45,7 +50,7 @@ def png_bytes(fig, dpi: int = _DPI) -> bytes:
 
 
 def m_y_apriori_plot(
-    lines: dict[str, list[tuple[str, object, object, object]]],
+    lines: Mapping[str, Sequence[tuple[str, object, object, object]]],
     title: str,
     row_height_in: float,
     dpi: int = _DPI,
@@ -76,7 +81,9 @@ def m_y_apriori_plot(
     return png_bytes(fig, dpi=dpi)
 
 
-def _finish(fig, ax, xlabel: str, ylabel: str, title: str, legend_loc: str) -> bytes:
+def _finish(
+    fig: Figure, ax: Axes, xlabel: str, ylabel: str, title: str, legend_loc: LegendLocType
+) -> bytes:
     """Axis labels, grid, legend and title in the report's style, then the PNG."""
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
@@ -86,14 +93,15 @@ def _finish(fig, ax, xlabel: str, ylabel: str, title: str, legend_loc: str) -> b
     return png_bytes(fig)
 
 
-def _utc_axis(fig, ax) -> None:
+def _utc_axis(fig: Figure, ax: Axes) -> None:
     """A shared UTC date axis ('day hh:mm') at the bottom of ``fig``."""
-    ax.xaxis.set_major_formatter(mdates.DateFormatter("%d %H:%M"))
+    # matplotlib.dates ships no annotations for DateFormatter
+    ax.xaxis.set_major_formatter(mdates.DateFormatter("%d %H:%M"))  # type: ignore[no-untyped-call]
     ax.set_xlabel("UTC")
     fig.autofmt_xdate()
 
 
-def _dt(time_ns) -> np.ndarray:
+def _dt(time_ns: ArrayLike) -> np.ndarray:
     """int64 ns -> numpy datetime64 for matplotlib's date axis."""
     return np.asarray(time_ns, dtype="int64").astype("datetime64[ns]")
 
@@ -114,7 +122,7 @@ DR_LABEL = "DR (water track)"
 WATER_LABEL = "water track (heading and log only)"
 
 
-def _by_leg(n_m, e_m, leg) -> tuple[np.ndarray, np.ndarray]:
+def _by_leg(n_m: FloatArray, e_m: FloatArray, leg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """km east and north, thinned for the line, with a break (NaN) at each restart so no
     line joins two legs."""
     k = _stride(len(n_m))
@@ -123,7 +131,7 @@ def _by_leg(n_m, e_m, leg) -> tuple[np.ndarray, np.ndarray]:
     return np.insert(es / 1e3, jumps, np.nan), np.insert(ns / 1e3, jumps, np.nan)
 
 
-def track_figure(a: Analysis):
+def track_figure(a: Analysis) -> tuple[Figure, Axes] | None:
     """The track plot as a matplotlib (figure, axes), or None with nothing to plot.
 
     Every source's track; the estimated position (solid black) with its 2M circles at each
@@ -232,7 +240,9 @@ def growth_plot(a: Analysis) -> bytes | None:
     hours = tr.since_fix_s[::k] / 3600.0
     jumps = np.flatnonzero(np.diff(tr.leg[::k]) != 0) + 1
 
-    def by_leg(y):  # a break (NaN) at each restart, so no line joins two legs
+    def by_leg(
+        y: ArrayLike,
+    ) -> np.ndarray:  # a break (NaN) at each restart, so no line joins two legs
         return np.insert(y, jumps, np.nan)
 
     ax.plot(

@@ -15,7 +15,7 @@ from dracc.core.errors import DraccError
 from dracc.report.output import STDOUT, json_text
 
 if TYPE_CHECKING:  # the pipeline loads when the command runs, not when the CLI starts
-    from dracc.pipeline.analysis import Analysis
+    from dracc.pipeline.results import Analysis
 
 
 @contextmanager

@@ -7,7 +7,7 @@
 
 ``limits``    the ``[audit]`` settings, the a priori seeds, the vessel name
 ``rule``      the paper's monitoring rule ``a_{k+1} = max(a_k, m_y,k)`` (:func:`apriori_chain`)
-``facts``     what the audit reads from a typed :class:`~dracc.pipeline.analysis.Analysis`
+``facts``     what the audit reads from a typed :class:`~dracc.pipeline.results.Analysis`
 ``findings``  one night's checks (:func:`evaluate`) and the :class:`Finding` they give
 ``accuracy``  the limiting errors pooled over the accuracy window (several nights)
 ``logs``      choosing the night's logs safely, and their content hash

@@ -1,7 +1,7 @@
 """What the audit reads from one analysis: :class:`NightFacts`.
 
 :func:`facts_from_analysis` is the one place that reads the typed
-:class:`~dracc.pipeline.analysis.Analysis` for the audit and the fleet: the period, the
+:class:`~dracc.pipeline.results.Analysis` for the audit and the fleet: the period, the
 input counts, the sources by role, the INS statistics per unit and channel, the DR
 verdict, the calibration and the integrity checks.  Figures that are not finite become
 None, as in the analysis JSON document.
@@ -22,7 +22,7 @@ from dracc.pipeline.state import ChannelRow
 if TYPE_CHECKING:
     from dracc.math.deviation import DeviationResult
     from dracc.math.integrity import Check
-    from dracc.pipeline.analysis import Analysis, DRSection, Estimate
+    from dracc.pipeline.results import Analysis, DRSection, Estimate
 
 
 @dataclass(frozen=True)

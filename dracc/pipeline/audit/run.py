@@ -49,7 +49,7 @@ from dracc.pipeline.audit.rule import apriori_chain
 from dracc.pipeline.state import AprioriEvent, NightRecord, StateStore
 
 if TYPE_CHECKING:
-    from dracc.pipeline.analysis import Analysis
+    from dracc.pipeline.results import Analysis
 
 #: test hook: seconds to sleep inside the recording transaction (simulates a slow or killed run)
 TEST_SLEEP_ENV = "DRACC_AUDIT_TEST_SLEEP_S"

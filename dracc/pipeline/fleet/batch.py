@@ -36,7 +36,7 @@ from dracc.pipeline.fleet.tables import FleetResult, fleet_table, fleet_trends
 from dracc.pipeline.fleet.tasks import LogTask
 
 if TYPE_CHECKING:
-    from dracc.pipeline.analysis import Analysis
+    from dracc.pipeline.results import Analysis
 
 #: /2: the summary's "dr" carries the verdict word and the NEES statistic (a /1 entry is
 #: analysed again)
