@@ -100,9 +100,9 @@ _MEM_CHILD = r"""
 import json, resource, sys, time
 from pathlib import Path
 from dracc.core.config import IngestConfig
-from dracc.cli.inspect_cmd import inspect_logs
+from dracc.ingest.inspect import inspect_logs
 t = time.perf_counter()
-rep = inspect_logs([Path(sys.argv[1])], IngestConfig(), show_progress=False)
+rep = inspect_logs([Path(sys.argv[1])], IngestConfig())
 dt = time.perf_counter() - t
 me = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss

@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 from conftest import REAL, REAL_MISSING
 
-from dracc.cli.inspect_cmd import inspect_logs
+from dracc.ingest.inspect import inspect_logs
 from dracc.core.config import IngestConfig
 from dracc.core.errors import IngestError
 from dracc.ingest import detect_format, read_logs
@@ -46,7 +46,7 @@ def test_real_file_ingests_with_a_sensible_account(real_dir, rel):
         assert np.all(np.diff(df["time_ns"].to_numpy()) >= 0), kind  # merged in time order
         if len(df):
             assert df["time_ns"].min() > 946684800 * 10**9  # after 2000-01-01: every time resolved
-    rep = inspect_logs([path], IngestConfig(), show_progress=False)
+    rep = inspect_logs([path], IngestConfig())
     json.dumps(rep)
     assert rep["lines"] == n_lines and rep["rejected"] == dict(voyage.rejects.counts)
     for key, s in rep["sources"].items():

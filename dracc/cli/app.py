@@ -1,5 +1,5 @@
 """The typer app and what every command shares: consoles, root options, progress, typer's exits.
-The option types and checks are in :mod:`dracc.cli.options` (a few re-exported here)."""
+The option types and checks are in :mod:`dracc.cli.options`."""
 
 from __future__ import annotations
 
@@ -14,15 +14,6 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from dracc import __version__
 from dracc.cli import forget_caught_interrupt, started
-from dracc.cli.options import (  # noqa: F401  re-exported: audit, fleet and fix import them here
-    ConfigOption,
-    LogsArgument,
-    check_choice,
-    check_date,
-    check_pattern,
-    option_values,
-    options_only,
-)
 from dracc.core.errors import IngestError
 
 

@@ -43,7 +43,7 @@ class OptionError(DraccError):
     """A bad value on the command line (exit 2, like any usage error): the message names
     the option and the value.  The CLI raises it for option values it checks itself and
     turns a :class:`ConfigError` raised while the options are read into it
-    (:func:`dracc.cli.app.option_values`); a bad configuration *file* stays exit 4."""
+    (:func:`dracc.cli.options.option_values`); a bad configuration *file* stays exit 4."""
 
     exit_code = ExitCode.USAGE
 
