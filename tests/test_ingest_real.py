@@ -13,10 +13,10 @@ import pandas as pd
 import pytest
 from conftest import REAL, REAL_MISSING
 
-from dracc.ingest.inspect import inspect_logs
 from dracc.core.config import IngestConfig
 from dracc.core.errors import IngestError
 from dracc.ingest import detect_format, read_logs
+from dracc.ingest.inspect import inspect_logs
 from dracc.ingest.nmea import REASONS, read_nmea
 
 SKIP_SUFFIXES = {".chk", ".mcap", ".json", ".md"}
