@@ -39,6 +39,7 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -165,7 +166,7 @@ def concat_blocks(
 class Rejects:
     """Rejected lines, counted by reason, with the first few examples of each."""
 
-    counts: Counter = field(default_factory=Counter)
+    counts: Counter[str] = field(default_factory=Counter)
     #: reason -> list of (file, line number, text excerpt); at most ``max_examples`` each
     examples: dict[str, list[tuple[str, int, str]]] = field(default_factory=dict)
     max_examples: int = 5
@@ -209,8 +210,8 @@ class SourceInfo:
     #: roles this source serves; one source may serve several in different kinds
     #: (e.g. an instrument bus 'II' giving both the compass heading and the log speed)
     roles: list[str] = field(default_factory=list)
-    talkers: Counter = field(default_factory=Counter)
-    sentences: Counter = field(default_factory=Counter)
+    talkers: Counter[str] = field(default_factory=Counter)
+    sentences: Counter[str] = field(default_factory=Counter)
     records: int = 0
     first_ns: int | None = None
     last_ns: int | None = None
@@ -242,7 +243,7 @@ class FileResult:
     #: valid lines or messages the file holds that dracc does not use, by type (NMEA
     #: sentence type 'GSV', 'VDM', proprietary address 'PGRME', 'comment', 'blank'; MCAP
     #: schema name; CSV 'NMEA 2000'): counted, not rejected
-    ignored: Counter = field(default_factory=Counter)
+    ignored: Counter[str] = field(default_factory=Counter)
     #: type -> the first few (file, line or message number, text) of each ignored type
     ignored_examples: dict[str, list[tuple[str, int, str]]] = field(default_factory=dict)
 
@@ -259,12 +260,13 @@ class Voyage:
     sources: dict[str, SourceInfo]
     rejects: Rejects
     time_events: TimeEvents
-    inputs: list[dict]  #: per file: {"path", "format", "lines", "records", "rejected": {reason: n},
+    #: per file: {"path", "format", "lines", "records", "rejected": {reason: n},
     #: "ignored": {type: n}}
+    inputs: list[dict[str, Any]]
     lines: int = 0  #: lines (or messages) read in all files
     #: valid lines or messages dracc does not use, by type ('GSV', 'VDM', 'comment', an MCAP
     #: schema name, ...): counted, never rejected (only damaged input is rejected)
-    ignored: Counter = field(default_factory=Counter)
+    ignored: Counter[str] = field(default_factory=Counter)
 
     def role_sources(self, role: str) -> list[str]:
         """Source keys assigned to ``role``."""

@@ -19,8 +19,9 @@ from __future__ import annotations
 
 import re
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import pandas as pd
@@ -120,16 +121,19 @@ def detect_format(path: str | Path) -> str:
     for magic, what in _BINARY_MAGIC.items():
         if head.startswith(magic):
             raise IngestError(f"{p}: not a log file: looks like {what}")
+    is_csv: Callable[[bytes], bool] | None
     try:
-        from dracc.ingest.csv import looks_like_csv
+        from dracc.ingest.csv import looks_like_csv as is_csv
     except ImportError:  # pragma: no cover - the CSV reader is part of the package
-        looks_like_csv = None
-    if looks_like_csv is not None and looks_like_csv(head):
+        is_csv = None
+    if is_csv is not None and is_csv(head):
         return "csv"
     return "nmea"
 
 
-def read_file(path: str | Path, cfg: IngestConfig, progress=None) -> FileResult:
+def read_file(
+    path: str | Path, cfg: IngestConfig, progress: Callable[[int], object] | None = None
+) -> FileResult:
     """Read one log with the reader its format needs."""
     fmt = detect_format(path)
     if fmt == "mcap":
@@ -146,7 +150,7 @@ def read_file(path: str | Path, cfg: IngestConfig, progress=None) -> FileResult:
 
 
 def _merge_frames(results: list[FileResult]) -> dict[str, pd.DataFrame]:
-    out = {}
+    out: dict[str, pd.DataFrame] = {}
     for kind in KINDS:
         parts = [r.frames[kind] for r in results if kind in r.frames and len(r.frames[kind])]
         if not parts:
@@ -182,7 +186,9 @@ def _labels(col: pd.Series) -> tuple[np.ndarray, list[str]] | None:
     return codes, labels
 
 
-def summarize_frames(frames: dict[str, pd.DataFrame], file: str, into: dict | None = None) -> dict:
+def summarize_frames(
+    frames: dict[str, pd.DataFrame], file: str, into: dict[str, SourceInfo] | None = None
+) -> dict[str, SourceInfo]:
     """:func:`sources.summarize`, counted on the categorical codes of the frames.
 
     The same :class:`SourceInfo` values, in the same order (sources in order of first
@@ -198,7 +204,9 @@ def summarize_frames(frames: dict[str, pd.DataFrame], file: str, into: dict | No
         if any(p is None for p in parts):
             summarize({kind: df}, file, into=out)
             continue
-        (src, src_l), (sent, sent_l), (talk, talk_l) = parts
+        (src, src_l), (sent, sent_l), (talk, talk_l) = cast(
+            "list[tuple[np.ndarray, list[str]]]", parts
+        )
         ns, nt, nk = len(src_l), len(sent_l), len(talk_l)
         t = df["time_ns"].to_numpy()
         # one count per (source, sentence, talker); the rest are its sums
@@ -230,7 +238,9 @@ def summarize_frames(frames: dict[str, pd.DataFrame], file: str, into: dict | No
     return out
 
 
-def read_logs(paths: list[Path], cfg: IngestConfig, progress=None) -> Voyage:
+def read_logs(
+    paths: list[Path], cfg: IngestConfig, progress: Callable[[int], object] | None = None
+) -> Voyage:
     """Read several logs of one voyage, merge them by time, build sources and roles.
 
     ``progress(n_bytes)`` is called as bytes are read (NMEA text files).  A missing
@@ -252,9 +262,9 @@ def read_logs(paths: list[Path], cfg: IngestConfig, progress=None) -> Voyage:
     sources = merge_infos(per_file, renames)
     frames = _merge_frames(results)
     rejects = Rejects()
-    ignored: Counter = Counter()
+    ignored: Counter[str] = Counter()
     te = TimeEvents()
-    inputs = []
+    inputs: list[dict[str, Any]] = []
     for r in results:
         rejects.merge(r.rejects)
         ignored.update(r.ignored)

@@ -68,6 +68,7 @@ from dracc.ingest.csv_cells import (
     drop_blank_rows,
     find_column,
     parse_times,
+    required_column,
     row_times,
     sorted_frames,
 )
@@ -385,8 +386,10 @@ def read_csv(path, cfg: IngestConfig) -> FileResult:
                 f"{file}:1: header line of {scan.long_rows[0][3]} bytes, longer than "
                 f"[ingest] max_line_bytes = {limit}"
             )
-        for ln, _a, _b, n, first in scan.long_rows:
-            rejects.add("too_long", file, ln, f"{first.decode('utf-8', 'replace')}... ({n} bytes)")
+        for ln, _a, _b, n, row_head in scan.long_rows:
+            rejects.add(
+                "too_long", file, ln, f"{row_head.decode('utf-8', 'replace')}... ({n} bytes)"
+            )
         notes.append(
             f"{file}: {len(scan.long_rows)} row(s) longer than [ingest] max_line_bytes = {limit} "
             f"bytes left out (too_long; the longest {max(r[3] for r in scan.long_rows)} bytes, "
@@ -426,7 +429,7 @@ def _read_wide(
     file: str,
     scan: _Scan,
 ) -> FramesAndRows:
-    tcol = find_column(cols, TIME_COLUMNS)
+    tcol = required_column(cols, TIME_COLUMNS)
     scol = find_column(cols, ("source",))
     qcols: dict[str, str] = {}
     ignored = []
@@ -463,7 +466,7 @@ def _read_wide(
         for c, qname in qcols.items():
             text = data[c][ok]
             if qname in REF_QUANTITIES:
-                vals[qname] = np.where(text == "", None, text)
+                vals[qname] = np.where(text == "", None, text)  # type: ignore[assignment]  # numpy stubs: where(c, None, x) is an array
             else:
                 vals[qname] = cell_numbers(text, lines[ok], c, rejects, file)
         src = data[scol][ok] if scol else np.full(int(ok.sum()), p.stem, dtype=object)
@@ -484,8 +487,8 @@ def _read_raw(
 ) -> FileResult:
     from dracc.ingest.nmea import parse_sentences
 
-    tcol = find_column(cols, TIME_COLUMNS)
-    rcol = find_column(cols, RAW_COLUMNS)
+    tcol = required_column(cols, TIME_COLUMNS)
+    rcol = required_column(cols, RAW_COLUMNS)
     scol = find_column(cols, ("source",))
     pcol = find_column(cols, ("protocol",))
     all_lines: list[bytes] = []

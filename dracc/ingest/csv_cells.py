@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from dracc.core.errors import IngestError
 from dracc.frames import Rejects
 from dracc.ingest.csv_quantities import add_rejects
 
@@ -40,6 +41,14 @@ def find_column(cols: list[str], names: tuple[str, ...]) -> str | None:
         if n in low:
             return low[n]
     return None
+
+
+def required_column(cols: list[str], names: tuple[str, ...]) -> str:
+    """:func:`find_column` for a column the form requires (the header check found it)."""
+    found = find_column(cols, names)
+    if found is None:
+        raise IngestError(f"no {names[0]!r} column in the header")
+    return found
 
 
 def parse_times(text: np.ndarray, column: str) -> tuple[np.ndarray, np.ndarray]:

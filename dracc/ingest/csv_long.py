@@ -18,6 +18,7 @@ from dracc.ingest.csv_cells import (
     cell_numbers,
     drop_blank_rows,
     find_column,
+    required_column,
     row_times,
     sorted_frames,
     spells_nan,
@@ -79,6 +80,20 @@ def read_long(
     return frames, rows
 
 
+#: rows not yet made into records: (t, source, quantity, value, line, reference text)
+Rows = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def _stack(blocks: list[Rows]) -> Rows:
+    t, s, q, v, ln, ref = (np.concatenate([b[i] for b in blocks]) for i in range(6))
+    return t, s, q, v, ln, ref
+
+
+def _take(rows: Rows, mask: np.ndarray) -> Rows:
+    t, s, q, v, ln, ref = (x[mask] for x in rows)
+    return t, s, q, v, ln, ref
+
+
 def read_long_pass(
     blocks: Blocks,
     stem: str,
@@ -90,13 +105,13 @@ def read_long_pass(
 ) -> FramesAndRows:
     """One pass of :func:`read_long`: ``streaming`` makes records block by block (raising
     :class:`Unsorted` at a row older than those), else from all the rows at the end."""
-    tcol = find_column(cols, TIME_COLUMNS)
+    tcol = required_column(cols, TIME_COLUMNS)
     scol = find_column(cols, ("source",))
-    qcol = find_column(cols, ("quantity",))
-    vcol = find_column(cols, ("value",))
+    qcol = required_column(cols, ("quantity",))
+    vcol = required_column(cols, ("value",))
     sources, quantities = Labels(), Labels()
     #: rows not yet made into records: (t, source, quantity, value, line, reference text)
-    held: list[tuple[np.ndarray, ...]] = []
+    held: list[Rows] = []
     parts: list[dict[str, pd.DataFrame]] = []
     done_upto: int | None = None  #: the latest time made into records (streaming)
     rows = 0
@@ -130,7 +145,7 @@ def read_long_pass(
         k = np.flatnonzero(keep)
         if len(k) == 0:
             continue
-        ref = np.where(isref[k], val[k], None)
+        ref: np.ndarray = np.where(isref[k], val[k], None)  # type: ignore[assignment]  # numpy stubs: where(c, x, None) is an array
         block = (
             t_ns[k],
             sources.codes(src[k]),
@@ -144,17 +159,17 @@ def read_long_pass(
             continue
         if done_upto is not None and block[0].min() <= done_upto:
             raise Unsorted
-        rows_now = tuple(np.concatenate([h[i] for h in held] + [block[i]]) for i in range(6))
+        rows_now = _stack([*held, block])
         t_last = rows_now[0].max()
         complete = rows_now[0] < t_last
         if complete.any():
             parts.append(
-                long_records(*(x[complete] for x in rows_now), sources, quantities, file, rejects)
+                long_records(*_take(rows_now, complete), sources, quantities, file, rejects)
             )
             done_upto = int(rows_now[0][complete].max())
-        held = [tuple(x[~complete] for x in rows_now)]
+        held = [_take(rows_now, ~complete)]
     if held and len(held[0][0]):
-        rows_now = tuple(np.concatenate([h[i] for h in held]) for i in range(6))
+        rows_now = _stack(held)
         held = []
         parts.append(long_records(*rows_now, sources, quantities, file, rejects))
     return sorted_frames(concat_blocks(parts, every_kind=False)), rows

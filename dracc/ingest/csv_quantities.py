@@ -42,6 +42,7 @@ an integer in [0, 9], hdop non-negative.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -128,7 +129,8 @@ def _valid_mask(column: str, v: np.ndarray) -> np.ndarray:
             ok = v >= 0.0
         else:
             ok = np.isfinite(v)
-    return ok | nan
+    valid: np.ndarray = ok | nan
+    return valid
 
 
 def add_rejects(
@@ -145,7 +147,7 @@ def add_rejects(
         rejects.counts[reason] += n - k
 
 
-def _labels(x, n: int):
+def _labels(x: object, n: int) -> pd.Categorical | np.ndarray:
     """A string column as given (a Categorical stays one), a scalar as a 1-byte Categorical."""
     if isinstance(x, pd.Categorical):
         return x
@@ -156,13 +158,13 @@ def _labels(x, n: int):
 
 def build_frames(
     time_ns: np.ndarray,
-    source,
+    source: object,
     line: np.ndarray,
-    sentence,
+    sentence: object,
     values: dict[str, np.ndarray],
     file: str,
     rejects: Rejects,
-    talker=None,
+    talker: object = None,
     recv_ns: np.ndarray | None = None,
 ) -> dict[str, pd.DataFrame]:
     """Canonical frames from records given as quantity columns.
@@ -266,7 +268,7 @@ def build_frames(
         if not keep.any():
             continue
         idx = np.flatnonzero(keep)
-        data: dict[str, object] = {
+        data: dict[str, Any] = {
             "time_ns": np.asarray(time_ns)[idx],
             "source": src[idx],
             "sentence": sen[idx],

@@ -23,6 +23,7 @@ import tempfile
 from typing import Any
 
 import numpy as np
+from numpy.typing import DTypeLike
 
 
 def trim_heap() -> None:
@@ -47,7 +48,7 @@ def trim_heap() -> None:
 _MALLOC_TRIM: Any = None
 
 
-def mapped_columns(n: int, dtypes: list) -> list[np.ndarray]:
+def mapped_columns(n: int, dtypes: list[DTypeLike]) -> list[np.ndarray]:
     """Uninitialised arrays of ``n`` items, one per dtype, together in one anonymous
     memory mapping: when all of them are garbage the pages go back to the kernel at once
     (a freed malloc block of a few hundred KiB usually stays in the heap, so a run's

@@ -28,6 +28,7 @@ import re
 import numpy as np
 import pandas as pd
 
+from dracc.core.arrays import ArrayLike
 from dracc.core.quantities import BOOLEAN_FIELDS  # noqa: F401  (the boolean field names)
 
 TRUE_WORDS = frozenset(
@@ -43,7 +44,7 @@ ASCII_CODES = {84: "T", 77: "M"}
 REJECT_REASON = "heading reference not understood"
 
 
-def _word(x) -> str | None:
+def _word(x: object) -> str | None:
     """'T', 'M', '' (not given) or None (not understood) for one reference value."""
     if x is None or x is pd.NA:
         return ""
@@ -65,7 +66,7 @@ def _word(x) -> str | None:
     return None
 
 
-def normalize_reference(values) -> tuple[np.ndarray, np.ndarray]:
+def normalize_reference(values: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """(reference as object array of 'T'/'M'/None, mask of values not understood).
 
     Each distinct value is looked up once (a day of 10 Hz headings holds two or three)."""
@@ -75,7 +76,9 @@ def normalize_reference(values) -> tuple[np.ndarray, np.ndarray]:
     given = ~pd.isna(arr)
     tm = (arr == "T") | (arr == "M")
     if np.array_equal(tm, given):  # the common case: the NMEA letters already
-        return np.where(tm, arr, None).astype(object), np.zeros(arr.shape, dtype=bool)
+        # numpy's stubs have no overload for None as the value where False
+        ref = np.where(tm, arr, None)  # type: ignore[call-overload]
+        return ref.astype(object), np.zeros(arr.shape, dtype=bool)
     try:
         codes, uniq = pd.factorize(arr)  # None/NaN -> -1 (not given)
     except TypeError:  # unhashable values (a list in a JSON field): one by one
@@ -95,11 +98,12 @@ def normalize_reference(values) -> tuple[np.ndarray, np.ndarray]:
         )
         w = np.where(isbool, "?", w)
     bad = w == "?"
-    out = np.where((w == "T") | (w == "M"), w, None).astype(object)
+    # numpy's stubs read np.where(c, x, None) as the one-argument form (a tuple)
+    out = np.where((w == "T") | (w == "M"), w, None).astype(object)  # type: ignore[attr-defined]
     return out, bad
 
 
-def normalize_boolean(values, means: str) -> tuple[np.ndarray, np.ndarray]:
+def normalize_boolean(values: ArrayLike, means: str) -> tuple[np.ndarray, np.ndarray]:
     """A boolean 'is true'/'is magnetic' field (``means`` the reference of ``true``) as
     (reference, not-understood mask)."""
     other = "M" if means == "T" else "T"

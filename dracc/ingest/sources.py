@@ -28,9 +28,10 @@ from __future__ import annotations
 
 import re
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
+from typing import cast
 
 import numpy as np
 import pandas as pd
@@ -99,7 +100,7 @@ _MUST_MATCH: ContextVar[frozenset[str]] = ContextVar(
 
 
 @contextmanager
-def keys_must_match(keys) -> Iterator[None]:
+def keys_must_match(keys: Iterable[str]) -> Iterator[None]:
     """Within the block, :func:`assign_roles` raises :class:`ConfigError` for a mapping key
     in ``keys`` that matches no source (naming the keys that exist)."""
     token = _MUST_MATCH.set(frozenset(keys))
@@ -173,9 +174,9 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
     # 2. names
     by_name: dict[str, list[SourceInfo]] = {}
     for key, info in free.items():
-        role = _name_role(key)
-        if role and role not in taken:
-            by_name.setdefault(role, []).append(info)
+        named = _name_role(key)
+        if named and named not in taken:
+            by_name.setdefault(named, []).append(info)
     for role, infos in by_name.items():
         if len(infos) == 1:
             give(infos[0], role, "name")
@@ -293,9 +294,9 @@ def require_role(sources: dict[str, SourceInfo], role: str) -> str:
     )
 
 
-def sentence_counts(infos: dict[str, SourceInfo]) -> Counter:
+def sentence_counts(infos: dict[str, SourceInfo]) -> Counter[str]:
     """All sentence counts over sources."""
-    c: Counter = Counter()
+    c: Counter[str] = Counter()
     for s in infos.values():
         c.update(s.sentences)
     return c
@@ -330,8 +331,8 @@ def file_ids(files: list[str]) -> dict[str, str]:
         short = {f: s[cut : len(s) - tail if tail else None] for f, s in stems.items()}
         if all(short.values()) and len(set(short.values())) == len(names):
             ids = short
-    seen: Counter = Counter()
-    out = {}
+    seen: Counter[str] = Counter()
+    out: dict[str, str] = {}
     for f in files:  # the same name in two folders: numbered
         seen[ids[f]] += 1
         out[f] = ids[f] if seen[ids[f]] == 1 else f"{ids[f]}~{seen[ids[f]]}"
@@ -341,11 +342,14 @@ def file_ids(files: list[str]) -> dict[str, str]:
 def _span(info: SourceInfo) -> str:
     import datetime as dt
 
-    def hm(ns):
+    def hm(ns: int) -> str:
         return dt.datetime.fromtimestamp(ns / 1e9, tz=dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
 
     return (
-        f"{hm(info.first_ns)}-{hm(info.last_ns)[11:]}" if info.first_ns is not None else "no times"
+        # last_ns is set together with first_ns
+        f"{hm(info.first_ns)}-{hm(cast(int, info.last_ns))[11:]}"
+        if info.first_ns is not None
+        else "no times"
     )
 
 
@@ -374,12 +378,13 @@ def separate_files(
     for key, lst in by_key.items():
         if len(lst) < 2:
             continue
-        timed = [(f, s) for f, s in lst if s.first_ns is not None]
+        # (first_ns, last_ns) of the timed summaries: both are set together
+        timed = [(s.first_ns, cast(int, s.last_ns)) for _, s in lst if s.first_ns is not None]
         overlap = max(
             (
-                min(a.last_ns, b.last_ns) - max(a.first_ns, b.first_ns)
-                for i, (_, a) in enumerate(timed)
-                for _, b in timed[i + 1 :]
+                min(a_last, b_last) - max(a_first, b_first)
+                for i, (a_first, a_last) in enumerate(timed)
+                for b_first, b_last in timed[i + 1 :]
             ),
             default=-1,
         )
@@ -415,6 +420,7 @@ def merge_infos(
             m.sentences.update(s.sentences)
             m.records += s.records
             if s.first_ns is not None:
+                assert s.last_ns is not None  # set together with first_ns
                 m.first_ns = s.first_ns if m.first_ns is None else min(m.first_ns, s.first_ns)
                 m.last_ns = s.last_ns if m.last_ns is None else max(m.last_ns, s.last_ns)
             m.files |= s.files

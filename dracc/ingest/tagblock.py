@@ -27,7 +27,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from dracc.ingest.timebase import MISSING_NS
+from dracc.frames import MISSING_NS
 
 HEX = np.full(256, -1, dtype=np.int16)
 for _i, _c in enumerate(b"0123456789ABCDEF"):
@@ -56,7 +56,8 @@ def gather_rows(buf: np.ndarray, s: np.ndarray, w: int) -> np.ndarray:
     mat = np.lib.stride_tricks.sliding_window_view(buf, w)[np.minimum(s, lim)]
     for r in np.flatnonzero(s > lim):  # rows starting in the last w bytes of an unpadded buffer
         mat[r] = np.concatenate((buf[s[r] :], np.zeros(w, np.uint8)))[:w]
-    return mat
+    rows: np.ndarray = mat
+    return rows
 
 
 def unix_to_ns(v: np.ndarray, is_ms: np.ndarray) -> np.ndarray:
@@ -66,11 +67,12 @@ def unix_to_ns(v: np.ndarray, is_ms: np.ndarray) -> np.ndarray:
     iv = np.floor(v)
     frac = v - iv
     whole = iv.astype(np.int64)
-    return np.where(
+    ns: np.ndarray = np.where(
         is_ms,
         whole * 1_000_000 + np.round(frac * 1e6).astype(np.int64),
         whole * 1_000_000_000 + np.round(frac * 1e6).astype(np.int64) * 1000,
     )
+    return ns
 
 
 def gather_strings(buf: np.ndarray, start: np.ndarray, end: np.ndarray) -> pa.Array:
@@ -113,7 +115,9 @@ _CLASS[46] = 1 << 8
 _CLASS[43] = _CLASS[45] = 1 << 16
 
 
-def _numbers_arrow(buf: np.ndarray, s: np.ndarray, ln: np.ndarray, decimals: bool):
+def _numbers_arrow(
+    buf: np.ndarray, s: np.ndarray, ln: np.ndarray, decimals: bool
+) -> tuple[np.ndarray, np.ndarray | None] | None:
     """The common case of :func:`parse_numbers` (non-empty fields of ``[+-.0-9]`` only):
     the fields' bytes gathered end to end into one Arrow string array and cast to
     float64 by Arrow (correctly rounded, like numpy's ``astype`` from bytes, and about
@@ -145,7 +149,7 @@ def _numbers_arrow(buf: np.ndarray, s: np.ndarray, ln: np.ndarray, decimals: boo
 
 def parse_numbers(
     buf: np.ndarray, s: np.ndarray, e: np.ndarray, width: int = 20, decimals: bool = True
-):
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Decimal numbers in byte ranges [s, e) of ``buf``, vectorised.
 
     Returns (value float64 with NaN where empty or invalid, decimals int8 = digits after
@@ -166,6 +170,7 @@ def parse_numbers(
     if fast is not None:
         val[hi] = fast[0]
         if decimals:
+            assert fast[1] is not None  # _numbers_arrow counts decimals when asked
             dec[hi] = fast[1]
         return val, dec, invalid
     w = int(lh.max())
@@ -209,7 +214,14 @@ def parse_numbers(
     return val, dec, invalid
 
 
-def _key_value(buf, colons, commas, start, stop, key: int):
+def _key_value(
+    buf: np.ndarray,
+    colons: np.ndarray,
+    commas: np.ndarray,
+    start: np.ndarray,
+    stop: np.ndarray,
+    key: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """[s, e) of the value of TAG parameter ``key`` (one letter) in each body [start, stop)."""
     prev = buf[colons - 2]
     kc = colons[(buf[colons - 1] == key) & ((prev == 44) | (prev == 92))]
@@ -239,7 +251,7 @@ def parse_tags(
     stars: np.ndarray,
     commas: np.ndarray,
     colons: np.ndarray,
-):
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """TAG blocks ``buf[start:end]`` (each ``\\...*hh\\``), vectorised with numpy.
 
     Returns (ok, bad_checksum, ext_ns, source) where ``source`` is an object array.
@@ -262,9 +274,9 @@ def parse_tags(
     fs, ss, se = _key_value(buf, colons, commas, start, star, 115)  # 's'
     # printable ASCII only (NUL and pairs of equal bytes leave the XOR checksum unchanged),
     # and a source of at most MAX_SOURCE_CHARS (fuzz: 300 000-character source keys)
-    for i in np.flatnonzero(ok):  # long TAG blocks only: rare
-        blk = buf[start[i] : end[i]]
-        ok[i] = not np.any((blk < 32) | (blk > 126))
+    for k in np.flatnonzero(ok):  # long TAG blocks only: rare
+        blk = buf[start[k] : end[k]]
+        ok[k] = not np.any((blk < 32) | (blk > 126))
     ok &= ~(fs & (se - ss > MAX_SOURCE_CHARS))
     fs &= ok & (se > ss)
     if fs.any():
@@ -275,7 +287,9 @@ def parse_tags(
     return ok, bad_cs, ext, source
 
 
-def _tag_time_ns(cv: np.ndarray, cbad: np.ndarray, fc: np.ndarray, ok: np.ndarray):
+def _tag_time_ns(
+    cv: np.ndarray, cbad: np.ndarray, fc: np.ndarray, ok: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """(times in ns, MISSING_NS where none; ok) from parsed ``c:`` values: seconds (up to
     10 integer digits, < 1e10) or milliseconds.  A time beyond the int64 nanosecond range
     (year 2262) is unreadable, not wrapped: its TAG block is not ok."""
@@ -304,7 +318,9 @@ TAG_ROW_BYTES = 128
 MAX_SOURCE_CHARS = 64
 
 
-def _key_value_rows(mat: np.ndarray, stop: np.ndarray, keys: tuple[int, ...]):
+def _key_value_rows(
+    mat: np.ndarray, stop: np.ndarray, keys: tuple[int, ...]
+) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """[s, e) (relative to each row) of the values of TAG parameters ``keys`` (one
     letter each) in rows of a byte matrix, each row one TAG block from its opening
     backslash, zeros past its end.
@@ -325,7 +341,7 @@ def _key_value_rows(mat: np.ndarray, stop: np.ndarray, keys: tuple[int, ...]):
     ok = (col < stop[row]) & ((prev2 == 44) | (prev2 == 92))
     colon, col, row = colon[ok], col[ok], row[ok]
     comma = np.flatnonzero(flat == 44)
-    out = []
+    out: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     for key in keys:
         sel = flat[colon - 1] == key
         c, r = col[sel], row[sel]
@@ -348,7 +364,7 @@ def _key_value_rows(mat: np.ndarray, stop: np.ndarray, keys: tuple[int, ...]):
 
 def parse_tag_rows(
     buf: np.ndarray, mat: np.ndarray, start: np.ndarray, length: np.ndarray, cum_xor: np.ndarray
-):
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`parse_tags` for TAG blocks given as rows of a byte matrix.
 
     ``mat[i, :length[i]]`` are the bytes of TAG block i (``\\...*hh\\``, starting at
@@ -388,9 +404,10 @@ def parse_tag_rows(
 
 
 def _num(arr: pa.Array) -> np.ndarray:
-    return pc.cast(pc.if_else(pc.equal(arr, ""), None, arr), pa.float64()).to_numpy(
+    values: np.ndarray = pc.cast(pc.if_else(pc.equal(arr, ""), None, arr), pa.float64()).to_numpy(
         zero_copy_only=False
     )
+    return values
 
 
 def parse_prefixes(

@@ -28,11 +28,13 @@ from __future__ import annotations
 
 import datetime as _dt
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from dracc.frames import MISSING_NS  # the "no time" marker in int64 time arrays
+from dracc.core.arrays import ArrayLike
+from dracc.frames import MISSING_NS as MISSING_NS  # the "no time" marker (re-exported)
 
 DAY_NS = 86_400 * 1_000_000_000
 HALF_DAY_NS = DAY_NS // 2
@@ -40,7 +42,7 @@ GPS_WEEK_ROLLOVER_DAYS = 1024 * 7
 _EPOCH_2000_DAYS = 10957  # 2000-01-01 in days since 1970-01-01
 
 
-def days_from_civil(year, month, day):
+def days_from_civil(year: ArrayLike, month: ArrayLike, day: ArrayLike) -> np.ndarray:
     """Days since 1970-01-01 of a proleptic Gregorian date (arrays broadcast).
 
     Hinnant's algorithm: era = floor(y'/400) with y' = y - (m <= 2), day of era
@@ -53,10 +55,11 @@ def days_from_civil(year, month, day):
     yoe = y - era * 400
     doy = (153 * (m + np.where(m > 2, -3, 9)) + 2) // 5 + d - 1
     doe = yoe * 365 + yoe // 4 - yoe // 100 + doy
-    return era * 146097 + doe - 719468
+    days: np.ndarray = era * 146097 + doe - 719468
+    return days
 
 
-def valid_civil(year, month, day):
+def valid_civil(year: ArrayLike, month: ArrayLike, day: ArrayLike) -> np.ndarray:
     """True where (year, month, day) is a real calendar date."""
     y = np.asarray(year, dtype=np.int64)
     m = np.asarray(month, dtype=np.int64)
@@ -64,7 +67,8 @@ def valid_civil(year, month, day):
     leap = ((y % 4 == 0) & (y % 100 != 0)) | (y % 400 == 0)
     mdays = np.array([31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31, 31])
     dim = mdays[np.clip(m - 1, 0, 12)] + ((m == 2) & leap)
-    return (m >= 1) & (m <= 12) & (d >= 1) & (d <= dim)
+    valid: np.ndarray = (m >= 1) & (m <= 12) & (d >= 1) & (d <= dim)
+    return valid
 
 
 def today_days() -> int:
@@ -72,7 +76,7 @@ def today_days() -> int:
     return (_dt.datetime.now(_dt.timezone.utc).date() - _dt.date(1970, 1, 1)).days
 
 
-def fix_dates(date_days: np.ndarray, latest_days: int | None = None):
+def fix_dates(date_days: np.ndarray, latest_days: int | None = None) -> tuple[np.ndarray, int, int]:
     """Check dates (days since epoch; -1 = none) for plausibility.
 
     Returns (fixed_days, n_rollover_corrected, n_implausible_unused): a date before
@@ -91,7 +95,9 @@ def fix_dates(date_days: np.ndarray, latest_days: int | None = None):
     return d, int(fixable.sum()), int(unusable.sum())
 
 
-def drop_implausible_ext(ext_ns: np.ndarray, latest_days: int | None = None):
+def drop_implausible_ext(
+    ext_ns: np.ndarray, latest_days: int | None = None
+) -> tuple[np.ndarray, int]:
     """Rule 4 for external times (TAG ``c:``, logger prefixes, MCAP log times): a time
     outside 2000-01-01 .. today+1 (a garbled prefix read as a Unix time, a bit flip in a
     year) is not used.  Returns (ext_ns with those set to MISSING_NS, n_unused)."""
@@ -108,7 +114,8 @@ def nearest_day(tod_ns: np.ndarray, ref_ns: np.ndarray) -> np.ndarray:
     day0 = np.floor_divide(ref_ns, DAY_NS) * DAY_NS
     t = day0 + tod_ns
     t = np.where(t - ref_ns > HALF_DAY_NS, t - DAY_NS, t)
-    return np.where(ref_ns - t > HALF_DAY_NS, t + DAY_NS, t)
+    placed: np.ndarray = np.where(ref_ns - t > HALF_DAY_NS, t + DAY_NS, t)
+    return placed
 
 
 @dataclass
@@ -131,9 +138,11 @@ class TimeBase:
     implausible: int = 0
     date_changes: int = 0
     decisions: list[str] = field(default_factory=list)
-    _pending: list = field(default_factory=list)
+    _pending: list[tuple[np.ndarray, ...]] = field(default_factory=list)
 
-    def feed(self, tod_ns: np.ndarray, date_days: np.ndarray, ext_ns: np.ndarray):
+    def feed(
+        self, tod_ns: np.ndarray, date_days: np.ndarray, ext_ns: np.ndarray
+    ) -> list[np.ndarray]:
         """Feed one block (arrays in stream order); return a list of finished
         (block_id, time_ns) pairs in order (possibly empty, possibly several)."""
         date_days, nfix, nbad = fix_dates(date_days)
@@ -177,8 +186,8 @@ class TimeBase:
                 return []
         return self._flush()
 
-    def _flush(self):
-        out = []
+    def _flush(self) -> list[np.ndarray]:
+        out: list[np.ndarray] = []
         for tod_ns, ext_ns, has_ext, has_tod, seq, dayidx, base_cand in self._pending:
             t = np.full(len(tod_ns), MISSING_NS, dtype=np.int64)
             both = has_ext & has_tod
@@ -221,7 +230,7 @@ class TimeBase:
         self._pending = []
         return out
 
-    def finish(self):
+    def finish(self) -> list[np.ndarray]:
         """End of file: resolve what waits, with ``cfg.date`` if the log had no date.
 
         Returns the remaining time arrays; entries still MISSING_NS had no date at all.
@@ -250,7 +259,7 @@ class TimeBase:
         return self._flush()
 
 
-def _codes(values):
+def _codes(values: ArrayLike | pd.Series) -> tuple[np.ndarray, list[Any]]:
     """(codes, names) of a categorical or any array of labels."""
     if isinstance(values, pd.Series) and isinstance(values.dtype, pd.CategoricalDtype):
         values = values.array
@@ -272,11 +281,11 @@ class EventCounter:
 
     gap_s: float = 60.0
     tolerance_s: float = 1.0
-    last: dict = field(default_factory=dict)
-    per_source: dict = field(
+    last: dict[tuple[str, str], int] = field(default_factory=dict)
+    per_source: dict[str, dict[str, Any]] = field(
         default_factory=dict
     )  #: source -> {"duplicates","backsteps","gaps","max_gap_s"}
-    examples: list = field(default_factory=list)
+    examples: list[tuple[str, int, str]] = field(default_factory=list)
 
     def add(
         self,
@@ -336,7 +345,7 @@ class EventCounter:
                     )
             self.last[(key, stype)] = int(t[-1])
 
-    def totals(self) -> dict:
+    def totals(self) -> dict[str, int]:
         out = {"duplicates": 0, "backsteps": 0, "gaps": 0}
         for st in self.per_source.values():
             for k in out:

@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import html
 import math
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 from dracc.core import atomic
 from dracc.core.timefmt import iso_utc
 from dracc.core.vocabulary import CHANNELS
-from dracc.pipeline.results import Analysis, Estimate
+from dracc.pipeline.results import Analysis, DRLeg, DRSection, Estimate
 from dracc.report import fmt, fmt_duration, fmt_pct, fmt_signed, short_utc
 from dracc.report.page import CSP, data_uri  # one policy and one data URI for every page
 from dracc.report.rows import EXCEEDS, WITHIN, channel_rows, unit_rows
@@ -42,7 +44,7 @@ pre.config { background: #f6f6f6; border: 1px solid #ddd; padding: 0.5em 1em; fo
 """
 
 
-def _e(text) -> str:
+def _e(text: object) -> str:
     return html.escape(str(text), quote=True)
 
 
@@ -228,7 +230,7 @@ def _units(a: Analysis) -> str:
     return intro + table + notes + windows
 
 
-def _nees(dr) -> str:
+def _nees(dr: DRSection) -> str:
     if dr.nees_statistic is None or not math.isfinite(dr.nees_statistic):
         return "-"
     return (
@@ -238,16 +240,16 @@ def _nees(dr) -> str:
     )
 
 
-def _learned(m: dict | None) -> str:
+def _learned(m: Mapping[str, Any] | None) -> str:
     """The model learned from the fixes, and its [dead_reckoning] block in a <pre>."""
     if m is None:
         return ""
 
-    def g(key, digits, scale=1.0):
+    def g(key: str, digits: int, scale: float = 1.0) -> str:
         v = m.get(key)
         return fmt(None if v is None else scale * v, digits)
 
-    def sg(key, digits, scale=1.0):
+    def sg(key: str, digits: int, scale: float = 1.0) -> str:
         v = m.get(key)
         return fmt_signed(None if v is None else scale * v, digits)
 
@@ -339,7 +341,7 @@ def _dr(a: Analysis) -> str:
     kv = "".join(f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in rows)
     checks = {int(lc.leg): lc for lc in dr.leg_checks}
 
-    def nees(leg, field, digits):
+    def nees(leg: DRLeg, field: str, digits: int) -> str:
         lc = checks.get(int(leg.index))
         return "-" if lc is None else fmt(getattr(lc, field), digits)
 

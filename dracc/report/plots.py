@@ -95,8 +95,7 @@ def _finish(
 
 def _utc_axis(fig: Figure, ax: Axes) -> None:
     """A shared UTC date axis ('day hh:mm') at the bottom of ``fig``."""
-    # matplotlib.dates ships no annotations for DateFormatter
-    ax.xaxis.set_major_formatter(mdates.DateFormatter("%d %H:%M"))  # type: ignore[no-untyped-call]
+    ax.xaxis.set_major_formatter(mdates.DateFormatter("%d %H:%M"))
     ax.set_xlabel("UTC")
     fig.autofmt_xdate()
 

@@ -19,6 +19,7 @@ Times are timezone-aware UTC timestamps in Parquet and ISO 8601 in CSV.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -26,13 +27,14 @@ import pyarrow as pa
 import pyarrow.csv as pa_csv
 
 from dracc.core import atomic
+from dracc.core.arrays import ArrayLike
 from dracc.core.safetext import csv_cell
 from dracc.core.vocabulary import CHANNEL_KEYS, CHANNEL_UNITS, CHANNELS
 from dracc.math.deviation import WindowStats
 from dracc.pipeline.results import Analysis, DRTrackResult
 
 
-def _times(time_ns) -> pd.DatetimeIndex:
+def _times(time_ns: ArrayLike) -> pd.DatetimeIndex:
     return pd.to_datetime(np.asarray(time_ns, dtype="int64"), unit="ns", utc=True)
 
 
@@ -70,8 +72,8 @@ def samples_frame(a: Analysis) -> pd.DataFrame | None:
     return pd.DataFrame(cols)
 
 
-def _window_rows(w: WindowStats) -> list[dict]:
-    rows = []
+def _window_rows(w: WindowStats) -> list[dict[str, Any]]:
+    rows: list[dict[str, Any]] = []
     for name, u in w.units.items():
         for ch in CHANNELS:
             c = u.channels.get(ch)

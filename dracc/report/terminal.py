@@ -11,20 +11,29 @@ terminal a command.  Every text of the summary goes through :func:`_text`.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping, Sequence
+from typing import IO, Any, cast
+
 import numpy as np
-from rich.console import Console, Group
+from rich.console import Console, Group, JustifyMethod, RenderableType
 from rich.table import Table
 from rich.text import Text
 
 from dracc.core.safetext import printable
 from dracc.core.vocabulary import CHANNELS
 from dracc.math.deviation import DeviationResult
-from dracc.pipeline.results import Analysis, Estimate
+from dracc.pipeline.results import (
+    Analysis,
+    CalibrationSection,
+    CurrentSection,
+    DRSection,
+    Estimate,
+)
 from dracc.report import fmt, fmt_duration, fmt_pct, fmt_signed, short_utc
 from dracc.report.rows import EXCEEDS, unit_rows
 
 
-def _text(text="", style: str = "") -> Text:
+def _text(text: object = "", style: str = "") -> Text:
     """A rich Text of ``text`` with control characters escaped (never markup)."""
     return Text(printable(text), style=style)
 
@@ -41,19 +50,20 @@ def _heading(text: str) -> Text:
 
 def _sources_table(a: Analysis) -> Table:
     t = Table(box=None, pad_edge=False, show_edge=False, header_style="bold")
-    for col, just in (
+    columns: tuple[tuple[str, JustifyMethod], ...] = (
         ("source", "left"),
         ("role", "left"),
         ("records", "right"),
         ("sentences", "left"),
         ("first", "left"),
         ("last", "left"),
-    ):
+    )
+    for col, just in columns:
         # figures never wrap; a very long source key (it comes from the log) folds
         t.add_column(
             col,
             justify=just,
-            no_wrap=col != "source",  # type: ignore[arg-type]
+            no_wrap=col != "source",
             overflow="fold",
         )
     for s in a.sources:
@@ -128,7 +138,7 @@ def _unit_table(d: DeviationResult) -> Table:
     return t
 
 
-def _section(title: str, body: list | None) -> list:
+def _section(title: str, body: list[RenderableType] | None) -> list[RenderableType]:
     """A blank line, the heading, then the body, or 'not computed' where there is none."""
     return [
         _text(""),
@@ -137,23 +147,23 @@ def _section(title: str, body: list | None) -> list:
     ]
 
 
-def _bullets(title: str, items) -> list:
+def _bullets(title: str, items: Sequence[object]) -> list[RenderableType]:
     """A blank line, the heading and one '- item' line per item; nothing without items."""
     if not items:
         return []
     return [_text(""), _heading(title), *(_text(f"- {item}") for item in items)]
 
 
-def _notes(notes) -> list:
+def _notes(notes: Iterable[object]) -> list[RenderableType]:
     return [_text(f"note: {note}") for note in notes]
 
 
-def _verdict_word(dr) -> str:
+def _verdict_word(dr: DRSection) -> str:
     """'consistent', 'inconsistent (circle too small)', 'conservative', 'undetermined'."""
     return dr.verdict.partition(":")[0].strip()
 
 
-def _learned_line(m: dict) -> Text:
+def _learned_line(m: Mapping[str, Any]) -> Text:
     """The learned current and corrections in one line (DRSection.learned)."""
     scale, scale_sigma = m.get("log_scale_correction"), m.get("log_scale_correction_sigma")
     return _text(
@@ -166,8 +176,8 @@ def _learned_line(m: dict) -> Text:
     )
 
 
-def _dr_body(dr) -> list:
-    body = [
+def _dr_body(dr: DRSection) -> list[RenderableType]:
+    body: list[RenderableType] = [
         _text(
             f"heading  {dr.heading_source}; speed {dr.speed_source}; "
             f"restart {dr.reset}; {len(dr.legs)} leg{'s' if len(dr.legs) != 1 else ''}"
@@ -228,18 +238,19 @@ def _dr_body(dr) -> list:
     return body + _notes(dr.notes)
 
 
-def _deviation_body(d: DeviationResult) -> list:
+def _deviation_body(d: DeviationResult) -> list[RenderableType]:
     fac = ", ".join(f"{ch} {fmt(d.factors[ch], 3)}" for ch in CHANNELS)
-    return [
+    body: list[RenderableType] = [
         _text(
             f"{len(d.units)} units, every {fmt_duration(d.interval_s)}, "
             f"{len(d.time_ns)} instants; k: {fac}; excess kurtosis (normal 0)"
         ),
         _unit_table(d),
-    ] + _notes(d.messages)
+    ]
+    return body + _notes(d.messages)
 
 
-def _calibration_body(c) -> list:
+def _calibration_body(c: CalibrationSection) -> list[RenderableType]:
     scale = c.log_scale and Estimate(100 * c.log_scale.value, 100 * c.log_scale.sigma)
     return [
         _text(
@@ -250,7 +261,7 @@ def _calibration_body(c) -> list:
     ] + _notes(c.notes)
 
 
-def _current_body(cur) -> list:
+def _current_body(cur: CurrentSection) -> list[RenderableType]:
     return [
         _text(
             f"set {_est(cur.set_deg, '°', 0)} (towards), drift {_est(cur.drift_kn, 'kn')}"
@@ -261,7 +272,7 @@ def _current_body(cur) -> list:
 
 def summary(a: Analysis) -> Group:
     """The summary as a rich renderable."""
-    parts: list = []
+    parts: list[RenderableType] = []
     files = len(a.inputs)
     parts.append(_heading("dracc analyze"))
     parts.append(
@@ -341,7 +352,7 @@ def render_text(a: Analysis, width: int = 120) -> str:
         record=True,
         color_system=None,
         force_terminal=False,
-        file=_NullFile(),
+        file=cast(IO[str], _NullFile()),  # rich only calls write() and flush()
         soft_wrap=False,
     )
     console.print(summary(a))

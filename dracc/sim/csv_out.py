@@ -10,6 +10,7 @@ that reading back reproduces the value to the last bit in those units.  Times ar
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +36,9 @@ def _fmt(v: np.ndarray) -> np.ndarray:
     return out
 
 
-def _tables(frames: dict[str, pd.DataFrame]):
+def _tables(
+    frames: dict[str, pd.DataFrame],
+) -> Iterator[tuple[str, pd.DataFrame, dict[str, np.ndarray]]]:
     for kind in KINDS:
         df = frames.get(kind)
         if df is None or len(df) == 0:
@@ -43,7 +46,7 @@ def _tables(frames: dict[str, pd.DataFrame]):
         yield kind, df, frame_quantities(kind, df)
 
 
-def write_csv(frames: dict[str, pd.DataFrame], path, form: str = "long") -> Path:
+def write_csv(frames: dict[str, pd.DataFrame], path: str | Path, form: str = "long") -> Path:
     """Write ``frames`` (kind -> canonical frame) to ``path`` atomically; return the path.
 
     ``form='long'``: ``time_utc,source,quantity,value``, one present value per row, rows in

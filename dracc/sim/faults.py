@@ -32,7 +32,9 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, fields, replace
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -115,15 +117,17 @@ class SimFault:
 
     def window_ns(self, voyage_start_ns: int) -> tuple[int, int | None]:
         """``[lo, hi)`` in UTC ns of a resolved fault (``hi`` None: to the end)."""
+        assert self.start_s is not None and self.duration_s is not None  # resolved
         lo = int(voyage_start_ns) + int(round(self.start_s * 1e9))
         hi = None if math.isinf(self.duration_s) else lo + int(round(self.duration_s * 1e9))
         return lo, hi
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
     def describe(self) -> str:
         """The spec of a resolved fault, e.g. ``jump:GNSS@1234s+600s=670m``."""
+        assert self.duration_s is not None  # resolved
         s = f"{self.kind}:{self.source}@{self.start_s:g}s"
         s += "+end" if math.isinf(self.duration_s) else f"+{self.duration_s:g}s"
         if self.size is not None:
@@ -202,7 +206,11 @@ def _fmt_s(x: float) -> str:
 
 
 def resolve_faults(
-    faults, voyage_s: float, seed: int, compass: str = "gyro", labels=None
+    faults: Iterable[SimFault],
+    voyage_s: float,
+    seed: int,
+    compass: str = "gyro",
+    labels: Sequence[str] | None = None,
 ) -> tuple[SimFault, ...]:
     """Every fault with its defaults filled in and checked against the voyage.
 
@@ -299,8 +307,11 @@ def resolve_faults(
 
 
 def fault_table(
-    faults, voyage_start_ns: int, voyage_s: float, roles: dict | None = None
-) -> list[dict]:
+    faults: Iterable[SimFault],
+    voyage_start_ns: int,
+    voyage_s: float,
+    roles: Mapping[str, str] | None = None,
+) -> list[dict[str, Any]]:
     """The resolved faults as JSON-ready dicts (params.json ``faults``): kind, source, role,
     start_utc, end_utc (ISO 8601, ns, as truth.csv's time_utc; a fault to the end ends at
     the voyage's end), start_s, duration_s (finite), size (SI), size_unit, direction_deg."""
@@ -308,6 +319,8 @@ def fault_table(
     out = []
     for f in faults:
         lo, hi = f.window_ns(voyage_start_ns)
+        # resolved faults (the docstring): a source, a start and a duration
+        assert f.source is not None and f.start_s is not None and f.duration_s is not None
         end_ns = hi if hi is not None else int(voyage_start_ns) + int(round(voyage_s * 1e9))
         dur = f.duration_s if not math.isinf(f.duration_s) else voyage_s - f.start_s
         out.append(
@@ -344,7 +357,7 @@ def error_columns(source: str) -> tuple[str, str]:
 
 
 def apply_error_faults(
-    faults,
+    faults: Iterable[SimFault],
     errors: dict[str, np.ndarray],
     time_ns: np.ndarray,
     t_s: np.ndarray,
@@ -360,6 +373,9 @@ def apply_error_faults(
         w = _in(time_ns, lo, hi)
         if not w.any():
             continue
+        # a resolved jump or drift has all of these
+        assert f.source is not None and f.start_s is not None
+        assert f.size is not None and f.direction_deg is not None
         mag = np.where(w, f.size if f.kind == "jump" else f.size * (t_s - f.start_s), 0.0)
         d = math.radians(f.direction_deg)
         cn, ce = error_columns(f.source)
@@ -368,21 +384,21 @@ def apply_error_faults(
     return out
 
 
-def _frozen_columns(source: str) -> tuple[str, tuple[str, ...]]:
+def _frozen_columns(source: str | None) -> tuple[str, tuple[str, ...]]:
     if source in POSITION_SOURCES:
         return "position", ("lat_rad", "lon_rad")
     return "heading", ("heading_rad", "deviation_rad") if source == "MAG" else ("heading_rad",)
 
 
 def apply_frame_faults(
-    faults,
+    faults: Iterable[SimFault],
     frames: dict[str, pd.DataFrame],
     zda: pd.DataFrame,
     errors: pd.DataFrame,
     truth: pd.DataFrame,
     voyage_start_ns: int,
-    state_in: dict | None = None,
-):
+    state_in: dict[str, Any] | None = None,
+) -> tuple[dict[str, pd.DataFrame], pd.DataFrame, pd.DataFrame, dict[str, Any]]:
     """Apply the freezes, dropouts, latencies and invalid flags of ``faults`` (in their
     order) to the canonical frames of one simulated segment.
 
@@ -392,7 +408,7 @@ def apply_frame_faults(
     new objects where anything changed; line numbers are closed up after a dropout.
     """
     state_in = state_in or {}
-    state_out: dict = {}
+    state_out: dict[str, Any] = {}
     frames = dict(frames)
     dropped = False
     for i, f in enumerate(faults):
@@ -455,6 +471,7 @@ def apply_frame_faults(
                 df["quality"] = q
                 frames["position"] = df
         elif f.kind == "latency":
+            assert f.size is not None  # a resolved latency has a size
             lag = int(round(f.size * 1e9))
             for kind, df in list(frames.items()):
                 if not len(df):
@@ -472,7 +489,14 @@ def apply_frame_faults(
     return frames, zda, errors, state_out
 
 
-def _frozen_errors(f: SimFault, held, errors: pd.DataFrame, truth: pd.DataFrame, lo, hi):
+def _frozen_errors(
+    f: SimFault,
+    held: tuple[float, ...],
+    errors: pd.DataFrame,
+    truth: pd.DataFrame,
+    lo: int,
+    hi: int | None,
+) -> pd.DataFrame:
     """Errors in the freeze window: the held reading minus the truth at every sample."""
     w = _in(errors["time_ns"].to_numpy(np.int64), lo, hi)
     if not w.any():
@@ -498,7 +522,9 @@ def _frozen_errors(f: SimFault, held, errors: pd.DataFrame, truth: pd.DataFrame,
     return errors
 
 
-def renumber_lines(frames: dict[str, pd.DataFrame], zda: pd.DataFrame):
+def renumber_lines(
+    frames: dict[str, pd.DataFrame], zda: pd.DataFrame
+) -> tuple[dict[str, pd.DataFrame], pd.DataFrame]:
     """Close up the line numbers (1..n in the old order) after records were removed: the
     lines a reader of the written log numbers.  A line shared by two frames (RMC: position
     and ground) keeps one number."""
@@ -509,7 +535,7 @@ def renumber_lines(frames: dict[str, pd.DataFrame], zda: pd.DataFrame):
         return frames, zda
     u = np.unique(np.concatenate(parts))
 
-    def new(df):
+    def new(df: pd.DataFrame) -> pd.DataFrame:
         if not len(df):
             return df
         df = df.copy()

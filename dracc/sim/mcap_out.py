@@ -25,7 +25,9 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any, TypeAlias, TypeVar, cast
 
 import numpy as np
 import pandas as pd
@@ -50,6 +52,10 @@ TYPE = {
     "distance": "Distance",
     "rot": "RateOfTurn",
 }
+
+#: kind -> protobuf message class, and kind -> its serialized FileDescriptorSet
+ProtoClasses: TypeAlias = tuple[dict[str, Any], dict[str, bytes]]
+_V = TypeVar("_V")
 
 _TIME = "int32 sec\nuint32 nanosec\n"
 _HEADER = "builtin_interfaces/Time stamp\nstring frame_id\n"
@@ -109,7 +115,7 @@ def _dracc_msg(kind: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _kind_tables(frames):
+def _kind_tables(frames: dict[str, pd.DataFrame]) -> Iterator[tuple[str, str, pd.DataFrame]]:
     for kind in KINDS:
         df = frames.get(kind)
         if df is None or len(df) == 0:
@@ -118,7 +124,8 @@ def _kind_tables(frames):
             yield kind, str(src), sub
 
 
-def _clean(v) -> float | None:
+def _clean(v: _V) -> _V | None:
+    """``v``, or None for NaN (a number or a reference letter goes through unchanged)."""
     return None if v is None or (isinstance(v, float) and math.isnan(v)) else v
 
 
@@ -169,7 +176,7 @@ def _json_messages(kind: str, src: str, df: pd.DataFrame) -> tuple[str, bytes, l
     cols = [[_clean(x) for x in (qs[n].tolist())] for n in names]
     msgs = []
     for i, (s, ns) in enumerate(zip(sec, nsec, strict=False)):
-        obj = {"timestamp": {"sec": s, "nsec": ns}, "frame_id": src}
+        obj: dict[str, object] = {"timestamp": {"sec": s, "nsec": ns}, "frame_id": src}
         for n, c in zip(names, cols, strict=False):
             obj[n] = c[i]
         msgs.append(json.dumps(obj, separators=(",", ":")).encode())
@@ -217,7 +224,7 @@ def _ros2_messages(kind: str, src: str, df: pd.DataFrame) -> tuple[str, bytes, l
     return name, text.encode(), [r.tobytes() for r in rows]
 
 
-def _proto_classes():
+def _proto_classes() -> ProtoClasses:
     """foxglove.LocationFix and dracc.* protobuf classes built from descriptors in code."""
     from google.protobuf import descriptor_pb2, descriptor_pool, timestamp_pb2
     from google.protobuf.message_factory import GetMessageClass
@@ -280,7 +287,7 @@ def _proto_classes():
         s = descriptor_pb2.FileDescriptorSet()
         for nm in names:
             s.file.append(files[nm])
-        return s.SerializeToString()
+        return cast(bytes, s.SerializeToString())
 
     sets = {"position": fds(["google/protobuf/timestamp.proto", fox.name])}
     for kind in TYPE:
@@ -289,7 +296,7 @@ def _proto_classes():
 
 
 def _proto_messages(
-    kind: str, src: str, df: pd.DataFrame, protos
+    kind: str, src: str, df: pd.DataFrame, protos: ProtoClasses
 ) -> tuple[str, bytes, list[bytes]]:
     classes, sets = protos
     cls = classes[kind]
@@ -329,17 +336,17 @@ def _proto_messages(
 
 def _log_times(df: pd.DataFrame) -> np.ndarray:
     """Log (receive) time of each record: ``recv_ns`` where set, else ``time_ns``."""
-    t = df["time_ns"].to_numpy(dtype=np.int64)
+    t: np.ndarray = df["time_ns"].to_numpy(dtype=np.int64)
     if "recv_ns" not in df:
         return t
-    r = df["recv_ns"].to_numpy(dtype=np.int64)
+    r: np.ndarray = df["recv_ns"].to_numpy(dtype=np.int64)
     return np.where(r != MISSING_NS, r, t)
 
 
 def write_mcap(
     frames: dict[str, pd.DataFrame],
     roles: dict[str, str] | None,
-    path,
+    path: str | Path,
     encoding: str = "json",
     chunk_size: int = 1 << 20,
     compression: str | None = "zstd",
@@ -369,10 +376,10 @@ def write_mcap(
     if encoding == "nmea":
         from dracc.sim.nmea_out import frames_to_lines
 
-        t, src, lines = frames_to_lines(frames, roles)
-        src = np.asarray(src, dtype=object)
-        for s in sorted(set(src.tolist())):
-            m = src == s
+        t, line_src, lines = frames_to_lines(frames, roles)
+        line_src = np.asarray(line_src, dtype=object)
+        for s in sorted(set(line_src.tolist())):
+            m = line_src == s
             streams.append(
                 (
                     f"/{s.strip('/')}/nmea",
@@ -394,6 +401,7 @@ def write_mcap(
                 name, sdata, msgs = _ros2_messages(kind, src, df)
                 senc, menc = "ros2msg", "cdr"
             else:
+                assert protos is not None  # built above for encoding 'protobuf'
                 name, sdata, msgs = _proto_messages(kind, src, df, protos)
                 senc, menc = "protobuf", "protobuf"
             streams.append(
@@ -425,11 +433,12 @@ def write_mcap(
         for topic, name, senc, sdata, menc, _t, _m in streams:
             sid = 0
             if name:
-                sid = schema_ids.get((name, sdata))
-                if sid is None:
-                    sid = schema_ids[(name, sdata)] = w.register_schema(
+                known = schema_ids.get((name, sdata))
+                if known is None:
+                    known = schema_ids[(name, sdata)] = w.register_schema(
                         name=name, encoding=senc, data=sdata
                     )
+                sid = known
             ids.append(w.register_channel(topic=topic, message_encoding=menc, schema_id=sid))
         seq = [0] * len(streams)
         add = w.add_message

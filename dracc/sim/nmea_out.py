@@ -38,16 +38,22 @@ where its source's position record at the same time has quality 0.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING, TypeAlias
 
 import numpy as np
 import pandas as pd
 
+from dracc.core.arrays import ArrayLike
 from dracc.core.atomic import atomic_path
 from dracc.core.errors import DraccError
 from dracc.core.units import DEG_RAD, KN_MPS, NMI_M
 from dracc.frames import MISSING_NS
 from dracc.sim.model import ALT_DEC, ANGLE_DEC, DIST_DEC, HDOP_DEC, ROT_DEC, SPEED_DEC
+
+if TYPE_CHECKING:
+    from dracc.sim.model import SimVoyage
 
 KMH_MPS = 1000.0 / 3600.0
 FORMS = ("tag", "prefix", "bare")
@@ -63,6 +69,8 @@ KIND_TALKER = {
     "rot": "HE",
 }
 _HEX = np.frombuffer(b"0123456789ABCDEF", dtype=np.uint8)
+#: a sentence table as plain numpy columns (see :func:`_arrays`)
+_Columns: TypeAlias = dict[str, np.ndarray]
 
 
 # --------------------------------------------------------------------------- byte blocks
@@ -87,7 +95,7 @@ class _Row:
             self.add(m, np.ones((self.n, len(s)), bool))
         return self
 
-    def strs(self, values) -> _Row:
+    def strs(self, values: ArrayLike) -> _Row:
         """A column of short ASCII strings (variable length)."""
         a = np.asarray(values).astype("S")
         w = max(a.dtype.itemsize, 1)
@@ -99,7 +107,7 @@ class _Row:
         """Non-negative integers, zero-padded to ``width``."""
         return self.add(_digits(np.asarray(v, np.int64), width), np.ones((self.n, width), bool))
 
-    def num(self, x, dec: int, pad: int = 1, valid=None) -> _Row:
+    def num(self, x: ArrayLike, dec: int, pad: int = 1, valid: ArrayLike | None = None) -> _Row:
         """Decimal numbers with ``dec`` decimals, at least ``pad`` integer digits, a leading
         '-' where negative; NaN (or ``valid`` False) gives an empty field."""
         x = np.asarray(x, float)
@@ -120,7 +128,7 @@ class _Row:
             self.add(_digits(sc % scale, dec), np.broadcast_to(ok[:, None], (self.n, dec)))
         return self
 
-    def choice(self, cond, a: bytes, b: bytes, valid=None) -> _Row:
+    def choice(self, cond: ArrayLike, a: bytes, b: bytes, valid: ArrayLike | None = None) -> _Row:
         """One character: ``a`` where cond else ``b``; empty where not valid."""
         c = np.where(np.asarray(cond, bool), a[0], b[0]).astype(np.uint8)[:, None]
         ok = np.ones((self.n, 1), bool) if valid is None else np.asarray(valid, bool)[:, None]
@@ -146,7 +154,8 @@ def _ndigits(v: np.ndarray) -> np.ndarray:
 
 def checksum(mat: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """XOR of the kept bytes of each row (the NMEA and TAG block checksum)."""
-    return np.bitwise_xor.reduce(np.where(mask, mat, 0).astype(np.uint8), axis=1)
+    cs: np.ndarray = np.bitwise_xor.reduce(np.where(mask, mat, 0).astype(np.uint8), axis=1)
+    return cs
 
 
 def _hex2(cs: np.ndarray) -> np.ndarray:
@@ -194,18 +203,19 @@ def _date(cs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def _col(df: pd.DataFrame, name: str) -> np.ndarray:
     if name in df:
-        return df[name].to_numpy(dtype=float, na_value=np.nan)
+        col: np.ndarray = df[name].to_numpy(dtype=float, na_value=np.nan)
+        return col
     return np.full(len(df), np.nan)
 
 
-def _angle_deg(a_rad) -> np.ndarray:
+def _angle_deg(a_rad: ArrayLike) -> np.ndarray:
     """A heading or course in degrees [0, 360) as written: 359.9996 rounds to 0.000, not 360."""
     a = np.asarray(a_rad, float)
-    deg = np.rint(np.mod(a / DEG_RAD, 360.0) * 10**ANGLE_DEC) / 10**ANGLE_DEC
+    deg: np.ndarray = np.rint(np.mod(a / DEG_RAD, 360.0) * 10**ANGLE_DEC) / 10**ANGLE_DEC
     return np.where(deg >= 360.0, deg - 360.0, deg)
 
 
-def _gga(r, d):
+def _gga(r: _Row, d: _Columns) -> None:
     _hms(r, d["time_ns"])
     r.lit(b",")
     _latlon(r, d["lat_rad"], 2, b"N", b"S")
@@ -222,7 +232,7 @@ def _gga(r, d):
     r.lit(b",").num(hdop, HDOP_DEC).lit(b",").num(d["alt_m"], ALT_DEC).lit(b",M,,M,,")
 
 
-def _rmc(r, d):
+def _rmc(r: _Row, d: _Columns) -> None:
     cs = _hms(r, d["time_ns"])
     ok = np.asarray(d["quality"], np.int64) > 0
     r.lit(b",").choice(ok, b"A", b"V").lit(b",")
@@ -235,20 +245,20 @@ def _rmc(r, d):
     r.uint(dd, 2).uint(mm, 2).uint(yy % 100, 2).lit(b",,,").choice(ok, b"A", b"N")
 
 
-def _zda(r, d):
+def _zda(r: _Row, d: _Columns) -> None:
     cs = _hms(r, d["time_ns"])
     dd, mm, yy = _date(cs)
     r.lit(b",").uint(dd, 2).lit(b",").uint(mm, 2).lit(b",").uint(yy, 4).lit(b",00,00")
 
 
-def _hdt_like(code: bytes):
-    def f(r, d):
+def _hdt_like(code: bytes) -> Callable[[_Row, _Columns], None]:
+    def f(r: _Row, d: _Columns) -> None:
         r.num(_angle_deg(d["heading_rad"]), ANGLE_DEC).lit(b"," + code)
 
     return f
 
 
-def _hdg(r, d):
+def _hdg(r: _Row, d: _Columns) -> None:
     r.num(_angle_deg(d["heading_rad"]), ANGLE_DEC)
     for name in ("deviation_rad", "variation_rad"):
         v = d[name] / DEG_RAD
@@ -257,17 +267,17 @@ def _hdg(r, d):
         )
 
 
-def _rot(r, d):
+def _rot(r: _Row, d: _Columns) -> None:
     v = d["rot_radps"] * 60.0 / DEG_RAD
     r.num(v, ROT_DEC).lit(b",").choice(np.isfinite(v), b"A", b"V")
 
 
-def _vhw(r, d):
+def _vhw(r: _Row, d: _Columns) -> None:
     r.lit(b",T,,M,").num(d["stw_mps"] / KN_MPS, SPEED_DEC).lit(b",N,")
     r.num(d["stw_mps"] / KMH_MPS, SPEED_DEC).lit(b",K")
 
 
-def _vbw(r, d):
+def _vbw(r: _Row, d: _Columns) -> None:
     w_ok = np.isfinite(d["stw_mps"])
     g_ok = np.isfinite(d["sog_long_mps"])
     r.num(d["stw_mps"] / KN_MPS, SPEED_DEC).lit(b",")
@@ -276,12 +286,12 @@ def _vbw(r, d):
     r.num(d["sog_transverse_mps"] / KN_MPS, SPEED_DEC).lit(b",").choice(g_ok, b"A", b"V")
 
 
-def _vlw(r, d):
+def _vlw(r: _Row, d: _Columns) -> None:
     r.num(d["total_water_m"] / NMI_M, DIST_DEC).lit(b",N,")
     r.num(d["trip_water_m"] / NMI_M, DIST_DEC).lit(b",N")
 
 
-def _vtg(r, d):
+def _vtg(r: _Row, d: _Columns) -> None:
     r.num(_angle_deg(d["cog_rad"]), ANGLE_DEC).lit(b",T,,M,")
     r.num(d["sog_mps"] / KN_MPS, SPEED_DEC).lit(b",N,").num(d["sog_mps"] / KMH_MPS, SPEED_DEC)
     valid = d["valid"] if "valid" in d else np.ones(r.n, bool)
@@ -321,7 +331,9 @@ _NUMERIC = {
 # --------------------------------------------------------------------------- frames -> sentences
 
 
-def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None):
+def _sentence_tables(
+    frames: dict[str, pd.DataFrame], roles: dict[str, str] | None
+) -> list[tuple[str, pd.DataFrame]]:
     """Group frame rows into sentence tables: {type: DataFrame with time_ns, source, talker,
     line, sub (order after line) and the numeric columns the layout needs}."""
     roles = roles or {}
@@ -357,7 +369,7 @@ def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | No
         out["sub"] = 0
         return out
 
-    def table(df: pd.DataFrame, kind: str, cols) -> pd.DataFrame:
+    def table(df: pd.DataFrame, kind: str, cols: Iterable[str]) -> pd.DataFrame:
         """base() with the numeric columns ``cols`` of ``df`` (NaN where df lacks one)."""
         out = base(df, kind)
         for c in cols:
@@ -366,7 +378,8 @@ def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | No
 
     def sent(df: pd.DataFrame) -> np.ndarray:
         if "sentence" in df:
-            return df["sentence"].astype(str).to_numpy(object)
+            sentences: np.ndarray = df["sentence"].astype(str).to_numpy(object)
+            return sentences
         return np.full(len(df), "", object)
 
     pos = frames.get("position")
@@ -406,6 +419,7 @@ def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | No
         bg = table(rmc_gnd, "ground", ("cog_rad", "sog_mps")) if len(rmc_gnd) else None
         keys = ["time_ns", "source", "line", "talker", "sub", "recv_ns"]
         if bp is None:
+            assert bg is not None  # RMC rows of a position or a ground frame: one is there
             rmc = bg.assign(lat_rad=np.nan, lon_rad=np.nan, quality=1)
         elif bg is None:
             rmc = bp.assign(cog_rad=np.nan, sog_mps=np.nan)
@@ -459,9 +473,9 @@ def _sentence_tables(frames: dict[str, pd.DataFrame], roles: dict[str, str] | No
     return tables
 
 
-def _arrays(tb: pd.DataFrame) -> dict[str, np.ndarray]:
+def _arrays(tb: pd.DataFrame) -> _Columns:
     """A sentence table as plain numpy columns (source and talker as ASCII bytes)."""
-    out = {}
+    out: _Columns = {}
     for c in tb.columns:
         if c in ("source", "talker"):
             out[c] = tb[c].astype(str).to_numpy(dtype=object).astype("S")
@@ -472,7 +486,7 @@ def _arrays(tb: pd.DataFrame) -> dict[str, np.ndarray]:
     return out
 
 
-def _order(tables):
+def _order(tables: list[tuple[str, _Columns]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Global time order: (time_ns, line, sub, type order); returns (type_id, row, receive
     time) per line."""
     t = np.concatenate([tb["time_ns"] for _, tb in tables])
@@ -486,7 +500,9 @@ def _order(tables):
     return tid[o], row[o], rcv[o]
 
 
-def _format_block(typ: str, d: dict[str, np.ndarray], form: str, tag_time: str, newline: bytes):
+def _format_block(
+    typ: str, d: _Columns, form: str, tag_time: str, newline: bytes
+) -> tuple[np.ndarray, np.ndarray]:
     """Byte matrix and mask of complete lines (with terminator) for the rows of ``d``."""
     n = len(d["time_ns"])
     head = _Row(n)
@@ -511,7 +527,7 @@ def _format_block(typ: str, d: dict[str, np.ndarray], form: str, tag_time: str, 
     return head.lit(newline).build()
 
 
-def _received(d: dict[str, np.ndarray]) -> np.ndarray:
+def _received(d: _Columns) -> np.ndarray:
     """The receive time of each row: ``recv_ns`` where set, else ``time_ns``."""
     t = d["time_ns"]
     if "recv_ns" not in d:
@@ -557,7 +573,7 @@ def iter_blocks(
     tag_time: str = "s",
     newline: bytes = b"\r\n",
     chunk_rows: int = CHUNK_ROWS,
-):
+) -> Iterator[tuple[np.ndarray, np.ndarray, bytes]]:
     """Yield ``(time_ns, source, bytes)`` blocks of complete lines in time-of-fix order
     (``source`` as an ASCII bytes array; ``time_ns`` the time a logger stamps each line:
     ``recv_ns`` where set, else ``time_ns``).  TAG ``c:`` and prefix times are those
@@ -589,7 +605,9 @@ def iter_blocks(
         yield t[start : start + m], src, big[keep].tobytes()
 
 
-def frames_to_lines(frames: dict[str, pd.DataFrame], roles: dict[str, str] | None = None):
+def frames_to_lines(
+    frames: dict[str, pd.DataFrame], roles: dict[str, str] | None = None
+) -> tuple[np.ndarray, np.ndarray, list[bytes]]:
     """Bare sentences with checksums, time-ordered: ``(time_ns int64, source str array,
     lines list[bytes])`` (no line terminators; ``time_ns`` the receive time, as
     :func:`iter_blocks`)."""
@@ -604,7 +622,7 @@ def frames_to_lines(frames: dict[str, pd.DataFrame], roles: dict[str, str] | Non
 
 
 def write_nmea(
-    voyage_or_frames,
+    voyage_or_frames: SimVoyage | dict[str, pd.DataFrame],
     path: str | Path,
     form: str = "tag",
     tag_time: str = "s",

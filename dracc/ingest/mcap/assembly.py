@@ -13,6 +13,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from dracc.core.config import IngestConfig
 from dracc.frames import Rejects
@@ -38,7 +39,7 @@ class FrameAssembly:
 
     def __init__(
         self, file: str, cfg: IngestConfig, rejects: Rejects, channels: dict[int, _Channel]
-    ):
+    ) -> None:
         self.file = file
         self.cfg = cfg
         self.rejects = rejects
@@ -92,7 +93,7 @@ class FrameAssembly:
         self.nmea_recv = []
         self.nmea_store(released)
 
-    def nmea_store(self, released: list) -> None:
+    def nmea_store(self, released: list[dict[str, pd.DataFrame]]) -> None:
         """Put the frames the sentence stream released into the stores."""
         for frames in released:
             for kind, f in frames.items():
@@ -100,7 +101,14 @@ class FrameAssembly:
                     self.stores.setdefault(kind, _KindStore()).add(f)
 
     # ---------------------------------------------------------------- decoded columns
-    def add_part(self, ch: _Channel, t, nums, qs: dict, recv) -> None:
+    def add_part(
+        self,
+        ch: _Channel,
+        t: np.ndarray,
+        nums: np.ndarray,
+        qs: dict[str, np.ndarray],
+        recv: np.ndarray,
+    ) -> None:
         """Keep decoded columns of a channel (``recv``: the receive time of records timed
         by their own stamp, MISSING_NS elsewhere); turn them into compact frame pieces once
         enough have gathered, so the pending columns stay bounded."""

@@ -23,6 +23,7 @@ import re
 import struct
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -105,7 +106,7 @@ def compile_schema(name: str, text: str) -> list[_Field]:
                 raise CdrError(f"schema {name}: {short}: {err}") from err
         out = []
         for f in spec.fields:
-            t = f.type
+            t: Any = f.type  # the vendored IDL parser is untyped
             arr = (
                 (t.array_size if (t.array_size and not t.is_upper_bound) else -1)
                 if t.is_array
@@ -139,7 +140,7 @@ class Layout:
     size: int  #: bytes used (the message may be padded beyond)
 
 
-def walk(fields: list[_Field], buf, start: int, end: int) -> Layout:
+def walk(fields: list[_Field], buf: bytes, start: int, end: int) -> Layout:
     """Walk one CDR message in ``buf[start:end]``; raise CdrError if it is too short."""
     if end - start < 4:
         raise CdrError("message shorter than the CDR header")
@@ -213,7 +214,7 @@ def decode_channel(
     ends: np.ndarray,
     wanted: list[str],
     want_strings: Sequence[str] = (),
-):
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], np.ndarray]:
     """Decode the messages ``buf[starts[i]:ends[i]]`` of one channel.
 
     Returns (values, strings, ok): ``values[path]`` float64/int arrays for the scalar

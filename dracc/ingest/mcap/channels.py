@@ -5,9 +5,9 @@ signature every message decoder has (:data:`Decoder`)."""
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Collection, Iterable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -61,9 +61,11 @@ class _Channel:
     why: str = ""
     messages: int = 0
     bad: int = 0
-    #: decoded parts: (time_ns, line, {quantity: values})
-    parts: list = field(default_factory=list)
-    state: dict = field(default_factory=dict)
+    #: decoded parts: (time_ns, line, {quantity: values}, recv_ns)
+    parts: list[tuple[np.ndarray, np.ndarray, dict[str, np.ndarray], np.ndarray]] = field(
+        default_factory=list
+    )
+    state: dict[str, Any] = field(default_factory=dict)
 
     @property
     def type_name(self) -> str:
@@ -73,7 +75,14 @@ class _Channel:
 class FrameSink(Protocol):
     """Where decoders put what they decoded (:class:`dracc.ingest.mcap.assembly.FrameAssembly`)."""
 
-    def add_part(self, ch: _Channel, t, nums, qs: dict, recv) -> None: ...
+    def add_part(
+        self,
+        ch: _Channel,
+        t: np.ndarray,
+        nums: np.ndarray,
+        qs: dict[str, np.ndarray],
+        recv: np.ndarray,
+    ) -> None: ...
 
     def nmea_text(self, ch: _Channel, text: bytes, t: int, k: int, log_time: int) -> None: ...
 
@@ -83,7 +92,7 @@ class DecodeContext(Protocol):
     (:class:`dracc.ingest.mcap.decoding.ChannelDecoding`)."""
 
     file: str
-    declared: dict
+    declared: dict[str, str]
     rejects: Rejects
     channels: dict[int, _Channel]
     bad_stamps: int  #: message stamps out of range (log time used instead)
@@ -101,7 +110,7 @@ Decoder = Callable[
 ]
 
 
-def quantities_of(names, declared: dict) -> dict[str, str]:
+def quantities_of(names: Collection[str], declared: dict[str, str]) -> dict[str, str]:
     """Field name -> quantity name (unit in the name) for the fields dracc reads:
     foxglove's latitude/longitude/altitude, and names with a unit suffix or declared in
     ``[ingest.quantities]``.  One rule for JSON objects and protobuf descriptors."""
@@ -136,11 +145,11 @@ def message_times(
     return t, recv
 
 
-def channel_notes(channels) -> list[str]:
+def channel_notes(channels: Iterable[_Channel]) -> list[str]:
     """One note per channel (what it gave, or why it was not used); with more than 40,
     the unused ones are summarised by reason."""
-    notes = []
-    unused: Counter = Counter()
+    notes: list[str] = []
+    unused: Counter[str] = Counter()
     for ch in channels:
         what = (
             f"{ch.topic} [{ch.type_name}, {ch.encoding or 'no encoding'}]: {ch.messages} message(s)"

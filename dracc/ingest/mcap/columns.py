@@ -77,8 +77,8 @@ class _KindStore:
         self.step = step
         self.names: list[str] = []
         #: column -> ('num', None), ('cat', dtype of its categories) or ('str', its dtype), from the first piece
-        self.how: dict[str, tuple] = {}
-        self.labels: dict[str, dict] = {}  #: label column -> {label: code}
+        self.how: dict[str, tuple[str, Any]] = {}
+        self.labels: dict[str, dict[Any, int]] = {}  #: label column -> {label: code}
         self.runs: list[_Run] = []
         self.total = 0
 
@@ -128,7 +128,8 @@ class _KindStore:
         for i, u in enumerate(uniq.tolist()):
             lut[i] = known.setdefault(u, len(known))
         lut[-1] = -1  # code -1 indexes the last entry
-        return lut[codes].astype(_code_dtype(len(known)))
+        in_store: np.ndarray = lut[codes].astype(_code_dtype(len(known)))
+        return in_store
 
     def frame(self) -> pd.DataFrame:
         """The merged frame (see the class doc); the runs are released on the way."""
@@ -192,7 +193,7 @@ class _KindStore:
         return pd.DataFrame(out, copy=False)
 
 
-def _strings(codes: np.ndarray, labels: list, dtype) -> object:
+def _strings(codes: np.ndarray, labels: list[Any], dtype: Any) -> object:
     """A string column of ``dtype`` from codes into ``labels`` (-1: missing), built by
     pyarrow for pandas' arrow strings (no Python object per row)."""
     if isinstance(dtype, pd.StringDtype) and dtype.storage == "pyarrow":

@@ -15,9 +15,10 @@ from __future__ import annotations
 
 import struct
 import zlib
+from collections.abc import Iterable
 from io import BytesIO
 from pathlib import Path
-from typing import Protocol
+from typing import BinaryIO, Protocol
 
 import numpy as np
 
@@ -55,7 +56,15 @@ class MessageSink(Protocol):
 
     def add_channel(self, cid: int, topic: str, encoding: str, schema_id: int) -> None: ...
 
-    def decode(self, cid: int, buf: bytes, starts, ends, times, nums) -> None: ...
+    def decode(
+        self,
+        cid: int,
+        buf: bytes,
+        starts: np.ndarray,
+        ends: np.ndarray,
+        times: np.ndarray,
+        nums: np.ndarray,
+    ) -> None: ...
 
 
 class ContainerWalk:
@@ -64,7 +73,7 @@ class ContainerWalk:
 
     def __init__(
         self, path: Path, cfg: IngestConfig, rejects: Rejects, notes: list[str], sink: MessageSink
-    ):
+    ) -> None:
         self.path = path
         self.file = str(path)
         self.cfg = cfg
@@ -170,7 +179,7 @@ class ContainerWalk:
             f"(record_too_large)"
         )
 
-    def _check_data_crc(self, fh, pos: int, ln: int) -> None:
+    def _check_data_crc(self, fh: BinaryIO, pos: int, ln: int) -> None:
         """The DataEnd record's ``data_section_crc`` (0: not computed): the CRC32 of every
         byte before it.  A mismatch is noted; it is counted (``data_section_crc``) when no
         chunk's own CRC explained it (the damage is outside the chunks' records: a record
@@ -190,7 +199,7 @@ class ContainerWalk:
             f"{self.file}: {why}: the file was altered or damaged (what could be read is kept)"
         )
 
-    def _check_summary_crc(self, fh, pos: int, ln: int) -> None:
+    def _check_summary_crc(self, fh: BinaryIO, pos: int, ln: int) -> None:
         """The Footer's ``summary_crc`` (0: not computed): the CRC32 from the summary's
         start to the Footer's ``summary_offset_start`` field.  A mismatch is counted
         (``summary_crc``) and noted: the channels and schemas read from the summary may
@@ -247,7 +256,7 @@ class ContainerWalk:
             self.sink.decode(cid, buf, starts[ix], ends[ix], times, nums)
 
     # ---------------------------------------------------------------- chunks
-    def _chunk(self, fh, body_at: int, ln: int, size: int) -> None:
+    def _chunk(self, fh: BinaryIO, body_at: int, ln: int, size: int) -> None:
         """One chunk: checked against its declared size, ``[ingest] max_chunk_bytes`` and
         its CRC, then decoded through its message index or walked in windows.
 
@@ -357,7 +366,7 @@ class ContainerWalk:
                 f"file read"
             )
 
-    def _chunk_trouble(self, where: str, box: list, usize: int, kept: str) -> None:
+    def _chunk_trouble(self, where: str, box: list[BaseException], usize: int, kept: str) -> None:
         if not box:
             return
         err = box[0]
@@ -375,7 +384,7 @@ class ContainerWalk:
                 f"{err}); {kept}"
             )
 
-    def _walk_pieces(self, pieces) -> bytes:
+    def _walk_pieces(self, pieces: Iterable[bytes]) -> bytes:
         """Decode the records of a chunk given as pieces of its uncompressed bytes, in
         windows of about ``_WINDOW``; return the incomplete rest."""
         pend: list[bytes] = []
@@ -425,6 +434,7 @@ class ContainerWalk:
         nums = self.msg_no + 1 + np.arange(len(off), dtype=np.int64)
         self.msg_no += len(off)
         if len(off):
+            assert log_time is not None  # indexed_messages gives it where there are messages
             for c in np.unique(cid).tolist():
                 m = cid == c
                 self.sink.decode(c, data, off[m] + 31, end[m], log_time[m], nums[m])
@@ -434,7 +444,8 @@ class ContainerWalk:
         """Decode the complete records at the start of ``buf``; return the incomplete rest."""
         n = len(buf)
         pos = 0
-        per: dict[int, tuple[list, list, list, list]] = {}
+        #: channel -> (starts, ends, log times, message numbers) of its messages
+        per: dict[int, tuple[list[int], list[int], list[int], list[int]]] = {}
         unpack_rec = _REC_HEAD.unpack_from
         unpack_msg = _MSG_HEAD.unpack_from
         no = self.msg_no

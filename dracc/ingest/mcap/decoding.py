@@ -25,7 +25,15 @@ from dracc.ingest.mcap.protobuf_messages import decode_protobuf, setup_protobuf
 from dracc.ingest.mcap.ros2_messages import decode_ros2, setup_ros2
 
 
-def decode_text(ctx: DecodeContext, ch: _Channel, buf, starts, ends, times, nums) -> None:
+def decode_text(
+    ctx: DecodeContext,
+    ch: _Channel,
+    buf: bytes,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    times: np.ndarray,
+    nums: np.ndarray,
+) -> None:
     """The :data:`~dracc.ingest.mcap.channels.Decoder` of schemaless channels of raw NMEA
     text (each message timed by its log time)."""
     for s, e, t, k in zip(
@@ -49,7 +57,7 @@ class ChannelDecoding:
     :class:`~dracc.ingest.mcap.channels.DecodeContext` of the decoders); the decoded
     columns go to ``frames``."""
 
-    def __init__(self, file: str, cfg: IngestConfig, rejects: Rejects):
+    def __init__(self, file: str, cfg: IngestConfig, rejects: Rejects) -> None:
         self.file = file
         self.cfg = cfg
         self.declared = dict(getattr(cfg, "quantities", {}) or {})
@@ -71,7 +79,15 @@ class ChannelDecoding:
             key = topic if topic in self.cfg.sources else topic_source(topic)
             self.channels[cid] = _Channel(cid, topic, encoding, sch, key)
 
-    def decode(self, cid: int, buf: bytes, starts, ends, times, nums) -> None:
+    def decode(
+        self,
+        cid: int,
+        buf: bytes,
+        starts: np.ndarray,
+        ends: np.ndarray,
+        times: np.ndarray,
+        nums: np.ndarray,
+    ) -> None:
         """Decode messages ``buf[starts[i]:ends[i]]`` of channel ``cid``."""
         times = np.asarray(times)
         if times.dtype == np.uint64:  # MCAP log times are uint64; beyond int64 is damage

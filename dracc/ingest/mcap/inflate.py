@@ -4,7 +4,8 @@ the chunk's declared size (a decompression bomb raises :class:`_TooLarge`)."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
+from typing import BinaryIO
 
 _PIECE = 1 << 20
 
@@ -12,7 +13,7 @@ _PIECE = 1 << 20
 class _TooLarge(Exception):
     """A chunk inflating beyond its declared size (``n`` bytes had come out)."""
 
-    def __init__(self, n: int):
+    def __init__(self, n: int) -> None:
         super().__init__(f"inflates beyond {n:,} bytes")
         self.n = n
 
@@ -20,7 +21,7 @@ class _TooLarge(Exception):
 class _Slice:
     """``n`` bytes of an open file from offset ``at``, read as a stream."""
 
-    def __init__(self, fh, at: int, n: int):
+    def __init__(self, fh: BinaryIO, at: int, n: int) -> None:
         self.fh, self.pos, self.left = fh, at, max(n, 0)
 
     def read(self, k: int = -1) -> bytes:
@@ -34,7 +35,7 @@ class _Slice:
         return b
 
 
-def _inflate(fh, at: int, n: int, comp: str, limit: int) -> Iterator[bytes]:
+def _inflate(fh: BinaryIO, at: int, n: int, comp: str, limit: int) -> Iterator[bytes]:
     """Yield the uncompressed bytes of the ``n`` compressed bytes at file offset ``at``,
     at most ``_PIECE`` at a time; raise :class:`_TooLarge` as soon as more than ``limit``
     bytes have come out.  The memory is bounded whatever the data says: zstd through a
@@ -90,7 +91,7 @@ def _lz4_pieces(src: _Slice) -> Iterator[bytes]:
                 break
 
 
-def _guard(pieces, box: list) -> Iterator[bytes]:
+def _guard(pieces: Iterable[bytes], box: list[BaseException]) -> Iterator[bytes]:
     """The pieces until the first error, which is put in ``box`` (decompression errors
     are the libraries' own types; a bomb is :class:`_TooLarge`)."""
     try:
@@ -99,7 +100,7 @@ def _guard(pieces, box: list) -> Iterator[bytes]:
         box.append(err)
 
 
-def _drain(parts: list) -> Iterator[bytes]:
+def _drain(parts: list[bytes]) -> Iterator[bytes]:
     """The items of ``parts`` in order, each let go of once handed out."""
     parts.reverse()
     while parts:

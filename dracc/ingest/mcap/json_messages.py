@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import math
 from io import BytesIO
+from typing import Any
 
 import numpy as np
 
@@ -26,13 +27,23 @@ _JSON_QUEUED = (
 )
 
 
-def decode_json(ctx: DecodeContext, ch: _Channel, buf, starts, ends, times, nums) -> None:
+def decode_json(
+    ctx: DecodeContext,
+    ch: _Channel,
+    buf: bytes,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    times: np.ndarray,
+    nums: np.ndarray,
+) -> None:
     """The :data:`~dracc.ingest.mcap.channels.Decoder` of JSON channels (queued, see
     :func:`json_queue`)."""
     json_queue(ctx, ch, _join_lines(buf, starts, ends), len(starts), times, nums)
 
 
-def json_queue(ctx: DecodeContext, ch: _Channel, joined: bytes, n: int, times, nums) -> None:
+def json_queue(
+    ctx: DecodeContext, ch: _Channel, joined: bytes, n: int, times: np.ndarray, nums: np.ndarray
+) -> None:
     """Collect a channel's JSON payloads (one per line, see :func:`_join_lines`); parse
     them in batches, since each parse has a fixed cost."""
     q = ch.state.setdefault("queue", [[], 0, [], []])
@@ -57,7 +68,9 @@ def json_flush(ctx: DecodeContext, ch: _Channel) -> None:
     _json(ctx, ch, b"".join(q[0]), np.concatenate(q[2]), np.concatenate(q[3]))
 
 
-def _json(ctx: DecodeContext, ch: _Channel, joined: bytes, times, nums) -> None:
+def _json(
+    ctx: DecodeContext, ch: _Channel, joined: bytes, times: np.ndarray, nums: np.ndarray
+) -> None:
     """Decode newline-separated JSON messages of one channel into quantity columns."""
     payloads = None
     if "plan" not in ch.state:
@@ -118,7 +131,7 @@ def _json(ctx: DecodeContext, ch: _Channel, joined: bytes, times, nums) -> None:
     ctx.frames.add_part(ch, t[good], nums[good], {k: v[good] for k, v in cols.items()}, recv[good])
 
 
-def _json_plan(obj, declared: dict) -> dict | None:
+def _json_plan(obj: object, declared: dict[str, str]) -> dict[str, Any] | None:
     """What to read from a channel's JSON messages, planned from its first one."""
     if not isinstance(obj, dict):
         return None
@@ -152,7 +165,7 @@ def _join_lines(buf: bytes, starts: np.ndarray, ends: np.ndarray) -> bytes:
     return out
 
 
-def _json_columns(joined: bytes, n: int, plan: dict) -> dict[str, np.ndarray] | None:
+def _json_columns(joined: bytes, n: int, plan: dict[str, Any]) -> dict[str, np.ndarray] | None:
     """Columns of one channel's JSON messages (one per line) in one pyarrow parse, or None
     if pyarrow cannot (the caller then parses message by message).  The parse allocates
     from the C heap (pyarrow's system pool), which ``trim_heap`` gives back: pyarrow's
@@ -216,7 +229,7 @@ def _json_columns(joined: bytes, n: int, plan: dict) -> dict[str, np.ndarray] | 
     return cols
 
 
-def _num(v) -> float:
+def _num(v: Any) -> float:
     if v is None:
         return math.nan
     if isinstance(v, bool):
@@ -224,7 +237,7 @@ def _num(v) -> float:
     return float(v)
 
 
-def _json_columns_slow(payloads: list[bytes], plan: dict) -> dict[str, np.ndarray]:
+def _json_columns_slow(payloads: list[bytes], plan: dict[str, Any]) -> dict[str, np.ndarray]:
     n = len(payloads)
     cols: dict[str, np.ndarray] = {
         q: (np.full(n, None, dtype=object) if q in REF_QUANTITIES else np.full(n, np.nan))

@@ -7,6 +7,8 @@ or JSON text."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from dracc.core.quantities import REF_QUANTITIES
@@ -41,7 +43,15 @@ def setup_protobuf(ch: _Channel) -> None:
     ch.mode = "protobuf"
 
 
-def decode_protobuf(ctx: DecodeContext, ch: _Channel, buf, starts, ends, times, nums) -> None:
+def decode_protobuf(
+    ctx: DecodeContext,
+    ch: _Channel,
+    buf: bytes,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    times: np.ndarray,
+    nums: np.ndarray,
+) -> None:
     """The :data:`~dracc.ingest.mcap.channels.Decoder` of protobuf channels."""
     decode = ch.state["decode"]
     msgs = []
@@ -98,7 +108,15 @@ def decode_protobuf(ctx: DecodeContext, ch: _Channel, buf, starts, ends, times, 
     ctx.frames.add_part(ch, t[good], nums[good], {k: v[good] for k, v in out.items()}, recv[good])
 
 
-def _wrapped_text(ctx: DecodeContext, ch: _Channel, fld: str, msgs, t, nums, times) -> None:
+def _wrapped_text(
+    ctx: DecodeContext,
+    ch: _Channel,
+    fld: str,
+    msgs: list[Any],
+    t: np.ndarray,
+    nums: np.ndarray,
+    times: np.ndarray,
+) -> None:
     """The text in field ``fld`` of the decoded messages: raw NMEA sentences, else JSON
     (queued as a JSON channel's payloads)."""
     payloads, tt, kk, ll = [], [], [], []
@@ -131,7 +149,7 @@ def _wrapped_text(ctx: DecodeContext, ch: _Channel, fld: str, msgs, t, nums, tim
         )
 
 
-def _proto_plan(ch: _Channel, msg, declared: dict) -> dict | None:
+def _proto_plan(ch: _Channel, msg: Any, declared: dict[str, str]) -> dict[str, Any] | None:
     """What to read from a channel's protobuf messages, planned from its first one."""
     desc = msg.DESCRIPTOR
     names = {f.name: f for f in desc.fields}
@@ -161,9 +179,10 @@ def _proto_plan(ch: _Channel, msg, declared: dict) -> dict | None:
     return None
 
 
-def _repeated(f) -> bool:
+def _repeated(f: Any) -> bool:
     """A repeated protobuf field (protobuf >= 6 has ``is_repeated``; older ones ``label``)."""
     rep = getattr(f, "is_repeated", None)
     if rep is not None:
         return bool(rep)
-    return f.label == f.LABEL_REPEATED
+    repeated: bool = f.label == f.LABEL_REPEATED
+    return repeated

@@ -20,7 +20,7 @@ from dracc.ingest.mcap.json_messages import json_flush
 from dracc.ingest.memory import trim_heap
 
 
-def read_mcap(path, cfg: IngestConfig) -> FileResult:
+def read_mcap(path: str | Path, cfg: IngestConfig) -> FileResult:
     """Read an MCAP log into canonical frames (see the :mod:`dracc.ingest.mcap` doc)."""
     declared = dict(getattr(cfg, "quantities", {}) or {})
     check_declared(declared, str(path))

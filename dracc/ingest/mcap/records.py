@@ -7,6 +7,7 @@ from __future__ import annotations
 import re
 import struct
 import zlib
+from typing import BinaryIO
 
 import numpy as np
 
@@ -40,7 +41,7 @@ _REC_HEAD = struct.Struct("<BQ")
 _ZEROS = re.compile(b"\\x00+")
 
 
-def _past_zeros(buf, pos: int, end: int) -> int:
+def _past_zeros(buf: bytes, pos: int, end: int) -> int:
     """Where the walk goes on after the empty 9-byte records (all zero bytes) from ``pos``
     (there is one at least): the same place as walking them one by one, found in C (a
     64 MiB chunk of zeros, whose CRC may well be right, took seconds record by record)."""
@@ -50,7 +51,7 @@ def _past_zeros(buf, pos: int, end: int) -> int:
     return pos + 9 * (run // 9)
 
 
-def crc_of(fh, start: int, end: int) -> int:
+def crc_of(fh: BinaryIO, start: int, end: int) -> int:
     """CRC32 of the file's bytes ``start`` to ``end``, read ``_PIECE`` at a time."""
     crc = 0
     fh.seek(start)
@@ -64,7 +65,7 @@ def crc_of(fh, start: int, end: int) -> int:
     return crc
 
 
-def message_indexes(fh, pos: int, size: int, cap: int) -> list[bytes]:
+def message_indexes(fh: BinaryIO, pos: int, size: int, cap: int) -> list[bytes]:
     """The bodies of the MessageIndex records at file offset ``pos`` (right after a
     chunk), each at most ``cap`` bytes (``max_chunk_bytes``)."""
     bodies = []
@@ -78,7 +79,9 @@ def message_indexes(fh, pos: int, size: int, cap: int) -> list[bytes]:
     return bodies
 
 
-def indexed_messages(data: bytes, bodies: list[bytes]):
+def indexed_messages(
+    data: bytes, bodies: list[bytes]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None] | None:
     """The messages of a complete chunk's records ``data`` located through the bodies of
     its MessageIndex records, with numpy instead of a walk: ``(cid, off, end, log_time)``
     (channel id, record offset and end, log time of each message, in record order), or

@@ -17,6 +17,7 @@ from dracc.frames import MISSING_NS
 from dracc.ingest.csv_quantities import add_rejects, lookup
 from dracc.ingest.mcap.cdr import (
     CdrError,
+    _Field,
     compile_schema,
     decode_channel,
     scalar_paths,
@@ -26,7 +27,7 @@ from dracc.ingest.mcap.channels import DecodeContext, _Channel, message_times
 from dracc.ingest.references import ASCII_CODES, ros_constants
 
 
-def setup_ros2(ch: _Channel, declared: dict) -> None:
+def setup_ros2(ch: _Channel, declared: dict[str, str]) -> None:
     """Compile a CDR channel's schema and choose the fields to read (``ch.state``), or
     mark the channel ``skip`` with the reason."""
     sch = ch.schema
@@ -45,7 +46,7 @@ def setup_ros2(ch: _Channel, declared: dict) -> None:
     _choose_fields(ch, fields, declared)
 
 
-def _choose_fields(ch: _Channel, fields, declared: dict) -> None:
+def _choose_fields(ch: _Channel, fields: list[_Field], declared: dict[str, str]) -> None:
     assert ch.schema is not None
     paths = scalar_paths(fields)
     strs = string_paths(fields)
@@ -92,7 +93,15 @@ def _choose_fields(ch: _Channel, fields, declared: dict) -> None:
     ch.mode = "cdr"
 
 
-def decode_ros2(ctx: DecodeContext, ch: _Channel, buf, starts, ends, times, nums) -> None:
+def decode_ros2(
+    ctx: DecodeContext,
+    ch: _Channel,
+    buf: bytes,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    times: np.ndarray,
+    nums: np.ndarray,
+) -> None:
     """The :data:`~dracc.ingest.mcap.channels.Decoder` of CDR channels."""
     fields = ch.state["fields"]
     want = ch.state["want"]

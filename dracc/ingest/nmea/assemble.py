@@ -4,21 +4,22 @@ base (:func:`time_arrays`), and the frames built once their times are resolved
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
 
-from dracc.frames import KINDS, REFERENCE_DTYPE, make_frame
+from dracc.frames import KINDS, MISSING_NS, REFERENCE_DTYPE, make_frame
 from dracc.ingest.nmea.parsed import ParsedBlock
 from dracc.ingest.nmea.sentences import SENTENCES
-from dracc.ingest.timebase import MISSING_NS, drop_implausible_ext
+from dracc.ingest.timebase import drop_implausible_ext
 
 if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
     from dracc.core.config import IngestConfig
     from dracc.ingest.nmea.state import StreamState
 
-_DTYPES: dict[tuple, pd.CategoricalDtype] = {}
+_DTYPES: dict[tuple[str, ...], pd.CategoricalDtype] = {}
 
 
 def _cat(codes: np.ndarray, labels: list[str]) -> pd.Categorical:
@@ -50,7 +51,7 @@ def talker_str(code: int) -> str:
 
 
 def _source_categorical(
-    cols: dict[str, np.ndarray], names: list[str], split_talkers: dict, kind: str
+    cols: dict[str, np.ndarray], names: list[str], split_talkers: dict[str, set[int]], kind: str
 ) -> tuple[pd.Categorical, pd.Categorical]:
     """(source, talker) categoricals from codes: the TAG/given source where there is one,
     else the talker, split by decimals of minutes for fingerprinted talkers."""
@@ -165,7 +166,9 @@ def _recv_ns(tod_ns: np.ndarray, ext_ns: np.ndarray) -> np.ndarray:
     )
 
 
-def time_arrays(pb: ParsedBlock):
+def time_arrays(
+    pb: ParsedBlock,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, Callable[[np.ndarray], list[np.ndarray]]]:
     """All records of a block in stream order: (tod, date, ext, splitter)."""
     parts = [pb.kinds[k] for k in KINDS if k in pb.kinds]
     if pb.clock:
@@ -188,7 +191,7 @@ def time_arrays(pb: ParsedBlock):
     sizes = [len(p["seq"]) for p in parts]
     n_frames = len(parts) - (1 if pb.clock else 0)
 
-    def split(t_sorted):
+    def split(t_sorted: np.ndarray) -> list[np.ndarray]:
         t = np.empty_like(t_sorted)
         t[order] = t_sorted
         out = np.split(t, np.cumsum(sizes)[:-1])

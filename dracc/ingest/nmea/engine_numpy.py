@@ -30,8 +30,8 @@ def long_line_block(
     ignore_checksum: bool,
     at_eof: bool,
     max_line_bytes: int,
-    ext_ns=None,
-    ext_src=None,
+    ext_ns: np.ndarray | None = None,
+    ext_src: np.ndarray | None = None,
 ) -> tuple[ParsedBlock, dict[str, int]]:
     """The block of one line longer than ``max_line_bytes``: one ``too_long`` reject (its
     example the line's first bytes, ``head``), and the line's ``tail`` (its last
@@ -105,8 +105,8 @@ def _parse_chunk(
     data: bytes,
     ignore_checksum: bool,
     at_eof: bool,
-    ext_ns,
-    ext_src,
+    ext_ns: np.ndarray | None,
+    ext_src: np.ndarray | None,
     line0: int,
     max_line_bytes: int,
     split: bool = True,
@@ -122,7 +122,7 @@ def _parse_chunk(
     st = np.flatnonzero((buf == 36) | (buf == 33))
     long = (line_end - line_start) > max_line_bytes
 
-    def ext(a: int, b: int):
+    def ext(a: int, b: int) -> tuple[np.ndarray | None, np.ndarray | None]:
         return (
             None if ext_ns is None else np.asarray(ext_ns)[line0 + a : line0 + b],
             None if ext_src is None else np.asarray(ext_src, dtype=object)[line0 + a : line0 + b],

@@ -16,7 +16,14 @@ DEG = np.pi / 180.0
 class Fields:
     """Field boundaries of a group of sentences (rows) in ``buf``."""
 
-    def __init__(self, buf, commas, c0, nf, body_end):
+    def __init__(
+        self,
+        buf: np.ndarray,
+        commas: np.ndarray,
+        c0: np.ndarray,
+        nf: np.ndarray,
+        body_end: np.ndarray,
+    ) -> None:
         """``commas``: sorted positions of the commas inside sentence bodies; ``c0`` the
         index of each row's first comma (the one after the address), ``nf`` its count."""
         self.buf = buf
@@ -26,7 +33,7 @@ class Fields:
         self.body_end = body_end
         self.bad = np.zeros(len(nf), dtype=bool)
 
-    def bounds(self, k: int):
+    def bounds(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """[start, end) of data field k (1-based); empty where the field is absent."""
         present = self.nf >= k
         ci = np.minimum(self.c0 + k - 1, len(self.commas) - 1)
@@ -36,7 +43,7 @@ class Fields:
         e = np.where(present, e, 0)
         return s, e
 
-    def num(self, k: int, width: int = 20, decimals: bool = False):
+    def num(self, k: int, width: int = 20, decimals: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Field k as float64, NaN where empty; rows with a non-number are marked bad.
 
         Returns (value, decimals) where decimals = digits after the '.' (-1 if none).
@@ -58,7 +65,9 @@ class Fields:
         return np.where(e - s >= 1, self.buf[np.minimum(s, len(self.buf) - 1)], 0).astype(np.uint8)
 
 
-def _latlon(F: Fields, k: int, kh: int, pos: int, neg: int, limit_deg: float):
+def _latlon(
+    F: Fields, k: int, kh: int, pos: int, neg: int, limit_deg: float
+) -> tuple[np.ndarray, np.ndarray]:
     """ddmm.mmmm + hemisphere -> radians; malformed rows marked bad."""
     v, dec = F.num(k, decimals=True)
     h = F.char(kh)
@@ -88,7 +97,7 @@ def _tod(F: Fields, k: int) -> np.ndarray:
     return ns
 
 
-def _ymd_days(F: Fields, y, m, d) -> np.ndarray:
+def _ymd_days(F: Fields, y: np.ndarray, m: np.ndarray, d: np.ndarray) -> np.ndarray:
     has = ~(np.isnan(y) | np.isnan(m) | np.isnan(d))
     yi = np.where(has, y, 2000).astype(np.int64)
     mi = np.where(has, m, 1).astype(np.int64)
@@ -104,7 +113,8 @@ def _angle(F: Fields, k: int) -> np.ndarray:
     bad = ~np.isnan(v) & ((v < 0) | (v > 360))
     F.bad |= bad
     v = np.where(bad, np.nan, v)
-    return np.where(v >= 360.0, v - 360.0, v) * DEG
+    rad: np.ndarray = np.where(v >= 360.0, v - 360.0, v) * DEG
+    return rad
 
 
 def _signed(F: Fields, k: int, kh: int) -> np.ndarray:
@@ -113,7 +123,8 @@ def _signed(F: Fields, k: int, kh: int) -> np.ndarray:
     h = F.char(kh)
     bad = ~np.isnan(v) & (h != 69) & (h != 87) & (h != 0)
     F.bad |= bad
-    return np.where(h == 87, -v, v) * DEG
+    rad: np.ndarray = np.where(h == 87, -v, v) * DEG
+    return rad
 
 
 def _speed(F: Fields, k_kn: int, k_kmh: int | None = None) -> np.ndarray:

@@ -32,7 +32,7 @@ class Marked:
         return out
 
 
-def line_bounds(buf: np.ndarray, bufp: np.ndarray):
+def line_bounds(buf: np.ndarray, bufp: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool, Marked]:
     """Lines of a buffer: (start, content end, ends with a line end, binary bytes).
 
     A line ends at LF, CR LF, CR CR LF (CR LF through a text-mode conversion: one line

@@ -9,7 +9,7 @@ from collections import Counter
 import numpy as np
 import pandas as pd
 
-from dracc.frames import KIND_COLUMNS
+from dracc.frames import KIND_COLUMNS, MISSING_NS
 from dracc.ingest.nmea.fields import Fields, decode
 from dracc.ingest.nmea.lines import Marked, ranges_any
 from dracc.ingest.nmea.parsed import ParsedBlock, first_examples
@@ -22,7 +22,6 @@ from dracc.ingest.nmea.sentences import (
     SENTENCES,
 )
 from dracc.ingest.tagblock import FORMS, HEX, parse_prefixes
-from dracc.ingest.timebase import MISSING_NS
 
 
 def parse_core(
@@ -42,13 +41,13 @@ def parse_core(
     ``st`` the positions of its '$' and '!' bytes."""
     n_lines = len(line_end)
     blank = line_end == line_start
-    stats: Counter = Counter()
+    stats: Counter[str] = Counter()
     stats["blank"] = int(blank.sum())
-    counts: Counter = Counter()
+    counts: Counter[str] = Counter()
     examples: dict[str, list[tuple[int, str]]] = {}
     fatal: list[tuple[int, str, str]] = []
 
-    def reject(reason: str, lines_idx: np.ndarray, starts: np.ndarray, ends: np.ndarray):
+    def reject(reason: str, lines_idx: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> None:
         if len(lines_idx) == 0:
             return
         counts[reason] += len(lines_idx)
@@ -74,10 +73,12 @@ def parse_core(
                 )
             )
 
-    ignored: Counter = Counter()
+    ignored: Counter[str] = Counter()
     ign_examples: dict[str, list[tuple[int, str]]] = {}
 
-    def ignore(names: np.ndarray, lines_idx: np.ndarray, starts: np.ndarray, ends: np.ndarray):
+    def ignore(
+        names: np.ndarray, lines_idx: np.ndarray, starts: np.ndarray, ends: np.ndarray
+    ) -> None:
         """Count valid lines/sentences dracc does not use by type: ``names`` an (n, 8)
         uint8 matrix, the type's ASCII name zero-padded.  One sort over the n rows (as
         integers), a loop over the distinct types only."""
@@ -171,9 +172,9 @@ def parse_core(
         line_bad[pl[badt]] = True
         stats["tag_checksum_ignored"] += int((pr.bad_tag_checksum & ignore_checksum).sum())
         for code, f in enumerate(FORMS):
-            c = int(np.count_nonzero(pr.form == code))
-            if c:
-                stats[f"prefix_{f}"] += c
+            n_form = int(np.count_nonzero(pr.form == code))
+            if n_form:
+                stats[f"prefix_{f}"] += n_form
     if ext_line_ns is not None:
         line_ext = np.asarray(ext_line_ns, dtype=np.int64)
     if ext_line_source is not None:
@@ -187,7 +188,7 @@ def parse_core(
 
     alive = np.ones(nseg, dtype=bool)
 
-    def drop(reason, mask):
+    def drop(reason: str, mask: np.ndarray) -> None:
         idx = np.flatnonzero(mask & alive)
         reject(reason, seg_line[idx], st[idx], seg_end[idx])
         alive[idx] = False
@@ -248,7 +249,7 @@ def parse_core(
     )
     ais = buf[st] == 33
 
-    def drop_ignored(mask, width):
+    def drop_ignored(mask: np.ndarray, width: int) -> None:
         """Valid sentences dracc does not use: counted by their first ``width`` address
         characters (from the talker on; 'GSV' for the type: width 3 from index 2)."""
         idx = np.flatnonzero(mask & alive)
@@ -276,8 +277,8 @@ def parse_core(
     drop("implausible_talker", gnss_t & no_gnss)
     del addr
 
-    kinds: dict[str, dict[str, list]] = {}
-    clock: dict[str, list] = {}
+    kinds: dict[str, dict[str, list[np.ndarray]]] = {}
+    clock: dict[str, list[np.ndarray]] = {}
     for stype in SENTENCES:
         rows = np.flatnonzero(alive & (stype_b == stype.encode()))
         if len(rows) == 0:
@@ -319,9 +320,9 @@ def parse_core(
             tgt = kinds.setdefault(kind, {})
             for c, v in {**common, **d}.items():
                 tgt.setdefault(c, []).append(v)
-    kinds_np = {}
-    for k, d in kinds.items():
-        cat = {c: np.concatenate(v) for c, v in d.items()}
+    kinds_np: dict[str, dict[str, np.ndarray]] = {}
+    for k, parts in kinds.items():
+        cat = {c: np.concatenate(v) for c, v in parts.items()}
         order = np.argsort(cat["seq"], kind="stable")  # back to stream order
         kinds_np[k] = {c: v[order] for c, v in cat.items()}
     clock_np = {c: np.concatenate(v) for c, v in clock.items()}

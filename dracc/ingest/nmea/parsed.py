@@ -21,14 +21,14 @@ class ParsedBlock:
     kinds: dict[str, dict[str, np.ndarray]]
     #: the ZDA records (time only): seq, tod_ns, date_days, ext_ns, line
     clock: dict[str, np.ndarray]
-    reject_counts: Counter
+    reject_counts: Counter[str]
     reject_examples: dict[str, list[tuple[int, str]]]
     first_fatal: tuple[int, str, str] | None  #: (line, reason, text) of the first fatal rejection
-    stats: Counter = field(default_factory=Counter)
+    stats: Counter[str] = field(default_factory=Counter)
     #: names for the 'tag_source' codes (TAG s: / given source keys; '' = none)
     source_names: list[str] = field(default_factory=list)
     #: valid sentences and lines dracc does not use, by type (GSV, VDM, PGRME, comment)
-    ignored: Counter = field(default_factory=Counter)
+    ignored: Counter[str] = field(default_factory=Counter)
     #: type -> the first few (line, text) of each ignored type
     ignored_examples: dict[str, list[tuple[int, str]]] = field(default_factory=dict)
     #: sentence starts in the block (the range of ``seq``)
@@ -61,14 +61,14 @@ def concat_parsed(
         n_lines += pb.n_lines
     names = {nm: k for k, nm in enumerate(sorted(firsts, key=firsts.__getitem__))}
     n_lines = n_seg = n_blank = 0
-    kinds: dict[str, dict[str, list]] = {}
-    clock: dict[str, list] = {}
-    counts: Counter = Counter()
-    examples: dict[str, list] = {}
-    fatal: list = []
-    stats: Counter = Counter()
-    ignored: Counter = Counter()
-    ign_examples: dict[str, list] = {}
+    kinds: dict[str, dict[str, list[np.ndarray]]] = {}
+    clock: dict[str, list[np.ndarray]] = {}
+    counts: Counter[str] = Counter()
+    examples: dict[str, list[tuple[int, str]]] = {}
+    fatal: list[tuple[int, str, str]] = []
+    stats: Counter[str] = Counter()
+    ignored: Counter[str] = Counter()
+    ign_examples: dict[str, list[tuple[int, str]]] = {}
     for pb, _ in parts:
         lut = np.array([names[str(x)] for x in pb.source_names] or [0], dtype=np.int32)
         groups = [(kinds.setdefault(k, {}), cols) for k, cols in pb.kinds.items()]
@@ -87,7 +87,8 @@ def concat_parsed(
         for r, ex in pb.reject_examples.items():
             examples.setdefault(r, []).extend((ln + n_lines, tx) for ln, tx in ex)
         if pb.first_fatal is not None:
-            fatal.append((pb.first_fatal[0] + n_lines,) + tuple(pb.first_fatal[1:]))
+            fatal_line, fatal_reason, fatal_text = pb.first_fatal
+            fatal.append((fatal_line + n_lines, fatal_reason, fatal_text))
         stats.update(pb.stats)
         ignored.update(pb.ignored)
         for k, ex in pb.ignored_examples.items():

@@ -82,4 +82,5 @@ def load_parsed(handed: ParsedBlock | tuple[bytes, list[int], str]) -> ParsedBlo
     the mapping lives as long as the arrays do."""
     if isinstance(handed, ParsedBlock):
         return handed
-    return load_handover(handed)
+    pb: ParsedBlock = load_handover(handed)
+    return pb

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import os
 import stat
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
@@ -44,7 +44,7 @@ def iter_nmea_blocks(
     state: StreamState | None = None,
     block_bytes: int | None = None,
     workers: int | None = None,
-    progress=None,
+    progress: Callable[[int], object] | None = None,
 ) -> Iterator[Block]:
     """Stream an NMEA text file as resolved blocks with bounded memory.
 
@@ -90,10 +90,11 @@ def iter_nmea_blocks(
             n_rest += nworkers - n_rest % nworkers
         later = max(-(-rest // n_rest), 1) if n_rest else BLOCK_BYTES
         ranges = list(block_ranges(path, later, first_bytes, max_line))
-    held: list = []
+    #: blocks waiting for their times: (block, splitter of its times, first line, bytes)
+    held: list[tuple[ParsedBlock, Callable[[np.ndarray], list[np.ndarray]], int, int]] = []
     first_parsed = [True]  # talkers are fingerprinted in the first block read (not a line too long)
 
-    def handle(pb: ParsedBlock, nbytes: int):
+    def handle(pb: ParsedBlock, nbytes: int) -> Iterator[Block]:
         line0 = st.count_block(pb, cfg.strict)
         st.bytes += nbytes
         for kind, cols in pb.kinds.items():
@@ -115,7 +116,7 @@ def iter_nmea_blocks(
         done = st.timebase.feed(tod, date, ext)
         yield from _release(done)
 
-    def _release(done):
+    def _release(done: list[np.ndarray]) -> Iterator[Block]:
         for t in done:
             pb, split, line0, nbytes = held.pop(0)
             frames = assemble(pb, split(t), st, file, line0, cfg)
@@ -145,7 +146,7 @@ def iter_nmea_blocks(
         ):
             futures = []
 
-            def submit():
+            def submit() -> None:
                 i = pending.pop(0)
                 off, ln, too_long = ranges[i]
                 fut = (
@@ -235,7 +236,10 @@ def check_readable(path: Path) -> None:
 
 
 def read_nmea(
-    path: str | Path, cfg: IngestConfig, progress=None, workers: int | None = None
+    path: str | Path,
+    cfg: IngestConfig,
+    progress: Callable[[int], object] | None = None,
+    workers: int | None = None,
 ) -> FileResult:
     """Read a whole NMEA 0183 text file into a :class:`FileResult` (frames sorted by time)."""
     path = Path(path)

@@ -4,21 +4,32 @@ time base (:class:`SentenceStream`, :func:`parse_sentences`)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, TypeAlias
 
 import numpy as np
 import pandas as pd
 
-from dracc.frames import FileResult, concat_blocks
+from dracc.frames import MISSING_NS, FileResult, concat_blocks
 from dracc.ingest.nmea.assemble import assemble, time_arrays
 from dracc.ingest.nmea.engine_c import parse_buffer
+from dracc.ingest.nmea.parsed import ParsedBlock
 from dracc.ingest.nmea.sentences import MAX_LINE_BYTES
 from dracc.ingest.nmea.state import StreamState
-from dracc.ingest.timebase import MISSING_NS, drop_implausible_ext
+from dracc.ingest.timebase import drop_implausible_ext
 
 if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
     from dracc.core.config import IngestConfig
+
+#: a chunk waiting for its times: (parsed block, splitter of its times, first line,
+#: message numbers, receive times)
+_Held: TypeAlias = tuple[
+    ParsedBlock,
+    Callable[[np.ndarray], list[np.ndarray]],
+    int,
+    np.ndarray | None,
+    np.ndarray | None,
+]
 
 
 class SentenceStream:
@@ -39,7 +50,7 @@ class SentenceStream:
         self.st = StreamState(file)
         self.st.events.gap_s = cfg.gap_s
         self.st.events.tolerance_s = cfg.backstep_tolerance_s
-        self._held: list = []
+        self._held: list[_Held] = []
 
     def add(
         self,
@@ -95,7 +106,7 @@ class SentenceStream:
         """The frames of the chunks still held (call once, after the last :meth:`add`)."""
         return self._release(self.st.timebase.finish())
 
-    def _release(self, done) -> list[dict[str, pd.DataFrame]]:
+    def _release(self, done: list[np.ndarray]) -> list[dict[str, pd.DataFrame]]:
         out = []
         for t in done:
             pb, split, line0, nos, recv = self._held.pop(0)

@@ -5,6 +5,7 @@ resolved block of a file (:class:`Block`)."""
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import pandas as pd
@@ -37,13 +38,13 @@ class StreamState:
     bytes: int = 0
     rejects: Rejects = field(default_factory=Rejects)
     #: valid lines/sentences not used, by type (see :data:`IGNORED`), and their first examples
-    ignored: Counter = field(default_factory=Counter)
-    ignored_examples: dict = field(default_factory=dict)
-    stats: Counter = field(default_factory=Counter)
+    ignored: Counter[str] = field(default_factory=Counter)
+    ignored_examples: dict[str, list[tuple[str, int, str]]] = field(default_factory=dict)
+    stats: Counter[str] = field(default_factory=Counter)
     timebase: TimeBase = field(default_factory=TimeBase)
     events: EventCounter = field(default_factory=EventCounter)
-    sentences: Counter = field(default_factory=Counter)
-    split_talkers: dict = field(
+    sentences: Counter[str] = field(default_factory=Counter)
+    split_talkers: dict[str, set[int]] = field(
         default_factory=dict
     )  #: talker -> decimals seen (fingerprint split)
 
@@ -81,7 +82,11 @@ class StreamState:
         return te
 
     def count_block(
-        self, pb: ParsedBlock, strict: bool, number=None, label: str = "{path}:{n}"
+        self,
+        pb: ParsedBlock,
+        strict: bool,
+        number: Callable[[int, int], int] | None = None,
+        label: str = "{path}:{n}",
     ) -> int:
         """Add a parsed block's lines, statistics and rejects; return the stream line of its
         first line.  ``number(ln, line0)``: the number a reject example gets for the block's
