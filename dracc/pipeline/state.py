@@ -506,6 +506,7 @@ class StateStore:
                 _none_if_nan(rec.dr_nees),
             ),
         )
+        assert cur.lastrowid is not None  # an INSERT sets it
         night_id = int(cur.lastrowid)
         self.conn.executemany(
             "INSERT INTO unit_stats (night_id, unit, channel, measure, n, m_u, m_y, kurtosis, "

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields, replace
 from datetime import datetime
-from typing import Any
+from typing import Any, cast
 
 from dracc.sim.faults import SimFault
 
@@ -93,7 +93,13 @@ DEFAULT_INS = (
     ),
 )
 NO_INS_ERROR = InsErrorParams(
-    **{f.name: (GM(0.0, math.inf) if f.type in ("GM", GM) else 0.0) for f in fields(InsErrorParams)}
+    **cast(
+        dict[str, Any],
+        {
+            f.name: (GM(0.0, math.inf) if f.type in ("GM", GM) else 0.0)
+            for f in fields(InsErrorParams)
+        },
+    )
 )
 
 
@@ -205,7 +211,10 @@ class SimParams:
 
     def with_ins_error_scale(self, k: float) -> SimParams:
         """The same voyage with every INS error amplitude multiplied by ``k``."""
-        return replace(self, ins=tuple(u.scaled(k) for u in self.ins))
+        scaled = tuple(u.scaled(k) for u in self.ins)
+        return replace(
+            self, ins=cast("tuple[InsErrorParams, InsErrorParams, InsErrorParams]", scaled)
+        )
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict (GM as {"sigma", "tau_s"}, inf as the string "inf")."""

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from dracc.core.numbers import finite_or_none
 from dracc.core.timefmt import parse_utc
@@ -70,6 +71,7 @@ def pool_channels(
             a["nights"].append(night)
             a["hours"] += hours
             a["n"] += c.n
+            assert c.m_u is not None  # _usable
             a["ss"] += c.n * c.m_u**2
             if c.kurtosis is not None and math.isfinite(c.kurtosis):
                 a["kn"] += c.n * c.kurtosis
@@ -133,7 +135,7 @@ def accuracy_findings(
         hours += h
         if hours >= acfg.accuracy_window_h:
             break
-    doc = {
+    doc: dict[str, Any] = {
         "window_h": acfg.accuracy_window_h,
         "hours": hours,
         "nights": [n for n, _, _ in reversed(chosen)],

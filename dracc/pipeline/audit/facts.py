@@ -178,7 +178,7 @@ def facts_from_analysis(a: Analysis) -> NightFacts:
         inputs=tuple(str(i.path) for i in inputs),
         lines=lines,
         rejected=rejected,
-        rejected_rate=(rejected / lines) if lines else None,
+        rejected_rate=(rejected / lines) if lines and rejected is not None else None,
         sources=_sources_by_role(a),
         channels=_channel_rows(a.deviation),
         compass_error_deg=ce,

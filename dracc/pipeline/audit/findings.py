@@ -269,7 +269,7 @@ def dr_inconsistent_finding(facts: NightFacts, acfg: AuditConfig, below: bool) -
     if facts.dr_dominant_source and facts.dr_dominant_source not in msg:
         key = f" (key [dead_reckoning] {facts.dr_dominant_key})" if facts.dr_dominant_key else ""
         msg += f"; the circle is dominated by {facts.dr_dominant_source}{key}"
-    if below:
+    if below and facts.dr_containment_2m is not None:
         msg += (
             f"; {100 * facts.dr_containment_2m:.1f} % inside 2M is below the audit's minimum "
             f"of {100 * acfg.dr_containment_min:.1f} %"

@@ -296,18 +296,16 @@ def _recompute_chain(
                 vessel, step.night, unit, channel, step.before, step.after, step.verdict
             )
             if step.verdict in ("established", "raised"):
-                row = next(
-                    c
-                    for c in store.night(vessel, step.night).channels
-                    if c.unit == unit and c.channel == channel
-                )
+                stored = store.night(vessel, step.night)
+                assert stored is not None  # the chain runs over stored nights
+                row = next(c for c in stored.channels if c.unit == unit and c.channel == channel)
                 events.append(
                     AprioriEvent(
                         vessel,
                         unit,
                         channel,
                         step.night,
-                        float(step.after),
+                        float(step.after),  # type: ignore[arg-type]  # established/raised set it
                         step.before,
                         step.verdict,
                         {
