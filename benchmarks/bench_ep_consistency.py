@@ -55,15 +55,15 @@ def one(seed: int, hours: float):
     turned = np.array(
         [np.any((turns > a0) & (turns <= b0)) for a0, b0 in zip(start, t_rel, strict=True)]
     )
-    return dict(
-        inside=(d <= e.radius_2m_m)[s],
-        ratio=(d / (0.5 * e.radius_2m_m))[s],
-        since=e.since_fix_s[s],
-        turned=turned[s],
-        compass=p.compass,
-        seconds=el,
-        verdict=a.dead_reckoning.verdict.split(":")[0],
-    )
+    return {
+        "inside": (d <= e.radius_2m_m)[s],
+        "ratio": (d / (0.5 * e.radius_2m_m))[s],
+        "since": e.since_fix_s[s],
+        "turned": turned[s],
+        "compass": p.compass,
+        "seconds": el,
+        "verdict": a.dead_reckoning.verdict.split(":")[0],
+    }
 
 
 def main() -> None:

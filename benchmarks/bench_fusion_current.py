@@ -12,10 +12,9 @@ import time
 
 import numpy as np
 
-from dracc.core.geodesy import add_offset_ne
+from dracc.core.geodesy import add_offset_ne, range_azimuth
 from dracc.math.current import CurrentModel, estimate_current, simulate_voyage
 from dracc.math.fusion import BearingLOP, PositionFix, RangeLOP, fuse_fix
-from dracc.core.geodesy import range_azimuth
 
 LAT0, LON0 = np.deg2rad(54.52), np.deg2rad(18.55)
 

@@ -17,6 +17,7 @@ Run:  python benchmarks/current_real_hakefjord.py [--fix-every 300]
 from __future__ import annotations
 
 import argparse
+import itertools
 import time
 from pathlib import Path
 
@@ -136,7 +137,7 @@ def main() -> None:
     # DR restarted at each fix, no current (the plain DR of METHODS §2)
     reset_lat, reset_lon = np.empty(t.size), np.empty(t.size)
     bounds = list(fix_idx) + [t.size]
-    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+    for a, b in itertools.pairwise(bounds):
         leg = estimate_current(
             t[a : b + 1 if b < t.size else b] - t[a],
             course[a : b + 1],

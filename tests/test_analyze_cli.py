@@ -216,7 +216,7 @@ def test_gnss_only_log(run_cli, real_dir):
 
 
 def test_empty_mcap_is_one_line_error(run_cli, real_dir):
-    code, out, err = run_cli("analyze", real_dir / "keelson" / "6389403" / "test.mcap")
+    code, _out, err = run_cli("analyze", real_dir / "keelson" / "6389403" / "test.mcap")
     assert code == ExitCode.INPUT and err.startswith("error:") and "Traceback" not in err
 
 
@@ -284,4 +284,4 @@ def test_interrupt_while_drawing_the_html_leaves_the_previous_reports(
     code, _, err = run_cli(*args, "--interval", "2h")  # a different JSON had it been written
     assert code == ExitCode.INTERRUPTED and "interrupted" in err
     assert {p: p.read_bytes() for p in [js, page, *tables.iterdir()]} == before
-    assert not [p for p in tmp_path.rglob("*.part")]
+    assert not list(tmp_path.rglob("*.part"))

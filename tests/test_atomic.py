@@ -19,10 +19,9 @@ def test_write_is_atomic_and_gets_umask_mode(tmp_path):
 def test_interrupted_write_leaves_old_file(tmp_path):
     target = tmp_path / "report.html"
     target.write_text("old")
-    with pytest.raises(KeyboardInterrupt):
-        with atomic_path(target) as tmp:
-            tmp.write_text("half")
-            raise KeyboardInterrupt
+    with pytest.raises(KeyboardInterrupt), atomic_path(target) as tmp:
+        tmp.write_text("half")
+        raise KeyboardInterrupt
     assert target.read_text() == "old"
     assert [p.name for p in tmp_path.iterdir()] == ["report.html"]
 
@@ -30,19 +29,18 @@ def test_interrupted_write_leaves_old_file(tmp_path):
 def test_files_written_together_appear_together_or_not_at_all(tmp_path):
     a, b = tmp_path / "report.json", tmp_path / "tables" / "t.csv"
     a.write_text("old json")
-    with pytest.raises(KeyboardInterrupt):
-        with together():
-            write_text(a, "new json")
-            assert a.read_text() == "old json"  # not yet: the rename waits for the block
-            write_text(b, "new table")
-            raise KeyboardInterrupt  # e.g. while the HTML's plots are drawn
+    with pytest.raises(KeyboardInterrupt), together():
+        write_text(a, "new json")
+        assert a.read_text() == "old json"  # not yet: the rename waits for the block
+        write_text(b, "new table")
+        raise KeyboardInterrupt  # e.g. while the HTML's plots are drawn
     assert a.read_text() == "old json" and not b.exists()
-    assert not [p for p in tmp_path.rglob("*.part")]
+    assert not list(tmp_path.rglob("*.part"))
     with together():
         write_text(a, "new json")
         write_text(b, "new table")
     assert a.read_text() == "new json" and b.read_text() == "new table"
-    assert not [p for p in tmp_path.rglob("*.part")]
+    assert not list(tmp_path.rglob("*.part"))
 
 
 def test_a_write_outside_together_is_renamed_at_once(tmp_path):
@@ -66,20 +64,18 @@ def test_file_set_publishes_a_whole_set_by_one_link(tmp_path):
     assert len(done) == 1 and os.readlink(out / CURRENT) == os.path.join(RUNS, done[0])
     assert (out / "a.csv").read_text() == "1" and (out / "sub" / "b.csv").read_text() == "1"
     again: list[str] = []
-    with pytest.raises(KeyboardInterrupt):
-        with file_set(out, again) as stage:
-            (stage / "a.csv").write_text("2")
-            raise KeyboardInterrupt
+    with pytest.raises(KeyboardInterrupt), file_set(out, again) as stage:
+        (stage / "a.csv").write_text("2")
+        raise KeyboardInterrupt
     assert again == [] and (out / "a.csv").read_text() == "1"
     assert len(os.listdir(out / RUNS)) == 1  # the staging folder went with the interrupt
     with file_set(out) as stage:  # a set without sub/: its link goes
         (stage / "a.csv").write_text("3")
     assert (out / "a.csv").read_text() == "3" and not os.path.lexists(out / "sub")
     # SIGINT inside a critical section is held until its end, then acted on
-    with pytest.raises(KeyboardInterrupt):
-        with deferred_signals():
-            signal.raise_signal(signal.SIGINT)
-            reached = True
+    with pytest.raises(KeyboardInterrupt), deferred_signals():
+        signal.raise_signal(signal.SIGINT)
+        reached = True
     assert reached
 
 

@@ -517,10 +517,9 @@ def test_apriori_raise_as_finding_when_configured(tmp_path):
 def test_rollback_leaves_state_untouched(tmp_path):
     with StateStore(tmp_path / "s.sqlite") as store:
         _audit(store, make_analysis("2026-11-19"))
-        with pytest.raises(RuntimeError):
-            with store.transaction():
-                store.delete_night("Aurora", "2026-11-19")
-                raise RuntimeError("killed")
+        with pytest.raises(RuntimeError), store.transaction():
+            store.delete_night("Aurora", "2026-11-19")
+            raise RuntimeError("killed")
         assert [r.night for r in store.nights()] == ["2026-11-19"]
         assert store.journal_mode == "wal"
 

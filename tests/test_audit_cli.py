@@ -510,7 +510,7 @@ def test_calibration_checks_against_known_sensor_errors(run_cli, tmp_path):
         ]
     )
     assert code == 0
-    code, out, _ = run_cli(
+    code, _out, _ = run_cli(
         "audit",
         tmp_path / "bad-sensors.nmea",
         "--db",

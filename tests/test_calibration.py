@@ -188,13 +188,15 @@ def test_magnetic_deviation_curve_from_gnss_track():
 
 def test_one_course_cannot_separate_current_from_log_scale():
     """One course at one speed: a 3 % scale error is a 0.3 kn current along the track."""
-    rng, t, course, speed, glat, glon = _voyage(5, hours=6.0, single_course=0.7, constant_speed=5.0)
+    _rng, t, course, speed, glat, glon = _voyage(
+        5, hours=6.0, single_course=0.7, constant_speed=5.0
+    )
     with pytest.raises(InsufficientDataError, match="current"):
         calibrate_from_track(t, course, speed * 1.03, t, glat, glon, fit_log_offset=False)
 
 
 def test_constant_speed_cannot_separate_log_offset_from_scale():
-    rng, t, course, speed, glat, glon = _voyage(6, hours=6.0, constant_speed=5.0)
+    _rng, t, course, speed, glat, glon = _voyage(6, hours=6.0, constant_speed=5.0)
     with pytest.raises(InsufficientDataError, match="offset"):
         calibrate_from_track(t, course, speed * 1.03, t, glat, glon)
 
@@ -226,7 +228,7 @@ def test_slowly_varying_gyro_error_from_gnss_track():
 
 
 def test_too_short_a_log_for_the_track_calibration_says_so():
-    rng, t, course, speed, glat, glon = _voyage(7, hours=0.5)
+    _rng, t, course, speed, glat, glon = _voyage(7, hours=0.5)
     with pytest.raises(InsufficientDataError, match="need at least 4"):
         calibrate_from_track(t, course, speed, t, glat, glon)
 

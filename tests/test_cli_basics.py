@@ -45,7 +45,7 @@ def test_unknown_command_is_usage_error(run_cli):
 
 
 def test_missing_input_is_one_line_error(run_cli, tmp_path):
-    code, out, err = run_cli("inspect", tmp_path / "missing.nmea")
+    code, _out, err = run_cli("inspect", tmp_path / "missing.nmea")
     assert code == ExitCode.INPUT
     assert (
         err.startswith("error:") and len(err.strip().splitlines()) == 1 and "Traceback" not in err

@@ -256,7 +256,7 @@ def test_detection():
 def test_not_a_csv_header_is_a_clear_error(tmp_path):
     p = tmp_path / "x.csv"
     p.write_text("a,b,c\n1,2,3\n")
-    with pytest.raises(IngestError, match="x.csv:1: not a dracc CSV header"):
+    with pytest.raises(IngestError, match=r"x.csv:1: not a dracc CSV header"):
         read_csv(p, IngestConfig())
 
 

@@ -173,11 +173,11 @@ def test_mixed_taus_broadcast_like_the_regular_ones():
 @pytest.mark.parametrize(
     "kw",
     [
-        dict(current_tau_s=np.inf),
-        dict(current_tau_s=0.0),
-        dict(speed_tau_s=0.0, heading_tau_s=0.0),
-        dict(speed_tau_s=np.inf, heading_tau_s=np.inf),
-        dict(current_sigma_mps=0.0),
+        {"current_tau_s": np.inf},
+        {"current_tau_s": 0.0},
+        {"speed_tau_s": 0.0, "heading_tau_s": 0.0},
+        {"speed_tau_s": np.inf, "heading_tau_s": np.inf},
+        {"current_sigma_mps": 0.0},
     ],
 )
 def test_every_form_runs_and_does_not_depend_on_the_step(kw):
@@ -378,7 +378,7 @@ def test_ellipse_grows_between_updates_and_shrinks_at_each_range():
         range(40, t.size, 40)
     ):  # alternate between the two marks (sequential DME)
         m = marks[j % 2]
-        r, _ = np.asarray(offset_ne_m(voyage.lat_rad[0, i], voyage.lon_rad[0, i], *m))
+        _r, _ = np.asarray(offset_ne_m(voyage.lat_rad[0, i], voyage.lon_rad[0, i], *m))
         rng_m = float(np.hypot(*offset_ne_m(voyage.lat_rad[0, i], voyage.lon_rad[0, i], *m)))
         fixes.append((t[i], RangeLOP(float(m[0]), float(m[1]), rng_m + rng.normal(0, 10.0), 10.0)))
     tr = estimate_current(t, course, voyage.speed_mps, start, fixes, model)
@@ -452,7 +452,7 @@ def test_filter_with_too_small_a_model_is_flagged_inconsistent():
         fixes,
         CurrentModel(current_sigma_mps=0.15, current_tau_s=2400.0),
     )
-    lo, hi = stats.chi2.ppf([0.025, 0.975], 4 * runs) / runs
+    _lo, hi = stats.chi2.ppf([0.025, 0.975], 4 * runs) / runs
     assert nees(tr, voyage).mean(axis=0)[1:].mean() > hi
 
 

@@ -165,7 +165,7 @@ def test_mcap_cut_keeps_what_was_complete(tmp_path, mcap_full):
 def test_mcap_magic_only(run_cli, tmp_path):
     p = tmp_path / "magic.mcap"
     p.write_bytes(b"\x89MCAP0\r\n")
-    code, out, err = run_cli("analyze", p)
+    code, _out, err = run_cli("analyze", p)
     _one_line_error(code, err, "no usable record")
 
 
@@ -197,7 +197,7 @@ def test_real_mcap_cut_in_half(run_cli, tmp_path, name):
     data = src.read_bytes()
     p = tmp_path / "half.mcap"
     p.write_bytes(data[: len(data) // 2])
-    code, doc, err = _inspect(run_cli, p)
+    code, _doc, err = _inspect(run_cli, p)
     if code != ExitCode.OK:
         _one_line_error(code, err)
 

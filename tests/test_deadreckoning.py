@@ -172,7 +172,7 @@ def test_long_leg_matches_rhumb_line(lat_deg, azi_deg):
 
 def test_integration_crosses_the_antimeridian():
     t = np.arange(0.0, 1001.0)
-    lat, lon = integrate_ne(t, np.zeros(t.size), np.full(t.size, 10.0), 0.0, 179.99 * D)
+    _lat, lon = integrate_ne(t, np.zeros(t.size), np.full(t.size, 10.0), 0.0, 179.99 * D)
     assert -math.pi < lon[-1] < -179.9 * D
 
 
@@ -239,11 +239,18 @@ def test_b23_two_step_hand_example_reproduces_b26_to_b31():
     np.testing.assert_allclose(got[-1], P, rtol=1e-12)
     assert mean_error_m(got[-1], lat) == pytest.approx(M, rel=1e-12)  # (B30)
     # the numbers, so that a change of convention shows: M and 2M (B31) in metres
-    assert M == pytest.approx(
-        math.sqrt(
-            200 + (60 * 0.1) ** 2 + (120 * 0.1) ** 2 + (60 * 6 * s_c) ** 2 + (120 * 6 * s_c) ** 2
-        ),
-        rel=1e-12,
+    assert (
+        pytest.approx(
+            math.sqrt(
+                200
+                + (60 * 0.1) ** 2
+                + (120 * 0.1) ** 2
+                + (60 * 6 * s_c) ** 2
+                + (120 * 6 * s_c) ** 2
+            ),
+            rel=1e-12,
+        )
+        == M
     )
     P_m2 = covariance_m2_from_rad2(got[-1], lat)
     assert 2 * math.sqrt(np.trace(P_m2)) == pytest.approx(2 * M, rel=1e-12)  # (B31)
@@ -485,7 +492,7 @@ def test_break_without_fixes_leaves_rest_unknown():
 
 def test_no_heading_at_all_raises_instead_of_steering_north():
     t = np.arange(0.0, 10.0)
-    with pytest.raises(InsufficientDataError, match="no heading.*not assume north"):
+    with pytest.raises(InsufficientDataError, match=r"no heading.*not assume north"):
         dead_reckon(t, np.full(t.size, np.nan), np.ones(t.size), lat0_rad=0.0, lon0_rad=0.0)
 
 
@@ -646,7 +653,7 @@ def test_true_heading_missing_variation_zero_takes_0_and_counts_it():
     takes 0 there and says how many samples."""
     h = np.array([10.0, 20.0, 30.0]) * D
     var = [np.nan, 2.0 * D, 0.0]
-    with pytest.raises(InsufficientDataError, match="^1 magnetic heading samples have no"):
+    with pytest.raises(InsufficientDataError, match=r"^1 magnetic heading samples have no"):
         true_heading_rad(h, "M", np.zeros(3), var)
     with pytest.raises(InsufficientDataError, match="variation_deg"):
         true_heading_rad(h, "M", np.zeros(3), var, missing_variation="raise")

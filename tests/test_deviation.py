@@ -502,7 +502,7 @@ def test_arc_minutes_against_geographiclib():
 
     north_m = geod.Inverse(55.0, 12.0, 55.0 + 1 / 60, 12.0)["s12"]  # one arc-minute north
     east_m = geod.Inverse(55.0, 12.0, 55.0, 12.0 + 1 / 60)["s12"]  # one arc-minute east
-    dlat, dlon = metres_to_arcmin(north_m, east_m, math.radians(55.0 + 1 / 120))
+    dlat, _dlon = metres_to_arcmin(north_m, east_m, math.radians(55.0 + 1 / 120))
     assert dlat == pytest.approx(1.0, rel=1e-6)
     assert metres_to_arcmin(0.0, east_m, math.radians(55.0))[1] == pytest.approx(1.0, rel=1e-6)
     # in the report: samples and whole-log RMS in arc-minutes where asked
@@ -533,6 +533,6 @@ def test_position_deviations_across_the_antimeridian():
     _, lon_w = add_offset_ne(lat[0], math.pi, 0.0, -100.0)
     lon = np.array([lon_w, [math.pi], lon_e])  # wraps: -179.999..., 180, 179.999...
     assert lon[2, 0] < 0 < lon[0, 0]
-    north, east, lat_mean = S.deviations_position_m(lat, lon)
+    north, east, _lat_mean = S.deviations_position_m(lat, lon)
     np.testing.assert_allclose(east[:, 0], [-100.0, 0.0, 100.0], atol=1e-3)
     np.testing.assert_allclose(north, 0.0, atol=1e-9)

@@ -122,7 +122,7 @@ def test_asynchronous_units_give_the_true_deviations_in_turns(phased):
     # issue 13, done when: every hourly deviation equals the true one within 2 m and
     # 0.01 deg, and m_u is within 1 % of the m_u of the true deviations, in every channel.
     # Measured (seed 4): 0.76 m, 0.0005 deg; m_u ratios 0.9995-1.0005.
-    sim, units, own, res = phased
+    sim, units, _own, res = phased
     t0 = int(sim.truth["time_ns"].iloc[0])
     # 00:00 and 12:00 are readings of ins1 only (ins2/ins3 start 0.2/0.4 s later and end
     # 0.6/0.8 s earlier): outside their data, not sampled, counted with the reason
@@ -146,7 +146,7 @@ def test_asynchronous_units_give_the_true_deviations_in_turns(phased):
 def test_holding_the_nearest_reading_at_the_ends_would_fail_the_same_check(phased):
     # the former rule held ins2/ins3's first and last readings (0.2-0.8 s away, mid-turn)
     # for 00:00 and 12:00: against the truth that is metres and tenths of a degree
-    sim, units, own, res = phased
+    sim, units, _own, res = phased
     ends = res.time_ns[[0, -1]]
     truth = true_deviations(sim, units, ends)
     held = {}
@@ -186,7 +186,7 @@ def test_the_units_own_velocity_follows_the_turn_between_sparse_readings():
     # a straight line between readings cuts the turn's arc (up to 0.7 m), differently
     # for each phase; the sag from the unit's VTG velocity change follows it (millimetres).
     p = model.SimParams.noiseless(ins=tuple(_smooth(u) for u in model.DEFAULT_INS))
-    sim, units, own = async_voyage(4, step=50, phases=(0, 17, 34), params=p)
+    sim, units, _own = async_voyage(4, step=50, phases=(0, 17, 34), params=p)
     _, lin_units, _ = async_voyage(4, step=50, phases=(0, 17, 34), params=p, ground=False)
     assert len(units["ins1"].vn_mps) and not len(lin_units["ins1"].vn_mps)
     res = analyse_deviations(units, DeviationConfig())

@@ -203,7 +203,7 @@ def test_limiting_error_covers_the_true_error_at_its_probability():
     u = S.deviations_linear(x)[0]
     m_y = S.K_FIRST_APPROX_THREE * S.rms_k3b(u)
     fresh = np.abs(rng.normal(0.0, 1.0, runs))
-    lim, kp, kh = S.limiting_error(m_y, p, 0.0, 0.95, S.effective_samples(n, 3600.0, 3600.0))
+    lim, kp, _kh = S.limiting_error(m_y, p, 0.0, 0.95, S.effective_samples(n, 3600.0, 3600.0))
     bound = 3 * math.sqrt(p * (1 - p) / runs)
     assert np.mean(fresh <= lim) >= p - bound
     assert np.mean(fresh <= kp * m_y) == pytest.approx(p, abs=0.02)

@@ -178,7 +178,7 @@ def test_consistency_epochs_exclude_the_fix_and_report_per_leg():
     np.testing.assert_allclose(c.error_m, 300.0, rtol=1e-4)
     np.testing.assert_allclose(c.error_east_m, -300.0, rtol=1e-4)  # DR minus reference
     assert [leg.n_epochs for leg in c.legs] == [5, 5]
-    inside_expected = 300.0 <= tr.radius_2m_m[tr.epoch_index]
+    inside_expected = tr.radius_2m_m[tr.epoch_index] >= 300.0
     assert c.n_inside == int(inside_expected[tr.since_fix_s[tr.epoch_index] > 0].sum())
 
 

@@ -95,7 +95,7 @@ def test_sensitivities_are_the_jacobian_of_the_water_velocity():
 def test_learns_current_heading_and_scale_corrections_of_a_known_voyage():
     """Constant current 0.4 N / -0.3 E m/s, heading reads 0.6 deg high, log 3 % high: after
     6 h with course changes the filter's corrections are the true ones within 3 sigma."""
-    t, hdg, log, fixes, lat, lon = _voyage()
+    t, hdg, log, fixes, _lat, _lon = _voyage()
     _, est = _ep(t, hdg, log, fixes)
     m = est.model
     w = m.final_weights
@@ -135,7 +135,7 @@ def test_causal_a_leg_uses_nothing_from_after_its_start():
     flat2, flon2 = flat.copy(), flon.copy()
     flat2[late], flon2[late] = add_offset_ne(flat[late], flon[late], 2000.0, -1500.0)
     tr1, e1 = _ep(t, hdg, log, fixes)
-    tr2, e2 = _ep(t, hdg, log, (ft, flat2, flon2))
+    _tr2, e2 = _ep(t, hdg, log, (ft, flat2, flon2))
     early = np.isin(tr1.leg, np.flatnonzero(tr1.leg_start_s <= 3 * 3600.0 - 1))
     assert early.sum() > 3 * 3600 - 10
     np.testing.assert_array_equal(e1.track.lat_rad[early], e2.track.lat_rad[early])
@@ -177,7 +177,7 @@ def test_single_point_grid_gives_that_points_covariance_and_no_mixture_spread():
 
 
 def test_a_gnss_jump_is_left_out_as_an_outlier():
-    t, hdg, log, fixes, lat, lon = _voyage(hours=4.0)
+    t, hdg, log, fixes, _lat, _lon = _voyage(hours=4.0)
     ft, flat, flon = fixes
     jump = (ft > 9000) & (ft < 9030)
     flat2, flon2 = flat.copy(), flon.copy()

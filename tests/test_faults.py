@@ -348,7 +348,7 @@ def test_pipeline_reports_faults_and_excludes_only_when_told(faulty_voyage):
     rms_dropped = dropped.deviation.to_dict()
     assert rms_kept != rms_dropped
     # the plotted tracks keep the raw records either way
-    ins2 = [t for t in dropped.tracks if t.source == "INS2"][0]
+    ins2 = next(t for t in dropped.tracks if t.source == "INS2")
     assert np.unique(ins2.lat_rad).size < 0.6 * ins2.lat_rad.size  # half of it frozen
 
 

@@ -446,7 +446,7 @@ def test_file_errors(run_cli, tmp_path):
     for name, (text, words) in cases.items():
         p = tmp_path / name
         p.write_text(text, encoding="utf-8")
-        got, out, err = run_cli("fix", "--file", p)
+        got, _out, err = run_cli("fix", "--file", p)
         assert got == ExitCode.CONFIG, (name, err)
         assert words in err and str(p) in err and len(err.strip().splitlines()) == 1
 

@@ -163,7 +163,7 @@ def test_dask_scheduler_gives_the_local_table(local_run, fleet, tmp_path):
 
     port = _free_port()
     addr = f"tcp://127.0.0.1:{port}"
-    common = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    common = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL, "start_new_session": True}
     procs = []
     try:
         procs.append(

@@ -42,7 +42,7 @@ def test_offsets_match_geographiclib(north_m, east_m):
 
 
 def test_offset_across_antimeridian():
-    n, e = g.offset_ne_m(0.0, math.radians(-179.999), 0.0, math.radians(179.999))
+    _n, e = g.offset_ne_m(0.0, math.radians(-179.999), 0.0, math.radians(179.999))
     assert e == pytest.approx(2 * 0.001 * math.pi / 180 * 6378137.0, rel=1e-6)
 
 
@@ -92,7 +92,7 @@ def test_interp_position_hand_values_gaps_and_exact_hits():
 def test_interp_position_antimeridian_short_way():
     # 179.9 E -> 179.9 W in 10 s: the midpoint is on the antimeridian, not at 0
     lon = np.radians([179.9, -179.9])
-    la, lo = g.interp_position(np.array([0.0, 10.0]), np.zeros(2), lon, np.array([5.0, 7.5]), 60.0)
+    _la, lo = g.interp_position(np.array([0.0, 10.0]), np.zeros(2), lon, np.array([5.0, 7.5]), 60.0)
     assert abs(g.angdiff(lo[0], np.pi)) < 1e-12
     assert lo[1] == pytest.approx(np.radians(-179.95), abs=1e-12)
     assert np.all(lo <= np.pi) and np.all(lo > -np.pi)

@@ -295,7 +295,7 @@ def test_configured_variation_wins_over_a_zero_placeholder(tmp_path, configured)
 
     v = _hdg_voyage(tmp_path, ["0.0,E", "0.0,E", "2.0,W", ","])
     missing, notes = [], []
-    t, h, desc = _heading_series(v, DeadReckoningConfig(variation_deg=configured), missing, notes)
+    _t, h, desc = _heading_series(v, DeadReckoningConfig(variation_deg=configured), missing, notes)
     got = np.degrees(h)
     if configured is None:
         np.testing.assert_allclose(got, [100.0, 100.0, 98.0, 100.0], atol=1e-9)

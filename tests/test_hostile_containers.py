@@ -374,7 +374,7 @@ def test_mcap_lz4_bomb_is_rejected(tmp_path, chunked_voyage, where):
     (streamed): rejected, memory bounded (the read's own peak), the other chunks read."""
     import resource
 
-    p, frames = chunked_voyage
+    p, _frames = chunked_voyage
     data = p.read_bytes()
     chunks = _chunks(data)
     victim = chunks[-1] if where == "cut" else chunks[5]

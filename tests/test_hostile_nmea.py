@@ -396,7 +396,7 @@ def test_mcap_with_stripped_cr_is_named_a_damaged_container(run_cli, tmp_path, m
     for args in (("inspect", good, bad), ("analyze", good, bad), ("analyze", bad, good)):
         code, _, err = run_cli(*args)
         _one_line_error(code, err, "recorder.mcap", "damaged in transfer")
-    with pytest.raises(IngestError, match="recorder.mcap"):
+    with pytest.raises(IngestError, match=r"recorder.mcap"):
         read_logs([good, bad], IngestConfig())
 
 

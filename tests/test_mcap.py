@@ -387,7 +387,9 @@ def _derived_fixture(tmp_path, real_dir, **kw):
 
 @pytest.mark.parametrize("chunked", [True, False])
 def test_cut_files_recover_every_complete_message(tmp_path, real_dir, chunked):
-    p, fr = _derived_fixture(tmp_path, real_dir, encoding="ros2", compression=None, chunk_size=2500)
+    p, _fr = _derived_fixture(
+        tmp_path, real_dir, encoding="ros2", compression=None, chunk_size=2500
+    )
     if not chunked:  # rewrite unchunked, from the first file's messages
         from mcap.reader import make_reader
         from mcap.writer import CompressionType, Writer
@@ -507,9 +509,7 @@ def test_one_simulated_voyage_reads_the_same_from_every_container(tmp_path):
     for name, p in paths.items():
         voy = read_logs([p], CFG)
         assert voy.rejects.total == 0, (name, dict(voy.rejects.counts))
-        assert {k: s.role for k, s in voy.sources.items()} == {k: r for k, r in v.roles.items()}, (
-            name
-        )
+        assert {k: s.role for k, s in voy.sources.items()} == dict(v.roles.items()), name
         exact = name in ("csv-long", "csv-wide", "mcap-json", "mcap-ros2", "mcap-protobuf")
         for kind, want in v.frames.items():
             got = voy.frames[kind]

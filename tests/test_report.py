@@ -224,10 +224,10 @@ def make_analysis(kind: str = "full") -> Analysis:
         for i, s in enumerate(sources)
         if s.roles[0] in ("ins1", "ins2", "ins3", "gnss")
     )
-    a_common = dict(
-        schema=SCHEMA,
-        dracc_version="0.1.0",
-        inputs=(
+    a_common = {
+        "schema": SCHEMA,
+        "dracc_version": "0.1.0",
+        "inputs": (
             InputFile(
                 path=f"/logs/{HOSTILE if hostile else 'voyage'}.nmea",
                 format="nmea",
@@ -236,10 +236,10 @@ def make_analysis(kind: str = "full") -> Analysis:
                 rejected={"checksum": 10, "truncated": 2},
             ),
         ),
-        sources=sources,
-        rejected={"checksum": 10, "truncated": 2},
-        reject_examples={"checksum": (("/logs/voyage.nmea", 17, "$INGGA,bad*00"),)},
-        time=TimeSummary(
+        "sources": sources,
+        "rejected": {"checksum": 10, "truncated": 2},
+        "reject_examples": {"checksum": (("/logs/voyage.nmea", 17, "$INGGA,bad*00"),)},
+        "time": TimeSummary(
             duplicates=0,
             backsteps=1,
             gaps=2,
@@ -247,12 +247,12 @@ def make_analysis(kind: str = "full") -> Analysis:
             implausible_dates=0,
             decisions=("date from RMC",),
         ),
-        start_ns=T0_NS,
-        end_ns=T0_NS + 25 * H_NS,
-        lines=1_530_012,
-        tracks=tracks,
-        settings={"interval_s": 3600.0, "reset": "1h"},
-    )
+        "start_ns": T0_NS,
+        "end_ns": T0_NS + 25 * H_NS,
+        "lines": 1_530_012,
+        "tracks": tracks,
+        "settings": {"interval_s": 3600.0, "reset": "1h"},
+    }
     if kind == "bare":
         return Analysis(
             **a_common,

@@ -17,7 +17,7 @@ from dracc.sim import GM, InsErrorParams, SimParams, gauss_markov, simulate
 from dracc.sim.processes import SCHULER_PERIOD_S, ins_errors
 from dracc.sim.truth import compass_course_rad, deviation_curve_rad, integrate_track
 
-SHORT = dict(duration_s=900.0, compass_hz=2.0)
+SHORT = {"duration_s": 900.0, "compass_hz": 2.0}
 Q_ANGLE = 0.0005 * DEG_RAD + 1e-12  # half a unit of the 3rd decimal of a degree
 Q_SPEED = 0.0005 * KN_MPS + 1e-12
 Q_POS_M = 0.5e-6 / 60 * DEG_RAD / k_phi(0.95) + 1e-6  # half a micro-minute, in metres
@@ -319,7 +319,7 @@ def test_schuler_period_in_ins_error_spectrum():
     peak = freq[band][np.argmax(spec[band])]
     # frequency resolution 1/(3 days): the period is resolved to about +-0.8 min at 84 min
     assert 1 / peak / 60 == pytest.approx(84.4, abs=1.0)
-    assert SCHULER_PERIOD_S == pytest.approx(2 * np.pi * np.sqrt(6371000.0 / 9.81), rel=2e-3)
+    assert pytest.approx(2 * np.pi * np.sqrt(6371000.0 / 9.81), rel=2e-3) == SCHULER_PERIOD_S
 
 
 def test_ins_velocity_error_is_position_error_rate():
@@ -380,7 +380,7 @@ def test_antimeridian_crossing():
     )
     lon = v.truth["lon_rad"].to_numpy()
     assert lon[0] > 0 > lon[-1] and np.all(np.abs(lon) <= np.pi)
-    n_m, e_m = offset_ne_m(
+    _n_m, e_m = offset_ne_m(
         v.truth["lat_rad"].to_numpy()[1:], lon[1:], v.truth["lat_rad"].to_numpy()[:-1], lon[:-1]
     )
     np.testing.assert_allclose(e_m, 12.0 * KN_MPS, rtol=1e-6)
@@ -413,12 +413,12 @@ def test_segments_continue_one_voyage():
     with noise, no error series jumps at a joint more than within a segment."""
     from dracc.sim.model import simulate_segments
 
-    kw = dict(
-        duration_s=3 * 1800.0,
-        compass_hz=1.0,
-        current_drift_kn=0.7,
-        legs=((0.0, 20.0), (2000.0, 200.0)),
-    )
+    kw = {
+        "duration_s": 3 * 1800.0,
+        "compass_hz": 1.0,
+        "current_drift_kn": 0.7,
+        "legs": ((0.0, 20.0), (2000.0, 200.0)),
+    }
     whole = simulate(SimParams.noiseless(**kw))
     parts = list(simulate_segments(SimParams.noiseless(**kw), segment_s=1800.0))
     assert len(parts) == 3

@@ -35,7 +35,7 @@ from dracc.sim.readings import SOURCES
 from dracc.sim.truth import start_ns
 
 #: a short voyage, every sensor at 1 Hz, both compasses (so MAG exists)
-BASE = dict(duration_s=3600.0, seed=11, compass="both", compass_hz=1.0, aux_hz=1.0)
+BASE = {"duration_s": 3600.0, "seed": 11, "compass": "both", "compass_hz": 1.0, "aux_hz": 1.0}
 S = 1_000_000_000
 
 
@@ -393,7 +393,7 @@ def test_invalid(base):
         assert all(re.search(pat_ok, ln) for ln in out)
     # GNSS invalid: RMC status V and mode N
     g = run(SimFault("invalid", "GNSS", 1200.0, 10.0))
-    _, gsrc, glines = frames_to_lines(g.frames, g.roles)
+    _, _gsrc, glines = frames_to_lines(g.frames, g.roles)
     rmc = [ln for ln in glines if ln.startswith(b"$GPRMC")]
     assert sum(ln.split(b",")[2] == b"V" and ln[-4:-3] == b"N" for ln in rmc) == 10
     assert sum(ln.split(b",")[2] == b"A" for ln in rmc) == 3601 - 10
@@ -439,7 +439,7 @@ def test_segments_apply_faults_by_absolute_time():
         vs = list(simulate_segments(params, seg))
         return vs, {k: pd.concat([v.frames[k] for v in vs], ignore_index=True) for k in KINDS}
 
-    vb, fb = cat(p)
+    _vb, fb = cat(p)
     vf, ff = cat(replace(p, faults=faults))
     assert len(vf) == 6
     t0 = start_ns(p.start_utc)

@@ -208,7 +208,7 @@ def test_signs_and_missing_fields():
 def test_generic_frames_without_talker_or_roles():
     v = simulate(SimParams(duration_s=5.0, compass_hz=1.0))
     fr = {k: f.assign(talker="", sentence="X") for k, f in v.frames.items()}
-    _, src, lines = frames_to_lines(fr, v.roles)
+    _, _src, lines = frames_to_lines(fr, v.roles)
     heads = {ln[:6].decode() for ln in lines}
     # X -> the default sentence of each kind (VHW where only the speed through water is
     # known, VBW where more); the GNSS ground rows become VTG; no RMC, so no ZDA

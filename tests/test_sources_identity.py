@@ -162,7 +162,7 @@ def test_role_key_matching_nothing_is_an_error_naming_the_keys():
     s = {"GYRO": src("GYRO", "HE", HDT=5), "GNSS": src("GNSS", "GP", GGA=5)}
     with (
         keys_must_match({"GYR0"}),
-        pytest.raises(ConfigError, match="GYR0.*the sources are GNSS, GYRO"),
+        pytest.raises(ConfigError, match=r"GYR0.*the sources are GNSS, GYRO"),
     ):
         assign_roles(s, {"GYR0": "compass"})
     notes = assign_roles(s, {"GYR0": "compass"})  # from a config file: a note, as before
@@ -174,7 +174,7 @@ def test_role_key_matching_nothing_is_an_error_naming_the_keys():
 def test_cli_role_key_matching_nothing_exits_with_the_config_code(run_cli, tmp_path):
     p = tmp_path / "g.log"
     gga_log(p, 0, 60, "30.000")
-    code, out, err = run_cli("analyze", p, "--role", "GPS1=gnss")
+    code, _out, err = run_cli("analyze", p, "--role", "GPS1=gnss")
     assert code == ExitCode.CONFIG
     lines = [ln for ln in err.strip().splitlines() if ln.strip()]
     assert (

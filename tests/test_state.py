@@ -59,9 +59,8 @@ def test_unique_night_per_vessel(tmp_path):
         with store.transaction():
             store.insert_night(_record())
             store.insert_night(_record(vessel="Borealis"))
-        with pytest.raises(sqlite3.IntegrityError):
-            with store.transaction():
-                store.insert_night(_record())
+        with pytest.raises(sqlite3.IntegrityError), store.transaction():
+            store.insert_night(_record())
         assert store.vessels() == ["Aurora", "Borealis"]
         # deleting a night takes its statistics with it
         with store.transaction():
@@ -90,9 +89,8 @@ def test_second_writer_waits_then_gives_a_clear_error(tmp_path):
             a.insert_night(_record())
             # a reader still sees the committed state (nothing yet)
             assert b.nights() == []
-            with pytest.raises(StateError, match="busy or locked"):
-                with b.transaction():
-                    pass
+            with pytest.raises(StateError, match="busy or locked"), b.transaction():
+                pass
         with b.transaction():
             b.insert_night(_record("2026-11-21"))
         assert [r.night for r in a.nights()] == ["2026-11-20", "2026-11-21"]
@@ -101,7 +99,7 @@ def test_second_writer_waits_then_gives_a_clear_error(tmp_path):
 def test_not_a_database(tmp_path):
     junk = tmp_path / "junk.sqlite"
     junk.write_bytes(b"this is not a database at all" * 100)
-    with pytest.raises(StateError, match="junk.sqlite: cannot open the audit database") as e:
+    with pytest.raises(StateError, match=r"junk.sqlite: cannot open the audit database") as e:
         StateStore(junk)
     assert e.value.exit_code == ExitCode.INPUT
     with pytest.raises(ConfigError, match="is a directory"):

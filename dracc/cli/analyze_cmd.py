@@ -115,9 +115,11 @@ def analyze(
     )
     total = sum(p.stat().st_size for p in logs if p.is_file())
     with _gc_spares_loaded_code():
-        with staged_progress("analyze", STAGES) as on_progress:
-            with keys_must_match(parse_roles(role or [])):  # a --role key matching nothing: error
-                result = analyse(logs, cfg, progress=on_progress, total_bytes=total)
+        with (
+            staged_progress("analyze", STAGES) as on_progress,
+            keys_must_match(parse_roles(role or [])),  # a --role key matching nothing: error
+        ):
+            result = analyse(logs, cfg, progress=on_progress, total_bytes=total)
         for line in write_reports(result, out, json_path, html_path, out_dir):
             err.print(line, highlight=False, markup=False)
     QUICK_EXIT["on"] = True

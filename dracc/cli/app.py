@@ -90,7 +90,7 @@ QUICK_EXIT = {"on": False}
 def _version(value: bool) -> None:
     if value:
         typer.echo(f"dracc {__version__}")
-        raise typer.Exit()
+        raise typer.Exit
 
 
 @app.callback()

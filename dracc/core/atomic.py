@@ -27,7 +27,7 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from contextvars import ContextVar
 from pathlib import Path
 from types import FrameType
@@ -40,10 +40,8 @@ _PENDING: ContextVar[list[tuple[Path, Path]] | None] = ContextVar(
 
 
 def _discard(tmp: Path) -> None:
-    try:
+    with suppress(FileNotFoundError):
         os.unlink(tmp)
-    except FileNotFoundError:
-        pass
 
 
 @contextmanager

@@ -50,7 +50,7 @@ _BINARY_MAGIC = {
     b"\x28\xb5\x2f\xfd": "a zstd file (decompress it first)",
 }
 
-__all__ = ["read_logs", "read_file", "detect_format", "assign_roles", "MCAP_MAGIC"]
+__all__ = ["MCAP_MAGIC", "assign_roles", "detect_format", "read_file", "read_logs"]
 
 #: what a transfer that treats a binary file as text does to the MCAP magic
 #: ``\x89MCAP0\r\n``: the bytes at the start of ``MCAP0`` and after it -> what happened

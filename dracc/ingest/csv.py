@@ -106,9 +106,7 @@ def looks_like_csv(head: bytes) -> bool:
     cols = _split_header(head)
     if not cols or len(cols) < 2:
         return False
-    if find_column(cols, TIME_COLUMNS) is None:
-        return False
-    return True
+    return find_column(cols, TIME_COLUMNS) is not None
 
 
 def _form(cols: list[str]) -> str:

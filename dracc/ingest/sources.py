@@ -323,9 +323,9 @@ def file_ids(files: list[str]) -> dict[str, str]:
     names = list(dict.fromkeys(stems.values()))
     ids = dict(stems)
     if len(names) > 1:
-        pre = commonprefix(names)
+        pre = commonprefix(names)  # noqa: RUF071  character prefix of file names, on purpose
         cut = max((m.end() for m in _SEP.finditer(pre)), default=0)
-        suf = commonprefix([n[::-1] for n in names])[::-1]
+        suf = commonprefix([n[::-1] for n in names])[::-1]  # noqa: RUF071  likewise
         cut_end = min((m.start() for m in _SEP.finditer(suf)), default=len(suf))
         tail = len(suf) - cut_end
         short = {f: s[cut : len(s) - tail if tail else None] for f, s in stems.items()}

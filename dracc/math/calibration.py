@@ -143,7 +143,7 @@ def block_means(
     if t.size == 0:
         return np.zeros(0), np.zeros((0,) + v.shape[1:]), np.zeros(0, dtype=np.int64)
     ids = _block_ids(t, block_s)
-    uniq, start, counts = np.unique(ids, return_index=True, return_counts=True)
+    _uniq, start, counts = np.unique(ids, return_index=True, return_counts=True)
     sums = np.add.reduceat(v2, start, axis=0)
     tsum = np.add.reduceat(t, start)
     keep = counts >= min_samples
@@ -284,7 +284,7 @@ def deviation_from_heading(
     k = np.asarray(compass_rad, float)
     delta = angdiff(reference_true_rad, k + np.asarray(variation_rad, float))
     cols = np.column_stack([delta, _curve_basis(k)])
-    bt, bm, _ = block_means(t, cols, block_s)
+    _bt, bm, _ = block_means(t, cols, block_s)
     if bm.shape[0] < 6:
         raise InsufficientDataError(
             f"deviation fit needs at least 6 blocks of {block_s:g} s with compass, reference "

@@ -54,7 +54,7 @@ from dracc.core.timefmt import iso_utc
 from dracc.core.units import DEG_RAD, KN_MPS, NMI_M, NS_PER_S
 from dracc.frames import Voyage
 
-__all__ = ["SensorFault", "FAULT_KINDS", "detect_faults", "exclude_faults", "check_config"]
+__all__ = ["FAULT_KINDS", "SensorFault", "check_config", "detect_faults", "exclude_faults"]
 
 FAULT_KINDS = ("jump", "frozen", "stuck_heading", "out_of_range")
 

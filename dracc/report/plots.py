@@ -144,7 +144,7 @@ def track_figure(a: Analysis) -> tuple[Figure, Axes] | None:
     fig, ax = plt.subplots(figsize=(9, 7))
     for t in a.tracks:
         n, e = offset_ne_m(t.lat_rad, t.lon_rad, lat0, lon0)
-        colour = _ROLE_COLOURS.get(t.role or "", None)
+        colour = _ROLE_COLOURS.get(t.role or "")
         label = f"{t.source} ({t.role})" if t.role else t.source
         ax.plot(e / 1e3, n / 1e3, lw=0.9, alpha=0.8, color=colour, label=label)
     dr = a.dead_reckoning

@@ -13,9 +13,9 @@ from dracc.sim.params import DEFAULT_INS, GM, InsErrorParams, SimParams
 from dracc.sim.processes import gauss_markov
 
 __all__ = [
-    "GM",
     "DEFAULT_INS",
     "FAULT_KINDS",
+    "GM",
     "InsErrorParams",
     "SimFault",
     "SimParams",

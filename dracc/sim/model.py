@@ -77,6 +77,8 @@ __all__ = [
     "GM",
     "HDOP_DEC",
     "LAT_MICROMIN",
+    # held here
+    "MAX_SAMPLES",
     "NO_INS_ERROR",
     "ROT_DEC",
     "SCHULER_PERIOD_S",
@@ -84,6 +86,7 @@ __all__ = [
     "SPEED_DEC",
     "InsErrorParams",
     "SimParams",
+    "SimVoyage",
     "compass_course_rad",
     "deviation_curve_rad",
     "gauss_markov",
@@ -93,12 +96,9 @@ __all__ = [
     "q_angle_rad",
     "q_latlon_rad",
     "q_signed",
-    "start_ns",
-    # held here
-    "MAX_SAMPLES",
-    "SimVoyage",
     "simulate",
     "simulate_segments",
+    "start_ns",
 ]
 
 MAX_SAMPLES = 3e6  #: truth samples in one simulate() call (~1.7 kB each at peak)

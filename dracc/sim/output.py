@@ -140,24 +140,24 @@ def simulate_to_folder(
         raise ConfigError(f"--format must be one of {', '.join(FORMATS)}, got {fmt!r}")
     if not (hours > 0 and math.isfinite(hours)):
         raise ConfigError(f"--hours must be positive, got {hours}")
-    common: dict[str, Any] = dict(
-        legs=parse_legs(legs),
-        ins_talkers=tuple(ins_talkers.split(",")),
-        duration_s=hours * 3600.0,
-        seed=seed,
-        start_utc=start,
-        start_lat_deg=lat_deg,
-        start_lon_deg=lon_deg,
-        speed_kn=speed_kn,
-        compass=compass,
-        compass_hz=compass_hz,
-        log_hz=log_hz,
-        ins_hz=ins_hz,
-        gnss_hz=gnss_hz,
-        aux_hz=aux_hz,
-        variation_deg=variation_deg,
-        current_set_deg=current_set_deg,
-    )
+    common: dict[str, Any] = {
+        "legs": parse_legs(legs),
+        "ins_talkers": tuple(ins_talkers.split(",")),
+        "duration_s": hours * 3600.0,
+        "seed": seed,
+        "start_utc": start,
+        "start_lat_deg": lat_deg,
+        "start_lon_deg": lon_deg,
+        "speed_kn": speed_kn,
+        "compass": compass,
+        "compass_hz": compass_hz,
+        "log_hz": log_hz,
+        "ins_hz": ins_hz,
+        "gnss_hz": gnss_hz,
+        "aux_hz": aux_hz,
+        "variation_deg": variation_deg,
+        "current_set_deg": current_set_deg,
+    }
     if noiseless:
         params = SimParams.noiseless(**common)
     else:

@@ -183,29 +183,29 @@ class SimParams:
         """Exact-truth voyage: no sensor error, no current, no leeway, no yaw; every
         sentence reads the truth (to its written precision).  ``overrides`` apply last."""
         zero = GM(0.0, math.inf)
-        base: dict[str, Any] = dict(
-            gyro_offset_deg=0.0,
-            gyro_bias_deg=zero,
-            gyro_noise_deg=zero,
-            gyro_white_deg=0.0,
-            rot_white_dpm=0.0,
-            mag_noise_deg=zero,
-            mag_white_deg=0.0,
-            log_scale=0.0,
-            log_bias_kn=0.0,
-            log_noise_kn=zero,
-            log_white_kn=0.0,
-            leeway_deg=0.0,
-            leeway_noise_deg=zero,
-            current_drift_kn=0.0,
-            current_noise_kn=zero,
-            yaw_amp_deg=0.0,
-            ins=(NO_INS_ERROR,) * 3,
-            ins_velocity_white_kn=0.0,
-            gnss_noise_m=zero,
-            gnss_white_m=0.0,
-            gnss_speed_white_kn=0.0,
-        )
+        base: dict[str, Any] = {
+            "gyro_offset_deg": 0.0,
+            "gyro_bias_deg": zero,
+            "gyro_noise_deg": zero,
+            "gyro_white_deg": 0.0,
+            "rot_white_dpm": 0.0,
+            "mag_noise_deg": zero,
+            "mag_white_deg": 0.0,
+            "log_scale": 0.0,
+            "log_bias_kn": 0.0,
+            "log_noise_kn": zero,
+            "log_white_kn": 0.0,
+            "leeway_deg": 0.0,
+            "leeway_noise_deg": zero,
+            "current_drift_kn": 0.0,
+            "current_noise_kn": zero,
+            "yaw_amp_deg": 0.0,
+            "ins": (NO_INS_ERROR,) * 3,
+            "ins_velocity_white_kn": 0.0,
+            "gnss_noise_m": zero,
+            "gnss_white_m": 0.0,
+            "gnss_speed_white_kn": 0.0,
+        }
         base.update(overrides)
         return cls(**base)
 

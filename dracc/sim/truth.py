@@ -94,7 +94,7 @@ def compass_course_rad(
     """The magnetic compass course KK with ``heading = KK + delta(KK) + d`` (B2), by Newton's
     method on ``f(KK) = KK + delta(KK) + d - heading`` (``f' = 1 + delta'``, > 0 for any real
     compass, whose deviation changes by far less than a degree per degree of heading)."""
-    a, b, c, d, e = coeffs_rad
+    _a, b, c, d, e = coeffs_rad
     target = np.asarray(heading_rad, float) - variation_rad
     kk = target - deviation_curve_rad(target, coeffs_rad)
     for _ in range(20):

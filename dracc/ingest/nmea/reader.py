@@ -207,7 +207,7 @@ def _fingerprint(cols: dict[str, np.ndarray], st: StreamState, pb_names: list[st
         u, c = np.unique(dec[sel], return_counts=True)
         big = u[(c >= 10) & (c >= 0.1 * sel.sum())]
         if len(big) >= 2:
-            st.split_talkers[talker_str(tk)] = set(int(x) for x in u)
+            st.split_talkers[talker_str(tk)] = {int(x) for x in u}
 
 
 def check_readable(path: Path) -> None:

@@ -59,9 +59,6 @@ from dracc.math.deviation.validation import check_config
 
 __all__ = [
     "FISHER_PROBABILITY",
-    "analyse_deviations",
-    "check_config",
-    "dedupe",
     # the result types, defined in dracc.math.deviation.results
     "ChannelMode",
     "ChannelStats",
@@ -72,6 +69,9 @@ __all__ = [
     "ReferenceStats",
     "UnitStats",
     "WindowStats",
+    "analyse_deviations",
+    "check_config",
+    "dedupe",
     "factor_alternatives",
     "metres_to_arcmin",
 ]

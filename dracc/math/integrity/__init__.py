@@ -111,13 +111,13 @@ from dracc.math.integrity.results import CHECK_KINDS, Check, IntegrityResult, So
 from dracc.math.integrity.validity import contradiction_checks, validity_checks
 
 __all__ = [
+    "CHECK_KINDS",
     "Check",
-    "SourceSummary",
     "IntegrityResult",
+    "SourceSummary",
     "check_night",
     "dr_innovation_check",
     "with_dr_check",
-    "CHECK_KINDS",
 ]
 
 #: a fix whose innovation against the DR exceeds this chi^2_2 value is an outlier, left

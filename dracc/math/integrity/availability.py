@@ -25,7 +25,7 @@ from dracc.math.integrity.helpers import (
 )
 from dracc.math.integrity.results import Check
 
-__all__ = ["source_times", "availability_checks"]
+__all__ = ["availability_checks", "source_times"]
 
 
 def source_times(voyage: Voyage) -> dict[str, IntArray]:

@@ -27,7 +27,7 @@ from dracc.math.integrity.helpers import (
 )
 from dracc.math.integrity.results import Check
 
-__all__ = ["velocity_consistency", "heading_consistency", "speed_consistency", "log_residual"]
+__all__ = ["heading_consistency", "log_residual", "speed_consistency", "velocity_consistency"]
 
 SCHULER_PERIOD_S = 84.4 * 60.0  #: 2 pi sqrt(R/g)
 #: IMO A.824(19) speed accuracy: 2 % of the speed or 0.2 kn, whichever is greater

@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["CHECK_KINDS", "CLAUSES", "Check", "SourceSummary", "IntegrityResult"]
+__all__ = ["CHECK_KINDS", "CLAUSES", "Check", "IntegrityResult", "SourceSummary"]
 
 #: the check families of the audit document (dracc.audit/1 ``findings[].check``)
 CHECK_KINDS = (

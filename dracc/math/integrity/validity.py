@@ -25,7 +25,7 @@ from dracc.math.integrity.helpers import (
 )
 from dracc.math.integrity.results import Check
 
-__all__ = ["validity_checks", "contradiction_checks"]
+__all__ = ["contradiction_checks", "validity_checks"]
 
 
 def validity_checks(voyage: Voyage, cfg: IntegrityConfig) -> list[Check]:

@@ -75,7 +75,7 @@ def dr_verdict_word(text: object) -> str | None:
         return None
     head = text.split(":", 1)[0].strip().lower()
     for word in DR_VERDICTS:  # "inconsistent" is not read as "consistent": whole first word
-        if head == word or head.startswith(word + " ") or head.startswith(word + "("):
+        if head == word or head.startswith((word + " ", word + "(")):
             return word
     return None
 

@@ -77,7 +77,7 @@ def audit_config(cfg: Config) -> AuditConfig:
     if not isinstance(table, dict):
         raise ConfigError(f"[audit] must be a table, got {type(table).__name__}")
     default = AuditConfig()
-    known = [f for f in asdict(default)]
+    known = list(asdict(default))
     _unknown(table, known, "audit")
     kw: dict = {}
     for key in ("db", "vessel", "pattern"):
