@@ -134,19 +134,16 @@ def detect_format(path: str | Path) -> str:
 def read_file(
     path: str | Path, cfg: IngestConfig, progress: Callable[[int], object] | None = None
 ) -> FileResult:
-    """Read one log with the reader its format needs."""
+    """Read one log with the reader its format needs.  Every reader has this signature:
+    (path, config, progress told the bytes read) -> :class:`~dracc.frames.FileResult`."""
     fmt = detect_format(path)
     if fmt == "mcap":
-        from dracc.ingest.mcap import read_mcap
-
-        return read_mcap(Path(path), cfg)
-    if fmt == "csv":
-        from dracc.ingest.csv import read_csv
-
-        return read_csv(Path(path), cfg)
-    from dracc.ingest.nmea import read_nmea
-
-    return read_nmea(path, cfg, progress=progress)
+        from dracc.ingest.mcap import read_mcap as reader
+    elif fmt == "csv":
+        from dracc.ingest.csv import read_csv as reader
+    else:
+        from dracc.ingest.nmea import read_nmea as reader
+    return reader(path, cfg, progress)
 
 
 def _merge_frames(results: list[FileResult]) -> dict[str, pd.DataFrame]:
@@ -243,7 +240,8 @@ def read_logs(
 ) -> Voyage:
     """Read several logs of one voyage, merge them by time, build sources and roles.
 
-    ``progress(n_bytes)`` is called as bytes are read (NMEA text files).  A missing
+    ``progress(n_bytes)`` is called as bytes are read (NMEA text as blocks are parsed,
+    MCAP and CSV when each file is done).  A missing
     file, a directory, an empty file, a known non-log or an MCAP file damaged in transfer
     raises :class:`IngestError` naming it, whatever other files are given (one bad file
     fails the run: it is never dropped in silence);

@@ -49,7 +49,7 @@ from __future__ import annotations
 import codecs
 import functools
 import io
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -344,8 +344,11 @@ def _iter_blocks(
             source.close()
 
 
-def read_csv(path, cfg: IngestConfig) -> FileResult:
-    """Read a CSV voyage log (long, wide or raw form) into canonical frames.
+def read_csv(
+    path: str | Path, cfg: IngestConfig, progress: Callable[[int], object] | None = None
+) -> FileResult:
+    """Read a CSV voyage log (long, wide or raw form) into canonical frames; ``progress``
+    is told the file's size in bytes once it is read (the readers' signature).
 
     Raises IngestError when the file is missing or its header is not one dracc reads,
     and (``cfg.strict``) on the first rejected row.
@@ -406,13 +409,18 @@ def read_csv(path, cfg: IngestConfig) -> FileResult:
     elif form == "csv-wide":
         frames, rows = _read_wide(p, cols, declared, rejects, notes, file, scan)
     else:
-        return _read_raw(p, cols, cfg, rejects, notes, file, scan)
+        raw = _read_raw(p, cols, cfg, rejects, notes, file, scan)
+        if progress is not None:
+            progress(p.stat().st_size)
+        return raw
     if cfg.strict and rejects.total:
         reason, ex = next(iter(rejects.examples.items()))
         f, line, text = ex[0]
         raise IngestError(f"{f}:{line}: {reason}: {text!r} (--strict)")
     if not frames:
         notes.append(f"{file}: no navigation records ({rows} rows read)")
+    if progress is not None:
+        progress(p.stat().st_size)
     return FileResult(
         path=file, format=form, frames=frames, lines=rows, rejects=rejects, notes=notes
     )

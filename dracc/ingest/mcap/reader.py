@@ -5,6 +5,7 @@ in notes and counts here."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -20,8 +21,11 @@ from dracc.ingest.mcap.json_messages import json_flush
 from dracc.ingest.memory import trim_heap
 
 
-def read_mcap(path: str | Path, cfg: IngestConfig) -> FileResult:
-    """Read an MCAP log into canonical frames (see the :mod:`dracc.ingest.mcap` doc)."""
+def read_mcap(
+    path: str | Path, cfg: IngestConfig, progress: Callable[[int], object] | None = None
+) -> FileResult:
+    """Read an MCAP log into canonical frames (see the :mod:`dracc.ingest.mcap` doc);
+    ``progress`` is told the file's size in bytes once it is read (the readers' signature)."""
     declared = dict(getattr(cfg, "quantities", {}) or {})
     check_declared(declared, str(path))
     path = Path(path)
@@ -29,7 +33,10 @@ def read_mcap(path: str | Path, cfg: IngestConfig) -> FileResult:
     decoding = ChannelDecoding(str(path), cfg, rejects)
     walk = ContainerWalk(path, cfg, rejects, [], decoding)
     walk.run()
-    return _result(walk, decoding)
+    result = _result(walk, decoding)
+    if progress is not None:
+        progress(path.stat().st_size)
+    return result
 
 
 def _result(walk: ContainerWalk, decoding: ChannelDecoding) -> FileResult:
