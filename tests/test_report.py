@@ -110,7 +110,7 @@ def _dr_track(n: int, step_s: float, with_ref: bool) -> DRTrackResult:
     )
 
 
-#: DRSection.learned as dracc.pipeline.analysis._learned_summary makes it
+#: DRSection.learned as dracc.pipeline.dr_model.learned_summary makes it
 LEARNED = {
     "current_set_deg": 45.0,
     "current_drift_kn": 0.49,

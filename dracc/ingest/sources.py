@@ -3,7 +3,7 @@
 Source keys come from the readers: the TAG ``s:`` value, an MCAP topic, a CSV source
 column, or the NMEA talker ID; a talker whose position sentences come with two or more
 different numbers of decimals of minutes (two receivers behind one talker) is split
-into ``<talker>/<n>dp`` keys (see :func:`dracc.ingest.nmea._fingerprint`).
+into ``<talker>/<n>dp`` keys (see :func:`dracc.ingest.nmea.reader._fingerprint`).
 
 Role assignment (:func:`assign_roles`), in this order:
 

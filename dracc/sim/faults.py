@@ -45,7 +45,7 @@ from dracc.core.timefmt import iso_utc
 from dracc.core.units import KN_MPS
 
 FAULT_KINDS = ("jump", "freeze", "dropout", "drift", "latency", "invalid")
-#: every source key the simulator can write (as :data:`dracc.sim.model.SOURCES`)
+#: every source key the simulator can write (as :data:`dracc.sim.readings.SOURCES`)
 ALL_SOURCES = ("GYRO", "MAG", "LOG", "INS1", "INS2", "INS3", "GNSS")
 POSITION_SOURCES = ("INS1", "INS2", "INS3", "GNSS")
 COMPASS_SOURCES = ("GYRO", "MAG")
@@ -80,7 +80,7 @@ DEFAULT_SIZE = {"jump": 670.0, "drift": 1.0 * KN_MPS, "latency": 3.0}
 SIZE_UNIT = {"jump": "m", "drift": "m/s", "latency": "s"}
 #: the default start is drawn uniformly in this fraction of the voyage
 START_RANGE = (0.2, 0.5)
-RNG_COMPONENT = 60  #: random stream of the fault draws (see dracc.sim.model._rng)
+RNG_COMPONENT = 60  #: random stream of the fault draws (see dracc.sim.processes.component_rng)
 SPEC_GRAMMAR = "KIND[:SOURCE][@START][+DURATION][=SIZE]"
 
 _TIME_UNITS = {"": 1.0, "s": 1.0, "min": 60.0, "h": 3600.0}

@@ -35,71 +35,22 @@ import pandas as pd
 from dracc.core.errors import ConfigError
 from dracc.core.units import DEG_RAD
 from dracc.sim.faults import apply_error_faults, apply_frame_faults, resolve_faults
-from dracc.sim.params import DEFAULT_INS, GM, NO_INS_ERROR, InsErrorParams, SimParams
+from dracc.sim.params import SimParams
 from dracc.sim.processes import (
-    DAY_PERIOD_S,
-    SCHULER_PERIOD_S,
     gauss_markov,
-    ins_errors,
     sensor_errors,
 )
 from dracc.sim.readings import (
-    ALT_DEC,
-    ANGLE_DEC,
-    DIST_DEC,
-    HDOP_DEC,
-    LAT_MICROMIN,
-    ROT_DEC,
-    SOURCES,
-    SPEED_DEC,
-    q_angle_rad,
-    q_latlon_rad,
-    q_signed,
     sensor_readings,
     unit_rms_from_frames,
 )
 from dracc.sim.truth import (
-    compass_course_rad,
-    deviation_curve_rad,
     generated_legs,
-    integrate_track,
     start_ns,
     true_track,
 )
 
-__all__ = [
-    # re-exported from the modules that hold them (importers use dracc.sim.model)
-    "ALT_DEC",
-    "ANGLE_DEC",
-    "DAY_PERIOD_S",
-    "DEFAULT_INS",
-    "DIST_DEC",
-    "GM",
-    "HDOP_DEC",
-    "LAT_MICROMIN",
-    # held here
-    "MAX_SAMPLES",
-    "NO_INS_ERROR",
-    "ROT_DEC",
-    "SCHULER_PERIOD_S",
-    "SOURCES",
-    "SPEED_DEC",
-    "InsErrorParams",
-    "SimParams",
-    "SimVoyage",
-    "compass_course_rad",
-    "deviation_curve_rad",
-    "gauss_markov",
-    "generated_legs",
-    "ins_errors",
-    "integrate_track",
-    "q_angle_rad",
-    "q_latlon_rad",
-    "q_signed",
-    "simulate",
-    "simulate_segments",
-    "start_ns",
-]
+__all__ = ["MAX_SAMPLES", "SimVoyage", "simulate", "simulate_segments"]
 
 MAX_SAMPLES = 3e6  #: truth samples in one simulate() call (~1.7 kB each at peak)
 

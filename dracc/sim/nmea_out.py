@@ -50,7 +50,7 @@ from dracc.core.atomic import atomic_path
 from dracc.core.errors import DraccError
 from dracc.core.units import DEG_RAD, KN_MPS, NMI_M
 from dracc.frames import MISSING_NS
-from dracc.sim.model import ALT_DEC, ANGLE_DEC, DIST_DEC, HDOP_DEC, ROT_DEC, SPEED_DEC
+from dracc.sim.readings import ALT_DEC, ANGLE_DEC, DIST_DEC, HDOP_DEC, ROT_DEC, SPEED_DEC
 
 if TYPE_CHECKING:
     from dracc.sim.model import SimVoyage
