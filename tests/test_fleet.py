@@ -12,15 +12,8 @@ from test_audit_helpers import make_analysis
 
 from dracc.core.config import config_from_dict
 from dracc.core.errors import ConfigError, FleetError, IngestError
-from dracc.pipeline.fleet import (
-    discover,
-    fleet_config,
-    inside,
-    run_fleet,
-    safe_name,
-    summarise,
-    write_tables,
-)
+from dracc.pipeline.fleet import discover, fleet_config, inside, run_fleet, safe_name, summarise
+from dracc.report.fleet_tables import write_tables
 
 CFG = config_from_dict({"deviation": {"apriori": {"ins1": {"lat_m": 120.0}}}})
 

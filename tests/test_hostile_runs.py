@@ -43,7 +43,8 @@ from dracc.core.errors import ExitCode
 from dracc.core.safetext import csv_cell, printable
 from dracc.pipeline.audit import TEST_SLEEP_ENV as AUDIT_SLEEP_ENV
 from dracc.pipeline.audit import choose_logs, input_problem
-from dracc.pipeline.fleet import TEST_SLEEP_ENV, discover, run_fleet, write_tables
+from dracc.pipeline.fleet import discover, run_fleet
+from dracc.report.fleet_tables import TEST_SLEEP_ENV, write_tables
 
 WAIT_S = 120.0  #: bound on every wait for a process
 EVIL = "INS2\x1b]0;pwned\x07\x1b[2J\x9b31m"  #: OSC (window title), clear screen, C1 CSI
@@ -271,7 +272,7 @@ def test_fleet_outputs_appear_together_or_not_at_all(tmp_path, monkeypatch):
     both = run_fleet(
         discover([root / "Aurora", root / "Borealis"]), CFG, out, workers=1, analyser=fake_analyser
     )
-    import dracc.pipeline.fleet.tables as fleet_mod  # write_tables looks csv_text up here
+    import dracc.report.fleet_tables as fleet_mod  # write_tables looks csv_text up here
 
     real_csv = fleet_mod.csv_text
     calls = []

@@ -16,8 +16,9 @@ from dracc.cli.options import ConfigFile, check_pattern
 from dracc.core.config import load_config
 from dracc.core.errors import ConfigError, ExitCode, Interrupted, OptionError
 from dracc.core.safetext import printable
-from dracc.pipeline.fleet import check_scheduler, discover, fleet_config, run_fleet, write_tables
+from dracc.pipeline.fleet import check_scheduler, discover, fleet_config, run_fleet
 from dracc.report.fleet_html import fleet_html, print_fleet_table
+from dracc.report.fleet_tables import write_tables
 
 
 @app.command("fleet")

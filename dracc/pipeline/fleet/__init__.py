@@ -16,14 +16,11 @@ from dracc.core.vocabulary import CHANNELS
 from dracc.pipeline.fleet.batch import CACHE_SCHEMA, analyse_log, cache_path, run_fleet, summarise
 from dracc.pipeline.fleet.tables import (
     TABLE_COLUMNS,
-    TEST_SLEEP_ENV,
     TREND_COLUMNS,
     FleetResult,
     count_logs,
-    csv_text,
     fleet_table,
     fleet_trends,
-    write_tables,
 )
 from dracc.pipeline.fleet.tasks import (
     FleetConfig,
@@ -39,7 +36,6 @@ __all__ = [
     "CACHE_SCHEMA",
     "CHANNELS",
     "TABLE_COLUMNS",
-    "TEST_SLEEP_ENV",
     "TREND_COLUMNS",
     "FleetConfig",
     "FleetError",
@@ -49,7 +45,6 @@ __all__ = [
     "cache_path",
     "check_scheduler",
     "count_logs",
-    "csv_text",
     "discover",
     "fleet_config",
     "fleet_table",
@@ -58,5 +53,4 @@ __all__ = [
     "run_fleet",
     "safe_name",
     "summarise",
-    "write_tables",
 ]
