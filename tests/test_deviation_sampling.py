@@ -32,6 +32,7 @@ from dracc.math.deviation.sampling import (
 )
 
 model = pytest.importorskip("dracc.sim.model")
+sim_params = pytest.importorskip("dracc.sim.params")
 
 NS = 1_000_000_000
 BASE_HZ = 5  # the truth's rate: phases in steps of 0.2 s
@@ -52,7 +53,7 @@ def async_voyage(hours, step, phases, params=None, ground=True, seed=4):
     """A turning voyage whose units read every ``step``/5 s at ``phases``/5 s: the
     simulator's 5 Hz frames of each INS decimated at that unit's own phase.
     Returns (sim, units, own) with own[unit] the unit's reading times (ns)."""
-    base = params or model.SimParams()
+    base = params or sim_params.SimParams()
     p = replace(
         base,
         duration_s=hours * 3600.0,
@@ -174,9 +175,9 @@ def _smooth(u):
     inf = math.inf
     return replace(
         u,
-        gm_m=model.GM(0.0, inf),
+        gm_m=sim_params.GM(0.0, inf),
         white_m=0.0,
-        heading_gm_deg=model.GM(0.0, inf),
+        heading_gm_deg=sim_params.GM(0.0, inf),
         heading_white_deg=0.0,
     )
 
@@ -185,7 +186,7 @@ def test_the_units_own_velocity_follows_the_turn_between_sparse_readings():
     # units reading every 10 s at phases 0, 3.4 and 6.8 s, turning through the instants:
     # a straight line between readings cuts the turn's arc (up to 0.7 m), differently
     # for each phase; the sag from the unit's VTG velocity change follows it (millimetres).
-    p = model.SimParams.noiseless(ins=tuple(_smooth(u) for u in model.DEFAULT_INS))
+    p = sim_params.SimParams.noiseless(ins=tuple(_smooth(u) for u in sim_params.DEFAULT_INS))
     sim, units, _own = async_voyage(4, step=50, phases=(0, 17, 34), params=p)
     _, lin_units, _ = async_voyage(4, step=50, phases=(0, 17, 34), params=p, ground=False)
     assert len(units["ins1"].vn_mps) and not len(lin_units["ins1"].vn_mps)

@@ -240,10 +240,11 @@ def test_reference_rms_matches_the_project_simulators_truth():
     # white; unequal units) with its canonical frames as a perfect parser returns them:
     # the Table 1 reference RMS against GNSS matches the simulator's own per-unit RMS.
     model = pytest.importorskip("dracc.sim.model")
+    sim_params = pytest.importorskip("dracc.sim.params")
     from dracc.math.deviation import unit_series_from_frames
 
     sim = model.simulate(
-        model.SimParams(
+        sim_params.SimParams(
             duration_s=3 * DAY_S,
             seed=3,
             compass_hz=0.1,

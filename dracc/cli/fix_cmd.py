@@ -1,7 +1,8 @@
 """``dracc fix``: fuse position fixes and lines of position at the chart table.
 
-Options -> :func:`dracc.ingest.observations.read_observations` (the navigator's units)
--> :func:`dracc.math.fix.fix_report` (LS (W1) / WLS (W4)) -> the tables
+Options -> :func:`dracc.pipeline.fix.run_fix` (the observations read in the navigator's
+units, :mod:`dracc.ingest.observations`, and fused by LS (W1) / WLS (W4),
+:mod:`dracc.math.fix`) -> the tables
 (:func:`dracc.report.fix_report.render`) or the ``dracc.fix/1`` JSON (docs/fix.md).
 
 Exit codes: 0 a fix; 2 a bad option value (the message names the option and the
@@ -18,18 +19,17 @@ import typer
 
 from dracc.cli.app import app, err, out
 from dracc.cli.options import JsonOut
-from dracc.core.errors import DraccError
 from dracc.ingest.observations import (
     DEFAULT_ABEAM_SIGMA_M,
     DEFAULT_BEARING_SIGMA_DEG,
     DEFAULT_FIX_SIGMA_M,
     DEFAULT_LINE_SIGMA_M,
     DEFAULT_PIER_SIGMA_M,
-    read_observations,
 )
-from dracc.math.fix import fix_report
+from dracc.pipeline.fix import run_fix
 from dracc.report.fix_report import render, to_json
 from dracc.report.output import STDOUT, emit_json
+from dracc.report.write import writing
 
 _OBS_HELP = "Repeatable. Coordinates: 54.6, -18.8, '54 36.5N', '018 48.2E', \"54°36.5'N\"."
 
@@ -124,16 +124,12 @@ def fix_cmd(
         ("--abeam", abeam),
         ("--nadir", nadir),
     ]
-    observations, prior_deg = read_observations(options, file, prior)
-    rep = fix_report(observations, prior_deg, weighted=not ls)
+    rep = run_fix(options, file, prior, weighted=not ls)
     if json_out != STDOUT:
         render(rep, out)
     if json_out is None:
         return
-    try:
+    with writing(json_out):
         written = emit_json(to_json(rep), json_out)
-    except OSError as e:
-        detail = f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e)
-        raise DraccError(f"cannot write {json_out}: {detail}") from e
     if written:
         err.print(f"wrote {written}", highlight=False, markup=False)
