@@ -32,7 +32,7 @@ JsonOut = Annotated[
     str | None,
     typer.Option(
         "--json",
-        metavar="PATH",
+        metavar="PATH|-",
         help="Write the JSON document to PATH, or '-' for stdout.",
     ),
 ]
