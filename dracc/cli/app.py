@@ -151,6 +151,6 @@ def staged_progress(
 def paths_exist(paths: list[Path]) -> list[Path]:
     """Check input paths up front so the user gets one clear line, not a traceback."""
     for p in paths:
-        if not p.exists():
+        if str(p) != "-" and not p.exists():  # '-': standard input
             raise IngestError(f"{p}: no such file")
     return paths

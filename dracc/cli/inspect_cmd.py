@@ -32,7 +32,7 @@ def inspect_logs(
     paths: list[Path], cfg: IngestConfig, show_progress: bool = True
 ) -> dict[str, Any]:
     """:func:`dracc.ingest.inspect.inspect_logs` with a progress bar on a terminal."""
-    total = sum(p.stat().st_size for p in paths)
+    total = sum(p.stat().st_size for p in paths if p.is_file())
     with progress("inspect", total if show_progress else None) as advance:
         return log_inspection.inspect_logs(paths, cfg, advance)
 

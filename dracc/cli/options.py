@@ -20,7 +20,10 @@ import typer
 from dracc.core.errors import ConfigError, OptionError
 from dracc.core.vocabulary import ROLES
 
-_LOGS_HELP = "Log files (NMEA text, CSV or MCAP); several files of one voyage merge by time."
+_LOGS_HELP = (
+    "Log files (NMEA text, CSV or MCAP; gzip, xz, bzip2 or zstd compressed too; '-' for"
+    " standard input); several files of one voyage merge by time."
+)
 _CONFIG_HELP = "TOML configuration file (see README)."
 
 LogFiles = Annotated[list[Path], typer.Argument(help=_LOGS_HELP)]

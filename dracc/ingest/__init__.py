@@ -26,8 +26,9 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 import pandas as pd
 
-from dracc.core.errors import IngestError
+from dracc.core.errors import DraccError, IngestError
 from dracc.frames import KINDS, FileResult, Rejects, SourceInfo, TimeEvents, Voyage, empty_frame
+from dracc.ingest.compressed import STDIN, plain_copy
 from dracc.ingest.nmea import check_readable
 from dracc.ingest.sources import (
     assign_roles,
@@ -46,8 +47,6 @@ _BINARY_MAGIC = {
     b"\x89PNG": "a PNG image",
     b"PK\x03\x04": "a ZIP archive",
     b"%PDF": "a PDF document",
-    b"\x1f\x8b": "a gzip file (decompress it first)",
-    b"\x28\xb5\x2f\xfd": "a zstd file (decompress it first)",
 }
 
 __all__ = ["MCAP_MAGIC", "assign_roles", "detect_format", "read_file", "read_logs"]
@@ -135,7 +134,25 @@ def read_file(
     path: str | Path, cfg: IngestConfig, progress: Callable[[int], object] | None = None
 ) -> FileResult:
     """Read one log with the reader its format needs.  Every reader has this signature:
-    (path, config, progress told the bytes read) -> :class:`~dracc.frames.FileResult`."""
+    (path, config, progress told the bytes read) -> :class:`~dracc.frames.FileResult`.
+    A compressed log (gzip, xz, bzip2, zstd) and ``-`` (standard input) are read from a
+    plain copy (:mod:`dracc.ingest.compressed`); what they say names the log as given."""
+    given = Path(path)
+    notes: list[str] = []
+    with plain_copy(given, notes) as plain:
+        if plain is None:
+            return _read_plain(path, cfg, progress)
+        told = _scaled(progress, given, plain)
+        try:
+            result = _read_plain(plain, cfg, told)
+        except DraccError as err:  # said of the log as given, not of its temporary copy
+            raise type(err)(str(err).replace(str(plain), str(given))) from err
+        return _relabelled(result, str(plain), str(given), notes)
+
+
+def _read_plain(
+    path: str | Path, cfg: IngestConfig, progress: Callable[[int], object] | None
+) -> FileResult:
     fmt = detect_format(path)
     if fmt == "mcap":
         from dracc.ingest.mcap import read_mcap as reader
@@ -144,6 +161,36 @@ def read_file(
     else:
         from dracc.ingest.nmea import read_nmea as reader
     return reader(path, cfg, progress)
+
+
+def _scaled(
+    progress: Callable[[int], object] | None, given: Path, plain: Path
+) -> Callable[[int], object] | None:
+    """The progress of reading the plain copy, told in bytes of the log as given (its
+    compressed size; nothing for standard input, whose size nobody knew)."""
+    if progress is None or str(given) == STDIN:
+        return None
+    ratio = given.stat().st_size / max(plain.stat().st_size, 1)
+    return lambda n: progress(int(round(n * ratio)))
+
+
+def _relabelled(r: FileResult, plain: str, given: str, notes: list[str]) -> FileResult:
+    """``r`` read from the plain copy, saying ``given`` wherever it said the copy."""
+
+    def name(text: str) -> str:
+        return text.replace(plain, given)
+
+    def examples(d: dict[str, list[tuple[str, int, str]]]) -> None:
+        for key, rows in d.items():
+            d[key] = [(name(f), line, text) for f, line, text in rows]
+
+    r.path = given
+    examples(r.rejects.examples)
+    examples(r.ignored_examples)
+    r.notes = notes + [name(n) for n in r.notes]
+    r.time_events.decisions = [name(d) for d in r.time_events.decisions]
+    r.time_events.examples = [(name(f), line, text) for f, line, text in r.time_events.examples]
+    return r
 
 
 def _merge_frames(results: list[FileResult]) -> dict[str, pd.DataFrame]:

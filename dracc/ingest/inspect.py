@@ -19,6 +19,7 @@ from dracc.core.config import IngestConfig
 from dracc.core.timefmt import iso_utc
 from dracc.frames import Rejects, TimeEvents
 from dracc.ingest import detect_format, read_file
+from dracc.ingest.compressed import STDIN, needs_copy
 from dracc.ingest.nmea import StreamState, iter_nmea_blocks
 from dracc.ingest.sources import assign_roles, merge_infos, separate_files, summarize
 from dracc.ingest.timebase import EventCounter
@@ -41,7 +42,8 @@ def inspect_logs(
     all_sentences: Counter[str] = Counter()
     notes: list[str] = []
     for p in paths:
-        fmt = detect_format(p)
+        packed = needs_copy(p)  # compressed, or standard input: read from a plain copy
+        fmt = "packed" if packed else detect_format(p)
         sources: dict[str, Any] = {}
         per_file.append((str(p), sources))
         if fmt == "nmea":
@@ -54,6 +56,7 @@ def inspect_logs(
             records = None
         else:
             r = read_file(p, cfg)
+            fmt = r.format
             summarize(r.frames, r.path, into=sources)
             ec = EventCounter(gap_s=cfg.gap_s, tolerance_s=cfg.backstep_tolerance_s)
             for kind, df in r.frames.items():
@@ -81,7 +84,7 @@ def inspect_logs(
                 tev.gaps or tot["gaps"],
             )
             records = r.records
-            if advance is not None:
+            if advance is not None and str(p) != STDIN:
                 advance(p.stat().st_size)
         lines += n_lines
         rejects.merge(rej)
