@@ -44,8 +44,6 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from dracc.core.vocabulary import INS_ROLES, ROLES  # noqa: F401  (the frames speak this vocabulary)
-
 #: the heading reference: two letters as a categorical (a string column of a million
 #: rows costs more to filter, sort and concatenate than all the numbers beside it)
 REFERENCE_DTYPE = pd.CategoricalDtype(["M", "T"])

@@ -11,6 +11,12 @@ REPO = Path(__file__).resolve().parents[1]
 #: real logs recorded by others (../shared/data/real beside the repository)
 REAL = Path(os.environ.get("DRACC_REAL_DATA", REPO.parent / "shared" / "data" / "real"))
 SAMPLES = REPO / "sample_logs"
+#: `dracc simulate` rates of a sparse voyage: a night of log in a few hundred kB, for the
+#: audit, fleet and interruption tests that need many nights
+SPARSE_RATES = (
+    "--compass-hz", "0.2", "--log-hz", "0.2", "--ins-hz", "0.1",
+    "--gnss-hz", "0.2", "--aux-hz", "0", "--truth-hz", "0.01",
+)  # fmt: skip
 #: set (CI sets it) to make missing real logs a failure instead of a skip
 REQUIRE_REAL = os.environ.get("DRACC_REQUIRE_REAL_DATA", "") not in ("", "0")
 REAL_MISSING = (

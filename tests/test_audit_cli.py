@@ -10,6 +10,7 @@ import sqlite3
 import jsonschema
 import numpy as np
 import pytest
+from conftest import SPARSE_RATES
 
 import dracc.pipeline.audit.run as audit_mod  # run_audit looks its helpers up here
 from dracc.cli.main import main
@@ -43,18 +44,7 @@ def ship(tmp_path_factory):
                 f"nav-{night}",
                 "--ins-error-scale",
                 str(scale),
-                "--compass-hz",
-                "0.2",
-                "--log-hz",
-                "0.2",
-                "--ins-hz",
-                "0.1",
-                "--gnss-hz",
-                "0.2",
-                "--aux-hz",
-                "0",
-                "--truth-hz",
-                "0.01",
+                *SPARSE_RATES,
             ]
         )
         assert code == 0

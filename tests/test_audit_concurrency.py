@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import SPARSE_RATES
 
 from dracc.cli.main import main
 from dracc.pipeline.audit import TEST_SLEEP_ENV
@@ -41,18 +42,7 @@ def logs(tmp_path_factory) -> dict[str, Path]:
                     f"{night}T00:00:00Z",
                     "--name",
                     f"nav-{night}",
-                    "--compass-hz",
-                    "0.2",
-                    "--log-hz",
-                    "0.2",
-                    "--ins-hz",
-                    "0.1",
-                    "--gnss-hz",
-                    "0.2",
-                    "--aux-hz",
-                    "0",
-                    "--truth-hz",
-                    "0.01",
+                    *SPARSE_RATES,
                 ]
             )
             == 0

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from conftest import SPARSE_RATES
 
 from dracc.cli.main import main
 from dracc.core.errors import ExitCode
@@ -44,18 +45,7 @@ def fleet(tmp_path_factory) -> Path:
                         f"{night}T00:00:00Z",
                         "--name",
                         f"{vessel[:2]}-{night}",
-                        "--compass-hz",
-                        "0.2",
-                        "--log-hz",
-                        "0.2",
-                        "--ins-hz",
-                        "0.1",
-                        "--gnss-hz",
-                        "0.2",
-                        "--aux-hz",
-                        "0",
-                        "--truth-hz",
-                        "0.01",
+                        *SPARSE_RATES,
                     ]
                 )
                 == 0

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import SPARSE_RATES
 from test_fleet import CFG, fake_analyser
 
 from dracc.cli.main import main
@@ -605,18 +606,7 @@ def _hostile_mcap(tmp_path: Path) -> Path:
                 "mcap-json",
                 "--name",
                 "v",
-                "--compass-hz",
-                "0.2",
-                "--log-hz",
-                "0.2",
-                "--ins-hz",
-                "0.1",
-                "--gnss-hz",
-                "0.2",
-                "--aux-hz",
-                "0",
-                "--truth-hz",
-                "0.01",
+                *SPARSE_RATES,
             ]
         )
         == 0
@@ -697,18 +687,7 @@ def night_log(tmp_path_factory) -> Path:
                 "2026-11-20T00:00:00Z",
                 "--name",
                 "nav-2026-11-20",
-                "--compass-hz",
-                "0.2",
-                "--log-hz",
-                "0.2",
-                "--ins-hz",
-                "0.1",
-                "--gnss-hz",
-                "0.2",
-                "--aux-hz",
-                "0",
-                "--truth-hz",
-                "0.01",
+                *SPARSE_RATES,
             ]
         )
         == 0

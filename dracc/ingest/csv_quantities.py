@@ -50,7 +50,6 @@ import pandas as pd
 from dracc.core.quantities import (
     BOOLEAN_FIELDS,
     QUANTITIES,
-    REF_QUANTITIES,  # noqa: F401  TODO(issue 16): mcap imports it from here
     Quantity,
 )
 from dracc.core.units import DEG_RAD, KN_MPS, NMI_M

@@ -29,7 +29,6 @@ import numpy as np
 import pandas as pd
 
 from dracc.core.arrays import ArrayLike
-from dracc.core.quantities import BOOLEAN_FIELDS  # noqa: F401  (the boolean field names)
 
 TRUE_WORDS = frozenset(
     {"t", "true", "true north", "true_north", "truenorth", "true-north", "geographic", "gyro"}
