@@ -13,7 +13,7 @@ import tempfile
 import numpy as np
 import pytest
 import zstandard
-from conftest import SAMPLES
+from conftest import SAMPLES, real_path
 
 from dracc.core.config import IngestConfig
 from dracc.core.errors import IngestError
@@ -94,3 +94,15 @@ def test_standard_input(packed):
     doc = json.loads(run.stdout)
     assert doc["inputs"][0]["path"] == "-"
     assert doc["lines"] == data.count(b"\n")
+
+
+@pytest.mark.parametrize("rel", ["VDRplayer/Hakefjord.txt", "gpsd/bundg_zeus_9.log"])
+def test_a_real_log_compressed_gives_the_same_records(private_tmp, rel):
+    plain = real_path(*rel.split("/"))
+    packed = private_tmp / (plain.name + ".gz")
+    packed.write_bytes(gzip.compress(plain.read_bytes()))
+    cfg = IngestConfig(date="2014-08-01")
+    want, got = read_logs([plain], cfg), read_logs([packed], cfg)
+    for a, b in zip(_positions(want), _positions(got), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert got.rejects.counts == want.rejects.counts
