@@ -9,14 +9,13 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from dracc.core.arrays import IntArray
+from dracc.core.arrays import IntArray, unique_sorted
 from dracc.core.config import IntegrityConfig
 from dracc.core.timefmt import iso_utc
 from dracc.core.units import NS_PER_S
 from dracc.frames import Voyage
 from dracc.math.integrity.helpers import (
     MAX_EVIDENCE,
-    by_source,
     not_checked,
     role_of,
     statistic,
@@ -32,9 +31,12 @@ def source_times(voyage: Voyage) -> dict[str, IntArray]:
     """Each source's distinct record times over every frame, sorted."""
     parts: dict[str, list[IntArray]] = {}
     for df in voyage.frames.values():
-        for key, g in by_source(df):
-            parts.setdefault(key, []).append(g["time_ns"].to_numpy(np.int64))
-    return {k: np.unique(np.concatenate(v)) for k, v in parts.items()}
+        if df is None or len(df) == 0:
+            continue
+        # only the time column is grouped: copying every column per source cost 0.5 s a day
+        for key, times in df["time_ns"].groupby(df["source"], sort=True, observed=True):
+            parts.setdefault(str(key), []).append(times.to_numpy(np.int64))
+    return {k: unique_sorted(np.concatenate(v)) for k, v in parts.items()}
 
 
 def availability_checks(
