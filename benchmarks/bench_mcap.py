@@ -4,7 +4,9 @@ Side by side in one run, on the simulated voyage (``dracc.sim.simulate``, defaul
 written as MCAP (JSON and ROS 2 CDR, zstd chunks of 1 MiB; and raw NMEA sentences, one per
 message, for the memory table):
 
-* dracc: :func:`dracc.ingest.mcap.read_mcap` into canonical frames (whole file);
+* dracc: :func:`dracc.ingest.mcap.read_mcap` into canonical frames (whole file), and
+  :func:`dracc.ingest.inspect.inspect_logs` (``dracc inspect``: the read plus per-source
+  summaries and time events; target >= 5x the stock JSON path);
 * stock: ``mcap.reader.make_reader(f).iter_messages()`` + ``json.loads`` per message,
   and ``iter_decoded_messages()`` with the ``mcap-ros2-support`` decoder -- only
   decoding, no frames built, so the comparison favours the stock path.  The stock path is
@@ -87,6 +89,15 @@ def time_dracc(path: Path) -> tuple[float, int]:
     return time.perf_counter() - t, r.lines
 
 
+def time_inspect(path: Path) -> tuple[float, int]:
+    from dracc.core.config import IngestConfig
+    from dracc.ingest.inspect import inspect_logs
+
+    t = time.perf_counter()
+    rep = inspect_logs([path], IngestConfig())
+    return time.perf_counter() - t, rep["lines"]
+
+
 def time_stock(path: Path, enc: str, limit: int) -> tuple[float, int]:
     from mcap.reader import make_reader
 
@@ -132,25 +143,35 @@ def main() -> None:
     files = make_files(args.hours, args.workdir)
     print(
         f"\n{'encoding':8} {'messages':>9} {'dracc s':>8} {'us/msg':>7} {'stock us/msg':>12} "
-        f"{'stock s (full file)':>20} {'speed-up':>8}  load (1/5/15 min)"
+        f"{'stock s (full file)':>20} {'speed-up':>8} {'inspect s':>9} {'inspect speed-up':>16}"
+        "  load (1/5/15 min)"
     )
     for enc, p in files.items():
         if enc == "nmea":  # raw NMEA sentences: in the memory table only
             continue
         # best of --repeat, alternating, so that load from other jobs hits both sides alike
         runs = [
-            (time_dracc(p), time_stock(p, enc, args.stock_limit or -1)) for _ in range(args.repeat)
+            (time_dracc(p), time_stock(p, enc, args.stock_limit or -1), time_inspect(p))
+            for _ in range(args.repeat)
         ]
         td, n = min(r[0] for r in runs)
         ts, ns = min(r[1] for r in runs)
+        ti, ni = min(r[2] for r in runs)
+        assert ni == n, (ni, n)
         per_d, per_s = td / n * 1e6, ts / ns * 1e6
         full = per_s * n / 1e6
         note = "" if ns == n else f" (extrapolated from {ns})"
         load = "/".join(f"{x:.2f}" for x in os.getloadavg())
         print(
-            f"{enc:8} {n:9d} {td:8.2f} {per_d:7.2f} {per_s:12.2f} {full:12.1f}{note} {per_s / per_d:7.1f}x  {load}",
+            f"{enc:8} {n:9d} {td:8.2f} {per_d:7.2f} {per_s:12.2f} {full:12.1f}{note} "
+            f"{per_s / per_d:7.1f}x {ti:9.2f} {full / ti:15.1f}x  {load}",
             flush=True,
         )
+        if enc == "json":
+            print(
+                f"json: dracc inspect / stock reader + json.loads: {full / ti:.1f}x (target >= 5x)",
+                flush=True,
+            )
     print(
         "\nmemory: fresh subprocess per file; working = peak RSS - RSS after imports - frames' own arrays"
     )

@@ -9,7 +9,9 @@ DataFrame sorted by ``time_ns`` with these columns (and no others needed downstr
 ``heading``   (HDT, THS, HDG, HDM)
     time_ns, source, heading_rad, reference ('T' true, 'M' magnetic: a categorical
     of these two, NaN where unknown),
-    deviation_rad, variation_rad (east positive; NaN where absent)
+    deviation_rad, variation_rad (east positive; NaN where absent),
+    heading_quality (float: the unit's own heading quality where it says one -- 0 normal,
+    1 reduced, 2 invalid, as Kongsberg ``$PSXN,20`` -- NaN where it says none)
 ``ground``    (VTG, RMC: course and speed over ground)
     time_ns, source, cog_rad, sog_mps
 ``water``     (VHW, VBW: the speed log)
@@ -72,6 +74,7 @@ KIND_COLUMNS: dict[str, dict[str, str]] = {
         "reference": REFERENCE_DTYPE,
         "deviation_rad": "float64",
         "variation_rad": "float64",
+        "heading_quality": "float64",
     },
     "ground": {"cog_rad": "float64", "sog_mps": "float64"},
     "water": {
@@ -195,6 +198,8 @@ class TimeEvents:
     gaps: int = 0  #: gaps longer than the configured threshold
     rollovers: int = 0  #: midnight rollovers resolved from time-of-day fields
     implausible_dates: int = 0  #: e.g. GPS week rollover (date ~19.6 years early)
+    #: the date a log with no date at all was placed on (YYYY-MM-DD), None if none was
+    assumed_date: str | None = None
     decisions: list[str] = field(default_factory=list)  #: human-readable notes
     #: (file, line, what) for the first few of each event
     examples: list[tuple[str, int, str]] = field(default_factory=list)

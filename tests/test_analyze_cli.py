@@ -200,11 +200,16 @@ def test_real_logs_estimated_position_neither_misses_nor_is_absurdly_large(
 
 def test_plaka_no_heading_is_said_plainly(run_cli, real_dir, validator):
     path = real_dir / "signalk-server" / "plaka.log"
-    code, _, err = run_cli("analyze", path)
-    assert code == ExitCode.INPUT and "--date" in err and len(err.strip().splitlines()) == 1
+    code, out, err = run_cli("analyze", path, "--json", "-")  # no date: the assumed one
+    assert code == ExitCode.OK, err
+    doc = _json(out, validator)
+    assert doc["time_events"]["assumed_date"] == "2000-01-01"
+    assert doc["period"]["start_utc"].startswith("2000-01-01")
+    assert any("assumed date" in d for d in doc["time_events"]["decisions"])
     code, out, err = run_cli("analyze", path, "--date", "2019-06-01", "--json", "-")
     assert code == ExitCode.OK, err
     doc = _json(out, validator)
+    assert doc["time_events"]["assumed_date"] is None
     assert doc["dead_reckoning"] is None
     assert any(m.startswith("no heading") for m in doc["missing"])
 
@@ -285,3 +290,19 @@ def test_interrupt_while_drawing_the_html_leaves_the_previous_reports(
     assert code == ExitCode.INTERRUPTED and "interrupted" in err
     assert {p: p.read_bytes() for p in [js, page, *tables.iterdir()]} == before
     assert not list(tmp_path.rglob("*.part"))
+
+
+def test_nmea2000_ship_log_gives_dead_reckoning_and_its_consistency(run_cli, real_dir, validator):
+    """signalk-server/aava-n2k.data (issue 17): a ship under way on NMEA 2000 -- heading
+    (PGN127250) and fixes from one navigation system, STW (PGN128259) from the log."""
+    code, out, err = run_cli(
+        "analyze", real_dir / "signalk-server" / "aava-n2k.data", "--json", "-"
+    )
+    assert code == ExitCode.OK, err
+    doc = _json(out, validator)
+    dr = doc["dead_reckoning"]
+    assert dr is not None and dr["n_scored"] >= 40 and dr["consistent"]
+    assert dr["containment_2m"] >= 0.85 and not dr["verdict"].startswith("inconsistent")
+    assert doc["sources"]["log"]["keys"] == ["n2k:addr115"]
+    assert doc["sources"]["gnss"]["keys"] == ["n2k:addr160"]
+    assert any("PGN129025" in n for n in doc["notes"])

@@ -17,6 +17,8 @@ HAS_DASK = importlib.util.find_spec("distributed") is not None
 
 #: (command and arguments, the words the error names); LOG, DIR, DB and OUT are filled in
 BAD = [
+    # records
+    (["records", "LOG", "--out", "OUT/x.xlsx"], ["--out", ".parquet", ".csv"]),
     # analyze
     (["analyze", "LOG", "--date", "1/3/2026"], ["--date", "YYYY-MM-DD"]),
     (["analyze", "LOG", "--date", "2023-02-30"], ["--date", "YYYY-MM-DD"]),

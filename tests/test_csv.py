@@ -278,13 +278,23 @@ def test_raw_logger_csv_goes_through_the_nmea_parser(tmp_path, real_dir):
         rows.append(
             f'2020-04-20T09:25:{42 + i // 4:02d}.{(i % 4) * 25:02d}Z,NMEA0183,{s[3:6]},GNSS,"{s}"'
         )
-    rows.append('2020-04-20T09:25:59Z,NMEA2000,129025,N2K,"0x1234"')
+    # an NMEA 2000 row as OpenCPN's data logger writes it: the Actisense BST 0x93 bytes
+    # (prio, PGN LE, dst, src, timer, length, data) of a real 127250 (canboat/scx20.raw
+    # line 5), and a row that is no such message
+    heading = bytes.fromhex("ff4a3bff7f7af8fc")
+    bst = bytes([0x93, 13 + 8, 2, 0x12, 0xF1, 0x01, 255, 1, 0, 0, 0, 0, 8]) + heading
+    rows.append(f'2020-04-20T09:25:59Z,NMEA2000,127250,N2K,"{bst.hex(" ")} 00"')
+    rows.append('2020-04-20T09:25:59.5Z,NMEA2000,129025,N2K,"0x1234"')
     p.write_text("\n".join(rows) + "\n")
     r = read_csv(p, IngestConfig())
     assert r.format == "csv-raw"
-    # a row of a protocol dracc does not decode is valid input: ignored, not rejected
-    assert r.rejects.total == 0 and r.ignored == {"NMEA 2000": 1}
-    assert r.ignored_examples["NMEA 2000"] == [(str(p), 22, "0x1234")]
+    assert r.rejects.counts == {"bst_message": 1} and "NMEA 2000" not in r.ignored
+    hd = r.frames["heading"]
+    assert hd["sentence"].astype(str).tolist() == ["PGN127250"] and hd["line"].tolist() == [22]
+    # canboat's analyzer on that line: "Heading": 87.0 (printed to 0.1 deg), "Reference": "True"
+    assert math.degrees(hd["heading_rad"].iloc[0]) == pytest.approx(87.0, abs=0.05)
+    assert hd["reference"].iloc[0] == "T"
+    assert hd["time_ns"].iloc[0] == pd.Timestamp("2020-04-20T09:25:59Z").value
     pos = r.frames["position"]
     assert len(pos) == 20  # 10 RMC + 10 GGA
     assert set(pos["source"].astype(str)) == {"GNSS"}

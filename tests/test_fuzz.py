@@ -38,6 +38,7 @@ from dracc.core.config import IngestConfig
 from dracc.frames import KIND_COLUMNS
 from dracc.ingest.nmea import REASONS, parse_buffer, read_nmea
 from dracc.ingest.tagblock import parse_numbers
+from dracc.ingest.timebase import ASSUMED_DATE_NOTE
 
 REPO = Path(__file__).resolve().parents[1]
 SAMPLES = REPO / "sample_logs"
@@ -369,7 +370,10 @@ def check_mutated(
     silent = [
         i + 1
         for i, ln in enumerate(mlines)
-        if ln.strip(b"\r \t") and (i + 1) not in with_record and b"ZDA," not in ln
+        if ln.strip(b"\r \t")
+        and (i + 1) not in with_record
+        and b"ZDA," not in ln  # a time only
+        and b"PSXN,20," not in ln  # a quality only, of the PSXN,23 that follows
     ]
     # a line gives a record, or is rejected (damaged), or is ignored (valid, unused: GSV, AIS,
     # a comment ...); blank lines are ignored too but are not among the silent ones
@@ -380,9 +384,12 @@ def check_mutated(
             f"{counted} rejected or ignored lines were counted (e.g. line {silent[0]})"
         )
     # differential: untouched lines give the same records
-    lost_date = res.rejects.counts.get("no_date", 0) > clean_recs.get(NO_DATE, 0)
+    # the log's only date on a mutated line: its times of day go on the assumed date
+    lost_date = res.rejects.counts.get("no_date", 0) > clean_recs.get(NO_DATE, 0) or (
+        ASSUMED_DATE_NOTE in res.time_events.decisions and not clean_recs[ASSUMED]
+    )
     for kind, d in clean_recs.items():
-        if kind == NO_DATE:
+        if kind in (NO_DATE, ASSUMED):
             continue
         g = got.get(kind, {})
         for ln, rec in d.items():
@@ -392,8 +399,9 @@ def check_mutated(
             have = g.get(j + 1)
             if have is None and lost_date and not timed:
                 continue  # the log's only date was on a mutated line: counted as no_date
-            want = rec if timed else rec[2:]
-            have = have if (have is None or timed) else have[2:]
+            exact = timed and not lost_date
+            want = rec if exact else rec[2:]
+            have = have if (have is None or exact) else have[2:]
             if have != want:
                 raise InvariantError(
                     f"{kind}: clean line {ln} (mutated line {j + 1}) gave {want}, now {have}"
@@ -403,13 +411,18 @@ def check_mutated(
 
 
 NO_DATE = "_no_date"  #: key of the clean log's no_date reject count beside its records
+ASSUMED = "_assumed"  #: key of: the clean log was read on the assumed date
 
 
 def clean_records(lines: list[bytes], tmp: Path, cfg: IngestConfig):
     p = tmp / "clean.nmea"
     p.write_bytes(b"\r\n".join(lines) + b"\r\n")
     res = read_nmea(p, cfg, workers=1)
-    return {**records_by_line(res.frames), NO_DATE: res.rejects.counts.get("no_date", 0)}
+    return {
+        **records_by_line(res.frames),
+        NO_DATE: res.rejects.counts.get("no_date", 0),
+        ASSUMED: ASSUMED_DATE_NOTE in res.time_events.decisions,
+    }
 
 
 def fuzz_round(
@@ -667,9 +680,12 @@ def test_regression_one_damaged_prefix_moves_other_records_to_the_logger_time(tm
     p.write_bytes(good + b"\r\n" + bad + b"\r\n")
     res = read_nmea(p, IngestConfig(), workers=1)
     pos = res.frames["position"]
-    assert pos["line"].tolist() == [1]
-    assert pos["time_ns"].tolist() == [1406851257_690_000_000]  # 00:00:57.69, the time of fix
-    assert res.rejects.counts["no_date"] == 1  # the line without a readable prefix: no date
+    assert pos["line"].tolist() == [1, 2]
+    # 00:00:57.69, the time of fix; the line without a readable prefix: its time of fix
+    # on the day of the log's first receive time, said so
+    assert pos["time_ns"].tolist() == [1406851257_690_000_000, 1406851268_690_000_000]
+    assert res.rejects.total == 0
+    assert any("day of its first receive time" in d for d in res.time_events.decisions)
 
 
 def test_regression_garbled_prefix_time_far_in_the_future(tmp_path):

@@ -718,7 +718,12 @@ def test_valid_unused_lines_are_ignored_by_type_and_never_fail_strict(tmp_path):
         nmea("PGRME,15.0,M,45.0,M,25.0,M"),
         nmea("PSRFTXT,Version 2.2"),  # a long proprietary address: its first 5 characters
         "!AIVDM,1,1,,B,13u=gHP3CWPlvs2Q8sHW:5fD0h6a,0*1B",
-        "!AIVDO,1,1,,,B3uBrjP0=0=Kjm8BoS`AcwUUwP06,0*75",  # VDRplayer/Hakefjord.txt
+        # own-ship static data (type 5, two sentences; pyais/ tests' VDM as VDO): not read
+        "!"
+        + (a := "AIVDO,2,1,1,A,55?MbV02;H;s<HtKR20EHE:0@T4@Dn2222222216L961O5Gf0NSQEp6ClRp8,0")
+        + "*"
+        + cs(a),
+        "!" + (b := "AIVDO,2,2,1,A,88888888880,2") + "*" + cs(b),
         "",
         nmea("HEHDT,10.0,T"),
     ]
@@ -734,7 +739,7 @@ def test_valid_unused_lines_are_ignored_by_type_and_never_fail_strict(tmp_path):
         "PGRME": 1,
         "PSRFT": 1,
         "VDM": 1,
-        "VDO": 1,
+        "VDO": 2,
         "blank": 1,
     }
     assert [e[1] for e in r.ignored_examples["GSV"]] == [3, 4]
@@ -775,9 +780,22 @@ def test_ignored_counts_are_the_same_from_every_engine_and_block_size(tmp_path, 
             assert [e[1] for e in st_.ignored_examples["GSV"]] == [2, 8, 14], (engine, kw)
 
 
-def test_an_rmc_without_a_date_is_one_no_date_line(tmp_path):
-    """An RMC gives a position and a ground record; without any date it is one line
-    rejected as no_date, not two."""
+def test_an_rmc_without_any_time_is_one_no_date_line(tmp_path):
+    """An RMC gives a position and a ground record; with no time anywhere in the log (no
+    time of fix, no receive time) it is one line rejected as no_date, not two."""
+    r = read_text(
+        tmp_path,
+        nmea("GPRMC,,A,5436.0,N,01847.0,E,5.0,90.0,,,,A")
+        + "\n"
+        + nmea("GPGGA,,5436.0,N,01847.0,E,1,10,0.8,25.0,M,,M,,")
+        + "\n",
+    )
+    assert r.rejects.counts == {"no_date": 2} and r.records == 0
+    assert [e[1] for e in r.rejects.examples["no_date"]] == [1, 2]
+
+
+def test_an_rmc_without_a_date_is_read_on_the_assumed_date(tmp_path):
+    """Times of day but no date anywhere: both lines read, on the assumed date."""
     r = read_text(
         tmp_path,
         nmea("GPRMC,221320.00,A,5436.0,N,01847.0,E,5.0,90.0,,,,A")
@@ -785,8 +803,11 @@ def test_an_rmc_without_a_date_is_one_no_date_line(tmp_path):
         + nmea("GPGGA,221321.00,5436.0,N,01847.0,E,1,10,0.8,25.0,M,,M,,")
         + "\n",
     )
-    assert r.rejects.counts == {"no_date": 2} and r.records == 0
-    assert [e[1] for e in r.rejects.examples["no_date"]] == [1, 2]
+    assert r.rejects.total == 0 and r.records == 3  # RMC: position and ground; GGA
+    day0 = 946_684_800 * 10**9  # 2000-01-01T00:00:00Z
+    t = r.frames["position"]["time_ns"].tolist()
+    assert t == [day0 + 80_000 * 10**9, day0 + 80_001 * 10**9]
+    assert r.time_events.assumed_date == "2000-01-01"
 
 
 def test_recv_ns_stays_with_its_rows_when_files_merge(tmp_path):

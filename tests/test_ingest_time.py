@@ -6,12 +6,16 @@ from __future__ import annotations
 import datetime as dt
 
 import numpy as np
+import pytest
+from conftest import real_path
 from hypothesis import given
 from hypothesis import strategies as st
 
 from dracc.core.config import IngestConfig
 from dracc.ingest.nmea import read_nmea
 from dracc.ingest.timebase import (
+    ASSUMED_DATE,
+    ASSUMED_DATE_NOTE,
     EventCounter,
     days_from_civil,
     fix_dates,
@@ -82,13 +86,18 @@ def gga(hhmmss: str) -> str:
     return nmea(f"GPGGA,{hhmmss},5436.0,N,01847.0,E,1,08,1.0,5.0,M,,M,,")
 
 
-def test_midnight_without_date_needs_date_option(tmp_path):
+def test_midnight_without_date_on_the_assumed_date_or_the_date_option(tmp_path):
     p = _write(tmp_path, [gga("235958"), gga("235959"), gga("000000"), gga("000001")])
     r = read_nmea(p, IngestConfig())
-    assert (
-        len(r.frames["position"]) == 0 and r.rejects.counts["no_date"] == 4
-    )  # counted, not dropped silently
-    assert any("--date" in d for d in r.time_events.decisions)
+    # no date anywhere: read on the assumed date, with a plain warning, nothing rejected
+    assert r.rejects.total == 0 and len(r.frames["position"]) == 4
+    assert r.frames["position"]["time_ns"].tolist() == [
+        ns(f"{ASSUMED_DATE}T23:59:58Z"),
+        ns(f"{ASSUMED_DATE}T23:59:59Z"),
+        ns("2000-01-02T00:00:00Z"),
+        ns("2000-01-02T00:00:01Z"),
+    ]
+    assert ASSUMED_DATE_NOTE in r.time_events.decisions and "--date" in ASSUMED_DATE_NOTE
     r = read_nmea(p, IngestConfig(date="2019-03-09"))
     t = r.frames["position"]["time_ns"].tolist()
     assert t == [
@@ -98,6 +107,32 @@ def test_midnight_without_date_needs_date_option(tmp_path):
         ns("2019-03-10T00:00:01Z"),
     ]
     assert r.time_events.rollovers == 1
+    assert ASSUMED_DATE_NOTE not in r.time_events.decisions
+
+
+@pytest.mark.parametrize(
+    ("parts", "records"),
+    [
+        (("gpsd", "sounder.log"), 122),
+        (("gpsbabel", "adddate.nmea"), 500),
+        (("signalk-server", "plaka.log"), 43500),
+    ],
+)
+def test_real_dateless_logs_read_on_the_assumed_date(parts, records):
+    """The dateless logs of issue 17: each read whole without --date, on the assumed
+    date, and told so; the durations are the log's own."""
+    r = read_nmea(real_path(*parts), IngestConfig())
+    assert r.rejects.counts.get("no_date", 0) == 0
+    assert ASSUMED_DATE_NOTE in r.time_events.decisions
+    t = np.concatenate([f["time_ns"].to_numpy() for f in r.frames.values() if len(f)])
+    day0 = ns(f"{ASSUMED_DATE}T00:00:00Z")
+    assert day0 <= t.min() and t.max() < day0 + 2 * 86_400 * 10**9
+    assert r.records >= records
+    dated = read_nmea(real_path(*parts), IngestConfig(date="2021-06-01"))
+    td = np.concatenate([f["time_ns"].to_numpy() for f in dated.frames.values() if len(f)])
+    assert len(td) == len(t) and np.array_equal(
+        np.sort(td) - np.sort(t), np.full(len(t), td.min() - t.min())
+    )
 
 
 def test_date_back_filled_from_trailing_zda(tmp_path):

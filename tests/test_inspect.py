@@ -1,10 +1,27 @@
-"""``dracc inspect``: help, JSON keys, table, options, exit codes."""
+"""``dracc inspect``: help, JSON keys, table, options, exit codes; every sentence type
+read (time-only ZDA included, per source) and the account of every line, against counts
+made here by hand (a checksum check of each sentence written for the test) and gpsd's
+``.chk`` expectations on real logs."""
 
 from __future__ import annotations
 
 import json
+import re
+from collections import Counter
+from pathlib import Path
+
+import pytest
 
 from dracc.core.errors import ExitCode
+from dracc.ingest.timebase import ASSUMED_DATE
+
+#: the sentence types dracc reads (docs/ingest.md); every other valid one is ignored
+READ_TYPES = {
+    "HDT", "HDM", "HDG", "THS", "ROT", "VHW", "VBW", "VLW",
+    "GGA", "GLL", "RMC", "GNS", "VTG", "ZDA",
+}  # fmt: skip
+_START = re.compile(r"[$!](?=[^$!])")
+_WHOLE = re.compile(r"[$!]([A-Z0-9]{2})([A-Z]{3}),[^*]*\*([0-9A-F]{2})\s*")
 
 
 def nmea(body: str) -> str:
@@ -122,8 +139,10 @@ def test_strict_and_missing_and_bad_date(run_cli, tmp_path):
 
 def test_date_option_places_a_dateless_log(run_cli, tmp_path, real_dir):
     code, out, _ = run_cli("inspect", real_dir / "gpsbabel" / "adddate.nmea", "--json", "-")
-    rep = json.loads(out)
-    assert code == 0 and rep["sources"] == {} and rep["rejected"] == {"no_date": 500}
+    rep = json.loads(out)  # no date anywhere: placed on the assumed date, and said so
+    assert code == 0 and rep["rejected"] == {}
+    assert rep["sources"]["GP"]["first_utc"] == f"{ASSUMED_DATE}T23:56:00Z"
+    assert any(ASSUMED_DATE in d for d in rep["time"]["decisions"])
     code, out, _ = run_cli(
         "inspect", real_dir / "gpsbabel" / "adddate.nmea", "--json", "-", "--date", "2019-03-09"
     )
@@ -140,3 +159,194 @@ def test_ignore_checksum(run_cli, real_dir):
     rep = json.loads(out)
     assert code == 0 and rep["sources"]["II"]["role"] == "compass+log"
     assert any("wrong checksums accepted" in n for n in rep["notes"])
+
+
+def _hand_count(path: Path) -> tuple[int, Counter[str], Counter[str], int, int]:
+    """(lines, whole sentences with a right checksum by type, the others by reason
+    'truncated' / 'checksum', sentences after the first on their line, comment lines),
+    counted line by line with a checksum check written here."""
+    text = path.read_bytes().decode("ascii", "replace")
+    lines = re.split(r"\r\n|\r\r\n|\n|\r", text)
+    if lines and lines[-1] == "":
+        lines.pop()
+    good: Counter[str] = Counter()
+    bad: Counter[str] = Counter()
+    shared = comments = 0
+    for ln in lines:
+        if ln.startswith("#"):
+            comments += 1
+            continue
+        starts = [m.start() for m in _START.finditer(ln)]
+        shared += max(len(starts) - 1, 0)
+        for a, b in zip(starts, [*starts[1:], len(ln)], strict=True):
+            seg = ln[a:b]
+            m = _WHOLE.fullmatch(seg)
+            if not m:
+                bad["truncated"] += 1
+                continue
+            x = 0
+            for ch in seg[1 : seg.index("*")].encode():
+                x ^= ch
+            if x != int(m.group(3), 16):
+                bad["checksum"] += 1
+                continue
+            good[m.group(2)] += 1
+    return len(lines), good, bad, shared, comments
+
+
+def _adds_up(acc: dict[str, int]) -> bool:
+    return acc["lines"] == (
+        acc["sentences"]
+        + acc["time_only"]
+        + acc["qualifiers"]
+        + acc["ignored"]
+        + acc["rejected"]
+        - acc["shared"]
+    )
+
+
+def _inspect(run_cli, path: Path) -> dict:
+    code, out, err = run_cli("inspect", path, "--json", "-")
+    assert code == 0, err
+    return json.loads(out)
+
+
+def test_every_sentence_type_counted_as_gpsd_expects(run_cli, real_dir):
+    """B&G Zeus log: gpsd's .chk echoes every sentence it took; dracc lists each type it
+    read with the same count (ZDA included, in the GPS source), the others as ignored, and
+    the lines add up with nothing rejected."""
+    log = real_dir / "gpsd" / "bundg_zeus_9.log"
+    chk: Counter[str] = Counter()
+    talker: Counter[str] = Counter()
+    for line in (
+        (real_dir / "gpsd" / "bundg_zeus_9.log.chk").read_text(errors="replace").splitlines()
+    ):
+        m = re.match(r"[$!]([A-Z0-9]{2})([A-Z]{3}),", line)
+        if m:
+            chk[m.group(2)] += 1
+            talker[m.group(1) + m.group(2)] += 1
+    rep = _inspect(run_cli, log)
+    assert rep["sentences"] == {t: n for t, n in sorted(chk.items()) if t in READ_TYPES}
+    comments = sum(1 for ln in log.read_text(errors="replace").splitlines() if ln.startswith("#"))
+    assert rep["ignored"] == dict(
+        sorted(
+            {**{t: n for t, n in chk.items() if t not in READ_TYPES}, "comment": comments}.items()
+        )
+    )
+    assert rep["sentences"]["ZDA"] == 154 == talker["GPZDA"]
+    assert rep["sources"]["GP"]["sentences"]["ZDA"] == talker["GPZDA"]
+    acc = rep["inputs"][0]["accounting"]
+    n_lines = len(log.read_bytes().splitlines())
+    assert acc == rep["accounting"]
+    assert acc["lines"] == n_lines and acc["time_only"] == 154 and acc["rejected"] == 0
+    assert acc["shared"] == 0 and _adds_up(acc)
+    assert rep["inputs"][0]["time_only"] == {"ZDA": 154}
+
+
+def test_every_line_accounted_for_with_shared_lines(run_cli, real_dir):
+    """GoFree log at the dock: 994 VLW sentences cut short and followed by another on the
+    same line, 142 wrong checksums.  Every whole sentence is listed by type (ZDA included),
+    read or ignored; the cut ones and wrong checksums are rejected; the lines add up."""
+    log = real_dir / "signalk-server" / "gofree-merrimac.log"
+    n_lines, good, bad, shared, comments = _hand_count(log)
+    assert (good["ZDA"], shared, comments) == (142, 994, 0)  # what the hand count found
+    rep = _inspect(run_cli, log)
+    assert rep["sentences"] == {t: n for t, n in sorted(good.items()) if t in READ_TYPES}
+    assert rep["ignored"] == {t: n for t, n in sorted(good.items()) if t not in READ_TYPES}
+    assert rep["rejected"] == dict(sorted(bad.items()))
+    acc = rep["accounting"]
+    assert acc == {
+        "lines": n_lines,
+        "sentences": sum(good[t] for t in READ_TYPES) - good["ZDA"],
+        "time_only": good["ZDA"],
+        "qualifiers": 0,
+        "ignored": sum(good[t] for t in good if t not in READ_TYPES),
+        "rejected": sum(bad.values()),
+        "shared": shared,
+    }
+    assert _adds_up(acc)
+    gp = rep["sources"]["GP"]
+    assert gp["sentences"]["ZDA"] == 142 and gp["records"] == 142 * 5  # GGA GLL RMC(2) VTG
+
+
+def test_time_only_sentences_per_tag_source(run_cli, tmp_path):
+    """ZDA is listed in the source that sent it (TAG s:), also one that sends nothing
+    else; it gives no record; RMC is one sentence though it gives two records."""
+    lines = []
+    for k in range(30):
+        t = 1_700_000_000 + k
+        hh, mm, ss = (t // 3600) % 24, (t // 60) % 60, t % 60
+        hms = f"{hh:02d}{mm:02d}{ss:02d}.00"
+        lines.append(
+            tag(f"s:GNSS,c:{t}", nmea(f"GPRMC,{hms},A,5436.0,N,01847.0,E,12.0,60.0,141123,,,A"))
+        )
+        lines.append(tag(f"s:GNSS,c:{t}", nmea(f"GPZDA,{hms},14,11,2023,00,00")))
+        lines.append(tag(f"s:CLOCK,c:{t}", nmea(f"ZCZDA,{hms},14,11,2023,00,00")))
+    lines += ["", nmea("GPGSV,1,1,00")]
+    p = tmp_path / "zda.nmea"
+    p.write_text("\n".join(lines) + "\n")
+    rep = _inspect(run_cli, p)
+    s = rep["sources"]
+    assert s["GNSS"]["sentences"] == {"RMC": 30, "ZDA": 30} and s["GNSS"]["records"] == 60
+    assert s["GNSS"]["talkers"] == {"GP": 60}
+    assert s["CLOCK"]["sentences"] == {"ZDA": 30} and s["CLOCK"]["records"] == 0
+    assert s["CLOCK"]["role"] is None and s["CLOCK"]["first_utc"] is None
+    assert rep["sentences"] == {"RMC": 30, "ZDA": 60}
+    assert rep["ignored"] == {"GSV": 1, "blank": 1}
+    assert rep["accounting"] == {
+        "lines": 92,
+        "sentences": 30,
+        "time_only": 60,
+        "qualifiers": 0,
+        "ignored": 2,
+        "rejected": 0,
+        "shared": 0,
+    }
+    code, out, _ = run_cli("inspect", p)
+    assert code == 0 and "92 lines = 30 sentences with records + 60 time-only (ZDA)" in out
+    assert "sentences read: RMC:30 ZDA:60" in out and "ignored (valid, not used): GSV:1" in out
+
+
+@pytest.mark.parametrize("name", ["voyage_tag.nmea", "voyage_long.csv"])
+def test_sample_logs(run_cli, name):
+    """The 3 h sample: its ZDA sentences counted as a grep counts them; a CSV log (rows are
+    not records one to one) has no line account."""
+    p = Path(__file__).resolve().parents[1] / "sample_logs" / name
+    rep = _inspect(run_cli, p)
+    if name.endswith(".csv"):
+        assert rep["inputs"][0]["accounting"] is None and rep["accounting"] is None
+        assert rep["sources"]
+        return
+    zda = sum(1 for ln in p.read_text().splitlines() if re.search(r"\$..ZDA,", ln))
+    assert zda > 0 and rep["sentences"]["ZDA"] == zda == rep["accounting"]["time_only"]
+    assert _adds_up(rep["accounting"]) and rep["accounting"]["shared"] == 0
+
+
+def test_compressed_log_is_streamed_and_counted_alike(run_cli, real_dir, tmp_path):
+    """A gzip copy of the GoFree log: the same sentences (ZDA included), ignored types,
+    rejects and line account as the plain file; its examples name the .gz."""
+    import gzip
+
+    log = real_dir / "signalk-server" / "gofree-merrimac.log"
+    gz = tmp_path / "gofree.log.gz"
+    gz.write_bytes(gzip.compress(log.read_bytes()))
+    plain, packed = _inspect(run_cli, log), _inspect(run_cli, gz)
+    for k in ("sentences", "ignored", "rejected", "accounting"):
+        assert packed[k] == plain[k], k
+    assert packed["inputs"][0]["time_only"] == {"ZDA": 142}
+    assert {e["file"] for ex in packed["rejected_examples"].values() for e in ex} == {str(gz)}
+    assert packed["sources"]["GP"]["files"] == [str(gz)]
+
+
+def test_qualifying_sentences_are_accounted_for(run_cli, real_dir):
+    """Seapath log (timestamp-prefixed): ``$PSXN,20`` only qualifies the attitude that
+    follows it; counted as a qualifier, not lost, so the 5000 lines add up."""
+    log = real_dir / "openrvdas" / "NBP1406_seap-2014-08-01"
+    text = log.read_text(errors="replace").splitlines()
+    n20 = sum("$PSXN,20," in ln for ln in text)
+    zda = sum("$GPZDA," in ln for ln in text)
+    rep = _inspect(run_cli, log)
+    acc = rep["accounting"]
+    assert (acc["lines"], acc["qualifiers"], acc["time_only"]) == (len(text), n20, zda)
+    assert n20 > 0 and acc["shared"] == 0 and _adds_up(acc)
+    assert rep["inputs"][0]["qualifiers"] == {"PSXN": n20}

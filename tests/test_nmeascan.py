@@ -47,6 +47,7 @@ FIELDS = (
     "ignored",
     "ignored_examples",
     "n_seg",
+    "aux",
 )
 MAX_BYTES = 1_500_000  #: the first bytes of each real log (the test stays fast)
 
@@ -345,6 +346,21 @@ EDGE = [
     b"\\" * 70000 + GOOD,
     b"\x00" * 70000 + b"$$" + GOOD[1:],
     b"\x00" * 70000 + b"\\" + GOOD,
+    # INS and own-ship AIS sentences: the kernel hands their lines to the numpy path
+    _sentence(b"PASHR,163029.000,158.09,T,-0.30,+0.31,+0.01,0.029,0.029,0.059,1,1"),
+    _sentence(b"PASHR,163029.000,158.09,T,-0.30,+0.31,+0.01"),
+    _sentence(b"PASHR,ATT,88536.0000,345.9640,0.0390,-0.9052,0.0024,0.0144,0"),
+    _sentence(b"PASHR,163029.000,158.09,M,-0.30,+0.31,+0.01"),
+    _sentence(b"PSXN,20,1,0,2,0") + b"\n" + _sentence(b"PSXN,23,1.28,1.93,104.68,-0.24"),
+    _sentence(b"PSXN,23,1.28,1.93,104.68,-0.24") + b"\n" + _sentence(b"PSXN,22,0.1,0.2"),
+    _sentence(b"PSXN,20,1,0,7,0") + GOOD,
+    _tag(b"s:SP1") + _sentence(b"PSXN,20,0,0,1,0") + b"\n" + _sentence(b"PSXN,23,1,2,3,4"),
+    b"!AIVDO,1,1,,,B3`hBQh0086=Ui7VpAsQ3wsUoP06,0*41",
+    b"!AIVDO,1,1,,,B3`hBQh0086=Ui7VpAsQ3wsUoP06,0*41" + GOOD,
+    b"!" + _sentence(b"AIVDO,1,1,,,B3`hBQh0086=Ui7VpAsQ3wsUoP0,0")[1:],  # too short
+    b"!"
+    + _sentence(b"AIVDO,2,1,1,A,55?MbV02;H;s<HtKR20EHE:0@T4@Dn2222222216L961O5Gf0NSQEp6,0")[1:],
+    _tag(b"s:AIS,c:1700000000") + b"!AIVDO,1,1,,,B3uBrjP0=0=Kjm8BoS`AcwUUwP06,0*75",
 ]
 
 

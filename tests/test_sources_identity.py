@@ -56,7 +56,7 @@ def test_file_ids_strip_what_the_names_share():
 def test_real_two_receivers_of_one_ship_are_two_sources(real_dir):
     """Palmer's Seapath and its second GPS both talk GP; 45 m apart, overlapping in time."""
     v = read_logs([real_dir / SEAP, real_dir / GP02], IngestConfig())
-    assert set(v.sources) == {"seap:GP", "gp02:GP"}
+    assert set(v.sources) == {"seap:GP", "gp02:GP", "PSXN"}  # PSXN: the Seapath's $PSXN,23
     pos = v.frames["position"]
     assert Counter(pos["source"].astype(str)) == {"gp02:GP": 1667, "seap:GP": 715}
     assert v.sources["seap:GP"].files == {str(real_dir / SEAP)}
@@ -73,7 +73,7 @@ def test_real_two_receivers_of_one_ship_are_two_sources(real_dir):
 
 def test_single_file_keys_do_not_change(real_dir):
     v = read_logs([real_dir / SEAP], IngestConfig())
-    assert set(v.sources) == {"GP"}
+    assert set(v.sources) == {"GP", "PSXN"}
 
 
 def test_consecutive_files_of_one_recorder_are_one_source_and_say_so(tmp_path):

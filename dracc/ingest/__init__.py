@@ -1,9 +1,11 @@
-"""Ingest: logs (NMEA 0183 text, CSV, MCAP) -> canonical frames with sources and roles.
+"""Ingest: logs (NMEA 0183 text, NMEA 2000, Signal K, gpsd JSON, CSV, MCAP) -> canonical
+frames with sources and roles.
 
 Public API::
 
     read_logs(paths, cfg, progress=None) -> Voyage
-    detect_format(path) -> "nmea" | "csv" | "mcap"
+    detect_format(path) -> "nmea" | "n2k" | "signalk" | "signalk-delta" | "gpsd-json"
+                           | "csv" | "mcap"
     read_file(path, cfg, progress=None) -> FileResult
     nmea.read_nmea(path, cfg) -> FileResult
     nmea.parse_sentences(lines, time_ns, source, file, cfg) -> FileResult
@@ -97,7 +99,8 @@ def _damaged_container(head: bytes, tail: bytes) -> str | None:
 
 
 def detect_format(path: str | Path) -> str:
-    """'mcap', 'csv' or 'nmea' from the first bytes; IngestError for known non-logs and for
+    """'mcap', 'gpsd-json', 'signalk-delta', 'signalk', 'n2k', 'csv' or 'nmea' from the
+    first bytes; IngestError for known non-logs and for
     an MCAP file damaged in transfer (:func:`_damaged_container`), which would otherwise be
     read as NMEA text and give nothing but rejected lines."""
     p = Path(path)
@@ -120,6 +123,21 @@ def detect_format(path: str | Path) -> str:
     for magic, what in _BINARY_MAGIC.items():
         if head.startswith(magic):
             raise IngestError(f"{p}: not a log file: looks like {what}")
+    from dracc.ingest.gpsd_json import looks_like_gpsd_json
+    from dracc.ingest.n2k import sniff_n2k
+    from dracc.ingest.signalk import looks_like_signalk
+    from dracc.ingest.signalk_delta import looks_like_signalk_delta
+
+    # before the CSV sniff: a Signal K log's ';' lines and canboat's comma lines are no CSV;
+    # Signal K before NMEA 2000: its 'A' lines are canboat lines behind a prefix
+    if looks_like_gpsd_json(head):
+        return "gpsd-json"
+    if looks_like_signalk_delta(head):
+        return "signalk-delta"
+    if looks_like_signalk(head):
+        return "signalk"
+    if sniff_n2k(head) is not None:
+        return "n2k"
     is_csv: Callable[[bytes], bool] | None
     try:
         from dracc.ingest.csv import looks_like_csv as is_csv
@@ -156,10 +174,22 @@ def _read_plain(
     fmt = detect_format(path)
     if fmt == "mcap":
         from dracc.ingest.mcap import read_mcap as reader
+    elif fmt == "n2k":
+        from dracc.ingest.n2k import read_n2k as reader
+    elif fmt == "signalk":
+        from dracc.ingest.signalk import read_signalk as reader
+    elif fmt == "signalk-delta":
+        from dracc.ingest.signalk_delta import read_signalk_delta as reader
+    elif fmt == "gpsd-json":
+        from dracc.ingest.gpsd_json import read_gpsd_json as reader
     elif fmt == "csv":
         from dracc.ingest.csv import read_csv as reader
     else:
-        from dracc.ingest.nmea import read_nmea as reader
+        from dracc.ingest.embedded_n2k import add_embedded, has_embedded
+        from dracc.ingest.nmea import read_nmea
+
+        r = read_nmea(path, cfg, progress)
+        return add_embedded(path, r, cfg) if has_embedded(r) else r
     return reader(path, cfg, progress)
 
 
@@ -218,6 +248,11 @@ def _merge_frames(results: list[FileResult]) -> dict[str, pd.DataFrame]:
     return out
 
 
+#: sentences that give rows of several kinds from one line (RMC: position and ground;
+#: AIS VDO: position, ground, heading), counted once per line, in the position row
+COUNTED_IN_POSITION = {"ground": ("RMC", "VDO"), "heading": ("VDO",)}
+
+
 def _labels(col: pd.Series) -> tuple[np.ndarray, list[str]] | None:
     """(codes, labels as str) of a categorical column whose labels are distinct strings
     and which has no missing value; None otherwise."""
@@ -258,8 +293,9 @@ def summarize_frames(
             ns, nt, nk
         )
         records = full.sum(axis=(1, 2))
-        if kind == "ground" and "RMC" in sent_l:  # an RMC is counted in its position row
-            full[:, sent_l.index("RMC"), :] = 0
+        for one_line in COUNTED_IN_POSITION.get(kind, ()):  # counted in its position row
+            if one_line in sent_l:
+                full[:, sent_l.index(one_line), :] = 0
         by_sent = full.sum(axis=2)
         tc = full.sum(axis=1)
         lo = np.full(ns, np.iinfo(np.int64).max)
@@ -319,6 +355,7 @@ def read_logs(
         te.gaps += e.gaps
         te.rollovers += e.rollovers
         te.implausible_dates += e.implausible_dates
+        te.assumed_date = te.assumed_date or e.assumed_date
         te.decisions.extend(f"{Path(r.path).name}: {d}" for d in e.decisions)
         te.decisions.extend(f"{Path(r.path).name}: {n}" for n in r.notes)
         te.examples.extend(e.examples[:10])

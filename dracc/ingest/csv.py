@@ -15,8 +15,9 @@ wide (``csv-wide``)
 raw (``csv-raw``)
     a time column (``received_at``, ``time_utc``, ``timestamp`` ...) and a column of raw
     NMEA 0183 sentences (``raw_data``, ``raw``, ``nmea``, ``raw_sentence``); an optional
-    ``source`` column gives the source key; rows whose ``protocol`` names NMEA 2000 are
-    counted as ignored (``"NMEA 2000"``), not decoded; sentences dracc does not use are
+    ``source`` column gives the source key; rows whose ``protocol`` names NMEA 2000
+    (OpenCPN's data logger: the message as Actisense BST bytes in hex) are decoded by
+    :mod:`dracc.ingest.n2k`, timed by their row; sentences dracc does not use are
     ignored by type as in NMEA text.  Sentences go through :func:`dracc.ingest.nmea.parse_sentences`.
 
 Times: a ``time_ns`` column holds integer nanoseconds since the Unix epoch; any other
@@ -502,8 +503,9 @@ def _read_raw(
     sources: list[np.ndarray] = []
     file_lines: list[np.ndarray] = []
     rows = 0
-    n2k_rows = 0
-    n2k_examples: list[tuple[str, int, str]] = []
+    n2k_raw: list[str] = []
+    n2k_times: list[np.ndarray] = []
+    n2k_lines: list[np.ndarray] = []
     for data, lines in _iter_blocks(p, cols, rejects, file, scan):
         rows += len(lines)
         data, lines = drop_blank_rows(data, lines, rejects, file)
@@ -512,14 +514,13 @@ def _read_raw(
             n2k = np.fromiter(
                 ("2000" in x for x in data[pcol].tolist()), dtype=bool, count=len(lines)
             )
-            if n2k.any():
-                n2k_rows += int(n2k.sum())
-                for ln, x in zip(
-                    lines[n2k][: max(0, 3 - len(n2k_examples))].tolist(),
-                    data[rcol][n2k][:3].tolist(),
-                    strict=False,
-                ):
-                    n2k_examples.append((file, int(ln), str(x)[:120]))
+            if n2k.any():  # NMEA 2000 messages: decoded apart (dracc.ingest.n2k)
+                t2k, ok2k = parse_times(data[tcol][n2k], tcol)
+                n2k_raw.extend(str(x) for x in data[rcol][n2k][ok2k])
+                n2k_times.append(t2k[ok2k])
+                n2k_lines.append(lines[n2k][ok2k])
+                if not ok2k.all():
+                    add_rejects(rejects, "bad time", file, lines[n2k][~ok2k], ["NMEA 2000"] * 5)
             keep &= ~n2k
         empty = keep & (data[rcol] == "")
         if empty.any():
@@ -551,11 +552,36 @@ def _read_raw(
         k: [(f, int(where[ln - 1]) if 1 <= ln <= len(where) else ln, t) for f, ln, t in ex]
         for k, ex in res.ignored_examples.items()
     }
-    if n2k_rows:
-        res.ignored["NMEA 2000"] += n2k_rows
-        res.ignored_examples["NMEA 2000"] = n2k_examples
+    if n2k_raw:
+        res = _with_n2k(res, n2k_raw, n2k_times, n2k_lines, file, cfg)
     res.rejects.merge(rejects)
     res.format = "csv-raw"
     res.lines = rows
     res.notes = notes + res.notes
     return res
+
+
+def _with_n2k(
+    res: FileResult,
+    raw: list[str],
+    times: list[np.ndarray],
+    lines: list[np.ndarray],
+    file: str,
+    cfg: IngestConfig,
+) -> FileResult:
+    """``res`` with the NMEA 2000 rows of a raw-sentence CSV decoded and merged in: the
+    OpenCPN data logger writes each message as its Actisense BST bytes in hex
+    (``93 13 02 01 F8 01 ...``), timed by the row."""
+    from dracc.ingest.demux import merge_results
+    from dracc.ingest.n2k.ebl import bst_messages
+    from dracc.ingest.n2k.reader import n2k_result
+
+    def hex_bytes(text: str) -> bytes:
+        try:
+            return bytes.fromhex(text.replace("0x", " ").replace(",", " "))
+        except ValueError:
+            return b""
+
+    msgs = bst_messages([hex_bytes(x) for x in raw], np.concatenate(times), np.concatenate(lines))
+    n2k = n2k_result(msgs, file, "csv-raw", cfg, lines=0)
+    return merge_results(res.path, res.format, res.lines, [res, n2k], [])

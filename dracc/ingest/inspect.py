@@ -1,15 +1,29 @@
-"""What a log holds, the report of ``dracc inspect``: sources and roles, sentence counts,
-rates, time span and gaps, rejected lines by reason with examples, time-base decisions.
+"""What a log holds, the report of ``dracc inspect``: sources and roles, every sentence
+type read (time-only ZDA included), rates, time span and gaps, the lines not used (rejected
+by reason, ignored by type, with examples), the account of every line, time-base decisions.
 
 NMEA text files are streamed block by block (memory does not grow with the file); CSV
-and MCAP files are read whole by their readers.  The keys are documented in
-``docs/ingest.md``; :mod:`dracc.report.inspect_report` renders the report as tables.
+and MCAP files are read whole by their readers.  Per-source counts are taken on the
+frames' categorical codes (:func:`dracc.ingest.summarize_frames`), never by sorting
+strings.  The keys are documented in ``docs/ingest.md``;
+:mod:`dracc.report.inspect_report` renders the report as tables.
+
+The account of an NMEA text file's lines (``inputs[i]["accounting"]``; summed over the
+files in ``accounting``; None for CSV and MCAP): every sentence or line is
+counted once, as a sentence giving records (an RMC once, though it gives a position and
+a ground row), a time-only sentence (ZDA: it sets the time base and gives no record), a qualifier
+(``$PSXN,20``: the quality of the records of another sentence; no record either), an
+ignored line or sentence (by type) or a rejected one (by reason), so that ``lines ==
+sentences + time_only + qualifiers + ignored + rejected - shared``, ``shared`` being the sentences
+found on a line after another one (a truncated sentence followed by a whole one, two
+sentences fused on one line).
 """
 
 from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -17,12 +31,170 @@ import numpy as np
 
 from dracc.core.config import IngestConfig
 from dracc.core.timefmt import iso_utc
-from dracc.frames import Rejects, TimeEvents
-from dracc.ingest import detect_format, read_file
-from dracc.ingest.compressed import STDIN, needs_copy
+from dracc.frames import FileResult, Rejects, SourceInfo, TimeEvents
+from dracc.ingest import _relabelled, _scaled, detect_format, read_file, summarize_frames
+from dracc.ingest.compressed import STDIN, needs_copy, plain_copy
 from dracc.ingest.nmea import StreamState, iter_nmea_blocks
-from dracc.ingest.sources import assign_roles, merge_infos, separate_files, summarize
+from dracc.ingest.sources import assign_roles, merge_infos, separate_files
 from dracc.ingest.timebase import EventCounter
+
+_EXAMPLES = 5  #: examples kept per ignored type over all files (as per reject reason)
+_NO_EVENTS = {"duplicates": 0, "backsteps": 0, "gaps": 0, "max_gap_s": 0.0}
+
+
+@dataclass
+class _FileRead:
+    """One file's share of the report."""
+
+    format: str
+    lines: int
+    rejects: Rejects
+    time_events: TimeEvents
+    notes: list[str]
+    events: dict[str, dict[str, Any]]  #: source -> duplicates, backsteps, gaps, max_gap_s
+    ignored: Counter[str]
+    ignored_examples: dict[str, list[tuple[str, int, str]]]
+    records: int | None = None  #: frame rows (None: the sum over the file's sources)
+    time_only: Counter[str] = field(default_factory=Counter)  #: time-only sentences by type
+    qualifiers: Counter[str] = field(default_factory=Counter)  #: qualifying sentences by type
+
+
+def _add_no_record(
+    sources: dict[str, SourceInfo], counts: Counter[tuple[str, str, str]], file: str
+) -> Counter[str]:
+    """Add sentences that give no record (time-only, qualifiers: (source key, type,
+    talker) -> n) to the file's sources; return them by type."""
+    by_type: Counter[str] = Counter()
+    for (key, stype, talker), n in counts.items():
+        info = sources.setdefault(key, SourceInfo(key=key))
+        info.sentences[stype] += n
+        if talker:
+            info.talkers[talker] += n
+        info.files.add(file)
+        by_type[stype] += n
+    return by_type
+
+
+def _read_nmea(
+    p: Path,
+    cfg: IngestConfig,
+    sources: dict[str, SourceInfo],
+    advance: Callable[[int], object] | None,
+    name: str | None = None,
+) -> _FileRead:
+    """Stream an NMEA text file, summarising each block's frames into ``sources``;
+    ``name``: what the file is called (the log as given, ``p`` being its plain copy)."""
+    file = str(p) if name is None else name
+    st = StreamState(file)
+    for block in iter_nmea_blocks(p, cfg, st, progress=advance, name=file):
+        summarize_frames(block.frames, file, into=sources)
+    return _FileRead(
+        "nmea",
+        st.lines,
+        st.rejects,
+        st.time_events(),
+        st.notes(),
+        st.events.per_source,
+        st.ignored,
+        st.ignored_examples,
+        time_only=_add_no_record(sources, st.time_only, file),
+        qualifiers=_add_no_record(sources, st.qualifiers, file),
+    )
+
+
+def _read_packed(
+    p: Path,
+    cfg: IngestConfig,
+    sources: dict[str, SourceInfo],
+    advance: Callable[[int], object] | None,
+) -> _FileRead:
+    """A compressed log or standard input, from its plain copy: NMEA text streamed (every
+    sentence type counted, as for a plain file), the others read whole (:func:`read_file`
+    says what they hold as of the log given)."""
+    said: list[str] = []
+    with plain_copy(p, said) as plain:
+        if plain is None or detect_format(plain) != "nmea":
+            r = read_file(plain or p, cfg)
+            if plain is not None:
+                r = _relabelled(r, str(plain), str(p), said)
+            return _whole(r, cfg, sources, p, advance)
+        f = _read_nmea(plain, cfg, sources, _scaled(advance, p, plain), name=str(p))
+    f.notes = said + f.notes
+    return f
+
+
+def _read_whole(
+    p: Path,
+    cfg: IngestConfig,
+    sources: dict[str, SourceInfo],
+    advance: Callable[[int], object] | None,
+) -> _FileRead:
+    """Read a CSV or MCAP file whole; count its time events."""
+    return _whole(read_file(p, cfg), cfg, sources, p, advance)
+
+
+def _whole(
+    r: FileResult,
+    cfg: IngestConfig,
+    sources: dict[str, SourceInfo],
+    p: Path,
+    advance: Callable[[int], object] | None,
+) -> _FileRead:
+    """A file read whole (``r``): its summary into ``sources``, its time events."""
+    summarize_frames(r.frames, r.path, into=sources)
+    ec = EventCounter(gap_s=cfg.gap_s, tolerance_s=cfg.backstep_tolerance_s)
+    for kind, df in r.frames.items():
+        if len(df):
+            t = df["time_ns"].to_numpy()
+            # categorical columns are counted on their codes (EventCounter takes them as they are)
+            own = np.ones(len(t), bool)
+            ec.add(kind, df["source"], t, own, df["line"].to_numpy(), r.path, df["sentence"])
+    tev = r.time_events
+    tot = ec.totals()
+    tev.duplicates = tev.duplicates or tot["duplicates"]
+    tev.backsteps = tev.backsteps or tot["backsteps"]
+    tev.gaps = tev.gaps or tot["gaps"]
+    if advance is not None and str(p) != STDIN:
+        advance(p.stat().st_size)
+    return _FileRead(
+        r.format,
+        r.lines,
+        r.rejects,
+        tev,
+        r.notes,
+        ec.per_source,
+        r.ignored,
+        r.ignored_examples,
+        records=r.records,
+    )
+
+
+def _accounting(f: _FileRead, sentences: Counter[str]) -> dict[str, int] | None:
+    """The account of an NMEA text file's lines (see the module doc); ``sentences``: the
+    file's sentence counts by type, time-only ones included.  None for CSV and MCAP,
+    whose rows and messages are not one record each."""
+    if f.format != "nmea":
+        return None
+    time_only = sum(f.time_only.values())
+    qual = sum(f.qualifiers.values())
+    rec = sum(sentences.values()) - time_only - qual
+    ign = sum(f.ignored.values())
+    rej = sum(f.rejects.counts.values())
+    return {
+        "lines": f.lines,
+        "sentences": rec,
+        "time_only": time_only,
+        "qualifiers": qual,
+        "ignored": ign,
+        "rejected": rej,
+        "shared": rec + time_only + qual + ign + rej - f.lines,
+    }
+
+
+def _examples(ex: dict[str, list[tuple[str, int, str]]]) -> dict[str, list[dict[str, Any]]]:
+    return {
+        r: [{"file": f, "line": ln, "text": t} for f, ln, t in e] for r, e in sorted(ex.items())
+    }
 
 
 def inspect_logs(
@@ -30,124 +202,84 @@ def inspect_logs(
 ) -> dict[str, Any]:
     """The inspection report of ``paths`` as a JSON-ready dict (``cfg``: the
     :class:`~dracc.core.config.IngestConfig`).  ``advance(n)`` is told each n bytes read."""
-    per_file: list[tuple[str, dict[str, Any]]] = []  # each file's sources: a key two files share is
-    per_file_events: list[
-        tuple[str, dict[str, Any]]
-    ] = []  # one source only if separate_files says so
+    # each file's sources: a key two files share is one source only if separate_files says so
+    per_file: list[tuple[str, dict[str, SourceInfo]]] = []
+    per_file_events: list[tuple[str, dict[str, Any]]] = []
     rejects = Rejects()
     te = TimeEvents()
-    events: dict[str, dict[str, Any]] = {}
-    inputs = []
+    inputs: list[dict[str, Any]] = []
+    accounts: list[dict[str, int] | None] = []
     lines = 0
-    all_sentences: Counter[str] = Counter()
+    ignored: Counter[str] = Counter()
+    ignored_examples: dict[str, list[tuple[str, int, str]]] = {}
     notes: list[str] = []
     for p in paths:
-        packed = needs_copy(p)  # compressed, or standard input: read from a plain copy
-        fmt = "packed" if packed else detect_format(p)
-        sources: dict[str, Any] = {}
+        sources: dict[str, SourceInfo] = {}
         per_file.append((str(p), sources))
-        if fmt == "nmea":
-            st = StreamState(str(p))
-            for block in iter_nmea_blocks(p, cfg, st, progress=advance):
-                summarize(block.frames, str(p), into=sources)
-            n_lines, rej, tev, nts = st.lines, st.rejects, st.time_events(), st.notes()
-            per_src = st.events.per_source
-            all_sentences.update(st.sentences)
-            records = None
+        if needs_copy(p):  # compressed, or standard input: read from a plain copy
+            f = _read_packed(p, cfg, sources, advance)
+        elif detect_format(p) == "nmea":
+            f = _read_nmea(p, cfg, sources, advance)
         else:
-            r = read_file(p, cfg)
-            fmt = r.format
-            summarize(r.frames, r.path, into=sources)
-            ec = EventCounter(gap_s=cfg.gap_s, tolerance_s=cfg.backstep_tolerance_s)
-            for kind, df in r.frames.items():
-                if len(df):
-                    ec.add(
-                        kind,
-                        df["source"].astype(str).to_numpy(),
-                        df["time_ns"].to_numpy(),
-                        np.ones(len(df), bool),
-                        df["line"].to_numpy(),
-                        r.path,
-                        df["sentence"].astype(str).to_numpy(),
-                    )
-            n_lines, rej, tev, nts, per_src = (
-                r.lines,
-                r.rejects,
-                r.time_events,
-                r.notes,
-                ec.per_source,
-            )
-            tot = ec.totals()
-            tev.duplicates, tev.backsteps, tev.gaps = (
-                tev.duplicates or tot["duplicates"],
-                tev.backsteps or tot["backsteps"],
-                tev.gaps or tot["gaps"],
-            )
-            records = r.records
-            if advance is not None and str(p) != STDIN:
-                advance(p.stat().st_size)
-        lines += n_lines
-        rejects.merge(rej)
+            f = _read_whole(p, cfg, sources, advance)
+        lines += f.lines
+        rejects.merge(f.rejects)
+        ignored.update(f.ignored)
+        for k, ex in f.ignored_examples.items():
+            kept = ignored_examples.setdefault(k, [])
+            kept.extend(ex[: max(0, _EXAMPLES - len(kept))])
+        tev = f.time_events
         for k in ("duplicates", "backsteps", "gaps", "rollovers", "implausible_dates"):
             setattr(te, k, getattr(te, k) + getattr(tev, k))
         te.decisions.extend(f"{p.name}: {d}" for d in tev.decisions)
         te.examples.extend(tev.examples[:6])
-        notes.extend(f"{p.name}: {n}" for n in nts)
-        per_file_events.append((str(p), per_src))
+        notes.extend(f"{p.name}: {n}" for n in f.notes)
+        per_file_events.append((str(p), f.events))
+        file_sent: Counter[str] = Counter()
+        for s in sources.values():
+            file_sent.update(s.sentences)
         inputs.append(
             {
                 "path": str(p),
-                "format": fmt,
-                "lines": n_lines,
-                "records": records
-                if records is not None
-                else sum(s.records for s in sources.values() if str(p) in s.files),
-                "rejected": dict(rej.counts),
+                "format": f.format,
+                "lines": f.lines,
+                "records": f.records
+                if f.records is not None
+                else sum(s.records for s in sources.values()),
+                "sentences": dict(sorted(file_sent.items())),
+                "time_only": dict(sorted(f.time_only.items())),
+                "qualifiers": dict(sorted(f.qualifiers.items())),
+                "ignored": dict(sorted(f.ignored.items())),
+                "rejected": dict(f.rejects.counts),
+                "accounting": _accounting(f, file_sent),
             }
         )
+        accounts.append(inputs[-1]["accounting"])
     renames, identity_notes = separate_files(per_file) if len(per_file) > 1 else ({}, [])
-    sources = merge_infos(per_file, renames)
-    for f, per_src in per_file_events:
+    merged = merge_infos(per_file, renames)
+    events: dict[str, dict[str, Any]] = {}
+    for fname, per_src in per_file_events:
         for key, ev in per_src.items():
-            key = renames.get(f, {}).get(key, key)
-            agg = events.setdefault(
-                key, {"duplicates": 0, "backsteps": 0, "gaps": 0, "max_gap_s": 0.0}
-            )
+            agg = events.setdefault(renames.get(fname, {}).get(key, key), dict(_NO_EVENTS))
             for k in ("duplicates", "backsteps", "gaps"):
                 agg[k] += ev[k]
             agg["max_gap_s"] = max(agg["max_gap_s"], ev["max_gap_s"])
     te.decisions.extend(identity_notes)
-    role_notes = assign_roles(sources, dict(cfg.sources))
-    src_out = {}
-    for key in sorted(sources):
-        s = sources[key]
-        span_s = (s.last_ns - s.first_ns) / 1e9 if s.first_ns is not None else 0.0  # type: ignore[operator]
-        ev = events.get(key, {"duplicates": 0, "backsteps": 0, "gaps": 0, "max_gap_s": 0.0})
-        nsent = sum(s.sentences.values())
-        src_out[key] = {
-            "role": s.role,
-            "roles": list(s.roles),
-            "records": s.records,
-            "sentences": dict(sorted(s.sentences.items())),
-            "talkers": dict(sorted(s.talkers.items())),
-            "first_utc": iso_utc(s.first_ns),
-            "last_utc": iso_utc(s.last_ns),
-            "span_s": span_s,
-            "rate_hz": (nsent - 1) / span_s if span_s > 0 else None,
-            "gaps": ev["gaps"],
-            "max_gap_s": ev["max_gap_s"],
-            "duplicates": ev["duplicates"],
-            "backsteps": ev["backsteps"],
-            "files": sorted(s.files),
-        }
+    role_notes = assign_roles(merged, dict(cfg.sources))
+    all_sent: Counter[str] = Counter()
+    for s in merged.values():
+        all_sent.update(s.sentences)
     return {
         "lines": lines,
-        "sources": src_out,
-        "rejected": dict(sorted(rejects.counts.items())),
-        "rejected_examples": {
-            r: [{"file": f, "line": ln, "text": t} for f, ln, t in ex]
-            for r, ex in sorted(rejects.examples.items())
+        "sentences": dict(sorted(all_sent.items())),
+        "sources": {
+            key: _source_out(merged[key], events.get(key, _NO_EVENTS)) for key in sorted(merged)
         },
+        "rejected": dict(sorted(rejects.counts.items())),
+        "rejected_examples": _examples(rejects.examples),
+        "ignored": dict(sorted(ignored.items())),
+        "ignored_examples": _examples(ignored_examples),
+        "accounting": _total_accounting(accounts),
         "time": {
             "duplicates": te.duplicates,
             "backsteps": te.backsteps,
@@ -160,4 +292,34 @@ def inspect_logs(
         "roles": role_notes,
         "notes": notes,
         "inputs": inputs,
+    }
+
+
+def _total_accounting(parts: list[dict[str, int] | None]) -> dict[str, int] | None:
+    """The accounts of the NMEA text files summed (None where there is none)."""
+    have = [a for a in parts if a is not None]
+    return {k: sum(a[k] for a in have) for k in have[0]} if have else None
+
+
+def _source_out(s: SourceInfo, ev: dict[str, Any]) -> dict[str, Any]:
+    """One source's entry of the report."""
+    span_s = (
+        (s.last_ns - s.first_ns) / 1e9 if s.first_ns is not None and s.last_ns is not None else 0.0
+    )
+    nsent = sum(s.sentences.values())
+    return {
+        "role": s.role,
+        "roles": list(s.roles),
+        "records": s.records,
+        "sentences": dict(sorted(s.sentences.items())),
+        "talkers": dict(sorted(s.talkers.items())),
+        "first_utc": iso_utc(s.first_ns),
+        "last_utc": iso_utc(s.last_ns),
+        "span_s": span_s,
+        "rate_hz": (nsent - 1) / span_s if span_s > 0 else None,
+        "gaps": ev["gaps"],
+        "max_gap_s": ev["max_gap_s"],
+        "duplicates": ev["duplicates"],
+        "backsteps": ev["backsteps"],
+        "files": sorted(s.files),
     }

@@ -12,13 +12,20 @@ Role assignment (:func:`assign_roles`), in this order:
 2. names: a source key naming its unit (``INS1``..``INS3``, ``GYRO``/``HDG``/
    ``COMPASS``/``HEADING``, ``LOG``/``SPEEDLOG``/``STW``, ``GNSS``/``GPS``), case-insensitive,
    as a whole key or the last component of a topic; only if one source has that name;
-3. content, only where unambiguous: talker families (GP/GN/GA/GL/GB -> gnss; exactly
-   three INS-type talkers or keys (IN, II, IR, or names containing 'INS') with
-   positions -> ins1..3 in sorted order); the only source with heading sentences and
+3. content, only where unambiguous: gnss from the first of these tiers that has a
+   candidate -- talker families (GP/GN/GA/GL/GB ...), NMEA 2000 devices sending
+   positions (PGN129029/129025) and no heading (PGN127250), then those sending both (a
+   satellite compass, an integrated navigation system), own-ship AIS (``VDO``);
+   exactly three INS-type sources (talkers IN, II, IR, keys containing 'INS', or
+   senders of an INS's own PASHR/PSXN) with positions -> ins1..3 in sorted order;
+   the only source with heading sentences (HDT/HDG/HDM/THS/ROT, PGN127250/127251) and
    no positions -> compass (where there is none, the only instrument bus with heading
    sentences; where there are several, the only one giving true heading, HDT/THS); a
-   source of fixes without log sentences (an INS, a GNSS compass) is never made the
-   compass by content; the only source with VHW/VBW -> log.  An instrument bus (e.g. 'II' with HDG + VHW) may be compass and log.
+   source of fixes without log sentences (an INS, a GNSS compass) and a sender of
+   PASHR/PSXN beside another heading source are never made the compass by content;
+   the only source with VHW/VBW/PGN128259 -> log (a GNSS's PGN128259, speed over
+   ground only, gives way to a log's).  An instrument bus (e.g. 'II' with HDG + VHW)
+   may be compass and log.
 4. Otherwise the role stays free and a note names the candidates; where the data
    clearly need a role that two sources claim, :class:`AmbiguousSourceError` is for
    the caller that requires it (``require_role``).
@@ -42,9 +49,17 @@ from dracc.frames import SourceInfo
 
 GNSS_FAMILY = ("GP", "GN", "GA", "GL", "GB", "GI", "GQ", "BD")
 INS_TALKERS = ("IN", "II", "IR")
-HEADING_SENTENCES = {"HDT", "HDG", "HDM", "THS", "ROT"}
-LOG_SENTENCES = {"VHW", "VBW", "VLW"}
-POSITION_SENTENCES = {"GGA", "GLL", "RMC", "GNS"}
+#: NMEA 2000 messages are sentences ``PGN<n>`` (:mod:`dracc.ingest.n2k`)
+N2K_HEADING = {"PGN127250", "PGN127251"}
+N2K_LOG = {"PGN128259", "PGN128275"}
+N2K_POSITION = {"PGN129029", "PGN129025"}
+#: proprietary sentences of INS (attitude and true heading: NovAtel/Trimble, Seapath)
+INS_SENTENCES = {"PASHR", "PSXN"}
+HEADING_SENTENCES = {"HDT", "HDG", "HDM", "THS", "ROT"} | INS_SENTENCES | N2K_HEADING
+LOG_SENTENCES = {"VHW", "VBW", "VLW"} | N2K_LOG
+#: own-ship AIS (``!AIVDO``) positions come from the transponder's own receiver
+AIS_POSITION = {"VDO"}
+POSITION_SENTENCES = {"GGA", "GLL", "RMC", "GNS"} | N2K_POSITION | AIS_POSITION
 
 _NAME_RULES = [
     (re.compile(r"^(?:.*[/_.-])?ins[_-]?([123])$", re.I), None),
@@ -54,13 +69,21 @@ _NAME_RULES = [
 ]
 
 
+#: sentences that give rows of several kinds from one line (RMC: position and ground;
+#: AIS VDO: position, ground, heading): kind -> the types whose rows of that kind are not
+#: counted as sentences (their position row is)
+COUNTED_IN_POSITION = {"ground": ("RMC", "VDO"), "heading": ("VDO",)}
+
+
 def summarize(
     frames: dict[str, pd.DataFrame], file: str, into: dict[str, SourceInfo] | None = None
 ) -> dict[str, SourceInfo]:
     """Add per-source counts of ``frames`` (kind -> canonical frame) to ``into``.
 
-    Records are counted once per frame row; an RMC gives a position and a ground row,
-    so sentence counts use the position row only for RMC.
+    Records are counted once per frame row; a sentence giving rows of several kinds (an
+    RMC: a position and a ground row) is counted once, in its position row
+    (:data:`COUNTED_IN_POSITION`).  The reference for
+    :func:`dracc.ingest.summarize_frames`, which counts the same on categorical codes.
     """
     out = {} if into is None else into
     for kind, df in frames.items():
@@ -74,7 +97,7 @@ def summarize(
         for i, key in enumerate(uniq):
             sel = codes == i
             info = out.setdefault(key, SourceInfo(key=key))
-            count_sent = sel & ~((kind == "ground") & (sent == "RMC"))
+            count_sent = sel & ~np.isin(sent, COUNTED_IN_POSITION.get(kind, ()))
             if count_sent.any():
                 u, c = np.unique(sent[count_sent], return_counts=True)
                 info.sentences.update(dict(zip(u.tolist(), c.tolist(), strict=True)))
@@ -196,7 +219,11 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
             s
             for s in free.values()
             if has(s, POSITION_SENTENCES)
-            and ((_talker(s) in INS_TALKERS and "/" not in s.key) or "ins" in s.key.lower())
+            and (
+                (_talker(s) in INS_TALKERS and "/" not in s.key)
+                or "ins" in s.key.lower()
+                or has(s, INS_SENTENCES)
+            )
         ]
         if len(ins) == 3:
             for role, s in zip(INS_ROLES, sorted(ins, key=lambda s: s.key), strict=True):
@@ -206,14 +233,36 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
                 f"INS roles not assigned: {len(ins)} INS-type position sources "
                 f"({', '.join(sorted(s.key for s in ins))}); map them in [ingest.sources]"
             )
-    gnss = [
-        s
-        for s in free.values()
-        if not s.roles and has(s, POSITION_SENTENCES) and (_talker(s) or "") in GNSS_FAMILY
+    # GNSS candidates, the first tier that has any: satellite talkers; NMEA 2000 devices
+    # sending positions and no heading (a satellite compass sends both); own-ship AIS
+    tiers = [
+        (
+            [s for s in free.values() if (_talker(s) or "") in GNSS_FAMILY],
+            lambda s: f"satellite talker {_talker(s)}",
+        ),
+        (
+            [s for s in free.values() if has(s, N2K_POSITION) and not has(s, N2K_HEADING)],
+            lambda s: "NMEA 2000 positions without heading",
+        ),
+        (  # a satellite compass or an integrated navigation system: positions and heading
+            [s for s in free.values() if has(s, N2K_POSITION)],
+            lambda s: (
+                "NMEA 2000 positions (with heading: a satellite compass or navigation system)"
+            ),
+        ),
+        ([s for s in free.values() if has(s, AIS_POSITION)], lambda s: "own-ship AIS (VDO)"),
     ]
+    gnss, why_gnss = next(
+        (
+            ([s for s in t if not s.roles and has(s, POSITION_SENTENCES)], why)
+            for t, why in tiers
+            if any(not s.roles and has(s, POSITION_SENTENCES) for s in t)
+        ),
+        ([], tiers[0][1]),
+    )
     if "gnss" not in taken:
         if len(gnss) == 1:
-            give(gnss[0], "gnss", f"satellite talker {_talker(gnss[0])}")
+            give(gnss[0], "gnss", why_gnss(gnss[0]))
         elif len(gnss) > 1:
             notes.append(
                 "gnss role not assigned: several satellite sources "
@@ -241,6 +290,9 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
                     f"heading ({hs}), so it is an INS or a GNSS compass; map it "
                     f"(--role {s.key}=compass) if it is the ship's compass"
                 )
+        # an INS's own attitude sentences (PASHR, PSXN) make it an INS, not the compass,
+        # where any other heading source is there
+        cands = [s for s in cands if not has(s, INS_SENTENCES)] or cands
         pure = [s for s in cands if not has(s, POSITION_SENTENCES)]  # heading sentences only
         if pure:
             cands = pure
@@ -263,10 +315,13 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
         cands = [
             s
             for s in sources.values()
-            if has(s, {"VHW", "VBW"}) and not any(r in INS_ROLES or r == "gnss" for r in s.roles)
+            if has(s, {"VHW", "VBW", "PGN128259"})
+            and not any(r in INS_ROLES or r == "gnss" for r in s.roles)
         ]
+        if len(cands) > 1:  # a GNSS's 128259 (speed over ground only) beside the log's
+            cands = [s for s in cands if not has(s, POSITION_SENTENCES)] or cands
         if len(cands) == 1:
-            give(cands[0], "log", "the only source of VHW/VBW")
+            give(cands[0], "log", "the only source of VHW/VBW/PGN128259")
         elif len(cands) > 1:
             notes.append(
                 "log role not assigned: several speed-log sources "

@@ -40,6 +40,15 @@ DAY_NS = 86_400 * 1_000_000_000
 HALF_DAY_NS = DAY_NS // 2
 GPS_WEEK_ROLLOVER_DAYS = 1024 * 7
 _EPOCH_2000_DAYS = 10957  # 2000-01-01 in days since 1970-01-01
+#: the date a log with no date anywhere (and no ``--date``) is placed on: plainly not a
+#: real one, so nobody takes it for the day of the voyage
+ASSUMED_DATE = "2000-01-01"
+ASSUMED_DATE_DAYS = _EPOCH_2000_DAYS
+ASSUMED_DATE_NOTE = (
+    f"no date in the log and none given: times of day placed on an assumed date, "
+    f"{ASSUMED_DATE}; durations, dead reckoning and deviations hold, calendar dates in "
+    "the report do not (pass --date YYYY-MM-DD for the real one)"
+)
 
 
 def days_from_civil(year: ArrayLike, month: ArrayLike, day: ArrayLike) -> np.ndarray:
@@ -137,6 +146,8 @@ class TimeBase:
     week_rollovers: int = 0
     implausible: int = 0
     date_changes: int = 0
+    #: ``ASSUMED_DATE`` where the log had no date and none was given, else None
+    assumed_date: str | None = None
     decisions: list[str] = field(default_factory=list)
     _pending: list[tuple[np.ndarray, ...]] = field(default_factory=list)
 
@@ -231,31 +242,32 @@ class TimeBase:
         return out
 
     def finish(self) -> list[np.ndarray]:
-        """End of file: resolve what waits, with ``cfg.date`` if the log had no date.
+        """End of file: resolve what waits, on ``cfg.date`` if the log had no date.
 
-        Returns the remaining time arrays; entries still MISSING_NS had no date at all.
+        A log with no date at all (no RMC/ZDA date, no TAG or prefix time) and none given
+        is placed on an assumed date, :data:`ASSUMED_DATE` (dead reckoning and
+        deviations need only time differences); ``assumed_date`` says so and a decision
+        tells the user.  Where some records carry a receive time and the others only a
+        time of day, the others are placed on the day of the first receive time.
         """
         if not self._pending:
             return []
         if self.base_days is None:
+            first = next((p[5][0] for p in self._pending if len(p[5])), 0)
+            ext = next((p[1][p[2]][0] for p in self._pending if p[2].any()), None)
             if self.cfg_date_days is not None:
-                first = next((p[5][0] for p in self._pending if len(p[5])), 0)
                 self.base_days = int(self.cfg_date_days - first)
                 self.decisions.append("no date in the log: date taken from --date / ingest.date")
-            else:
-                out = []
-                for p in self._pending:
-                    tod_ns, ext_ns, has_ext, has_tod = p[0], p[1], p[2], p[3]
-                    t = np.where(has_ext, ext_ns, MISSING_NS).astype(np.int64)
-                    both = has_ext & has_tod
-                    t[both] = nearest_day(tod_ns[both], ext_ns[both])  # rule 1, as in _flush
-                    out.append(t)
-                self._pending = []
+            elif ext is not None:
+                self.base_days = int(int(ext) // DAY_NS - first)
                 self.decisions.append(
-                    "no date in the log and none given: records with only a "
-                    "time of day rejected as 'no_date' (pass --date YYYY-MM-DD)"
+                    "no date in the log's sentences: times of day placed on the day of "
+                    "its first receive time (pass --date YYYY-MM-DD to set it)"
                 )
-                return out
+            else:
+                self.base_days = int(ASSUMED_DATE_DAYS - first)
+                self.assumed_date = ASSUMED_DATE
+                self.decisions.append(ASSUMED_DATE_NOTE)
         return self._flush()
 
 

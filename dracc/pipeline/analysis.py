@@ -36,7 +36,7 @@ from dracc import __version__
 from dracc.core.config import Config
 from dracc.frames import Voyage
 from dracc.math.integrity import check_night, dr_innovation_check, with_dr_check
-from dracc.pipeline import overview
+from dracc.pipeline import overview, selection
 from dracc.pipeline.calibration_stage import calibration as calibration_section
 from dracc.pipeline.current_stage import current as current_section
 from dracc.pipeline.deviation_stage import deviation as deviation_section
@@ -100,6 +100,7 @@ def analyse_voyage(
     start_ns, end_ns = overview.time_span(voyage, inputs, sources)
     time = overview.time_summary(voyage)
     notes = overview.voyage_notes(voyage, inputs, sources)
+    voyage = selection.without_rapid_positions(voyage, notes)
     tracks = overview.tracks(voyage)
 
     report("integrity checks", 0.0)

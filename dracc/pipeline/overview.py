@@ -90,6 +90,7 @@ def time_summary(voyage: Voyage) -> TimeSummary:
         rollovers=te.rollovers,
         implausible_dates=te.implausible_dates,
         decisions=tuple(te.decisions),
+        assumed_date=te.assumed_date,
     )
 
 

@@ -74,6 +74,8 @@ class TimeSummary:
     rollovers: int
     implausible_dates: int
     decisions: tuple[str, ...]
+    #: the date a log without any date was placed on (``timebase.ASSUMED_DATE``), or None
+    assumed_date: str | None = None
 
 
 @dataclass(frozen=True)

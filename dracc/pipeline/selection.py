@@ -11,6 +11,7 @@ Every choice made for the user is said in ``notes``; what is lacking in ``missin
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -111,12 +112,20 @@ def heading_series(
             for k in hdg["source"][valid].unique().tolist()
             if not (set(voyage.sources[k].roles) & {"ins1", "ins2", "ins3", "gnss"})
         ]
-        use = hdg[valid & hdg["source"].isin(other).to_numpy()]
-        who = "heading source " + "+".join(map(str, other))
         if other:
             notes.append(
                 f"no source has the role compass; heading taken from {'+'.join(map(str, other))}"
             )
+        else:  # the heading there is comes from a unit that gives fixes too
+            other = hdg["source"][valid].unique().tolist()
+            if other:
+                notes.append(
+                    "no compass and no heading beside the fixes' units: heading taken from "
+                    f"{'+'.join(map(str, other))}, which also gives fixes (a satellite "
+                    "compass, an INS, or a navigation system relaying the gyro)"
+                )
+        use = hdg[valid & hdg["source"].isin(other).to_numpy()]
+        who = "heading source " + "+".join(map(str, other))
     if use.empty:
         missing.append(
             "no heading: heading sentences exist but none has a value from a compass "
@@ -433,3 +442,35 @@ class DRInputs:
     mode: str  #: 'water' (relative log) or 'ground' (absolute log)
     epoch_interval_s: float = 600.0  #: the DR's epoch spacing (the old filter's fix spacing)
     estimated: EstimatedPosition | None = None  #: where the model was learned (learn = true)
+
+
+# ---------------------------------------------------------------- NMEA 2000 positions
+
+
+def without_rapid_positions(voyage: Voyage, notes: list[str]) -> Voyage:
+    """``voyage`` without the 129025 positions (rapid update: no time of fix, 1e-7 deg)
+    of NMEA 2000 devices that also send 129029 (the full fix with its own time).  Both
+    kept, one receiver's fixes interleave on two time bases (the frame's and the fix's,
+    ~0.5 s apart on aava-n2k.data) and the steps between them look like jumps to the
+    plausibility checks.  The frames of the voyage itself are not changed (``dracc
+    records`` gives every record)."""
+    pos = voyage.frames.get("position")
+    if pos is None or not len(pos):
+        return voyage
+    names = [str(c) for c in pos["sentence"].cat.categories]
+    if "PGN129025" not in names or "PGN129029" not in names:
+        return voyage
+    sent = pos["sentence"].cat.codes.to_numpy()
+    src = pos["source"].cat.codes.to_numpy()
+    full = np.unique(src[sent == names.index("PGN129029")])
+    rapid = (sent == names.index("PGN129025")) & np.isin(src, full)
+    if not rapid.any():
+        return voyage
+    keys = sorted({str(pos["source"].cat.categories[c]) for c in np.unique(src[rapid])})
+    notes.append(
+        f"{int(rapid.sum())} rapid positions (PGN129025) of {', '.join(keys)} not used: "
+        "the same device sends PGN129029, the full fix with its own time"
+    )
+    frames = dict(voyage.frames)
+    frames["position"] = pos[~rapid].reset_index(drop=True)
+    return dataclasses.replace(voyage, frames=frames)

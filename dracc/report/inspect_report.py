@@ -1,5 +1,6 @@
 """``dracc inspect`` on the terminal: the inspection report (:mod:`dracc.ingest.inspect`)
-as a sources table, a table of the lines not used, and the time-base decisions."""
+as a sources table, every sentence type read and the account of the lines, tables of the
+lines not used (rejected by reason, ignored by type), and the time-base decisions."""
 
 from __future__ import annotations
 
@@ -64,24 +65,24 @@ def render_inspection(rep: dict[str, Any], out: Console) -> None:
             )
         )
     out.print(t)
+    sent = rep.get("sentences") or {}
+    if sent:
+        out.print(
+            cell("sentences read: " + " ".join(f"{k}:{v}" for k, v in sent.items())),
+            highlight=False,
+        )
+    acc = rep.get("accounting")
+    if acc:
+        kinds = sorted({k for i in rep.get("inputs", []) for k in i.get("time_only") or {}})
+        out.print(cell(_account(acc, kinds)), highlight=False)
     if rep["rejected"]:
-        r = Table(title="lines not used, by reason")
-        for c in ("reason", "count", "first examples (file:line text)"):
-            r.add_column(c)
-        for reason, n in rep["rejected"].items():
-            ex = rep["rejected_examples"].get(reason, [])[:2]
-            # one example per line: the escapes keep a line's own CR/LF from breaking it up
-            r.add_row(
-                cell(reason),
-                cell(str(n)),
-                Text(
-                    "\n".join(
-                        printable(f"{Path(e['file']).name}:{e['line']} {e['text'][:70]}")
-                        for e in ex
-                    )
-                ),
-            )
-        out.print(r)
+        out.print(_rejected(rep["rejected"], rep["rejected_examples"]))
+    ignored = rep.get("ignored") or {}
+    if ignored:  # valid input dracc does not use: counts only (examples in the JSON)
+        out.print(
+            cell("ignored (valid, not used): " + " ".join(f"{k}:{v}" for k, v in ignored.items())),
+            highlight=False,
+        )
     tm = rep["time"]
     out.print(
         f"time base: {tm['duplicates']} duplicates, {tm['backsteps']} back-steps, {tm['gaps']} gaps, "
@@ -91,3 +92,41 @@ def render_inspection(rep: dict[str, Any], out: Console) -> None:
     )
     for d in tm["decisions"] + rep["notes"] + rep["roles"]:
         out.print(cell(f"  - {d}"), highlight=False)
+
+
+def _account(acc: dict[str, int], time_only: list[str]) -> str:
+    """The account of the NMEA text lines in one sentence (``time_only``: the types of
+    the time-only sentences)."""
+    kinds = f" ({', '.join(time_only)})" if time_only else ""
+    text = (
+        f"{acc['lines']} lines = {acc['sentences']} sentences with records "
+        f"+ {acc['time_only']} time-only{kinds} + {acc['ignored']} ignored "
+        f"+ {acc['rejected']} rejected"
+    )
+    if acc.get("qualifiers"):
+        text = text.replace(" ignored ", f" ignored + {acc['qualifiers']} qualifying others ", 1)
+    if acc["shared"] > 0:
+        text += f" - {acc['shared']} sentences sharing a line with another"
+    elif acc["shared"] < 0:  # a reader counting a sentence nowhere: said, never hidden
+        text += f" + {-acc['shared']} lines not accounted for"
+    return text
+
+
+def _rejected(counts: dict[str, int], examples: dict[str, list[dict[str, Any]]]) -> Table:
+    """The rejected lines by reason, with the first two examples each."""
+    r = Table(title="lines not used, by reason")
+    for c in ("reason", "count", "first examples (file:line text)"):
+        r.add_column(c)
+    for reason, n in counts.items():
+        ex = examples.get(reason, [])[:2]
+        # one example per line: the escapes keep a line's own CR/LF from breaking it up
+        r.add_row(
+            Text(printable(reason)),
+            Text(str(n)),
+            Text(
+                "\n".join(
+                    printable(f"{Path(e['file']).name}:{e['line']} {e['text'][:70]}") for e in ex
+                )
+            ),
+        )
+    return r

@@ -241,6 +241,7 @@ def to_dict(a: Analysis) -> dict[str, Any]:
             "gaps": a.time.gaps,
             "rollovers": a.time.rollovers,
             "implausible_dates": a.time.implausible_dates,
+            "assumed_date": a.time.assumed_date,
             "decisions": list(a.time.decisions),
         },
         "sources": by_role,

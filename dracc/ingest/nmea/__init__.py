@@ -32,9 +32,12 @@ Field conversions (edges of the SI world, units per ``dracc.core.units``):
 
 Sentences read: HDT, HDG, HDM, THS, ROT (heading/rot); VHW, VBW (water), VLW
 (distance); GGA, GLL, RMC, GNS (position; RMC also ground), VTG (ground); ZDA (time
-only).  Other well-formed sentences, ``#`` comments and blank lines are not rejected
-but *ignored*: counted by type (the sentence type, e.g. ``GSV``, ``VDM``; the first 5
-characters of a proprietary address, e.g. ``PGRME``; ``comment``; ``blank``).
+only); and, by the numpy path alone (:mod:`~dracc.ingest.nmea.ins_ais`), ``$PASHR``
+and ``$PSXN,20``/``,23`` (INS heading with its quality) and own-ship AIS ``!AIVDO``
+types 1, 2, 3, 18, 19 (position, ground, heading).  Other well-formed sentences, ``#``
+comments and blank lines are not rejected but *ignored*: counted by type (the sentence
+type, e.g. ``GSV``, ``VDM``; the first 5 characters of a proprietary address, e.g.
+``PGRME``; ``comment``; ``blank``).
 
 The modules of the package, in the order a block goes through them:
 
@@ -46,9 +49,12 @@ The modules of the package, in the order a block goes through them:
 * :mod:`~dracc.ingest.nmea.engine_numpy` and :mod:`~dracc.ingest.nmea.numpy_core`: the
   numpy engine (pieces of bounded memory, and the vectorised parse of one);
 * :mod:`~dracc.ingest.nmea.fields`: the field decoders of the numpy engine;
+* :mod:`~dracc.ingest.nmea.ins_ais`: its decoders of ``$PASHR``, ``$PSXN`` and own-ship
+  ``!AIVDO`` (the six-bit AIS armour);
 * :mod:`~dracc.ingest.nmea.parsed`: :class:`ParsedBlock`, what a parse gives;
 * :mod:`~dracc.ingest.nmea.pool`: the worker processes and their hand-over of blocks;
-* :mod:`~dracc.ingest.nmea.assemble`: parsed blocks to canonical frames;
+* :mod:`~dracc.ingest.nmea.assemble`: parsed blocks to canonical frames (and the
+  ``$PSXN,20`` quality and the AIS UTC second applied to their records);
 * :mod:`~dracc.ingest.nmea.state`: :class:`StreamState`, the running totals of a stream;
 * :mod:`~dracc.ingest.nmea.reader`: the file reader (:func:`iter_nmea_blocks`,
   :func:`read_nmea`, :func:`check_readable`);

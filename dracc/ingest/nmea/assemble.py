@@ -47,14 +47,21 @@ def _reference_categorical(codes: np.ndarray) -> pd.Categorical:
 
 
 def talker_str(code: int) -> str:
-    return int(code).to_bytes(2, "little").decode("ascii", "replace")
+    """The talker of a code ('' for 0: a proprietary sentence has none)."""
+    return int(code).to_bytes(2, "little").decode("ascii", "replace") if code else ""
+
+
+#: a source key code (see :func:`_source_categorical`) above this is a sentence type:
+#: the source of an untagged proprietary sentence (no talker) is its address
+_BY_SENTENCE = 1 << 41
 
 
 def _source_categorical(
     cols: dict[str, np.ndarray], names: list[str], split_talkers: dict[str, set[int]], kind: str
 ) -> tuple[pd.Categorical, pd.Categorical]:
     """(source, talker) categoricals from codes: the TAG/given source where there is one,
-    else the talker, split by decimals of minutes for fingerprinted talkers."""
+    else the talker, split by decimals of minutes for fingerprinted talkers, or for a
+    proprietary sentence (no talker) its address (``PSXN``, ``PASHR``)."""
     talker = cols["talker"].astype(np.int64)
     tag = cols["tag_source"].astype(np.int64)
     has_tag = np.zeros(len(tag), dtype=bool)
@@ -66,11 +73,15 @@ def _source_categorical(
     split = ~has_tag & np.isin(talker, split_codes) if split_codes else np.zeros(len(tag), bool)
     # one integer per distinct source: tag code, or talker (+ decimals where split)
     key = np.where(has_tag, tag, (1 << 32) + talker * 64 + np.where(split, dec + 1, 0))
+    sentence = cols["sentence"].astype(np.int64)
+    key = np.where(~has_tag & (talker == 0), _BY_SENTENCE + sentence, key)
     inv, ukey = pd.factorize(key, sort=True)  # = np.unique(key, return_inverse=True), by hashing
     labels = []
     for k in ukey.tolist():
         if k < (1 << 32):
             labels.append(names[k])
+        elif k >= _BY_SENTENCE:
+            labels.append(SENTENCES[k - _BY_SENTENCE])
         else:
             t, d = divmod(k - (1 << 32), 64)
             labels.append(talker_str(t) + (f"/{d - 1}dp" if d else ""))
@@ -91,17 +102,29 @@ def assemble(
     line0: int,
     cfg: IngestConfig,
 ) -> dict[str, pd.DataFrame]:
-    """Turn a parsed block plus resolved times into canonical frames; count events."""
+    """Turn a parsed block plus resolved times into canonical frames; count events.
+
+    ``$PSXN,23`` headings get the quality of the latest ``$PSXN,20`` of their source
+    (:func:`fill_heading_quality`), own-ship AIS records their UTC second
+    (:func:`ais_time`)."""
     frames = {}
     order_kinds = [k for k in KINDS if k in pb.kinds]
+    filled = fill_heading_quality(pb, state.psxn_quality)
+    vdo_seen = np.zeros(0, dtype=np.int64)  # a VDO is one line: its no_date counted once
     for kind, t in zip(order_kinds, times, strict=True):
         cols = pb.kinds[kind]
+        if kind == "heading" and filled is not None:
+            cols = {**cols, "heading_quality": filled}
+        t = ais_time(t, cols, pb)
         line = cols["line"] + line0 - 1
         missing = t == MISSING_NS
         if missing.any():
+            vdo = cols["sentence"] == _VDO
             idx = np.flatnonzero(missing)
             if kind == "ground":  # an RMC is one line: counted once, in its position row
                 idx = idx[cols["sentence"][idx] != SENTENCES.index("RMC")]
+            idx = idx[~(vdo[idx] & np.isin(cols["seq"][idx], vdo_seen))]
+            vdo_seen = np.concatenate((vdo_seen, cols["seq"][vdo & missing]))
             if len(idx):
                 state.rejects.counts["no_date"] += len(idx)
                 ex = state.rejects.examples.setdefault("no_date", [])
@@ -153,6 +176,68 @@ def assemble(
         state.events.add(kind, src, t, own, line, file, sent)
         frames[kind] = df
     return frames
+
+
+_PSXN, _VDO = SENTENCES.index("PSXN"), SENTENCES.index("VDO")
+
+
+def fill_heading_quality(pb: ParsedBlock, carry: dict[str, float]) -> np.ndarray | None:
+    """The ``heading_quality`` column of ``pb``'s heading records with the ``$PSXN,23``
+    rows given the head-qual of the latest ``$PSXN,20`` of the same source before them
+    (in this block, else ``carry``: the latest of the blocks before; NaN if none); None
+    where the block has neither.  ``carry`` is updated with this block's latest."""
+    q = pb.aux.get("psxn_quality")
+    h = pb.kinds.get("heading")
+    if q is None and (h is None or not (h["sentence"] == _PSXN).any()):
+        return None
+    names = pb.source_names
+
+    def label(tag: np.ndarray) -> np.ndarray:
+        lab = np.array(names + [""], dtype=object) if names else np.array([""], dtype=object)
+        return lab[np.where(tag < len(names), tag, len(names))]
+
+    q_src = label(q["tag_source"]) if q is not None else np.zeros(0, dtype=object)
+    out = None
+    if h is not None:
+        out = h["heading_quality"].copy()
+        rows = np.flatnonzero(h["sentence"] == _PSXN)
+        h_src = label(h["tag_source"][rows])
+        for src in pd.unique(h_src).tolist():
+            r = rows[h_src == src]
+            val = np.full(len(r), carry.get(src, np.nan))
+            if q is not None:
+                mine = q_src == src
+                qs, qv = q["seq"][mine], q["heading_quality"][mine]
+                at = np.searchsorted(qs, h["seq"][r], side="right") - 1
+                val = np.where(at >= 0, qv[np.maximum(at, 0)] if len(qv) else np.nan, val)
+            out[r] = val
+    if q is not None:
+        for src in pd.unique(q_src).tolist():
+            carry[src] = float(q["heading_quality"][q_src == src][-1])
+    return out
+
+
+def ais_time(t: np.ndarray, cols: dict[str, np.ndarray], pb: ParsedBlock) -> np.ndarray:
+    """Times of own-ship AIS records moved to their report's UTC second (0-59): the
+    nearest time with that second within -30 s .. +30 s of the time the time base gave
+    them (the line's external time, or the preceding timed record's); unchanged where
+    the report has no second (60-63) or the record no time."""
+    a = pb.aux.get("ais_second")
+    if a is None or len(a["seq"]) == 0:
+        return t
+    vdo = np.flatnonzero((cols["sentence"] == _VDO) & (t != MISSING_NS))
+    if len(vdo) == 0:
+        return t
+    at = np.searchsorted(a["seq"], cols["seq"][vdo])
+    sec = a["second"][np.minimum(at, len(a["seq"]) - 1)].astype(np.int64)
+    ok = (at < len(a["seq"])) & (sec >= 0)
+    vdo, sec = vdo[ok], sec[ok]
+    minute = 60 * 1_000_000_000
+    d = sec * 1_000_000_000 - t[vdo] % minute
+    d = (d + minute // 2) % minute - minute // 2  # to [-30 s, 30 s)
+    t = t.copy()
+    t[vdo] += d
+    return t
 
 
 def _recv_ns(tod_ns: np.ndarray, ext_ns: np.ndarray) -> np.ndarray:

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from dracc.frames import KIND_COLUMNS
 from dracc.ingest.nmea.engine_numpy import parse_numpy
 from dracc.ingest.nmea.parsed import ParsedBlock
 from dracc.ingest.nmea.sentences import MAX_LINE_BYTES, SENTENCES
@@ -186,6 +187,9 @@ def _parse_c(
                     cols[c] = np.where(rmc, val[sel, 4 + j], val[sel, j])
                 else:
                     cols[c] = val[sel, j]
+            for c, t in KIND_COLUMNS[kind].items():  # columns no kernel type gives: NaN
+                if c not in cols and t == "float64":
+                    cols[c] = np.full(len(sel), np.nan)
             parts.append(cols)
         if kind in pbs.kinds:
             parts.append(from_sub(pbs.kinds[kind]))
@@ -239,6 +243,7 @@ def _parse_c(
         Counter(pbs.ignored),
         ign_examples,
         int(r["n_seg"]),
+        {k: from_sub(cols) for k, cols in pbs.aux.items()},  # only the numpy path gives them
     )
 
 

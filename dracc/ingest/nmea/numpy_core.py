@@ -11,6 +11,7 @@ import pandas as pd
 
 from dracc.frames import KIND_COLUMNS, MISSING_NS
 from dracc.ingest.nmea.fields import Fields, decode
+from dracc.ingest.nmea.ins_ais import decode_special, ignored_rows
 from dracc.ingest.nmea.lines import Marked, ranges_any
 from dracc.ingest.nmea.parsed import ParsedBlock, first_examples
 from dracc.ingest.nmea.sentences import (
@@ -20,6 +21,7 @@ from dracc.ingest.nmea.sentences import (
     NO_GNSS,
     NON_FATAL,
     SENTENCES,
+    STANDARD,
 )
 from dracc.ingest.tagblock import FORMS, HEX, parse_prefixes
 
@@ -263,26 +265,12 @@ def parse_core(
         ignore(m, seg_line[idx], st[idx], seg_end[idx])
         alive[idx] = False
 
-    drop_ignored(proprietary & (addr_len >= 2), 5)
-    drop_ignored(ais & good_addr, 3)  # AIS: 'VDM', 'VDO' (an unreadable address is damage)
-    drop("bad_address", ~good_addr)
-    addr = np.ascontiguousarray(amat).view("S5").ravel()
-    stype_b = np.ascontiguousarray(amat[:, 2:]).view("S3").ravel()
     talker_b = np.ascontiguousarray(amat[:, :2]).view("S2").ravel()
-    known_types = np.array([s.encode() for s in SENTENCES], dtype="S3")
-    is_known = np.isin(stype_b, known_types)
-    drop_ignored(~is_known, 3)
-    gnss_t = np.isin(talker_b, np.array([t.encode() for t in GNSS_TALKERS], dtype="S2"))
-    no_gnss = np.isin(stype_b, np.array([t.encode() for t in NO_GNSS], dtype="S3"))
-    drop("implausible_talker", gnss_t & no_gnss)
-    del addr
-
     kinds: dict[str, dict[str, list[np.ndarray]]] = {}
-    clock: dict[str, list[np.ndarray]] = {}
-    for stype in SENTENCES:
-        rows = np.flatnonzero(alive & (stype_b == stype.encode()))
-        if len(rows) == 0:
-            continue
+    aux: dict[str, dict[str, list[np.ndarray]]] = {}
+
+    def group(stype: str, rows: np.ndarray) -> tuple[np.ndarray, Fields | None]:
+        """The rows of one sentence type with the right field count, and their fields."""
         F = Fields(bufp, commas, c_first[rows], ncomma[rows], body_end[rows])
         lo, hi = FIELD_COUNTS[stype]
         badn = (F.nf < lo) | (F.nf > hi)
@@ -290,42 +278,124 @@ def parse_core(
             drop("field_count", np.isin(np.arange(nseg), rows[badn]))
             rows = rows[~badn]
             if len(rows) == 0:
-                continue
+                return rows, None
             F = Fields(bufp, commas, c_first[rows], ncomma[rows], body_end[rows])
-        cols, timing = decode(stype, F)
+        return rows, F
+
+    def malformed(F: Fields, rows: np.ndarray) -> np.ndarray:
         if F.bad.any():
             drop("malformed_field", np.isin(np.arange(nseg), rows[F.bad]))
-            okr = ~F.bad
-            rows = rows[okr]
-            cols = {k: {c: v[okr] for c, v in d.items()} for k, d in cols.items()}
-            timing = {k: v[okr] for k, v in timing.items()}
-            if len(rows) == 0:
-                continue
+        return ~F.bad
+
+    def emit(
+        stype: str,
+        rows: np.ndarray,
+        timing: dict[str, np.ndarray],
+        name: str,
+        d: dict[str, np.ndarray],
+        talker: np.ndarray | None = None,
+    ) -> None:
+        """Append the rows of one group to a kind (or to a side table, ``aux``)."""
         common = {
             "line": seg_line[rows] + 1,
             "seq": rows,
-            "talker": talker_b[rows].view(np.uint16),
+            "talker": talker_b[rows].view(np.uint16) if talker is None else talker,
             "sentence": np.full(len(rows), SENTENCES.index(stype), dtype=np.int8),
             "tag_source": src_codes[seg_line[rows]],
             "ext_ns": line_ext[seg_line[rows]],
             **timing,
         }
-        if stype == "ZDA":
-            for c, v in common.items():
-                clock.setdefault(c, []).append(v)
-        for kind, d in cols.items():
-            for c, t in KIND_COLUMNS[kind].items():  # every group carries every column
+        if name in KIND_COLUMNS:
+            for c, t in KIND_COLUMNS[name].items():  # every group carries every column
                 if c not in d and t == "float64":
                     d[c] = np.full(len(rows), np.nan)
-            tgt = kinds.setdefault(kind, {})
-            for c, v in {**common, **d}.items():
-                tgt.setdefault(c, []).append(v)
-    kinds_np: dict[str, dict[str, np.ndarray]] = {}
-    for k, parts in kinds.items():
+            tgt = kinds.setdefault(name, {})
+        else:
+            tgt = aux.setdefault(name, {})
+        for c, v in {**common, **d}.items():
+            tgt.setdefault(c, []).append(v)
+
+    # INS and own-ship AIS sentences (ins_ais): a proprietary address or '!', before the
+    # proprietary and AIS sentences are ignored and the 5-character addresses checked
+    prop_rows = np.flatnonzero(alive & proprietary)  # few: the masks are taken on these only
+    at4 = np.ascontiguousarray(amat[prop_rows, :4]).view("S4").ravel()
+    ai = np.flatnonzero(alive & ais & good_addr)
+    specials = {
+        "PASHR": prop_rows[
+            (addr_len[prop_rows] == 5) & (at4 == b"PASH") & (amat[prop_rows, 4] == 82)
+        ],
+        "PSXN": prop_rows[(addr_len[prop_rows] == 4) & (at4 == b"PSXN")],
+        "VDO": ai[np.ascontiguousarray(amat[ai, 2:]).view("S3").ravel() == b"VDO"],
+    }
+    for stype, rows in specials.items():
+        if len(rows) == 0:
+            continue
+        F = Fields(bufp, commas, c_first[rows], ncomma[rows], body_end[rows])
+        ign = ignored_rows(stype, F)
+        drop_ignored(np.isin(np.arange(nseg), rows[ign]), 3 if stype == "VDO" else 5)
+        rows, F2 = group(stype, rows[~ign]) if (~ign).any() else (rows[:0], None)
+        if F2 is None:
+            continue
+        out, timing = decode_special(stype, F2)
+        ok = malformed(F2, rows)
+        used = np.zeros(len(rows), dtype=bool)
+        for _, (m, _d) in out.items():
+            used |= m
+        drop_ignored(np.isin(np.arange(nseg), rows[ok & ~used]), 3 if stype == "VDO" else 5)
+        alive[rows] = False
+        tk = None if stype == "VDO" else np.zeros(len(rows), dtype=np.uint16)  # no talker
+        for name, (m, d) in out.items():
+            keep = m & ok
+            if keep.any():
+                emit(
+                    stype,
+                    rows[keep],
+                    {k: v[keep] for k, v in timing.items()},
+                    name,
+                    {c: v[keep] for c, v in d.items()},
+                    None if tk is None else tk[keep],
+                )
+
+    drop_ignored(proprietary & (addr_len >= 2), 5)
+    drop_ignored(ais & good_addr, 3)  # AIS: 'VDM', 'VDO' (an unreadable address is damage)
+    drop("bad_address", ~good_addr)
+    stype_b = np.ascontiguousarray(amat[:, 2:]).view("S3").ravel()
+    known_types = np.array([s.encode() for s in STANDARD], dtype="S3")
+    is_known = np.isin(stype_b, known_types)
+    drop_ignored(~is_known, 3)
+    gnss_t = np.isin(talker_b, np.array([t.encode() for t in GNSS_TALKERS], dtype="S2"))
+    no_gnss = np.isin(stype_b, np.array([t.encode() for t in NO_GNSS], dtype="S3"))
+    drop("implausible_talker", gnss_t & no_gnss)
+
+    for stype in STANDARD:
+        rows = np.flatnonzero(alive & (stype_b == stype.encode()))
+        if len(rows) == 0:
+            continue
+        rows, Fg = group(stype, rows)
+        if Fg is None:
+            continue
+        F = Fg
+        cols, timing = decode(stype, F)
+        okr = malformed(F, rows)
+        if not okr.all():
+            rows = rows[okr]
+            cols = {k: {c: v[okr] for c, v in d.items()} for k, d in cols.items()}
+            timing = {k: v[okr] for k, v in timing.items()}
+            if len(rows) == 0:
+                continue
+        if stype == "ZDA":
+            emit(stype, rows, timing, "clock", {})
+        for kind, d in cols.items():
+            emit(stype, rows, timing, kind, d)
+
+    def in_order(parts: dict[str, list[np.ndarray]]) -> dict[str, np.ndarray]:
         cat = {c: np.concatenate(v) for c, v in parts.items()}
         order = np.argsort(cat["seq"], kind="stable")  # back to stream order
-        kinds_np[k] = {c: v[order] for c, v in cat.items()}
-    clock_np = {c: np.concatenate(v) for c, v in clock.items()}
+        return {c: v[order] for c, v in cat.items()}
+
+    kinds_np = {k: in_order(parts) for k, parts in kinds.items()}
+    clock_np = {c: np.concatenate(v) for c, v in aux.pop("clock", {}).items()}
+    aux_np = {k: in_order(parts) for k, parts in aux.items()}
     return (
         ParsedBlock(
             n_lines,
@@ -340,6 +410,7 @@ def parse_core(
             ignored,
             first_examples(ign_examples, IGNORED_EXAMPLES),
             nseg,
+            aux_np,
         ),
         firsts,
     )

@@ -33,6 +33,11 @@ class ParsedBlock:
     ignored_examples: dict[str, list[tuple[int, str]]] = field(default_factory=dict)
     #: sentence starts in the block (the range of ``seq``)
     n_seg: int = 0
+    #: side tables (seq, line, talker, sentence, tag_source and their columns) of what is
+    #: not a record but qualifies records: ``psxn_quality`` (``$PSXN,20`` head-qual),
+    #: ``ais_second`` (the UTC second of an own-ship AIS report), see
+    #: :mod:`~dracc.ingest.nmea.ins_ais`; applied by :mod:`~dracc.ingest.nmea.assemble`
+    aux: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
 
 
 def too_long_block(text: bytes) -> ParsedBlock:
@@ -62,6 +67,7 @@ def concat_parsed(
     names = {nm: k for k, nm in enumerate(sorted(firsts, key=firsts.__getitem__))}
     n_lines = n_seg = n_blank = 0
     kinds: dict[str, dict[str, list[np.ndarray]]] = {}
+    aux: dict[str, dict[str, list[np.ndarray]]] = {}
     clock: dict[str, list[np.ndarray]] = {}
     counts: Counter[str] = Counter()
     examples: dict[str, list[tuple[int, str]]] = {}
@@ -72,6 +78,7 @@ def concat_parsed(
     for pb, _ in parts:
         lut = np.array([names[str(x)] for x in pb.source_names] or [0], dtype=np.int32)
         groups = [(kinds.setdefault(k, {}), cols) for k, cols in pb.kinds.items()]
+        groups += [(aux.setdefault(k, {}), cols) for k, cols in pb.aux.items()]
         if pb.clock:
             groups.append((clock, pb.clock))
         for d, cols in groups:
@@ -98,6 +105,7 @@ def concat_parsed(
         n_blank += pb.n_blank
     cat = {k: {c: np.concatenate(v) for c, v in d.items()} for k, d in kinds.items()}
     clock_np = {c: np.concatenate(v) for c, v in clock.items()}
+    aux_np = {k: {c: np.concatenate(v) for c, v in d.items()} for k, d in aux.items()}
     pb = ParsedBlock(
         n_lines,
         n_blank,
@@ -111,6 +119,7 @@ def concat_parsed(
         ignored,
         {k: ex[:IGNORED_EXAMPLES] for k, ex in ign_examples.items()},
         n_seg,
+        aux_np,
     )
     return pb, firsts
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import stat
+from collections import Counter
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -18,7 +19,7 @@ import numpy as np
 from dracc.core.errors import IngestError
 from dracc.frames import FileResult, concat_blocks
 from dracc.ingest.memory import handover_dir
-from dracc.ingest.nmea.assemble import assemble, talker_str, time_arrays
+from dracc.ingest.nmea.assemble import _source_categorical, assemble, talker_str, time_arrays
 from dracc.ingest.nmea.blocks import block_ranges, parse_range
 from dracc.ingest.nmea.parsed import ParsedBlock
 from dracc.ingest.nmea.pool import load_parsed, parse_range_to_file, pool_ok, worker_init
@@ -45,6 +46,7 @@ def iter_nmea_blocks(
     block_bytes: int | None = None,
     workers: int | None = None,
     progress: Callable[[int], object] | None = None,
+    name: str | None = None,
 ) -> Iterator[Block]:
     """Stream an NMEA text file as resolved blocks with bounded memory.
 
@@ -58,11 +60,13 @@ def iter_nmea_blocks(
     its own, read only at its ends (:func:`block_ranges`).  ``block_bytes`` None: a first block of ``FIRST_BLOCK_BYTES``
     (``MAIN_FIRST_BLOCK_BYTES`` with workers), then blocks of about ``BLOCK_BYTES``, as
     many as the workers share evenly (none waits alone at the end); a number: blocks of that
-    size.  ``progress(n_bytes)`` is called as blocks finish.  Raises IngestError in
-    ``cfg.strict`` mode at the first rejected line.
+    size.  ``progress(n_bytes)`` is called as blocks finish.  ``name``: what the file is
+    called in examples, events and errors (default its path; the log as given where
+    ``path`` is its decompressed copy).  Raises IngestError in ``cfg.strict`` mode at the
+    first rejected line.
     """
     path = Path(path)
-    file = str(path)
+    file = str(path) if name is None else name
     st = state if state is not None else StreamState(file)
     st.path = file
     if cfg.date is not None:
@@ -97,18 +101,24 @@ def iter_nmea_blocks(
     def handle(pb: ParsedBlock, nbytes: int) -> Iterator[Block]:
         line0 = st.count_block(pb, cfg.strict)
         st.bytes += nbytes
+        pos = pb.kinds.get("position")
+        pos_types = (
+            np.bincount(pos["sentence"].astype(np.int64), minlength=len(SENTENCES)) > 0
+            if pos is not None
+            else np.zeros(len(SENTENCES), bool)
+        )
         for kind, cols in pb.kinds.items():
-            sc = (
-                cols["sentence"][cols["sentence"] != SENTENCES.index("RMC")]
-                if kind == "ground"
-                else cols["sentence"]
-            )
-            c = np.bincount(sc.astype(np.int64), minlength=len(SENTENCES))
+            c = np.bincount(cols["sentence"].astype(np.int64), minlength=len(SENTENCES))
+            if kind != "position" and pos is not None and c[pos_types].any():
+                c -= _also_in_position(cols, pos["seq"], pos_types)
             st.sentences.update({SENTENCES[i]: int(c[i]) for i in np.flatnonzero(c).tolist()})
             if kind == "position" and first_parsed[0] and not st.split_talkers:
                 _fingerprint(cols, st, pb.source_names)
         if pb.clock:
             st.sentences["ZDA"] += len(pb.clock["seq"])
+            count_by_source(pb, pb.clock, st.split_talkers, st.time_only)
+        if pb.aux:
+            _count_qualifiers(pb, st)
         if pb.n_lines and not (pb.n_lines == 1 and pb.reject_counts.get("too_long") == 1):
             first_parsed[0] = False
         tod, date, ext, split = time_arrays(pb)
@@ -128,7 +138,7 @@ def iter_nmea_blocks(
 
     def local(i: int) -> ParsedBlock:
         off, ln, too_long = ranges[i]
-        return parse_range(file, off, ln, cfg.ignore_checksum, at_eof[i], max_line, too_long)
+        return parse_range(str(path), off, ln, cfg.ignore_checksum, at_eof[i], max_line, too_long)
 
     if nworkers <= 1 or len(ranges) <= 1:
         for i, (_off, ln, _long) in enumerate(ranges):
@@ -156,7 +166,7 @@ def iter_nmea_blocks(
                         parse_range_to_file,
                         folder,
                         i,
-                        file,
+                        str(path),
                         off,
                         ln,
                         cfg.ignore_checksum,
@@ -191,6 +201,61 @@ def iter_nmea_blocks(
         if broken:
             st.stats["pool_fallback"] += 1
     yield from _release(st.timebase.finish())
+
+
+def _also_in_position(
+    cols: dict[str, np.ndarray], pos_seq: np.ndarray, pos_types: np.ndarray
+) -> np.ndarray:
+    """Per sentence type, the rows of a kind whose sentence gave a position row too (an
+    RMC's ground row, an AIS VDO's ground and heading rows): counted in the position.
+    Both tables are in stream order (``seq`` ascending); only rows of types the position
+    table holds are looked up."""
+    rows = np.flatnonzero(pos_types[cols["sentence"]])
+    seq = cols["seq"][rows]
+    at = np.minimum(np.searchsorted(pos_seq, seq), len(pos_seq) - 1)
+    same = rows[pos_seq[at] == seq]
+    return np.bincount(cols["sentence"][same].astype(np.int64), minlength=len(pos_types))
+
+
+def count_by_source(
+    pb: ParsedBlock,
+    table: dict[str, np.ndarray],
+    split_talkers: dict[str, set[int]],
+    into: Counter[tuple[str, str, str]],
+) -> None:
+    """Add the sentences of one of a block's tables (``clock``: ZDA; a side table of
+    qualifiers) to ``into`` by (source key, type, talker), the key made as for the
+    block's records (TAG ``s:`` or given source, else the talker; see
+    :func:`~dracc.ingest.nmea.assemble.assemble`)."""
+    if not table or not len(table["seq"]):
+        return
+    src, tal = _source_categorical(table, pb.source_names, split_talkers, "clock")
+    ns, nt, nk = len(src.categories), len(tal.categories), len(SENTENCES)
+    key = (src.codes.astype(np.int64) * nk + table["sentence"].astype(np.int64)) * nt
+    full = np.bincount(key + tal.codes.astype(np.int64), minlength=ns * nk * nt)
+    for j in np.flatnonzero(full).tolist():
+        rest, t = divmod(j, nt)
+        s, k = divmod(rest, nk)
+        into[(str(src.categories[s]), SENTENCES[k], str(tal.categories[t]))] += int(full[j])
+
+
+def _count_qualifiers(pb: ParsedBlock, st: StreamState) -> None:
+    """Count the side-table rows of sentences that gave no record (``$PSXN,20``) in
+    ``st.qualifiers`` and ``st.sentences``; a side row of a sentence that did give one
+    (the UTC second of an AIS report) is that sentence, counted already."""
+    used = [c["seq"] for c in pb.kinds.values()]
+    if pb.clock:
+        used.append(pb.clock["seq"])
+    seqs = np.concatenate(used) if used else np.zeros(0, np.int64)
+    for table in pb.aux.values():
+        if not table or not len(table["seq"]):
+            continue
+        alone = ~np.isin(table["seq"], seqs)
+        if alone.any():
+            sub = {c: v[alone] for c, v in table.items()}
+            c = np.bincount(sub["sentence"].astype(np.int64), minlength=len(SENTENCES))
+            st.sentences.update({SENTENCES[i]: int(c[i]) for i in np.flatnonzero(c).tolist()})
+            count_by_source(pb, sub, st.split_talkers, st.qualifiers)
 
 
 def _fingerprint(cols: dict[str, np.ndarray], st: StreamState, pb_names: list[str]) -> None:

@@ -24,8 +24,17 @@ FIELD_COUNTS = {
     "GNS": (12, 14),
     "VTG": (8, 10),
     "ZDA": (4, 7),
+    # read by the numpy path only (the compiled kernel hands their lines over):
+    # proprietary INS sentences and own-ship AIS (:mod:`~dracc.ingest.nmea.ins_ais`)
+    "PASHR": (6, 11),  # the short form ends after heave; NovAtel < 7.03 has no field 11
+    "PSXN": (5, 5),  # the ,20 (quality) and ,23 (attitude) forms dracc reads
+    "VDO": (6, 6),
 }
 SENTENCES = tuple(FIELD_COUNTS)
+#: the standard 3-letter sentence types (the kernel's types, in its order); the others
+#: of :data:`SENTENCES` are :data:`SPECIAL` (a proprietary address or AIS armour)
+STANDARD = SENTENCES[:14]
+SPECIAL = SENTENCES[14:]
 #: talkers of satellite receivers: they cannot measure magnetic heading nor water speed
 GNSS_TALKERS = frozenset({"GP", "GN", "GL", "GA", "GB", "GI", "GQ", "BD"})
 NO_GNSS = frozenset({"HDG", "HDM", "VHW", "VBW", "VLW"})
@@ -51,8 +60,12 @@ REASONS = {
 #: what the names counted as *ignored* (valid input dracc does not use; never rejected,
 #: never a --strict failure) mean.  Besides these: the sentence type of a well-formed
 #: standard sentence dracc does not read (``GSV``, ``MWV``, ``DBT``, ``XDR`` ...; also
-#: ``VDM``/``VDO`` for AIS ``!AIVDM``/``!AIVDO``), and the address of a proprietary
-#: sentence, its first 5 characters (``PGRME``, ``PUHAW``, ``PSRFT`` for ``$PSRFTXT``).
+#: ``VDM`` for AIS ``!AIVDM``, other ships), and the address of a proprietary sentence,
+#: its first 5 characters (``PGRME``, ``PUHAW``, ``PSRFT`` for ``$PSRFTXT``).  Of the
+#: sentences dracc reads, the forms it does not use are ignored under their name too:
+#: ``VDO`` (a multi-sentence own-ship message such as type 5, other message types, a
+#: report with nothing available), ``PSXN`` (``$PSXN,21``, ``,22``, ``,24`` ...) and
+#: ``PASHR`` (Ashtech's ``$PASHR,ATT``, ``,HPR``, ``,POS`` ... with a word in field 1).
 IGNORED = {
     "comment": "comment line ('#')",
     "blank": "empty line",

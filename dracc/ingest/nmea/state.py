@@ -1,6 +1,6 @@
 """The running totals of a stream of NMEA text (:class:`StreamState`: lines, rejects,
-ignored types, statistics, time base and events, and the notes they give) and one
-resolved block of a file (:class:`Block`)."""
+ignored types, statistics, time base and events, the sentences that give only a time,
+and the notes they give) and one resolved block of a file (:class:`Block`)."""
 
 from __future__ import annotations
 
@@ -43,7 +43,19 @@ class StreamState:
     stats: Counter[str] = field(default_factory=Counter)
     timebase: TimeBase = field(default_factory=TimeBase)
     events: EventCounter = field(default_factory=EventCounter)
+    #: sentences parsed, by type (every sentence once: an RMC's ground row is not counted;
+    #: records later rejected for want of a date included)
     sentences: Counter[str] = field(default_factory=Counter)
+    #: the sentences that give a time and no record (ZDA), by (source key, type, talker):
+    #: they set the time base, so no frame holds them (counted by
+    #: :func:`~dracc.ingest.nmea.reader.count_by_source`)
+    time_only: Counter[tuple[str, str, str]] = field(default_factory=Counter)
+    #: the sentences that only qualify records of other sentences (``$PSXN,20``, the
+    #: quality of the attitude that follows), likewise: they give no record either
+    qualifiers: Counter[tuple[str, str, str]] = field(default_factory=Counter)
+    #: the head-qual of the latest ``$PSXN,20`` of each source (its TAG source, '' untagged),
+    #: carried from block to block to the ``$PSXN,23`` headings that follow
+    psxn_quality: dict[str, float] = field(default_factory=dict)
     split_talkers: dict[str, set[int]] = field(
         default_factory=dict
     )  #: talker -> decimals seen (fingerprint split)
@@ -57,6 +69,7 @@ class StreamState:
             gaps=tot["gaps"],
             rollovers=tb.rollovers,
             implausible_dates=tb.week_rollovers + tb.implausible,
+            assumed_date=tb.assumed_date,
         )
         te.decisions = list(dict.fromkeys(tb.decisions))
         if tb.derived:

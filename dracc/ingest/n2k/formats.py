@@ -1,0 +1,161 @@
+"""Which NMEA 2000 log format a file is, and reading any of them into :class:`Messages`.
+
+Formats (names as :func:`sniff_n2k` gives them and :func:`parse_n2k` takes them):
+
+=====================  ===========================================================
+``n2k-plain``          canboat PLAIN, a CAN frame a line (fast packets reassembled)
+``n2k-fast``           canboat FAST, a whole message a line
+``n2k-plain-mix-fast`` canboat PLAIN_MIX_FAST: fast PGNs as frames and whole lines
+``n2k-candump``        Linux candump, any of its three forms
+``n2k-ydraw``          Yacht Devices RAW (time of day only)
+``n2k-pdgy``           Digital Yacht iKonvert ``!PDGY``
+``n2k-ebl``            Actisense EBL binary
+``n2k-pcdin``          ``$PCDIN`` sentences
+``n2k-mxpgn``          ``$MXPGN`` sentences
+=====================  ===========================================================
+
+canboat's own ``# format=NAME`` header line, where a log has one, decides between the
+three canboat forms; otherwise a log with whole-message lines is FAST unless some
+8-byte lines of fast-packet PGNs are visibly frames (frame 0 followed by frame 1 of
+the same sequence), which makes it PLAIN_MIX_FAST.
+"""
+
+from __future__ import annotations
+
+import re
+from collections import Counter
+
+import numpy as np
+
+from dracc.ingest.n2k.canframes import parse_candump, parse_ydraw
+from dracc.ingest.n2k.ebl import parse_ebl
+from dracc.ingest.n2k.encapsulated import parse_mxpgn, parse_pcdin, parse_pdgy
+from dracc.ingest.n2k.fastpacket import is_fast_pgn
+from dracc.ingest.n2k.messages import Messages
+from dracc.ingest.n2k.plain import parse_plain
+from dracc.ingest.n2k.textscan import Lines, join_lines, split_lines
+
+PLAIN, FAST, MIX = "n2k-plain", "n2k-fast", "n2k-plain-mix-fast"
+CANDUMP, YDRAW, PDGY, EBL = "n2k-candump", "n2k-ydraw", "n2k-pdgy", "n2k-ebl"
+PCDIN, MXPGN = "n2k-pcdin", "n2k-mxpgn"
+FORMATS = (PLAIN, FAST, MIX, CANDUMP, YDRAW, PDGY, EBL, PCDIN, MXPGN)
+#: how much of a file :func:`sniff_n2k` looks at
+SNIFF_BYTES = 65536
+#: lines of the head classified
+SNIFF_LINES = 400
+
+_HEADER_FORMATS = {"PLAIN": PLAIN, "FAST": FAST, "PLAIN_OR_FAST": PLAIN, "PLAIN_MIX_FAST": MIX}
+_PLAIN_RE = re.compile(
+    r"^[^,]{1,40},[0-7],\d{1,7},\d{1,3},\d{1,3},(\d{1,4})((?:,[0-9a-fA-F]{1,2})*)\s*$"
+)
+_CANDUMP_RE = re.compile(
+    r"^\s*(?:\(\d+\.\d+\)\s+\S+\s+[0-9A-Fa-f]{3,8}#"
+    r"|(?:\(\d+\.\d+\)\s+)?\S+\s+[0-9A-Fa-f]{3,8}\s+\[\d\]"
+    r"|<0x[0-9A-Fa-f]{1,8}>\s+\[\d\])"
+)
+_YDRAW_RE = re.compile(r"^\d{2}:\d{2}:\d{2}\.\d+ [RT] [0-9A-Fa-f]{8}(?: [0-9A-Fa-f]{2}){0,8}\s*$")
+_PDGY_RE = re.compile(r"^[!$]PDGY,")
+
+
+def sniff_n2k(head: bytes) -> str | None:
+    """The N2K format of a log whose first bytes are ``head`` (up to 64 KiB are read),
+    or None if it is none (an NMEA 0183 log with a few ``$PCDIN`` lines is none)."""
+    head = head[:SNIFF_BYTES]
+    if head.startswith(b"\x1b\x01") or (
+        head.count(b"\x10\x02\x93") + head.count(b"\x10\x02\x94") >= 2
+        and sum(b < 9 or 13 < b < 32 for b in head[:2048]) > len(head[:2048]) // 20
+    ):
+        return EBL
+    text = head.decode("latin-1")
+    lines = re.split(r"\r\n|\r|\n", text)
+    if len(head) == SNIFF_BYTES and len(lines) > 1:
+        lines = lines[:-1]  # maybe cut short
+    votes: Counter[str] = Counter()
+    plain_rows: list[tuple[int, int, str, int]] = []
+    total = 0
+    for line in lines:
+        s = line.strip()
+        if not s:
+            continue
+        if s.startswith("#"):
+            m = re.match(r"#\s*format=(\w+)", s)
+            if m and m.group(1).upper() in _HEADER_FORMATS:
+                return _HEADER_FORMATS[m.group(1).upper()]
+            continue
+        total += 1
+        if total > SNIFF_LINES:
+            break
+        pm = _PLAIN_RE.match(line)
+        if pm:
+            votes["plain"] += 1
+            fields = line.split(",")
+            b0 = int(fields[6], 16) if len(fields) > 6 else -1
+            plain_rows.append((int(fields[2]), int(pm.group(1)), fields[3], b0))
+        elif _YDRAW_RE.match(line):
+            votes[YDRAW] += 1
+        elif _PDGY_RE.match(s):
+            votes[PDGY] += 1
+        elif "$PCDIN," in s:
+            votes[PCDIN] += 1
+        elif "$MXPGN," in s:
+            votes[MXPGN] += 1
+        elif _CANDUMP_RE.match(line):
+            votes[CANDUMP] += 1
+    if not votes:
+        return None
+    best, n = votes.most_common(1)[0]
+    if 2 * n <= min(total, SNIFF_LINES):
+        return None
+    if best != "plain":
+        return best
+    return _plain_kind(plain_rows)
+
+
+def _plain_kind(rows: list[tuple[int, int, str, int]]) -> str:
+    """PLAIN, FAST or MIX from (pgn, length, src, byte 0) of plain lines."""
+    if not any(n > 8 for _, n, _, _ in rows):
+        return PLAIN
+    last: dict[tuple[int, str], int] = {}
+    for pgn, n, src, b0 in rows:
+        if n > 8 or b0 < 0 or not is_fast_pgn(pgn):
+            continue
+        prev = last.get((pgn, src))
+        if prev is not None and prev & 0x1F == 0 and b0 == prev + 1:
+            return MIX
+        last[(pgn, src)] = b0
+    return FAST
+
+
+def _parse_lines(lines: Lines, fmt: str) -> Messages:
+    if fmt in (PLAIN, MIX):
+        return parse_plain(lines, reassemble=True)
+    if fmt == FAST:
+        return parse_plain(lines, reassemble=False)
+    if fmt == CANDUMP:
+        return parse_candump(lines)
+    if fmt == YDRAW:
+        return parse_ydraw(lines)
+    if fmt == PDGY:
+        return parse_pdgy(lines)
+    if fmt == PCDIN:
+        return parse_pcdin(lines)
+    if fmt == MXPGN:
+        return parse_mxpgn(lines)
+    raise ValueError(f"not a line-based N2K format: {fmt!r} (one of {', '.join(FORMATS)})")
+
+
+def parse_n2k(data: bytes, fmt: str, first_line: int = 1) -> Messages:
+    """The messages of a whole log ``data`` in format ``fmt`` (line numbers count from
+    ``first_line``; for EBL ``line`` is the record number). Bad lines are counted in
+    ``Messages.rejects``, never raised."""
+    if fmt == EBL:
+        return parse_ebl(data)
+    return _parse_lines(split_lines(data, first_line), fmt)
+
+
+def parse_n2k_lines(lines: list[bytes], line_numbers: np.ndarray, fmt: str) -> Messages:
+    """The messages of ``lines`` (each one log line, e.g. the PLAIN part of Signal K
+    ``A`` lines) whose line numbers in their file are ``line_numbers``."""
+    if len(lines) != len(line_numbers):
+        raise ValueError("one line number per line")
+    return _parse_lines(join_lines(lines, line_numbers), fmt)
