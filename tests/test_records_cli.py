@@ -386,3 +386,46 @@ def test_rows_of_one_record_join_and_fused_twins_pair_up():
     assert list(t["line"]) == [7, 7, 8] and set(t["role"]) == {"gnss"}
     np.testing.assert_allclose(t["lat_deg"], np.array([0.1, 0.2, 0.3]) * DEG)
     np.testing.assert_allclose(t["sog_kn"], np.array([1.0, 2.0, 3.0]) * KN)
+
+
+def test_nmea2000_records_equal_canboats_decode(tmp_path):
+    """signalk-server/aava-n2k.data as a table: the records per PGN and the first record
+    of each are canboat's analyzer's (`analyzer -json`, transcribed; it prints lat/lon to
+    1e-7 deg, angles to 0.1 deg, speeds in m/s to 0.01, distances in m)."""
+    out = tmp_path / "aava.parquet"
+    path = real_path("signalk-server", "aava-n2k.data")
+    assert main(["records", str(path), "--out", str(out)]) == ExitCode.OK
+    t = pq.read_table(out).to_pandas()
+    counts = Counter(t["sentence"])
+    assert {k: v for k, v in counts.items()} == {
+        "PGN129029": 597,
+        "PGN129025": 597,
+        "PGN129026": 596,
+        "PGN127250": 596,
+        "PGN128259": 1798,
+        "PGN128275": 602,
+    }
+
+    def first(pgn: int) -> pd.Series:
+        return t[t["sentence"] == f"PGN{pgn}"].sort_values("line").iloc[0]
+
+    fix = first(129029)  # time of fix 18:59:59.4620, frame 19:00:00.042
+    assert fix["time_utc"] == pd.Timestamp("2014-08-15T18:59:59.462Z")
+    assert fix["recv_utc"] == pd.Timestamp("2014-08-15T19:00:00.042Z")
+    assert fix["lat_deg"] == pytest.approx(59.7250108, abs=6e-8)
+    assert fix["lon_deg"] == pytest.approx(24.7366770, abs=6e-8)
+    assert fix["alt_m"] == pytest.approx(2.32, abs=0.005) and fix["hdop"] == pytest.approx(0.8)
+    rapid = first(129025)
+    assert rapid["lat_deg"] == pytest.approx(59.7249807, abs=6e-8)
+    assert rapid["lon_deg"] == pytest.approx(24.7366563, abs=6e-8)
+    cog = first(129026)
+    assert cog["cog_deg"] == pytest.approx(196.5, abs=0.05)
+    assert cog["sog_kn"] == pytest.approx(3.47 * KN, abs=0.005 * KN)
+    hdg = first(127250)
+    assert hdg["heading_deg"] == pytest.approx(199.1, abs=0.05) and hdg["heading_ref"] == "T"
+    assert hdg["variation_deg"] == pytest.approx(8.1, abs=0.05)
+    stw = first(128259)
+    assert stw["stw_kn"] == pytest.approx(3.34 * KN, abs=0.005 * KN)
+    log = first(128275)
+    assert log["total_water_nmi"] == pytest.approx(17441025 / 1852, abs=0.5 / 1852)
+    assert log["trip_water_nmi"] == pytest.approx(79951 / 1852, abs=0.5 / 1852)
