@@ -397,7 +397,7 @@ def test_nmea2000_records_equal_canboats_decode(tmp_path):
     assert main(["records", str(path), "--out", str(out)]) == ExitCode.OK
     t = pq.read_table(out).to_pandas()
     counts = Counter(t["sentence"])
-    assert {k: v for k, v in counts.items()} == {
+    assert dict(counts) == {
         "PGN129029": 597,
         "PGN129025": 597,
         "PGN129026": 596,
