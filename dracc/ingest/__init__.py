@@ -31,6 +31,7 @@ import pandas as pd
 from dracc.core.errors import DraccError, IngestError
 from dracc.frames import KINDS, FileResult, Rejects, SourceInfo, TimeEvents, Voyage, empty_frame
 from dracc.ingest.compressed import STDIN, plain_copy
+from dracc.ingest.demux import relabel, scaled_progress
 from dracc.ingest.nmea import check_readable
 from dracc.ingest.sources import (
     assign_roles,
@@ -160,12 +161,12 @@ def read_file(
     with plain_copy(given, notes) as plain:
         if plain is None:
             return _read_plain(path, cfg, progress)
-        told = _scaled(progress, given, plain)
+        told = scaled(progress, given, plain)
         try:
             result = _read_plain(plain, cfg, told)
         except DraccError as err:  # said of the log as given, not of its temporary copy
             raise type(err)(str(err).replace(str(plain), str(given))) from err
-        return _relabelled(result, str(plain), str(given), notes)
+        return relabelled(result, str(plain), str(given), notes)
 
 
 def _read_plain(
@@ -193,33 +194,21 @@ def _read_plain(
     return reader(path, cfg, progress)
 
 
-def _scaled(
+def scaled(
     progress: Callable[[int], object] | None, given: Path, plain: Path
 ) -> Callable[[int], object] | None:
     """The progress of reading the plain copy, told in bytes of the log as given (its
     compressed size; nothing for standard input, whose size nobody knew)."""
     if progress is None or str(given) == STDIN:
         return None
-    ratio = given.stat().st_size / max(plain.stat().st_size, 1)
-    return lambda n: progress(int(round(n * ratio)))
+    return scaled_progress(progress, given.stat().st_size, plain.stat().st_size)
 
 
-def _relabelled(r: FileResult, plain: str, given: str, notes: list[str]) -> FileResult:
-    """``r`` read from the plain copy, saying ``given`` wherever it said the copy."""
-
-    def name(text: str) -> str:
-        return text.replace(plain, given)
-
-    def examples(d: dict[str, list[tuple[str, int, str]]]) -> None:
-        for key, rows in d.items():
-            d[key] = [(name(f), line, text) for f, line, text in rows]
-
-    r.path = given
-    examples(r.rejects.examples)
-    examples(r.ignored_examples)
-    r.notes = notes + [name(n) for n in r.notes]
-    r.time_events.decisions = [name(d) for d in r.time_events.decisions]
-    r.time_events.examples = [(name(f), line, text) for f, line, text in r.time_events.examples]
+def relabelled(r: FileResult, plain: str, given: str, notes: list[str]) -> FileResult:
+    """``r`` read from the plain copy, saying ``given`` wherever it said the copy, with
+    ``notes`` (what the copy said: where a stream broke) first."""
+    relabel(r, plain, given)
+    r.notes = notes + r.notes
     return r
 
 

@@ -48,7 +48,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
-from dracc.frames import MISSING_NS, FileResult, Rejects, TimeEvents, concat_blocks, make_frame
+from dracc.frames import MISSING_NS, FileResult, Rejects, concat_blocks, make_frame
 from dracc.ingest.demux import (
     check_strict,
     line_bounds,
@@ -218,9 +218,7 @@ class GpsdDecoder:
                 self.file,
                 df["sentence"].to_numpy(dtype=object),
             )
-        tot = events.totals()
-        te = TimeEvents(duplicates=tot["duplicates"], backsteps=tot["backsteps"], gaps=tot["gaps"])
-        te.examples = list(events.examples)
+        te = events.time_events()
         return FileResult(
             path=self.file,
             format="gpsd-json",

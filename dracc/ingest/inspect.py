@@ -32,7 +32,7 @@ import numpy as np
 from dracc.core.config import IngestConfig
 from dracc.core.timefmt import iso_utc
 from dracc.frames import FileResult, Rejects, SourceInfo, TimeEvents
-from dracc.ingest import _relabelled, _scaled, detect_format, read_file, summarize_frames
+from dracc.ingest import detect_format, read_file, relabelled, scaled, summarize_frames
 from dracc.ingest.compressed import STDIN, needs_copy, plain_copy
 from dracc.ingest.nmea import StreamState, iter_nmea_blocks
 from dracc.ingest.sources import assign_roles, merge_infos, separate_files
@@ -116,9 +116,9 @@ def _read_packed(
         if plain is None or detect_format(plain) != "nmea":
             r = read_file(plain or p, cfg)
             if plain is not None:
-                r = _relabelled(r, str(plain), str(p), said)
+                r = relabelled(r, str(plain), str(p), said)
             return _whole(r, cfg, sources, p, advance)
-        f = _read_nmea(plain, cfg, sources, _scaled(advance, p, plain), name=str(p))
+        f = _read_nmea(plain, cfg, sources, scaled(advance, p, plain), name=str(p))
     f.notes = said + f.notes
     return f
 

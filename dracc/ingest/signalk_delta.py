@@ -47,7 +47,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
-from dracc.frames import MISSING_NS, FileResult, Rejects, TimeEvents, concat_blocks, make_frame
+from dracc.frames import MISSING_NS, FileResult, Rejects, concat_blocks, make_frame
 from dracc.ingest.demux import check_strict, line_bounds
 from dracc.ingest.timebase import EventCounter
 
@@ -434,9 +434,7 @@ class DeltaDecoder:
         if no_time:
             self.rejects.counts["no_time"] += no_time
             notes.append(f"{no_time} Signal K values without a timestamp or receive time not used")
-        tot = events.totals()
-        te = TimeEvents(duplicates=tot["duplicates"], backsteps=tot["backsteps"], gaps=tot["gaps"])
-        te.examples = list(events.examples)
+        te = events.time_events()
         return FileResult(
             path=self.file,
             format="signalk-delta",

@@ -35,6 +35,7 @@ import pandas as pd
 
 from dracc.core.arrays import ArrayLike
 from dracc.frames import MISSING_NS as MISSING_NS  # the "no time" marker (re-exported)
+from dracc.frames import TimeEvents
 
 DAY_NS = 86_400 * 1_000_000_000
 HALF_DAY_NS = DAY_NS // 2
@@ -363,3 +364,14 @@ class EventCounter:
             for k in out:
                 out[k] += st[k]
         return out
+
+    def time_events(self, decisions: list[str] | None = None) -> TimeEvents:
+        """The totals and first examples as a file's :class:`~dracc.frames.TimeEvents`."""
+        tot = self.totals()
+        return TimeEvents(
+            duplicates=tot["duplicates"],
+            backsteps=tot["backsteps"],
+            gaps=tot["gaps"],
+            decisions=list(decisions or []),
+            examples=list(self.examples),
+        )

@@ -32,7 +32,6 @@ from dracc.frames import (
     REFERENCE_DTYPE,
     FileResult,
     Rejects,
-    TimeEvents,
     concat_blocks,
     make_frame,
 )
@@ -197,15 +196,8 @@ def n2k_result(
                 file,
                 df["sentence"].array,
             )
-    tot = ev.totals()
-    events = TimeEvents(
-        duplicates=tot["duplicates"],
-        backsteps=tot["backsteps"],
-        gaps=tot["gaps"],
-        decisions=list(notes),
-        examples=list(ev.examples),
-        assumed_date=ASSUMED_DATE if any("assumed date" in n for n in notes) else None,
-    )
+    events = ev.time_events(notes)
+    events.assumed_date = ASSUMED_DATE if any("assumed date" in n for n in notes) else None
     res = FileResult(
         path=file,
         format=fmt if fmt.startswith("n2k") else f"n2k-{fmt}",
