@@ -571,7 +571,7 @@ def test_summary_text_by_hand(tmp_path):
         "  - [consistency] DR: reference inside 2M at 50.0 % of epochs < 90.0 %",
     ]
     assert "a priori raised: ins1 lat 100.0 m -> 150.0 m (tonight's m_y is larger)" in lines
-    assert "  ins1  lat      24      150.0 m      300.0 m      150.0 m  raised" in lines
+    assert "  ins1  lat     24    150.0 m    300.0 m    150.0 m  raised" in lines
     assert (
         "not checked: accuracy log_scale log: log scale not estimated (no speed log or no "
         "reference)"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime
 import json
 import math
 from pathlib import Path
@@ -100,17 +101,17 @@ def test_fleet_run_table_rule_failures_and_resume(tmp_path):
     assert "not a log" in res.failures[0]["error"]
     t = res.table
     failed = t[t["status"] == "failed"]
-    assert failed["log"].tolist() == ["broken.nmea"] and failed["unit"].isna().all()
-    a = t[(t["vessel"] == "Aurora") & (t["unit"] == "ins1") & (t["channel"] == "lat")]
+    assert failed["log"].tolist() == ["broken.nmea"] and failed["ins_unit"].isna().all()
+    a = t[(t["vessel"] == "Aurora") & (t["ins_unit"] == "ins1") & (t["channel"] == "lat")]
     # the monitoring rule, seeded with 120 m: 100 within, 140 raised, 130 within
     assert a["m_y"].tolist() == [100.0, 140.0, 130.0]
     assert a["apriori_after"].tolist() == [120.0, 140.0, 140.0]
     assert a["apriori_verdict"].tolist() == ["within", "raised", "within"]
-    b = t[(t["vessel"] == "Borealis") & (t["unit"] == "ins1") & (t["channel"] == "lat")]
+    b = t[(t["vessel"] == "Borealis") & (t["ins_unit"] == "ins1") & (t["channel"] == "lat")]
     assert b["apriori_verdict"].tolist() == ["within", "raised"]
-    lon = t[(t["vessel"] == "Aurora") & (t["unit"] == "ins2") & (t["channel"] == "lon")]
+    lon = t[(t["vessel"] == "Aurora") & (t["ins_unit"] == "ins2") & (t["channel"] == "lon")]
     assert lon["apriori_verdict"].tolist() == ["established", "within", "within"]
-    assert set(t["measure"].dropna()) == {"m"} and len(t) == 5 * 4 + 1
+    assert set(t["measure_unit"].dropna()) == {"m"} and len(t) == 5 * 4 + 1
     # the DR verdict of each log, on every row of it, beside dr_consistent
     per_log = t[t["status"] == "ok"].drop_duplicates(["vessel", "log"]).set_index(["vessel", "log"])
     assert per_log.loc[("Aurora", "2026-11-18.nmea"), "dr_verdict"] is pd.NA
@@ -129,7 +130,7 @@ def test_fleet_run_table_rule_failures_and_resume(tmp_path):
         )
     assert t["dr_nees"].dtype == "float64" and t["dr_verdict"].dtype == "string"
     assert t.groupby(["vessel", "log"])["dr_verdict"].nunique(dropna=False).max() == 1
-    assert t["day"].dropna().iloc[0] == "2026-11-18"
+    assert t["day"].dropna().iloc[0] == datetime.date(2026, 11, 18)
 
     written = write_tables(res, out)
     assert (out / "fleet.parquet").exists() and (out / "trends.csv").exists()
@@ -189,9 +190,9 @@ def test_trends_pool_rms_per_day():
             "sha256": ["1", "2"],
             "status": ["ok"] * 2,
             "day": ["d"] * 2,
-            "unit": ["ins1"] * 2,
+            "ins_unit": ["ins1"] * 2,
             "channel": ["lat"] * 2,
-            "measure": ["m"] * 2,
+            "measure_unit": ["m"] * 2,
             "n": [10, 30],
             "m_y": [100.0, 200.0],
             "apriori_after": [100.0, 200.0],
@@ -318,7 +319,7 @@ def test_table_rule_equals_the_reference_chain():
         summaries[t.path] = summarise(doc)
     seeds = {("ins1", "lat"): 150.0}
     t = fleet_table(tasks, summaries, {}, seeds)
-    for (_vessel, unit, channel), g in t.groupby(["vessel", "unit", "channel"]):
+    for (_vessel, unit, channel), g in t.groupby(["vessel", "ins_unit", "channel"]):
         steps = apriori_chain(
             seeds.get((unit, channel)),
             [(lg, None if pd.isna(m) else m) for lg, m in zip(g["log"], g["m_y"], strict=True)],

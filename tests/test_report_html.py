@@ -39,9 +39,22 @@ window.addEventListener('load', function () {
             scheme: i.getAttribute('src').split(':')[0]}; });
   var heads = Array.prototype.map.call(d.querySelectorAll('h1,h2,h3'),
                                        function (h) { return h.textContent; });
+  var w = d.defaultView;
+  var sections = Array.prototype.map.call(d.querySelectorAll('body > section'),
+                                          function (s) { return s.id; });
+  var ths = Array.prototype.map.call(d.querySelectorAll('th'), function (t) {
+    var a = t.querySelector('a'); return a ? a.getAttribute('href') : null; });
+  var terms = Array.prototype.map.call(d.querySelectorAll('#glossary dt'),
+                                       function (t) { return t.id; });
+  var fp = d.querySelector('#faults > p'), fs = fp ? w.getComputedStyle(fp) : null;
+  var vb = d.getElementById('verdict-block');
   var out = {imgs: imgs, heads: heads, scripts: d.querySelectorAll('script').length,
              links: d.querySelectorAll('link[href],iframe,object,embed').length,
-             body: d.body.innerText};
+             body: d.body.innerText, sections: sections, ths: ths, terms: terms,
+             verdict: vb ? vb.innerText : null,
+             faults: fp ? {cls: fp.className, text: fp.innerText, color: fs.color,
+                           border: fs.borderLeftStyle + ' ' + fs.borderLeftColor,
+                           font: fs.fontStyle} : null};
   document.getElementById('result').textContent = JSON.stringify(out);
 });
 </script></body></html>
@@ -105,12 +118,15 @@ def test_html_in_real_browser(tmp_path):
     write_html(make_analysis("hostile"), report)
     data, urls = _probe(tmp_path, report)
     imgs = data["imgs"]
-    assert [i["alt"] for i in imgs] == [
+    alts = [i["alt"] for i in imgs]
+    legs = [x for x in alts if x.startswith("track plot, leg ")]
+    assert [x for x in alts if x not in legs] == [
         "track plot",
         "deviation plot",
         "2M growth plot",
         "current plot",
     ]
+    assert len(legs) >= 1  # the overview, then a panel per leg (the worst 8 at most)
     for i in imgs:
         assert i["complete"] and i["w"] > 300 and i["h"] > 200, i
         assert i["scheme"] == "data"
@@ -149,7 +165,8 @@ def test_html_dead_reckoning_shows_nees_and_the_learned_model():
     text = render_html(a)
     dr_part = text.split('<section id="dead-reckoning">', 1)[1].split("</section>", 1)[0]
     assert (
-        "<td>NEES</td><td>36.0 over 24 legs (χ² bounds 26.5–77.0); mean per epoch 1.65" in dr_part
+        '<td><a class="g" href="#g-nees">NEES</a></td><td>36.0 over 24 legs (χ² bounds '
+        "26.5–77.0); mean per epoch 1.65" in dr_part
     )
     assert (
         "out of sample" in dr_part and "5 epochs of earlier legs (prior only) not scored" in dr_part
@@ -165,7 +182,11 @@ def test_html_dead_reckoning_shows_nees_and_the_learned_model():
     block = html_lib.escape(a.dead_reckoning.learned["config_block"], quote=True)
     assert f'<pre class="config">{block}</pre>' in dr_part
     # per leg: NEES where scored, '-' for leg 0 (prior only)
-    assert "<th>mean NEES</th><th>last NEES</th><th>NEES bound</th>" in dr_part
+    assert (
+        '<th><a class="g" href="#g-mean-nees">mean NEES</a></th><th><a class="g" '
+        'href="#g-last-nees">last NEES</a></th><th><a class="g" href="#g-nees-bound">NEES '
+        "bound</a></th>" in dr_part
+    )
     assert "<td>0</td><td>-</td><td>-</td><td>-</td><td>-</td></tr>" in dr_part
     assert "<td>45</td><td>1.70</td><td>2.00</td><td>9.21</td></tr>" in dr_part
 
@@ -248,4 +269,58 @@ def test_html_is_self_contained_text():
     text = render_html(make_analysis("hostile"))
     assert CSP in text and "default-src 'none'" in text
     assert "<script" not in text.replace("&lt;script", "")
-    assert 'src="http' not in text and "href=" not in text
+    assert 'src="http' not in text
+    # the only links are to the page's own glossary (fragments), never out of the page
+    hrefs = re.findall(r'href="([^"]*)"', text)
+    assert hrefs and all(h.startswith("#") for h in hrefs)
+    ids = set(re.findall(r'id="([^"]*)"', text))
+    assert {h[1:] for h in hrefs} <= ids
+
+
+@pytest.fixture(scope="module")
+def sample_reports(tmp_path_factory):
+    """The sample voyage's report ("none found") and its speed log alone ("not checked")."""
+    from dataclasses import replace
+
+    from dracc.core.config import IngestConfig
+    from dracc.frames import empty_frame
+    from dracc.ingest import read_logs
+    from dracc.pipeline.analysis import analyse_voyage
+
+    tag = Path(__file__).resolve().parents[1] / "sample_logs" / "voyage_tag.nmea"
+    v = read_logs([tag], IngestConfig())
+    only_log = replace(
+        v,
+        frames={k: (f if k == "water" else empty_frame(k)) for k, f in v.frames.items()},
+        sources={k: s for k, s in v.sources.items() if k == "LOG"},
+    )
+    out = tmp_path_factory.mktemp("sample_reports")
+    paths = (out / "sample.html", out / "log_only.html")
+    write_html(analyse_voyage(v), paths[0])
+    write_html(analyse_voyage(only_log), paths[1])
+    return paths
+
+
+def test_verdict_block_and_glossary_in_a_real_browser(tmp_path, sample_reports):
+    """The verdict is the page's first section and names the truly worst unit (INS2 in
+    sample_logs/params.json); every column header links to a glossary entry; "none found"
+    and "not checked" look different (class, label, border and colour)."""
+    truth = json.loads(
+        (Path(__file__).resolve().parents[1] / "sample_logs" / "params.json").read_text()
+    )["unit_rms"]
+    worst = max(truth, key=lambda u: truth[u]["lat_m"] ** 2 + truth[u]["lon_m"] ** 2).lower()
+    data, _ = _probe(tmp_path, sample_reports[0])
+    assert data["sections"][0] == "verdict-block" and data["heads"][1] == "Verdict"
+    assert f"Worst INS unit: {worst}" in data["verdict"]
+    for label in ("OK", "NOT CHECKED"):  # levels in words, not colour only
+        assert label in data["verdict"]
+    assert data["ths"] and all(h and h[1:] in data["terms"] for h in data["ths"]), data["ths"]
+    assert data["sections"][-1] == "glossary" and len(data["terms"]) == len(set(data["terms"]))
+    found = data["faults"]
+    data2, _ = _probe(tmp_path / "2", sample_reports[1])
+    unchecked = data2["faults"]
+    assert found["cls"] == "none-found" and found["text"].startswith("OK none found")
+    assert unchecked["cls"] == "not-checked"
+    assert unchecked["text"].startswith("NOT CHECKED sensor faults not checked")
+    assert found["border"] != unchecked["border"] and found["font"] != unchecked["font"]
+    assert "NOT CHECKED" in data2["verdict"] and "Worst INS unit" not in data2["verdict"]

@@ -3,8 +3,9 @@
 The command merges its options into the configuration (:func:`build_config`), calls
 :func:`dracc.pipeline.analysis.analyse` once, and hands the result to
 :func:`dracc.report.write.write_reports`: a short summary on stdout (unless the JSON goes
-there), ``--json`` (file or ``-``), ``--html`` (one offline file) and ``--out`` (CSV and
-Parquet tables).  Every file is written atomically.
+there), ``--json`` (file or ``-``), ``--html`` (one offline file), ``--out`` (CSV and
+Parquet tables) and the exports ``--gpx``, ``--kml``, ``--geojson`` and ``--mcap``.  Every
+file is written atomically, and all of them appear together.
 """
 
 from __future__ import annotations
@@ -20,11 +21,15 @@ import typer
 from dracc.cli.app import QUICK_EXIT, app, err, out, paths_exist, staged_progress
 from dracc.cli.options import (
     ConfigFile,
+    GeoJsonOut,
+    GpxOut,
     HtmlOut,
     IgnoreChecksum,
     JsonOut,
+    KmlOut,
     LogDate,
     LogFiles,
+    McapOut,
     Roles,
     Strict,
     check_date,
@@ -60,6 +65,10 @@ def analyze(
     ),
     json_path: JsonOut = None,
     html_path: HtmlOut = None,
+    gpx_path: GpxOut = None,
+    kml_path: KmlOut = None,
+    geojson_path: GeoJsonOut = None,
+    mcap_path: McapOut = None,
     interval: str | None = typer.Option(
         None, "--interval", help="INS sampling interval: 1h (default), 2h, 3600 ..."
     ),
@@ -120,7 +129,17 @@ def analyze(
             keys_must_match(parse_roles(role or [])),  # a --role key matching nothing: error
         ):
             result = analyse(logs, cfg, progress=on_progress, total_bytes=total)
-        for line in write_reports(result, out, json_path, html_path, out_dir):
+        for line in write_reports(
+            result,
+            out,
+            json_path,
+            html_path,
+            out_dir,
+            gpx_path=gpx_path,
+            kml_path=kml_path,
+            geojson_path=geojson_path,
+            mcap_path=mcap_path,
+        ):
             err.print(line, highlight=False, markup=False)
     QUICK_EXIT["on"] = True
 

@@ -76,9 +76,13 @@ class _Console(Console):
         )
 
 
-#: data goes to stdout; messages, progress and errors to stderr
-out = _Console(soft_wrap=True)
-err = _Console(stderr=True, soft_wrap=True)
+#: data goes to stdout; messages, progress and errors to stderr.  Rich wraps, crops and
+#: highlights nothing, and reads no ``:name:`` as an emoji (a vessel named ``:ship:`` stays
+#: so): the commands lay their text out themselves (:mod:`dracc.report.textout`), on a
+#: terminal at its width (asked at every print: a resized window is followed), on a pipe
+#: or in a file with tables at their natural width and notes wrapped at ``$COLUMNS`` or 100
+out = _Console(soft_wrap=True, emoji=False, highlight=False)
+err = _Console(stderr=True, soft_wrap=True, emoji=False, highlight=False)
 
 VERBOSE = {"on": False}
 

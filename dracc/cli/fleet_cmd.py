@@ -1,7 +1,7 @@
 """``dracc fleet``: batch reports over many vessels' logs, in parallel, resumable.
 
-The work is :mod:`dracc.pipeline.fleet` (discover, run, publish the tables); the page and
-the terminal table are :mod:`dracc.report.fleet_html`.
+The work is :mod:`dracc.pipeline.fleet` (discover, run, publish the tables); the page is
+:mod:`dracc.report.fleet_html`, the terminal table :func:`dracc.report.terminal.print_fleet`.
 """
 
 from __future__ import annotations
@@ -9,16 +9,16 @@ from __future__ import annotations
 from pathlib import Path
 
 import typer
-from rich.text import Text
 
 from dracc.cli.app import app, err, out, progress
 from dracc.cli.options import ConfigFile, check_pattern
 from dracc.core.config import load_config
 from dracc.core.errors import ConfigError, ExitCode, Interrupted, OptionError
-from dracc.core.safetext import printable
 from dracc.pipeline.fleet import check_scheduler, discover, fleet_config, run_fleet
-from dracc.report.fleet_html import fleet_html, print_fleet_table
+from dracc.report.fleet_html import fleet_html
 from dracc.report.fleet_tables import write_tables
+from dracc.report.terminal import print_fleet
+from dracc.report.textout import layout, print_lines, wrap
 
 
 @app.command("fleet")
@@ -98,14 +98,15 @@ def fleet_cmd(
             "far are cached for the next run"
         ) from None
     try:
-        print_fleet_table(res, out)
+        print_fleet(res, out)
+        width = layout(err).width  # messages wrap on spaces, never inside a name
         for f in res.failures:
-            err.print(Text(printable(f"failed: {f['vessel']}/{f['log']}: {f['error']}")))
+            print_lines(err, wrap(f"failed: {f['vessel']}/{f['log']}: {f['error']}", width, hang=2))
         said = (
             f"fleet: {len(tasks)} logs, {res.analysed} analysed, {res.cached} from the cache, "
             f"{len(res.failures)} failed; tables and fleet.html in {target}"
         )
-        err.print(Text(printable(said)))
+        print_lines(err, wrap(said, width, hang=2))
     except KeyboardInterrupt:
         raise Interrupted(done) from None
     return int(ExitCode.INPUT if res.failures else ExitCode.OK)

@@ -46,6 +46,44 @@ HtmlOut = Annotated[
     typer.Option("--html", metavar="PATH", help="Write one self-contained offline HTML page."),
 ]
 
+#: ``analyze``'s exports for the tools navigators run (dracc.report.exports, mcap_export)
+GpxOut = Annotated[
+    Path | None,
+    typer.Option(
+        "--gpx",
+        metavar="PATH",
+        help="Write GPX 1.1 (OpenCPN, chart plotters): DR, EP and reference tracks, "
+        "a segment per leg, the 2M per point, waypoints at the misses.",
+    ),
+]
+KmlOut = Annotated[
+    Path | None,
+    typer.Option(
+        "--kml",
+        metavar="PATH",
+        help="Write KML 2.2 (Google Earth, with its time slider): the tracks and the 2M "
+        "circles at the reporting epochs.",
+    ),
+]
+GeoJsonOut = Annotated[
+    Path | None,
+    typer.Option(
+        "--geojson",
+        metavar="PATH",
+        help="Write GeoJSON (RFC 7946): the tracks, and a polygon per 2M circle and "
+        "error ellipse at the reporting epochs with time, radius and inside.",
+    ),
+]
+McapOut = Annotated[
+    Path | None,
+    typer.Option(
+        "--mcap",
+        metavar="PATH",
+        help="Write an MCAP for Foxglove: the inputs' positions and headings, the DR and "
+        "EP with their covariance, the 2M as GeoJSON (layout: docs/).",
+    ),
+]
+
 #: ``--role KEY=ROLE`` (repeatable), read by :func:`parse_roles`
 Roles = Annotated[
     list[str] | None,

@@ -102,6 +102,7 @@ def analyse_voyage(
     notes = overview.voyage_notes(voyage, inputs, sources)
     voyage = selection.without_rapid_positions(voyage, notes)
     tracks = overview.tracks(voyage)
+    headings = overview.heading_tracks(voyage)
 
     report("integrity checks", 0.0)
     integrity = check_night(voyage, cfg.integrity)
@@ -160,6 +161,7 @@ def analyse_voyage(
         faults=faults,
         ignored={str(k): int(v) for k, v in getattr(voyage, "ignored", {}).items()},
         integrity=integrity,
+        headings=headings,
     )
 
 

@@ -1,5 +1,6 @@
 """What the ingest saw, summarised for the report: the input files, the sources, the time
-base's findings, the recording spells and the thinned position tracks for the plots.
+base's findings, the recording spells, the thinned position tracks for the plots and the
+thinned heading tracks for the exports.
 
 Raises :class:`~dracc.core.errors.InsufficientDataError` when the logs hold no usable
 record at all, the one case the analysis cannot report on.
@@ -16,11 +17,13 @@ import pandas as pd
 from dracc.core.errors import InsufficientDataError
 from dracc.core.units import NS_PER_S
 from dracc.frames import Voyage
-from dracc.pipeline.results import InputFile, SourceRow, TimeSummary, Track
+from dracc.pipeline.results import HeadingTrack, InputFile, SourceRow, TimeSummary, Track
 from dracc.pipeline.selection import role_of, valid_positions
 
 #: at most this many points per source in the plotting tracks
 TRACK_POINTS = 4000
+#: the heading tracks keep the first record of every this many seconds per source
+HEADING_STEP_S = 10.0
 #: records further apart than this (in every frame) form separate recording spells
 SPELL_GAP_S = 6 * 3600.0
 
@@ -163,6 +166,36 @@ def tracks(voyage: Voyage) -> tuple[Track, ...]:
                 time_ns=d["time_ns"].to_numpy(np.int64),
                 lat_rad=d["lat_rad"].to_numpy(float),
                 lon_rad=d["lon_rad"].to_numpy(float),
+            )
+        )
+    return tuple(out)
+
+
+def heading_tracks(voyage: Voyage, step_s: float = HEADING_STEP_S) -> tuple[HeadingTrack, ...]:
+    """Every heading source, thinned to its first record in each ``step_s`` seconds of
+    UTC (bins from the epoch, so sources share them); NaN headings left out."""
+    hdg = voyage.frames.get("heading")
+    if hdg is None or hdg.empty:
+        return ()
+    step_ns = int(round(step_s * NS_PER_S))
+    out = []
+    for key, df in hdg.groupby("source", observed=True, sort=False):
+        d = df[np.isfinite(df["heading_rad"].to_numpy(float))]
+        if d.empty:
+            continue
+        t = d["time_ns"].to_numpy(np.int64)
+        order = np.argsort(t, kind="stable")
+        t = t[order]
+        bins = t // step_ns
+        keep = order[np.r_[True, bins[1:] != bins[:-1]]]
+        ref = d["reference"].astype(object).to_numpy()[keep]
+        out.append(
+            HeadingTrack(
+                source=str(key),
+                role=role_of(voyage, str(key)),
+                time_ns=d["time_ns"].to_numpy(np.int64)[keep],
+                heading_rad=d["heading_rad"].to_numpy(float)[keep],
+                reference=np.array([r if r in ("T", "M") else "" for r in ref], dtype=object),
             )
         )
     return tuple(out)

@@ -29,6 +29,7 @@ __all__ = [
     "DRSection",
     "DRTrackResult",
     "Estimate",
+    "HeadingTrack",
     "InputFile",
     "SourceRow",
     "TimeSummary",
@@ -87,6 +88,21 @@ class Track:
     time_ns: np.ndarray
     lat_rad: np.ndarray
     lon_rad: np.ndarray
+
+
+@dataclass(frozen=True)
+class HeadingTrack:
+    """The headings of one source, thinned for the exports: the first record of every
+    ``overview.HEADING_STEP_S`` seconds (10 s), NaN headings left out.
+
+    ``reference`` holds 'T' (true), 'M' (magnetic) or '' (not said) per record.
+    """
+
+    source: str
+    role: str | None
+    time_ns: np.ndarray
+    heading_rad: np.ndarray
+    reference: np.ndarray
 
 
 # -------------------------------------------------------------------- dead reckoning
@@ -253,6 +269,8 @@ class Analysis:
     ignored: dict[str, int] = field(default_factory=dict)
     #: integrity checks of every source (dracc.math.integrity), None when not run
     integrity: IntegrityResult | None = None
+    #: every heading source, thinned (one record per 10 s), for the MCAP export
+    headings: tuple[HeadingTrack, ...] = ()
 
     @property
     def duration_s(self) -> float:

@@ -5,18 +5,26 @@ analysis report's sections below; :func:`history_html` renders the history docum
 by :func:`dracc.report.audit_json.history_document` (schema ``dracc.audit.history/1``), per
 vessel a plot of the nights and their tables.  Nothing is computed here.  The page is one
 self-contained file (:mod:`dracc.report.page`); matplotlib loads only when a plot is drawn.
+The history plot (:func:`m_y_history_plot`, shared with the fleet page) fits its date
+axis to the nights plotted (:func:`date_axis`); the tables' headers name their columns
+of :data:`dracc.core.vocabulary.TABLE_COLUMNS` (:func:`column_header`).
 """
 
 from __future__ import annotations
 
 import html
 import math
-from typing import TYPE_CHECKING
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
 from dracc.core.numbers import none_to_nan
+from dracc.core.vocabulary import CHANNEL_UNITS, CHANNELS, TABLE_COLUMNS
 from dracc.report.page import PAGE_END, img_tag, page_head
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
     from dracc.pipeline.audit import AuditOutcome
 
 _DPI = 90
@@ -34,17 +42,104 @@ def measure_digits(measure: str) -> int:
     return 3 if measure == "deg" else 1
 
 
-def history_plot(doc: dict, vessel: str) -> bytes | None:
-    """m_y per unit and the a priori (dashed steps) per channel over nights; PNG bytes."""
+def column_header(label: str, column: str) -> str:
+    """A ``<th>`` showing ``label`` for the table column ``column`` of
+    :data:`dracc.core.vocabulary.TABLE_COLUMNS`: its name in ``data-column`` (the same
+    name as in the CSV and Parquet tables), its meaning as the tooltip."""
+    meaning = TABLE_COLUMNS[column][1]
+    return (
+        f"<th data-column='{html.escape(column)}' title='{html.escape(meaning)}'>"
+        f"{html.escape(label)}</th>"
+    )
+
+
+def date_axis(ax: Axes, times) -> None:
+    """A date x axis fitted to ``times`` (the nights or days plotted): limits from the
+    first to the last with a pad of 5 % of the span and at least half a day each side (one
+    night is a day wide, not matplotlib's default four years), a tick on whole days at
+    most about eight of them for spans up to 60 days (labelled ``YYYY-MM-DD``), the
+    automatic locator with concise labels beyond."""
+    import matplotlib.dates as mdates
     import pandas as pd
 
-    from dracc.report.plots import m_y_apriori_plot  # matplotlib loaded only when a page is drawn
+    t = pd.DatetimeIndex(pd.to_datetime(list(times))).dropna()
+    if t.empty:
+        return
+    if t.tz is not None:
+        t = t.tz_convert("UTC").tz_localize(None)
+    lo, hi = t.min(), t.max()
+    span = hi - lo
+    pad = max(span * 0.05, pd.Timedelta(hours=12))
+    ax.set_xlim(lo - pad, hi + pad)
+    days = span / pd.Timedelta(days=1)
+    if days <= 60:
+        ax.xaxis.set_major_locator(mdates.DayLocator(interval=max(1, math.ceil((days + 1) / 8))))
+        ax.xaxis.set_major_formatter(mdates.DateFormatter("%Y-%m-%d"))
+    else:
+        locator = mdates.AutoDateLocator()
+        ax.xaxis.set_major_locator(locator)
+        ax.xaxis.set_major_formatter(mdates.ConciseDateFormatter(locator))
+
+
+def m_y_history_figure(
+    lines: Mapping[str, Sequence[tuple[str, Any, Any, Any]]],
+    title: str,
+    row_height_in: float,
+) -> Figure:
+    """One panel per channel: each INS unit's m_y (points and line) and its a priori
+    (dashed steps, same colour) over nights or days, on a shared :func:`date_axis`.
+    ``lines``: channel -> [(ins_unit, dates, m_y, a priori)], NaN where missing."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(
+        len(lines), 1, figsize=(8, row_height_in * len(lines)), sharex=True, squeeze=False
+    )
+    every = []
+    for ax, (ch, rows) in zip(axes[:, 0], lines.items(), strict=True):
+        for unit, t, m_y, apriori in rows:
+            (line,) = ax.plot(t, m_y, "o-", label=f"{unit} m_y")
+            ax.step(
+                t,
+                apriori,
+                "--",
+                where="post",
+                color=line.get_color(),
+                alpha=0.7,
+                label=f"{unit} a priori",
+            )
+            every.extend(list(t))
+        ax.set_ylabel(f"{ch} ({CHANNEL_UNITS.get(ch, '')})")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, ncol=3)
+    date_axis(axes[-1, 0], every)
+    axes[-1, 0].set_xlabel("UTC date")
+    axes[0, 0].set_title(title)
+    fig.autofmt_xdate()
+    return fig
+
+
+def m_y_history_plot(
+    lines: Mapping[str, Sequence[tuple[str, Any, Any, Any]]],
+    title: str,
+    row_height_in: float,
+    dpi: int = _DPI,
+) -> bytes:
+    """:func:`m_y_history_figure` as PNG bytes."""
+    from dracc.report.plots import png_bytes  # matplotlib loaded only when a page is drawn
+
+    return png_bytes(m_y_history_figure(lines, title, row_height_in), dpi=dpi)
+
+
+def history_lines(doc: dict, vessel: str) -> dict[str, list[tuple[str, Any, Any, Any]]]:
+    """The history document's series of ``vessel`` as plot lines: channel ->
+    [(ins_unit, nights as dates, m_y, a priori after)]."""
+    import pandas as pd
 
     series = [s for s in doc["series"] if s["vessel"] == vessel]
-    if not series:
-        return None
-
-    lines = {
+    return {
         c: [
             (
                 s["unit"],
@@ -55,18 +150,27 @@ def history_plot(doc: dict, vessel: str) -> bytes | None:
             for s in series
             if s["channel"] == c
         ]
-        for c in ("lat", "lon", "course")
+        for c in CHANNELS
         if any(s["channel"] == c for s in series)
     }
-    return m_y_apriori_plot(
+
+
+def history_plot(doc: dict, vessel: str) -> bytes | None:
+    """m_y per INS unit and the a priori (dashed steps) per channel over nights; PNG bytes."""
+    lines = history_lines(doc, vessel)
+    if not lines:
+        return None
+    return m_y_history_plot(
         lines, f"{vessel}: RMS error from deviations (m_y) and a priori, per night", 2.4, dpi=_DPI
     )
 
 
 def history_html(doc: dict) -> str:
-    """One self-contained page (no network): per vessel a plot and the table of nights."""
+    """One self-contained page (no network): per vessel a plot and the table of nights.
+    Column headers name their column of the tables' vocabulary (:func:`column_header`)."""
     e = html.escape
     _f = fmt_value
+    h = column_header
     parts = [page_head("dracc audit history", "td:first-child,th:first-child{text-align:left}")]
     vessels = sorted({s["vessel"] for s in doc["series"]} | {n["vessel"] for n in doc["nights"]})
     if not vessels:
@@ -77,8 +181,16 @@ def history_html(doc: dict) -> str:
         if png:
             parts.append(img_tag(png, f"m_y and a priori per night for {e(v)}"))
         parts.append(
-            "<table><tr><th>unit</th><th>channel</th><th>night</th><th>n</th><th>m_y</th>"
-            "<th>limit</th><th>a priori</th><th>verdict</th></tr>"
+            "<table class='history'><tr>"
+            + h("INS unit", "ins_unit")
+            + h("channel", "channel")
+            + h("night", "night")
+            + h("n", "n")
+            + h("m_y", "m_y")
+            + h("limit", "limit")
+            + h("a priori", "apriori_after")
+            + h("verdict", "apriori_verdict")
+            + "</tr>"
         )
         for s in (s for s in doc["series"] if s["vessel"] == v):
             d = measure_digits(s["measure"])
@@ -92,8 +204,13 @@ def history_html(doc: dict) -> str:
                     f"<td>{e(n['verdict'] or '-')}</td></tr>"
                 )
         parts.append(
-            "</table><h3>Nights</h3><table><tr><th>night</th><th>DR in 2M</th>"
-            "<th>compass error</th><th>log scale</th><th>findings</th></tr>"
+            "</table><h3>Nights</h3><table class='nights'><tr>"
+            + h("night", "night")
+            + h("DR in 2M", "dr_containment_2m")
+            + h("compass error", "compass_error_deg")
+            + h("log scale", "log_scale_pct")
+            + h("findings", "findings")
+            + "</tr>"
         )
         for n in (n for n in doc["nights"] if n["vessel"] == v):
             c = n["dr_containment_2m"]
@@ -247,8 +364,14 @@ def night_html(doc: dict, analysis_body: str = "", analysis_css: str = "") -> st
     if doc["ins"]:
         acc = doc.get("accuracy") or {}
         parts.append(
-            "<section id='ins'><h2>INS accuracy and a priori</h2><table><tr><th>unit</th>"
-            "<th>channel</th><th>n</th><th>m_y tonight</th><th>a priori</th><th>verdict</th></tr>"
+            "<section id='ins'><h2>INS accuracy and a priori</h2><table><tr>"
+            + column_header("INS unit", "ins_unit")
+            + column_header("channel", "channel")
+            + column_header("n", "n")
+            + column_header("m_y tonight", "m_y")
+            + column_header("a priori", "apriori_after")
+            + column_header("verdict", "apriori_verdict")
+            + "</tr>"
         )
         for c in doc["ins"]:
             d = measure_digits(c["measure"])

@@ -3,19 +3,21 @@
 :func:`format_summary` renders an :class:`~dracc.pipeline.audit.AuditOutcome`: the verdict
 and the findings first, then what was not checked and the evidence.
 :func:`print_history` shows a history document (``dracc.audit.history/1``) as one table per
-vessel, unit and channel.  Nothing is computed here.
+vessel, unit and channel.  The tables are :mod:`dracc.report.textout`'s: every column at its
+natural width in a file or a pipe, the least needed left out on a narrow terminal.
+Nothing is computed here.
 """
 
 from __future__ import annotations
 
 from rich.console import Console
-from rich.table import Table
 
 from dracc.core.errors import ExitCode
 from dracc.core.vocabulary import CHANNEL_KEYS
 from dracc.pipeline.audit import AuditOutcome
 from dracc.report.audit_html import fmt_value as _f
 from dracc.report.audit_html import measure_digits as _digits
+from dracc.report.textout import Layout, Page, layout, table, wrap
 
 _STATUS = {
     "recorded": "recorded (a new night)",
@@ -37,9 +39,14 @@ def _finding_line(f) -> str:
     return f"  - [{f.check}] {who}{role}: {msg}"
 
 
-def format_summary(o: AuditOutcome, probability: float | None = None) -> str:
+def format_summary(
+    o: AuditOutcome, probability: float | None = None, width: int | None = None
+) -> str:
     """The plain-text summary (e-mail or log): the verdict and the findings first, then
-    what was not checked and the evidence."""
+    what was not checked and the evidence.  ``width``: wrap the long lines there, on
+    spaces only (:func:`dracc.report.textout.wrap`; a finding's continuation lines under
+    its text, the table never); None: one line per fact, however long (for a log that
+    is read line by line)."""
     r = o.record
     n = len(o.findings)
     if o.no_data:
@@ -48,7 +55,7 @@ def format_summary(o: AuditOutcome, probability: float | None = None) -> str:
             f"state: {_STATUS[o.status]}; recorded as a night without data",
         ]
         lines.append(f"exit {int(o.exit_code)} (no logs)")
-        return "\n".join(lines) + "\n"
+        return _joined(lines, width)
     head = "all checks passed" if n == 0 else f"{n} finding{'s' if n > 1 else ''}"
     if o.not_checked:
         k = len(o.not_checked)
@@ -81,17 +88,29 @@ def format_summary(o: AuditOutcome, probability: float | None = None) -> str:
             f"INS tonight (m_y = k m_u; limiting error{p}; the larger of a priori and m_y "
             "becomes the a priori):"
         )
-        lines.append(
-            f"  {'unit':<5} {'chan':<6} {'n':>4} {'m_y':>12} {'limit':>12} "
-            f"{'a priori':>12}  verdict"
-        )
+        rows = []
         for c in r.channels:
             d = _digits(c.measure)
-            lines.append(
-                f"  {c.unit:<5} {c.channel:<6} {c.n:>4} {_f(c.m_y, d, c.measure):>12} "
-                f"{_f(c.limit_error, d, c.measure):>12} "
-                f"{_f(c.apriori_after, d, c.measure):>12}  {c.verdict or '-'}"
+            rows.append(
+                (
+                    c.unit,
+                    c.channel,
+                    c.n,
+                    _f(c.m_y, d, c.measure),
+                    _f(c.limit_error, d, c.measure),
+                    _f(c.apriori_after, d, c.measure),
+                    c.verdict or "-",
+                )
             )
+        # a file or a mail: every column at its natural width, never squeezed
+        lines.append(
+            table(
+                ("unit", "chan", "n", "m_y", "limit", "a priori", "verdict"),
+                rows,
+                right=(False, False, True, True, True, True, False),
+                indent=2,
+            )
+        )
     acc = o.accuracy or {}
     if acc.get("channels"):
         lines.append(
@@ -140,27 +159,51 @@ def format_summary(o: AuditOutcome, probability: float | None = None) -> str:
         lines.append(f"missing: {m}")
     code = o.exit_code
     lines.append(f"exit {int(code)} ({'findings' if code == ExitCode.FINDINGS else 'ok'})")
+    return _joined(lines, width)
+
+
+def _joined(lines: list[str], width: int | None) -> str:
+    """The summary's lines as text, each wrapped at ``width`` (a table, several lines in
+    one entry, as it is)."""
+    if width is not None:
+        lines = [
+            ln if "\n" in ln else wrap(ln, width, hang=4 if ln.startswith("  - ") else 2)
+            for ln in lines
+        ]
     return "\n".join(lines) + "\n"
 
 
-def print_history(doc: dict, console: Console) -> None:
-    """One table per vessel, unit and channel: m_u, m_y, kurtosis, limit, a priori, verdict
-    per night; a sentence when the selection holds no night."""
+#: the history table: name, right-aligned, priority (0: always shown; higher: left out
+#: sooner on a narrow terminal, see :mod:`dracc.report.textout`)
+_HISTORY_COLUMNS = (
+    ("night", False, 0),
+    ("n", True, 2),
+    ("m_u", True, 1),
+    ("m_y", True, 0),
+    ("kurtosis", True, 2),
+    ("limit", True, 1),
+    ("a priori", True, 0),
+    ("verdict", False, 0),
+)
+
+
+def history_text(doc: dict, lay: Layout = Layout()) -> str:
+    """The history document as text laid out for ``lay``: one table per vessel, unit and
+    channel (m_u, m_y, kurtosis, limit, a priori, verdict per night), a blank line between
+    them; a sentence when the selection holds no night."""
+    return _history_page(doc, lay).text()
+
+
+def _history_page(doc: dict, lay: Layout) -> Page:
+    page = Page(lay)
     if not doc["series"]:
-        console.print("no nights recorded for this selection", markup=False, highlight=False)
-        return
-    for s in doc["series"]:
+        page.add("no nights recorded for this selection")
+        return page
+    headers, right, prio = zip(*_HISTORY_COLUMNS, strict=True)
+    for k, s in enumerate(doc["series"]):
         d = _digits(s["measure"])
-        t = Table(title=f"{s['vessel']} {s['unit']} {s['channel']} ({s['measure']})")
-        for col in ("night", "n", "m_u", "m_y", "kurtosis", "limit", "a priori", "verdict"):
-            t.add_column(
-                col,
-                justify="left" if col in ("night", "verdict") else "right",
-                no_wrap=True,
-                min_width=10 if col == "night" else None,
-            )
-        for n in s["nights"]:
-            t.add_row(
+        rows = [
+            (
                 n["night"],
                 str(n["n"]),
                 _f(n["m_u"], d),
@@ -170,4 +213,16 @@ def print_history(doc: dict, console: Console) -> None:
                 _f(n["apriori_after"], d),
                 n["verdict"] or "-",
             )
-        console.print(t)
+            for n in s["nights"]
+        ]
+        if k:
+            page.blank()
+        title = f"{s['vessel']} {s['unit']} {s['channel']} ({s['measure']})"
+        page.table(headers, rows, right=right, priorities=prio, title=title)
+    return page
+
+
+def print_history(doc: dict, console: Console) -> None:
+    """:func:`history_text` laid out for ``console`` (:func:`dracc.report.textout.layout`)
+    and printed there, the titles and headers bold on a terminal."""
+    _history_page(doc, layout(console)).print(console)

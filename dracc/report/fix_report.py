@@ -2,7 +2,8 @@
 
 :func:`to_json` builds the JSON object (:data:`JSON_SCHEMA`, draft 2020-12; every key is
 documented in docs/fix.md): strict JSON, an undefined value is ``null``.  :func:`render`
-prints the position, the error ellipse, DOP, the residual table and the verdict.
+prints the position, the error ellipse, DOP, the residual table and the verdict, laid out by
+:mod:`dracc.report.textout` (never squeezed, wrapped on spaces).
 """
 
 from __future__ import annotations
@@ -11,10 +12,10 @@ import math
 from typing import Any
 
 from rich.console import Console
-from rich.table import Table
 
 from dracc.core.numbers import finite_or_none as _finite
 from dracc.math.fix import FixReport, format_dm
+from dracc.report.textout import Layout, Page, labelled, layout
 
 SCHEMA = "dracc.fix/1"
 
@@ -182,58 +183,68 @@ JSON_SCHEMA = {
 }
 
 
-def render(rep: FixReport, console: Console) -> None:
-    """The fix as rich tables on ``console`` (the CLI's stdout console)."""
+def fix_page(rep: FixReport, lay: Layout) -> Page:
+    """The fix laid out for ``lay`` (:mod:`dracc.report.textout`): the title, the
+    position, the error ellipse, DOP, chi-square and the prior under their labels, the
+    residual table and the verdict."""
     s = rep.solution
     lat, lon = math.degrees(s.lat_rad), math.degrees(s.lon_rad)
     e = s.ellipse
-    head = Table(
-        title=f"dracc fix ({'WLS (W4)' if s.weighted else 'LS (W1)'}, "
-        f"{len(rep.observations)} observation(s), {s.iterations} iteration(s))",
-        show_header=False,
-        title_justify="left",
+    page = Page(lay)
+    page.heading(
+        f"dracc fix ({'WLS (W4)' if s.weighted else 'LS (W1)'}, "
+        f"{len(rep.observations)} observation(s), {s.iterations} iteration(s))"
     )
-    head.add_column("quantity")
-    head.add_column("value")
-    head.add_row("position", f"{format_dm(lat, 'lat')}  {format_dm(lon, 'lon')}")
-    head.add_row("decimal", f"{lat:.7f}, {lon:.7f}")
-    head.add_row(
-        "error ellipse (1σ)",
-        f"{float(e.semi_major_m):.2f} m × {float(e.semi_minor_m):.2f} m, "
-        f"major axis {math.degrees(float(e.orientation_rad)):05.1f}° true",
+    head = (
+        ("position", f"{format_dm(lat, 'lat')}  {format_dm(lon, 'lon')}"),
+        ("decimal", f"{lat:.7f}, {lon:.7f}"),
+        (
+            "error ellipse (1σ)",
+            f"{float(e.semi_major_m):.2f} m × {float(e.semi_minor_m):.2f} m, "
+            f"major axis {math.degrees(float(e.orientation_rad)):05.1f}° true",
+        ),
+        ("drms / 2drms", f"{float(s.drms_m):.2f} m / {float(s.two_drms_m):.2f} m"),
+        ("DOP", f"{float(s.dop):.3f}"),
+        ("chi-square", f"{float(s.chi2):.3f}, redundancy {s.redundancy}"),
+        (
+            "prior",
+            f"{format_dm(rep.prior_lat_deg, 'lat')}  "
+            f"{format_dm(rep.prior_lon_deg, 'lon')} ({rep.prior_source})",
+        ),
     )
-    head.add_row("drms / 2drms", f"{float(s.drms_m):.2f} m / {float(s.two_drms_m):.2f} m")
-    head.add_row("DOP", f"{float(s.dop):.3f}")
-    head.add_row("chi-square", f"{float(s.chi2):.3f}, redundancy {s.redundancy}")
-    head.add_row(
-        "prior",
-        f"{format_dm(rep.prior_lat_deg, 'lat')}  "
-        f"{format_dm(rep.prior_lon_deg, 'lon')} ({rep.prior_source})",
-    )
-    console.print(head)
-    res = Table(title="residuals (measured − fitted)", title_justify="left")
-    for name, justify in (
-        ("observation", "left"),
-        ("row", "left"),
-        ("residual", "right"),
-        ("σ", "right"),
-        ("r/σ", "right"),
-        ("w", "right"),
-    ):
-        res.add_column(name, justify=justify)  # type: ignore[arg-type]
+    column = max(len(label) for label, _ in head) + 2
+    for label, value in head:
+        page.add(labelled(label, value, lay.width, column))
+    rows = []
     for r in rep.residuals:
         digits = 3 if r.unit == "deg" else 2
         sigma = f"{r.sigma:.{digits}f} {r.unit}" + (" (default)" if r.sigma_default else "")
-        res.add_row(
-            r.label,
-            r.row,
-            f"{r.residual:+.{digits}f} {r.unit}",
-            sigma,
-            f"{r.normalised:+.2f}",
-            "-" if not math.isfinite(r.w) else f"{r.w:+.2f}",
+        rows.append(
+            (
+                r.label,
+                r.row,
+                f"{r.residual:+.{digits}f} {r.unit}",
+                sigma,
+                f"{r.normalised:+.2f}",
+                "-" if not math.isfinite(r.w) else f"{r.w:+.2f}",
+            )
         )
-    console.print(res)
-    console.print(f"verdict: {rep.verdict}", highlight=False, markup=False)
+    page.blank()
+    page.table(
+        ("observation", "row", "residual", "σ", "r/σ", "w"),
+        rows,
+        right=(False, False, True, True, True, True),
+        priorities=(0, 1, 0, 1, 0, 2),
+        title="residuals (measured − fitted)",
+    )
+    page.blank()
+    page.wrapped(f"verdict: {rep.verdict}", hang=2)
+    return page
 
 
-__all__ = ["JSON_SCHEMA", "SCHEMA", "format_dm", "render", "to_json"]
+def render(rep: FixReport, console: Console) -> None:
+    """The fix (:func:`fix_page`) laid out for ``console`` (the CLI's stdout) and printed."""
+    fix_page(rep, layout(console)).print(console)
+
+
+__all__ = ["JSON_SCHEMA", "SCHEMA", "fix_page", "format_dm", "render", "to_json"]

@@ -1,9 +1,11 @@
-"""The ``dracc fleet`` reports: the page (latest figures per vessel, DR containment and
-trend plots) and the terminal table of the latest figures (:func:`print_fleet_table`).
+"""The ``dracc fleet`` page: latest figures per vessel, DR containment and trend plots.
 
 Renders a :class:`~dracc.pipeline.fleet.FleetResult`; nothing is estimated here.  The page is one
 self-contained file (:mod:`dracc.report.page`); matplotlib loads only when a plot is drawn.
-The cell formatters and :func:`latest` are shared by the page and the terminal table.
+The cell formatters and :func:`latest` are shared by the page and the terminal table
+(:func:`dracc.report.terminal.print_fleet`).  The trend plot's date axis is fitted to the
+days plotted (:func:`dracc.report.audit_html.date_axis`); the table's headers name their
+columns of :data:`dracc.core.vocabulary.TABLE_COLUMNS`.
 """
 
 from __future__ import annotations
@@ -12,12 +14,10 @@ import html
 import math
 
 import pandas as pd
-from rich.console import Console
-from rich.table import Table
-from rich.text import Text
 
-from dracc.core.safetext import printable
+from dracc.core.vocabulary import CHANNELS
 from dracc.pipeline.fleet import FleetResult, count_logs
+from dracc.report.audit_html import column_header, m_y_history_plot
 from dracc.report.page import PAGE_END, img_tag, page_head
 
 _DPI = 85
@@ -42,36 +42,35 @@ def cell_text(x) -> str:
 
 
 def latest(table: pd.DataFrame) -> pd.DataFrame:
-    """Per vessel, unit and channel: the latest log's row, with the vessel's log count and period."""
+    """Per vessel, INS unit and channel: the latest log's row, with the vessel's log count
+    and period (``first_day``, ``last_day``, ``logs``)."""
     ok = table[table["status"] == "ok"]
     if ok.empty:
         return ok
     # logs without INS statistics keep one row (unit and channel empty) for DR and calibration
-    last = ok.groupby(["vessel", "unit", "channel"], sort=True, dropna=False).tail(1).copy()
+    last = ok.groupby(["vessel", "ins_unit", "channel"], sort=True, dropna=False).tail(1).copy()
     span = ok.groupby("vessel").agg(
         first_day=("day", "min"), last_day=("day", "max"), logs=("log", "nunique")
     )
     return last.join(span, on="vessel").sort_values(
-        ["vessel", "unit", "channel"], na_position="last"
+        ["vessel", "ins_unit", "channel"], na_position="last"
     )
 
 
 def trend_plot(trends: pd.DataFrame, vessel: str) -> bytes | None:
-    """Per channel: the day's pooled m_y per unit and the a priori (dashed); PNG bytes."""
-    from dracc.report.plots import m_y_apriori_plot  # matplotlib loaded only when a page is drawn
-
+    """Per channel: the day's pooled m_y per INS unit and the a priori (dashed); PNG bytes."""
     t = trends[trends["vessel"] == vessel]
     if t.empty:
         return None
     lines = {
         c: [
             (unit, pd.to_datetime(g["day"].astype(str)), g["m_y"], g["apriori_after"])
-            for unit, g in t[t["channel"] == c].groupby("unit")
+            for unit, g in t[t["channel"] == c].groupby("ins_unit")
         ]
-        for c in ("lat", "lon", "course")
+        for c in CHANNELS
         if (t["channel"] == c).any()
     }
-    return m_y_apriori_plot(
+    return m_y_history_plot(
         lines, f"{vessel}: daily RMS error from deviations (pooled m_y) and a priori", 2.2, dpi=_DPI
     )
 
@@ -117,35 +116,35 @@ def fleet_html(res: FleetResult) -> str:
     lt = latest(res.table)
     if not lt.empty:
         parts.append(
-            "<h2>Latest figures per vessel, unit and channel</h2><table><tr>"
+            "<h2>Latest figures per vessel, INS unit and channel</h2><table><tr>"
             + "".join(
-                f"<th>{h}</th>"
-                for h in (
-                    "vessel",
-                    "unit",
-                    "channel",
-                    "days",
-                    "logs",
-                    "m_y",
-                    "kurtosis",
-                    "limiting error",
-                    "a priori",
-                    "verdict",
-                    "DR in 2M",
-                    "compass error",
-                    "log scale",
+                column_header(label, column)
+                for label, column in (
+                    ("vessel", "vessel"),
+                    ("INS unit", "ins_unit"),
+                    ("channel", "channel"),
+                    ("days", "day"),
+                    ("logs", "logs"),
+                    ("m_y", "m_y"),
+                    ("excess kurtosis", "kurtosis_excess"),
+                    ("limiting error", "limit"),
+                    ("a priori", "apriori_after"),
+                    ("verdict", "apriori_verdict"),
+                    ("DR in 2M", "dr_containment_2m"),
+                    ("compass error", "compass_error_deg"),
+                    ("log scale", "log_scale_pct"),
                 )
             )
             + "</tr>"
         )
         for _, r in lt.iterrows():
-            d = 3 if _s(r["measure"]) == "deg" else 1
+            d = 3 if _s(r["measure_unit"]) == "deg" else 1
             c = r["dr_containment_2m"]
             parts.append(
-                f"<tr><td>{e(_s(r['vessel']))}</td><td>{e(_s(r['unit']))}</td>"
+                f"<tr><td>{e(_s(r['vessel']))}</td><td>{e(_s(r['ins_unit']))}</td>"
                 f"<td>{e(_s(r['channel']))}</td><td>{e(_s(r['first_day']))} to "
                 f"{e(_s(r['last_day']))}</td><td>{r['logs']}</td>"
-                f"<td>{e(_fu(r['m_y'], d, ' ' + _s(r['measure'])))}</td><td>{_f(r['kurtosis'], 2)}</td>"
+                f"<td>{e(_fu(r['m_y'], d, ' ' + _s(r['measure_unit'])))}</td><td>{_f(r['kurtosis_excess'], 2)}</td>"
                 f"<td>{_f(r['limit'], d)}</td><td>{_f(r['apriori_after'], d)}</td>"
                 f"<td>{e(_s(r['apriori_verdict']))}</td>"
                 f"<td>{'-' if pd.isna(c) else f'{100 * c:.1f} %'}</td>"
@@ -167,53 +166,3 @@ def fleet_html(res: FleetResult) -> str:
         parts.append("</ul>")
     parts.append(PAGE_END)
     return "\n".join(parts)
-
-
-def print_fleet_table(res: FleetResult, console: Console) -> None:
-    """The latest figures per vessel, unit and channel, compact enough for 80 columns."""
-    lt = latest(res.table)
-    t = Table(title="fleet: latest log per vessel, unit and channel", padding=(0, 1))
-    for col in (
-        "vessel",
-        "unit",
-        "m_y",
-        "kurt",
-        "limit",
-        "a priori",
-        "verdict",
-        "DR 2M",
-        "compass",
-        "log",
-    ):
-        left = col in ("vessel", "unit", "verdict")
-        t.add_column(
-            col,
-            justify="left" if left else "right",
-            no_wrap=col in ("vessel", "unit"),
-            overflow="fold",
-        )
-    for _, r in lt.iterrows():
-        d = 3 if cell_text(r["measure"]) == "deg" else 0
-        c = r["dr_containment_2m"]
-        unit = "-" if pd.isna(r["unit"]) else f"{r['unit']} {r['channel']}"
-        measure = "" if pd.isna(r["measure"]) else r["measure"]
-        # Text, not str: a vessel folder named '[red]x' is not markup; control
-        # characters from names are shown escaped, never sent to the terminal
-        t.add_row(
-            *(
-                Text(printable(x))
-                for x in (
-                    cell_text(r["vessel"]),
-                    unit,
-                    fmt_num_unit(r["m_y"], d, measure),
-                    fmt_num(r["kurtosis"], 1),
-                    fmt_num(r["limit"], d),
-                    fmt_num(r["apriori_after"], d),
-                    cell_text(r["apriori_verdict"]),
-                    "-" if pd.isna(c) else f"{100 * c:.0f}%",
-                    fmt_num_unit(r["compass_error_deg"], 2, "°"),
-                    fmt_num_unit(r["log_scale_pct"], 1, "%"),
-                )
-            )
-        )
-    console.print(t)

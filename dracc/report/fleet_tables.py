@@ -17,24 +17,19 @@ from dracc import __version__
 from dracc.core import atomic
 from dracc.pipeline.fleet.tables import FleetResult, count_logs
 from dracc.pipeline.fleet.tasks import inside
+from dracc.report.tables import csv_ready
 
 #: test hook: seconds to sleep half-way through writing the outputs (interruption tests)
 TEST_SLEEP_ENV = "DRACC_FLEET_TEST_SLEEP_S"
 
 
 def csv_text(df: pd.DataFrame) -> str:
-    """``df`` as CSV for a spreadsheet: a text cell starting with ``=``, ``+``, ``-``,
-    ``@``, a tab or a CR (a vessel or file name, an error message) gets a leading single
-    quote, so that no cell is read as a formula (:func:`dracc.core.safetext.csv_cell`).
-    Numbers are left alone (-0.5 stays a number); Parquet keeps the raw text."""
-    from dracc.core.safetext import csv_cell
-
-    safe = df.copy()
-    for col in safe.columns:
-        if not (pd.api.types.is_string_dtype(safe[col]) or safe[col].dtype == object):
-            continue
-        safe[col] = safe[col].map(csv_cell, na_action="ignore")
-    return safe.to_csv(index=False)
+    """``df`` as CSV for a spreadsheet (:func:`dracc.report.tables.csv_ready`): times as
+    ISO 8601 UTC with ``Z``, dates ``YYYY-MM-DD``, and a text cell starting with ``=``,
+    ``+``, ``-``, ``@``, a tab or a CR (a vessel or file name, an error message) with a
+    leading single quote, so that no cell is read as a formula.  Numbers are left alone
+    (-0.5 stays a number); Parquet keeps the raw text and the typed columns."""
+    return csv_ready(df).to_csv(index=False)
 
 
 def write_tables(

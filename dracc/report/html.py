@@ -19,8 +19,13 @@ from dracc.core.timefmt import iso_utc
 from dracc.core.vocabulary import CHANNELS
 from dracc.pipeline.results import Analysis, DRLeg, DRSection, Estimate
 from dracc.report import fmt, fmt_duration, fmt_pct, fmt_signed, short_utc
+from dracc.report.glossary import GLOSSARY, anchor
 from dracc.report.page import CSP, data_uri  # one policy and one data URI for every page
 from dracc.report.rows import EXCEEDS, WITHIN, channel_rows, unit_rows
+from dracc.report.verdict import FAULTS_FOUND, Finding, Verdict, verdict
+
+#: a column header: the glossary term (shown as it is), or (term, header html)
+Header = str | tuple[str, str]
 
 _CSS = """
 body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; margin: 1.5em auto;
@@ -41,6 +46,30 @@ figcaption { font-size: 0.9em; color: #555; }
 .kv td { text-align: left; white-space: normal; }
 pre.config { background: #f6f6f6; border: 1px solid #ddd; padding: 0.5em 1em; font-size: 0.85em;
              overflow-x: auto; }
+th a.g, .kv a.g { color: inherit; text-decoration: underline dotted; }
+.artefact { color: #455a64; background: #eceff1; border-radius: 3px; padding: 0 0.3em;
+            font-style: italic; }
+#verdict-block { border: 1px solid #ccc; padding: 0.3em 1em 0.8em; }
+#verdict-block > p.overall { font-size: 1.15em; }
+.verdict-list { list-style: none; padding: 0; margin: 0; }
+.verdict-list > li { margin: 0.5em 0; padding: 0.3em 0.6em; border-left: 6px solid #999; }
+.verdict-list ul { margin: 0.2em 0 0 1em; padding-left: 1em; font-size: 0.9em; color: #333; }
+.lvl { display: inline-block; min-width: 8.5em; font-weight: 700; font-size: 0.85em;
+       letter-spacing: 0.03em; }
+li.lvl-ok { border-left-color: #1b6e20; background: #f1f8f1; }
+li.lvl-attention { border-left-color: #e08a00; background: #fff8e6; }
+li.lvl-fail { border-left-color: #b00020; background: #fdecee; }
+li.lvl-not-checked { border-left: 6px dashed #78909c; background: #f5f5f5; }
+.lvl-ok .lvl, span.lvl-ok { color: #1b6e20; }
+.lvl-attention .lvl, span.lvl-attention { color: #9a5b00; }
+.lvl-fail .lvl, span.lvl-fail { color: #b00020; }
+.lvl-not-checked .lvl, span.lvl-not-checked { color: #546e7a; font-style: italic; }
+p.none-found { border-left: 4px solid #1b6e20; padding: 0.3em 0.8em; }
+p.not-checked { border-left: 4px dashed #78909c; padding: 0.3em 0.8em; color: #455a64;
+                font-style: italic; }
+dl.glossary dt { font-weight: 600; margin-top: 0.5em; }
+dl.glossary dd { margin-left: 1.5em; }
+dl.glossary .label { color: #555; font-size: 0.9em; }
 """
 
 
@@ -48,10 +77,20 @@ def _e(text: object) -> str:
     return html.escape(str(text), quote=True)
 
 
-def _table(headers: list[str], rows: list[list[str]], left: int = 1) -> str:
-    """An HTML table; cells are already escaped; the first ``left`` columns align left."""
+def _th(h: Header) -> str:
+    """A header cell's content: the header linked to its glossary entry."""
+    term, text = (h, _e(h)) if isinstance(h, str) else h
+    if term not in GLOSSARY:
+        return text
+    return f'<a class="g" href="#{anchor(term)}">{text}</a>'
+
+
+def _table(headers: list[Header], rows: list[list[str]], left: int = 1) -> str:
+    """An HTML table; cells are already escaped; the first ``left`` columns align left.
+    Each header is a glossary term (or (term, html)) and links to the term's entry."""
     head = "".join(
-        f'<th class="l">{h}</th>' if i < left else f"<th>{h}</th>" for i, h in enumerate(headers)
+        f'<th class="l">{_th(h)}</th>' if i < left else f"<th>{_th(h)}</th>"
+        for i, h in enumerate(headers)
     )
     body = "".join(
         "<tr>"
@@ -160,7 +199,8 @@ def _units(a: Analysis) -> str:
                 "-"
                 if not r.has_hat
                 else (
-                    '<span class="bad">negative variance</span>'
+                    f'<a class="artefact" href="#{anchor("negative variance")}">'
+                    "negative variance (artefact)</a>"
                     if r.hat_negative
                     else f"{r.hat_sigma} [{_e(r.hat_lower)}, {_e(r.hat_upper)}]"
                 )
@@ -196,10 +236,10 @@ def _units(a: Analysis) -> str:
             "m_u",
             "m_y",
             "excess kurtosis",
-            f"limit {p}",
+            ("limit", f"limit {p}"),
             "a priori",
             "a priori verdict",
-            "hat σ [bounds]",
+            ("hat σ", "hat σ [bounds]"),
             "ref RMS",
             "k*",
         ],
@@ -338,7 +378,7 @@ def _dr(a: Analysis) -> str:
         key = f" (prior: [dead_reckoning] {_e(dr.dominant_key)})" if dr.dominant_key else ""
         rows.append(("largest part of the 2M", f"{_e(dr.dominant_source)}{key}"))
     rows.append(("verdict", _e(dr.verdict)))
-    kv = "".join(f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in rows)
+    kv = "".join(f"<tr><td>{_th(k)}</td><td>{v}</td></tr>" for k, v in rows)
     checks = {int(lc.leg): lc for lc in dr.leg_checks}
 
     def nees(leg: DRLeg, field: str, digits: int) -> str:
@@ -353,7 +393,7 @@ def _dr(a: Analysis) -> str:
             "fix",
             "inside 2M",
             "scored",
-            "max error [m]",
+            ("max error", "max error [m]"),
             "mean NEES",
             "last NEES",
             "NEES bound",
@@ -412,6 +452,92 @@ def _calibration_current(a: Analysis) -> str:
     return "".join(out)
 
 
+def _finding(f: Finding) -> str:
+    reasons = "".join(f"<li>{_e(r)}</li>" for r in f.reasons)
+    return (
+        f'<li class="lvl-{f.level}" data-topic="{_e(f.topic)}">'
+        f'<span class="lvl">{_e(f.label)}</span> <strong>{_e(f.topic)}</strong>: '
+        f"{_e(f.headline)}" + (f"<ul>{reasons}</ul>" if reasons else "") + "</li>"
+    )
+
+
+def _verdict(v: Verdict) -> str:
+    """The verdict block: the overall level and headline, then each part with its reasons.
+    Every level is written out (OK, ATTENTION, FAIL, NOT CHECKED), not shown by colour only."""
+    worst = (
+        ""
+        if v.worst is None
+        else f'<p class="worst">Worst INS unit: <strong>{_e(v.worst.unit)}</strong> '
+        f"{_e(v.worst.channel)}: {_e(v.worst.detail)}.</p>"
+    )
+    return (
+        '<section id="verdict-block"><h2>Verdict</h2>'
+        f'<p class="overall lvl-{v.level}"><span class="lvl lvl-{v.level}">{_e(v.label)}</span> '
+        f"{_e(v.headline)}</p>{worst}"
+        '<ul class="verdict-list">' + "".join(_finding(f) for f in v.findings) + "</ul>"
+        '<p>Every column and figure is explained in the <a href="#glossary">glossary</a>.</p>'
+        "</section>"
+    )
+
+
+def _glossary() -> str:
+    """Every term once, with its meaning and its equation label (METHODS.md)."""
+    items = "".join(
+        f'<dt id="{anchor(term)}">{_e(term)}'
+        + (f' <span class="label">{_e(label)}</span>' if label else "")
+        + f"</dt><dd>{_e(meaning)}</dd>"
+        for term, (meaning, label) in GLOSSARY.items()
+    )
+    return (
+        '<section id="glossary"><h2>Glossary</h2><p>Each column header links here; the '
+        "labels are the equations of the methods (METHODS.md).</p>"
+        f'<dl class="glossary">{items}</dl></section>'
+    )
+
+
+def _faults(a: Analysis, v: Verdict) -> str:
+    """The sensor-fault section: the faults found, or "none found" (what was searched)
+    distinct from "not checked" (and why not)."""
+    fd = v.faults
+    head = f'<span class="lvl lvl-{fd.level}">{_e(fd.label)}</span> {_e(fd.headline)}'
+    if v.faults_state != FAULTS_FOUND:
+        cls = "none-found" if fd.level == "ok" else "not-checked"
+        reasons = "".join(f"<li>{_e(r)}</li>" for r in fd.reasons)
+        return (
+            f'<section id="faults"><h2>Sensor faults</h2><p class="{cls}">{head}</p>'
+            + (f"<ul>{reasons}</ul>" if reasons else "")
+            + "</section>"
+        )
+    return (
+        f'<section id="faults"><h2>Sensor faults</h2><p class="found">{head}</p>'
+        + _table(
+            [
+                "kind",
+                "source",
+                "role",
+                ("start", "start (UTC)"),
+                ("end", "end (UTC)"),
+                "records",
+                "what was seen",
+            ],
+            [
+                [
+                    _e(f.kind),
+                    _e(f.source),
+                    _e(f.role or "-"),
+                    _e(short_utc(f.start_ns)),
+                    _e(short_utc(f.end_ns)),
+                    _e(f.n_records),
+                    _e(f.message),
+                ]
+                for f in a.faults
+            ],
+            left=3,
+        )
+        + "</section>"
+    )
+
+
 def render_html(a: Analysis) -> str:
     """The whole report as one HTML document (a string)."""
     title = "dracc voyage analysis"
@@ -424,28 +550,8 @@ def render_html(a: Analysis) -> str:
             + "".join(f"<li>{_e(m)}</li>" for m in a.missing)
             + "</ul></div></section>"
         )
-    faults = ""
-    if a.faults:  # dracc.math.faults: shown whenever found, excluded or not
-        faults = (
-            '<section id="faults"><h2>Sensor faults</h2>'
-            + _table(
-                ["kind", "source", "role", "start (UTC)", "end (UTC)", "records", "what was seen"],
-                [
-                    [
-                        _e(f.kind),
-                        _e(f.source),
-                        _e(f.role or "-"),
-                        _e(short_utc(f.start_ns)),
-                        _e(short_utc(f.end_ns)),
-                        _e(f.n_records),
-                        _e(f.message),
-                    ]
-                    for f in a.faults
-                ],
-                left=3,
-            )
-            + "</section>"
-        )
+    v = verdict(a)
+    faults = _faults(a, v)
     notes = ""
     if a.notes:
         notes = (
@@ -453,24 +559,11 @@ def render_html(a: Analysis) -> str:
             + "".join(f"<li>{_e(n)}</li>" for n in a.notes)
             + "</ul></section>"
         )
-    from dracc.report import plots  # matplotlib loads only when a page is drawn
+    from dracc.report import plots, track_plots  # matplotlib loads only when a page is drawn
 
-    dr = a.dead_reckoning
-    if dr is not None and dr.scored_out_of_sample:
-        track_caption = (
-            "Track of every source, the estimated position with its 2M circles (each hour "
-            "since the fix, and just before each restart) and the water track (heading "
-            "and log only, thin dashed)"
-        )
-    else:
-        track_caption = (
-            "Track of every source, the dead-reckoning track (the water track: heading "
-            "and log only) and its 2M circles (each hour since the fix, and just before "
-            "each restart)"
-        )
     figures = "".join(
         [
-            _figure(plots.track_plot(a), "track plot", track_caption, "fig-track"),
+            track_plots.figures_html(a),  # the overview and the leg panels
             _figure(
                 plots.deviation_plot(a),
                 "deviation plot",
@@ -504,6 +597,7 @@ def render_html(a: Analysis) -> str:
 <body>
 <h1>{_e(title)}</h1>
 <p>Report schema {_e(a.schema)}, dracc {_e(a.dracc_version)}.</p>
+{_verdict(v)}
 <section id="summary"><h2>Summary</h2>{_summary(a)}</section>
 {missing}
 {faults}
@@ -512,6 +606,7 @@ def render_html(a: Analysis) -> str:
 <section id="calibration"><h2>Calibration and current</h2>{_calibration_current(a)}</section>
 <section id="plots"><h2>Plots</h2>{figures}</section>
 {notes}
+{_glossary()}
 </body>
 </html>
 """

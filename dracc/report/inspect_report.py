@@ -1,6 +1,7 @@
 """``dracc inspect`` on the terminal: the inspection report (:mod:`dracc.ingest.inspect`)
 as a sources table, every sentence type read and the account of the lines, tables of the
-lines not used (rejected by reason, ignored by type), and the time-base decisions."""
+lines not used (rejected by reason, ignored by type), and the time-base decisions; laid
+out by :mod:`dracc.report.textout`."""
 
 from __future__ import annotations
 
@@ -8,90 +9,98 @@ from pathlib import Path
 from typing import Any
 
 from rich.console import Console
-from rich.table import Table
-from rich.text import Text
 
 from dracc.core.safetext import printable
+from dracc.report.textout import Layout, Page, layout
+
+#: the sources table: name, right-aligned, priority (0: always shown; higher: left out
+#: sooner on a narrow terminal, see :mod:`dracc.report.textout`)
+_COLUMNS = (
+    ("source", False, 0),
+    ("role", False, 0),
+    ("talkers", False, 3),
+    ("sentences", False, 2),
+    ("records", True, 1),
+    ("rate Hz", True, 2),
+    ("first UTC", False, 3),
+    ("last UTC", False, 3),
+    ("gaps", True, 1),
+    ("max gap s", True, 2),
+    ("dup", True, 2),
+    ("back", True, 2),
+)
 
 
 def render_inspection(rep: dict[str, Any], out: Console) -> None:
-    """The report of :func:`dracc.ingest.inspect.inspect_logs` as rich tables on ``out``.  Every text from the log (source keys, talkers, sentence
-    types, file names, rejected lines, notes) is shown as Text, never markup, with its
-    control characters escaped (:func:`dracc.core.safetext.printable`): a source key
-    holding ESC sequences cannot command the terminal."""
+    """The report of :func:`dracc.ingest.inspect.inspect_logs` as plain tables on ``out``,
+    laid out for it (:mod:`dracc.report.textout`: natural width on a pipe, fewer columns
+    on a narrow terminal, lines wrapped on spaces).  Every text from the log (source keys,
+    talkers, sentence types, file names, rejected lines, notes) is shown as text, never
+    markup, with its control characters escaped (:func:`dracc.core.safetext.printable`):
+    a source key holding ESC sequences cannot command the terminal."""
+    inspection_page(rep, layout(out)).print(out)
 
-    def cell(x: object) -> Text:
-        return Text(printable(x))
 
-    t = Table(title=f"sources ({rep['lines']} lines read)")
-    for c in (
-        "source",
-        "role",
-        "talkers",
-        "sentences",
-        "records",
-        "rate Hz",
-        "first UTC",
-        "last UTC",
-        "gaps",
-        "max gap s",
-        "dup",
-        "back",
-    ):
-        t.add_column(
-            c,
-            justify="right"
-            if c in ("records", "rate Hz", "gaps", "max gap s", "dup", "back")
-            else "left",
+def render_inspection_text(rep: dict[str, Any], width: int = 100, tty: bool = False) -> str:
+    """The inspection as plain text laid out for ``width`` columns (``tty``: a terminal)."""
+    return inspection_page(rep, Layout(width, tty)).text()
+
+
+def inspection_page(rep: dict[str, Any], lay: Layout) -> Page:
+    """The inspection's lines laid out for ``lay``."""
+    page = Page(lay)
+    rows = [
+        (
+            key,
+            s["role"] or "-",
+            " ".join(s["talkers"]) or "-",
+            " ".join(f"{k}:{v}" for k, v in s["sentences"].items()),
+            str(s["records"]),
+            f"{s['rate_hz']:.2f}" if s["rate_hz"] else "-",
+            s["first_utc"] or "-",
+            s["last_utc"] or "-",
+            str(s["gaps"]),
+            f"{s['max_gap_s']:.1f}",
+            str(s["duplicates"]),
+            str(s["backsteps"]),
         )
-    for key, s in rep["sources"].items():
-        t.add_row(
-            *(
-                cell(x)
-                for x in (
-                    key,
-                    s["role"] or "-",
-                    " ".join(s["talkers"]) or "-",
-                    " ".join(f"{k}:{v}" for k, v in s["sentences"].items()),
-                    str(s["records"]),
-                    f"{s['rate_hz']:.2f}" if s["rate_hz"] else "-",
-                    s["first_utc"] or "-",
-                    s["last_utc"] or "-",
-                    str(s["gaps"]),
-                    f"{s['max_gap_s']:.1f}",
-                    str(s["duplicates"]),
-                    str(s["backsteps"]),
-                )
-            )
-        )
-    out.print(t)
+        for key, s in rep["sources"].items()
+    ]
+    headers, right, prio = zip(*_COLUMNS, strict=True)
+    page.table(
+        headers, rows, right=right, priorities=prio, title=f"sources ({rep['lines']} lines read)"
+    )
     sent = rep.get("sentences") or {}
     if sent:
-        out.print(
-            cell("sentences read: " + " ".join(f"{k}:{v}" for k, v in sent.items())),
-            highlight=False,
-        )
+        page.wrapped("sentences read: " + " ".join(f"{k}:{v}" for k, v in sent.items()), hang=2)
     acc = rep.get("accounting")
     if acc:
         kinds = sorted({k for i in rep.get("inputs", []) for k in i.get("time_only") or {}})
-        out.print(cell(_account(acc, kinds)), highlight=False)
+        page.wrapped(_account(acc, kinds), hang=2)
     if rep["rejected"]:
-        out.print(_rejected(rep["rejected"], rep["rejected_examples"]))
+        page.blank()
+        page.table(
+            ("reason", "count", "first examples (file:line text)"),
+            _rejected(rep["rejected"], rep["rejected_examples"]),
+            right=(False, True, False),
+            priorities=(0, 0, 1),
+            title="lines not used, by reason",
+        )
+        page.blank()
     ignored = rep.get("ignored") or {}
     if ignored:  # valid input dracc does not use: counts only (examples in the JSON)
-        out.print(
-            cell("ignored (valid, not used): " + " ".join(f"{k}:{v}" for k, v in ignored.items())),
-            highlight=False,
-        )
+        text = "ignored (valid, not used): " + " ".join(f"{k}:{v}" for k, v in ignored.items())
+        page.wrapped(text, hang=2)
     tm = rep["time"]
-    out.print(
-        f"time base: {tm['duplicates']} duplicates, {tm['backsteps']} back-steps, {tm['gaps']} gaps, "
-        f"{tm['rollovers']} midnight rollovers, {tm['implausible_dates']} implausible dates",
-        highlight=False,
-        markup=False,
+    page.wrapped(
+        f"time base: {tm['duplicates']} duplicates, {tm['backsteps']} back-steps, "
+        f"{tm['gaps']} gaps, {tm['rollovers']} midnight rollovers, "
+        f"{tm['implausible_dates']} implausible dates",
+        hang=2,
     )
     for d in tm["decisions"] + rep["notes"] + rep["roles"]:
-        out.print(cell(f"  - {d}"), highlight=False)
+        page.wrapped(f"  - {printable(d)}", hang=4)
+    return page
 
 
 def _account(acc: dict[str, int], time_only: list[str]) -> str:
@@ -112,21 +121,19 @@ def _account(acc: dict[str, int], time_only: list[str]) -> str:
     return text
 
 
-def _rejected(counts: dict[str, int], examples: dict[str, list[dict[str, Any]]]) -> Table:
-    """The rejected lines by reason, with the first two examples each."""
-    r = Table(title="lines not used, by reason")
-    for c in ("reason", "count", "first examples (file:line text)"):
-        r.add_column(c)
-    for reason, n in counts.items():
-        ex = examples.get(reason, [])[:2]
-        # one example per line: the escapes keep a line's own CR/LF from breaking it up
-        r.add_row(
-            Text(printable(reason)),
-            Text(str(n)),
-            Text(
-                "\n".join(
-                    printable(f"{Path(e['file']).name}:{e['line']} {e['text'][:70]}") for e in ex
-                )
+def _rejected(
+    counts: dict[str, int], examples: dict[str, list[dict[str, Any]]]
+) -> list[tuple[str, str, str]]:
+    """The rows of the rejected lines by reason, with the first two examples each (one
+    example per line: the escapes keep a line's own CR/LF from breaking it up)."""
+    return [
+        (
+            printable(reason),
+            str(n),
+            "\n".join(
+                printable(f"{Path(e['file']).name}:{e['line']} {e['text'][:70]}")
+                for e in examples.get(reason, [])[:2]
             ),
         )
-    return r
+        for reason, n in counts.items()
+    ]

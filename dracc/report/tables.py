@@ -8,12 +8,16 @@
                      estimated position, water_* the water track (heading and log only), scored
                      whether the row is scored out of sample
 ``dr_epochs``        the same columns at the reporting epochs
-``deviation_samples`` one row per instant: time_utc and ``<unit>_lat_m``, ``<unit>_lon_m``,
-                     ``<unit>_course_deg``
-``unit_stats``       one row per window, unit and channel: n, m_u, m_y, kurtosis (excess),
-                     limit, unit (m or deg), a priori, hat and reference figures
+``deviation_samples`` one row per instant: time_utc and ``<ins_unit>_lat_m``,
+                     ``<ins_unit>_lon_m``, ``<ins_unit>_course_deg``
+``unit_stats``       one row per window, INS unit and channel: window, window_start_utc,
+                     ins_unit, channel, measure_unit (m or deg), n, m_u, m_y,
+                     kurtosis_excess, limit, a priori, hat and reference figures
 
-Times are timezone-aware UTC timestamps in Parquet and ISO 8601 in CSV.
+Every column is named and typed as :data:`dracc.core.vocabulary.TABLE_COLUMNS` says:
+times (``*_utc``) are ``timestamp[ns, tz=UTC]`` in Parquet and ISO 8601 with ``Z`` in
+CSV (:func:`csv_ready`, shared with the fleet tables), dates ``date32`` and
+``YYYY-MM-DD``.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ import pyarrow.csv as pa_csv
 from dracc.core import atomic
 from dracc.core.arrays import ArrayLike
 from dracc.core.safetext import csv_cell
+from dracc.core.timefmt import iso_utc
 from dracc.core.vocabulary import CHANNEL_KEYS, CHANNEL_UNITS, CHANNELS
 from dracc.math.deviation import WindowStats
 from dracc.pipeline.results import Analysis, DRTrackResult
@@ -85,9 +90,9 @@ def _window_rows(w: WindowStats) -> list[dict[str, Any]]:
                 {
                     "window": w.label,
                     "window_start_utc": pd.Timestamp(w.start_ns, unit="ns", tz="UTC"),
-                    "unit_name": name,
+                    "ins_unit": name,
                     "channel": ch,
-                    "unit": CHANNEL_UNITS[ch],
+                    "measure_unit": CHANNEL_UNITS[ch],
                     "n": c.n,
                     "m_u": c.m_u,
                     "k": c.k,
@@ -142,6 +147,41 @@ def frames(a: Analysis) -> dict[str, pd.DataFrame]:
     return out
 
 
+def _iso_column(col: pd.Series) -> pd.Series:
+    """A timestamp column as ISO 8601 UTC text with ``Z``, with the fewest fractional
+    digits of a second (0, 3, 6 or 9) that write every time of the column exactly;
+    missing times (NaT) an empty cell."""
+    utc = col.dt.tz_convert("UTC") if col.dt.tz is not None else col.dt.tz_localize("UTC")
+    ns = utc.dt.tz_localize(None).to_numpy("datetime64[ns]").view("int64")
+    have = ~utc.isna().to_numpy()
+    text = np.full(len(col), "", dtype=object)
+    if have.any():
+        t = ns[have]
+        unit = next(
+            (u for u, step in (("s", 10**9), ("ms", 10**6), ("us", 10**3)) if not (t % step).any()),
+            "ns",
+        )
+        text[have] = iso_utc(t, unit)
+    return pd.Series(text, index=col.index, dtype=object)
+
+
+def csv_ready(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` as its CSV shows it: timestamps as ISO 8601 UTC text with ``Z``
+    (:func:`_iso_column`), dates as ``YYYY-MM-DD``, and a text cell starting with ``=``,
+    ``+``, ``-``, ``@``, a tab or a CR with a leading single quote, so that no cell is read
+    as a formula (:func:`dracc.core.safetext.csv_cell`).  Numbers are left alone."""
+    out = df.copy()
+    for col in out.columns:
+        c = out[col]
+        if isinstance(c.dtype, pd.DatetimeTZDtype) or pd.api.types.is_datetime64_dtype(c):
+            out[col] = _iso_column(c)
+        elif isinstance(c.dtype, pd.ArrowDtype) and pa.types.is_date(c.dtype.pyarrow_dtype):
+            out[col] = c.astype("string")
+        elif pd.api.types.is_string_dtype(c) or c.dtype == object:
+            out[col] = c.map(csv_cell, na_action="ignore")
+    return out
+
+
 def write_tables(a: Analysis, out_dir: str | Path) -> list[Path]:
     """Write every table as CSV and Parquet into ``out_dir``; return the paths written."""
     out_dir = Path(out_dir)
@@ -149,20 +189,7 @@ def write_tables(a: Analysis, out_dir: str | Path) -> list[Path]:
     for name, df in frames(a).items():
         csv_path = out_dir / f"{name}.csv"
         with atomic.atomic_path(csv_path) as tmp:
-            csv = df.copy()
-            for col in csv.columns:
-                if pd.api.types.is_string_dtype(csv[col]) or csv[col].dtype == object:
-                    # a source key like "=cmd|..." must not become a spreadsheet formula
-                    csv[col] = csv[col].map(csv_cell, na_action="ignore")
-                if isinstance(csv[col].dtype, pd.DatetimeTZDtype):
-                    naive = (
-                        csv[col]
-                        .dt.tz_convert("UTC")
-                        .dt.tz_localize(None)
-                        .to_numpy("datetime64[us]")
-                    )
-                    csv[col] = np.char.add(np.datetime_as_string(naive, unit="us"), "Z")
-            pa_csv.write_csv(pa.Table.from_pandas(csv, preserve_index=False), tmp)
+            pa_csv.write_csv(pa.Table.from_pandas(csv_ready(df), preserve_index=False), tmp)
         written.append(csv_path)
         pq_path = out_dir / f"{name}.parquet"
         with atomic.atomic_path(pq_path) as tmp:

@@ -1,23 +1,24 @@
-"""The short rich summary ``dracc analyze`` prints on the terminal.
+"""The short summary ``dracc analyze`` prints on the terminal, and ``dracc fleet``'s table.
 
 Sections, in the order a navigator reads them: period and inputs, sources and
 rejects, dead-reckoning consistency, the per-unit table, calibration, current, and
-what is missing.  Text from the logs (source keys, file names, and the notes and
-messages that quote them) is printed with rich markup disabled, so a log cannot style
-the terminal, and with every control character shown as an escape
-(:func:`dracc.core.safetext.printable`: ESC as ``\\x1b``), so a log cannot send the
-terminal a command.  Every text of the summary goes through :func:`_text`.
+what is missing.  The text is laid out by :mod:`dracc.report.textout`: tables at their
+natural width on a pipe or in a file (never squeezed, never an ellipsis); a terminal
+narrower than a table leaves out its least needed columns (and says which); the long
+lines wrap on spaces at the terminal's width (on a pipe at ``$COLUMNS`` or 100), never
+inside a number or a source key.  Text from the logs (source keys, file names, and the
+notes and messages that quote them) is never read as rich markup, and every control
+character is shown as an escape (:func:`dracc.core.safetext.printable`: ESC as
+``\\x1b``), so a log can neither style the terminal nor send it a command.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from typing import IO, Any, cast
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from rich.console import Console, Group, JustifyMethod, RenderableType
-from rich.table import Table
-from rich.text import Text
+from rich.console import Console
 
 from dracc.core.safetext import printable
 from dracc.core.vocabulary import CHANNELS
@@ -31,11 +32,26 @@ from dracc.pipeline.results import (
 )
 from dracc.report import fmt, fmt_duration, fmt_pct, fmt_signed, short_utc
 from dracc.report.rows import EXCEEDS, unit_rows
+from dracc.report.textout import Layout, Page, bullet, labelled, layout
+from dracc.report.verdict import verdict
+
+if TYPE_CHECKING:
+    from dracc.pipeline.fleet import FleetResult
+from dracc.report.textout import wrap as wrap_text
 
 
-def _text(text: object = "", style: str = "") -> Text:
-    """A rich Text of ``text`` with control characters escaped (never markup)."""
-    return Text(printable(text), style=style)
+class _Page(Page):
+    """The summary's lines, with its labelled lines, notes and bullets."""
+
+    def line(self, label: str, text: object) -> None:
+        """A line under a 9-character label (``period   ...``), wrapped under its text."""
+        self.add(labelled(label, text, self.lay.width))
+
+    def note(self, text: object) -> None:
+        self.wrapped(f"note: {printable(text)}", hang=6)
+
+    def bullet(self, text: object) -> None:
+        self.add(bullet(text, self.lay.width))
 
 
 def _est(e: Estimate | None, unit: str, digits: int = 2) -> str:
@@ -44,118 +60,113 @@ def _est(e: Estimate | None, unit: str, digits: int = 2) -> str:
     return f"{fmt(e.value, digits)} ± {fmt(e.sigma, digits)} {unit}"
 
 
-def _heading(text: str) -> Text:
-    return _text(text, style="bold")
+#: the sources table: name, right-aligned, priority (0 always shown; higher: left out
+#: sooner on a narrow terminal; first and last are in the period line already)
+_SOURCE_COLUMNS = (
+    ("source", False, 0),
+    ("role", False, 0),
+    ("records", True, 1),
+    ("sentences", False, 2),
+    ("first", False, 3),
+    ("last", False, 3),
+)
 
 
-def _sources_table(a: Analysis) -> Table:
-    t = Table(box=None, pad_edge=False, show_edge=False, header_style="bold")
-    columns: tuple[tuple[str, JustifyMethod], ...] = (
-        ("source", "left"),
-        ("role", "left"),
-        ("records", "right"),
-        ("sentences", "left"),
-        ("first", "left"),
-        ("last", "left"),
-    )
-    for col, just in columns:
-        # figures never wrap; a very long source key (it comes from the log) folds
-        t.add_column(
-            col,
-            justify=just,
-            no_wrap=col != "source",
-            overflow="fold",
-        )
+def _sources_table(page: _Page, a: Analysis) -> None:
+    rows = []
     for s in a.sources:
         top = sorted(s.sentences.items(), key=lambda kv: (-kv[1], kv[0]))[:4]
-        sent = " ".join(f"{k}:{v}" for k, v in top) + (" …" if len(s.sentences) > 4 else "")
-        t.add_row(
-            _text(s.key),
-            _text("+".join(s.roles) or "(none)"),
-            f"{s.records:,}",
-            _text(sent),
-            short_utc(s.first_ns),
-            short_utc(s.last_ns),
+        more = len(s.sentences) - len(top)
+        sent = " ".join(f"{k}:{v}" for k, v in top) + (f" +{more} more" if more else "")
+        rows.append(
+            (
+                s.key,
+                "+".join(s.roles) or "(none)",
+                f"{s.records:,}",
+                sent,
+                short_utc(s.first_ns),
+                short_utc(s.last_ns),
+            )
         )
-    return t
+    headers, right, prio = zip(*_SOURCE_COLUMNS, strict=True)
+    page.table(headers, rows, right=right, priorities=prio)
 
 
-def _unit_table(d: DeviationResult) -> Table:
-    p = f"{100 * d.probability:g} %"
-    t = Table(box=None, pad_edge=False, show_edge=False, header_style="bold")
-    for col in (
-        "unit",
-        "channel",
-        "n",
-        "m_u",
-        "m_y",
-        "excess kurt.",
-        f"limit {p}",
-        "a priori",
-        "verdict",
-        "hat σ",
-        "ref RMS",
-        "k*",
-    ):
-        t.add_column(
-            col, justify="left" if col in ("unit", "channel", "verdict") else "right", no_wrap=True
-        )
-    for name, rows in unit_rows(d):
-        if rows is None:
-            t.add_row(name, "-", "0", *["-"] * 9)
+def _unit_columns(d: DeviationResult) -> tuple[tuple[str, bool, int], ...]:
+    """The per-unit table's columns: name, right-aligned, priority (as above)."""
+    return (
+        ("unit", False, 0),
+        ("channel", False, 0),
+        ("n", True, 3),
+        ("m_u", True, 1),
+        ("m_y", True, 0),
+        ("excess kurt.", True, 2),
+        (f"limit {100 * d.probability:g} %", True, 1),
+        ("a priori", True, 1),
+        ("verdict", False, 0),
+        ("hat σ", True, 2),
+        ("ref RMS", True, 3),
+        ("k*", True, 3),
+    )
+
+
+def _unit_table(page: _Page, d: DeviationResult) -> None:
+    rows: list[tuple[object, ...]] = []
+    for name, unit in unit_rows(d):
+        if unit is None:
+            rows.append((name, "-", "0", *["-"] * 9))
             continue
-        for r in rows:
-            if r.verdict == EXCEEDS:
-                verdict = f"exceeds→{r.new_apriori}"
-            else:
-                verdict = r.verdict
+        for r in unit:
+            verdict = f"exceeds→{r.new_apriori}" if r.verdict == EXCEEDS else r.verdict
             if not r.has_hat:
                 hat = "-"
             elif r.hat_negative:
                 hat = "neg. var."
             else:
                 hat = r.hat_sigma
-            # Text, not str: rich would read 'lat [m]' as markup and print 'lat'
-            t.add_row(
-                *(
-                    _text(str(c))
-                    for c in (
-                        name,
-                        r.channel_text,
-                        r.n,
-                        r.m_u,
-                        r.m_y,
-                        r.kurtosis,
-                        r.limit,
-                        r.apriori,
-                        verdict,
-                        hat,
-                        r.ref_rms,
-                        r.k_star,
-                    )
+            rows.append(
+                (
+                    name,
+                    r.channel_text,
+                    r.n,
+                    r.m_u,
+                    r.m_y,
+                    r.kurtosis,
+                    r.limit,
+                    r.apriori,
+                    verdict,
+                    hat,
+                    r.ref_rms,
+                    r.k_star,
                 )
             )
-    return t
+    headers, right, prio = zip(*_unit_columns(d), strict=True)
+    page.table(headers, rows, right=right, priorities=prio)
 
 
-def _section(title: str, body: list[RenderableType] | None) -> list[RenderableType]:
+def _section(page: _Page, title: str, body: Any, section: object | None) -> None:
     """A blank line, the heading, then the body, or 'not computed' where there is none."""
-    return [
-        _text(""),
-        _heading(title),
-        *(body if body is not None else [_text("not computed (see Missing)")]),
-    ]
+    page.blank()
+    page.heading(title)
+    if section is None:
+        page.add("not computed (see Missing)")
+    else:
+        body(page, section)
 
 
-def _bullets(title: str, items: Sequence[object]) -> list[RenderableType]:
-    """A blank line, the heading and one '- item' line per item; nothing without items."""
+def _bullets(page: _Page, title: str, items: Sequence[object]) -> None:
+    """A blank line, the heading and one '- item' per item; nothing without items."""
     if not items:
-        return []
-    return [_text(""), _heading(title), *(_text(f"- {item}") for item in items)]
+        return
+    page.blank()
+    page.heading(title)
+    for item in items:
+        page.bullet(item)
 
 
-def _notes(notes: Iterable[object]) -> list[RenderableType]:
-    return [_text(f"note: {note}") for note in notes]
+def _notes(page: _Page, notes: Iterable[object]) -> None:
+    for note in notes:
+        page.note(note)
 
 
 def _verdict_word(dr: DRSection) -> str:
@@ -163,11 +174,11 @@ def _verdict_word(dr: DRSection) -> str:
     return dr.verdict.partition(":")[0].strip()
 
 
-def _learned_line(m: Mapping[str, Any]) -> Text:
+def _learned_text(m: Mapping[str, Any]) -> str:
     """The learned current and corrections in one line (DRSection.learned)."""
     scale, scale_sigma = m.get("log_scale_correction"), m.get("log_scale_correction_sigma")
-    return _text(
-        f"learned  current set {fmt(m.get('current_set_deg'), 0)} ° drift "
+    return (
+        f"current set {fmt(m.get('current_set_deg'), 0)} ° drift "
         f"{fmt(m.get('current_drift_kn'), 2)} kn; corrections: heading "
         f"{fmt_signed(m.get('heading_correction_deg'), 2)} ± "
         f"{fmt(m.get('heading_correction_sigma_deg'), 2)} °, log scale "
@@ -176,48 +187,42 @@ def _learned_line(m: Mapping[str, Any]) -> Text:
     )
 
 
-def _dr_body(dr: DRSection) -> list[RenderableType]:
-    body: list[RenderableType] = [
-        _text(
-            f"heading  {dr.heading_source}; speed {dr.speed_source}; "
-            f"restart {dr.reset}; {len(dr.legs)} leg{'s' if len(dr.legs) != 1 else ''}"
-        )
-    ]
+def _dr_body(page: _Page, dr: DRSection) -> None:
+    page.line(
+        "heading",
+        f"{dr.heading_source}; speed {dr.speed_source}; "
+        f"restart {dr.reset}; {len(dr.legs)} leg{'s' if len(dr.legs) != 1 else ''}",
+    )
     # the 2M is of the estimated position (water track + what was learned), or, with
     # learn = false, of the water track itself
     r2m = dr.epochs.radius_2m_m
     max2m = fmt(float(np.nanmax(r2m)) if np.isfinite(r2m).any() else None, 0)
     of = (
-        f"2M       of the {'estimated position' if dr.scored_out_of_sample else 'DR water track'}, "
+        f"of the {'estimated position' if dr.scored_out_of_sample else 'DR water track'}, "
         f"largest {max2m} m"
     )
     if not dr.n_scored:
-        body.append(
-            _text(
-                f"{of}: "
-                + (
-                    "no reference: consistency not scored"
-                    if dr.reference_role is None
-                    else "no epoch scored against the reference"
-                )
-            )
+        why = (
+            "no reference: consistency not scored"
+            if dr.reference_role is None
+            else "no epoch scored against the reference"
         )
+        page.line("2M", f"{of}: {why}")
     else:
-        body.append(
-            _text(
-                f"{of}: reference ({dr.reference_role}) inside 2M at "
-                f"{fmt_pct(dr.containment_2m)} (model: {fmt_pct(dr.expected_inside)})"
-            )
+        page.line(
+            "2M",
+            f"{of}: reference ({dr.reference_role}) inside 2M at "
+            f"{fmt_pct(dr.containment_2m)} (model: {fmt_pct(dr.expected_inside)})",
         )
         if dr.scored_out_of_sample:
             ep = dr.epochs
             prior = int(np.sum((ep.since_fix_s > 0) & ~np.asarray(ep.scored, dtype=bool)))
-            scored = f"scored   {dr.n_scored} epochs out of sample (model learned from earlier fixes only)"
+            scored = f"{dr.n_scored} epochs out of sample (model learned from earlier fixes only)"
             if prior:
                 scored += f"; {prior} prior-only epochs unscored"
         else:
-            scored = f"scored   {dr.n_scored} epochs after a fix, error model as configured (learn = false)"
-        body.append(_text(scored))
+            scored = f"{dr.n_scored} epochs after a fix, error model as configured (learn = false)"
+        page.line("scored", scored)
         nees = "-"
         if np.isfinite(dr.nees_statistic):
             n_legs = len(dr.leg_checks)
@@ -226,82 +231,79 @@ def _dr_body(dr: DRSection) -> list[RenderableType]:
                 f"(chi² {fmt(dr.nees_lower, 1)}-{fmt(dr.nees_upper, 1)}), mean per epoch "
                 f"{fmt(dr.mean_nees, 2)} (2 expected)"
             )
-        body.append(
-            _text(f"NEES     {nees}; RMS error/M {fmt(dr.error_over_m_rms, 2)} (1 expected)")
-        )
+        page.line("NEES", f"{nees}; RMS error/M {fmt(dr.error_over_m_rms, 2)} (1 expected)")
     if dr.learned is not None:
-        body.append(_learned_line(dr.learned))
+        page.line("learned", _learned_text(dr.learned))
     if dr.dominant_source and _verdict_word(dr) != "consistent":
         key = f" ([dead_reckoning] {dr.dominant_key})" if dr.dominant_key else ""
-        body.append(_text(f"dominant {dr.dominant_source}{key}"))
-    body.append(_text(f"verdict  {dr.verdict}"))
-    return body + _notes(dr.notes)
+        page.line("dominant", f"{dr.dominant_source}{key}")
+    page.line("verdict", dr.verdict)
+    _notes(page, dr.notes)
 
 
-def _deviation_body(d: DeviationResult) -> list[RenderableType]:
+def _deviation_body(page: _Page, d: DeviationResult) -> None:
     fac = ", ".join(f"{ch} {fmt(d.factors[ch], 3)}" for ch in CHANNELS)
-    body: list[RenderableType] = [
-        _text(
+    page.add(
+        wrap_text(
             f"{len(d.units)} units, every {fmt_duration(d.interval_s)}, "
-            f"{len(d.time_ns)} instants; k: {fac}; excess kurtosis (normal 0)"
-        ),
-        _unit_table(d),
-    ]
-    return body + _notes(d.messages)
+            f"{len(d.time_ns)} instants; k: {fac}; excess kurtosis (normal 0)",
+            page.lay.width,
+        )
+    )
+    _unit_table(page, d)
+    _notes(page, d.messages)
 
 
-def _calibration_body(c: CalibrationSection) -> list[RenderableType]:
+def _calibration_body(page: _Page, c: CalibrationSection) -> None:
     scale = c.log_scale and Estimate(100 * c.log_scale.value, 100 * c.log_scale.sigma)
-    return [
-        _text(
+    page.add(
+        wrap_text(
             f"against {c.reference_role} ({c.n} segments of {c.segment_s:g} s): compass error "
             f"{_est(c.compass_error_deg, '°')}; log scale {_est(scale, '%')}; "
-            f"log offset {_est(c.log_offset_kn, 'kn')}"
-        )
-    ] + _notes(c.notes)
-
-
-def _current_body(cur: CurrentSection) -> list[RenderableType]:
-    return [
-        _text(
-            f"set {_est(cur.set_deg, '°', 0)} (towards), drift {_est(cur.drift_kn, 'kn')}"
-            f" ({cur.n_updates} fix updates)"
-        )
-    ] + _notes(cur.notes)
-
-
-def summary(a: Analysis) -> Group:
-    """The summary as a rich renderable."""
-    parts: list[RenderableType] = []
-    files = len(a.inputs)
-    parts.append(_heading("dracc analyze"))
-    parts.append(
-        _text(
-            f"period   {short_utc(a.start_ns)} → {short_utc(a.end_ns)} "
-            f"({fmt_duration(a.duration_s)})"
+            f"log offset {_est(c.log_offset_kn, 'kn')}",
+            page.lay.width,
         )
     )
-    parts.append(
-        _text(
-            f"inputs   {files} file{'s' if files != 1 else ''}, {a.lines:,} lines, "
-            f"{sum(f.records for f in a.inputs):,} records"
+    _notes(page, c.notes)
+
+
+def _current_body(page: _Page, cur: CurrentSection) -> None:
+    page.add(
+        wrap_text(
+            f"set {_est(cur.set_deg, '°', 0)} (towards), drift {_est(cur.drift_kn, 'kn')}"
+            f" ({cur.n_updates} fix updates)",
+            page.lay.width,
         )
+    )
+    _notes(page, cur.notes)
+
+
+def _head(page: _Page, a: Analysis) -> None:
+    """The title, the period, the inputs, what was rejected and ignored, the time events."""
+    files = len(a.inputs)
+    page.heading("dracc analyze")
+    page.line(
+        "period",
+        f"{short_utc(a.start_ns)} → {short_utc(a.end_ns)} ({fmt_duration(a.duration_s)})",
+    )
+    page.line(
+        "inputs",
+        f"{files} file{'s' if files != 1 else ''}, {a.lines:,} lines, "
+        f"{sum(f.records for f in a.inputs):,} records",
     )
     for f in a.inputs:
-        parts.append(_text(f"         {f.path} ({f.format}, {f.lines:,} lines)"))
+        page.line("", f"{f.path} ({f.format}, {f.lines:,} lines)")
     rej = sum(a.rejected.values())
     if rej:
         by = ", ".join(f"{k} {v:,}" for k, v in sorted(a.rejected.items(), key=lambda kv: -kv[1]))
-        parts.append(_text(f"rejected {rej:,} lines: {by}"))
+        page.line("rejected", f"{rej:,} lines: {by}")
     else:
-        parts.append(_text("rejected none"))
+        page.line("rejected", "none")
     if a.ignored:
         by = ", ".join(
             f"{k} {v:,}" for k, v in sorted(a.ignored.items(), key=lambda kv: -kv[1])[:8]
         )
-        parts.append(
-            _text(f"ignored  {sum(a.ignored.values()):,} valid lines dracc does not use: {by}")
-        )
+        page.line("ignored", f"{sum(a.ignored.values()):,} valid lines dracc does not use: {by}")
     te = a.time
     events = [
         f"{n} {what}"
@@ -314,72 +316,112 @@ def summary(a: Analysis) -> Group:
         )
         if n
     ]
-    parts.append(_text("time     " + (", ".join(events) if events else "no time events")))
-    parts.append(_text(""))
-    parts.append(_heading("Sources"))
-    parts.append(_sources_table(a))
+    page.line("time", ", ".join(events) if events else "no time events")
 
-    parts += _section(
-        "Dead reckoning", None if a.dead_reckoning is None else _dr_body(a.dead_reckoning)
-    )
-    parts += _section(
-        "INS deviations from the mean",
-        None if a.deviation is None else _deviation_body(a.deviation),
-    )
-    parts += _section(
-        "Calibration", None if a.calibration is None else _calibration_body(a.calibration)
-    )
-    parts += _section("Current", None if a.current is None else _current_body(a.current))
+
+def _verdict(page: _Page, a: Analysis) -> None:
+    """The headline first (:func:`dracc.report.verdict.verdict`, as the HTML report's
+    verdict block): each part's level in words, then its one sentence."""
+    v = verdict(a)
+    page.blank()
+    page.heading(f"Verdict: {v.label}")
+    page.wrapped(v.headline)
+    for f in v.findings:
+        page.wrapped(f"{f.label:<11} {f.topic}: {f.headline}", hang=12)
+
+
+def _page(a: Analysis, lay: Layout) -> _Page:
+    """The whole summary laid out for ``lay``."""
+    page = _Page(lay)
+    _head(page, a)
+    _verdict(page, a)
+    page.blank()
+    page.heading("Sources")
+    _sources_table(page, a)
+    _section(page, "Dead reckoning", _dr_body, a.dead_reckoning)
+    _section(page, "INS deviations from the mean", _deviation_body, a.deviation)
+    _section(page, "Calibration", _calibration_body, a.calibration)
+    _section(page, "Current", _current_body, a.current)
     # dracc.math.faults: shown whenever found, excluded or not
-    parts += _bullets(
-        f"Sensor faults ({len(a.faults)})", [f"{f.kind}: {f.message}" for f in a.faults]
-    )
+    _bullets(page, f"Sensor faults ({len(a.faults)})", [f"{f.kind}: {f.message}" for f in a.faults])
     if a.integrity is not None:
         failed = a.integrity.failed
-        parts += _bullets(
+        _bullets(
+            page,
             f"Integrity: {len(failed)} of {len(a.integrity.checks)} checks failed",
             [f"[{c.check}] {c.message}" for c in failed],
         )
-    parts += _bullets("Missing", a.missing)
-    parts += _bullets("Notes", a.notes)
-    return Group(*parts)
+    _bullets(page, "Missing", a.missing)
+    _bullets(page, "Notes", a.notes)
+    return page
 
 
-def render_text(a: Analysis, width: int = 120) -> str:
-    """The summary as plain text (no colour), for golden files and pipes."""
-    console = Console(
-        width=width,
-        record=True,
-        color_system=None,
-        force_terminal=False,
-        file=cast(IO[str], _NullFile()),  # rich only calls write() and flush()
-        soft_wrap=False,
-    )
-    console.print(summary(a))
-    return console.export_text()
-
-
-#: the summary's tables are laid out for at least this many columns; a narrower terminal
-#: wraps the long lines rather than the tables hiding figures behind ellipses
-MIN_WIDTH = 110
-#: a file or a pipe has no width: lay the tables out as wide as their content needs, up to this
-FILE_WIDTH = 200
+def render_text(a: Analysis, width: int = 120, tty: bool = False) -> str:
+    """The summary as plain text laid out for ``width`` columns (``tty``: a terminal of
+    that width, which leaves out columns that do not fit; else a pipe: every column)."""
+    return _page(a, Layout(width, tty)).text()
 
 
 def print_summary(a: Analysis, console: Console) -> None:
-    """Print the summary on ``console`` (stdout in the CLI)."""
-    width = console.width
-    target = max(width, MIN_WIDTH) if console.is_terminal else FILE_WIDTH
-    console.width = target  # rich never prints wider than the console's own width
-    try:
-        console.print(summary(a))
-    finally:
-        console.width = width
+    """Print the summary on ``console`` (stdout in the CLI), laid out for it
+    (:func:`dracc.report.textout.layout`), the headings bold on a terminal."""
+    _page(a, layout(console)).print(console)
 
 
-class _NullFile:
-    def write(self, _s: str) -> int:
-        return 0
+#: ``dracc fleet``'s table: name, right-aligned, priority (as above)
+_FLEET_COLUMNS = (
+    ("vessel", False, 0),
+    ("unit", False, 0),
+    ("m_y", True, 0),
+    ("kurt", True, 2),
+    ("limit", True, 1),
+    ("a priori", True, 1),
+    ("verdict", False, 0),
+    ("DR 2M", True, 1),
+    ("compass", True, 2),
+    ("log", True, 2),
+)
 
-    def flush(self) -> None:
-        pass
+
+def _fleet_page(res: FleetResult, lay: Layout) -> Page:
+    import pandas as pd
+
+    from dracc.report.fleet_html import cell_text, fmt_num, fmt_num_unit, latest
+
+    lt = latest(res.table)
+    rows = []
+    for _, r in lt.iterrows():
+        d = 3 if cell_text(r["measure_unit"]) == "deg" else 0
+        c = r["dr_containment_2m"]
+        unit = "-" if pd.isna(r["ins_unit"]) else f"{r['ins_unit']} {r['channel']}"
+        measure = "" if pd.isna(r["measure_unit"]) else r["measure_unit"]
+        rows.append(
+            (
+                cell_text(r["vessel"]),
+                unit,
+                fmt_num_unit(r["m_y"], d, measure),
+                fmt_num(r["kurtosis_excess"], 1),
+                fmt_num(r["limit"], d),
+                fmt_num(r["apriori_after"], d),
+                cell_text(r["apriori_verdict"]),
+                "-" if pd.isna(c) else f"{100 * c:.0f}%",
+                fmt_num_unit(r["compass_error_deg"], 2, "°"),
+                fmt_num_unit(r["log_scale_pct"], 1, "%"),
+            )
+        )
+    page = Page(lay)
+    headers, right, prio = zip(*_FLEET_COLUMNS, strict=True)
+    title = "fleet: latest log per vessel, unit and channel"
+    page.table(headers, rows, right=right, priorities=prio, title=title)
+    return page
+
+
+def fleet_text(res: FleetResult, width: int = 100, tty: bool = False) -> str:
+    """``dracc fleet``'s table of the latest figures per vessel, unit and channel as text
+    laid out for ``width`` columns (``tty``: a terminal of that width)."""
+    return _fleet_page(res, Layout(width, tty)).text()
+
+
+def print_fleet(res: FleetResult, console: Console) -> None:
+    """The fleet table (:func:`fleet_text`) laid out for ``console`` and printed there."""
+    _fleet_page(res, layout(console)).print(console)

@@ -1,9 +1,10 @@
 """Writing an analysis's reports: the terminal summary or the JSON on stdout, then the JSON,
-HTML and table files, all renamed into place together; a write error becomes one line."""
+HTML, table and export (GPX, KML, GeoJSON, MCAP) files, all renamed into place together; a
+write error becomes one line."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -36,11 +37,18 @@ def write_reports(
     json_path: str | None,
     html_path: Path | None,
     out_dir: Path | None,
+    *,
+    gpx_path: Path | None = None,
+    kml_path: Path | None = None,
+    geojson_path: Path | None = None,
+    mcap_path: Path | None = None,
 ) -> list[str]:
     """The terminal summary on ``console`` (or the JSON there, for ``json_path`` '-'), then
     the report files: each written in full to a temporary file and all renamed together at
     the end (:func:`dracc.core.atomic.together`), so that an interrupt while the plots are
-    drawn leaves every earlier report as it was, not a new JSON beside an old HTML.
+    drawn leaves every earlier report as it was, not a new JSON beside an old HTML.  The
+    exports join the set: GPX, KML and GeoJSON (:mod:`dracc.report.exports`) and the MCAP
+    for Foxglove (:func:`dracc.report.mcap_export.write_mcap_export`).
 
     Returns the lines that say what was written (``wrote report.json``)."""
     from dracc.report import html as html_report
@@ -69,4 +77,30 @@ def write_reports(
                 if written
                 else f"no tables to write to {out_dir} (no DR and no deviation statistics)"
             )
+        for path, write in _exports(gpx_path, kml_path, geojson_path, mcap_path):
+            with writing(path):
+                write(result, path)
+            said.append(f"wrote {path}")
     return said
+
+
+def _exports(
+    gpx: Path | None, kml: Path | None, geojson: Path | None, mcap: Path | None
+) -> list[tuple[Path, Callable[[Analysis, Path], None]]]:
+    """(path, writer) of each export asked for, its module loaded only then."""
+    todo: list[tuple[Path, Callable[[Analysis, Path], None]]] = []
+    if gpx is not None or kml is not None or geojson is not None:
+        from dracc.report import exports
+
+        for path, fn in (
+            (gpx, exports.write_gpx),
+            (kml, exports.write_kml),
+            (geojson, exports.write_geojson),
+        ):
+            if path is not None:
+                todo.append((path, fn))
+    if mcap is not None:
+        from dracc.report.mcap_export import write_mcap_export
+
+        todo.append((mcap, write_mcap_export))
+    return todo

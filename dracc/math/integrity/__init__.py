@@ -17,12 +17,19 @@ validity / ``contradiction``
     a source flagging fixes valid while they fail a plausibility check.
 plausibility / ``jump``
     the step between consecutive fixes against the step the ship's own motion predicts:
-    innovation ``r_k = (p_k - p_{k-1}) - v_k dt_k`` with ``v_k`` the running median of
-    the source's velocity over 11 steps (what the ship can do: it follows manoeuvres but
-    not one displaced fix).  ``r`` is scaled per axis by its robust sigma learned from
+    innovation ``r_k = (p_k - p_{k-1}) - w_k - v_k dt_k`` with ``w_k`` the water track
+    over the step (the compass and the log integrated: the ship's own turns and changes
+    of speed; 0 where there is no compass and log or a heading gap inside the step) and
+    ``v_k`` the running median over 11 steps of what is left, ``(p_k - p_{k-1} - w_k) /
+    dt_k`` (the current and the sensors' slow errors: it follows them but not one
+    displaced fix).  ``r`` is scaled per axis by its robust sigma learned from
     the night (the larger of the MAD sigma and the one its 99th percentile implies); ``(r_n/s_n)^2 + (r_e/s_e)^2`` is chi-square with 2 degrees of freedom
     for Gaussian fix noise, so the gate ``-2 ln(alpha / N)`` over the N steps holds the
-    night's false-alarm probability at ``alpha`` (Bonferroni).  A step within
+    night's false-alarm probability at ``alpha`` (Bonferroni).  A jump is one displaced
+    fix: the step's innovation must also stand out from its neighbours',
+    ``i_k = r_k - (r_{k-1} + r_{k+1}) / 2`` scaled by its own robust sigma past the same
+    gate, so a change of speed or a turn the running median lags behind (the same
+    innovation on several steps in a row) is not a jump.  A step within
     ``jump_floor_m`` (10 m: the 95 % accuracy IMO A.1046(27) asks of a receiver) is not a
     finding however sure the statistics are (a satellite change moves a fix by metres).
     The check reports the smallest jump it could have seen,

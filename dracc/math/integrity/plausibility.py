@@ -43,8 +43,88 @@ def steps_ne(g: pd.DataFrame) -> tuple[FloatArray, FloatArray]:
     return n, e
 
 
+def _isolated(r: FloatArray, usable: np.ndarray) -> FloatArray:
+    """``r_k - (r_{k-1} + r_{k+1}) / 2``: how far a step's innovation stands out from its
+    neighbours' (an unusable or missing neighbour counts as 0)."""
+    z = np.where(usable, r, 0.0)
+    prev = np.concatenate(([0.0], z[:-1]))
+    nxt = np.concatenate((z[1:], [0.0]))
+    out: FloatArray = z - 0.5 * (prev + nxt)
+    return out
+
+
+#: (time ns, cumulative north m, cumulative east m) of the water track: compass and log
+WaterTrack = tuple[np.ndarray, FloatArray, FloatArray]
+
+
+def water_track(voyage: Voyage) -> WaterTrack | None:
+    """The ship's own motion through the water, integrated from the compass and the log
+    (true heading; a magnetic one with its deviation and variation where it sends them):
+    ``n(t) = integral v cos(h) dt``, ``e(t) = integral v sin(h) dt`` at the heading
+    times (trapezoids), the speed interpolated there.  None without both."""
+    compass, log = voyage.role_sources("compass"), voyage.role_sources("log")
+    if not compass or not log:
+        return None
+    h = voyage.frames["heading"]
+    h = h[h["source"].isin(compass).to_numpy()]
+    w = voyage.frames["water"]
+    w = w[w["source"].isin(log).to_numpy()]
+    ref = h["reference"].astype(object).to_numpy()
+    hd = h["heading_rad"].to_numpy(float)
+    corr = np.nan_to_num(h["deviation_rad"].to_numpy(float)) + np.nan_to_num(
+        h["variation_rad"].to_numpy(float)
+    )
+    true = np.where(ref == "M", hd + corr, hd)
+    ok = np.isfinite(true)
+    th, true = h["time_ns"].to_numpy(np.int64)[ok], true[ok]
+    stw = w["stw_mps"].to_numpy(float)
+    wok = np.isfinite(stw)
+    tw, stw = w["time_ns"].to_numpy(np.int64)[wok], stw[wok]
+    if len(th) < 2 or len(tw) < 2:
+        return None
+    order = np.argsort(th, kind="stable")
+    th, true = th[order], true[order]
+    v = np.interp(th.astype(float), tw.astype(float), stw)
+    dt = np.diff(th) / NS_PER_S
+    vn, ve = v * np.cos(true), v * np.sin(true)
+    cn = np.concatenate(([0.0], np.cumsum(0.5 * (vn[1:] + vn[:-1]) * dt)))
+    ce = np.concatenate(([0.0], np.cumsum(0.5 * (ve[1:] + ve[:-1]) * dt)))
+    return th, cn, ce
+
+
+def _water_steps(
+    t: np.ndarray, water: WaterTrack | None, max_gap_s: float
+) -> tuple[FloatArray, FloatArray]:
+    """North/east water-track displacement over each step between fix times ``t``; NaN
+    where the water track does not cover the step (outside it, or a heading gap longer
+    than ``max_gap_s`` inside it)."""
+    n = len(t) - 1
+    if water is None or n <= 0:
+        return np.full(max(n, 0), np.nan), np.full(max(n, 0), np.nan)
+    th, cn, ce = water
+    tf = t.astype(float)
+    at_n = np.interp(tf, th.astype(float), cn)
+    at_e = np.interp(tf, th.astype(float), ce)
+    inside = (t >= th[0]) & (t <= th[-1])
+    # the longest heading gap within each step: the gap of the sample before each end
+    gap = np.diff(th) / NS_PER_S
+    k0 = np.clip(np.searchsorted(th, t[:-1], side="right") - 1, 0, len(gap) - 1)
+    k1 = np.clip(np.searchsorted(th, t[1:], side="left"), 1, len(th) - 1) - 1
+    big = np.flatnonzero(gap > max_gap_s)
+    has_gap = np.searchsorted(big, k1, side="right") > np.searchsorted(big, k0, side="left")
+    good = inside[:-1] & inside[1:] & ~has_gap
+    dn = np.where(good, np.diff(at_n), np.nan)
+    de = np.where(good, np.diff(at_e), np.nan)
+    return dn, de
+
+
 def jump_check(
-    key: str, role: str | None, g: pd.DataFrame, frozen: Sequence[SensorFault], cfg: IntegrityConfig
+    key: str,
+    role: str | None,
+    g: pd.DataFrame,
+    frozen: Sequence[SensorFault],
+    cfg: IntegrityConfig,
+    water: WaterTrack | None = None,
 ) -> Check:
     """Step innovation against the ship's own motion (module docstring)."""
     ok = (
@@ -74,9 +154,14 @@ def jump_check(
     dt = np.diff(t) / NS_PER_S
     dn, de = np.diff(north), np.diff(east)
     cadence = float(np.median(dt))
-    vn = pd.Series(dn / dt).rolling(11, center=True, min_periods=3).median().to_numpy()
-    ve = pd.Series(de / dt).rolling(11, center=True, min_periods=3).median().to_numpy()
-    rn, re_ = dn - vn * dt, de - ve * dt
+    # the ship's own motion: the water track (compass and log) over each step, where it
+    # covers it, so a turn or a change of speed is predicted; what is left (the current,
+    # the compass and log errors) changes slowly: its running median over 11 steps
+    wn, we = _water_steps(t, water, max_gap_s=max(10.0, cadence))
+    xn, xe = np.where(np.isfinite(wn), dn - wn, dn), np.where(np.isfinite(we), de - we, de)
+    vn = pd.Series(xn / dt).rolling(11, center=True, min_periods=3).median().to_numpy()
+    ve = pd.Series(xe / dt).rolling(11, center=True, min_periods=3).median().to_numpy()
+    rn, re_ = xn - vn * dt, xe - ve * dt
     # steps over a drop-out (availability) or out of a frozen run (the unit catching
     # up, a 'frozen' fault) are not jumps
     usable = dt <= 10.0 * cadence
@@ -88,9 +173,18 @@ def jump_check(
     n_steps = int(usable.sum())
     gate = -2.0 * math.log(cfg.false_alarm / max(n_steps, 1))  # chi2_2 survival exp(-x/2)
     d2 = np.where(usable, (rn / sn) ** 2 + (re_ / se) ** 2, 0.0)
+    # a jump is a displaced fix, alone: its innovation stands out from its neighbours'
+    # (a fix off and back: +d then -d; a step: +d once).  A change of speed or a turn the
+    # running median has not caught up with gives the same innovation on several steps
+    # in a row: not a jump.  i_k = r_k - (r_{k-1} + r_{k+1}) / 2, scaled by its own
+    # robust sigma, must pass the gate as well
+    iso_n, iso_e = _isolated(rn, usable), _isolated(re_, usable)
+    isn = max(tail_sigma(iso_n[usable]), quantum)
+    ise = max(tail_sigma(iso_e[usable]), quantum)
+    d2_iso = np.where(usable, (iso_n / isn) ** 2 + (iso_e / ise) ** 2, 0.0)
     # a step within the position accuracy the standards ask of a receiver is not a finding,
     # however sure the statistics are that the fix moved (a satellite change, multipath)
-    flagged = (d2 > gate) & (np.hypot(rn, re_) > cfg.jump_floor_m)
+    flagged = (d2 > gate) & (d2_iso > gate) & (np.hypot(rn, re_) > cfg.jump_floor_m)
     min_jump = max(math.sqrt(gate) * max(sn, se), cfg.jump_floor_m)
     evidence: list[dict[str, Any]] = []
     lines = g["line"].to_numpy()
@@ -102,7 +196,7 @@ def jump_check(
                 "time": iso_utc(unit="ms", time_ns=t[k + 1]),
                 "line": int(lines[k + 1]),
                 "step_m": float(math.hypot(dn[k], de[k])),
-                "expected_step_m": float(math.hypot(vn[k] * dt[k], ve[k] * dt[k])),
+                "expected_step_m": float(math.hypot(dn[k] - rn[k], de[k] - re_[k])),
                 "innovation_m": float(math.hypot(rn[k], re_[k])),
                 "dt_s": float(dt[k]),
                 "flagged_valid": bool(quality[k + 1] > 0),
@@ -153,9 +247,10 @@ def plausibility_checks(
     fcfg = FaultsConfig(frozen_min_s=cfg.frozen_min_s, stuck_min_s=cfg.frozen_min_s)
     faults = detect_faults(voyage, fcfg)
     checks = []
+    water = water_track(voyage)
     for key, g in by_source(voyage.frames["position"]):
         frozen = [f for f in faults if f.source == key and f.kind == "frozen"]
-        checks.append(jump_check(key, role_of(voyage, key), g, frozen, cfg))
+        checks.append(jump_check(key, role_of(voyage, key), g, frozen, cfg, water))
     checks += fault_checks(
         voyage,
         faults,

@@ -12,6 +12,11 @@ The outputs (tables, trends, per-vessel CSV, ``fleet.json`` and extra pages such
 ``fleet.html``) are written to a staging folder and published together by one rename
 (:func:`dracc.core.atomic.file_set`); CSV cells that a spreadsheet would read as a
 formula get a leading single quote.
+
+Column names and kinds are those of :data:`dracc.core.vocabulary.TABLE_COLUMNS`:
+``period_start_utc`` and ``period_end_utc`` are UTC timestamps, ``day`` a date (pyarrow
+``date32``), ``ins_unit`` the INS unit and ``measure_unit`` the unit of the channel's
+figures (m or deg).
 """
 
 from __future__ import annotations
@@ -21,11 +26,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 
+from dracc.core.vocabulary import CHANNEL_UNITS
 from dracc.pipeline.audit.rule import apriori_chain
 from dracc.pipeline.fleet.tasks import LogTask
 
-#: columns of the fleet table, in order (units in the names or in ``measure``)
+#: columns of the fleet table, in order (units in the names or in ``measure_unit``)
 TABLE_COLUMNS = (
     "vessel",
     "log",
@@ -35,13 +42,13 @@ TABLE_COLUMNS = (
     "period_start_utc",
     "period_end_utc",
     "day",
-    "unit",
+    "ins_unit",
     "channel",
-    "measure",
+    "measure_unit",
     "n",
     "m_u",
     "m_y",
-    "kurtosis",
+    "kurtosis_excess",
     "limit",
     "apriori_before",
     "apriori_after",
@@ -61,9 +68,9 @@ TABLE_COLUMNS = (
 TREND_COLUMNS = (
     "vessel",
     "day",
-    "unit",
+    "ins_unit",
     "channel",
-    "measure",
+    "measure_unit",
     "logs",
     "n",
     "m_y",
@@ -83,12 +90,17 @@ class FleetResult:
     cached: int  #: logs taken from the cache
 
 
-def _day(start: str | None, end: str | None) -> str | None:
+#: the dtype of a UTC date column (``day``): pyarrow ``date32`` (Parquet DATE)
+DATE_DTYPE = pd.ArrowDtype(pa.date32())
+
+
+def _day(start: str | None, end: str | None):
+    """The UTC date of the middle of the period ``start``..``end`` (ISO 8601 texts)."""
     if not start or not end:
         return None
-    t0 = pd.Timestamp(start)
-    t1 = pd.Timestamp(end)
-    return (t0 + (t1 - t0) / 2).date().isoformat()
+    t0 = pd.Timestamp(start).tz_convert("UTC")
+    t1 = pd.Timestamp(end).tz_convert("UTC")
+    return (t0 + (t1 - t0) / 2).date()
 
 
 def _pct(x):
@@ -139,20 +151,20 @@ def fleet_table(
             rows.append(
                 {
                     **common,
-                    "unit": c["unit"],
+                    "ins_unit": c["unit"],
                     "channel": c["channel"],
-                    "measure": {"lat": "m", "lon": "m", "course": "deg"}.get(c["channel"]),
+                    "measure_unit": CHANNEL_UNITS.get(c["channel"]),
                     "n": c["n"],
                     "m_u": c["m_u"],
                     "m_y": c["m_y"],
-                    "kurtosis": c["kurtosis"],
+                    "kurtosis_excess": c["kurtosis"],
                     "limit": c["limit_error"],
                 }
             )
     df = pd.DataFrame(rows, columns=list(TABLE_COLUMNS))
     df = _typed(df)
     df = df.sort_values(
-        ["vessel", "period_start_utc", "log", "unit", "channel"],
+        ["vessel", "period_start_utc", "log", "ins_unit", "channel"],
         na_position="last",
         kind="mergesort",
     ).reset_index(drop=True)
@@ -164,7 +176,7 @@ def _typed(df: pd.DataFrame) -> pd.DataFrame:
     floats = [
         "m_u",
         "m_y",
-        "kurtosis",
+        "kurtosis_excess",
         "limit",
         "apriori_before",
         "apriori_after",
@@ -177,7 +189,17 @@ def _typed(df: pd.DataFrame) -> pd.DataFrame:
         "rejected_rate_pct",
     ]
     ints = ["n", "dr_n_scored", "lines"]
-    strings = [c for c in TABLE_COLUMNS if c not in floats + ints + ["dr_consistent"]]
+    times = ["period_start_utc", "period_end_utc"]
+    typed = floats + ints + times + ["day", "dr_consistent"]
+    strings = [c for c in TABLE_COLUMNS if c not in typed]
+    for c in times:
+        df[c] = pd.to_datetime(df[c], utc=True, format="ISO8601").astype("datetime64[ns, UTC]")
+    # through pyarrow: a column without any date (every log failed) is float NaN, which
+    # pandas cannot cast to date32
+    day = df["day"].astype(object).where(df["day"].notna(), None)
+    df["day"] = pd.Series(
+        pa.array(day.tolist(), type=pa.date32()), dtype=DATE_DTYPE, index=df.index
+    )
     for c in floats:
         df[c] = pd.to_numeric(df[c], errors="coerce").astype("float64")
     for c in ints:
@@ -191,15 +213,15 @@ def _typed(df: pd.DataFrame) -> pd.DataFrame:
 def _apply_rule(df: pd.DataFrame, seeds: Mapping[tuple[str, str], float]) -> None:
     """The monitoring rule per vessel, unit and channel, log after log in time order
     (:func:`dracc.pipeline.audit.apriori_chain` on each series; one assignment per column)."""
-    ok_pos = np.flatnonzero(((df["status"] == "ok") & df["unit"].notna()).to_numpy(dtype=bool))
+    ok_pos = np.flatnonzero(((df["status"] == "ok") & df["ins_unit"].notna()).to_numpy(dtype=bool))
     before = np.full(len(df), np.nan)
     after = np.full(len(df), np.nan)
     verdict = np.full(len(df), None, dtype=object)
     logs = df["log"].to_numpy(dtype=object)
     m_y = df["m_y"].to_numpy(dtype="float64")
-    keys = df.iloc[ok_pos][["vessel", "unit", "channel"]]
+    keys = df.iloc[ok_pos][["vessel", "ins_unit", "channel"]]
     for (_vessel, unit, channel), pos in keys.groupby(
-        ["vessel", "unit", "channel"], sort=False
+        ["vessel", "ins_unit", "channel"], sort=False
     ).indices.items():
         rows = ok_pos[pos]  # in table order: time order within the vessel
         steps = apriori_chain(
@@ -218,18 +240,18 @@ def fleet_trends(table: pd.DataFrame) -> pd.DataFrame:
     """Per vessel, day, unit and channel: pooled RMS m_y (weights n), the a priori at the
     day's end, and the DR containment of the vessel's logs that day pooled over their
     scored epochs (weights ``dr_n_scored``)."""
-    ok = table[(table["status"] == "ok") & table["unit"].notna() & table["day"].notna()]
-    key = ["vessel", "day", "unit", "channel"]
+    ok = table[(table["status"] == "ok") & table["ins_unit"].notna() & table["day"].notna()]
+    key = ["vessel", "day", "ins_unit", "channel"]
     n = ok["n"].astype("float64")
     m_y = ok["m_y"].astype("float64")
     good = m_y.notna() & (n > 0)
-    parts = ok[key + ["measure", "log", "apriori_after"]].assign(
+    parts = ok[key + ["measure_unit", "log", "apriori_after"]].assign(
         _n=n.where(good, 0.0), _nm2=(n * m_y**2).where(good, 0.0)
     )
     agg = (
         parts.groupby(key, sort=True)
         .agg(
-            measure=("measure", "first"),
+            measure_unit=("measure_unit", "first"),
             logs=("log", "nunique"),
             n=("_n", "sum"),
             nm2=("_nm2", "sum"),
@@ -253,8 +275,8 @@ def fleet_trends(table: pd.DataFrame) -> pd.DataFrame:
         dr["dr_containment_2m"] = np.where(dr["w"] > 0, dr["wc"] / dr["w"], np.nan)
     df = agg.merge(dr[["vessel", "day", "dr_containment_2m"]], on=["vessel", "day"], how="left")
     df = df[list(TREND_COLUMNS)].copy()
-    for col in ("vessel", "day", "unit", "channel", "measure"):
-        df[col] = df[col].astype("string")
+    for col in ("vessel", "ins_unit", "channel", "measure_unit"):
+        df[col] = df[col].astype("string")  # ``day`` keeps the table's dtype (a date)
     for col in ("logs", "n"):
         df[col] = df[col].round().astype("Int64")
     for col in ("m_y", "apriori_after", "dr_containment_2m"):
