@@ -9,7 +9,6 @@ the 2M circles are true circles (local tangent plane, :func:`dracc.core.geodesy.
 from __future__ import annotations
 
 import io
-from collections.abc import Mapping, Sequence
 
 import matplotlib
 
@@ -19,11 +18,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.patches import Circle  # noqa: E402
 from matplotlib.typing import LegendLocType  # noqa: E402
 
 from dracc.core.arrays import ArrayLike, FloatArray  # noqa: E402
-from dracc.core.geodesy import offset_ne_m  # noqa: E402
 from dracc.core.vocabulary import CHANNEL_KEYS, CHANNEL_UNITS, CHANNELS
 from dracc.pipeline.results import Analysis
 
@@ -47,38 +44,6 @@ def png_bytes(fig: Figure, dpi: int = _DPI) -> bytes:
     fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight", metadata={"Software": None})
     plt.close(fig)
     return buf.getvalue()
-
-
-def m_y_apriori_plot(
-    lines: Mapping[str, Sequence[tuple[str, object, object, object]]],
-    title: str,
-    row_height_in: float,
-    dpi: int = _DPI,
-) -> bytes:
-    """One panel per channel: each unit's m_y (points and line) and its a priori (dashed
-    steps, same colour) over nights or days.  ``lines``: channel -> [(unit, times, m_y,
-    a priori)], times as datetimes; NaN where a value is missing.  PNG bytes."""
-    fig, axes = plt.subplots(
-        len(lines), 1, figsize=(8, row_height_in * len(lines)), sharex=True, squeeze=False
-    )
-    for ax, (ch, rows) in zip(axes[:, 0], lines.items(), strict=True):
-        for unit, t, m_y, apriori in rows:
-            (line,) = ax.plot(t, m_y, "o-", label=f"{unit} m_y")
-            ax.step(
-                t,
-                apriori,
-                "--",
-                where="post",
-                color=line.get_color(),
-                alpha=0.7,
-                label=f"{unit} a priori",
-            )
-        ax.set_ylabel(f"{ch} ({'deg' if ch == 'course' else 'm'})")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, ncol=3)
-    axes[0, 0].set_title(title)
-    fig.autofmt_xdate()
-    return png_bytes(fig, dpi=dpi)
 
 
 def _finish(
@@ -128,80 +93,6 @@ def _by_leg(n_m: FloatArray, e_m: FloatArray, leg: np.ndarray) -> tuple[np.ndarr
     ns, es, legs = n_m[::k], e_m[::k], leg[::k]
     jumps = np.flatnonzero(np.diff(legs) != 0) + 1
     return np.insert(es / 1e3, jumps, np.nan), np.insert(ns / 1e3, jumps, np.nan)
-
-
-def track_figure(a: Analysis) -> tuple[Figure, Axes] | None:
-    """The track plot as a matplotlib (figure, axes), or None with nothing to plot.
-
-    Every source's track; the estimated position (solid black) with its 2M circles at each
-    hour since the fix and at each restart; the water track (heading and log only: thin,
-    dashed), where it differs from the estimated position (with ``learn = false`` the DR is
-    the water track).  Kilometres north/east of the start."""
-    origin = _origin(a)
-    if origin is None:
-        return None
-    lat0, lon0 = origin
-    fig, ax = plt.subplots(figsize=(9, 7))
-    for t in a.tracks:
-        n, e = offset_ne_m(t.lat_rad, t.lon_rad, lat0, lon0)
-        colour = _ROLE_COLOURS.get(t.role or "")
-        label = f"{t.source} ({t.role})" if t.role else t.source
-        ax.plot(e / 1e3, n / 1e3, lw=0.9, alpha=0.8, color=colour, label=label)
-    dr = a.dead_reckoning
-    if dr is not None and len(dr.track.time_ns):
-        tr = dr.track
-        n, e = offset_ne_m(tr.lat_rad, tr.lon_rad, lat0, lon0)
-        wn, we = offset_ne_m(tr.water_lat_rad, tr.water_lon_rad, lat0, lon0)
-        learned = bool(dr.scored_out_of_sample)
-        differs = bool(np.any(np.hypot(wn - n, we - e) > 0.5))  # metres
-        if differs:
-            ax.plot(*_by_leg(wn, we, tr.leg), lw=0.7, ls="--", color="#7f7f7f", label=WATER_LABEL)
-        ax.plot(
-            *_by_leg(n, e, tr.leg),
-            lw=1.4,
-            color="black",
-            label=EP_LABEL if learned or differs else DR_LABEL,
-        )
-        # 2M at each whole hour since the fix and at the end of every leg (just before the
-        # restart, where the circle is largest)
-        hour = np.floor(tr.since_fix_s / 3600.0)
-        new_leg = np.r_[True, np.diff(tr.leg) != 0]
-        at_hour = np.flatnonzero(~new_leg & (np.r_[0.0, np.diff(hour)] > 0))
-        leg_end = np.flatnonzero(np.r_[np.diff(tr.leg) != 0, True])
-        pick = np.union1d(at_hour, leg_end)
-        first = True
-        for x, y, r in zip(e[pick] / 1e3, n[pick] / 1e3, tr.radius_2m_m[pick] / 1e3, strict=True):
-            if np.isfinite(r) and np.isfinite(x):
-                ax.add_patch(
-                    Circle(
-                        (x, y),
-                        r,
-                        fill=False,
-                        color="#ff7f0e",
-                        lw=1.2,
-                        label="2M: each hour since the fix, and at each restart" if first else None,
-                    )
-                )
-                first = False
-    ax.set_aspect("equal", adjustable="datalim")
-    title = (
-        "Tracks, estimated position, water track and 2M circles"
-        if dr is not None and dr.scored_out_of_sample
-        else "Tracks, dead reckoning and 2M circles"
-    )
-    ax.set_xlabel("east of start [km]")
-    ax.set_ylabel("north of start [km]")
-    ax.grid(True, alpha=0.3)
-    ax.legend(loc="best", fontsize=8)
-    ax.set_title(title)
-    return fig, ax
-
-
-def track_plot(a: Analysis) -> bytes | None:
-    """Every source's track, the estimated position with its 2M circles at each hour and the
-    water track (km from the start); PNG bytes."""
-    drawn = track_figure(a)
-    return None if drawn is None else png_bytes(drawn[0])
 
 
 def deviation_plot(a: Analysis) -> bytes | None:

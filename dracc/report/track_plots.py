@@ -33,7 +33,16 @@ from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 from dracc.core.geodesy import add_offset_ne, circmean, interp_position, offset_ne_m, wrap_pi
 from dracc.pipeline.results import Analysis, DRSection
 from dracc.report.page import data_uri
-from dracc.report.plots import _DPI, _ROLE_COLOURS, _by_leg, _origin, png_bytes
+from dracc.report.plots import (
+    _DPI,
+    _ROLE_COLOURS,
+    DR_LABEL,
+    EP_LABEL,
+    WATER_LABEL,
+    _by_leg,
+    _origin,
+    png_bytes,
+)
 
 __all__ = [
     "CIRCLE_LABEL",
@@ -544,7 +553,7 @@ def _overview(
                 ls="--",
                 color="#7f7f7f",
                 zorder=Z_OTHER,
-                label="water track (heading and log only)",
+                label=WATER_LABEL,
             )
             water_note = "; the water track (heading and log only, thin dashed)"
         est = dr.scored_out_of_sample or differs
@@ -553,7 +562,7 @@ def _overview(
             lw=1.4,
             color=DR_COLOUR,
             zorder=Z_DR,
-            label="estimated position (EP)" if est else "DR (water track)",
+            label=EP_LABEL if est else DR_LABEL,
         )
         _reference_line(ax, a, ref, lat0, lon0, int(tr.time_ns[0]), int(tr.time_ns[-1]))
     elif ref is not None:
