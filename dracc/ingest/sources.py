@@ -21,8 +21,9 @@ Role assignment (:func:`assign_roles`), in this order:
    the only source with heading sentences (HDT/HDG/HDM/THS/ROT, PGN127250/127251) and
    no positions -> compass (where there is none, the only instrument bus with heading
    sentences; where there are several, the only one giving true heading, HDT/THS); a
-   source of fixes without log sentences (an INS, a GNSS compass) and a sender of
-   PASHR/PSXN beside another heading source are never made the compass by content;
+   source of fixes without log sentences (an INS, a GNSS compass) is never made the
+   compass by content, a sender of PASHR/PSXN only where no other heading source is a
+   candidate (the Seapath's PSXN beside its GP fixes: openrvdas/NBP1406_seap);
    the only source with VHW/VBW/PGN128259 -> log (a GNSS's PGN128259, speed over
    ground only, gives way to a log's).  An instrument bus (e.g. 'II' with HDG + VHW)
    may be compass and log.
@@ -279,6 +280,9 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
         # compass; only an instrument bus (fixes beside speed-log sentences, e.g. II with
         # RMC + HDG + VHW) may still be.  The pipeline takes heading from such a source, and
         # says so, only where no compass exists.
+        # an INS's own attitude sentences (PASHR, PSXN) make it an INS, not the compass,
+        # where another heading source is a candidate
+        cands = [s for s in cands if not has(s, INS_SENTENCES)] or cands
         devices = [s for s in cands if has(s, POSITION_SENTENCES) and not has(s, LOG_SENTENCES)]
         if devices:
             cands = [s for s in cands if s not in devices]
@@ -290,9 +294,6 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
                     f"heading ({hs}), so it is an INS or a GNSS compass; map it "
                     f"(--role {s.key}=compass) if it is the ship's compass"
                 )
-        # an INS's own attitude sentences (PASHR, PSXN) make it an INS, not the compass,
-        # where any other heading source is there
-        cands = [s for s in cands if not has(s, INS_SENTENCES)] or cands
         pure = [s for s in cands if not has(s, POSITION_SENTENCES)]  # heading sentences only
         if pure:
             cands = pure
