@@ -1,0 +1,525 @@
+"""Live inputs, listening only: UDP (plain NMEA or IEC 61162-450), a TCP client and a
+growing file, each polled for ``(recv_ns, line)`` pairs.
+
+Every source has ``poll(timeout_s) -> list[(recv_ns, line_bytes)]`` (waits at most
+``timeout_s`` for input, returns at most ``max_lines`` lines, line ends stripped, blank
+lines dropped) and ``close()``; ``rejected`` counts what was dropped, by reason:
+
+* ``binary``: a byte outside printable ASCII (0x20-0x7E) -- a whole UDP datagram (not
+  NMEA: another protocol on the port, an IEC 61162-450 binary transfer ``RaUdP``/``RrUdP``),
+  one line of a stream;
+* ``empty``: a UDP datagram with no line in it (nothing after the header);
+* ``too_long``: a line longer than ``max_line_bytes`` (never held whole on a stream: its
+  bytes are skipped up to the next line end);
+* ``truncated``: a UDP datagram larger than the receive buffer (cut by the kernel);
+* ``partial``: the unfinished last line of a TCP connection that closed.
+
+No source ever transmits: the UDP socket is only bound (a multicast group is joined only
+where the host is a multicast address *and* ``allow_multicast=True``), the TCP client
+only connects and reads.  Sockets are non-blocking and waited on with :mod:`selectors`;
+there are no threads.
+
+IEC 61162-450 (§7): a datagram of sentences begins with the 6-byte header ``UdPbC\\0``,
+stripped here; the TAG blocks (``\\s:...,c:...*hh\\``) and line groups (``g:``) are kept
+as received, for the NMEA reader to check and reassemble.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import ipaddress
+import os
+import selectors
+import socket
+import struct
+import time
+from collections import Counter
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from urllib.parse import urlsplit
+
+from dracc.core.errors import IngestError
+
+#: the IEC 61162-450 header of a datagram of sentences
+UDPBC = b"UdPbC\x00"
+#: a live line longer than this is dropped (an NMEA sentence is at most 82 characters, a
+#: TAG block adds a few tens)
+MAX_LIVE_LINE_BYTES = 4096
+#: lines returned by one ``poll`` at most (bounded memory per call)
+MAX_POLL_LINES = 50_000
+#: bytes of one UDP receive (a datagram up to this is whole; larger is ``truncated``)
+DATAGRAM_BYTES = 65_536
+#: the UDP receive buffer asked of the kernel (it may grant less: net.core.rmem_max)
+RCVBUF_BYTES = 8 * 1024 * 1024
+#: TCP reconnect backoff: first wait, factor, cap (seconds)
+BACKOFF_FIRST_S = 0.25
+BACKOFF_FACTOR = 2.0
+BACKOFF_CAP_S = 30.0
+#: a growing file is checked for new bytes and rotation this often when idle (seconds)
+FILE_INTERVAL_S = 0.05
+#: bytes read from a file or socket in one go
+READ_BYTES = 1 << 20
+
+Line = tuple[int, bytes]
+#: bytes not allowed in a line: everything but printable ASCII (for ``bytes.translate``)
+_NOT_PRINTABLE = bytes(b for b in range(256) if not 32 <= b <= 126)
+_NOT_PRINTABLE_OR_EOL = bytes(b for b in _NOT_PRINTABLE if b not in (10, 13))
+
+
+def _printable(data: bytes, delete: bytes = _NOT_PRINTABLE) -> bool:
+    """Whether ``data`` holds only the allowed bytes (those not in ``delete``)."""
+    return len(data.translate(None, delete)) == len(data)
+
+
+class LiveSource:
+    """What every live source has: its spec, counters, ``poll`` and ``close``."""
+
+    kind = ""
+
+    def __init__(self, spec: str, max_line_bytes: int, max_lines: int) -> None:
+        self.spec = spec
+        self.max_line_bytes = max_line_bytes
+        self.max_lines = max_lines
+        #: dropped input, by reason (see the module docstring)
+        self.rejected: Counter[str] = Counter()
+        self.lines = 0  #: lines returned so far
+        self.bytes = 0  #: bytes received so far
+        self.closed = False
+
+    def poll(self, timeout_s: float = 0.0) -> list[Line]:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def close(self) -> None:
+        self.closed = True
+
+    def __enter__(self) -> LiveSource:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.spec} lines={self.lines}>"
+
+
+class _StreamLines:
+    """Bytes of a stream cut into lines (LF, CR LF or a lone CR), with bounded memory: a
+    line longer than ``max_line_bytes`` is dropped as ``too_long`` and its bytes skipped
+    up to the next line end."""
+
+    def __init__(self, source: LiveSource) -> None:
+        self.src = source
+        self.pending = b""
+        self.skipping = False
+
+    def feed(self, recv_ns: int, data: bytes, out: list[Line]) -> None:
+        src = self.src
+        src.bytes += len(data)
+        if self.skipping:
+            ends = [i for i in (data.find(b"\n"), data.find(b"\r")) if i >= 0]
+            if not ends:
+                return
+            cut = min(ends)
+            data = data[cut + 1 :]
+            self.skipping = False
+        data = self.pending + data
+        pieces = data.splitlines()
+        if data and data[-1] not in (10, 13):
+            self.pending = pieces.pop() if pieces else b""
+        else:
+            self.pending = b""
+        limit = src.max_line_bytes
+        for line in pieces:
+            if not line:
+                continue
+            if len(line) > limit:
+                src.rejected["too_long"] += 1
+            elif not _printable(line):
+                src.rejected["binary"] += 1
+            else:
+                out.append((recv_ns, line))
+        if len(self.pending) > limit:
+            src.rejected["too_long"] += 1
+            self.pending = b""
+            self.skipping = True
+        src.lines += len(out)
+
+    def drop_partial(self) -> None:
+        if self.pending or self.skipping:
+            if self.pending:
+                self.src.rejected["partial"] += 1
+            self.pending = b""
+            self.skipping = False
+
+
+def _host_port(spec: str, scheme: str) -> tuple[str, int]:
+    u = urlsplit(spec)
+    try:
+        port = u.port
+    except ValueError as err:
+        raise IngestError(f"{spec}: bad port") from err
+    if u.scheme != scheme or u.hostname is None or port is None:
+        raise IngestError(f"{spec}: expected {scheme}://HOST:PORT")
+    return u.hostname, port
+
+
+def _is_multicast(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(host).is_multicast
+    except ValueError:
+        return False
+
+
+class UdpSource(LiveSource):
+    """Datagrams received on ``HOST:PORT`` (bound; port 0 picks a free one, see
+    ``address``), each one or more lines, an IEC 61162-450 ``UdPbC\\0`` header stripped."""
+
+    kind = "udp"
+
+    def __init__(
+        self,
+        spec: str,
+        allow_multicast: bool = False,
+        interface: str = "0.0.0.0",
+        max_line_bytes: int = MAX_LIVE_LINE_BYTES,
+        max_lines: int = MAX_POLL_LINES,
+        clock: Callable[[], int] = time.time_ns,
+    ) -> None:
+        super().__init__(spec, max_line_bytes, max_lines)
+        host, port = _host_port(spec, "udp")
+        self.clock = clock
+        self.datagrams = 0  #: datagrams received
+        self.iec450 = 0  #: of which IEC 61162-450 (``UdPbC\0``)
+        multicast = _is_multicast(host)
+        if multicast and not allow_multicast:
+            raise IngestError(
+                f"{spec}: {host} is a multicast group; joining it needs allow_multicast=True"
+            )
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        try:
+            infos = socket.getaddrinfo(host, port, family, socket.SOCK_DGRAM)
+        except socket.gaierror as err:
+            raise IngestError(f"{spec}: {err}") from err
+        sock = socket.socket(family, socket.SOCK_DGRAM)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RCVBUF_BYTES)
+            sock.bind(infos[0][4])
+            if multicast:
+                if family == socket.AF_INET6:
+                    mreq6 = socket.inet_pton(family, host) + struct.pack("@I", 0)
+                    sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_JOIN_GROUP, mreq6)
+                else:
+                    mreq = socket.inet_aton(host) + socket.inet_aton(interface)
+                    sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, mreq)
+            sock.setblocking(False)
+        except OSError as err:
+            sock.close()
+            raise IngestError(f"{spec}: {err.strerror or err}") from err
+        self.sock = sock
+        self.address: tuple[str, int] = sock.getsockname()[:2]
+        self.selector = selectors.DefaultSelector()
+        self.selector.register(sock, selectors.EVENT_READ)
+
+    def _datagram(self, recv_ns: int, data: bytes, flags: int, out: list[Line]) -> None:
+        self.datagrams += 1
+        self.bytes += len(data)
+        if flags & socket.MSG_TRUNC:
+            self.rejected["truncated"] += 1
+            return
+        if data.startswith(UDPBC):
+            self.iec450 += 1
+            data = data[len(UDPBC) :]
+        if not _printable(data, _NOT_PRINTABLE_OR_EOL):
+            self.rejected["binary"] += 1
+            return
+        lines = [ln for ln in data.splitlines() if ln]
+        if not lines:
+            self.rejected["empty"] += 1
+            return
+        limit = self.max_line_bytes
+        for line in lines:
+            if len(line) > limit:
+                self.rejected["too_long"] += 1
+            else:
+                out.append((recv_ns, line))
+
+    def poll(self, timeout_s: float = 0.0) -> list[Line]:
+        out: list[Line] = []
+        if self.closed:
+            return out
+        if not self.selector.select(timeout_s):
+            return out
+        recv = self.sock.recvmsg
+        while len(out) < self.max_lines:
+            try:
+                data, _, flags, _ = recv(DATAGRAM_BYTES)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError as err:  # e.g. ICMP errors reported on the socket: not fatal
+                self.rejected[f"error_{errno.errorcode.get(err.errno or 0, 'os')}"] += 1
+                break
+            self._datagram(self.clock(), data, flags, out)
+        self.lines += len(out)
+        return out
+
+    def close(self) -> None:
+        if not self.closed:
+            self.selector.close()
+            self.sock.close()
+        super().close()
+
+
+class TcpSource(LiveSource):
+    """A TCP client of ``HOST:PORT`` reading lines; when the connection fails or closes
+    it reconnects after a wait that doubles from ``backoff_first_s`` up to
+    ``backoff_cap_s`` (back to the first after a connection that delivered data)."""
+
+    kind = "tcp"
+
+    def __init__(
+        self,
+        spec: str,
+        backoff_first_s: float = BACKOFF_FIRST_S,
+        backoff_cap_s: float = BACKOFF_CAP_S,
+        max_line_bytes: int = MAX_LIVE_LINE_BYTES,
+        max_lines: int = MAX_POLL_LINES,
+        clock: Callable[[], int] = time.time_ns,
+    ) -> None:
+        super().__init__(spec, max_line_bytes, max_lines)
+        self.host, self.port = _host_port(spec, "tcp")
+        self.clock = clock
+        self.backoff_first_s = backoff_first_s
+        self.backoff_cap_s = backoff_cap_s
+        self.backoff_s = backoff_first_s
+        self.connects = 0  #: connections made
+        self.failures = 0  #: connection attempts failed or connections lost
+        self.connected = False
+        self.sock: socket.socket | None = None
+        self.next_try = 0.0  #: time.monotonic() of the next connection attempt
+        self.selector = selectors.DefaultSelector()
+        self.stream = _StreamLines(self)
+        self._got_data = False
+
+    def _start(self) -> None:
+        try:
+            infos = socket.getaddrinfo(self.host, self.port, 0, socket.SOCK_STREAM)
+        except socket.gaierror:
+            self._lost()
+            return
+        family, stype, proto, _, addr = infos[0]
+        sock = socket.socket(family, stype, proto)
+        sock.setblocking(False)
+        err = sock.connect_ex(addr)
+        if err not in (0, errno.EINPROGRESS, errno.EWOULDBLOCK):
+            sock.close()
+            self._lost()
+            return
+        self.sock = sock
+        self.selector.register(sock, selectors.EVENT_WRITE)
+
+    def _lost(self) -> None:
+        if self.sock is not None:
+            with contextlib.suppress(KeyError, ValueError):
+                self.selector.unregister(self.sock)
+            self.sock.close()
+            self.sock = None
+        self.stream.drop_partial()
+        self.failures += 1
+        if self._got_data:
+            self.backoff_s = self.backoff_first_s
+        self.next_try = time.monotonic() + self.backoff_s
+        self.backoff_s = min(self.backoff_s * BACKOFF_FACTOR, self.backoff_cap_s)
+        self.connected = False
+        self._got_data = False
+
+    def _connected(self) -> None:
+        assert self.sock is not None
+        if self.sock.getsockopt(socket.SOL_SOCKET, socket.SO_ERROR):
+            self._lost()
+            return
+        self.selector.modify(self.sock, selectors.EVENT_READ)
+        self.connected = True
+        self.connects += 1
+
+    def _read(self, out: list[Line]) -> None:
+        assert self.sock is not None
+        while len(out) < self.max_lines:
+            try:
+                data = self.sock.recv(READ_BYTES)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                self._lost()
+                return
+            if not data:
+                self._lost()
+                return
+            self._got_data = True
+            got: list[Line] = []
+            self.stream.feed(self.clock(), data, got)
+            out.extend(got)
+
+    def poll(self, timeout_s: float = 0.0) -> list[Line]:
+        out: list[Line] = []
+        end = time.monotonic() + timeout_s
+        while not self.closed:
+            now = time.monotonic()
+            if self.sock is None and now >= self.next_try:
+                self._start()
+            if self.sock is None:
+                wait = min(end, self.next_try) - now
+                if wait > 0:
+                    time.sleep(wait)
+                if time.monotonic() >= end:
+                    break
+                continue
+            for _key, _ev in self.selector.select(max(0.0, end - time.monotonic())):
+                if not self.connected:
+                    self._connected()
+                else:
+                    self._read(out)
+            if out or time.monotonic() >= end:
+                break
+        return out
+
+    def close(self) -> None:
+        if not self.closed:
+            if self.sock is not None:
+                self.sock.close()
+                self.sock = None
+            self.selector.close()
+        super().close()
+
+
+class FileSource(LiveSource):
+    """A file that grows, read as ``tail -f`` does, from its end (``from_start`` False)
+    or its beginning; it may not exist yet.  Rotation survives: when the path names
+    another file (a new inode: rename and create) the rest of the old one is read, then
+    the new one from its start; when the file shrinks (truncated in place) it is read
+    again from its start."""
+
+    kind = "file"
+
+    def __init__(
+        self,
+        spec: str,
+        from_start: bool = False,
+        interval_s: float = FILE_INTERVAL_S,
+        max_line_bytes: int = MAX_LIVE_LINE_BYTES,
+        max_lines: int = MAX_POLL_LINES,
+        clock: Callable[[], int] = time.time_ns,
+    ) -> None:
+        super().__init__(spec, max_line_bytes, max_lines)
+        self.path = Path(spec[5:] if spec.startswith("file:") else spec)
+        self.clock = clock
+        self.interval_s = interval_s
+        self.rotations = 0  #: new files followed (rename and create)
+        self.truncations = 0  #: files that shrank and were read again from the start
+        self._fd: int | None = None
+        self._ino: tuple[int, int] | None = None
+        self.pos = 0
+        self.stream = _StreamLines(self)
+        self._open(at_end=not from_start)
+
+    def _open(self, at_end: bool) -> bool:
+        try:
+            fd = os.open(self.path, os.O_RDONLY)
+        except FileNotFoundError:
+            return False
+        except OSError as err:
+            raise IngestError(f"{self.path}: {err.strerror}") from err
+        st = os.fstat(fd)
+        self._fd = fd
+        self._ino = (st.st_dev, st.st_ino)
+        self.pos = st.st_size if at_end else 0
+        return True
+
+    def _read_some(self, out: list[Line]) -> int:
+        """Bytes read from the open file (0 at its end)."""
+        if self._fd is None:
+            return 0
+        total = 0
+        while len(out) < self.max_lines:
+            data = os.pread(self._fd, READ_BYTES, self.pos)
+            if not data:
+                break
+            self.pos += len(data)
+            total += len(data)
+            got: list[Line] = []
+            self.stream.feed(self.clock(), data, got)
+            out.extend(got)
+        return total
+
+    def _check_rotation(self) -> None:
+        """At the end of the open file: follow a new file at the path or a truncation."""
+        try:
+            st = os.stat(self.path)
+        except FileNotFoundError:
+            return  # renamed away, the new one not yet created: keep the old one open
+        if self._fd is None:
+            self._open(at_end=False)  # created since: read from its start
+            return
+        if (st.st_dev, st.st_ino) != self._ino:
+            os.close(self._fd)
+            self._fd = None
+            self.stream.drop_partial()
+            if self._open(at_end=False):
+                self.rotations += 1
+        elif st.st_size < self.pos:
+            self.truncations += 1
+            self.stream.drop_partial()
+            self.pos = 0
+
+    def poll(self, timeout_s: float = 0.0) -> list[Line]:
+        out: list[Line] = []
+        end = time.monotonic() + timeout_s
+        while not self.closed:
+            if self._read_some(out) == 0 and len(out) < self.max_lines:
+                self._check_rotation()
+                self._read_some(out)
+            now = time.monotonic()
+            if out or now >= end:
+                break
+            time.sleep(min(self.interval_s, end - now))
+        return out
+
+    def close(self) -> None:
+        if not self.closed and self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+        super().close()
+
+
+def open_source(spec: str, **options: object) -> LiveSource:
+    """The live source a spec names: ``udp://HOST:PORT``, ``tcp://HOST:PORT``,
+    ``file:PATH`` or a plain path (a growing file).  ``options`` go to the source's class
+    (:class:`UdpSource` ``allow_multicast``; :class:`TcpSource` ``backoff_first_s``,
+    ``backoff_cap_s``; :class:`FileSource` ``from_start``; all ``max_line_bytes``,
+    ``max_lines``, ``clock``).  Raises IngestError for a spec it cannot open."""
+    scheme = urlsplit(spec).scheme if "://" in spec else ""
+    try:
+        if scheme == "udp":
+            return UdpSource(spec, **options)  # type: ignore[arg-type]
+        if scheme == "tcp":
+            return TcpSource(spec, **options)  # type: ignore[arg-type]
+        if scheme:
+            raise IngestError(f"{spec}: unknown source (udp://, tcp://, file: or a path)")
+        return FileSource(spec, **options)  # type: ignore[arg-type]
+    except TypeError as err:
+        raise IngestError(f"{spec}: {err}") from err
+
+
+def poll_all(sources: Sequence[LiveSource], timeout_s: float = 0.0) -> list[tuple[int, Line]]:
+    """Lines of several sources as (index of the source, (recv_ns, line)): each polled
+    without waiting, then, while none had any, again every few milliseconds until
+    ``timeout_s`` has passed."""
+    end = time.monotonic() + timeout_s
+    while True:
+        out = [(i, ln) for i, s in enumerate(sources) for ln in s.poll(0.0)]
+        now = time.monotonic()
+        if out or now >= end:
+            return out
+        time.sleep(min(0.005, end - now))
