@@ -76,6 +76,8 @@ BAD = [
     (["simulate", "--out", "OUT", "--segment-hours", "0"], ["--segment-hours"]),
     (["simulate", "--out", "OUT", "--fault", "jmp"], ["--fault", "jmp"]),
     (["simulate", "--out", "OUT", "--fault", "jump:GNSS@5h"], ["--fault"]),
+    # watch (a bad value before any socket is opened)
+    (["watch", "udp://127.0.0.1:0", "--stale", "0"], ["--stale", "positive"]),
 ]
 
 

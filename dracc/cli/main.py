@@ -19,6 +19,7 @@ try:  # Ctrl-C while the libraries load (seconds on a busy machine): one line, n
     from dracc.cli import fleet_cmd  # noqa: F401,E402  isort: skip
     from dracc.cli import fix_cmd  # noqa: F401,E402  isort: skip
     from dracc.cli import records_cmd  # noqa: F401,E402  isort: skip
+    from dracc.cli import watch_cmd  # noqa: F401,E402  isort: skip
 except KeyboardInterrupt:
     sys.stderr.write("error: interrupted while starting; nothing was written\n")
     sys.exit(130)
