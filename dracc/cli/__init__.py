@@ -33,9 +33,16 @@ def _exit_while_starting(signum: int, frame: FrameType | None) -> None:
         os._exit(130)
 
 
+#: set when a signal has asked the run to stop: an exception raised by the unwinding
+#: (a C extension's module init turns the KeyboardInterrupt into "ImportError:
+#: initialization failed") is then the interrupt, not a bug
+SIGNALLED = {"on": False}
+
+
 def raise_interrupt(signum: int, frame: FrameType | None) -> None:
     """Signal handler (SIGTERM once started): unwind like Ctrl-C, so that atomic writes
     and transactions roll back."""
+    SIGNALLED["on"] = True
     raise KeyboardInterrupt(f"signal {signum}")
 
 

@@ -99,7 +99,8 @@ def fleet_cmd(
         ) from None
     try:
         print_fleet(res, out)
-        width = layout(err).width  # messages wrap on spaces, never inside a name
+        lay = layout(err)  # a terminal: wrap on spaces; a pipe or journald: a line each
+        width = lay.width if lay.tty else 1 << 30
         for f in res.failures:
             print_lines(err, wrap(f"failed: {f['vessel']}/{f['log']}: {f['error']}", width, hang=2))
         said = (

@@ -7,7 +7,7 @@ import sys
 import traceback
 
 try:  # Ctrl-C while the libraries load (seconds on a busy machine): one line, no traceback
-    from dracc.cli import quick_exit, raise_interrupt
+    from dracc.cli import SIGNALLED, quick_exit, raise_interrupt
     from dracc.cli.app import ABORT, CLICK_ERROR, EXIT, QUICK_EXIT, VERBOSE, app, err
     from dracc.core.errors import DraccError, ExitCode
 
@@ -34,6 +34,10 @@ def main(argv: list[str] | None = None) -> int:
     code = _run(args)
     if argv is None:
         if QUICK_EXIT["on"] and code == ExitCode.OK:
+            quick_exit(code)
+        if code == ExitCode.INTERRUPTED and SIGNALLED["on"]:
+            # everything has unwound; a library cut off in its module init may not survive
+            # the interpreter's shutdown (an abort, exit -6): end here, with 130
             quick_exit(code)
         sys.exit(int(code))
     return int(code)
@@ -64,6 +68,11 @@ def _run(args: list[str]) -> int:
     except BrokenPipeError:
         return ExitCode.OK
     except Exception as e:  # a bug: one line unless --verbose
+        if SIGNALLED["on"]:  # the interrupt, turned into another exception on its way up
+            err.print(
+                "error: interrupted; nothing partial was written", style="red", highlight=False
+            )
+            return ExitCode.INTERRUPTED
         if VERBOSE["on"]:
             traceback.print_exc()
         err.print(
