@@ -190,3 +190,28 @@ def test_garbage_is_counted_never_raised(tmp_path):
     r = read_gpsd_json(p, IngestConfig())
     assert r.lines == len(data.split(b"\n"))  # a damaged byte may be a line end
     assert r.rejects.total > 0 and len(r.frames["position"]) >= 1
+
+
+def test_a_line_too_long_is_one_reject_and_the_rest_is_read(tmp_path):
+    """A 1 MB line (a crashed logger, a runaway report) is rejected unread as too_long,
+    in gpsd JSON and in Signal K deltas alike; the lines around it are kept."""
+    from dracc.ingest.signalk_delta import read_signalk_delta
+
+    tpv = (
+        '{"class":"TPV","device":"/dev/gps","mode":3,"time":"2024-05-01T10:00:0%dZ",'
+        '"lat":54.5,"lon":18.5,"track":90.0,"speed":5.0}'
+    )
+    huge = '{"class":"TPV","junk":"' + "x" * 1_000_000 + '"}'
+    p = tmp_path / "gpsd.json"
+    p.write_text("\n".join([tpv % 1, huge, tpv % 2]) + "\n")
+    r = read_gpsd_json(p, IngestConfig())
+    assert r.rejects.counts == {"too_long": 1} and r.rejects.examples["too_long"][0][1] == 2
+    assert len(r.frames["position"]) == 2
+    delta = (
+        '{"context":"vessels.self","updates":[{"$source":"gps","timestamp":'
+        '"2024-05-01T10:00:0%dZ","values":[{"path":"navigation.speedOverGround","value":2.5}]}]}'
+    )
+    p = tmp_path / "delta.log"
+    p.write_text("\n".join([delta % 1, '{"x":"' + "y" * 1_000_000 + '"}', delta % 2]) + "\n")
+    r = read_signalk_delta(p, IngestConfig())
+    assert r.rejects.counts.get("too_long") == 1

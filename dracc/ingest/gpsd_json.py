@@ -59,6 +59,7 @@ from dracc.ingest.demux import (
     take_off_blanks,
     write_copy,
 )
+from dracc.ingest.nmea.sentences import MAX_LINE_BYTES
 from dracc.ingest.signalk_delta import JSON_ERRORS, loads
 from dracc.ingest.timebase import EventCounter
 
@@ -116,6 +117,8 @@ class GpsdDecoder:
     ignored: Counter[str] = field(default_factory=Counter)
     ignored_examples: dict[str, list[tuple[str, int, str]]] = field(default_factory=dict)
     lines: int = 0
+    #: a line longer is rejected as ``too_long`` unread (``[ingest] max_line_bytes``)
+    max_line_bytes: int = MAX_LINE_BYTES
     #: TPV rows: (time, device, line, lat, lon, alt, track, speed, quality)
     tpv: list[tuple[Any, ...]] = field(default_factory=list)
     #: ATT rows: (time, device, line, heading, mheading, rot)
@@ -131,6 +134,9 @@ class GpsdDecoder:
     def feed(self, payload: bytes, line: int) -> None:
         self.lines += 1
         text = payload[:120].decode("utf-8", "replace")
+        if len(payload) > self.max_line_bytes:  # never parsed whole: one reject
+            self.rejects.add("too_long", self.file, line, text)
+            return
         try:
             msg = loads(payload)
         except JSON_ERRORS:
@@ -378,7 +384,7 @@ def read_gpsd_json(
     first = np.where(blank, 0, buf[np.minimum(start, max(len(buf) - 1, 0))]) if len(buf) else start
     is_json = first == ord("{")
     other = ~is_json & ~blank
-    dec = GpsdDecoder(file)
+    dec = GpsdDecoder(file, max_line_bytes=cfg.max_line_bytes)
     ji = np.flatnonzero(is_json)
     for s, e, n in zip(start[ji].tolist(), end[ji].tolist(), (ji + 1).tolist(), strict=True):
         dec.feed(raw[s:e], n)

@@ -171,7 +171,7 @@ def read_signalk(
                 _read_n2k_lines(p, cfg, progress, buf, start, end, nxt, is_n2k, pay, recv, folder)
             )
         if is_delta.any():
-            dec = DeltaDecoder(file)
+            dec = DeltaDecoder(file, max_line_bytes=cfg.max_line_bytes)
             di = np.flatnonzero(is_delta)
             decode_lines(dec, raw, pay[di], end[di], di + 1, recv[di])
             r = dec.finish(cfg)

@@ -49,6 +49,7 @@ import pandas as pd
 
 from dracc.frames import MISSING_NS, FileResult, Rejects, concat_blocks, make_frame
 from dracc.ingest.demux import check_strict, line_bounds
+from dracc.ingest.nmea.sentences import MAX_LINE_BYTES
 from dracc.ingest.timebase import EventCounter
 
 if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
@@ -206,6 +207,8 @@ class DeltaDecoder:
     ignored: Counter[str] = field(default_factory=Counter)
     ignored_examples: dict[str, list[tuple[str, int, str]]] = field(default_factory=dict)
     lines: int = 0
+    #: a line longer is rejected as ``too_long`` unread (``[ingest] max_line_bytes``)
+    max_line_bytes: int = MAX_LINE_BYTES
     rows: dict[str, _Rows] = field(default_factory=lambda: {k: _Rows() for k in _COLUMNS})
     contexts: list[str | None] = field(default_factory=list)
     _ctx_index: dict[str | None, int] = field(default_factory=dict)
@@ -229,6 +232,9 @@ class DeltaDecoder:
         time or MISSING_NS)."""
         self.lines += 1
         text = payload[:120].decode("utf-8", "replace")
+        if len(payload) > self.max_line_bytes:  # never parsed whole: one reject
+            self.rejects.add("too_long", self.file, line, text)
+            return
         try:
             msg = loads(payload)
         except JSON_ERRORS:
@@ -499,7 +505,7 @@ def read_signalk_delta(
     raw = p.read_bytes()
     buf = np.frombuffer(raw, dtype=np.uint8)
     start, end, _nxt = line_bounds(buf)
-    dec = DeltaDecoder(str(p))
+    dec = DeltaDecoder(str(p), max_line_bytes=cfg.max_line_bytes)
     blank = start == end
     if blank.any():
         dec.ignored["blank"] += int(blank.sum())
