@@ -282,19 +282,7 @@ def _insets(
         ax.plot(dr_xy[:, 0], dr_xy[:, 1], lw=1.2, color=DR_COLOUR, zorder=Z_DR)
         ax.plot(ref_xy[:, 0], ref_xy[:, 1], lw=1.1, color=REF_COLOUR, zorder=Z_REF)
         ax.add_patch(Circle((cx, cy), r, fill=False, color=CIRCLE_COLOUR, lw=1.2, zorder=Z_CIRCLE))
-        ax.add_patch(
-            Ellipse(
-                (cx, cy),
-                2 * float(ep.semi_major_km[i]),
-                2 * float(ep.semi_minor_km[i]),
-                angle=float(ep.angle_deg[i]),
-                fill=False,
-                color=ELLIPSE_COLOUR,
-                lw=0.9,
-                ls="--",
-                zorder=Z_CIRCLE,
-            )
-        )
+        ax.add_patch(_ellipse(ep, i, (cx, cy)))
         ax.plot([cx], [cy], "+", ms=7, color=DR_COLOUR, zorder=Z_DR)
         title = f"{_utc(int(ep.time_ns[i]))[3:]}  2M {_metres(r)}"
         if np.isfinite(d):
@@ -421,6 +409,22 @@ def _reference_line(
     )
 
 
+def _ellipse(ep: _Epochs, i: int, xy: tuple[float, float], label: str | None = None) -> Ellipse:
+    """The 95 % error ellipse of epoch ``i`` centred at ``xy`` (km), dashed."""
+    return Ellipse(
+        xy,
+        2 * float(ep.semi_major_km[i]),
+        2 * float(ep.semi_minor_km[i]),
+        angle=float(ep.angle_deg[i]),
+        fill=False,
+        color=ELLIPSE_COLOUR,
+        lw=0.9,
+        ls="--",
+        zorder=Z_CIRCLE,
+        label=label,
+    )
+
+
 def _circles(ax: Axes, ep: _Epochs, sel: np.ndarray, px_km: float) -> tuple[float, int]:
     """2M circles and 95 % ellipses at the epochs ``sel`` (bool) that are at least
     MIN_CIRCLE_PX at ``px_km``; dots at the others.  (smallest radius drawn in px, dots)."""
@@ -439,20 +443,7 @@ def _circles(ax: Axes, ep: _Epochs, sel: np.ndarray, px_km: float) -> tuple[floa
                 label=CIRCLE_LABEL if first else None,
             )
         )
-        ax.add_patch(
-            Ellipse(
-                xy,
-                2 * float(ep.semi_major_km[i]),
-                2 * float(ep.semi_minor_km[i]),
-                angle=float(ep.angle_deg[i]),
-                fill=False,
-                color=ELLIPSE_COLOUR,
-                lw=0.9,
-                ls="--",
-                zorder=Z_CIRCLE,
-                label=ELLIPSE_LABEL if first else None,
-            )
-        )
+        ax.add_patch(_ellipse(ep, int(i), xy, ELLIPSE_LABEL if first else None))
         first = False
     small = sel & ~big
     if small.any():
