@@ -11,6 +11,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections import Counter
 from pathlib import Path
@@ -132,7 +133,8 @@ def test_status_counts_every_source_while_running(run):
         c_s = int(last[last.index(b",c:") + 3 : last.index(b"*")])
         recv_s = pd.Timestamp(s["last_utc"]).timestamp()
         assert s["latency_s"] == pytest.approx(recv_s - c_s, abs=0.002)
-    assert st["deviation"] is None and st["dead_reckoning"] is None and st["not_yet"]
+    # the first analysis of the window is due after --analyse-every (30 s by default)
+    assert st["analysis"]["window_s"] == 3600.0 and st["analysis"]["every_s"] == 30.0
 
 
 def test_stale_raised_then_cleared_with_evidence(run):
@@ -168,3 +170,59 @@ def test_sigterm_exits_0_and_the_recording_reads_as_the_lines_sent(run):
     assert set(a) == set(b) and {"position", "heading"} <= set(a)
     for kind in a:
         pd.testing.assert_frame_equal(a[kind], b[kind])
+
+
+def test_tty_gets_the_live_view_and_analysis_fills_it(tmp_path):
+    """stdout a terminal (a pty): the rich view is drawn, findings are not printed on
+    stderr; with --analyse-every 0.5s the sources get their roles from the analysis."""
+    import pty
+
+    master, slave = pty.openpty()
+    port = _free_port()
+    status = tmp_path / "status.json"
+    env = {**os.environ, "PYTHONPATH": str(REPO), "COLUMNS": "120", "LINES": "60"}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "dracc", "watch", f"udp://127.0.0.1:{port}", "--status"]
+        + [str(status), "--status-every", "0.2s", "--analyse-every", "0.5s"],
+        stdout=slave,
+        stderr=subprocess.PIPE,
+        env=env,
+    )
+    os.close(slave)
+    chunks: list[bytes] = []
+
+    def drain() -> None:  # a terminal is read, or the writer blocks
+        while True:
+            try:
+                chunk = os.read(master, 1 << 16)
+            except OSError:  # EIO: the other end closed
+                return
+            if not chunk:
+                return
+            chunks.append(chunk)
+
+    reader = threading.Thread(target=drain, daemon=True)
+    reader.start()
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        _wait(status, lambda st: "received" in st, timeout_s=15)
+        for i, ln in enumerate(SAMPLE.read_bytes().splitlines()[:3000]):
+            tx.sendto(ln + b"\r\n", ("127.0.0.1", port))
+            if i % 200 == 199:
+                time.sleep(0.01)
+        st = _wait(status, lambda st: st["sources"].get("INS1", {}).get("role"), timeout_s=20)
+        proc.send_signal(signal.SIGTERM)
+        _, errtext = proc.communicate(timeout=20)
+    finally:
+        tx.close()
+        if proc.poll() is None:
+            proc.kill()
+    reader.join(timeout=5)
+    os.close(master)
+    text = b"".join(chunks).decode("utf-8", "replace")
+    assert proc.returncode == 0, errtext
+    assert st["sources"]["INS1"]["role"] == "ins1" and st["sources"]["GNSS"]["role"] == "gnss"
+    assert st["analysis"]["runs"] >= 1 and st["analysis"]["error"] is None
+    assert "dracc watch" in text and "sources" in text and "INS1" in text
+    assert "\x1b[" in text  # drawn for a terminal (cursor moves, colours)
+    assert b"raised" not in errtext  # findings are in the view, not on stderr

@@ -1,7 +1,9 @@
 """``dracc watch SOURCE...``: listen to live sources (never transmitting), record what was
 heard, keep a status document; the loop is :class:`dracc.pipeline.watch.Watch`.
 
-stderr has one line per finding raised or cleared.  SIGTERM or SIGINT end the watch
+The rolling statistics (:mod:`dracc.pipeline.watch_analysis`) run in one worker process.
+When stdout is a TTY the status is drawn live (:mod:`dracc.report.watch_view`); otherwise
+stderr has one line per finding raised or cleared (journald, a pipe).  SIGTERM or SIGINT end the watch
 cleanly -- its normal end: the recording is flushed and closed, the final status
 written, and the exit code is 0 (an interruption of ``analyze`` exits 130 because it
 leaves nothing; here everything heard is kept).
@@ -11,14 +13,18 @@ from __future__ import annotations
 
 import json
 import signal
+import sys
 import time
 from pathlib import Path
 from types import FrameType
 
 import typer
+from rich.console import Console
+from rich.live import Live
 
 from dracc.cli.app import app, err
-from dracc.cli.options import option_values
+from dracc.cli.options import ConfigOption, option_values
+from dracc.report.watch_view import status_view
 
 
 @app.command("watch")
@@ -31,28 +37,46 @@ def watch(
     status_every: str = typer.Option("2s", help="How often the status is rewritten."),
     stale: str = typer.Option("10s", help="A source silent this long raises 'stale'."),
     duration: str | None = typer.Option(None, help="Stop after this long (default: never)."),
+    window: str = typer.Option("1h", help="The DR and integrity statistics are over this span."),
+    analyse_every: str = typer.Option("30s", help="How often the window is analysed."),
+    window_mb: float = typer.Option(256.0, min=1.0, help="The window holds at most this much."),
+    analysis: bool = typer.Option(True, help="--no-analysis: only count, time and record."),
+    config: Path | None = ConfigOption,
+    baud: int | None = typer.Option(None, min=1, help="Serial: baud (default: spec's or 4800)."),
 ) -> None:
     """Listen to live NMEA sources (listening only): record every line with its receive
     time, count and time each source, raise and clear findings; until SIGTERM/SIGINT."""
     from dracc.core.atomic import write_text
+    from dracc.core.config import load_config
     from dracc.core.durations import parse_duration_s
+    from dracc.core.numbers import jsonable
     from dracc.ingest.live import Recorder, open_source
     from dracc.pipeline.watch import Watch
+    from dracc.pipeline.watch_analysis import LiveAnalyser, worker_pool
 
+    cfg = load_config(config)
     with option_values():
         every_s = parse_duration_s(status_every, "--status-every", "2s or 0.5s")
         stale_s = parse_duration_s(stale, "--stale", "10s or 1min")
         run_s = parse_duration_s(duration, "--duration", "1h or 30s") if duration else None
+        window_s = parse_duration_s(window, "--window", "1h or 6h")
+        analyse_s = parse_duration_s(analyse_every, "--analyse-every", "30s or 1min")
     opened = []
     try:
         for spec in sources:
-            opened.append(open_source(spec))
+            opened.append(open_source(spec, baud=baud))
     except BaseException:
         for s in opened:
             s.close()
         raise
-    loop = Watch(opened, Recorder(record) if record else None, stale_s=stale_s)
+    pool = worker_pool() if analysis else None
+    analyser = (
+        LiveAnalyser(cfg, window_s, analyse_s, int(window_mb * 2**20), pool) if analysis else None
+    )
+    recorder = Recorder(record) if record else None
+    loop = Watch(opened, recorder, stale_s=stale_s, analyser=analyser)
     stop: list[int] = []
+    view = _live_view() if sys.stdout.isatty() else None
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
         stop.append(signum)
@@ -60,15 +84,21 @@ def watch(
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
 
     def write_status() -> None:
+        doc = jsonable(loop.status())
         if status is not None:
-            write_text(status, json.dumps(loop.status(), indent=1) + "\n")
+            write_text(status, json.dumps(doc, indent=1) + "\n")
+        if view is not None:
+            view.update(status_view(doc), refresh=True)
 
     try:
         start = next_status = time.monotonic()
         while not stop and (run_s is None or time.monotonic() - start < run_s):
             for f in loop.step(0.1):
+                if view is not None:
+                    continue  # the view shows them
                 err.print(
-                    f"{f['cleared_utc'] or f['raised_utc']} {f['check']} {f['event']}: "
+                    f"{f['cleared_utc'] or f['raised_utc']} {f['check']}"
+                    f"{'/' + f['name'] if f.get('name') else ''} {f['event']}: "
                     f"{f['message']}",
                     markup=False,
                     highlight=False,
@@ -78,6 +108,17 @@ def watch(
                 next_status = time.monotonic() + every_s
     finally:
         loop.close()
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
         write_status()
+        if view is not None:
+            view.stop()
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+
+
+def _live_view() -> Live:
+    """A rich Live display on stdout, redrawn by the status (no refresh thread)."""
+    view = Live(console=Console(), auto_refresh=False, transient=False)
+    view.start()
+    return view

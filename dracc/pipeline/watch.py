@@ -7,18 +7,25 @@ there is one) and to the per-source state, and returns the findings raised or cl
 in that step; :meth:`Watch.status` is the status document; :meth:`Watch.close` closes
 the sources and finishes the recording.
 
-A line's source key is the one dracc's NMEA reader gives it, from a cheap parse: the
-TAG block's ``s:`` where there is one, else the talker of ``$TTSSS`` (a proprietary
-``$P...`` sentence: its address, ``PASHR``).  Per key: the records, the rate over the
+A line's form and source key come from :func:`dracc.ingest.live.forms.classify`, a cheap
+look at its bytes: for NMEA 0183 the key dracc's reader gives it (the TAG block's ``s:``
+where there is one, else the talker of ``$TTSSS``; a proprietary ``$P...`` sentence: its
+address, ``PASHR``), ``n2k:addr<src>`` for a NMEA 2000 text line, ``signalk:<source>`` for
+a Signal K delta.  ``records`` counts the lines heard (a line the reader will reject for
+its checksum is heard all the same).  Per key: the records, the rate over the
 last minute (60 one-second buckets), the last receive time and its age, and the
 latency (receive time minus the TAG ``c:`` time, where the line has one; ``c:`` in
 seconds up to 10 digits, else milliseconds, as :mod:`dracc.ingest.tagblock` reads it).
 
 Findings: ``stale`` is raised for a source whose age exceeds ``stale_s`` and cleared at
-its next line, each with its evidence (``last_utc``, ``age_s``).  Open findings are all
-kept; of the cleared ones the last :data:`KEEP_CLEARED`.  The deviation, dead-reckoning
-and integrity statistics of ``analyze``/``audit`` are not computed live yet: the status
-says so in ``not_yet``.
+its next line, each with its evidence (``last_utc``, ``age_s``).  With a
+:class:`~dracc.pipeline.watch_analysis.LiveAnalyser`, every line also goes into its
+rolling window, and each finished analysis of the window (the library's
+``analyse_voyage``: the audit's integrity checks) raises a finding for every check that
+fails (check, name, source: its message, statistic, threshold and evidence) and clears
+an open one when the same check passes again -- at most a window after the fault ended,
+when the window no longer holds it.  Open findings are all kept; of the cleared ones the
+last :data:`KEEP_CLEARED`.
 
 The recording (``Recorder``) writes each line with its receive time; a line with a TAG
 block keeps it (its ``s:``), a line without one is recorded with ``c:`` only, so that
@@ -34,55 +41,21 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from dracc.ingest.live import LiveSource, Recorder, poll_all
+from dracc.ingest.live import LiveSource, Recorder, classify, poll_all
+from dracc.ingest.live.forms import NMEA_FORMS
+from dracc.ingest.live.record import tag_line
+from dracc.pipeline.watch_analysis import LiveAnalyser, WindowResult
 
 SCHEMA = "dracc.watch/1"
 RATE_WINDOW_S = 60  #: the rate is over this many seconds (one bucket per second)
 KEEP_CLEARED = 200  #: cleared findings kept in the status, the latest
 MAX_SOURCES = 1000  #: source keys tracked at most (bounded memory against garbage keys)
-NOT_YET = [
-    "role: the roles of the sources (the live role assignment comes next)",
-    "deviation: the hourly INS deviations and their statistics over the window",
-    "dead_reckoning: the DR from the last fix and its 2M against GNSS",
-    "integrity checks other than stale (validity, plausibility, consistency)",
-]
 
 
 def utc(ns: int) -> str:
     """ISO 8601 UTC of a time in ns, to the millisecond."""
     t = dt.datetime(1970, 1, 1) + dt.timedelta(microseconds=ns // 1000)
     return t.strftime("%Y-%m-%dT%H:%M:%S.") + f"{t.microsecond // 1000:03d}Z"
-
-
-def line_key(line: bytes) -> tuple[str | None, int | None]:
-    """(source key, TAG ``c:`` time in ns or None) of a received line; key None where the
-    line is no sentence."""
-    source = None
-    c_ns = None
-    if line[:1] == b"\\":
-        end = line.find(b"\\", 1)
-        if end < 0:
-            return None, None
-        star = line.rfind(b"*", 1, end)
-        for p in line[1 : star if star > 0 else end].split(b","):
-            if p[:2] == b"s:" and len(p) > 2:
-                source = p[2:].decode("ascii", "replace")
-            elif p[:2] == b"c:":
-                try:
-                    v = float(p[2:])
-                except ValueError:
-                    continue
-                c_ns = int(v * 1e9) if v < 1e10 else int(v * 1e6)
-        line = line[end + 1 :]
-    if source is None:
-        if line[:1] not in (b"$", b"!") or len(line) < 6:
-            return None, c_ns
-        if line[1:2] == b"P":
-            comma = line.find(b",")
-            source = line[1 : comma if comma > 0 else 6].decode("ascii", "replace")
-        else:
-            source = line[1:3].decode("ascii", "replace")
-    return source, c_ns
 
 
 @dataclass
@@ -127,6 +100,7 @@ class Watch:
         recorder: Recorder | None = None,
         stale_s: float = 10.0,
         clock: Callable[[], int] = time.time_ns,
+        analyser: LiveAnalyser | None = None,
     ) -> None:
         self.sources = list(sources)
         self.recorder = recorder
@@ -137,6 +111,9 @@ class Watch:
         self.unkeyed = 0  #: lines that are no sentence (recorded, counted, no source)
         self.state: dict[str, SourceState] = {}
         self.cleared: deque[dict[str, Any]] = deque(maxlen=KEEP_CLEARED)
+        self.analyser = analyser
+        #: open integrity findings by (check, name, source)
+        self.open_checks: dict[tuple[str, str, str | None], dict[str, Any]] = {}
 
     def step(self, timeout_s: float = 0.1) -> list[dict[str, Any]]:
         """Poll once; record and count the lines; return the findings raised or cleared
@@ -146,11 +123,16 @@ class Watch:
             got = [(0, ln) for ln in self.sources[0].poll(timeout_s)]
         else:
             got = poll_all(self.sources, timeout_s)
+        analyser = self.analyser
         for _, (recv_ns, line) in got:
             self.received += 1
+            info = classify(line)
             if self.recorder is not None:
-                self.recorder.write(line, recv_ns)
-            key, c_ns = line_key(line)
+                self.recorder.write(line, recv_ns, form=info.form)
+            key, c_ns = info.key, info.c_ns
+            if analyser is not None:  # the window holds the lines as recorded
+                recorded = tag_line(line, recv_ns) if info.form in NMEA_FORMS else line
+                analyser.add(info.form, c_ns or recv_ns, recorded)
             if key is None:
                 self.unkeyed += 1
                 continue
@@ -166,6 +148,10 @@ class Watch:
         if self.recorder is not None:
             self.recorder.tick()
         now = self.clock()
+        if analyser is not None:
+            result = analyser.end_step()
+            if result is not None:
+                events += self._integrity(result, now)
         for key, st in self.state.items():
             if st.stale is None and now - st.last_ns > self.stale_ns:
                 events.append(self._raise(key, st, now))
@@ -191,6 +177,41 @@ class Watch:
         self.cleared.append(done)
         return {"event": "cleared", **done}
 
+    def _integrity(self, result: WindowResult, now: int) -> list[dict[str, Any]]:
+        """Raise a finding for each failed check not open yet; clear the open ones whose
+        check passed in this analysis."""
+        events: list[dict[str, Any]] = []
+        made = {(c["check"], c["name"], c["source"]): c for c in result.checks}
+        for key, c in made.items():
+            found = self.open_checks.get(key)
+            if c["status"] != "fail":
+                continue
+            if found is None:
+                found = self.open_checks[key] = {
+                    "check": c["check"],
+                    "name": c["name"],
+                    "source": c["source"],
+                    "role": c["role"],
+                    "raised_utc": utc(now),
+                    "cleared_utc": None,
+                    "message": c["message"],
+                    "evidence": c["evidence"],
+                }
+                events.append({"event": "raised", **found})
+            else:
+                found.update(message=c["message"], evidence=c["evidence"])
+        for key in list(self.open_checks):
+            now_made = made.get(key)
+            # cleared: the check passed, or it was not reported while its source was
+            # analysed (some checks are only reported when they fail)
+            if (now_made is None and key[2] in result.roles) or (
+                now_made is not None and now_made["status"] == "pass"
+            ):
+                done = {**self.open_checks.pop(key), "cleared_utc": utc(now)}
+                self.cleared.append(done)
+                events.append({"event": "cleared", **done})
+        return events
+
     def dropped(self) -> dict[str, int]:
         """Input the sources dropped, by reason (summed over the sources)."""
         total: Counter[str] = Counter()
@@ -201,9 +222,11 @@ class Watch:
     def status(self) -> dict[str, Any]:
         """The ``dracc.watch/1`` status document (JSON-ready)."""
         now = self.clock()
+        last = self.analyser.last if self.analyser is not None else None
+        roles = last.roles if last is not None else {}
         sources = {
             key: {
-                "role": None,
+                "role": ",".join(roles[key]) if roles.get(key) else None,
                 "records": st.records,
                 "rate_hz": st.rate_hz(now),
                 "last_utc": utc(st.last_ns),
@@ -213,6 +236,7 @@ class Watch:
             for key, st in sorted(self.state.items())
         }
         open_ = [st.stale for st in self.state.values() if st.stale is not None]
+        open_ += list(self.open_checks.values())
         findings = sorted([*self.cleared, *open_], key=lambda f: f["raised_utc"])
         return {
             "schema": SCHEMA,
@@ -222,16 +246,45 @@ class Watch:
             "unkeyed": self.unkeyed,
             "dropped": self.dropped(),
             "recording": str(self.recorder.current or "") if self.recorder else None,
+            "recording_files": (
+                {f: str(p) for f, p in self.recorder.current_files().items()}
+                if self.recorder
+                else None
+            ),
             "sources": sources,
             "findings": findings,
-            "deviation": None,
-            "dead_reckoning": None,
-            "not_yet": NOT_YET,
+            "deviation": last.deviation if last is not None else None,
+            "dead_reckoning": _dr_status(last),
+            "analysis": self._analysis_status(last),
         }
+
+    def _analysis_status(self, last: WindowResult | None) -> dict[str, Any] | None:
+        """The analyser's state: window, runs, the last analysis (span, lines, time)."""
+        if self.analyser is None:
+            return None
+        s = self.analyser.summary()
+        first, lastn = s.pop("window_first_ns"), s.pop("window_last_ns")
+        s["window_first_utc"] = utc(first) if first is not None else None
+        s["window_last_utc"] = utc(lastn) if lastn is not None else None
+        if last is not None:
+            s["last_span_utc"] = [utc(last.span_utc_ns[0]), utc(last.span_utc_ns[1])]
+            s["missing"] = last.missing
+        return s
 
     def close(self) -> None:
         """Close the sources and finish the recording (flush, fsync, rename)."""
         for s in self.sources:
             s.close()
+        if self.analyser is not None:
+            self.analyser.close()
         if self.recorder is not None:
             self.recorder.close()
+
+
+def _dr_status(last: WindowResult | None) -> dict[str, Any] | None:
+    """The DR of the last analysis with its epoch as UTC."""
+    if last is None or last.dead_reckoning is None:
+        return None
+    dr = dict(last.dead_reckoning)
+    dr["epoch_utc"] = utc(dr.pop("epoch_utc_ns"))
+    return dr

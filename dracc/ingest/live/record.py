@@ -1,21 +1,31 @@
-"""The recording of what was heard: each line with its receive time, as TAG-block NMEA
-0183 (the IEC 61162-450 form every dracc reader reads), in daily files.
+"""The recording of what was heard, in daily files: NMEA 0183 lines with their receive
+times as TAG-block NMEA 0183 (the IEC 61162-450 form every dracc reader reads), NMEA
+2000 and Signal K lines as received, each form in its own file.
 
-A line is written as ``\\c:<unix ms>,s:<source>*hh\\<line>`` (``s:`` only where a source
-is given; ``hh`` the XOR of the bytes between the backslash and the ``*``, IEC 61162-450
-§7.3.2).  A line that already has a TAG block keeps it: where it has no ``c:`` and its
-checksum is right, ``c:`` is put first in it and the checksum made anew; otherwise (a
-``c:`` there, or a wrong checksum that must stay wrong) the line is written as received.
-Lines that are not sentences (``#`` comments, a logger's prefix) are written as received.
+A sentence is written as ``\\c:<unix ms>,s:<source>*hh\\<line>`` (``s:`` only where a
+source is given; ``hh`` the XOR of the bytes between the backslash and the ``*``, IEC
+61162-450 §7.3.2).  A line that already has a TAG block keeps it: where it has no ``c:``
+and its checksum is right, ``c:`` is put first in it and the checksum made anew;
+otherwise (a ``c:`` there, or a wrong checksum that must stay wrong) the line is written
+as received.  Lines that are not sentences (``#`` comments, a logger's prefix) are
+written as received.
 
-Files: ``DIR/dracc-YYYYMMDD.nmea.part`` while written (the UTC day of the receive
-times), then ``dracc-YYYYMMDD-1.nmea.part`` and so on when one reaches ``max_bytes``;
+The form of a line (:func:`dracc.ingest.live.forms.classify`) decides its file:
+``nmea0183`` and ``other`` go to the ``.nmea`` file as above; every other form is
+written as received (each carries its own times, or they are found from its GNSS
+messages as the reader does) to a file of its own, whose suffix :func:`form_suffix`
+gives: a file of one form is what that form's reader recognises by its content, which a
+file mixing TAG-block NMEA with CAN frames is not.
+
+Files: ``DIR/dracc-YYYYMMDD<suffix>.part`` while written (the UTC day of the receive
+times), then ``dracc-YYYYMMDD-1<suffix>.part`` and so on when one reaches ``max_bytes``;
 a new file at each UTC midnight (of the receive times, or of the clock in :meth:`tick`
 when nothing arrives).  A finished file is flushed, fsynced and renamed to drop
 ``.part`` (then the folder fsynced), so a reader of ``DIR`` sees whole files only.
-Writes go through a buffered file flushed every ``flush_s`` seconds or ``flush_lines``
-lines: memory is bounded whatever the rate.  ``.part`` files left by a crash are
-finished when a :class:`Recorder` opens the folder (cut after their last line end).
+Writes go through a buffered file per form, flushed every ``flush_s`` seconds or
+``flush_lines`` lines: memory is bounded whatever the rate.  ``.part`` files of these
+names left by a crash are finished when a :class:`Recorder` opens the folder (cut after
+their last line end).
 """
 
 from __future__ import annotations
@@ -25,22 +35,64 @@ import datetime as dt
 import os
 import re
 import time
-from collections.abc import Callable
+from collections import Counter
+from collections.abc import Callable, Sequence
 from functools import reduce
 from operator import xor
 from pathlib import Path
 from typing import BinaryIO
 
 from dracc.core.errors import IngestError
+from dracc.ingest.live.forms import (
+    CANDUMP,
+    GPSD_JSON,
+    NMEA0183,
+    NMEA_FORMS,
+    OTHER,
+    PDGY,
+    PLAIN,
+    SIGNALK_DELTA,
+    SIGNALK_LOG,
+    YDWG,
+    classify,
+)
 
 #: a recording file reaching this size is finished and the next one begun
 MAX_BYTES = 256 * 1024 * 1024
-FLUSH_S = 1.0  #: the buffered file is flushed at least this often ...
-FLUSH_LINES = 10_000  #: ... and after this many lines
-_NAME = re.compile(r"^dracc-(\d{8})(?:-(\d+))?\.nmea(\.part)?$")
+FLUSH_S = 1.0  #: the buffered files are flushed at least this often ...
+FLUSH_LINES = 10_000  #: ... and a file after this many lines
+NMEA_SUFFIX = ".nmea"
+#: form -> the suffix of its files (the NMEA 0183 file takes what has no form of its own)
+SUFFIXES = {
+    NMEA0183: NMEA_SUFFIX,
+    OTHER: NMEA_SUFFIX,
+    PDGY: ".pdgy.log",
+    YDWG: ".ydwg.raw",
+    CANDUMP: ".candump.log",
+    PLAIN: ".plain.n2k",
+    SIGNALK_LOG: ".signalk.log",
+    SIGNALK_DELTA: ".signalk-delta.json",
+    GPSD_JSON: ".gpsd.json",
+}
+#: suffix -> the form :meth:`Recorder.current_files` names its file by
+_FORM_OF = {suffix: form for form, suffix in reversed(SUFFIXES.items())}
+#: the line end of each file: the sentences' and YDWG-02's own CR LF, else LF (candump,
+#: canboat, the Signal K server and gpsd write LF)
+_LINE_END = {NMEA_SUFFIX: b"\r\n", SUFFIXES[YDWG]: b"\r\n"}
+_NAME = re.compile(r"^dracc-(\d{8})(?:-(\d+))?((?:\.[a-z0-9-]+)+?)(\.part)?$")
 #: bytes a TAG ``s:`` value may not hold (they end the parameter, the block or the line)
 _SOURCE_BAD = re.compile(r"[^!-~]|[,*\\$]")
 _HEX = re.compile(rb"^[0-9A-Fa-f]{1,2}$")
+
+
+def form_suffix(form: str | None) -> str:
+    """The file suffix of a line form (:data:`SUFFIXES`; ``.nmea`` for None)."""
+    if form is None:
+        return NMEA_SUFFIX
+    try:
+        return SUFFIXES[form]
+    except KeyError:
+        raise ValueError(f"unknown line form {form!r} (one of {', '.join(SUFFIXES)})") from None
 
 
 def checksum(body: bytes) -> int:
@@ -72,15 +124,44 @@ def tag_line(line: bytes, recv_ns: int, source: str | None = None) -> bytes:
     return b"\\%s*%02X%s" % (b, checksum(b), line[end:])
 
 
+DAY_NS = 86_400 * 10**9
+
+
 def _day(ns: int) -> str:
     return (dt.datetime(1970, 1, 1) + dt.timedelta(microseconds=ns // 1000)).strftime("%Y%m%d")
 
 
+class _Daily:
+    """The file of one suffix being written: its ``.part`` path, UTC day (``lo <= t <
+    hi`` in ns), size, buffer."""
+
+    __slots__ = ("fh", "hi", "lo", "part", "size", "suffix", "unflushed")
+
+    def __init__(self, suffix: str, part: Path, lo: int) -> None:
+        self.suffix = suffix
+        self.part = part
+        self.lo = lo
+        self.hi = lo + DAY_NS
+        self.fh: BinaryIO = open(part, "xb", buffering=1 << 16)  # noqa: SIM115 - kept open
+        self.size = 0
+        self.unflushed = 0
+
+    def finish(self) -> Path:
+        """Flush, fsync, close and rename to the final name (returned)."""
+        self.fh.flush()
+        os.fsync(self.fh.fileno())
+        self.fh.close()
+        final = self.part.with_suffix("")
+        os.rename(self.part, final)
+        return final
+
+
 class Recorder:
-    """Received lines written to daily TAG-block NMEA files in ``folder`` (see the module
-    docstring).  ``write(line, recv_ns=None, source=None)`` per line; ``tick()`` now and
-    then (it flushes, and finishes yesterday's file at midnight); ``close()`` finishes
-    the current file.  ``now_ns`` is the clock (injected by tests)."""
+    """Received lines written to daily files in ``folder``, a file per line form (see
+    the module docstring).  ``write(line, recv_ns=None, source=None, form=None)`` per
+    line; ``tick()`` now and then (it flushes, and finishes yesterday's files at
+    midnight); ``close()`` finishes the current files.  ``now_ns`` is the clock
+    (injected by tests)."""
 
     def __init__(
         self,
@@ -102,17 +183,18 @@ class Recorder:
         self.files: list[Path] = []  #: finished files, in order
         self.recovered: list[Path] = []  #: ``.part`` files of an earlier run, finished
         self.lines = 0  #: lines written
-        self._fh: BinaryIO | None = None
-        self._part: Path | None = None
-        self._file_day = ""
-        self._size = 0
-        self._unflushed = 0
+        self.lines_by_form: Counter[str] = Counter()  #: lines written, by form
+        self._open: dict[str, _Daily] = {}  #: suffix -> the file being written
         self._last_flush = now_ns()
         self._recover()
 
     # -- files -------------------------------------------------------------------------
     def _recover(self) -> None:
-        for part in sorted(self.folder.glob("dracc-*.nmea.part")):
+        known = set(SUFFIXES.values())
+        for part in sorted(self.folder.glob("dracc-*.part")):
+            m = _NAME.match(part.name)
+            if not m or m.group(3) not in known or not part.is_file():
+                continue  # not a recording of ours
             data = part.read_bytes()
             cut = max(data.rfind(b"\n"), data.rfind(b"\r")) + 1
             with open(part, "r+b") as fh:
@@ -123,43 +205,34 @@ class Recorder:
                 part.unlink()
                 continue
             final = part.with_suffix("")
-            m = _NAME.match(part.name)
-            if final.exists() and m:
-                final = self._free_name(m.group(1))
+            if final.exists():
+                final = self._free_name(m.group(1), m.group(3))
             os.rename(part, final)
             self.recovered.append(final)
         self._sync_folder()
 
-    def _free_name(self, day: str) -> Path:
-        """The first name of ``day`` neither finished nor being written."""
+    def _free_name(self, day: str, suffix: str) -> Path:
+        """The first name of ``day`` and ``suffix`` neither finished nor being written."""
         n = 0
         while True:
-            name = f"dracc-{day}.nmea" if n == 0 else f"dracc-{day}-{n}.nmea"
+            name = f"dracc-{day}{suffix}" if n == 0 else f"dracc-{day}-{n}{suffix}"
             p = self.folder / name
             if not p.exists() and not p.with_name(name + ".part").exists():
                 return p
             n += 1
 
-    def _begin(self, day: str) -> None:
-        final = self._free_name(day)
-        self._part = final.with_name(final.name + ".part")
-        self._fh = open(self._part, "xb", buffering=1 << 16)  # noqa: SIM115 - kept open
-        self._file_day = day
-        self._size = 0
+    def _begin(self, suffix: str, recv_ns: int) -> _Daily:
+        lo = recv_ns // DAY_NS * DAY_NS
+        final = self._free_name(_day(lo), suffix)
+        out = self._open[suffix] = _Daily(suffix, final.with_name(final.name + ".part"), lo)
+        return out
 
-    def _finish(self) -> None:
-        if self._fh is None or self._part is None:
+    def _finish(self, suffix: str) -> None:
+        out = self._open.pop(suffix, None)
+        if out is None:
             return
-        self._fh.flush()
-        os.fsync(self._fh.fileno())
-        self._fh.close()
-        final = self._part.with_suffix("")
-        os.rename(self._part, final)
+        self.files.append(out.finish())
         self._sync_folder()
-        self.files.append(final)
-        self._fh = None
-        self._part = None
-        self._unflushed = 0
 
     def _sync_folder(self) -> None:
         with contextlib.suppress(OSError):
@@ -171,58 +244,93 @@ class Recorder:
 
     @property
     def current(self) -> Path | None:
-        """The ``.part`` file being written (None between files)."""
-        return self._part
+        """The ``.part`` file of NMEA 0183 being written (None between files)."""
+        out = self._open.get(NMEA_SUFFIX)
+        return out.part if out is not None else None
+
+    def current_files(self) -> dict[str, Path]:
+        """Form -> the ``.part`` file being written for it (``nmea0183`` for the
+        ``.nmea`` file, which ``other`` lines share)."""
+        return {_FORM_OF[s]: out.part for s, out in self._open.items()}
 
     # -- writing -----------------------------------------------------------------------
-    def write(self, line: bytes, recv_ns: int | None = None, source: str | None = None) -> None:
+    def write(
+        self,
+        line: bytes,
+        recv_ns: int | None = None,
+        source: str | None = None,
+        form: str | None = None,
+    ) -> None:
         """Record one received line (without its line end) and its receive time
-        (``now_ns()`` if None)."""
+        (``now_ns()`` if None).  ``form`` (what :func:`classify` says; None: NMEA 0183)
+        picks the file; ``source`` is written (TAG ``s:``) with NMEA 0183 only: the other
+        forms name their sources themselves."""
         if recv_ns is None:
             recv_ns = self.now_ns()
-        data = tag_line(line, recv_ns, source) + b"\r\n"
-        day = _day(recv_ns)
-        if self._fh is not None and (
-            day != self._file_day or (self._size and self._size + len(data) > self.max_bytes)
+        if form is None or form in NMEA_FORMS:
+            suffix = NMEA_SUFFIX
+            data = tag_line(line, recv_ns, source) + b"\r\n"
+        else:
+            suffix = form_suffix(form)
+            data = line + _LINE_END.get(suffix, b"\n")
+        out = self._open.get(suffix)
+        if out is not None and (
+            not out.lo <= recv_ns < out.hi or (out.size and out.size + len(data) > self.max_bytes)
         ):
-            self._finish()
-        if self._fh is None:
-            self._begin(day)
-        assert self._fh is not None
-        self._fh.write(data)
-        self._size += len(data)
+            self._finish(suffix)
+            out = None
+        if out is None:
+            out = self._begin(suffix, recv_ns)
+        out.fh.write(data)
+        out.size += len(data)
         self.lines += 1
-        self._unflushed += 1
-        if self._unflushed >= self.flush_lines:
-            self.flush()
+        self.lines_by_form[form or NMEA0183] += 1
+        out.unflushed += 1
+        if out.unflushed >= self.flush_lines:
+            out.fh.flush()
+            out.unflushed = 0
 
-    def write_many(self, lines: list[tuple[int, bytes]], source: str | None = None) -> None:
-        """Record ``(recv_ns, line)`` pairs (what a live source's ``poll`` returns), then
-        :meth:`tick`."""
-        for recv_ns, line in lines:
-            self.write(line, recv_ns, source)
+    def write_many(
+        self,
+        lines: list[tuple[int, bytes]],
+        source: str | None = None,
+        forms: Sequence[str | None] | None = None,
+    ) -> None:
+        """Record ``(recv_ns, line)`` pairs (what a live source's ``poll`` returns), each
+        in the file of its form (``forms``, one per line; classified here where not
+        given), then :meth:`tick`."""
+        if forms is None:
+            for recv_ns, line in lines:
+                self.write(line, recv_ns, source, classify(line).form)
+        else:
+            if len(forms) != len(lines):
+                raise ValueError("one form per line")
+            for (recv_ns, line), form in zip(lines, forms, strict=True):
+                self.write(line, recv_ns, source, form)
         self.tick()
 
     def flush(self) -> None:
         """Hand the buffered lines to the operating system (no fsync: that is at the end
         of each file)."""
-        if self._fh is not None:
-            self._fh.flush()
-        self._unflushed = 0
+        for out in self._open.values():
+            out.fh.flush()
+            out.unflushed = 0
         self._last_flush = self.now_ns()
 
     def tick(self) -> None:
-        """Flush if ``flush_s`` has passed; finish the current file once the clock is past
-        its UTC day."""
+        """Flush if ``flush_s`` has passed; finish the current files once the clock is
+        past their UTC day."""
         now = self.now_ns()
-        if self._fh is not None and _day(now) > self._file_day:
-            self._finish()
-        elif now - self._last_flush >= self.flush_ns:
+        done = [s for s, out in self._open.items() if now >= out.hi]
+        for suffix in done:
+            self._finish(suffix)
+        if not done and now - self._last_flush >= self.flush_ns:
             self.flush()
 
     def close(self) -> None:
-        """Finish the current file (flush, fsync, rename)."""
-        self._finish()
+        """Finish the current files (flush, fsync, rename)."""
+        for suffix in list(self._open):
+            self._finish(suffix)
 
     def __enter__(self) -> Recorder:
         return self

@@ -495,18 +495,34 @@ class FileSource(LiveSource):
 
 def open_source(spec: str, **options: object) -> LiveSource:
     """The live source a spec names: ``udp://HOST:PORT``, ``tcp://HOST:PORT``,
-    ``file:PATH`` or a plain path (a growing file).  ``options`` go to the source's class
-    (:class:`UdpSource` ``allow_multicast``; :class:`TcpSource` ``backoff_first_s``,
-    ``backoff_cap_s``; :class:`FileSource` ``from_start``; all ``max_line_bytes``,
-    ``max_lines``, ``clock``).  Raises IngestError for a spec it cannot open."""
+    ``serial:///dev/DEVICE?baud=N`` or a device path (``/dev/ttyUSB0``, any character
+    device), ``file:PATH`` or a plain path (a growing file).  ``options`` go to the
+    source's class (:class:`UdpSource` ``allow_multicast``; :class:`TcpSource`
+    ``backoff_first_s``, ``backoff_cap_s``; :class:`FileSource` ``from_start``;
+    ``SerialSource`` ``baud`` (None: the spec's or 4800; ignored by the other sources),
+    ``backoff_first_s``, ``backoff_cap_s``; all ``max_line_bytes``, ``max_lines``,
+    ``clock``).  Raises IngestError for a spec it cannot open.
+
+    Sources defined in the package's other modules (``serial_source``) are found as the
+    subclasses of :class:`LiveSource` with a ``claims(spec)`` test, without importing
+    them here (they import this module); the package imports them all."""
     scheme = urlsplit(spec).scheme if "://" in spec else ""
+    baud = options.pop("baud", None)
     try:
         if scheme == "udp":
             return UdpSource(spec, **options)  # type: ignore[arg-type]
         if scheme == "tcp":
             return TcpSource(spec, **options)  # type: ignore[arg-type]
+        for cls in LiveSource.__subclasses__():
+            claims = getattr(cls, "claims", None)
+            if claims is not None and claims(spec):
+                if baud is not None:
+                    options["baud"] = baud
+                return cls(spec, **options)  # type: ignore[arg-type]
         if scheme:
-            raise IngestError(f"{spec}: unknown source (udp://, tcp://, file: or a path)")
+            raise IngestError(
+                f"{spec}: unknown source (udp://, tcp://, serial://, file: or a path)"
+            )
         return FileSource(spec, **options)  # type: ignore[arg-type]
     except TypeError as err:
         raise IngestError(f"{spec}: {err}") from err

@@ -104,7 +104,7 @@ def _sources_by_role(a: Analysis) -> dict[str, str]:
     return {role: ",".join(k) for role, k in keys.items()}
 
 
-def _channel_rows(dev: DeviationResult | None) -> tuple[ChannelRow, ...]:
+def channel_rows(dev: DeviationResult | None) -> tuple[ChannelRow, ...]:
     """The whole-log statistics per unit (sorted) and channel (the paper's order)."""
     if dev is None:
         return ()
@@ -180,7 +180,7 @@ def facts_from_analysis(a: Analysis) -> NightFacts:
         rejected=rejected,
         rejected_rate=(rejected / lines) if lines and rejected is not None else None,
         sources=_sources_by_role(a),
-        channels=_channel_rows(a.deviation),
+        channels=channel_rows(a.deviation),
         compass_error_deg=ce,
         compass_error_sigma_deg=ce_s,
         log_scale=ls,

@@ -151,6 +151,9 @@ def choose_logs(inputs: Sequence[Path], night: str | None, pattern: str) -> LogC
                     continue
                 if forms and not any(form in str(rel) for form in forms):
                     continue
+                if f.name.endswith(".part"):  # dracc watch still writing it (or crashed)
+                    left_out.append((f, "being written (.part): not taken"))
+                    continue
                 target = outside_link(f, p)
                 if target is not None:
                     left_out.append(
