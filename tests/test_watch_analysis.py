@@ -18,6 +18,7 @@ from rich.console import Console
 
 from dracc.core.config import Config
 from dracc.core.numbers import jsonable
+from dracc.ingest.live import LiveSource
 from dracc.pipeline.analysis import analyse
 from dracc.pipeline.audit.facts import channel_rows
 from dracc.pipeline.watch import Watch
@@ -37,22 +38,21 @@ def _simulate(out: Path, hours: float, seed: int, *extra: str) -> Path:
     return out / "voyage.nmea"
 
 
-class _Replay:
+class _Replay(LiveSource):
     """A live source replaying a log, ``per`` lines a poll, received now."""
 
-    rejected: dict[str, int] = {}
+    kind = "replay"
 
     def __init__(self, lines: list[bytes], per: int) -> None:
-        self.lines, self.per, self.i = lines, per, 0
+        super().__init__("replay", 4096, per)
+        self.log, self.per, self.i = lines, per, 0
 
     def poll(self, timeout_s: float = 0.0) -> list[tuple[int, bytes]]:
         now = time.time_ns()
-        out = [(now, ln) for ln in self.lines[self.i : self.i + self.per]]
+        out = [(now, ln) for ln in self.log[self.i : self.i + self.per]]
         self.i += self.per
+        self.lines += len(out)
         return out
-
-    def close(self) -> None:
-        pass
 
 
 def _replay(log: Path, window_s: float, per: int = 15_000):
@@ -62,9 +62,9 @@ def _replay(log: Path, window_s: float, per: int = 15_000):
     tick = [0.0]
     analyser = LiveAnalyser(Config(), window_s, 1.0, 256 << 20, clock=lambda: tick[0])
     src = _Replay(lines, per)
-    watch = Watch([src], None, stale_s=1e9, analyser=analyser)  # type: ignore[list-item]
+    watch = Watch([src], None, stale_s=1e9, analyser=analyser)
     events = []
-    while src.i < len(lines):
+    while src.i < len(src.log):
         tick[0] += 1.0
         events += watch.step(0)
     return watch, events, analyser
@@ -103,7 +103,7 @@ def test_window_dr_equals_analysis_of_that_span(clean, tmp_path):
     window_lines = held.read_bytes().splitlines()
     original = log.read_bytes().splitlines()
     i = len(original) - len(window_lines)
-    assert 0 < i and original[i:] == window_lines, SEED
+    assert i > 0 and original[i:] == window_lines, SEED
     cut = tmp_path / "span.nmea"
     cut.write_bytes(b"\n".join(original[i:]) + b"\n")
     a = analyse([cut])
@@ -125,7 +125,7 @@ def test_window_dr_equals_analysis_of_that_span(clean, tmp_path):
 
 
 def test_clean_voyage_raises_no_integrity_finding(clean):
-    _, watch, events, analyser = clean
+    _, _, events, analyser = clean
     assert analyser.runs >= 5 and analyser.error is None
     assert [e for e in events if e["check"] != "stale"] == [], SEED
 
@@ -149,11 +149,21 @@ def test_seeded_faults_raised_then_cleared_with_evidence(tmp_path):
     assert raised == cleared, (SEED, raised - cleared)
     jump = next(e for e in events if e["name"] == "jump" and e["event"] == "raised")
     assert jump["evidence"]["statistic"]["value"] > 600  # the 670 m step
-    assert jump["evidence"]["items"] and "670" in jump["message"] or "671" in jump["message"]
+    assert jump["evidence"]["items"] and ("670" in jump["message"] or "671" in jump["message"])
     drop = next(e for e in events if e["name"] == "dropout" and e["event"] == "raised")
     # the silence as far as the window had heard it when raised: beyond the gate, <= 10 min
     assert 60 < drop["evidence"]["statistic"]["value"] <= 660
-    assert watch.status()["findings"] and not watch.open_checks
+    st = watch.status()
+    assert st["findings"] and not watch.open_checks
+    assert st["inputs"] == [
+        {
+            "spec": "replay",
+            "kind": "replay",
+            "lines": 0 + len(log.read_bytes().splitlines()),
+            "bytes": 0,
+            "dropped": {},
+        }
+    ]
 
 
 def test_line_window_bounds_by_time_and_bytes():

@@ -19,18 +19,16 @@ from pathlib import Path
 from types import FrameType
 
 import typer
-from rich.console import Console
-from rich.live import Live
 
 from dracc.cli.app import app, err
 from dracc.cli.options import ConfigOption, option_values
-from dracc.report.watch_view import status_view
+from dracc.report.watch_view import LiveView, finding_line
 
 
 @app.command("watch")
 def watch(
     sources: list[str] = typer.Argument(
-        ..., help="udp://HOST:PORT, tcp://HOST:PORT, file:PATH or a growing file."
+        ..., help="udp://HOST:PORT, tcp://HOST:PORT, /dev/DEVICE or serial://, a growing file."
     ),
     record: Path | None = typer.Option(None, help="Record what is heard in daily files here."),
     status: Path | None = typer.Option(None, help="Rewrite this JSON status (dracc.watch/1)."),
@@ -43,6 +41,7 @@ def watch(
     analysis: bool = typer.Option(True, help="--no-analysis: only count, time and record."),
     config: Path | None = ConfigOption,
     baud: int | None = typer.Option(None, min=1, help="Serial: baud (default: spec's or 4800)."),
+    join_multicast: bool = typer.Option(False, help="Join udp:// multicast groups (sends IGMP)."),
 ) -> None:
     """Listen to live NMEA sources (listening only): record every line with its receive
     time, count and time each source, raise and clear findings; until SIGTERM/SIGINT."""
@@ -64,7 +63,7 @@ def watch(
     opened = []
     try:
         for spec in sources:
-            opened.append(open_source(spec, baud=baud))
+            opened.append(open_source(spec, baud=baud, allow_multicast=join_multicast))
     except BaseException:
         for s in opened:
             s.close()
@@ -76,7 +75,7 @@ def watch(
     recorder = Recorder(record) if record else None
     loop = Watch(opened, recorder, stale_s=stale_s, analyser=analyser)
     stop: list[int] = []
-    view = _live_view() if sys.stdout.isatty() else None
+    view = LiveView() if sys.stdout.isatty() else None
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
         stop.append(signum)
@@ -88,21 +87,14 @@ def watch(
         if status is not None:
             write_text(status, json.dumps(doc, indent=1) + "\n")
         if view is not None:
-            view.update(status_view(doc), refresh=True)
+            view.show(doc)
 
     try:
         start = next_status = time.monotonic()
         while not stop and (run_s is None or time.monotonic() - start < run_s):
             for f in loop.step(0.1):
-                if view is not None:
-                    continue  # the view shows them
-                err.print(
-                    f"{f['cleared_utc'] or f['raised_utc']} {f['check']}"
-                    f"{'/' + f['name'] if f.get('name') else ''} {f['event']}: "
-                    f"{f['message']}",
-                    markup=False,
-                    highlight=False,
-                )
+                if view is None:  # else the view shows them
+                    err.print(finding_line(f), markup=False, highlight=False)
             if time.monotonic() >= next_status:
                 write_status()
                 next_status = time.monotonic() + every_s
@@ -115,10 +107,3 @@ def watch(
             view.stop()
         for signum, handler in previous.items():
             signal.signal(signum, handler)
-
-
-def _live_view() -> Live:
-    """A rich Live display on stdout, redrawn by the status (no refresh thread)."""
-    view = Live(console=Console(), auto_refresh=False, transient=False)
-    view.start()
-    return view

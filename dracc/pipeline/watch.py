@@ -251,6 +251,7 @@ class Watch:
                 if self.recorder
                 else None
             ),
+            "inputs": [_input_status(src) for src in self.sources],
             "sources": sources,
             "findings": findings,
             "deviation": last.deviation if last is not None else None,
@@ -288,3 +289,26 @@ def _dr_status(last: WindowResult | None) -> dict[str, Any] | None:
     dr = dict(last.dead_reckoning)
     dr["epoch_utc"] = utc(dr.pop("epoch_utc_ns"))
     return dr
+
+
+#: counters a live source may have beyond lines, bytes and rejects (TCP, serial, UDP)
+_INPUT_COUNTERS = ("connects", "failures", "opens", "reopens", "datagrams", "iec450")
+
+
+def _input_status(src: LiveSource) -> dict[str, Any]:
+    """One live input as the status shows it: spec, kind, what it gave and dropped, its
+    connections (TCP) or openings (serial)."""
+    out: dict[str, Any] = {
+        "spec": src.spec,
+        "kind": src.kind,
+        "lines": src.lines,
+        "bytes": src.bytes,
+        "dropped": dict(sorted(src.rejected.items())),
+    }
+    for name in _INPUT_COUNTERS:
+        value = getattr(src, name, None)
+        if isinstance(value, int):
+            out[name] = value
+    if getattr(src, "connected", None) is not None:
+        out["connected"] = bool(src.connected)  # type: ignore[attr-defined]
+    return out

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from rich.console import Group, RenderableType
+from rich.console import Console, Group, RenderableType
+from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
@@ -126,3 +127,24 @@ def _deviation(st: dict[str, Any]) -> Text:
 def status_view(st: dict[str, Any]) -> Group:
     """The whole screen for one status document."""
     return Group(_head(st), _findings(st), _sources(st), _dr(st), _deviation(st))
+
+
+def finding_line(f: dict[str, Any]) -> str:
+    """One line for a finding raised or cleared (stderr: journald, a pipe)."""
+    name = f"/{f['name']}" if f.get("name") else ""
+    when = f["cleared_utc"] or f["raised_utc"]
+    return printable(f"{when} {f['check']}{name} {f['event']}: {f['message']}")
+
+
+class LiveView:
+    """The status drawn on the terminal (stdout), redrawn by :meth:`show` (no thread)."""
+
+    def __init__(self) -> None:
+        self.live = Live(console=Console(), auto_refresh=False, transient=False)
+        self.live.start()
+
+    def show(self, st: dict[str, Any]) -> None:
+        self.live.update(status_view(st), refresh=True)
+
+    def stop(self) -> None:
+        self.live.stop()

@@ -16,7 +16,7 @@ non-blocking (``timeout=0``) and waited on with :mod:`selectors` on the port's f
 descriptor, so that :func:`~dracc.ingest.live.sources.poll_all` across sources keeps
 working; there are no threads.
 
-Lines are cut as on TCP (:class:`~dracc.ingest.live.sources._StreamLines`: ``binary``,
+Lines are cut as on TCP (:class:`~dracc.ingest.live.base.StreamLines`: ``binary``,
 ``too_long``, and ``partial`` for the unfinished line of a device that went away).  A
 device that goes away (an unplugged USB adapter: the read fails or reports no data) is
 not fatal: it is counted in ``failures``, closed, and opened again after a wait that
@@ -42,7 +42,7 @@ from urllib.parse import parse_qsl, urlsplit
 import serial
 
 from dracc.core.errors import IngestError
-from dracc.ingest.live.sources import (
+from dracc.ingest.live.base import (
     BACKOFF_CAP_S,
     BACKOFF_FACTOR,
     BACKOFF_FIRST_S,
@@ -51,7 +51,7 @@ from dracc.ingest.live.sources import (
     READ_BYTES,
     Line,
     LiveSource,
-    _StreamLines,
+    StreamLines,
 )
 
 #: missing paths taken for serial devices (others are growing files that may appear)
@@ -162,7 +162,6 @@ class SerialSource(LiveSource):
 
     kind = "serial"
     #: the specs this class opens (found by ``open_source`` through this)
-    claims = staticmethod(is_serial_spec)
 
     def __init__(
         self,
@@ -188,7 +187,7 @@ class SerialSource(LiveSource):
         self.port: serial.Serial | None = None
         self.next_try = 0.0  #: time.monotonic() of the next reopening
         self.selector = selectors.DefaultSelector()
-        self.stream = _StreamLines(self)
+        self.stream = StreamLines(self)
         self._got_data = False
         try:
             self._open()

@@ -34,123 +34,29 @@ import selectors
 import socket
 import struct
 import time
-from collections import Counter
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from urllib.parse import urlsplit
 
 from dracc.core.errors import IngestError
-
-#: the IEC 61162-450 header of a datagram of sentences
-UDPBC = b"UdPbC\x00"
-#: a live line longer than this is dropped (an NMEA sentence is at most 82 characters, a
-#: TAG block adds a few tens)
-MAX_LIVE_LINE_BYTES = 4096
-#: lines returned by one ``poll`` at most (bounded memory per call)
-MAX_POLL_LINES = 50_000
-#: bytes of one UDP receive (a datagram up to this is whole; larger is ``truncated``)
-DATAGRAM_BYTES = 65_536
-#: the UDP receive buffer asked of the kernel (it may grant less: net.core.rmem_max)
-RCVBUF_BYTES = 8 * 1024 * 1024
-#: TCP reconnect backoff: first wait, factor, cap (seconds)
-BACKOFF_FIRST_S = 0.25
-BACKOFF_FACTOR = 2.0
-BACKOFF_CAP_S = 30.0
-#: a growing file is checked for new bytes and rotation this often when idle (seconds)
-FILE_INTERVAL_S = 0.05
-#: bytes read from a file or socket in one go
-READ_BYTES = 1 << 20
-
-Line = tuple[int, bytes]
-#: bytes not allowed in a line: everything but printable ASCII (for ``bytes.translate``)
-_NOT_PRINTABLE = bytes(b for b in range(256) if not 32 <= b <= 126)
-_NOT_PRINTABLE_OR_EOL = bytes(b for b in _NOT_PRINTABLE if b not in (10, 13))
-
-
-def _printable(data: bytes, delete: bytes = _NOT_PRINTABLE) -> bool:
-    """Whether ``data`` holds only the allowed bytes (those not in ``delete``)."""
-    return len(data.translate(None, delete)) == len(data)
-
-
-class LiveSource:
-    """What every live source has: its spec, counters, ``poll`` and ``close``."""
-
-    kind = ""
-
-    def __init__(self, spec: str, max_line_bytes: int, max_lines: int) -> None:
-        self.spec = spec
-        self.max_line_bytes = max_line_bytes
-        self.max_lines = max_lines
-        #: dropped input, by reason (see the module docstring)
-        self.rejected: Counter[str] = Counter()
-        self.lines = 0  #: lines returned so far
-        self.bytes = 0  #: bytes received so far
-        self.closed = False
-
-    def poll(self, timeout_s: float = 0.0) -> list[Line]:  # pragma: no cover - abstract
-        raise NotImplementedError
-
-    def close(self) -> None:
-        self.closed = True
-
-    def __enter__(self) -> LiveSource:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def __repr__(self) -> str:
-        return f"<{type(self).__name__} {self.spec} lines={self.lines}>"
-
-
-class _StreamLines:
-    """Bytes of a stream cut into lines (LF, CR LF or a lone CR), with bounded memory: a
-    line longer than ``max_line_bytes`` is dropped as ``too_long`` and its bytes skipped
-    up to the next line end."""
-
-    def __init__(self, source: LiveSource) -> None:
-        self.src = source
-        self.pending = b""
-        self.skipping = False
-
-    def feed(self, recv_ns: int, data: bytes, out: list[Line]) -> None:
-        src = self.src
-        src.bytes += len(data)
-        if self.skipping:
-            ends = [i for i in (data.find(b"\n"), data.find(b"\r")) if i >= 0]
-            if not ends:
-                return
-            cut = min(ends)
-            data = data[cut + 1 :]
-            self.skipping = False
-        data = self.pending + data
-        pieces = data.splitlines()
-        if data and data[-1] not in (10, 13):
-            self.pending = pieces.pop() if pieces else b""
-        else:
-            self.pending = b""
-        limit = src.max_line_bytes
-        for line in pieces:
-            if not line:
-                continue
-            if len(line) > limit:
-                src.rejected["too_long"] += 1
-            elif not _printable(line):
-                src.rejected["binary"] += 1
-            else:
-                out.append((recv_ns, line))
-        if len(self.pending) > limit:
-            src.rejected["too_long"] += 1
-            self.pending = b""
-            self.skipping = True
-        src.lines += len(out)
-
-    def drop_partial(self) -> None:
-        if self.pending or self.skipping:
-            if self.pending:
-                self.src.rejected["partial"] += 1
-            self.pending = b""
-            self.skipping = False
+from dracc.ingest.live.base import (
+    _NOT_PRINTABLE_OR_EOL,
+    BACKOFF_CAP_S,
+    BACKOFF_FACTOR,
+    BACKOFF_FIRST_S,
+    DATAGRAM_BYTES,
+    FILE_INTERVAL_S,
+    MAX_LIVE_LINE_BYTES,
+    MAX_POLL_LINES,
+    RCVBUF_BYTES,
+    READ_BYTES,
+    UDPBC,
+    Line,
+    LiveSource,
+    StreamLines,
+    _printable,
+)
+from dracc.ingest.live.serial_source import SerialSource, is_serial_spec
 
 
 def _host_port(spec: str, scheme: str) -> tuple[str, int]:
@@ -194,7 +100,8 @@ class UdpSource(LiveSource):
         multicast = _is_multicast(host)
         if multicast and not allow_multicast:
             raise IngestError(
-                f"{spec}: {host} is a multicast group; joining it needs allow_multicast=True"
+                f"{spec}: {host} is a multicast group; joining it sends IGMP membership "
+                "reports on the network: give --join-multicast (allow_multicast=True)"
             )
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         try:
@@ -300,7 +207,7 @@ class TcpSource(LiveSource):
         self.sock: socket.socket | None = None
         self.next_try = 0.0  #: time.monotonic() of the next connection attempt
         self.selector = selectors.DefaultSelector()
-        self.stream = _StreamLines(self)
+        self.stream = StreamLines(self)
         self._got_data = False
 
     def _start(self) -> None:
@@ -421,7 +328,7 @@ class FileSource(LiveSource):
         self._fd: int | None = None
         self._ino: tuple[int, int] | None = None
         self.pos = 0
-        self.stream = _StreamLines(self)
+        self.stream = StreamLines(self)
         self._open(at_end=not from_start)
 
     def _open(self, at_end: bool) -> bool:
@@ -499,26 +406,20 @@ def open_source(spec: str, **options: object) -> LiveSource:
     device), ``file:PATH`` or a plain path (a growing file).  ``options`` go to the
     source's class (:class:`UdpSource` ``allow_multicast``; :class:`TcpSource`
     ``backoff_first_s``, ``backoff_cap_s``; :class:`FileSource` ``from_start``;
-    ``SerialSource`` ``baud`` (None: the spec's or 4800; ignored by the other sources),
+    ``SerialSource`` ``baud`` (None: the spec's or 4800); ``baud`` and ``allow_multicast``
+    are ignored by the sources they do not concern;
     ``backoff_first_s``, ``backoff_cap_s``; all ``max_line_bytes``, ``max_lines``,
-    ``clock``).  Raises IngestError for a spec it cannot open.
-
-    Sources defined in the package's other modules (``serial_source``) are found as the
-    subclasses of :class:`LiveSource` with a ``claims(spec)`` test, without importing
-    them here (they import this module); the package imports them all."""
+    ``clock``).  Raises IngestError for a spec it cannot open."""
     scheme = urlsplit(spec).scheme if "://" in spec else ""
     baud = options.pop("baud", None)
+    allow_multicast = bool(options.pop("allow_multicast", False))
     try:
         if scheme == "udp":
-            return UdpSource(spec, **options)  # type: ignore[arg-type]
+            return UdpSource(spec, allow_multicast=allow_multicast, **options)  # type: ignore[arg-type]
         if scheme == "tcp":
             return TcpSource(spec, **options)  # type: ignore[arg-type]
-        for cls in LiveSource.__subclasses__():
-            claims = getattr(cls, "claims", None)
-            if claims is not None and claims(spec):
-                if baud is not None:
-                    options["baud"] = baud
-                return cls(spec, **options)  # type: ignore[arg-type]
+        if scheme == "serial" or (not scheme and is_serial_spec(spec)):
+            return SerialSource(spec, baud=baud, **options)  # type: ignore[arg-type]
         if scheme:
             raise IngestError(
                 f"{spec}: unknown source (udp://, tcp://, serial://, file: or a path)"
