@@ -5,6 +5,8 @@ parameters are ``key:value`` pairs separated by commas; the checksum ``hh`` is t
 XOR of the bytes between the opening backslash and the ``*`` (IEC 61162-450 §7.3.2,
 the same rule as NMEA 0183 sentences).  ``s:`` is the source identification, ``c:``
 the UNIX time of the sentence: in seconds (<= 10 digits) or milliseconds (more).
+``g:<i>-<n>-<id>`` (§7.3, line grouping) makes the sentence line ``i`` of ``n`` of group
+``id``; :func:`parse_groups` reads it, :mod:`dracc.ingest.nmea.groups` joins the lines.
 
 Logger prefixes recognised before a sentence (the text between line start and ``$``):
 
@@ -497,6 +499,65 @@ def parse_prefixes(
                 ext[idx] = v[good]
                 form[idx] = FORMS.index("iso")
     return PrefixResult(ext, source, form, bad_cs, bad_tag)
+
+
+_GROUP_RE = r"^(?P<i>\d{1,6})-(?P<n>\d{1,6})-(?P<id>\d{1,9})$"
+
+
+def parse_groups(
+    buf: np.ndarray, start: np.ndarray, end: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The line-group parameter ``g:<i>-<n>-<id>`` of TAG blocks ``buf[start:end]`` (each
+    ``\\...*hh\\``, well formed), vectorised.
+
+    Returns (found, ok, i, n, id): ``found`` where the block has a ``g:`` (the first one
+    counts, found as :func:`parse_tag_rows` finds ``s:`` and ``c:``: after ``\\`` or
+    ``,``, before the ``*``); ``ok`` where its value is three decimal integers with
+    ``1 <= i <= n`` (``g:3-2-7``, ``g:1-x`` are not); i, n, id int64 (0 where not ok)."""
+    k = len(start)
+    ln = (end - start).astype(np.int64)
+    off = np.zeros(k + 1, dtype=np.int64)
+    np.cumsum(ln, out=off[1:])
+    d = buf[np.repeat(start - off[:-1], ln) + np.arange(int(off[-1]))]
+    d = np.concatenate((d, np.zeros(2, dtype=np.uint8)))
+    stars = np.flatnonzero(d == 42)
+    srow = np.searchsorted(off, stars, side="right") - 1
+    star = off[1:].copy()  # the first '*' of each block (its end where it has none)
+    first = np.ones(len(srow), dtype=bool)
+    first[1:] = srow[1:] != srow[:-1]
+    star[srow[first]] = stars[first]
+    gp = np.flatnonzero(d[1:-1] == 103) + 1
+    gp = gp[(d[gp + 1] == 58) & ((d[gp - 1] == 92) | (d[gp - 1] == 44))]
+    grow = np.searchsorted(off, gp, side="right") - 1
+    keep = gp < star[grow]
+    gp, grow = gp[keep], grow[keep]
+    first = np.ones(len(grow), dtype=bool)
+    first[1:] = grow[1:] != grow[:-1]
+    gp, grow = gp[first], grow[first]
+    found = np.zeros(k, dtype=bool)
+    found[grow] = True
+    ok = np.zeros(k, dtype=bool)
+    gi, gn, gid = (np.zeros(k, dtype=np.int64) for _ in range(3))
+    if not len(gp):
+        return found, ok, gi, gn, gid
+    vs = gp + 2
+    commas = np.flatnonzero(d == 44)
+    j = np.searchsorted(commas, vs)
+    ve = star[grow].copy()  # the value ends at the next ',' or at the '*'
+    if len(commas):
+        nxt = commas[np.minimum(j, len(commas) - 1)]
+        ve = np.where(j < len(commas), np.minimum(nxt, ve), ve)
+    m = pc.extract_regex(gather_strings(d, vs, ve), _GROUP_RE)
+    valid = m.is_valid().to_numpy(zero_copy_only=False)
+    vals = [
+        pc.cast(pc.struct_field(m, f).fill_null("0"), pa.int64()).to_numpy(zero_copy_only=False)
+        for f in ("i", "n", "id")
+    ]
+    valid &= (vals[0] >= 1) & (vals[0] <= vals[1])
+    ok[grow] = valid
+    for o, v in zip((gi, gn, gid), vals, strict=True):
+        o[grow] = np.where(valid, v, 0)
+    return found, ok, gi, gn, gid
 
 
 def tag_checksum(body: bytes) -> int:

@@ -543,7 +543,13 @@ def calibrate_from_track(
     JtJ = J.T @ J
     names = ["heading"] * n_h + ["log scale"] + ["log offset"] * n_b + ["current"] * (2 * nk)
     # singular or nearly singular geometry: report which parameter cannot be separated
-    w, vecs = np.linalg.eigh(JtJ / np.outer(np.sqrt(np.diag(JtJ)), np.sqrt(np.diag(JtJ))))
+    d = np.sqrt(np.diag(JtJ))
+    if not np.all(np.isfinite(JtJ)) or np.any(d == 0):  # a parameter the data never touch
+        raise InsufficientDataError(
+            "log calibration: the data do not determine every parameter (a segment or "
+            "current knot without data)"
+        )
+    w, vecs = np.linalg.eigh(JtJ / np.outer(d, d))
     if w[0] < ILL_CONDITIONED:
         # parameter groups carrying > 5 % of any near-null direction
         null = vecs[:, w < ILL_CONDITIONED] ** 2

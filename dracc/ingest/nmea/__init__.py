@@ -55,6 +55,8 @@ The modules of the package, in the order a block goes through them:
 * :mod:`~dracc.ingest.nmea.pool`: the worker processes and their hand-over of blocks;
 * :mod:`~dracc.ingest.nmea.assemble`: parsed blocks to canonical frames (and the
   ``$PSXN,20`` quality and the AIS UTC second applied to their records);
+* :mod:`~dracc.ingest.nmea.groups`: the lines of TAG line groups (``g:``), joined to
+  their group's first line (its source and time);
 * :mod:`~dracc.ingest.nmea.state`: :class:`StreamState`, the running totals of a stream;
 * :mod:`~dracc.ingest.nmea.reader`: the file reader (:func:`iter_nmea_blocks`,
   :func:`read_nmea`, :func:`check_readable`);

@@ -14,6 +14,7 @@ import numpy as np
 
 from dracc.frames import KIND_COLUMNS
 from dracc.ingest.nmea.engine_numpy import parse_numpy
+from dracc.ingest.nmea.groups import attach_groups
 from dracc.ingest.nmea.parsed import ParsedBlock
 from dracc.ingest.nmea.sentences import MAX_LINE_BYTES, SENTENCES
 
@@ -272,16 +273,19 @@ def parse_buffer(
     give the same block (tests/test_nmeascan.py).  Lines with an external time/source
     (``ext_line_ns``/``ext_line_source``, for :func:`parse_sentences`) take the numpy core.
     Lines end at LF, CR LF, CR CR LF or a lone CR; a line longer than ``max_line_bytes``
-    is one ``too_long`` reject (its bytes are never parsed).
+    is one ``too_long`` reject (its bytes are never parsed).  The lines of TAG line
+    groups (``g:``) are listed in the block's ``groups``
+    (:func:`~dracc.ingest.nmea.groups.attach_groups`; not for lines with an external
+    source), for the reader to join.
     """
     use_c = (engine or ENGINE) == "c" and _nmeascan is not None
-    if use_c and ext_line_ns is None and ext_line_source is None and len(data):
-        return _parse_c(
-            data if isinstance(data, bytes) else bytes(data),
-            ignore_checksum,
-            at_eof,
-            max_line_bytes,
-        )
-    return parse_numpy(data, ignore_checksum, at_eof, ext_line_ns, ext_line_source, max_line_bytes)[
-        0
-    ]
+    if ext_line_ns is not None or ext_line_source is not None:
+        return parse_numpy(
+            data, ignore_checksum, at_eof, ext_line_ns, ext_line_source, max_line_bytes
+        )[0]
+    data = data if isinstance(data, bytes) else bytes(data)
+    if use_c and len(data):
+        pb = _parse_c(data, ignore_checksum, at_eof, max_line_bytes)
+    else:
+        pb = parse_numpy(data, ignore_checksum, at_eof, None, None, max_line_bytes)[0]
+    return attach_groups(pb, data, ignore_checksum)

@@ -38,6 +38,9 @@ class ParsedBlock:
     #: ``ais_second`` (the UTC second of an own-ship AIS report), see
     #: :mod:`~dracc.ingest.nmea.ins_ais`; applied by :mod:`~dracc.ingest.nmea.assemble`
     aux: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+    #: the lines with a TAG line-group parameter ``g:`` (see
+    #: :func:`~dracc.ingest.nmea.groups.scan_groups`; empty without), joined by the reader
+    groups: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def too_long_block(text: bytes) -> ParsedBlock:

@@ -21,6 +21,7 @@ from dracc.frames import FileResult, concat_blocks
 from dracc.ingest.memory import handover_dir
 from dracc.ingest.nmea.assemble import _source_categorical, assemble, talker_str, time_arrays
 from dracc.ingest.nmea.blocks import block_ranges, parse_range
+from dracc.ingest.nmea.groups import join_line_groups
 from dracc.ingest.nmea.parsed import ParsedBlock
 from dracc.ingest.nmea.pool import load_parsed, parse_range_to_file, pool_ok, worker_init
 from dracc.ingest.nmea.sentences import MAX_LINE_BYTES, SENTENCES
@@ -100,6 +101,7 @@ def iter_nmea_blocks(
 
     def handle(pb: ParsedBlock, nbytes: int) -> Iterator[Block]:
         line0 = st.count_block(pb, cfg.strict)
+        join_line_groups(pb, st.line_groups, line0, st.stats)
         st.bytes += nbytes
         pos = pb.kinds.get("position")
         pos_types = (

@@ -12,6 +12,7 @@ import pandas as pd
 
 from dracc.core.errors import IngestError
 from dracc.frames import Rejects, TimeEvents
+from dracc.ingest.nmea.groups import GroupCarry
 from dracc.ingest.nmea.parsed import ParsedBlock
 from dracc.ingest.nmea.sentences import IGNORED_EXAMPLES, REASONS
 from dracc.ingest.timebase import EventCounter, TimeBase
@@ -59,6 +60,8 @@ class StreamState:
     split_talkers: dict[str, set[int]] = field(
         default_factory=dict
     )  #: talker -> decimals seen (fingerprint split)
+    #: the TAG line groups (``g:``) still open, carried from block to block
+    line_groups: GroupCarry = field(default_factory=GroupCarry)
 
     def time_events(self) -> TimeEvents:
         tb = self.timebase
@@ -141,6 +144,19 @@ class StreamState:
             out.append(
                 f"{s['tag_checksum_ignored']} wrong TAG checksums accepted (--ignore-checksum)"
             )
+        if s["tag_group_joined"]:
+            out.append(
+                f"{s['tag_group_joined']} sentences of TAG line groups (g:) read with the "
+                "source (s:) and time (c:) of their group's first line"
+            )
+        if s["tag_group_incomplete"]:
+            out.append(
+                f"{s['tag_group_incomplete']} sentences of TAG line groups (g:) without "
+                "their group's first line (line group incomplete): read with their own "
+                "source and time"
+            )
+        if s["tag_group_bad"]:
+            out.append(f"{s['tag_group_bad']} unreadable TAG line-group parameters (g:) ignored")
         if s["one_digit_checksum"]:
             out.append(f"{s['one_digit_checksum']} one-digit checksums ('*5' for '*05') accepted")
         if s["doubled_start"]:
