@@ -127,11 +127,13 @@ class Watch:
         for _, (recv_ns, line) in got:
             self.received += 1
             info = classify(line)
+            recorded = None
             if self.recorder is not None:
-                self.recorder.write(line, recv_ns, form=info.form)
+                recorded = self.recorder.write(line, recv_ns, form=info.form)
             key, c_ns = info.key, info.c_ns
             if analyser is not None:  # the window holds the lines as recorded
-                recorded = tag_line(line, recv_ns) if info.form in NMEA_FORMS else line
+                if recorded is None:
+                    recorded = tag_line(line, recv_ns) if info.form in NMEA_FORMS else line
                 analyser.add(info.form, c_ns or recv_ns, recorded)
             if key is None:
                 self.unkeyed += 1

@@ -5,6 +5,8 @@ TCP, serial devices and files) and the limits they apply.  The sources themselve
 
 from __future__ import annotations
 
+import selectors
+import time
 from collections import Counter
 
 #: the IEC 61162-450 header of a datagram of sentences
@@ -117,3 +119,43 @@ class StreamLines:
                 self.src.rejected["partial"] += 1
             self.pending = b""
             self.skipping = False
+
+
+class ReconnectingSource(LiveSource):
+    """A stream source that opens (and reopens, after a backoff) its connection or
+    device: :meth:`poll` waits for the next attempt when it is closed, else for input,
+    at most ``timeout_s`` in all.  Subclasses set ``next_try`` (``time.monotonic()`` of
+    the next attempt) and ``selector``, and give :meth:`_is_open`, :meth:`_attempt` and
+    :meth:`_ready` (one ready event: read into ``out``)."""
+
+    next_try: float
+    selector: selectors.BaseSelector
+
+    def _is_open(self) -> bool:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _attempt(self) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _ready(self, out: list[Line]) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def poll(self, timeout_s: float = 0.0) -> list[Line]:
+        out: list[Line] = []
+        end = time.monotonic() + timeout_s
+        while not self.closed:
+            now = time.monotonic()
+            if not self._is_open() and now >= self.next_try:
+                self._attempt()
+            if not self._is_open():
+                wait = min(end, self.next_try) - now
+                if wait > 0:
+                    time.sleep(wait)
+                if time.monotonic() >= end:
+                    break
+                continue
+            for _ in self.selector.select(max(0.0, end - time.monotonic())):
+                self._ready(out)
+            if out or time.monotonic() >= end:
+                break
+        return out

@@ -260,19 +260,21 @@ class Recorder:
         recv_ns: int | None = None,
         source: str | None = None,
         form: str | None = None,
-    ) -> None:
+    ) -> bytes:
         """Record one received line (without its line end) and its receive time
-        (``now_ns()`` if None).  ``form`` (what :func:`classify` says; None: NMEA 0183)
-        picks the file; ``source`` is written (TAG ``s:``) with NMEA 0183 only: the other
-        forms name their sources themselves."""
+        (``now_ns()`` if None); return it as recorded, without the line end.  ``form``
+        (what :func:`classify` says; None: NMEA 0183) picks the file; ``source`` is
+        written (TAG ``s:``) with NMEA 0183 only: the other forms name their sources
+        themselves."""
         if recv_ns is None:
             recv_ns = self.now_ns()
         if form is None or form in NMEA_FORMS:
             suffix = NMEA_SUFFIX
-            data = tag_line(line, recv_ns, source) + b"\r\n"
+            recorded = tag_line(line, recv_ns, source)
         else:
             suffix = form_suffix(form)
-            data = line + _LINE_END.get(suffix, b"\n")
+            recorded = line
+        data = recorded + _LINE_END.get(suffix, b"\n")
         out = self._open.get(suffix)
         if out is not None and (
             not out.lo <= recv_ns < out.hi or (out.size and out.size + len(data) > self.max_bytes)
@@ -289,6 +291,7 @@ class Recorder:
         if out.unflushed >= self.flush_lines:
             out.fh.flush()
             out.unflushed = 0
+        return recorded
 
     def write_many(
         self,

@@ -50,7 +50,7 @@ from dracc.ingest.live.base import (
     MAX_POLL_LINES,
     READ_BYTES,
     Line,
-    LiveSource,
+    ReconnectingSource,
     StreamLines,
 )
 
@@ -157,7 +157,7 @@ def _open_reason(err: Exception) -> str:
     return text.splitlines()[0] if text else type(err).__name__
 
 
-class SerialSource(LiveSource):
+class SerialSource(ReconnectingSource):
     """Lines read from a serial device (see the module docstring)."""
 
     kind = "serial"
@@ -250,25 +250,14 @@ class SerialSource(LiveSource):
             self.stream.feed(self.clock(), data, got)
             out.extend(got)
 
-    def poll(self, timeout_s: float = 0.0) -> list[Line]:
-        out: list[Line] = []
-        end = time.monotonic() + timeout_s
-        while not self.closed:
-            now = time.monotonic()
-            if self.port is None and now >= self.next_try:
-                self._reopen()
-            if self.port is None:
-                wait = min(end, self.next_try) - now
-                if wait > 0:
-                    time.sleep(wait)
-                if time.monotonic() >= end:
-                    break
-                continue
-            if self.selector.select(max(0.0, end - time.monotonic())):
-                self._read(out)
-            if out or time.monotonic() >= end:
-                break
-        return out
+    def _is_open(self) -> bool:
+        return self.port is not None
+
+    def _attempt(self) -> None:
+        self._reopen()
+
+    def _ready(self, out: list[Line]) -> None:
+        self._read(out)
 
     def close(self) -> None:
         if not self.closed:

@@ -53,6 +53,7 @@ from dracc.ingest.live.base import (
     UDPBC,
     Line,
     LiveSource,
+    ReconnectingSource,
     StreamLines,
     _printable,
 )
@@ -179,7 +180,7 @@ class UdpSource(LiveSource):
         super().close()
 
 
-class TcpSource(LiveSource):
+class TcpSource(ReconnectingSource):
     """A TCP client of ``HOST:PORT`` reading lines; when the connection fails or closes
     it reconnects after a wait that doubles from ``backoff_first_s`` up to
     ``backoff_cap_s`` (back to the first after a connection that delivered data)."""
@@ -269,28 +270,17 @@ class TcpSource(LiveSource):
             self.stream.feed(self.clock(), data, got)
             out.extend(got)
 
-    def poll(self, timeout_s: float = 0.0) -> list[Line]:
-        out: list[Line] = []
-        end = time.monotonic() + timeout_s
-        while not self.closed:
-            now = time.monotonic()
-            if self.sock is None and now >= self.next_try:
-                self._start()
-            if self.sock is None:
-                wait = min(end, self.next_try) - now
-                if wait > 0:
-                    time.sleep(wait)
-                if time.monotonic() >= end:
-                    break
-                continue
-            for _key, _ev in self.selector.select(max(0.0, end - time.monotonic())):
-                if not self.connected:
-                    self._connected()
-                else:
-                    self._read(out)
-            if out or time.monotonic() >= end:
-                break
-        return out
+    def _is_open(self) -> bool:
+        return self.sock is not None
+
+    def _attempt(self) -> None:
+        self._start()
+
+    def _ready(self, out: list[Line]) -> None:
+        if not self.connected:
+            self._connected()
+        else:
+            self._read(out)
 
     def close(self) -> None:
         if not self.closed:
