@@ -15,6 +15,7 @@ from conftest import SPARSE_RATES
 import dracc.pipeline.audit.run as audit_mod  # run_audit looks its helpers up here
 from dracc.cli.main import main
 from dracc.core.errors import ExitCode
+from dracc.pipeline.state import StateStore
 from dracc.report.audit_json import load_schema
 
 NIGHTS = (("2026-11-18", 11, 1.0), ("2026-11-19", 12, 2.5), ("2026-11-20", 13, 0.7))
@@ -738,3 +739,30 @@ def test_history_known_selection_and_an_empty_database(run_cli, recorded, tmp_pa
     # an unknown unit is a usage error before the database is looked for
     code, _, err = run_cli("audit", "history", "--db", tmp_path / "none.sqlite", "--unit", "ins9")
     assert code == ExitCode.USAGE and "--unit" in err
+
+
+def test_brief_json_is_small_valid_and_carries_the_measures(run_cli, ship, tmp_path):
+    """--brief: the document without the analysis, what a ship sends ashore for the fleet."""
+    code, _, err = run_cli(
+        "audit",
+        ship / "nav-2026-11-19.nmea",
+        "--db",
+        tmp_path / "s.sqlite",
+        "--vessel",
+        "Aurora",
+        "--json",
+        tmp_path / "brief.json",
+        "--brief",
+        "--summary",
+        tmp_path / "s.txt",
+    )
+    assert code in (ExitCode.OK, ExitCode.FINDINGS), err
+    raw = (tmp_path / "brief.json").read_text()
+    doc = json.loads(raw)
+    jsonschema.validate(doc, load_schema())
+    assert doc["analysis"] is None and len(raw.encode()) < 40_000
+    quantities = {(r["unit"], r["quantity"]) for r in doc["measures"]["rows"]}
+    assert {("ins1", "lat_m_y"), ("ins2", "lon_m_y"), ("log", "log_scale")} <= quantities
+    assert doc["dead_reckoning"]["n_scored"] > 0
+    with StateStore(tmp_path / "s.sqlite") as store:  # the database holds the same measures
+        assert store.nights()[0].measures == doc["measures"]

@@ -245,10 +245,11 @@ def _snapshot(out: Path) -> dict[str, bytes]:
         if rel.parts[0] in ("cache", atomic.RUNS, atomic.CURRENT) or not p.is_file():
             continue
         got[rel.as_posix()] = p.read_bytes()
-    if (out / "vessels").is_dir():  # rglob does not descend into a linked folder
-        for p in sorted((out / "vessels").rglob("*")):
-            if p.is_file():
-                got[f"vessels/{p.relative_to(out / 'vessels').as_posix()}"] = p.read_bytes()
+    for folder in ("vessels", "tables"):  # rglob does not descend into a linked folder
+        if (out / folder).is_dir():
+            for p in sorted((out / folder).rglob("*")):
+                if p.is_file():
+                    got[f"{folder}/{p.relative_to(out / folder).as_posix()}"] = p.read_bytes()
     return got
 
 
@@ -531,7 +532,7 @@ def test_two_audits_creating_a_new_database_at_once(tmp_path):
         assert all(g[1] == "wal" for g in got if g[0] == "ok")
         con = sqlite3.connect(db)
         try:
-            assert con.execute("SELECT value FROM meta WHERE key = 'schema'").fetchall() == [("2",)]
+            assert con.execute("SELECT value FROM meta WHERE key = 'schema'").fetchall() == [("3",)]
         finally:
             con.close()
     assert failures == []

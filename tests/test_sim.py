@@ -367,6 +367,14 @@ def test_ins_error_scale():
     )
 
 
+def test_ins_unit_scales_scale_one_unit_only():
+    a = simulate(SimParams(seed=1, **SHORT))
+    b = simulate(SimParams(seed=1, **SHORT).with_ins_unit_scales((1.0, 3.0, 1.0)))
+    np.testing.assert_allclose(b.errors["ins2_east_m"], 3 * a.errors["ins2_east_m"], rtol=1e-12)
+    np.testing.assert_array_equal(b.errors["ins1_north_m"], a.errors["ins1_north_m"])
+    np.testing.assert_array_equal(b.errors["ins3_heading_rad"], a.errors["ins3_heading_rad"])
+
+
 def test_antimeridian_crossing():
     """Eastward across 180 deg: longitude wraps to -180, the track stays continuous."""
     v = simulate(

@@ -118,12 +118,13 @@ def test_newer_schema_is_refused(tmp_path):
 
 
 def _v1_database(db) -> None:
-    """A state file as schema 1 wrote it (nights without the DR verdict columns), one night."""
+    """A state file as schema 1 wrote it (nights without the DR verdict and measures
+    columns), one night."""
     import re
 
     from dracc.pipeline import state
 
-    v2_only = "|".join(name for name, _ in state._NIGHT_COLUMNS_V2)
+    v2_only = "|".join([*(name for name, _ in state._NIGHT_COLUMNS_V2), "measures_json"])
     ddl = "\n".join(
         line for line in state._DDL.splitlines() if not re.match(rf"\s+({v2_only})\s", line)
     )
@@ -162,9 +163,15 @@ def test_schema_1_database_is_migrated_in_place(tmp_path):
                 )
             )
     con = sqlite3.connect(db)
-    assert con.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()[0] == "2"
+    assert con.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()[0] == "3"
     cols = [r[1] for r in con.execute("PRAGMA table_info(nights)")]
-    assert cols[-4:] == ["dr_verdict", "dr_verdict_text", "dr_consistent", "dr_nees"]
+    assert cols[-5:] == [
+        "dr_verdict",
+        "dr_verdict_text",
+        "dr_consistent",
+        "dr_nees",
+        "measures_json",
+    ]
     con.close()
     with StateStore(db) as store:  # opening it again changes nothing
         new = store.night("Aurora", "2026-11-20")

@@ -87,6 +87,11 @@ def audit_run(
     summary_out: Path | None = typer.Option(
         None, "--summary", help="Write the plain-text summary to this file instead of stdout."
     ),
+    brief: bool = typer.Option(
+        False,
+        "--brief",
+        help="--json without the analysis (about 10 kB a night: what 'dracc fleet' needs ashore).",
+    ),
 ) -> int:
     """Audit one night: analyse, check the limits, record the night; exit 0/1/2/3/4.
 
@@ -110,7 +115,7 @@ def audit_run(
         )
     doc = audit_json.to_dict(outcome) if (json_out or html_out) else None
     if json_out is not None:
-        emit_json(doc, json_out)
+        emit_json(audit_json.brief(doc) if brief and doc else doc, json_out)
     if html_out is not None:
         atomic.write_text(html_out, audit_page(outcome, doc))
     text = format_summary(outcome, cfg.deviation.probability)

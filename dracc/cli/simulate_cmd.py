@@ -59,6 +59,12 @@ def simulate_cmd(
     ins_error_scale: float = typer.Option(
         1.0, "--ins-error-scale", help="Multiply every INS error amplitude."
     ),
+    ins_unit_scales: str = typer.Option(
+        "1,1,1",
+        "--ins-unit-scales",
+        help="Multiply the error amplitudes of INS1,INS2,INS3 (after --ins-error-scale), "
+        "e.g. 1,3,1 for an INS2 three times worse.",
+    ),
     gyro_error_deg: float = typer.Option(
         0.3, "--gyro-error-deg", help="Gyro compass constant error, degrees (reads high +)."
     ),

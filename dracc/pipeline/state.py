@@ -35,6 +35,9 @@ Schema versions
    in place when opened (the columns are added, NULL for the nights already stored), in
    the same ``BEGIN IMMEDIATE`` transaction as the check, so two audits opening an old
    file at once migrate it once.
+3. ``nights`` gained ``measures_json``: the night's measures for the fleet ranking
+   (:mod:`dracc.pipeline.audit.measures`), NULL for nights stored before.  Migrated in
+   place the same way (from 1 or 2).
 
 This module stores and reads; the rules (what the a priori becomes, what is a finding)
 live in :mod:`dracc.pipeline.audit`.
@@ -53,7 +56,7 @@ from pathlib import Path
 
 from dracc.core.errors import ConfigError, StateError
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 
 #: columns added to ``nights`` after version 1: (name, SQL type), in order
 _NIGHT_COLUMNS_V2 = (
@@ -100,6 +103,7 @@ CREATE TABLE IF NOT EXISTS nights (
     dr_verdict_text   TEXT,
     dr_consistent     INTEGER,                 -- 1, 0 or NULL (undetermined)
     dr_nees           REAL,
+    measures_json     TEXT,                    -- the fleet ranking's measures (schema 3)
     UNIQUE (vessel, night)
 );
 CREATE TABLE IF NOT EXISTS unit_stats (
@@ -182,6 +186,9 @@ class NightRecord:
     dr_verdict_text: str | None = None
     dr_consistent: bool | None = None
     dr_nees: float | None = None
+    #: the fleet ranking's measures (:func:`dracc.pipeline.audit.measures.night_measures`);
+    #: None for nights stored before schema 3
+    measures: dict | None = None
 
 
 @dataclass(frozen=True)
@@ -248,11 +255,14 @@ class StateStore:
     ``busy_timeout_s`` is how long a writer waits for another audit's transaction.
     """
 
-    def __init__(self, path: str | Path, busy_timeout_s: float = 60.0):
+    def __init__(self, path: str | Path, busy_timeout_s: float = 60.0, read_only: bool = False):
         self.path = Path(path)
         self.busy_timeout_s = float(busy_timeout_s)
         if self.path.is_dir():
             raise ConfigError(f"audit database path is a directory: {self.path}")
+        if read_only:
+            self._open_read_only()
+            return
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self.conn = sqlite3.connect(self.path, timeout=busy_timeout_s, isolation_level=None)
@@ -278,6 +288,25 @@ class StateStore:
                 raise StateError(f"{self.path}: cannot open the audit database: {err}") from err
             raise
         self.journal_mode = str(mode).lower()
+
+    def _open_read_only(self) -> None:
+        """Open an existing database for reading only (a ship's database read ashore):
+        nothing is created, migrated or written; schema 1 to 3 are read."""
+        try:
+            self.conn = sqlite3.connect(
+                f"{self.path.resolve().as_uri()}?mode=ro", uri=True, isolation_level=None
+            )
+            self.conn.row_factory = sqlite3.Row
+            row = self.conn.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()
+        except sqlite3.DatabaseError as err:
+            raise StateError(f"{self.path}: not a readable audit database: {err}") from err
+        if row is None or str(row[0]) not in ("1", "2", str(SCHEMA_VERSION)):
+            self.conn.close()
+            raise StateError(
+                f"{self.path}: audit database schema {row[0] if row else None} is not "
+                f"1 to {SCHEMA_VERSION}"
+            )
+        self.journal_mode = "read-only"
 
     # -- plumbing ------------------------------------------------------------------
 
@@ -329,8 +358,8 @@ class StateStore:
                 version = int(row[0])
             except ValueError:
                 version = -1
-            if version == 1:
-                self._migrate_1_to_2(c)
+            if version in (1, 2):
+                self._migrate(c)
             elif version != SCHEMA_VERSION:
                 raise StateError(
                     f"{self.path}: audit database schema {row[0]} is not the supported "
@@ -338,10 +367,10 @@ class StateStore:
                 )
 
     @staticmethod
-    def _migrate_1_to_2(c: sqlite3.Connection) -> None:
-        """Add the DR verdict columns to ``nights`` (inside the open transaction)."""
+    def _migrate(c: sqlite3.Connection) -> None:
+        """Add the columns of versions 2 and 3 to ``nights`` (inside the open transaction)."""
         have = {r[1] for r in c.execute("PRAGMA table_info(nights)")}
-        for name, sql_type in _NIGHT_COLUMNS_V2:
+        for name, sql_type in (*_NIGHT_COLUMNS_V2, ("measures_json", "TEXT")):
             if name not in have:
                 c.execute(f"ALTER TABLE nights ADD COLUMN {name} {sql_type}")
         c.execute("UPDATE meta SET value = ? WHERE key = 'schema'", (str(SCHEMA_VERSION),))
@@ -433,6 +462,12 @@ class StateStore:
         )
 
     def _record(self, r: sqlite3.Row) -> NightRecord:
+        have = set(r.keys())  # a database read-only at schema 1 or 2 lacks later columns
+
+        def col(name: str):
+            return r[name] if name in have else None
+
+        measures = col("measures_json")
         return NightRecord(
             vessel=r["vessel"],
             night=r["night"],
@@ -455,10 +490,11 @@ class StateStore:
             findings=tuple(json.loads(r["findings_json"])),
             missing=tuple(json.loads(r["missing_json"])),
             channels=self._channels(r["id"]),
-            dr_verdict=r["dr_verdict"],
-            dr_verdict_text=r["dr_verdict_text"],
-            dr_consistent=None if r["dr_consistent"] is None else bool(r["dr_consistent"]),
-            dr_nees=r["dr_nees"],
+            dr_verdict=col("dr_verdict"),
+            dr_verdict_text=col("dr_verdict_text"),
+            dr_consistent=None if col("dr_consistent") is None else bool(r["dr_consistent"]),
+            dr_nees=col("dr_nees"),
+            measures=None if measures is None else json.loads(measures),
         )
 
     # -- writes (call inside :meth:`transaction`) ------------------------------------
@@ -477,8 +513,8 @@ class StateStore:
             "period_start_utc, period_end_utc, inputs_json, sources_json, lines, rejected, "
             "rejected_rate, dr_containment_2m, dr_n_scored, compass_error_deg, "
             "compass_error_sigma_deg, log_scale, log_scale_sigma, findings_json, missing_json, "
-            "dr_verdict, dr_verdict_text, dr_consistent, dr_nees) "
-            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            "dr_verdict, dr_verdict_text, dr_consistent, dr_nees, measures_json) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             (
                 rec.vessel,
                 rec.night,
@@ -504,6 +540,9 @@ class StateStore:
                 rec.dr_verdict_text,
                 None if rec.dr_consistent is None else int(bool(rec.dr_consistent)),
                 _none_if_nan(rec.dr_nees),
+                None
+                if rec.measures is None
+                else json.dumps(rec.measures, sort_keys=True, allow_nan=False),
             ),
         )
         assert cur.lastrowid is not None  # an INSERT sets it

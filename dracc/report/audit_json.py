@@ -111,6 +111,8 @@ def to_dict(o: AuditOutcome) -> dict:
             "verdict": r.dr_verdict,
             "verdict_text": r.dr_verdict_text,
             "containment_2m": r.dr_containment_2m,
+            "n_scored": r.dr_n_scored,
+            "consistent": r.dr_consistent,
             "nees": r.dr_nees,
         },
         "calibration": {
@@ -120,14 +122,23 @@ def to_dict(o: AuditOutcome) -> dict:
             "log_scale_sigma": r.log_scale_sigma,
         },
         "missing": list(r.missing),
+        "measures": r.measures,
         "analysis": None if o.analysis is None else json_report.to_dict(o.analysis),
     }
     return jsonable(doc)
 
 
-def write_json(o: AuditOutcome, target: str | Path) -> None:
+def brief(doc: dict) -> dict:
+    """The audit document without the analysis it rests on (``analysis`` null): the
+    night's verdict, findings, INS statistics and ranking measures, about 10 kB, for a
+    ship to send ashore (``dracc audit --json F --brief``)."""
+    return {**doc, "analysis": None}
+
+
+def write_json(o: AuditOutcome, target: str | Path, *, without_analysis: bool = False) -> None:
     """Write the audit document to ``target`` (atomically), or on stdout for '-'."""
-    emit_json(to_dict(o), target)
+    doc = to_dict(o)
+    emit_json(brief(doc) if without_analysis else doc, target)
 
 
 # ------------------------------------------------------------------------- history

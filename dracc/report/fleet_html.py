@@ -1,4 +1,5 @@
-"""The ``dracc fleet`` page: latest figures per vessel, DR containment and trend plots.
+"""The ``dracc fleet`` page: the ranked list first, then the latest figures per vessel,
+DR containment and trend plots.
 
 Renders a :class:`~dracc.pipeline.fleet.FleetResult`; nothing is estimated here.  The page is one
 self-contained file (:mod:`dracc.report.page`); matplotlib loads only when a plot is drawn.
@@ -11,6 +12,7 @@ columns of :data:`dracc.core.vocabulary.TABLE_COLUMNS`.
 from __future__ import annotations
 
 import html
+import json
 import math
 
 import pandas as pd
@@ -100,6 +102,104 @@ def containment_plot(table: pd.DataFrame) -> bytes | None:
     return png_bytes(fig, dpi=_DPI)
 
 
+#: rows of the ranked list shown beyond the discoveries (the next strongest)
+_NEXT_ROWS = 10
+
+_QUANTITY_TEXT = {
+    "lat_m_y": "latitude RMS error",
+    "lon_m_y": "longitude RMS error",
+    "course_m_y": "course RMS error",
+    "log_scale": "log scale error",
+    "compass_error": "compass error",
+    "dr_consistency": "DR inside 2M",
+    "latency": "latency p95",
+    "availability": "availability",
+}
+
+
+def _p(x) -> str:
+    if x is None or pd.isna(x):
+        return "-"
+    return f"{x:.2g}" if x >= 1e-4 else f"{x:.1e}"
+
+
+def _value(x, unit: str) -> str:
+    digits = 3 if unit == "deg" else (2 if unit in ("%", "s") else 0)
+    return fmt_num_unit(x, digits, f" {unit}" if unit != "%" else " %")
+
+
+def ranking_section(ranking: pd.DataFrame) -> list[str]:
+    """The ranked list (discoveries, then the next strongest rows), each row linked to
+    its evidence: the nights and values, the peers, the change point."""
+    if ranking is None or ranking.empty:
+        return ["<h2>Ranking</h2><p>Nothing to rank: no nightly measures.</p>"]
+    e = html.escape
+    found = ranking[ranking["discovery"].fillna(False).astype(bool)]
+    shown = ranking.head(len(found) + _NEXT_ROWS)
+    parts = [
+        "<h2>Ranking: which unit on which ship is worse than its peers or got worse</h2>",
+        f"<p>{len(found)} of {len(ranking)} units and quantities stand out at a false "
+        "discovery rate of 5 % (q &lt; 0.05, Benjamini-Hochberg over the fleet); the "
+        f"next {min(_NEXT_ROWS, len(ranking) - len(found))} rows follow for context. "
+        "p combines the comparison with peers and the unit's own change point "
+        "(Bonferroni over the two).</p><table><tr>"
+        + "".join(
+            f"<th>{h}</th>"
+            for h in (
+                "rank",
+                "vessel",
+                "unit",
+                "quantity",
+                "value",
+                "peers' mean",
+                "score",
+                "p",
+                "q",
+                "since",
+                "evidence",
+            )
+        )
+        + "</tr>",
+    ]
+    for _, r in shown.iterrows():
+        unit = cell_text(r["measure_unit"])
+        cls = " class='bad'" if bool(r["discovery"]) else ""
+        parts.append(
+            f"<tr{cls}><td>{r['rank']}</td><td>{e(cell_text(r['vessel']))}</td>"
+            f"<td>{e(cell_text(r['unit']))}</td>"
+            f"<td>{e(_QUANTITY_TEXT.get(str(r['quantity']), str(r['quantity'])))}</td>"
+            f"<td>{e(_value(r['value'], unit))}</td><td>{e(_value(r['peer_median'], unit))}</td>"
+            f"<td>{fmt_num(r['score'], 1)}</td><td>{_p(r['p_value'])}</td>"
+            f"<td>{_p(r['q_value'])}</td><td>{e(cell_text(r['since']))}</td>"
+            f"<td><a href='#ev-{r['rank']}'>nights</a></td></tr>"
+        )
+    parts.append("</table><h3>Evidence</h3>")
+    for _, r in shown.iterrows():
+        ev = json.loads(str(r["evidence"]))
+        unit = cell_text(r["measure_unit"])
+        peer, change = ev.get("peer") or {}, ev.get("change") or {}
+        nights = "".join(
+            f"<tr><td>{e(str(n['night']))}</td><td>{e(_value(n['value'], unit))}</td></tr>"
+            for n in ev.get("nights", [])
+        )
+        parts.append(
+            f"<details id='ev-{r['rank']}'{' open' if bool(r['discovery']) else ''}><summary>"
+            f"#{r['rank']} {e(cell_text(r['vessel']))} {e(cell_text(r['unit']))} "
+            f"{e(_QUANTITY_TEXT.get(str(r['quantity']), str(r['quantity'])))} "
+            f"({e(str(ev.get('method')))})</summary>"
+            f"<p>Peers ({e(str(ev.get('peer_group')))}, {peer.get('peers')} units): the last "
+            f"{peer.get('window_nights')} nights give {e(_value(peer.get('value'), unit))} "
+            f"against the peers' {e(_value(peer.get('median'), unit))}; z "
+            f"{fmt_num(peer.get('z'), 2)}, p {_p(peer.get('p'))}. Own history: the most "
+            f"likely change at {e(str(change.get('night') or '-'))}, "
+            f"{e(_value(change.get('before'), unit))} before and "
+            f"{e(_value(change.get('after'), unit))} after; z {fmt_num(change.get('z'), 2)}, "
+            f"p {_p(change.get('p'))} over {change.get('splits')} splits.</p>"
+            f"<table><tr><th>night</th><th>value</th></tr>{nights}</table></details>"
+        )
+    return parts
+
+
 def fleet_html(res: FleetResult) -> str:
     """One self-contained page (offline): fleet table of latest figures, plots, failures."""
     e = html.escape
@@ -112,6 +212,7 @@ def fleet_html(res: FleetResult) -> str:
         f"<p>{count_logs(res.table)} logs of {res.table['vessel'].nunique()} vessels; "
         f"{res.analysed} analysed in this run, {res.cached} from the cache, "
         f"{len(res.failures)} failed.</p>",
+        *ranking_section(res.ranking),
     ]
     lt = latest(res.table)
     if not lt.empty:

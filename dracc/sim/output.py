@@ -98,6 +98,20 @@ class SimulationWritten:
     faults: tuple[SimFault, ...]
 
 
+def _unit_scales(text: str) -> tuple[float, float, float]:
+    """``--ins-unit-scales``: three positive factors 'A,B,C' for INS1..INS3."""
+    parts = [p.strip() for p in str(text).split(",")]
+    try:
+        k = tuple(float(p) for p in parts)
+    except ValueError:
+        k = ()
+    if len(k) != 3 or not all(math.isfinite(x) and x >= 0 for x in k):
+        raise ConfigError(
+            f"--ins-unit-scales must be three factors >= 0 such as 1,3,1, got {text!r}"
+        )
+    return (k[0], k[1], k[2])
+
+
 def simulate_to_folder(
     *,
     out_dir: Path,
@@ -119,6 +133,7 @@ def simulate_to_folder(
     legs: str,
     ins_talkers: str,
     ins_error_scale: float,
+    ins_unit_scales: str,
     gyro_error_deg: float,
     log_scale_pct: float,
     log_bias_kn: float,
@@ -168,6 +183,7 @@ def simulate_to_folder(
             log_bias_kn=log_bias_kn,
             current_drift_kn=current_kn,
         ).with_ins_error_scale(ins_error_scale)
+        params = params.with_ins_unit_scales(_unit_scales(ins_unit_scales))
     if not segment_hours > 0:
         raise ConfigError(f"--segment-hours must be positive, got {segment_hours}")
     if form not in ("tag", "prefix", "bare") or tag_time not in ("s", "ms", "auto"):

@@ -216,6 +216,13 @@ class SimParams:
             self, ins=cast("tuple[InsErrorParams, InsErrorParams, InsErrorParams]", scaled)
         )
 
+    def with_ins_unit_scales(self, k: tuple[float, float, float]) -> SimParams:
+        """The same voyage with INS1..INS3's error amplitudes multiplied by ``k[0..2]``."""
+        scaled = tuple(u.scaled(f) for u, f in zip(self.ins, k, strict=True))
+        return replace(
+            self, ins=cast("tuple[InsErrorParams, InsErrorParams, InsErrorParams]", scaled)
+        )
+
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict (GM as {"sigma", "tau_s"}, inf as the string "inf")."""
 

@@ -17,6 +17,7 @@ from dracc.core.errors import InsufficientDataError
 from dracc.core.numbers import finite_or_none
 from dracc.core.timefmt import iso_utc, parse_utc
 from dracc.core.vocabulary import CHANNELS
+from dracc.pipeline.audit.measures import night_measures
 from dracc.pipeline.state import ChannelRow
 
 if TYPE_CHECKING:
@@ -59,6 +60,8 @@ class NightFacts:
     #: the analysis' integrity checks (:class:`dracc.math.integrity.Check`)
     integrity_checks: tuple[Check, ...] = ()
     integrity_false_alarm: float | None = None  #: per-night bound of its statistical checks
+    #: the fleet ranking's measures (:func:`dracc.pipeline.audit.measures.night_measures`)
+    measures: Mapping[str, Any] = field(default_factory=dict)
 
 
 #: reject reasons of older analyses that were valid input dracc does not use
@@ -192,6 +195,7 @@ def facts_from_analysis(a: Analysis) -> NightFacts:
         integrity_false_alarm=(
             finite_or_none(integ.false_alarm_per_night) if integ is not None else None
         ),
+        measures=night_measures(a),
         **_dr_facts(a.dead_reckoning),
     )
 

@@ -188,6 +188,7 @@ def _record(
         dr_verdict_text=facts.dr_verdict_text,
         dr_consistent=facts.dr_consistent,
         dr_nees=facts.dr_nees,
+        measures=dict(facts.measures) if facts.measures else None,
     )
 
 

@@ -5,6 +5,7 @@ The modules, in reading order:
 ``tasks``   the ``[fleet]`` settings, safe output names, :func:`discover` (one task per log)
 ``batch``   :func:`run_fleet`: analyse every log on a local pool or on Dask, with a cache
 ``tables``  the fleet table, the a priori rule per vessel, the per-day trends, publication
+``query``   the Hive-partitioned layout of ``--out/tables`` and :func:`run_query` (DuckDB SQL)
 
 The names below are the package's API, importable from ``dracc.pipeline.fleet``.
 """
@@ -14,6 +15,7 @@ from __future__ import annotations
 from dracc.core.errors import FleetError
 from dracc.core.vocabulary import CHANNELS
 from dracc.pipeline.fleet.batch import CACHE_SCHEMA, analyse_log, cache_path, run_fleet, summarise
+from dracc.pipeline.fleet.query import run_query
 from dracc.pipeline.fleet.tables import (
     TABLE_COLUMNS,
     TREND_COLUMNS,
@@ -51,6 +53,7 @@ __all__ = [
     "fleet_trends",
     "inside",
     "run_fleet",
+    "run_query",
     "safe_name",
     "summarise",
 ]

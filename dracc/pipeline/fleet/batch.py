@@ -1,6 +1,6 @@
 """Running the fleet batch: every log analysed on a local pool or on Dask, cached.
 
-Each log file is one task.  Workers run :func:`analyse_log` (the pipeline) and send back
+Workers run :func:`analyse_log` (the pipeline) on each log file and send back
 :func:`summarise`: a small JSON-ready summary of the analysis (no samples, no DR
 epochs).  The parent caches every summary under ``OUT/cache/`` keyed by the SHA-256 of
 the log's bytes and of the analysis settings (``dracc.fleet.cache/2``, written
@@ -10,7 +10,8 @@ skips what was done unless ``force``; a failing log becomes a row with
 
 Engines: a local :class:`concurrent.futures.ProcessPoolExecutor` (``workers``), or an
 existing Dask distributed scheduler (``scheduler='tcp://host:port'``, through
-:class:`distributed.Client`).  The workers must see the log paths (a shared disk).
+:class:`distributed.Client`), both in :mod:`dracc.pipeline.fleet.engines` (small logs of
+one folder several to a task).  The workers must see the log paths (a shared disk).
 """
 
 from __future__ import annotations
@@ -18,8 +19,6 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -27,20 +26,23 @@ from typing import TYPE_CHECKING
 from dracc import __version__
 from dracc.core import atomic
 from dracc.core.config import Config
-from dracc.core.errors import DraccError, FleetError
-from dracc.core.workers import detach_worker
+from dracc.core.errors import DraccError
 from dracc.pipeline.audit.facts import facts_from_analysis
 from dracc.pipeline.audit.limits import apriori_seeds, settings_sha256
 from dracc.pipeline.audit.run import analyse_voyage
-from dracc.pipeline.fleet.tables import FleetResult, fleet_table, fleet_trends
+from dracc.pipeline.fleet.documents import expand_documents
+from dracc.pipeline.fleet.engines import run_dask as _run_dask
+from dracc.pipeline.fleet.engines import run_local as _run_local
+from dracc.pipeline.fleet.ranking import measures_frame, rank_fleet, ranking_config
+from dracc.pipeline.fleet.tables import FleetResult, fleet_table, fleet_trends, night_of_summary
 from dracc.pipeline.fleet.tasks import LogTask
 
 if TYPE_CHECKING:
     from dracc.pipeline.results import Analysis
 
-#: /2: the summary's "dr" carries the verdict word and the NEES statistic (a /1 entry is
-#: analysed again)
-CACHE_SCHEMA = "dracc.fleet.cache/2"
+#: /2: the summary's "dr" carries the verdict word and the NEES statistic; /3: the
+#: ranking's "measures" (an older entry is analysed again)
+CACHE_SCHEMA = "dracc.fleet.cache/3"
 
 
 def summarise(analysis: Analysis) -> dict:
@@ -67,6 +69,7 @@ def summarise(analysis: Analysis) -> dict:
             "log_scale_sigma": facts.log_scale_sigma,
         },
         "missing": list(facts.missing),
+        "measures": dict(facts.measures),
     }
 
 
@@ -120,10 +123,22 @@ def run_fleet(
     out = Path(out)
     settings = settings_sha256(cfg)
     seeds = apriori_seeds(cfg)
-    summaries: dict[str, dict] = {}
-    failures: dict[str, str] = {}
+    rc = ranking_config(cfg)
+    # audit documents and databases: their nights are read, not analysed
+    n_inputs = len(tasks)
+    tasks, summaries, failures = expand_documents(tasks)
+    from_documents = len(summaries)
+    n_documents = n_inputs - sum(1 for t in tasks if t.path not in summaries)
+    if progress and n_documents:
+        progress(n_documents)
     todo: list[LogTask] = []
     for t in tasks:
+        if t.path in summaries:
+            continue
+        if t.path in failures:  # a document that cannot be read
+            if progress:
+                progress(1)
+            continue
         if t.error is not None:  # not a readable file: listed as failed, never opened
             failures[t.path] = t.error
             if progress:
@@ -136,7 +151,7 @@ def run_fleet(
             summaries[t.path] = s
             if progress:
                 progress(1)
-    cached = len(summaries)
+    cached = len(summaries) - from_documents
 
     def done(task: LogTask, result: dict) -> None:
         if result.get("ok"):
@@ -170,12 +185,22 @@ def run_fleet(
         else:
             _run_local(todo, cfg, workers or os.cpu_count() or 1, analyser, done)
     table = fleet_table(tasks, summaries, failures, seeds)
+    ranking = rank_fleet(
+        measures_frame(
+            [
+                (t.vessel, night, summaries[t.path].get("measures") or {})
+                for t in tasks
+                if t.path in summaries and (night := night_of_summary(summaries[t.path]))
+            ]
+        ),
+        rc,
+    )
     failed = tuple(
         {"vessel": t.vessel, "log": t.log, "path": t.path, "error": failures[t.path]}
         for t in tasks
         if t.path in failures
     )
-    return FleetResult(table, fleet_trends(table), failed, len(todo), cached)
+    return FleetResult(table, fleet_trends(table), failed, len(todo), cached, ranking)
 
 
 def _size(path: str) -> int:
@@ -183,67 +208,3 @@ def _size(path: str) -> int:
         return os.path.getsize(path)
     except OSError:
         return 0
-
-
-def _preload() -> None:
-    """Import the pipeline in the parent so that forked workers start with it loaded."""
-    import importlib
-
-    for name in ("dracc.pipeline.analysis", "dracc.ingest"):
-        try:
-            importlib.import_module(name)
-        except ImportError:  # pragma: no cover - the worker reports it per log
-            pass
-
-
-def _run_local(todo, cfg, workers, analyser, done) -> None:
-    if analyser is analyse_log:
-        _preload()
-    with ProcessPoolExecutor(
-        max_workers=max(1, min(workers, len(todo))),
-        initializer=detach_worker,
-        initargs=(os.getpid(),),
-    ) as pool:
-        pending = {pool.submit(analyser, t.path, cfg): t for t in todo}
-        try:
-            while pending:
-                finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in finished:
-                    task = pending.pop(fut)
-                    try:
-                        result = fut.result()
-                    except BrokenProcessPool as err:
-                        result = {"ok": False, "error": f"worker process died ({err})"}
-                    done(task, result)
-        except BaseException:
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
-
-
-def _run_dask(todo, cfg, scheduler, timeout_s, analyser, done) -> None:
-    try:
-        from distributed import Client, as_completed
-    except ImportError as err:
-        raise FleetError("--scheduler needs Dask distributed: pip install 'dracc[dask]'") from err
-    try:
-        client = Client(scheduler, timeout=timeout_s, set_as_default=False)
-    except (OSError, TimeoutError) as err:
-        raise FleetError(f"cannot reach the Dask scheduler at {scheduler}: {err}") from err
-    try:
-        try:
-            client.wait_for_workers(1, timeout=timeout_s)
-        except TimeoutError as err:
-            raise FleetError(
-                f"the Dask scheduler at {scheduler} has no workers (waited {timeout_s:g} s)"
-            ) from err
-        futures = client.map(analyser, [t.path for t in todo], cfg=cfg, pure=False)
-        by_key = {f.key: t for f, t in zip(futures, todo, strict=True)}
-        for fut in as_completed(futures, loop=client.loop):
-            task = by_key[fut.key]
-            try:
-                result = fut.result()
-            except Exception as err:  # a worker lost or killed: that log failed, the batch goes on
-                result = {"ok": False, "error": f"dask task failed ({type(err).__name__}: {err})"}
-            done(task, result)
-    finally:
-        client.close()

@@ -21,8 +21,9 @@ figures (m or deg).
 
 from __future__ import annotations
 
+import datetime as dt
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -88,6 +89,8 @@ class FleetResult:
     failures: tuple[dict, ...]  #: {"vessel", "log", "path", "error"}
     analysed: int  #: logs analysed in this run
     cached: int  #: logs taken from the cache
+    #: the ranked list (:data:`dracc.pipeline.fleet.ranking.RANKING_COLUMNS`), best first
+    ranking: pd.DataFrame = field(default_factory=pd.DataFrame)
 
 
 #: the dtype of a UTC date column (``day``): pyarrow ``date32`` (Parquet DATE)
@@ -101,6 +104,23 @@ def _day(start: str | None, end: str | None):
     t0 = pd.Timestamp(start).tz_convert("UTC")
     t1 = pd.Timestamp(end).tz_convert("UTC")
     return (t0 + (t1 - t0) / 2).date()
+
+
+def _night(text: object):
+    """The date of an audit night 'YYYY-MM-DD'; None for anything else."""
+    if not isinstance(text, str):
+        return None
+    try:
+        return dt.date.fromisoformat(text)
+    except ValueError:
+        return None
+
+
+def night_of_summary(s: Mapping) -> str | None:
+    """The night (UTC date, ISO text) a summary belongs to, as its fleet row says."""
+    per = s.get("period") or {}
+    d = _night(s.get("night")) or _day(per.get("start_utc"), per.get("end_utc"))
+    return None if d is None else d.isoformat()
 
 
 def _pct(x):
@@ -132,7 +152,8 @@ def fleet_table(
             "error": None,
             "period_start_utc": per["start_utc"],
             "period_end_utc": per["end_utc"],
-            "day": _day(per["start_utc"], per["end_utc"]),
+            # an audit document's own night, else the middle of the period
+            "day": _night(s.get("night")) or _day(per["start_utc"], per["end_utc"]),
             "dr_containment_2m": s["dr"]["containment_2m"],
             "dr_n_scored": s["dr"]["n_scored"],
             "dr_consistent": s["dr"]["consistent"],

@@ -41,7 +41,7 @@ def fleet_config(cfg: Config) -> FleetConfig:
     if not isinstance(table, dict):
         raise ConfigError(f"[fleet] must be a table, got {type(table).__name__}")
     known = list(asdict(FleetConfig()))
-    unknown = set(table) - set(known)
+    unknown = set(table) - set(known) - {"ranking"}  # [fleet.ranking]: fleet.ranking
     if unknown:
         raise ConfigError(
             f"[fleet] unknown key(s): {', '.join(sorted(unknown))}; "

@@ -1,0 +1,182 @@
+"""Edge-first fleet inputs: the nightly audit documents ships send ashore.
+
+A ship's nightly ``dracc audit`` writes a few kB: the audit document (``dracc.audit/1``
+JSON, ``--json``) and its state database (SQLite, ``--db``).  :func:`expand_documents`
+finds them among the fleet's inputs (by their first bytes, whatever their names) and
+turns each night in them into a fleet row, without any raw log: one pseudo-log
+``<file>#<night>`` per night, with the summary :func:`dracc.pipeline.fleet.summarise`
+would give for the night's logs (the measures the ranking reads are stored verbatim),
+so a fleet ranked from documents equals one ranked from the logs.  The vessel is the
+one the documents name.  A database is opened read-only: nothing on it changes.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+
+from dracc.core.errors import StateError
+from dracc.pipeline.fleet.tasks import LogTask
+from dracc.pipeline.state import NightRecord, StateStore
+
+AUDIT_SCHEMA = "dracc.audit/1"
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+#: how far into a JSON file its "schema" key is looked for (the audit writes it first)
+_SNIFF_BYTES = 4096
+
+
+def sniff(path: str) -> str | None:
+    """'audit-json', 'state-db', or None for anything else (a log)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(_SNIFF_BYTES)
+    except OSError:
+        return None
+    if head.startswith(_SQLITE_MAGIC):
+        return "state-db"
+    text = head.lstrip()
+    if text.startswith(b"{") and b'"schema"' in text and AUDIT_SCHEMA.encode() in text:
+        return "audit-json"
+    return None
+
+
+def _channels(rows) -> list[dict]:
+    return [
+        {
+            "unit": c["unit"],
+            "channel": c["channel"],
+            "n": c["n"],
+            "m_u": c["m_u"],
+            "m_y": c["m_y"],
+            "kurtosis": c["kurtosis"],
+            "limit_error": c["limit_error"],
+        }
+        for c in rows
+    ]
+
+
+def summary_from_document(doc: dict) -> dict:
+    """The fleet summary of one audit document's night."""
+    logs = doc.get("logs") or {}
+    period = logs.get("period") or {}
+    dr = doc.get("dead_reckoning") or {}
+    cal = doc.get("calibration") or {}
+    return {
+        "schema": AUDIT_SCHEMA,
+        "night": doc.get("night"),
+        "period": {"start_utc": period.get("start_utc"), "end_utc": period.get("end_utc")},
+        "lines": logs.get("lines"),
+        "rejected": logs.get("rejected"),
+        "sources": dict(doc.get("sources") or {}),
+        "channels": _channels(doc.get("ins") or []),
+        "dr": {
+            "containment_2m": dr.get("containment_2m"),
+            "n_scored": dr.get("n_scored"),
+            "consistent": dr.get("consistent"),
+            "verdict": dr.get("verdict"),
+            "nees": dr.get("nees"),
+        },
+        "calibration": {
+            k: cal.get(k)
+            for k in (
+                "compass_error_deg",
+                "compass_error_sigma_deg",
+                "log_scale",
+                "log_scale_sigma",
+            )
+        },
+        "missing": list(doc.get("missing") or []),
+        "measures": doc.get("measures") or {},
+    }
+
+
+def summary_from_record(r: NightRecord) -> dict:
+    """The fleet summary of one night stored in an audit database."""
+    return {
+        "schema": "dracc.audit.state",
+        "night": r.night,
+        "period": {"start_utc": r.period_start_utc, "end_utc": r.period_end_utc},
+        "lines": r.lines,
+        "rejected": r.rejected,
+        "sources": dict(r.sources),
+        "channels": _channels(
+            [
+                {
+                    "unit": c.unit,
+                    "channel": c.channel,
+                    "n": c.n,
+                    "m_u": c.m_u,
+                    "m_y": c.m_y,
+                    "kurtosis": c.kurtosis,
+                    "limit_error": c.limit_error,
+                }
+                for c in r.channels
+            ]
+        ),
+        "dr": {
+            "containment_2m": r.dr_containment_2m,
+            "n_scored": r.dr_n_scored,
+            "consistent": r.dr_consistent,
+            "verdict": r.dr_verdict,
+            "nees": r.dr_nees,
+        },
+        "calibration": {
+            "compass_error_deg": r.compass_error_deg,
+            "compass_error_sigma_deg": r.compass_error_sigma_deg,
+            "log_scale": r.log_scale,
+            "log_scale_sigma": r.log_scale_sigma,
+        },
+        "missing": list(r.missing),
+        "measures": r.measures or {},
+    }
+
+
+def _nights(task: LogTask, kind: str) -> list[tuple[str, str, dict]]:
+    """(vessel, night, summary) of every night with data in one document."""
+    if kind == "audit-json":
+        try:
+            doc = json.loads(Path(task.path).read_text(encoding="utf-8"))
+        except (OSError, ValueError) as err:
+            raise StateError(f"{task.path}: not a readable audit document: {err}") from None
+        if not isinstance(doc, dict) or doc.get("schema") != AUDIT_SCHEMA:
+            raise StateError(f"{task.path}: not an audit document ({AUDIT_SCHEMA})")
+        if doc.get("verdict") == "no data":
+            return []
+        return [
+            (str(doc.get("vessel") or task.vessel), str(doc["night"]), summary_from_document(doc))
+        ]
+    with StateStore(task.path, read_only=True) as store:
+        return [
+            (r.vessel, r.night, summary_from_record(r))
+            for r in store.nights()
+            if r.period_start_utc is not None  # a night recorded without logs
+        ]
+
+
+def expand_documents(
+    tasks: Sequence[LogTask],
+) -> tuple[list[LogTask], dict[str, dict], dict[str, str]]:
+    """Replace each audit document or database among ``tasks`` by one task per night it
+    holds; returns (tasks, summaries of those nights by task path, failures by path).
+    A log is passed through unchanged."""
+    out: list[LogTask] = []
+    summaries: dict[str, dict] = {}
+    failures: dict[str, str] = {}
+    for t in tasks:
+        kind = None if t.error is not None else sniff(t.path)
+        if kind is None:
+            out.append(t)
+            continue
+        try:
+            nights = _nights(t, kind)
+        except StateError as err:
+            out.append(t)
+            failures[t.path] = str(err)
+            continue
+        for vessel, night, summary in nights:
+            key = f"{t.path}#{vessel}#{night}"
+            out.append(replace(t, vessel=vessel, path=key, log=f"{t.log}#{night}"))
+            summaries[key] = summary
+    return out, summaries, failures
