@@ -272,3 +272,23 @@ def test_empty_measures_give_an_empty_typed_ranking():
     r = rank_fleet(measures_frame([]), RankingConfig())
     assert r.empty and list(r.columns) == list(RANKING_COLUMNS)
     assert isinstance(r, pd.DataFrame)
+
+
+def test_terminal_and_page_lead_with_the_discoveries():
+    from dracc.pipeline.fleet.tables import FleetResult, fleet_table, fleet_trends
+    from dracc.report.fleet_html import fleet_html
+    from dracc.report.terminal import fleet_text
+
+    r = rank_fleet(synthetic_fleet(1, vessels=8, nights=7, faults=True))
+    table = fleet_table([], {}, {}, {})
+    res = FleetResult(table, fleet_trends(table), (), 0, 0, r)
+    text = fleet_text(res, width=100)
+    assert text.startswith("fleet ranking: 5 of")
+    first = text.splitlines()[2].split()
+    assert first[:2] == ["1", str(r.iloc[0].vessel)]
+    page = fleet_html(res)
+    assert (
+        page.index("Ranking") < page.index("Latest figures") if "Latest figures" in page else True
+    )
+    for k in range(1, 6):  # each discovery links to its evidence, open
+        assert f"href='#ev-{k}'" in page and f"<details id='ev-{k}' open>" in page

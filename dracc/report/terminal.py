@@ -383,6 +383,56 @@ _FLEET_COLUMNS = (
 )
 
 
+_RANKING_COLUMNS = (
+    ("rank", True, 1),
+    ("vessel", False, 0),
+    ("unit", False, 0),
+    ("quantity", False, 0),
+    ("value", True, 0),
+    ("peers", True, 2),
+    ("q", True, 0),
+    ("since", False, 1),
+)
+
+
+def _ranking_lines(page: Page, ranking) -> None:
+    """The discoveries of the ranking (q below the FDR), first on the page."""
+    from dracc.report.fleet_html import cell_text, fmt_num_unit
+
+    if ranking is None or ranking.empty:
+        return
+    found = ranking[ranking["discovery"].fillna(False).astype(bool)]
+    tested = int(ranking["p_value"].notna().sum())
+    if found.empty:
+        page.wrapped(
+            f"fleet ranking: no unit stands out among {tested} tested (false discovery rate "
+            f"5 %); {len(ranking) - tested} more without the peers or nights a test needs; "
+            "ranking.csv and fleet.html list them all"
+        )
+        page.blank()
+        return
+    rows = []
+    for _, r in found.iterrows():
+        unit = cell_text(r["measure_unit"])
+        digits = 3 if unit == "deg" else (2 if unit in ("%", "s") else 0)
+        rows.append(
+            (
+                str(r["rank"]),
+                cell_text(r["vessel"]),
+                cell_text(r["unit"]),
+                cell_text(r["quantity"]),
+                fmt_num_unit(r["value"], digits, unit),
+                fmt_num_unit(r["peer_median"], digits, unit),
+                f"{r['q_value']:.1e}",
+                cell_text(r["since"]),
+            )
+        )
+    headers, right, prio = zip(*_RANKING_COLUMNS, strict=True)
+    title = f"fleet ranking: {len(found)} of {len(ranking)} stand out (q < 0.05)"
+    page.table(headers, rows, right=right, priorities=prio, title=title)
+    page.blank()
+
+
 def _fleet_page(res: FleetResult, lay: Layout) -> Page:
     import pandas as pd
 
@@ -410,6 +460,7 @@ def _fleet_page(res: FleetResult, lay: Layout) -> Page:
             )
         )
     page = Page(lay)
+    _ranking_lines(page, res.ranking)
     headers, right, prio = zip(*_FLEET_COLUMNS, strict=True)
     title = "fleet: latest log per vessel, unit and channel"
     page.table(headers, rows, right=right, priorities=prio, title=title)
