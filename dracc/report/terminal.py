@@ -404,10 +404,15 @@ def _ranking_lines(page: Page, ranking) -> None:
     found = ranking[ranking["discovery"].fillna(False).astype(bool)]
     tested = int(ranking["p_value"].notna().sum())
     if found.empty:
+        untested = len(ranking) - tested
+        said = (
+            f"no unit stands out among {tested} tested (false discovery rate 5 %)"
+            if tested
+            else "nothing to test yet"
+        )
         page.wrapped(
-            f"fleet ranking: no unit stands out among {tested} tested (false discovery rate "
-            f"5 %); {len(ranking) - tested} more without the peers or nights a test needs; "
-            "ranking.csv and fleet.html list them all"
+            f"fleet ranking: {said}; {untested} row(s) without the peers or nights a test "
+            "needs; ranking.csv and fleet.html list them all"
         )
         page.blank()
         return
