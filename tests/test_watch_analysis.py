@@ -7,6 +7,7 @@ their evidence, and the window stays inside its bounds."""
 from __future__ import annotations
 
 import random
+import re
 import subprocess
 import sys
 import time
@@ -149,7 +150,13 @@ def test_seeded_faults_raised_then_cleared_with_evidence(tmp_path):
     assert raised == cleared, (SEED, raised - cleared)
     jump = next(e for e in events if e["name"] == "jump" and e["event"] == "raised")
     assert jump["evidence"]["statistic"]["value"] > 600  # the 670 m step
-    assert jump["evidence"]["items"] and ("670" in jump["message"] or "671" in jump["message"])
+    # the 670 m step as measured: the GNSS noise and the ship's own motion move it a few
+    # metres either way (669-674 m seen over seeds)
+    largest = re.search(r"the largest (\d+) m", jump["message"])
+    assert jump["evidence"]["items"] and largest and abs(int(largest[1]) - 670) <= 15, (
+        SEED,
+        jump["message"],
+    )
     drop = next(e for e in events if e["name"] == "dropout" and e["event"] == "raised")
     # the silence as far as the window had heard it when raised: beyond the gate, <= 10 min
     assert 60 < drop["evidence"]["statistic"]["value"] <= 660
