@@ -147,3 +147,24 @@ def test_turns_between_sparse_fixes_are_not_jumps():
         voyage = read_logs([log], IngestConfig())
         jumps = [c for c in check_night(voyage, IntegrityConfig()).checks if c.name == "jump"]
         assert jumps and all(c.status == "pass" for c in jumps), [c.message for c in jumps]
+
+
+def test_comparison_grid_leaves_out_hour_long_silences():
+    """A stray record four years early must not make a grid of years (12.6 million
+    instants at 10 s, 50 s of CPU in the whole-pipeline fuzz regression); without a long
+    silence the grid is exactly the old regular one."""
+    from dracc.math.integrity.helpers import covered_instants, shifted_index
+
+    s = 1_000_000_000
+    start, end, step = 0, 7200 * s, 10 * s
+    t = np.arange(0, 7200 * s, s)
+    np.testing.assert_array_equal(
+        covered_instants([t], start, end, step), np.arange(start, end, step)
+    )
+    stray_start = -4 * 365 * 86400 * s
+    g = covered_instants([np.concatenate(([stray_start], t))], stray_start, end, step)
+    # the stray instant's own grid point and the voyage's 720, in phase with the start
+    assert len(g) == 721 and g[0] == stray_start and np.all((g - stray_start) % step == 0)
+    idx, ok = shifted_index(g, 600 * s)
+    assert not ok[:61].any() and ok[61:].all()  # no t - 10 min across the four years
+    np.testing.assert_array_equal(g[idx[ok]], g[ok] - 600 * s)

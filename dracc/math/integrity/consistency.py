@@ -17,8 +17,10 @@ from dracc.frames import Voyage
 from dracc.math.deviation.sampling import align_at, sample_unit, unit_series_from_voyage
 from dracc.math.integrity.helpers import (
     MAX_EVIDENCE,
+    covered_instants,
     not_checked,
     runs,
+    shifted_index,
     statistic,
     tail_sigma,
     threshold,
@@ -84,7 +86,15 @@ def velocity_consistency(
             )
     if why or not targets:
         return checks
-    instants = np.arange(start_ns, end_ns, int(step_s * NS_PER_S), dtype=np.int64)
+    step_ns = int(step_s * NS_PER_S)
+    instants = covered_instants(
+        [voyage.frame("position", r)["time_ns"].to_numpy(np.int64) for r in roles],
+        start_ns,
+        end_ns,
+        step_ns,
+    )
+    i1, ok1 = shifted_index(instants, lag * step_ns)  # t - T
+    i2, ok2 = shifted_index(instants, 2 * lag * step_ns)  # t - 2T
     pos = {}
     for r in roles:
         s = sample_unit(unit_series_from_voyage(voyage, r), instants, cfg.consistency_max_gap_s)
@@ -98,9 +108,8 @@ def velocity_consistency(
         the change of its Schuler-averaged velocity from one period to the next."""
         d = ne[r] - np.mean([ne[x] for x in refs], axis=0)
         v = np.full(len(instants), np.nan)
-        v[2 * lag :] = np.hypot(*(d[:, 2 * lag :] - 2 * d[:, lag:-lag] + d[:, : -2 * lag])) / (
-            lag * step_s
-        )
+        ok = ok1 & ok2
+        v[ok] = np.hypot(*(d[:, ok] - 2 * d[:, i1[ok]] + d[:, i2[ok]])) / (lag * step_s)
         return v
 
     bad: list[str] = []
@@ -214,8 +223,12 @@ def heading_consistency(
                 "fewer than 30 true headings from the compass",
             )
         ]
-    instants = np.arange(
-        start_ns, end_ns, int(cfg.consistency_interval_s * NS_PER_S), dtype=np.int64
+    instants = covered_instants(
+        [hd["time_ns"].to_numpy(np.int64)]
+        + [voyage.frame("heading", r)["time_ns"].to_numpy(np.int64) for r in ins],
+        start_ns,
+        end_ns,
+        int(cfg.consistency_interval_s * NS_PER_S),
     )
     c, _ = align_at(
         hd["time_ns"].to_numpy(np.int64),
@@ -355,7 +368,15 @@ def speed_consistency(
         )
         return [skip(f"log: not checked: {why}", why)]
     step_ns = int(cfg.consistency_interval_s * NS_PER_S)
-    instants = np.arange(start_ns, end_ns, step_ns, dtype=np.int64)
+    instants = covered_instants(
+        [
+            wt["time_ns"].to_numpy(np.int64),
+            voyage.frame("ground", ref_roles[0])["time_ns"].to_numpy(np.int64),
+        ],
+        start_ns,
+        end_ns,
+        step_ns,
+    )
     gap = cfg.consistency_max_gap_s
     stw, _ = align_at(
         wt["time_ns"].to_numpy(np.int64), wt["stw_mps"].to_numpy(float)[None, :], instants, gap

@@ -119,3 +119,47 @@ def not_checked(
         message,
         why_not=why,
     )
+
+
+#: a silence of every compared source longer than this splits the comparison grid
+GRID_SILENCE_NS = 3600 * 1_000_000_000
+
+
+def covered_instants(
+    times_ns: list[IntArray], start_ns: int, end_ns: int, step_ns: int
+) -> IntArray:
+    """The comparison grid start_ns + k step_ns in [start_ns, end_ns), without the
+    stretches where every compared source is silent for more than an hour: a stray record
+    dated years away must not make a grid of years (millions of empty instants).  Without
+    such a silence this is exactly ``arange(start_ns, end_ns, step_ns)``."""
+    t = np.concatenate([np.asarray(x, dtype=np.int64) for x in times_ns]) if times_ns else None
+    if t is None or t.size == 0:
+        return np.arange(start_ns, end_ns, step_ns, dtype=np.int64)
+    t = np.unique(t[(t >= start_ns) & (t < end_ns)])
+    if t.size == 0:
+        return np.arange(start_ns, end_ns, step_ns, dtype=np.int64)
+    gaps = np.flatnonzero(np.diff(t) > GRID_SILENCE_NS)
+    # segments of data: [the window's start, or the first record after a silence; the last
+    # record before a silence, or the window's end); grid points keep their phase
+    first = start_ns if t[0] - start_ns <= GRID_SILENCE_NS else int(t[0])
+    last = end_ns if end_ns - t[-1] <= GRID_SILENCE_NS else int(t[-1]) + 1
+    if gaps.size == 0 and (first, last) == (start_ns, end_ns):
+        return np.arange(start_ns, end_ns, step_ns, dtype=np.int64)
+    lo = np.concatenate(([first], t[gaps + 1]))
+    hi = np.concatenate((t[gaps] + 1, [last]))
+    parts = []
+    for a, b in zip(lo.tolist(), hi.tolist(), strict=True):
+        k0 = -(-(a - start_ns) // step_ns)
+        k1 = -(-(b - start_ns) // step_ns)
+        parts.append(start_ns + step_ns * np.arange(k0, k1, dtype=np.int64))
+    return np.concatenate(parts)
+
+
+def shifted_index(instants: IntArray, shift_ns: int) -> tuple[IntArray, NDArray[np.bool_]]:
+    """For each instant t, the index of t - shift_ns in ``instants`` and whether it is
+    there (a grid with its long silences left out is not regular across them)."""
+    want = instants - shift_ns
+    idx = np.searchsorted(instants, want)
+    inside = idx < len(instants)
+    idx_c = np.where(inside, idx, 0)
+    return idx_c, inside & (instants[idx_c] == want)
