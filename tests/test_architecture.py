@@ -28,7 +28,7 @@ ALLOWED: dict[str, set[str]] = {
     "cli": {"core", "frames", "ingest", "math", "sim", "pipeline", "report"},
 }
 MAX_MODULE_LINES = 800
-MAX_CLI_LINES = 1600  #: eleven commands and their shared options (was 1300 for seven)
+MAX_CLI_LINES = 1700  #: eleven commands and their shared options (was 1600 before issue 21)
 MAX_COMMAND_LINES = 250
 
 

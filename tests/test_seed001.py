@@ -188,3 +188,57 @@ def test_fisher_upper_bound_on_k_for_the_papers_eight_days():
     # one day (24 instants, N = 5): K_FD = sqrt(F_0.99(5, 5)) = sqrt(10.967) = 3.3117
     _, kf1, n1 = S.k_upper_fisher(1.32, 24, 3600.0, 4.8 * 3600.0)
     assert n1 == 5.0 and kf1 == pytest.approx(math.sqrt(10.967), rel=1e-4)
+
+
+# ------------------------------------------------- (8) the limiting error, issue 21
+
+
+def test_limiting_error_8_normal_law_at_the_papers_probability():
+    # the paper's stated probability is P = 0.99 with N = 40 independent measurements
+    # (eight days hourly, correlation interval 4.8 h); for a normal law (E = 0) (8) is
+    # y^ = z_(1+P)/2 * sqrt(N / chi2_(1-P)(N)) * m_y.  Table values: z_0.995 = 2.5758,
+    # chi2_0.01(40) = 22.164 -> K_hm = sqrt(40 / 22.164) = 1.3434, K^ = 3.4604
+    n = S.effective_samples(192, 3600.0, 4.8 * 3600.0)
+    lim, kp, kh = S.limiting_error(1.0, 0.99, 0.0, 0.99, n)
+    assert kp == pytest.approx(2.5758, abs=1e-4) and kh == pytest.approx(1.3434, abs=1e-4)
+    assert lim == pytest.approx(2.5758 * math.sqrt(40 / 22.164), abs=2e-4)
+    exact = sps.norm.ppf(0.995) * math.sqrt(40 / sps.chi2.ppf(0.01, 40))
+    assert lim == pytest.approx(exact, rel=1e-12)
+    # with the RMS known (N -> infinity) (8) is the traditional K_PI(P) m_y of the note;
+    # the traditional form understates the limit at N = 40 by 1 - 1/K_hm = 25.6 %
+    assert S.k_hm(0.99, 1e9) == pytest.approx(1.0, abs=1e-3)
+    assert 1.0 - kp / lim == pytest.approx(0.2556, abs=1e-4)
+    # dracc's defaults (P = 0.95, confidence 0.95, tau 5 h) on the same eight days: N = 38.4
+    d = DeviationConfig()
+    n_d = S.effective_samples(192, 3600.0, d.correlation_time_s)
+    lim_d = S.limiting_error(1.0, d.probability, 0.0, d.confidence, n_d)[0]
+    assert n_d == pytest.approx(38.4)
+    assert lim_d == pytest.approx(
+        sps.norm.ppf(0.975) * math.sqrt(38.4 / sps.chi2.ppf(0.05, 38.4)), rel=1e-12
+    )
+    # the paper's "maximum understatement ... 48 % in the longitude channel" is the RMS
+    # factors of 31.10 alone: 1 - 1.49 / 2.89
+    assert round(1.0 - 1.49 / 2.89, 2) == 0.48
+
+
+def test_limiting_error_8_coverage_normal_and_heavy_tailed():
+    # (8) promises |error| <= y^ with probability P, at confidence P for the RMS: over
+    # normal samples of N = 40 the limit covers the true 99 % quantile in 99 % of trials
+    rng = np.random.default_rng(21)
+    trials, n = 20_000, 40
+    x = rng.standard_normal((trials, n))
+    m = np.sqrt(np.mean(x * x, axis=1))  # m^2 ~ chi2(N)/N for sigma = 1
+    lim = S.limiting_error(m, 0.99, 0.0, 0.99, n)[0]
+    share = np.mean(lim >= sps.norm.ppf(0.995))
+    assert abs(share - 0.99) < 4 * math.sqrt(0.99 * 0.01 / trials)
+    # dracc's K_hm takes the RMS's scatter from the normal law: for Student t with 6
+    # degrees of freedom (E = 3, Var m^2 = (2 + E) sigma^4 / N) it covers sigma less often
+    t6 = rng.standard_t(6, (trials, n)) / math.sqrt(1.5)  # unit variance
+    cover = np.mean(S.k_hm(0.99, n) * np.sqrt(np.mean(t6 * t6, axis=1)) >= 1.0)
+    assert 0.95 < cover < 0.97  # measured 0.960 (docs/deviation.md)
+    # the family matters at E = 3: Student t (dracc) against the Laplace law (E = 3 too,
+    # unit variance: quantile -ln(1 - P) / sqrt 2) differ by 6 %
+    assert S.k_pie(0.95, 3.0) == pytest.approx(sps.t.ppf(0.975, 6) * math.sqrt(4 / 6), rel=1e-9)
+    laplace = -math.log(0.05) / math.sqrt(2.0)
+    assert laplace == pytest.approx(2.1183, abs=1e-4)
+    assert laplace / S.k_pie(0.95, 3.0) == pytest.approx(1.0603, abs=1e-3)

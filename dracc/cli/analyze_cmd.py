@@ -40,6 +40,8 @@ from dracc.core.config import Config, load_config, validate
 from dracc.core.durations import parse_duration_s, parse_reset_s
 from dracc.core.errors import ConfigError
 from dracc.ingest.sources import keys_must_match
+from dracc.ingest.timed_observations import read_timed_observations
+from dracc.pipeline.results import EPOptions
 
 #: the analysis's stages and their shares of the progress bar (reading is most of the time)
 STAGES = {
@@ -102,6 +104,18 @@ def analyze(
     fix_role: str | None = typer.Option(
         None, "--fix-role", help="DR restart fixes from gnss (default) or ins_mean."
     ),
+    observations: Path | None = typer.Option(
+        None,
+        "--observations",
+        help="TOML file of timed fixes, ranges, bearings and lines: "
+        "each updates the estimated position.",
+    ),
+    fix_interval: str | None = typer.Option(
+        None,
+        "--fix-interval",
+        help="Update-interval study of the estimated position: "
+        "GNSS fix intervals, e.g. 300,600,1200,1800,3600 (or 5min,1h).",
+    ),
 ) -> None:
     """Analyse a voyage: DR with honest 2M circles, INS deviations from the mean, current; reports."""
     from dracc.pipeline.analysis import analyse
@@ -128,7 +142,13 @@ def analyze(
             staged_progress("analyze", STAGES) as on_progress,
             keys_must_match(parse_roles(role or [])),  # a --role key matching nothing: error
         ):
-            result = analyse(logs, cfg, progress=on_progress, total_bytes=total)
+            result = analyse(
+                logs,
+                cfg,
+                progress=on_progress,
+                total_bytes=total,
+                ep=_ep(observations, fix_interval),
+            )
         for line in write_reports(
             result,
             out,
@@ -142,6 +162,14 @@ def analyze(
         ):
             err.print(line, highlight=False, markup=False)
     QUICK_EXIT["on"] = True
+
+
+def _ep(observations: Path | None, fix_interval: str | None) -> EPOptions:
+    """The observation file read and the ``--fix-interval`` values parsed (seconds)."""
+    with option_values():
+        parts = [p for p in (fix_interval or "").split(",") if p.strip()]
+        iv = tuple(parse_duration_s(p.strip(), "--fix-interval") for p in parts)
+    return EPOptions(read_timed_observations(observations) if observations else (), iv)
 
 
 @contextmanager

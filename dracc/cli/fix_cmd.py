@@ -26,7 +26,7 @@ from dracc.ingest.observations import (
     DEFAULT_LINE_SIGMA_M,
     DEFAULT_PIER_SIGMA_M,
 )
-from dracc.pipeline.fix import run_fix
+from dracc.pipeline.fix import run_fix_free_gyro
 from dracc.report.fix_report import render, to_json
 from dracc.report.output import STDOUT, emit_json
 from dracc.report.write import writing
@@ -87,6 +87,13 @@ def fix_cmd(
         "SUBLAT,SUBLON,NADIR_DEG[,SIGMA_DEG]",
         "Free-gyro nadir circle about the sub-point (default sigma 1'; needs --prior when alone).",
     ),
+    gyro_vector: list[str] = _repeated(
+        "--gyro-vector",
+        "UX,UY,UZ,TIME_S,NADIR_DEG[,SIGMA_DEG[,SIGMA_U_DEG[,SIGMA_T_S]]]",
+        "Free-gyro spin-axis unit vector (inertial frame), time and nadir angle (seeds/002 "
+        "(1)); sigmas of the nadir angle (default 1'), the vector and the clock; the "
+        "report adds the paper's error model and FDOP (docs/free-gyro.md).",
+    ),
     prior: str | None = typer.Option(
         None,
         "--prior",
@@ -101,11 +108,18 @@ def fix_cmd(
         "-f",
         metavar="OBS.TOML",
         help="Observations as TOML table arrays named fix, range, bearing, "
-        "line, pier, abeam, nadir, and an optional prior table "
+        "line, pier, abeam, nadir, gyro_vector, and an optional prior table "
         "(docs/fix.md); they combine with the options.",
     ),
     ls: bool = typer.Option(
         False, "--ls", help="Unweighted least squares (W1) instead of WLS (W4)."
+    ),
+    datum: str | None = typer.Option(
+        None,
+        "--datum",
+        metavar="NAME",
+        help="Datum of the options' charted positions (ED50, NAD27, OSGB36, Tokyo, "
+        "'Pulkovo 1942', EPSG:4230 ...), brought to WGS-84 before fusion (default WGS84).",
     ),
     json_out: JsonOut = None,
 ) -> None:
@@ -123,13 +137,14 @@ def fix_cmd(
         ("--pier", pier),
         ("--abeam", abeam),
         ("--nadir", nadir),
+        ("--gyro-vector", gyro_vector),
     ]
-    rep = run_fix(options, file, prior, weighted=not ls)
+    rep, datums, gyro = run_fix_free_gyro(options, file, prior, weighted=not ls, datum=datum)
     if json_out != STDOUT:
-        render(rep, out)
+        render(rep, out, datums, gyro)
     if json_out is None:
         return
     with writing(json_out):
-        written = emit_json(to_json(rep), json_out)
+        written = emit_json(to_json(rep, datums, gyro), json_out)
     if written:
         err.print(f"wrote {written}", highlight=False, markup=False)

@@ -33,6 +33,17 @@ else:  # pragma: no cover
 from dracc.core.durations import parse_reset_s
 from dracc.core.errors import ConfigError
 from dracc.core.quantities import QUANTITIES
+from dracc.core.reference_config import (
+    BerthConfig,
+    ReferenceConfig,
+    check_abeam,
+    check_alongside,
+    check_berth,
+    check_pier,
+    check_utc,
+    one_or_many,
+    toml_datetime,
+)
 from dracc.core.vocabulary import CHANNEL_KEYS, INS_ROLES, ROLES
 
 
@@ -174,6 +185,7 @@ class Config:
     deviation: DeviationConfig = DeviationConfig()
     faults: FaultsConfig = FaultsConfig()
     integrity: IntegrityConfig = IntegrityConfig()
+    reference: ReferenceConfig = field(default_factory=ReferenceConfig)
     #: further sections (audit, fleet, report, vessel) as plain tables, validated by their
     #: owners (dracc.pipeline.audit.audit_config, dracc.pipeline.fleet.fleet_config); here only: each is a table
     extra: dict[str, Any] = field(default_factory=dict)
@@ -186,6 +198,7 @@ _SECTIONS: dict[str, type] = {
     "deviation": DeviationConfig,
     "faults": FaultsConfig,
     "integrity": IntegrityConfig,
+    "reference": ReferenceConfig,
 }
 
 
@@ -361,6 +374,8 @@ def _describe(tp: Any) -> str:
         return "an integer"
     if tp is float:
         return "a number"
+    if tp is BerthConfig:
+        return "a berth table"
     if tp is str:
         return "a string"
     origin = typing.get_origin(tp)
@@ -394,6 +409,8 @@ def _typed(value: object, tp: Any, section: str, key: str, rng: _Range | None) -
         return value
     if tp is ErrorSource:
         return _error_source(value, section, key)
+    if tp is BerthConfig:
+        return _berth(value, section, key)
     if origin is tuple:
         if not isinstance(value, (list, tuple)):
             raise _wrong(section, key, value, _describe(tp))
@@ -512,6 +529,24 @@ def _check_apriori(
     return table
 
 
+def _berth(value: object, section: str, key: str) -> BerthConfig:
+    """One berth of ``[reference] alongside``: its keys and values checked as a section's
+    are (:func:`_section`), then its own rules (:func:`check_berth`)."""
+    where = f"{section}.{_key(key)}"
+    if not isinstance(value, dict):
+        raise _wrong(
+            section, key, value, "a table {pier = [...], side = ..., half_breadth_m = ...}"
+        )
+    _no_unknown(value, [f.name for f in fields(BerthConfig)], where)
+    for name in ("pier", "side", "half_breadth_m"):
+        if name not in value:
+            raise ConfigError(
+                f"[{where}] {name} is missing: a berth needs pier = [LAT1, LON1, LAT2, LON2], "
+                'side = "port" or "starboard" and half_breadth_m'
+            )
+    return check_berth(_section(BerthConfig(**value), where), where)
+
+
 #: every field of every section: its range and rules beyond its annotated type (a test
 #: checks that no field is missing here)
 _RULES: dict[type, dict[str, _Rule]] = {
@@ -607,6 +642,23 @@ _RULES: dict[type, dict[str, _Rule]] = {
             _POS,
         ),
     },
+    BerthConfig: {
+        "pier": _Rule(_FINITE, check=check_pier),
+        "side": _Rule(check=_one_of("port", "starboard")),
+        "half_breadth_m": _POS,
+        "heading_deg": _Rule(_Range("in [0, 360] degrees", 0.0, 360.0)),
+        "sigma_m": _POS,
+        "gap_m": _Rule(_NON_NEGATIVE),
+        "ref_stbd_m": _Rule(_FINITE),
+        "abeam": _Rule(_FINITE, check=check_abeam),
+        "abeam_sigma_m": _POS,
+        "start_utc": _Rule(check=check_utc, before=toml_datetime),
+        "end_utc": _Rule(check=check_utc, before=toml_datetime),
+        "tolerance_m": _POS,
+        "max_speed_kn": _POS,
+        "datum": _TYPE_ONLY,  # the name is checked by the analysis (pyproj, dracc.ingest.datums)
+    },
+    ReferenceConfig: {"alongside": _Rule(check=check_alongside, before=one_or_many)},
 }
 
 

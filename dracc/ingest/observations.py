@@ -11,6 +11,10 @@ library observations (radians, metres) are built from these by :mod:`dracc.math.
 Errors are one line naming the option (or file, table and key) and the value:
 :class:`FixUsageError` (exit 2) for the command line, :class:`FixFileError` (exit 4) for
 the file, :class:`IngestError` (exit 3) for a missing file.
+
+Datums (seeds/004 §2): a charted item's positions referred to another datum (``--datum``,
+the file's ``datum``, an item's ``datum``) are moved to WGS-84 by
+:func:`referred_to_wgs84` (:mod:`dracc.ingest.datums`) before fusion.
 """
 
 from __future__ import annotations
@@ -18,13 +22,14 @@ from __future__ import annotations
 import math
 import re
 import sys
-from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from dracc.core.errors import DraccError, FixFileError, FixUsageError, IngestError
+from dracc.core.errors import ConfigError, DraccError, FixFileError, FixUsageError, IngestError
 from dracc.core.units import CABLE_M, NMI_M
+from dracc.ingest.datums import Transformation, resolve_datum, to_wgs84
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -136,6 +141,7 @@ class Pending:
     kind: str
     source: str
     fields: dict[str, Any]
+    datum: str | None = None  #: the datum its positions are referred to (None: WGS-84)
 
     @property
     def text(self) -> str | None:
@@ -204,6 +210,14 @@ class _Reader:
 
 # ------------------------------------------------------------- options and the TOML file
 
+#: a free-gyro observation (seeds/002 (1)): the spin-axis unit vector in the inertial frame,
+#: the time (s; the inertial x axis is at Greenwich at 0), the nadir angle, and the sigmas of
+#: the nadir angle, of the gyro vector's direction (per axis) and of the clock
+_GYRO_REQUIRED = ("ux", "uy", "uz", "time_s", "nadir_deg")
+_GYRO_OPTIONAL = ("sigma_deg", "sigma_u_deg", "sigma_t_s")
+#: |u| may differ from 1 by this much (rounding of the given components)
+GYRO_UNIT_TOLERANCE = 1e-6
+
 #: option name -> (kind, required field names, optional field names)
 OPTION_FORMS = {
     "--fix": ("fix", ("lat", "lon"), ("sigma_m",)),
@@ -218,6 +232,7 @@ OPTION_FORMS = {
     ),
     "--abeam": ("abeam", ("lat", "lon"), ("sigma_m",)),
     "--nadir": ("nadir", ("sublat", "sublon", "nadir_deg"), ("sigma_deg",)),
+    "--gyro-vector": ("gyro_vector", _GYRO_REQUIRED, _GYRO_OPTIONAL),
 }
 
 #: TOML table name -> (kind, required keys, optional keys); alternatives "a|b" (one of)
@@ -233,6 +248,7 @@ TABLE_FORMS = {
     ),
     "abeam": ("abeam", ("lat", "lon"), ("sigma_m",)),
     "nadir": ("nadir", ("sublat", "sublon", "nadir_deg"), ("sigma_deg",)),
+    "gyro_vector": ("gyro_vector", _GYRO_REQUIRED, _GYRO_OPTIONAL),
 }
 
 
@@ -253,6 +269,12 @@ def _toml_pending(path: Path, table: str, index: int, entry: Any) -> Pending:
     where = f"{path}: [[{table}]] #{index}"
     if not isinstance(entry, dict):
         raise FixFileError(f"{where}: expected a table ([[{table}]] with keys), got {entry!r}")
+    entry = dict(entry)
+    datum = entry.pop("datum", None)
+    if datum is not None:
+        if kind not in DATUM_KINDS:
+            raise FixFileError(f"{where}: datum applies to charted positions, not to [[{table}]]")
+        datum = checked_datum(f"{where}: datum", datum, FixFileError)
     allowed = {k for spec in required + optional for k in spec.split("|")}
     for key in entry:
         if key not in allowed:
@@ -274,7 +296,7 @@ def _toml_pending(path: Path, table: str, index: int, entry: Any) -> Pending:
         raise FixFileError(
             f"{where}: observed_at must be 'ship' or 'mark', got {entry['observed_at']!r}"
         )
-    return Pending(kind, where, fields)
+    return Pending(kind, where, fields, datum)
 
 
 def read_obs_file(path: Path) -> tuple[list[Pending], dict[str, Any] | None]:
@@ -292,20 +314,85 @@ def read_obs_file(path: Path) -> tuple[list[Pending], dict[str, Any] | None]:
         raise FixFileError(f"{path}: cannot read ({e})") from e
     pending: list[Pending] = []
     prior = None
+    file_datum = None
     for key, value in data.items():
         if key == "prior":
             if not isinstance(value, dict) or set(value) != {"lat", "lon"}:
                 raise FixFileError(f"{path}: [prior] must hold exactly lat and lon, got {value!r}")
             prior = value
             continue
+        if key == "datum":  # the file's datum: for every charted item without its own
+            file_datum = checked_datum(f"{path}: datum", value, FixFileError)
+            continue
         if key not in TABLE_FORMS:
             raise FixFileError(
-                f"{path}: unknown table {key!r} (tables: prior, {', '.join(TABLE_FORMS)})"
+                f"{path}: unknown table {key!r} (tables: prior, {', '.join(TABLE_FORMS)}; "
+                "key: datum)"
             )
         entries = value if isinstance(value, list) else [value]
         for i, entry in enumerate(entries, start=1):
             pending.append(_toml_pending(path, key, i, entry))
+    if file_datum is not None:
+        pending = [
+            replace(p, datum=file_datum) if p.datum is None and p.kind in DATUM_KINDS else p
+            for p in pending
+        ]
     return pending, prior
+
+
+# ------------------------------------------------------------------------------ datums
+
+#: the kinds whose positions are charted (or plotted) and so referred to a datum; a
+#: nadir circle's sub-point is astronomical (seeds/002), not charted
+DATUM_KINDS = ("fix", "range", "bearing", "bearing_from_mark", "line", "pier", "abeam")
+
+
+def checked_datum(where: str, value: Any, exc_type: type[DraccError]) -> str:
+    """A datum name or EPSG code, checked (:func:`dracc.ingest.datums.resolve_datum`)."""
+    if not isinstance(value, str):
+        raise exc_type(f"{where} must be a text such as 'ED50' or 'EPSG:4230', got {value!r}")
+    try:
+        resolve_datum(value)
+    except ConfigError as e:
+        raise exc_type(f"{where}: {e}") from None
+    return value.strip()
+
+
+@dataclass(frozen=True)
+class DatumRecord:
+    """How one observation's positions were brought to WGS-84 (seeds/004 §2).
+
+    ``points_given_deg``: as the navigator gave them (on ``transformation.datum``);
+    ``points_wgs84_deg``: as fused; ``shift_m``: each point's shift (geodesic metres).
+    """
+
+    label: str
+    points_given_deg: tuple[tuple[float, float], ...]
+    points_wgs84_deg: tuple[tuple[float, float], ...]
+    shift_m: tuple[float, ...]
+    transformation: Transformation
+
+
+def referred_to_wgs84(spec: ObsSpec, datum: str) -> ObsSpec:
+    """``spec`` with its charted points on WGS-84 and the :class:`DatumRecord`.
+
+    Only positions move: ranges, bearings, offsets and pier distances stay as measured.
+    WGS-84 itself leaves ``spec`` as it is (no record).
+    """
+    if resolve_datum(datum) == "EPSG:4326":
+        return spec
+    exc = FixUsageError if spec.source.startswith("--") else FixFileError
+    lats = [p[0] for p in spec.points_deg]
+    lons = [p[1] for p in spec.points_deg]
+    try:
+        pos = to_wgs84(lats, lons, datum)
+    except ConfigError as e:
+        raise _Reader(spec.source, spec.text, exc).fail(str(e)) from None
+    points = tuple(zip(pos.lat_deg.tolist(), pos.lon_deg.tolist(), strict=True))
+    record = DatumRecord(
+        spec.label, spec.points_deg, points, tuple(pos.shift_m.tolist()), pos.transformation
+    )
+    return replace(spec, points_deg=points, datum=record)
 
 
 def parse_prior(
@@ -331,14 +418,15 @@ def parse_prior(
 class ObsSpec:
     """One observation as the navigator gave it, checked, in degrees and metres.
 
-    ``kind``: fix, range, bearing, bearing_from_mark, line, pier, abeam or nadir;
+    ``kind``: fix, range, bearing, bearing_from_mark, line, pier, abeam, nadir or gyro_vector;
     ``text``: the option's value (for messages; None from the file); ``unit``: ``"m"`` or
     ``"deg"``, the unit its residual is shown in; ``sigma``: its standard deviation in
     that unit; ``sigma_default``: True when no sigma was given; ``points_deg``: the
     charted points it names (the mark, the line's or pier's ends A and B, the nadir
     circle's sub-point).  ``values`` by kind: range ``dist_m``; bearings
     ``bearing_deg``; line ``offset_m``; pier ``heading_deg``, ``half_breadth_m``,
-    ``gap_m``, ``ref_stbd_m`` (and ``side``); nadir ``nadir_deg``.
+    ``gap_m``, ``ref_stbd_m`` (and ``side``); nadir ``nadir_deg``; gyro_vector (no point)
+    ``ux``, ``uy``, ``uz``, ``time_s``, ``nadir_deg``, ``sigma_u_deg``, ``sigma_t_s``.
     """
 
     kind: str
@@ -351,6 +439,7 @@ class ObsSpec:
     points_deg: tuple[tuple[float, float], ...]
     values: dict[str, float] = field(default_factory=dict)
     side: str | None = None
+    datum: DatumRecord | None = None  #: set when its points were moved to WGS-84
 
 
 def build_observation(p: Pending, label: str, n_piers: int) -> ObsSpec:
@@ -444,7 +533,29 @@ def build_observation(p: Pending, label: str, n_piers: int) -> ObsSpec:
             r.num(f["sigma_deg"], "SIGMA_DEG", positive=True) if given else DEFAULT_NADIR_SIGMA_DEG
         )
         return spec("deg", sigma, given, ((lat, lon),), nadir_deg=nadir)
+    if p.kind == "gyro_vector":
+        return _gyro_vector(r, f, spec)
     raise AssertionError(p.kind)  # pragma: no cover - kinds come from OPTION_FORMS/TABLE_FORMS
+
+
+def _gyro_vector(r: _Reader, f: dict[str, Any], spec: Callable[..., ObsSpec]) -> ObsSpec:
+    """A gyro-vector observation: ``values`` ux, uy, uz, time_s, nadir_deg, sigma_u_deg,
+    sigma_t_s (0 when not given); no charted point (the sub-point comes from u and t)."""
+    u = [r.num(f[k], k.upper()) for k in ("ux", "uy", "uz")]
+    norm = math.sqrt(sum(c * c for c in u))
+    if abs(norm - 1.0) > GYRO_UNIT_TOLERANCE:
+        raise r.fail(f"the gyro vector UX,UY,UZ must be a unit vector, |u| = {norm:.7f}")
+    time_s = r.num(f["time_s"], "TIME_S")
+    nadir = r.num(f["nadir_deg"], "NADIR_DEG")
+    if not 0.0 < nadir < 180.0:
+        raise r.fail(f"NADIR_DEG must be in (0, 180), got {f['nadir_deg']!r}")
+    given = "sigma_deg" in f
+    sigma = r.num(f["sigma_deg"], "SIGMA_DEG", positive=True) if given else DEFAULT_NADIR_SIGMA_DEG
+    sigma_u = r.num(f["sigma_u_deg"], "SIGMA_U_DEG", nonneg=True) if "sigma_u_deg" in f else 0.0
+    sigma_t = r.num(f["sigma_t_s"], "SIGMA_T_S", nonneg=True) if "sigma_t_s" in f else 0.0
+    values = dict(zip(("ux", "uy", "uz"), u, strict=True))
+    values |= {"time_s": time_s, "nadir_deg": nadir, "sigma_u_deg": sigma_u, "sigma_t_s": sigma_t}
+    return spec("deg", sigma, given, (), **values)
 
 
 def _two_points(r: _Reader, f: dict[str, Any]) -> tuple[tuple[float, float], tuple[float, float]]:
@@ -455,8 +566,18 @@ def _two_points(r: _Reader, f: dict[str, Any]) -> tuple[tuple[float, float], tup
 
 
 #: the solving order of the kinds; labels count within a kind
-KIND_ORDER = ("fix", "range", "bearing", "bearing_from_mark", "line", "pier", "abeam", "nadir")
-_LABEL = {"bearing_from_mark": "bearing at mark"}
+KIND_ORDER = (
+    "fix",
+    "range",
+    "bearing",
+    "bearing_from_mark",
+    "line",
+    "pier",
+    "abeam",
+    "nadir",
+    "gyro_vector",
+)
+_LABEL = {"bearing_from_mark": "bearing at mark", "gyro_vector": "gyro vector"}
 
 
 def iter_observations(pending: Sequence[Pending]) -> Iterator[ObsSpec]:
@@ -471,16 +592,25 @@ def iter_observations(pending: Sequence[Pending]) -> Iterator[ObsSpec]:
     for kind in KIND_ORDER:
         for p in (q for q in pending if q.kind == kind):
             counts[kind] = counts.get(kind, 0) + 1
-            yield build_observation(p, f"{_LABEL.get(kind, kind)} {counts[kind]}", n_piers)
+            spec = build_observation(p, f"{_LABEL.get(kind, kind)} {counts[kind]}", n_piers)
+            yield referred_to_wgs84(spec, p.datum) if p.datum is not None else spec
             n_piers += kind == "pier"
 
 
 def read_observations(
-    options: Sequence[tuple[str, Sequence[str]]], file: Path | None, prior: str | None
+    options: Sequence[tuple[str, Sequence[str]]],
+    file: Path | None,
+    prior: str | None,
+    datum: str | None = None,
 ) -> tuple[Iterator[ObsSpec], tuple[float, float] | None]:
     """Everything ``dracc fix`` was given: the observations (lazy, in solving order) and
-    the prior (degrees, or None).  ``options``: (option name, its values) pairs."""
+    the prior (degrees, or None).  ``options``: (option name, its values) pairs;
+    ``datum``: the datum of the options' charted positions (``--datum``; the file names
+    its own)."""
     pending = [parse_option(option, v) for option, values in options for v in values]
+    if datum is not None:
+        datum = checked_datum("--datum", datum, FixUsageError)
+        pending = [replace(p, datum=datum) if p.kind in DATUM_KINDS else p for p in pending]
     file_prior = None
     if file is not None:
         more, file_prior = read_obs_file(file)
@@ -489,12 +619,15 @@ def read_observations(
 
 
 __all__ = [
+    "DATUM_KINDS",
     "KIND_ORDER",
     "OPTION_FORMS",
     "TABLE_FORMS",
+    "DatumRecord",
     "ObsSpec",
     "Pending",
     "build_observation",
+    "checked_datum",
     "iter_observations",
     "parse_coordinate_deg",
     "parse_distance_m",
@@ -502,4 +635,5 @@ __all__ = [
     "parse_prior",
     "read_obs_file",
     "read_observations",
+    "referred_to_wgs84",
 ]

@@ -39,10 +39,11 @@ from dracc.math.integrity import check_night, dr_innovation_check, with_dr_check
 from dracc.pipeline import overview, selection
 from dracc.pipeline.calibration_stage import calibration as calibration_section
 from dracc.pipeline.current_stage import current as current_section
+from dracc.pipeline.current_stage import estimated_position
 from dracc.pipeline.deviation_stage import deviation as deviation_section
 from dracc.pipeline.dr_stage import dead_reckoning
 from dracc.pipeline.faults_stage import sensor_faults
-from dracc.pipeline.results import SCHEMA, Analysis
+from dracc.pipeline.results import SCHEMA, Analysis, EPOptions
 
 __all__ = ["analyse", "analyse_voyage"]
 
@@ -59,6 +60,7 @@ def analyse(
     cfg: Config | None = None,
     progress: Progress | None = None,
     total_bytes: int | None = None,
+    ep: EPOptions | None = None,
 ) -> Analysis:
     """Read the logs ``paths`` (several files of one voyage merge by time) and analyse them.
 
@@ -84,13 +86,17 @@ def analyse(
 
     voyage = read_logs([Path(p) for p in paths], cfg.ingest, progress=on_bytes)
     report("reading logs", 1.0)
-    return analyse_voyage(voyage, cfg, report)
+    return analyse_voyage(voyage, cfg, report, ep)
 
 
 def analyse_voyage(
-    voyage: Voyage, cfg: Config | None = None, progress: Progress | None = None
+    voyage: Voyage,
+    cfg: Config | None = None,
+    progress: Progress | None = None,
+    ep: EPOptions | None = None,
 ) -> Analysis:
-    """Analyse an ingested :class:`~dracc.frames.Voyage` (see :func:`analyse`)."""
+    """Analyse an ingested :class:`~dracc.frames.Voyage` (see :func:`analyse`; ``ep``: the
+    observation file's updates and the fix-interval study of the estimated position)."""
     cfg = cfg or Config()
     report = progress or _noop
     missing: list[str] = []
@@ -123,9 +129,13 @@ def analyse_voyage(
         )
 
     report("current", 0.0)
-    current = None
+    current = est = None
     if dr is not None and dr_inputs is not None and fixes is not None:
         current = current_section(dr_inputs, fixes, cfg.dead_reckoning, missing)
+        ep = ep or EPOptions()
+        est = estimated_position(
+            dr_inputs, fixes, cfg.dead_reckoning, ep.observations, ep.intervals_s, missing
+        )
     report("current", 1.0)
 
     report("deviation statistics", 0.0)
@@ -162,6 +172,7 @@ def analyse_voyage(
         ignored={str(k): int(v) for k, v in getattr(voyage, "ignored", {}).items()},
         integrity=integrity,
         headings=headings,
+        estimated_position=est,
     )
 
 

@@ -9,6 +9,7 @@ already moves with the current: nothing to estimate.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 
@@ -16,9 +17,20 @@ from dracc.core.arrays import unique_sorted
 from dracc.core.config import DeadReckoningConfig
 from dracc.core.geodesy import wrap_2pi
 from dracc.core.units import KN_MPS
+from dracc.ingest.timed_observations import TimedObservation
 from dracc.math.current import CurrentModel, estimate_current
+from dracc.math.ellipse import error_ellipse
+from dracc.math.ep.aided import (
+    TimedUpdate,
+    epoch_rows,
+    interval_rows,
+    interval_study,
+    run_aided,
+    thinned_fixes,
+)
+from dracc.math.fix import library_observation
 from dracc.math.fusion import PositionFix
-from dracc.pipeline.results import CurrentSection, Estimate
+from dracc.pipeline.results import CurrentSection, Estimate, EstimatedPositionSection
 from dracc.pipeline.selection import DR_STEP_S, DRInputs, Fixes
 
 #: the current filter runs on a grid of this step, updated by a fix every epoch interval
@@ -174,4 +186,141 @@ def current_filtered(
         drift_sigma_mps=s_d,
         n_updates=n_updates,
         notes=(note,),
+    )
+
+
+# ------------------------------------------------- the estimated position (seeds/003)
+
+
+def _stretches(dr: DRInputs) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """(t_s, course_rad, speed_mps) on the CURRENT_STEP_S grid over each stretch of water velocity."""
+    step = max(1, int(round(CURRENT_STEP_S / DR_STEP_S)))
+    t, vn, ve = dr.time_s[::step], dr.vn_mps[::step], dr.ve_mps[::step]
+    ok = np.isfinite(vn) & np.isfinite(ve)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        if b - a >= 3:
+            yield t[a:b], np.arctan2(ve[a:b], vn[a:b]), np.hypot(vn[a:b], ve[a:b])
+
+
+def estimated_position(
+    dr: DRInputs,
+    fixes: Fixes,
+    cfg: DeadReckoningConfig,
+    observations: Sequence[TimedObservation],
+    intervals_s: Sequence[float],
+    missing: list[str],
+) -> EstimatedPositionSection | None:
+    """The aided-DR EP (dracc.math.ep.aided) of a water log over each stretch of DR: started
+    at a fix, updated by a fix every ``epoch_interval_s`` and by the file's observations;
+    with ``intervals_s``, the update-interval study (GNSS fixes only)."""
+    if dr.mode != "water":
+        if observations or intervals_s:
+            missing.append(
+                "estimated position not computed: the log measures over the ground, so there "
+                "is no current for the aided-DR filter to learn"
+            )
+        return None
+    ft, flat, flon, fdesc = fixes
+    fix_s = (ft - dr.t0_ns) / 1e9
+    model = CurrentModel.from_config(cfg)
+    obs = [
+        ((o.time_ns - dr.t0_ns) / 1e9, library_observation(o.spec, []).obs, o.spec.label)
+        for o in observations
+    ]
+    cols: list[list[np.ndarray]] = [[] for _ in range(5)]
+    kinds: list[str] = []
+    used: set[int] = set()
+    n_fix = n_lop = 0
+    study: list[list[tuple[np.ndarray, np.ndarray]]] = []
+    for ts, course, speed in _stretches(dr):
+        if intervals_s:
+            study.append(
+                interval_study(
+                    ts, course, speed, fix_s, flat, flon, cfg.fix_sigma_m, model, intervals_s
+                )
+            )
+        pick = thinned_fixes(fix_s, ts[0], ts[-1], dr.epoch_interval_s)
+        if pick.size == 0:
+            continue
+        t0 = fix_s[pick[0]]
+        keep = ts >= t0
+        if keep.sum() < 2:
+            continue
+        ups = [
+            TimedUpdate(
+                float(fix_s[i]), PositionFix.from_sigma(flat[i], flon[i], cfg.fix_sigma_m), "gnss"
+            )
+            for i in pick[1:]
+        ]
+        mine = [j for j, (t, _, _) in enumerate(obs) if t0 < t <= ts[keep][-1]]
+        ups += [TimedUpdate(obs[j][0], obs[j][1], obs[j][2]) for j in mine]
+        used.update(mine)
+        start = PositionFix.from_sigma(flat[pick[0]], flon[pick[0]], cfg.fix_sigma_m)
+        run = run_aided(ts[keep], course[keep], speed[keep], start, ups, model)
+        n_fix += sum(u.label == "gnss" for u in run.updates)
+        n_lop += sum(u.label != "gnss" for u in run.updates)
+        rows = epoch_rows(run, dr.epoch_interval_s)
+        tr = run.track
+        cols[0].append(tr.t_s[rows.index])
+        cols[1].append(tr.lat_rad[rows.index])
+        cols[2].append(tr.lon_rad[rows.index])
+        cols[3].append(tr.position_cov_m2[rows.index])
+        cols[4].append(rows.since_update_s)
+        kinds += rows.update_kind
+    if not kinds:
+        missing.append("estimated position not computed: no fix starts a stretch of dead reckoning")
+        return None
+    t, lat, lon, P, since = (np.concatenate(c) for c in cols)
+    smaj, smin, orient = error_ellipse(P)
+    outside = len(obs) - len(used)
+    notes = [
+        f"the aided-DR filter (seeds/003): a Gauss-Markov current estimated from a {fdesc} fix "
+        f"every {dr.epoch_interval_s:g} s"
+        + (f" and {n_lop} lines of position or fixes from the observation file" if obs else "")
+    ]
+    if outside:
+        notes.append(
+            f"{outside} observation(s) of the file lie outside the dead reckoning: not used"
+        )
+    for o in observations:  # datums (seeds/004 §2): say what moved each charted position
+        rec = o.spec.datum
+        if rec is not None:
+            op = rec.transformation
+            acc = "" if op.accuracy_m is None else f", ±{op.accuracy_m:g} m"
+            code = f" ({op.operation_code}{acc})" if op.operation_code else ""
+            notes.append(
+                f"{o.spec.label}: charted on {op.datum}, moved to WGS-84 by {op.operation}"
+                f"{code}: {max(rec.shift_m):.1f} m"
+                + (f"; {op.missing_operation} needs a grid not installed" if op.fallback else "")
+            )
+    return EstimatedPositionSection(
+        time_ns=(t * 1e9).astype(np.int64) + dr.t0_ns,
+        lat_rad=lat,
+        lon_rad=lon,
+        radius_2m_m=2.0 * np.sqrt(P[:, 0, 0] + P[:, 1, 1]),
+        semi_major_m=smaj,
+        semi_minor_m=smin,
+        orientation_rad=orient,
+        since_update_s=since,
+        update_kind=tuple(kinds),
+        fix_interval_s=dr.epoch_interval_s,
+        n_fix_updates=n_fix,
+        n_lop_updates=n_lop,
+        observations_outside=outside,
+        interval_study=(
+            interval_rows(
+                intervals_s,
+                [
+                    (
+                        np.concatenate([s[i][0] for s in study]),
+                        np.concatenate([s[i][1] for s in study]),
+                    )
+                    for i in range(len(intervals_s))
+                ],
+            )
+            if study
+            else ()
+        ),
+        notes=tuple(notes),
     )

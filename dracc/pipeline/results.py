@@ -13,8 +13,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from dracc.ingest.timed_observations import TimedObservation
 from dracc.math.deadreckoning import LegConsistency
 from dracc.math.deviation import DeviationResult
+from dracc.math.ep.aided import IntervalRow
 from dracc.math.faults import SensorFault
 from dracc.math.integrity import IntegrityResult
 
@@ -28,7 +30,9 @@ __all__ = [
     "DRLeg",
     "DRSection",
     "DRTrackResult",
+    "EPOptions",
     "Estimate",
+    "EstimatedPositionSection",
     "HeadingTrack",
     "InputFile",
     "SourceRow",
@@ -232,6 +236,37 @@ class CurrentSection:
     notes: tuple[str, ...] = ()
 
 
+@dataclass(frozen=True)
+class EPOptions:
+    """What ``analyze`` adds to the estimated position: the observation file's updates and
+    the fix intervals of the update-interval study (none: no study)."""
+
+    observations: tuple[TimedObservation, ...] = ()
+    intervals_s: tuple[float, ...] = ()
+
+
+@dataclass(frozen=True)
+class EstimatedPositionSection:
+    """The aided-DR estimated position (seeds/003, dracc.math.ep.aided): the EP at the
+    reporting epochs and the first epoch after each update, its 1-sigma ellipse and 2M."""
+
+    time_ns: np.ndarray
+    lat_rad: np.ndarray
+    lon_rad: np.ndarray
+    radius_2m_m: np.ndarray  #: 2 sqrt(trace P) (B30, B31)
+    semi_major_m: np.ndarray  #: 1-sigma ellipse
+    semi_minor_m: np.ndarray
+    orientation_rad: np.ndarray  #: of the major axis, clockwise from north
+    since_update_s: np.ndarray  #: since the last update (the start fix before the first)
+    update_kind: tuple[str, ...]  #: the updates since the row before ('gnss', 'bearing 1'); '' none
+    fix_interval_s: float  #: the GNSS fixes used, one per this interval
+    n_fix_updates: int
+    n_lop_updates: int  #: updates from the observation file
+    observations_outside: int  #: file observations outside every stretch of DR, not used
+    interval_study: tuple[IntervalRow, ...] = ()  #: --fix-interval (seeds/003, Figure 5)
+    notes: tuple[str, ...] = ()
+
+
 # ---------------------------------------------------------------------- the result
 
 
@@ -271,6 +306,8 @@ class Analysis:
     integrity: IntegrityResult | None = None
     #: every heading source, thinned (one record per 10 s), for the MCAP export
     headings: tuple[HeadingTrack, ...] = ()
+    #: the aided-DR estimated position with fixes and lines of position (seeds/003)
+    estimated_position: EstimatedPositionSection | None = None
 
     @property
     def duration_s(self) -> float:

@@ -11,6 +11,9 @@ holds up to three tracks, each split into one part per DR leg (restart to restar
 ``reference``  the reference the DR is scored against (the GNSS fixes), cut at the legs'
                start times
 
+and, where ``analyze`` computed it, the aided-DR estimated position of seeds/003
+(``aided_ep``: its track and 2-sigma ellipses, :mod:`dracc.report.ep_exports`).
+
 Track points are the full-rate DR rows thinned to one every :data:`TRACK_STEP_S` seconds
 of each leg (a row is kept where the whole number of steps since the leg's first row
 grows), plus each leg's first and last row; the reference is the source's positions as
@@ -55,16 +58,32 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
-from xml.sax.saxutils import escape, quoteattr
+from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
 from dracc import __version__
 from dracc.core import atomic
-from dracc.core.geodesy import add_offset_ne, offset_ne_m
+from dracc.core.geodesy import offset_ne_m
 from dracc.core.safetext import printable
 from dracc.core.timefmt import iso_utc
 from dracc.pipeline.results import Analysis, DRSection, DRTrackResult, Track
+from dracc.report import ep_exports
+from dracc.report.ep_exports import (
+    CIRCLE_VERTICES,
+    ELLIPSE_SCALE,
+    NS_GX,
+    NS_KML,
+    polygon_geometry,
+    ring_deg,
+)
+from dracc.report.ep_exports import deg as _deg
+from dracc.report.ep_exports import latlon_attrs as _latlon
+from dracc.report.ep_exports import line_geometry as _line_geometry
+from dracc.report.ep_exports import nullable as _nullable
+from dracc.report.ep_exports import num_text as _num
+from dracc.report.ep_exports import sub_element as _sub
+from dracc.report.ep_exports import xml_text as _text
 
 __all__ = [
     "CIRCLE_VERTICES",
@@ -80,14 +99,8 @@ __all__ = [
 NS_DRACC = "https://dracc.example/gpx/1"
 NS_GPX = "http://www.topografix.com/GPX/1/1"
 NS_XSI = "http://www.w3.org/2001/XMLSchema-instance"
-NS_KML = "http://www.opengis.net/kml/2.2"
-NS_GX = "http://www.google.com/kml/ext/2.2"
 #: seconds between exported track points (each leg's first and last row always)
 TRACK_STEP_S = 10.0
-#: vertices of a circle or ellipse polygon (the ring closes with a repeat of the first)
-CIRCLE_VERTICES = 72
-#: the exported ellipse is the 1-sigma one times this (2 sigma, as 2M is 2 drms)
-ELLIPSE_SCALE = 2.0
 #: the per-point uncertainty values, in the order written
 UNCERTAINTY = ("radius_2m_m", "semi_major_m", "semi_minor_m", "orientation_deg", "since_fix_s")
 #: those of them a KML track carries per point (Google Earth's elevation profile shows them)
@@ -138,12 +151,6 @@ def export_rows(tr: DRTrackResult, step_s: float = TRACK_STEP_S) -> np.ndarray:
     steps = np.floor((t - start) / (step_s * 1e9)).astype(np.int64)
     grows = np.r_[False, steps[1:] > steps[:-1]]
     return idx[first | last | grows]
-
-
-def _deg(lat_rad: np.ndarray, lon_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    lon = np.degrees(np.asarray(lon_rad, float))
-    lon = np.mod(lon + 180.0, 360.0) - 180.0  # GPX: -180 <= lon < 180
-    return np.degrees(np.asarray(lat_rad, float)), lon
 
 
 def _values(tr: DRTrackResult, idx: np.ndarray) -> dict[str, np.ndarray]:
@@ -260,10 +267,6 @@ def misses(dr: DRSection) -> np.ndarray:
     return np.flatnonzero(has & ~inside & (np.asarray(dr.epochs.since_fix_s) > 0))
 
 
-def _num(x: float, digits: int = 6) -> str:
-    return f"{x:.{digits}f}".rstrip("0").rstrip(".") if math.isfinite(x) else "nan"
-
-
 def _miss_text(dr: DRSection, i: int) -> str:
     ep = dr.epochs
     return (
@@ -289,13 +292,6 @@ def _describe(a: Analysis) -> str:
 # --------------------------------------------------------------------------- GPX
 
 
-def _sub(parent: ET.Element, tag: str, text: str | None = None, **attrib: str) -> ET.Element:
-    el = ET.SubElement(parent, tag, {k: printable(v) for k, v in attrib.items()})
-    if text is not None:
-        el.text = printable(text)  # a control character from a log is no XML
-    return el
-
-
 def _uncertainty(values: dict[str, float]) -> str:
     """The ``extensions`` element of a point: dracc's values that are known."""
     inner = "".join(
@@ -304,14 +300,6 @@ def _uncertainty(values: dict[str, float]) -> str:
         if math.isfinite(v := values.get(name, math.nan))
     )
     return f"<extensions><dracc:uncertainty>{inner}</dracc:uncertainty></extensions>"
-
-
-def _text(tag: str, text: str) -> str:
-    return f"<{tag}>{escape(printable(text))}</{tag}>"
-
-
-def _latlon(lat: float, lon: float) -> str:
-    return f'lat="{_num(lat, 8)}" lon="{_num(lon, 8)}"'
 
 
 def gpx_document(a: Analysis) -> bytes:
@@ -327,8 +315,11 @@ def gpx_document(a: Analysis) -> bytes:
     desc = _describe(a)
     if desc:
         out.append(_text("desc", desc))
-    lats = np.concatenate([p.lat_deg for ln in lines for p in ln.parts] or [np.zeros(0)])
-    lons = np.concatenate([p.lon_deg for ln in lines for p in ln.parts] or [np.zeros(0)])
+    aided = a.estimated_position if a.dead_reckoning is not None else None  # rides on the DR
+    la, lo = _deg(aided.lat_rad, aided.lon_rad) if aided is not None else (np.zeros(0),) * 2
+    lats = np.concatenate([p.lat_deg for ln in lines for p in ln.parts] + [la])
+    lons = np.concatenate([p.lon_deg for ln in lines for p in ln.parts] + [lo])
+    lats, lons = lats[np.isfinite(lats)], lons[np.isfinite(lons)]
     if lats.size:
         out.append(
             f'<bounds minlat="{_num(lats.min(), 8)}" minlon="{_num(lons.min(), 8)}" '
@@ -353,6 +344,9 @@ def gpx_document(a: Analysis) -> bytes:
                 + "</wpt>\n"
             )
     for ln in lines:
+        if ln.key == "reference" and aided is not None:  # the aided EP below the reference
+            out.append(ep_exports.gpx_track(aided, f"dracc {__version__}"))
+            aided = None
         out.append(
             "<trk>"
             + _text("name", ln.name)
@@ -380,6 +374,8 @@ def gpx_document(a: Analysis) -> bytes:
                 out.append(f'<extensions><dracc:leg index="{part.leg}"{fix}/></extensions>')
             out.append("</trkseg>\n")
         out.append("</trk>\n")
+    if aided is not None:
+        out.append(ep_exports.gpx_track(aided, f"dracc {__version__}"))
     out.append("</gpx>\n")
     return "".join(out).encode("utf-8")
 
@@ -390,91 +386,6 @@ def write_gpx(a: Analysis, path: str | Path) -> None:
 
 
 # ---------------------------------------------------------------------- polygons
-
-
-def ring_deg(
-    lat_rad: float,
-    lon_rad: float,
-    semi_major_m: float,
-    semi_minor_m: float,
-    orientation_rad: float,
-    n: int = CIRCLE_VERTICES,
-) -> tuple[np.ndarray, np.ndarray]:
-    """A closed counter-clockwise ring (lat, lon in degrees, n + 1 points; longitudes
-    continuous around the centre, possibly beyond +-180) of the ellipse with these
-    semi-axes, the major one at ``orientation_rad`` clockwise from north; equal axes make
-    a circle.  Each vertex is the point on the ellipsoid at its north/east offset."""
-    t = -np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)  # clockwise in (u, v): see below
-    ca, sa = math.cos(orientation_rad), math.sin(orientation_rad)
-    u, v = semi_major_m * np.cos(t), semi_minor_m * np.sin(t)
-    north = u * ca - v * sa
-    east = u * sa + v * ca
-    if np.sum(east * np.roll(north, -1) - np.roll(east, -1) * north) < 0:  # keep it CCW
-        north, east = north[::-1], east[::-1]
-    lat, lon = add_offset_ne(lat_rad, lon_rad, north, east)
-    lon = np.degrees(lon_rad + np.angle(np.exp(1j * (lon - lon_rad))))
-    lat = np.degrees(lat)
-    return np.r_[lat, lat[0]], np.r_[lon, lon[0]]
-
-
-def _clip(ring: list[tuple[float, float]], keep_west: bool) -> list[tuple[float, float]]:
-    """Sutherland-Hodgman: the part of a (lon, lat) ring west (or east) of lon 180."""
-    out: list[tuple[float, float]] = []
-    pts = ring[:-1]
-
-    def inside(p: tuple[float, float]) -> bool:
-        return p[0] <= 180.0 if keep_west else p[0] >= 180.0
-
-    for k, cur in enumerate(pts):
-        prev = pts[k - 1]
-        if inside(cur) != inside(prev):
-            f = (180.0 - prev[0]) / (cur[0] - prev[0])
-            out.append((180.0, prev[1] + f * (cur[1] - prev[1])))
-        if inside(cur):
-            out.append(cur)
-    return [*out, out[0]] if len(out) >= 3 else []
-
-
-def polygon_geometry(lat_deg: np.ndarray, lon_deg: np.ndarray) -> dict[str, Any]:
-    """A GeoJSON Polygon of a ring, or a MultiPolygon of its two halves where it crosses
-    the antimeridian (RFC 7946 3.1.9)."""
-    lon = np.asarray(lon_deg, float)
-    shift = 360.0 if lon.min() < -180.0 else 0.0  # bring a crossing to +180
-    ring = [(float(x) + shift, float(y)) for x, y in zip(lon, lat_deg, strict=True)]
-    if max(p[0] for p in ring) <= 180.0:
-        return {"type": "Polygon", "coordinates": [[_pos(x, y) for x, y in ring]]}
-    west = _clip(ring, keep_west=True)
-    east = [(x - 360.0, y) for x, y in _clip(ring, keep_west=False)]
-    polys = [[[_pos(x, y) for x, y in part]] for part in (west, east) if part]
-    return {"type": "MultiPolygon", "coordinates": polys}
-
-
-def _pos(lon: float, lat: float) -> list[float]:
-    return [round(lon, 8), round(lat, 8)]
-
-
-def _line_geometry(lat_deg: np.ndarray, lon_deg: np.ndarray) -> dict[str, Any] | None:
-    """A LineString, or a MultiLineString cut where it crosses the antimeridian."""
-    if lat_deg.size < 2:
-        return None
-    parts: list[list[list[float]]] = [[_pos(lon_deg[0], lat_deg[0])]]
-    for k in range(1, lat_deg.size):
-        x0, x1, y0, y1 = lon_deg[k - 1], lon_deg[k], lat_deg[k - 1], lat_deg[k]
-        if abs(x1 - x0) > 180.0:  # across the antimeridian, the short way
-            edge = 180.0 if x0 > 0 else -180.0
-            x1u = x1 + (360.0 if x0 > 0 else -360.0)
-            y = y0 + (edge - x0) / (x1u - x0) * (y1 - y0)
-            parts[-1].append(_pos(edge, y))
-            parts.append([_pos(-edge, y)])
-        parts[-1].append(_pos(x1, y1))
-    parts = [p for p in parts if len(p) >= 2]
-    if len(parts) == 1:
-        return {"type": "LineString", "coordinates": parts[0]}
-    return {"type": "MultiLineString", "coordinates": parts}
-
-
-def _nullable(x: float) -> float | None:
-    return float(x) if math.isfinite(x) else None
 
 
 def _epoch_shapes(dr: DRSection) -> list[tuple[int, str, np.ndarray, np.ndarray]]:
@@ -548,6 +459,8 @@ def geojson_document(a: Analysis) -> dict[str, Any]:
                     },
                 }
             )
+    if a.estimated_position is not None and dr is not None:  # the EP rides on the DR
+        features += ep_exports.geojson_features(a.estimated_position)
     return {
         "type": "FeatureCollection",
         "name": _title(a),
@@ -637,6 +550,8 @@ def kml_document(a: Analysis) -> bytes:
     if desc:
         _sub(doc, f"{{{k}}}description", desc)
     _kml_styles(doc)
+    if a.estimated_position is not None and a.dead_reckoning is not None:
+        ep_exports.kml_styles(doc)
     dr = a.dead_reckoning
     if dr is not None:
         ep = dr.epochs
@@ -692,6 +607,8 @@ def kml_document(a: Analysis) -> bytes:
                 _sub(pm, f"{{{k}}}styleUrl", "#miss")
                 pt = _sub(pm, f"{{{k}}}Point")
                 _sub(pt, f"{{{k}}}coordinates", f"{_num(lon_d[i], 8)},{_num(lat_d[i], 8)},0")
+    if a.estimated_position is not None and dr is not None:  # the EP rides on the DR
+        ep_exports.kml_parts(doc, a.estimated_position)
     folder = _sub(doc, f"{{{k}}}Folder")
     _sub(folder, f"{{{k}}}name", "Tracks")
     for ln in _lines(a):  # the reference last: drawn above the DR

@@ -449,6 +449,41 @@ def _calibration_current(a: Analysis) -> str:
             f"{_est(cur.drift_kn, 'kn')}, from {cur.n_updates} fix updates.</p>"
         )
         out.extend(f"<p>{_e(n)}</p>" for n in cur.notes)
+    out.append(_aided_ep(a))
+    return "".join(out)
+
+
+def _aided_ep(a: Analysis) -> str:
+    """The aided-DR estimated position (seeds/003): its updates and the fix-interval table."""
+    e = a.estimated_position
+    if e is None:
+        return ""
+    r2m = [float(x) for x in e.radius_2m_m if math.isfinite(x)]
+    out = [
+        f"<p>Aided-DR estimated position: {e.n_fix_updates} GNSS updates, {e.n_lop_updates} "
+        f"from the observation file; 2M up to {max(r2m, default=math.nan):.0f} m "
+        f"over {len(e.time_ns)} epochs.</p>"
+    ]
+    out.extend(f"<p>{_e(n)}</p>" for n in e.notes)
+    if e.interval_study:
+        rows = [
+            [
+                f"{r.interval_s:g} s",
+                str(r.n_updates),
+                f"{r.mean_2m_before_m:.0f} m",
+                f"{r.max_2m_before_m:.0f} m",
+                f"{100 * r.containment:.1f} %",
+            ]
+            for r in e.interval_study
+        ]
+        head: list[Header] = [
+            "fix interval",
+            "updates",
+            "mean 2M before",
+            "max 2M before",
+            "inside 95 %",
+        ]
+        out.append(_table(head, rows))
     return "".join(out)
 
 
@@ -564,6 +599,7 @@ def render_html(a: Analysis) -> str:
     figures = "".join(
         [
             track_plots.figures_html(a),  # the overview and the leg panels
+            track_plots.aided_ep_html(a),  # the aided-DR EP of seeds/003 over the DR
             _figure(
                 plots.deviation_plot(a),
                 "deviation plot",

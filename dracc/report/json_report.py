@@ -26,6 +26,7 @@ from dracc.pipeline.results import (
     DRSection,
     DRTrackResult,
     Estimate,
+    EstimatedPositionSection,
 )
 
 SCHEMA_PATH = Path(__file__).with_name("analysis.schema.json")
@@ -190,6 +191,43 @@ def _current(c: CurrentSection) -> dict[str, Any]:
     }
 
 
+def _estimated_position(e: EstimatedPositionSection) -> dict[str, Any]:
+    lat, lon, orient = np.degrees(e.lat_rad), np.degrees(e.lon_rad), np.degrees(e.orientation_rad)
+    return {
+        "fix_interval_s": _num(e.fix_interval_s),
+        "n_fix_updates": int(e.n_fix_updates),
+        "n_lop_updates": int(e.n_lop_updates),
+        "observations_outside": int(e.observations_outside),
+        "epochs": [
+            {
+                "time_utc": iso_utc(int(e.time_ns[i])),
+                "lat_deg": _num(lat[i]),
+                "lon_deg": _num(lon[i]),
+                "radius_2m_m": _num(e.radius_2m_m[i]),
+                "ellipse": {
+                    "semi_major_m": _num(e.semi_major_m[i]),
+                    "semi_minor_m": _num(e.semi_minor_m[i]),
+                    "orientation_deg": _num(orient[i]),
+                },
+                "since_update_s": _num(e.since_update_s[i]),
+                "update": e.update_kind[i],
+            }
+            for i in range(len(e.time_ns))
+        ],
+        "fix_interval_study": [
+            {
+                "interval_s": _num(r.interval_s),
+                "n_updates": int(r.n_updates),
+                "mean_2m_before_m": _num(r.mean_2m_before_m),
+                "max_2m_before_m": _num(r.max_2m_before_m),
+                "containment": _num(r.containment),
+            }
+            for r in e.interval_study
+        ],
+        "notes": list(e.notes),
+    }
+
+
 def _plain(x: Any) -> Any:
     """Settings may hold numpy scalars, tuples or paths: make them JSON types."""
     if isinstance(x, dict):
@@ -264,6 +302,9 @@ def to_dict(a: Analysis) -> dict[str, Any]:
         "dead_reckoning": None if a.dead_reckoning is None else _dead_reckoning(a.dead_reckoning),
         "calibration": None if a.calibration is None else _calibration(a.calibration),
         "current": None if a.current is None else _current(a.current),
+        "estimated_position": (
+            None if a.estimated_position is None else _estimated_position(a.estimated_position)
+        ),
         "missing": list(a.missing),
         "notes": list(a.notes),
         "faults": [f.to_dict() for f in a.faults],

@@ -47,6 +47,15 @@ Channels (topic: schema, fields; units in every dracc field name)
                            ``radius_2m_m``, ``ref_error_m``, ``inside`` (the reference within
                            2M widened by its own noise, as the consistency check counts;
                            null where the epoch is not scored), ``scored``
+``/dracc/aided_ep``        foxglove.LocationFix: the aided-DR estimated position (seeds/003,
+                           ``Analysis.estimated_position``) at its epochs, covariance KNOWN
+                           (3) from its 1-sigma ellipse (ENU m^2, as ``/dracc/ep``)
+``/dracc/aided_ep_error``  dracc.AidedEPError at the same epochs: ``radius_2m_m``,
+                           ``semi_major_m``/``semi_minor_m`` (1 sigma), ``orientation_deg``,
+                           ``since_update_s``, ``update`` ('gnss', 'bearing 1'; '' none)
+``/dracc/aided_ep_2m``     foxglove.GeoJSON at each of its epochs: the 2M circle and the
+                           2-sigma error ellipse as polygons (as ``/dracc/dr_2m``), with
+                           ``time_utc``, ``radius_2m_m``, ``since_update_s``, ``update``
 ``/dracc/reference``       foxglove.LocationFix: the reference the DR is scored against,
                            covariance DIAGONAL_KNOWN (2) from the reference noise the
                            analysis estimated (east, north sigma^2)
@@ -81,7 +90,7 @@ from dracc.core.geodesy import add_offset_ne, wrap_pi
 from dracc.core.timefmt import iso_utc
 from dracc.core.units import KN_MPS
 from dracc.core.vocabulary import CHANNEL_KEYS, CHANNELS
-from dracc.pipeline.results import Analysis, DRSection, DRTrackResult
+from dracc.pipeline.results import Analysis, DRSection, DRTrackResult, EstimatedPositionSection
 
 __all__ = [
     "EXPORT_STEP_S",
@@ -197,6 +206,20 @@ DR_ERROR_SCHEMA = _dracc_schema(
         "leg": "integer",
     },
 )
+
+AIDED_EP_ERROR_SCHEMA = _dracc_schema(
+    "dracc.AidedEPError",
+    {
+        "radius_2m_m": "number",
+        "semi_major_m": "number",
+        "semi_minor_m": "number",
+        "orientation_deg": "number",
+        "since_update_s": "number",
+        "update": "string",
+    },
+)
+#: the aided EP's polygons (Foxglove's Map draws GeoJSON with leaflet styles)
+_AIDED_STYLE = {"color": "#2ca02c", "weight": 1, "fillOpacity": 0.1}
 
 
 @dataclass
@@ -476,6 +499,66 @@ def _polygons(dr: DRSection) -> Stream:
     return s
 
 
+def _aided_streams(e: EstimatedPositionSection) -> list[Stream]:
+    """/dracc/aided_ep with its covariance, its error beside it and its 2M polygons."""
+    fix = Stream("/dracc/aided_ep", LOCATION_FIX_SCHEMA)
+    err = Stream("/dracc/aided_ep_error", AIDED_EP_ERROR_SCHEMA)
+    poly = Stream("/dracc/aided_ep_2m", GEOJSON_SCHEMA)
+    cov = enu_covariance(e.semi_major_m, e.semi_minor_m, e.orientation_rad)
+    for i in range(len(e.time_ns)):
+        lat, lon, r = float(e.lat_rad[i]), float(e.lon_rad[i]), float(e.radius_2m_m[i])
+        if not (math.isfinite(lat) and math.isfinite(lon)):
+            continue
+        tn = int(e.time_ns[i])
+        known = bool(np.isfinite(cov[i]).all())
+        kind = COVARIANCE_KNOWN if known else COVARIANCE_UNKNOWN
+        _fix(fix, tn, "aided_ep", lat, lon, cov[i] if known else [0.0] * 9, kind)
+        vals = {
+            "radius_2m_m": _num(r),
+            "semi_major_m": _num(e.semi_major_m[i]),
+            "semi_minor_m": _num(e.semi_minor_m[i]),
+            "orientation_deg": _num(math.degrees(e.orientation_rad[i])),
+            "since_update_s": _num(e.since_update_s[i]),
+            "update": e.update_kind[i],
+        }
+        err.add(tn, {"timestamp": _stamp(tn), "frame_id": "aided_ep", **vals})
+        a, b = float(e.semi_major_m[i]), float(e.semi_minor_m[i])
+        if not (math.isfinite(r) and r > 0 and math.isfinite(a) and math.isfinite(b) and b > 0):
+            continue
+        when = iso_utc(tn)
+        rings = (
+            ("circle", f"EP 2M {when[11:16]}Z {r:,.0f} m", ring_lonlat_deg(lat, lon, r, r, 0.0)),
+            (
+                "ellipse",
+                f"EP {ELLIPSE_SIGMA:g}-sigma ellipse {when[11:16]}Z",
+                ring_lonlat_deg(
+                    lat,
+                    lon,
+                    ELLIPSE_SIGMA * a,
+                    ELLIPSE_SIGMA * b,
+                    float(e.orientation_rad[i]),
+                ),
+            ),
+        )
+        features = [
+            {
+                "type": "Feature",
+                "properties": {
+                    "time_utc": when,
+                    **vals,
+                    "shape": shape,
+                    "name": name,
+                    "style": _AIDED_STYLE,
+                },
+                "geometry": {"type": "Polygon", "coordinates": [ring]},
+            }
+            for shape, name, ring in rings
+        ]
+        doc = {"type": "FeatureCollection", "features": features}
+        poly.add(tn, {"geojson": json.dumps(doc, separators=(",", ":"), allow_nan=False)})
+    return [fix, err, poly]
+
+
 def _reference_stream(a: Analysis, dr: DRSection) -> Stream | None:
     ref = next((t for t in a.tracks if t.role is not None and t.role == dr.reference_role), None)
     if ref is None:
@@ -543,6 +626,8 @@ def mcap_streams(a: Analysis) -> list[Stream]:
     dr = a.dead_reckoning
     if dr is not None:
         streams += _dr_streams(dr)
+        if a.estimated_position is not None:  # the aided EP rides on the DR
+            streams += _aided_streams(a.estimated_position)
         ref = _reference_stream(a, dr)
         if ref is not None:
             streams.append(ref)

@@ -19,6 +19,7 @@ import numpy as np  # noqa: E402
 from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.typing import LegendLocType  # noqa: E402
+from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar  # noqa: E402
 
 from dracc.core.arrays import ArrayLike, FloatArray  # noqa: E402
 from dracc.core.vocabulary import CHANNEL_KEYS, CHANNEL_UNITS, CHANNELS
@@ -44,6 +45,42 @@ def png_bytes(fig: Figure, dpi: int = _DPI) -> bytes:
     fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight", metadata={"Software": None})
     plt.close(fig)
     return buf.getvalue()
+
+
+_NM_KM = 1.852
+
+
+def metres_text(km: float) -> str:
+    """'850 m' under 10 km, else '12.3 km'."""
+    return f"{km * 1e3:.0f} m" if km < 10 else f"{km:.1f} km"
+
+
+def px_per_km(ax: Axes) -> float:
+    """Pixels per km on the x axis of ``ax`` (its aspect applied)."""
+    ax.apply_aspect()
+    (x0, _), (x1, _) = ax.transData.transform([(0.0, 0.0), (1.0, 0.0)])
+    return float(abs(x1 - x0))
+
+
+def scale_bar(ax: Axes) -> None:
+    """A nautical-mile scale bar about a fifth of the map wide."""
+    width_km = abs(np.subtract(*ax.get_xlim()))
+    nm = width_km / _NM_KM / 5.0
+    nice = max(
+        (v for v in (0.05, 0.1, 0.2, 0.5, 1, 2, 5, 10, 20, 50, 100) if v <= nm), default=0.05
+    )
+    ax.add_artist(
+        AnchoredSizeBar(
+            ax.transData,
+            nice * _NM_KM,
+            f"{nice:g} NM",
+            "lower left",
+            pad=0.5,
+            frameon=True,
+            size_vertical=0,
+            fontproperties={"size": 8},
+        )
+    )
 
 
 def _finish(

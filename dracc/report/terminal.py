@@ -29,6 +29,7 @@ from dracc.pipeline.results import (
     CurrentSection,
     DRSection,
     Estimate,
+    EstimatedPositionSection,
 )
 from dracc.report import fmt, fmt_duration, fmt_pct, fmt_signed, short_utc
 from dracc.report.rows import EXCEEDS, unit_rows
@@ -278,6 +279,44 @@ def _current_body(page: _Page, cur: CurrentSection) -> None:
     _notes(page, cur.notes)
 
 
+#: the fix-interval study (seeds/003, Figure 5): name, right-aligned, priority (as above)
+_STUDY_COLUMNS: tuple[tuple[str, bool, int], ...] = (
+    ("fix interval", True, 0),
+    ("updates", True, 2),
+    ("mean 2M before", True, 0),
+    ("max 2M before", True, 1),
+    ("inside 95 %", True, 0),
+)
+
+
+def _aided_ep_body(page: _Page, e: EstimatedPositionSection) -> None:
+    """The aided-DR EP (seeds/003) in one line; with --fix-interval, the study's table."""
+    r2m = np.asarray(e.radius_2m_m, float)
+    ok = np.isfinite(r2m)
+    mean2m = fmt(float(r2m[ok].mean()) if ok.any() else None, 0)
+    max2m = fmt(float(r2m[ok].max()) if ok.any() else None, 0)
+    lops = f", {e.n_lop_updates} from the observation file" if e.n_lop_updates else ""
+    page.line(
+        "updates",
+        f"{e.n_fix_updates} GNSS fixes (one per {fmt_duration(e.fix_interval_s)}){lops}; "
+        f"2M mean {mean2m} m, largest {max2m} m over {len(e.time_ns)} epochs",
+    )
+    if e.interval_study:
+        rows = [
+            (
+                fmt_duration(r.interval_s),
+                r.n_updates,
+                f"{fmt(r.mean_2m_before_m, 0)} m",
+                f"{fmt(r.max_2m_before_m, 0)} m",
+                fmt_pct(r.containment),
+            )
+            for r in e.interval_study
+        ]
+        headers, right, prio = zip(*_STUDY_COLUMNS, strict=True)
+        page.table(headers, rows, right=right, priorities=prio)
+    _notes(page, e.notes[1:])  # the first note says what the updates line says
+
+
 def _head(page: _Page, a: Analysis) -> None:
     """The title, the period, the inputs, what was rejected and ignored, the time events."""
     files = len(a.inputs)
@@ -342,6 +381,8 @@ def _page(a: Analysis, lay: Layout) -> _Page:
     _section(page, "INS deviations from the mean", _deviation_body, a.deviation)
     _section(page, "Calibration", _calibration_body, a.calibration)
     _section(page, "Current", _current_body, a.current)
+    if a.estimated_position is not None:  # seeds/003; the Missing list says why not
+        _section(page, "Aided-DR estimated position", _aided_ep_body, a.estimated_position)
     # dracc.math.faults: shown whenever found, excluded or not
     _bullets(page, f"Sensor faults ({len(a.faults)})", [f"{f.kind}: {f.message}" for f in a.faults])
     if a.integrity is not None:

@@ -1,5 +1,5 @@
 """Track plots that show where the dead reckoning left its circle: an overview of the
-voyage and one panel per leg (the worst legs when there are many), each PNG.
+voyage, one panel per leg (the worst legs when there are many) and the aided-DR EP's.
 
 Every panel is north up with an equal metric aspect (kilometres north/east of the first
 DR fix, the local tangent plane of :func:`dracc.core.geodesy.offset_ne_m`, where the 2M
@@ -28,10 +28,10 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Ellipse, Rectangle
-from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
 from dracc.core.geodesy import add_offset_ne, circmean, interp_position, offset_ne_m, wrap_pi
 from dracc.pipeline.results import Analysis, DRSection
+from dracc.report.ep_exports import stretch_starts
 from dracc.report.page import data_uri
 from dracc.report.plots import (
     _DPI,
@@ -41,10 +41,14 @@ from dracc.report.plots import (
     WATER_LABEL,
     _by_leg,
     _origin,
+    metres_text,
     png_bytes,
+    px_per_km,
+    scale_bar,
 )
 
 __all__ = [
+    "AIDED_LABEL",
     "CIRCLE_LABEL",
     "ELLIPSE_LABEL",
     "GRATICULE_GID",
@@ -53,6 +57,8 @@ __all__ = [
     "MISS_LABEL",
     "DrawnPanel",
     "Panel",
+    "aided_ep_html",
+    "aided_ep_panel",
     "draw_track_panels",
     "figures_html",
     "track_panels",
@@ -70,7 +76,6 @@ _ELLIPSE_K = math.sqrt(-2.0 * math.log(0.05))
 #: epoch insets of a leg panel (for circles too small on the leg's map): at most
 #: _MAX_INSETS, _INSETS_PER_ROW to a row, each _INSET_IN square
 _MAX_INSETS, _INSETS_PER_ROW, _INSET_IN, _INSET_ROW_IN = 10, 5, 1.5, 2.0
-_NM_KM = 1.852
 
 DR_COLOUR, REF_COLOUR, CIRCLE_COLOUR, ELLIPSE_COLOUR, MISS_COLOUR = (
     "black",
@@ -284,7 +289,7 @@ def _insets(
         ax.add_patch(Circle((cx, cy), r, fill=False, color=CIRCLE_COLOUR, lw=1.2, zorder=Z_CIRCLE))
         ax.add_patch(_ellipse(ep, i, (cx, cy)))
         ax.plot([cx], [cy], "+", ms=7, color=DR_COLOUR, zorder=Z_DR)
-        title = f"{_utc(int(ep.time_ns[i]))[3:]}  2M {_metres(r)}"
+        title = f"{_utc(int(ep.time_ns[i]))[3:]}  2M {metres_text(r)}"
         if np.isfinite(d):
             far = d > 0.95 * half
             k = 0.95 * half / d if far else 1.0
@@ -304,18 +309,8 @@ def _insets(
                 ax.plot([px], [py], "o", ms=4, color=REF_COLOUR, zorder=Z_MISS)
             title += " (ref beyond edge)" if far else ""
         if np.isfinite(ep.error_km[i]):
-            title += f"\nerror {_metres(float(ep.error_km[i]))}"
+            title += f"\nerror {metres_text(float(ep.error_km[i]))}"
         ax.set_title(title, fontsize=7)
-
-
-def _metres(km: float) -> str:
-    return f"{km * 1e3:.0f} m" if km < 10 else f"{km:.1f} km"
-
-
-def _px_per_km(ax: Axes) -> float:
-    ax.apply_aspect()
-    (x0, _), (x1, _) = ax.transData.transform([(0.0, 0.0), (1.0, 0.0)])
-    return float(abs(x1 - x0))
 
 
 def _step(span_min: float) -> float:
@@ -367,27 +362,6 @@ def _graticule(ax: Axes, lat0: float, lon0: float) -> None:
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
     ax.tick_params(labelsize=8)
-
-
-def _scale_bar(ax: Axes) -> None:
-    """A nautical-mile scale bar about a fifth of the map wide."""
-    width_km = abs(np.subtract(*ax.get_xlim()))
-    nm = width_km / _NM_KM / 5.0
-    nice = max(
-        (v for v in (0.05, 0.1, 0.2, 0.5, 1, 2, 5, 10, 20, 50, 100) if v <= nm), default=0.05
-    )
-    ax.add_artist(
-        AnchoredSizeBar(
-            ax.transData,
-            nice * _NM_KM,
-            f"{nice:g} NM",
-            "lower left",
-            pad=0.5,
-            frameon=True,
-            size_vertical=0,
-            fontproperties={"size": 8},
-        )
-    )
 
 
 def _reference_line(
@@ -561,7 +535,7 @@ def _overview(
     _graticule(ax, lat0, lon0)
     min_px, n_miss, circles_note = math.nan, 0, ""
     if ep is not None and dr is not None:
-        px_km = _px_per_km(ax)
+        px_km = px_per_km(ax)
         min_px, n_dots = _circles(ax, ep, ep.shown & (ep.radius_km * px_km >= MIN_CIRCLE_PX), px_km)
         n_miss = _misses(ax, ep, ep.shown)
         for k in shown_legs:
@@ -603,7 +577,7 @@ def _overview(
             )
             + which
         )
-    _scale_bar(ax)
+    scale_bar(ax)
     ax.legend(loc="best", fontsize=8, framealpha=0.85)
     ax.set_title("Whole voyage", fontsize=10)
     subject = (
@@ -657,9 +631,9 @@ def _leg_panel(
     )
     _reference_line(ax, a, ref, lat0, lon0, t0, t1)
     _graticule(ax, lat0, lon0)
-    _, n_dots = _circles(ax, ep, sel, _px_per_km(ax))
+    _, n_dots = _circles(ax, ep, sel, px_per_km(ax))
     n_miss = _misses(ax, ep, sel)
-    _scale_bar(ax)
+    scale_bar(ax)
     ax.legend(loc="best", fontsize=8, framealpha=0.85)
     ax.set_title(f"Leg {k}: {_utc(t0)} – {_utc(t1)} UTC", fontsize=10)
     if small.size:
@@ -706,6 +680,97 @@ def draw_track_panels(a: Analysis) -> Iterator[DrawnPanel]:
         first = int(np.flatnonzero(dr.track.leg == k)[0])
         la, lo = float(dr.track.lat_rad[first]), float(dr.track.lon_rad[first])
         yield _leg_panel(a, la, lo, ref, _epochs(dr, ref, la, lo), k)
+
+
+#: legend label of the aided-DR EP (seeds/003) in its panel
+AIDED_LABEL = "aided-DR EP (seeds/003)"
+AIDED_COLOUR = "#2ca02c"
+
+
+def aided_ep_panel(a: Analysis) -> DrawnPanel | None:
+    """The aided-DR estimated position over the DR, with its 95 % ellipse at each epoch
+    (1-sigma semi-axes times sqrt(chi2_2(0.95))) where that is at least MIN_CIRCLE_PX."""
+    e, dr, origin = a.estimated_position, a.dead_reckoning, _origin(a)
+    if e is None or dr is None or origin is None or not len(e.time_ns):
+        return None
+    lat0, lon0 = origin
+    n, east = offset_ne_m(e.lat_rad, e.lon_rad, lat0, lon0)
+    x, y, ka = east / 1e3, n / 1e3, _ELLIPSE_K * e.semi_major_m / 1e3
+    r_km = e.radius_2m_m / 1e3
+    shown = (e.since_update_s > 0) & np.isfinite(r_km) & np.isfinite(x)
+    worst = np.flatnonzero(shown)[np.argsort(-r_km[shown], kind="stable")[:_INSETS_PER_ROW]]
+    fig = _frame([x - ka, x + ka], [y - ka, y + ka], inset_rows=int(worst.size > 0))
+    ax = fig.axes[0]
+    tn, te = offset_ne_m(dr.track.lat_rad, dr.track.lon_rad, lat0, lon0)
+    label = EP_LABEL if dr.scored_out_of_sample else DR_LABEL
+    ax.plot(*_by_leg(tn, te, dr.track.leg), lw=0.9, color=DR_COLOUR, zorder=Z_DR, label=label)
+    t0, t1 = int(e.time_ns[0]), int(e.time_ns[-1])
+    _reference_line(ax, a, ref := _reference(a), lat0, lon0, t0, t1)
+    brk = stretch_starts(e)[1:]  # no line joins two stretches of DR
+    ax.plot(np.insert(x, brk, np.nan), np.insert(y, brk, np.nan), lw=1.4, color=AIDED_COLOUR)
+    upd = np.array([k != "" for k in e.update_kind], bool)
+    ax.plot(x[upd], y[upd], "o", ms=3, color=AIDED_COLOUR, zorder=Z_DR + 0.5, label=AIDED_LABEL)
+    _graticule(ax, lat0, lon0)
+    px_km = px_per_km(ax)
+    big = np.flatnonzero((ka * px_km >= MIN_CIRCLE_PX) & np.isfinite(x))
+    for j, i in enumerate(big.tolist()):
+        ax.add_patch(
+            Ellipse(
+                (float(x[i]), float(y[i])),
+                2 * float(ka[i]),
+                2 * _ELLIPSE_K * float(e.semi_minor_m[i]) / 1e3,
+                angle=90.0 - math.degrees(float(e.orientation_rad[i])),
+                fill=False,
+                color=AIDED_COLOUR,
+                lw=0.9,
+                ls="--",
+                zorder=Z_CIRCLE,
+                label=f"{ELLIPSE_LABEL} of the aided EP" if j == 0 else None,
+            )
+        )
+    scale_bar(ax)
+    ax.legend(loc="best", fontsize=8, framealpha=0.85)
+    if worst.size:  # the largest 2M, each at the scale of its circle (as the leg panels')
+        rn, re_ = (np.full(x.size, np.nan),) * 2
+        if ref is not None:
+            rn, re_ = offset_ne_m(*interp_position(*ref, e.time_ns, 600e9), lat0, lon0)
+        ep = _Epochs(
+            e.time_ns, x, y, re_ / 1e3, rn / 1e3, np.zeros(x.size, int), r_km, ka,
+            _ELLIPSE_K * e.semi_minor_m / 1e3, 90.0 - np.degrees(e.orientation_rad), shown,
+            np.zeros(x.size, bool), np.zeros(x.size, bool), np.full(x.size, np.nan),
+            np.hypot(re_ - east, rn - n) / 1e3, ref is not None,
+        )  # fmt: skip
+        ref_xy = np.column_stack([re_, rn]) / 1e3 if ref is not None else np.zeros((0, 2))
+        _insets(fig, ep, np.sort(worst), np.column_stack([x, y]), ref_xy)
+    ax.set_title(f"{AIDED_LABEL}: {_utc(t0)} – {_utc(t1)} UTC", fontsize=10)
+    r2m = e.radius_2m_m[np.isfinite(e.radius_2m_m)]
+    caption = (
+        f"The {AIDED_LABEL} (green; dots: the epochs after an update: {e.n_fix_updates} GNSS "
+        f"fixes, {e.n_lop_updates} from the observation file) over the DR (black) and the "
+        f"reference (magenta); 2M up to {float(r2m.max()) if r2m.size else math.nan:,.0f} m; "
+        f"its 95 % error ellipse (green, dashed) at {big.size} of {len(e.time_ns)} epochs "
+        f"(the others under {MIN_CIRCLE_PX:g} px at this scale)"
+        + (
+            f"; below, the {worst.size} epochs of largest 2M, each at the scale of its 2M "
+            f"circle (orange) with the 95 % ellipse (blue, dashed), centred on the EP (+)"
+            if worst.size
+            else ""
+        )
+        + "."
+    )
+    return DrawnPanel(fig, ax, "aided EP track plot", caption, math.nan, None, 0)
+
+
+def aided_ep_html(a: Analysis) -> str:
+    """The aided EP panel as a ``<figure id="fig-aided-ep">``; '' without an aided EP."""
+    d = aided_ep_panel(a)
+    if d is None:
+        return ""
+    return (
+        f'<figure id="fig-aided-ep"><img alt="{d.alt}" '
+        f'src="{data_uri(png_bytes(d.fig))}"><figcaption>{html.escape(d.caption)}'
+        "</figcaption></figure>"
+    )
 
 
 def track_panels(a: Analysis) -> list[Panel]:

@@ -7,6 +7,7 @@ Modules, in the order a DR runs through them
     heading           course made good and speed (B1-B6), the true heading (B2, B3)
     holding           sample-and-hold of heading and speed, the gaps that break a track
     propagation       velocity over ground (B7-B14), integration on the ellipsoid (B16-B22)
+    aided_speed       the acceleration-aided speed between log readings (B15)
     legs              the restart rules: where each leg starts and ends
     error_processes   the honest covariance from Gauss-Markov error sources
     paper_covariance  the paper's covariance (B23-B31), M, 2M and its containment probability
@@ -32,6 +33,11 @@ Glossary (paper symbols, used inside the kernels)
 
 from __future__ import annotations
 
+from dracc.math.deadreckoning.aided_speed import (
+    aided_speed_between_readings_mps,
+    aided_speed_mps,
+    log_frame_rate_mps2,
+)
 from dracc.math.deadreckoning.consistency import (
     Consistency,
     LegConsistency,
@@ -79,6 +85,8 @@ __all__ = [
     "Gap",
     "LegConsistency",
     "TrueHeading",
+    "aided_speed_between_readings_mps",
+    "aided_speed_mps",
     "course_gyro_rad",
     "course_magnetic_rad",
     "covariance_b23_rad2",
@@ -95,6 +103,7 @@ __all__ = [
     "integrate_ne",
     "interp_deviation_rad",
     "leeway_from_log_rad",
+    "log_frame_rate_mps2",
     "mean_error_m",
     "prob_inside_2m",
     "sigma_course_rad",

@@ -22,6 +22,7 @@ from dracc.core.timefmt import iso_utc
 from dracc.core.units import ARCMIN_RAD
 from dracc.core.vocabulary import CHANNEL_KEYS, CHANNELS
 from dracc.math.deviation import stats
+from dracc.math.deviation.berth import BerthReference
 
 __all__ = [
     "ChannelMode",
@@ -313,6 +314,8 @@ class DeviationResult:
     #: channel -> reason ('outside unit span', 'gap too long') -> sampling instants (from the
     #: first reading of any unit to the last) not used in the channel for that reason
     skipped: dict[str, dict[str, int]] = field(default_factory=dict)
+    #: the berth references (:mod:`.berth`) of ``[reference] alongside``; empty without one
+    berths: tuple[BerthReference, ...] = ()
 
     @property
     def factors(self) -> dict[str, float]:
@@ -395,4 +398,4 @@ class DeviationResult:
             "reference": reference,
             "windows": [w.to_dict() for w in self.windows],
             "messages": list(self.messages),
-        }
+        } | ({"berths": [b.to_dict() for b in self.berths]} if self.berths else {})

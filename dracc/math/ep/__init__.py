@@ -50,6 +50,7 @@ Modules, in the order a run goes through them
     kalman        the Kalman filter over the fixes on every grid point: LearnedModel
     forecast      each leg's correction and covariance, covariance matching: LegForecast
     estimate      estimate_position, the entry point tying these together
+    aided         the aided-DR EP of seeds/003 (fixes and single LOPs, fix-interval study)
 """
 
 from __future__ import annotations
