@@ -50,9 +50,9 @@ def _pier(heading_deg: float, side: str) -> dict:
 
 
 @functools.cache
-def _sim(ins_scale: float = 1.0):
+def _sim(ins_scale: float = 1.0, hours: float = 6.0):
     p = SimParams.noiseless(
-        duration_s=6 * 3600.0,
+        duration_s=hours * 3600.0,
         seed=7,
         speed_kn=0.0,
         initial_heading_deg=0.0,
@@ -251,18 +251,7 @@ def test_the_nightly_audit_checks_the_ins_against_the_berth(tmp_path):
     from dracc.report.audit_json import to_dict as audit_doc
     from dracc.sim.nmea_out import write_nmea
 
-    sv = simulate(
-        SimParams.noiseless(
-            duration_s=3 * 3600.0,
-            seed=7,
-            speed_kn=0.0,
-            initial_heading_deg=0.0,
-            legs=((0.0, 0.0),),
-            compass_hz=1.0,
-            aux_hz=0.0,
-            ins=DEFAULT_INS,
-        )
-    )
+    sv = _sim(1.0, hours=3.0)
     full = tmp_path / "full.nmea"
     write_nmea(sv, full, form="tag")
     log = tmp_path / "alongside.nmea"

@@ -299,19 +299,25 @@ def _toml_pending(path: Path, table: str, index: int, entry: Any) -> Pending:
     return Pending(kind, where, fields, datum)
 
 
-def read_obs_file(path: Path) -> tuple[list[Pending], dict[str, Any] | None]:
-    """Observations and an optional ``[prior]`` from a TOML file (data only, never executed)."""
+def load_obs_toml(path: Path) -> dict[str, Any]:
+    """An observation file's TOML tables (data only, never executed): exit 3 for a missing
+    file (IngestError), 4 for one that is not a file or not TOML (FixFileError)."""
     if not path.exists():
         raise IngestError(f"{path}: no such file")
     if not path.is_file():
         raise FixFileError(f"{path}: not a file")
     try:
         with path.open("rb") as fh:
-            data = tomllib.load(fh)
+            return tomllib.load(fh)
     except tomllib.TOMLDecodeError as e:
         raise FixFileError(f"{path}: not valid TOML ({e})") from e
     except (OSError, UnicodeDecodeError) as e:
         raise FixFileError(f"{path}: cannot read ({e})") from e
+
+
+def read_obs_file(path: Path) -> tuple[list[Pending], dict[str, Any] | None]:
+    """Observations and an optional ``[prior]`` from a TOML file (data only, never executed)."""
+    data = load_obs_toml(path)
     pending: list[Pending] = []
     prior = None
     file_datum = None

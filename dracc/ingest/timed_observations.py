@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from dracc.core.errors import FixFileError, IngestError
+from dracc.core.errors import FixFileError
 from dracc.core.timefmt import parse_utc
 from dracc.ingest.observations import (
     DATUM_KINDS,
@@ -27,13 +27,14 @@ from dracc.ingest.observations import (
     Pending,
     build_observation,
     checked_datum,
+    load_obs_toml,
     referred_to_wgs84,
 )
 
 if sys.version_info >= (3, 11):
-    import tomllib
+    pass
 else:  # pragma: no cover
-    import tomli as tomllib
+    pass
 
 #: the tables the filter takes: one full fix or one line of position each
 TIMED_TABLES = ("fix", "range", "bearing", "line")
@@ -61,19 +62,7 @@ def _time_ns(raw: Any, where: str) -> int:
 
 def read_timed_observations(path: Path) -> tuple[TimedObservation, ...]:
     """The file's observations in time order (exit 3 for a missing file, 4 for a bad one)."""
-    if not path.is_file():
-        raise (
-            IngestError(f"{path}: no such file")
-            if not path.exists()
-            else FixFileError(f"{path}: not a file")
-        )
-    try:
-        with path.open("rb") as fh:
-            data = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as e:
-        raise FixFileError(f"{path}: not valid TOML ({e})") from e
-    except (OSError, UnicodeDecodeError) as e:
-        raise FixFileError(f"{path}: cannot read ({e})") from e
+    data = load_obs_toml(path)
     out: list[TimedObservation] = []
     file_datum = None
     if "datum" in data:
