@@ -256,7 +256,7 @@ def test_peer_groups_follow_the_configured_models():
         {"fdr": 0},
         {"fdr": "x"},
         {"peer_nights": 0},
-        {"area_deg": 500},
+        {"area_km": -5},
         {"models": {"a": 1}},
         {"x": 1},
     ],
@@ -290,3 +290,34 @@ def test_terminal_and_page_lead_with_the_discoveries():
     assert page.split("<h2>")[1].startswith("Ranking")  # the page leads with the ranked list
     for k in range(1, 6):  # each discovery links to its evidence, open
         assert f"href='#ev-{k}'" in page and f"<details id='ev-{k}' open>" in page
+
+
+def test_logs_are_compared_within_their_sea_area_or_with_the_fleet():
+    """Eight logs near 55N 10E and four near 40S 60W (8000+ km apart, within 1000 km among
+    themselves); the Atlantic logs read 4 % (an area bias), the Baltic 2 %.  Each is
+    compared with its own area's logs; a log alone in its area with the fleet's."""
+    rng = np.random.default_rng(9)
+    nights = []
+    places = [(55.0 + 0.3 * k, 10.0 + 0.5 * k, 2.0) for k in range(8)]
+    places += [(-40.0 - 0.4 * k, -60.0 + 0.6 * k, 4.0) for k in range(4)]
+    places += [(10.0, 100.0, 2.0)]  # alone in the Indian Ocean
+    for v, (lat, lon, scale) in enumerate(places):
+        for d in range(3):
+            row = {
+                "unit": "log",
+                "quantity": "log_scale",
+                "measure_unit": "%",
+                "value": scale + rng.normal(0, 0.2),
+                "sigma": 0.2,
+                "dof": None,
+                "n": 100,
+                "method": "calibration",
+            }
+            pos = {"lat_deg": lat, "lon_deg": lon}
+            nights.append((f"V{v:02d}", f"2026-03-0{d + 1}", {"position": pos, "rows": [row]}))
+    r = rank_fleet(measures_frame(nights)).set_index("vessel")
+    assert (r.q_value >= 0.05).all()  # the Atlantic's 4 % is its area's, not an outlier
+    assert (r.loc[[f"V{v:02d}" for v in range(8)], "peers"] == 7).all()
+    assert (r.loc[[f"V{v:02d}" for v in range(8, 12)], "peers"] == 3).all()
+    assert r.loc["V12", "peer_group"] == "fleet" and r.loc["V12", "peers"] >= 7
+    assert set(r.loc[[f"V{v:02d}" for v in range(12)], "peer_group"]) == {"within 1000 km"}

@@ -106,44 +106,48 @@ def peer_scores(
     direction: int,
     resolution: float,
     min_peers: int = 3,
+    peers_of: NDArray[np.bool_] | None = None,
 ) -> PeerScores:
-    """Leave-one-out scores of every unit against the other units of its group."""
+    """Leave-one-out scores of every unit against the other units of its group, or, with
+    ``peers_of`` (n x n, row i: the units unit i is compared with), against those."""
     x = np.asarray(x, dtype=np.float64)
     se = np.nan_to_num(np.asarray(se, dtype=np.float64), nan=0.0)
-    groups = np.asarray(groups)
     n = len(x)
+    if peers_of is None:
+        g = np.asarray(groups)
+        peers_of = g[:, None] == g[None, :]
+    mask = np.asarray(peers_of, dtype=bool) & np.isfinite(x)[None, :]
+    np.fill_diagonal(mask, False)
     z, p, center, spread, df = (np.full(n, np.nan) for _ in range(5))
     peers = np.zeros(n, dtype=np.int64)
     r2 = float(resolution) ** 2
-    for g in np.unique(groups):
-        idx = np.flatnonzero((groups == g) & np.isfinite(x))
-        for i in idx:
-            xo, so = x[idx[idx != i]], se[idx[idx != i]]
-            if len(xo) < min_peers:
-                peers[i] = len(xo)
-                continue
-            # another bad unit among the peers must not hide this one: peers beyond
-            # TRIM robust sigmas of the peers' median are left out of the spread
-            c0 = float(np.median(xo))
-            mad = MAD_TO_SIGMA * float(np.median(np.abs(xo - c0)))
-            keep = np.abs(xo - c0) <= TRIM * np.sqrt(mad * mad + so * so + r2)
-            xo, so = xo[keep], so[keep]
-            m = len(xo)
-            peers[i] = m
-            if m < min_peers:
-                continue
-            c = float(np.mean(xo))
-            s2_own = float(np.mean(so * so))
-            s2 = float(np.var(xo, ddof=1))
-            tau2 = max(r2, s2 - s2_own)
-            var_center = (tau2 + s2_own) / m
-            v = se[i] ** 2 + tau2 + var_center
-            # the part of V that rests on the peers' sample variance (m - 1 degrees of
-            # freedom), also where it came out below their own errors (tau at its floor)
-            share = min(1.0, s2 * (1.0 + 1.0 / m) / v)
-            center[i], spread[i] = c, math.sqrt(tau2)
-            df[i] = (m - 1) / max(share * share, 1e-12)
-            z[i] = (x[i] - c) / math.sqrt(v)
+    for i in np.flatnonzero(np.isfinite(x)):
+        xo, so = x[mask[i]], se[mask[i]]
+        if len(xo) < min_peers:
+            peers[i] = len(xo)
+            continue
+        # another bad unit among the peers must not hide this one: peers beyond TRIM
+        # robust sigmas of the peers' median are left out of the spread
+        c0 = float(np.median(xo))
+        mad = MAD_TO_SIGMA * float(np.median(np.abs(xo - c0)))
+        keep = np.abs(xo - c0) <= TRIM * np.sqrt(mad * mad + so * so + r2)
+        xo, so = xo[keep], so[keep]
+        m = len(xo)
+        peers[i] = m
+        if m < min_peers:
+            continue
+        c = float(np.mean(xo))
+        s2_own = float(np.mean(so * so))
+        s2 = float(np.var(xo, ddof=1))
+        tau2 = max(r2, s2 - s2_own)
+        var_center = (tau2 + s2_own) / m
+        v = se[i] ** 2 + tau2 + var_center
+        # the part of V that rests on the peers' sample variance (m - 1 degrees of
+        # freedom), also where it came out below their own errors (tau at its floor)
+        share = min(1.0, s2 * (1.0 + 1.0 / m) / v)
+        center[i], spread[i] = c, math.sqrt(tau2)
+        df[i] = (m - 1) / max(share * share, 1e-12)
+        z[i] = (x[i] - c) / math.sqrt(v)
     ok = np.isfinite(z)
     p[ok] = tail_p(z[ok], direction, df[ok])
     return PeerScores(z, p, center, spread, peers, df)

@@ -17,8 +17,8 @@ Per vessel, unit and quantity:
    units of its peer group (:func:`dracc.math.ranking.peer_scores`): the same INS model
    (``[fleet.ranking] models``; by default the same INS position ins1/ins2/ins3, as
    sister ships carry the same kit in the same place), the logs of the same sea area
-   (a ``area_deg`` grid cell of the nights' mean position) where it holds at least
-   ``min_peers`` others, else the fleet.
+   (mean positions within ``area_km`` of the log's: currents and sea state bias a log's
+   scale alike there) where there are at least ``min_peers`` of them, else the fleet's.
 4. **Own history.** The most likely change point of the unit's nightly series
    (:func:`dracc.math.ranking.change_point`) in the direction that is worse.
 5. **Control.** The row's p-value is Bonferroni over its two tests, 2 min(p_peer,
@@ -124,7 +124,7 @@ class RankingConfig:
     fdr: float = 0.05  #: false discovery rate of the ranked list
     peer_nights: int = 7  #: nights pooled for the comparison with peers
     min_peers: int = 3  #: fewest peers a score is computed with
-    area_deg: float = 10.0  #: grid cell of a sea area, degrees
+    area_km: float = 1000.0  #: logs whose mean positions lie this close share a sea area
     #: INS model per "VESSEL/unit" or per "unit"; units of one model are peers
     models: dict[str, str] = field(default_factory=dict)
 
@@ -153,11 +153,11 @@ def ranking_config(cfg: Config) -> RankingConfig:
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ConfigError(f"[fleet.ranking] {key} must be a positive integer, got {v!r}")
             kw[key] = v
-    if "area_deg" in table:
-        v = table["area_deg"]
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v <= 180:
-            raise ConfigError(f"[fleet.ranking] area_deg must be in (0, 180], got {v!r}")
-        kw["area_deg"] = float(v)
+    if "area_km" in table:
+        v = table["area_km"]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+            raise ConfigError(f"[fleet.ranking] area_km must be a positive number, got {v!r}")
+        kw["area_km"] = float(v)
     if "models" in table:
         m = table["models"]
         if not isinstance(m, dict) or not all(
@@ -331,13 +331,30 @@ def _peer_group(s: _Series, spec: QuantitySpec, rc: RankingConfig) -> str:
     if spec.peers == "model":
         return rc.models.get(f"{s.vessel}/{s.unit}") or rc.models.get(s.unit) or s.unit
     if spec.peers == "area":
-        if not (math.isfinite(s.lat_deg) and math.isfinite(s.lon_deg)):
-            return "fleet"
-        a = rc.area_deg
-        la = math.floor(s.lat_deg / a) * a
-        lo = math.floor(((s.lon_deg + 180.0) % 360.0 - 180.0) / a) * a
-        return f"{'N' if la >= 0 else 'S'}{abs(la):g} {'E' if lo >= 0 else 'W'}{abs(lo):g}"
+        return "sea area"
     return s.unit
+
+
+def _area_peers(series: list[_Series], rc: RankingConfig) -> tuple[np.ndarray, list[str]]:
+    """Each log's peers: the logs whose mean positions lie within ``area_km`` of its own
+    (great circle); the whole fleet's where fewer than ``min_peers`` do, or where the
+    position is not known."""
+    lat = np.radians([s.lat_deg for s in series])
+    lon = np.radians([s.lon_deg for s in series])
+    dlat = lat[:, None] - lat[None, :]
+    dlon = lon[:, None] - lon[None, :]
+    h = np.sin(dlat / 2) ** 2 + np.cos(lat[:, None]) * np.cos(lat[None, :]) * np.sin(dlon / 2) ** 2
+    with np.errstate(invalid="ignore"):
+        dist_km = 2 * 6371.0088 * np.arcsin(np.sqrt(np.clip(h, 0, 1)))
+    near = dist_km <= rc.area_km
+    names = []
+    for i in range(len(series)):
+        if np.count_nonzero(near[i]) - 1 < rc.min_peers:
+            near[i] = True
+            names.append("fleet")
+        else:
+            names.append(f"within {rc.area_km:g} km")
+    return near, names
 
 
 def _natural(x: float, spec: QuantitySpec) -> float:
@@ -363,9 +380,9 @@ def rank_fleet(measures: pd.DataFrame, rc: RankingConfig | None = None) -> pd.Da
         k = rc.peer_nights
         pooled = [_pooled(s, e, k, spec) for s, e in zip(series, se_list, strict=True)]
         groups = [_peer_group(s, spec, rc) for s in series]
-        if spec.peers == "area":  # an area with too few logs: the fleet's logs are the peers
-            counts = pd.Series(groups).value_counts()
-            groups = [g if counts[g] > rc.min_peers else "fleet" for g in groups]
+        peers_of = None
+        if spec.peers == "area":
+            peers_of, groups = _area_peers(series, rc)
         ps = peer_scores(
             [p[0] for p in pooled],
             [p[1] for p in pooled],
@@ -373,6 +390,7 @@ def rank_fleet(measures: pd.DataFrame, rc: RankingConfig | None = None) -> pd.Da
             direction=spec.direction,
             resolution=spec.resolution,
             min_peers=rc.min_peers,
+            peers_of=peers_of,
         )
         for i, s in enumerate(series):
             cp = change_point(
