@@ -289,6 +289,12 @@ _STUDY_COLUMNS: tuple[tuple[str, bool, int], ...] = (
 )
 
 
+def _metres(x: float | None) -> str:
+    """'309 m', or '-' where there is no figure (no update at that interval)."""
+    text = fmt(x, 0)
+    return text if text == "-" else f"{text} m"
+
+
 def _aided_ep_body(page: _Page, e: EstimatedPositionSection) -> None:
     """The aided-DR EP (seeds/003) in one line; with --fix-interval, the study's table."""
     r2m = np.asarray(e.radius_2m_m, float)
@@ -306,8 +312,8 @@ def _aided_ep_body(page: _Page, e: EstimatedPositionSection) -> None:
             (
                 fmt_duration(r.interval_s),
                 r.n_updates,
-                f"{fmt(r.mean_2m_before_m, 0)} m",
-                f"{fmt(r.max_2m_before_m, 0)} m",
+                _metres(r.mean_2m_before_m),
+                _metres(r.max_2m_before_m),
                 fmt_pct(r.containment),
             )
             for r in e.interval_study
