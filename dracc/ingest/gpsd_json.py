@@ -49,15 +49,13 @@ import numpy as np
 import pandas as pd
 
 from dracc.frames import MISSING_NS, FileResult, Rejects, concat_blocks, make_frame
+from dracc.ingest.chunks import Chunk, LineCopy, iter_line_chunks
 from dracc.ingest.demux import (
     check_strict,
-    line_bounds,
-    line_copy,
     merge_results,
     relabel,
     scaled_progress,
     take_off_blanks,
-    write_copy,
 )
 from dracc.ingest.nmea.sentences import MAX_LINE_BYTES
 from dracc.ingest.signalk_delta import JSON_ERRORS, loads
@@ -124,6 +122,12 @@ class GpsdDecoder:
     #: ATT rows: (time, device, line, heading, mheading, rot)
     att: list[tuple[Any, ...]] = field(default_factory=list)
     _last_tpv_time: dict[str, Any] = field(default_factory=dict)
+    #: the rows of earlier chunks as columns (:meth:`flush`), per table: blocks of (time
+    #: ns, time readable, device code, line, values, quality)
+    _blocks: dict[str, list[list[np.ndarray]]] = field(
+        default_factory=lambda: {"tpv": [], "att": []}
+    )
+    _devices: dict[str, int] = field(default_factory=dict)
 
     def ignore(self, what: str, line: int, text: str) -> None:
         self.ignored[what] += 1
@@ -131,7 +135,7 @@ class GpsdDecoder:
         if len(ex) < _EXAMPLES:
             ex.append((self.file, line, text))
 
-    def feed(self, payload: bytes, line: int) -> None:
+    def feed(self, payload: bytes | bytearray, line: int) -> None:
         self.lines += 1
         text = payload[:120].decode("utf-8", "replace")
         if len(payload) > self.max_line_bytes:  # never parsed whole: one reject
@@ -193,25 +197,49 @@ class GpsdDecoder:
         else:
             self.ignore(f"gpsd {cls}", line, text)
 
+    def flush(self) -> None:
+        """The rows fed so far kept as compact columns (times parsed), their lists emptied:
+        a streamed read calls this after each chunk, so its memory is the columns'."""
+        code = self._devices
+        for name, rows, nv in (("tpv", self.tpv, 5), ("att", self.att, 3)):
+            if not rows:
+                continue
+            t, ok = _times([r[0] for r in rows])
+            dev = np.array([code.setdefault(r[1], len(code)) for r in rows], dtype=np.int32)
+            line = np.array([r[2] for r in rows], dtype=np.int64)
+            vals = np.array([r[3 : 3 + nv] for r in rows], dtype=np.float64).reshape(-1, nv)
+            q = np.array([r[8] if name == "tpv" else 0 for r in rows], dtype=np.int8)
+            self._blocks[name].append([t, ok, dev, line, vals, q])
+            rows.clear()
+
     def finish(self, cfg: IngestConfig | None = None) -> FileResult:
+        """The frames, rejects and ignored counts (called once: it takes the columns)."""
         frames: dict[str, pd.DataFrame] = {}
         events = EventCounter()
         if cfg is not None:
             events.gap_s, events.tolerance_s = cfg.gap_s, cfg.backstep_tolerance_s
         bad_time = 0
-        if self.tpv:
-            t, ok = _times([r[0] for r in self.tpv])
-            bad_time += int((~ok).sum())
-            rows = [r for r, g in zip(self.tpv, ok.tolist(), strict=True) if g]
-            t = t[ok]
-            if rows:
-                self._tpv_frames(rows, t, frames)
-        if self.att:
-            t, ok = _times([r[0] for r in self.att])
-            bad_time += int((~ok).sum())
-            rows = [r for r, g in zip(self.att, ok.tolist(), strict=True) if g]
-            if rows:
-                self._att_frames(rows, t[ok], frames)
+        self.flush()
+        names = np.array(list(self._devices), dtype=object)
+        for name in ("tpv", "att"):
+            blocks = self._blocks[name]
+            if not blocks:
+                continue
+            cols = []
+            for j in range(6):  # column by column, each block's part given up at once
+                cols.append(np.concatenate([b[j] for b in blocks]))
+                for b in blocks:
+                    b[j] = cols[-1][:0]
+            blocks.clear()
+            t, ok, dev, line, vals, q = cols
+            del cols
+            bad = int((~ok).sum())
+            bad_time += bad
+            if bad:
+                t, dev, line, vals, q = t[ok], dev[ok], line[ok], vals[ok], q[ok]
+            if len(t):
+                build = self._tpv_frames if name == "tpv" else self._att_frames
+                build(t, names[dev], line, vals, q, frames)
         if bad_time:
             self.rejects.counts["bad_time"] += bad_time
         for kind, df in frames.items():
@@ -237,14 +265,16 @@ class GpsdDecoder:
         )
 
     def _tpv_frames(
-        self, rows: list[tuple[Any, ...]], t: np.ndarray, frames: dict[str, pd.DataFrame]
+        self,
+        t: np.ndarray,
+        dev: np.ndarray,
+        line: np.ndarray,
+        vals: np.ndarray,
+        quality: np.ndarray,
+        frames: dict[str, pd.DataFrame],
     ) -> None:
         """One record per run of TPVs of one device and time (each field its last value)."""
-        dev = np.array([r[1] for r in rows], dtype=object)
-        line = np.array([r[2] for r in rows], dtype=np.int64)
-        vals = np.array([r[3:8] for r in rows], dtype=np.float64)
-        quality = np.array([r[8] for r in rows], dtype=np.int8)
-        new = np.ones(len(rows), dtype=bool)
+        new = np.ones(len(t), dtype=bool)
         new[1:] = (t[1:] != t[:-1]) | (dev[1:] != dev[:-1])
         run = np.cumsum(new) - 1
         last = np.flatnonzero(np.append(new[1:], True))  # the last TPV of each run
@@ -254,7 +284,7 @@ class GpsdDecoder:
         for j in range(vals.shape[1]):
             fin = np.isfinite(vals[:, j])
             merged[run[fin], j] = vals[fin, j]  # later rows overwrite earlier ones
-        repeats = len(rows) - nrun
+        repeats = len(t) - nrun
         if repeats:
             self.ignored["gpsd TPV repeat"] += repeats
             ex = self.ignored_examples.setdefault("gpsd TPV repeat", [])
@@ -292,14 +322,17 @@ class GpsdDecoder:
             )
 
     def _att_frames(
-        self, rows: list[tuple[Any, ...]], t: np.ndarray, frames: dict[str, pd.DataFrame]
+        self,
+        t: np.ndarray,
+        dev: np.ndarray,
+        line: np.ndarray,
+        vals: np.ndarray,
+        _quality: np.ndarray,
+        frames: dict[str, pd.DataFrame],
     ) -> None:
-        dev = np.array([r[1] for r in rows], dtype=object)
-        line = np.array([r[2] for r in rows], dtype=np.int64)
-        vals = np.array([r[3:6] for r in rows], dtype=np.float64)
         # gpsd repeats the epoch's attitude in each report of the epoch: one record of a
         # run of equal reports (the first), the others counted
-        same = np.zeros(len(rows), dtype=bool)
+        same = np.zeros(len(t), dtype=bool)
         same[1:] = (
             (t[1:] == t[:-1])
             & (dev[1:] == dev[:-1])
@@ -367,42 +400,63 @@ def _times(values: list[Any]) -> tuple[np.ndarray, np.ndarray]:
     return out, out != MISSING_NS
 
 
+def _feed_json(dec: GpsdDecoder, ch: Chunk) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Feed ``dec`` the JSON lines of ``ch`` (those starting with ``{``); the masks of
+    the chunk's blank, JSON and other lines."""
+    buf, start, end, raw = ch.buf, ch.start, ch.end, ch.data
+    blank = start == end
+    first = np.where(blank, 0, buf[np.minimum(start, len(buf) - 1)])
+    is_json = first == ord("{")
+    ji = np.flatnonzero(is_json)
+    for s, e, n in zip(start[ji].tolist(), end[ji].tolist(), ch.numbers(ji).tolist(), strict=True):
+        dec.feed(raw[s:e], n)
+    return blank, is_json, ~is_json & ~blank
+
+
 def read_gpsd_json(
     path: str | Path, cfg: IngestConfig, progress: Callable[[int], object] | None = None
 ) -> FileResult:
     """Read gpsd JSON (``gpspipe -w``) or a gpsfake ``.chk`` file (JSON and NMEA lines)
-    into one :class:`FileResult` of format ``gpsd-json``."""
+    into one :class:`FileResult` of format ``gpsd-json``, streamed in chunks of whole
+    lines (:func:`iter_line_chunks`); the NMEA lines' copy is written chunk by chunk."""
     from dracc.ingest.nmea import check_readable, read_nmea
 
     p = Path(path)
     check_readable(p)
     file = str(p)
-    raw = p.read_bytes()
-    buf = np.frombuffer(raw, dtype=np.uint8)
-    start, end, nxt = line_bounds(buf)
-    blank = start == end
-    first = np.where(blank, 0, buf[np.minimum(start, max(len(buf) - 1, 0))]) if len(buf) else start
-    is_json = first == ord("{")
-    other = ~is_json & ~blank
     dec = GpsdDecoder(file, max_line_bytes=cfg.max_line_bytes)
-    ji = np.flatnonzero(is_json)
-    for s, e, n in zip(start[ji].tolist(), end[ji].tolist(), (ji + 1).tolist(), strict=True):
-        dec.feed(raw[s:e], n)
-    res = dec.finish(cfg)
-    check_strict(res, cfg)
-    if progress is not None:
-        progress(int((nxt - start)[is_json].sum()))
-    parts = [res]
-    notes = []
-    if other.any():
-        notes.append(f"{int(other.sum())} lines other than JSON read as NMEA 0183")
-        with tempfile.TemporaryDirectory(prefix="dracc-gpsd-") as tmp:
-            copy = write_copy(line_copy(buf, start, end, nxt, other), Path(tmp), p.name)
-            told = scaled_progress(progress, int((nxt - start)[other].sum()), copy.stat().st_size)
-            r = relabel(read_nmea(copy, cfg, told), str(copy), file)
-        take_off_blanks(r, int(is_json.sum()))
-        parts.append(r)
-    elif blank.any():
-        res.ignored["blank"] += int(blank.sum())
-    out = merge_results(file, "gpsd-json", len(start), parts, notes)
-    return out
+    lines = blanks = n_json = n_other = json_bytes = other_bytes = 0
+    with tempfile.TemporaryDirectory(prefix="dracc-gpsd-") as tmp:
+        copy: LineCopy | None = None  # started at the first line other than JSON
+        chunks = iter_line_chunks(p, cfg.max_line_bytes)
+        while (ch := next(chunks, None)) is not None:  # None at the end: no chunk held on
+            blank, is_json, other = _feed_json(dec, ch)
+            size = ch.nxt - ch.start
+            blanks += int(blank.sum())
+            n_json += int(is_json.sum())
+            n_other += int(other.sum())
+            json_bytes += int(size[is_json].sum())
+            other_bytes += int(size[other].sum())
+            if copy is None and other.any():
+                copy = LineCopy(p, Path(tmp) / p.name)
+                copy.pad(lines)
+            if copy is not None:
+                copy.add(ch, other)
+            dec.flush()
+            lines += len(ch.start)
+        copied = copy.close() if copy is not None else None
+        res = dec.finish(cfg)
+        check_strict(res, cfg)
+        if progress is not None:
+            progress(json_bytes)
+        parts = [res]
+        notes = []
+        if copied is not None:
+            notes.append(f"{n_other} lines other than JSON read as NMEA 0183")
+            told = scaled_progress(progress, other_bytes, copied.stat().st_size)
+            r = relabel(read_nmea(copied, cfg, told), str(copied), file)
+            take_off_blanks(r, n_json)
+            parts.append(r)
+        elif blanks:
+            res.ignored["blank"] += blanks
+    return merge_results(file, "gpsd-json", lines, parts, notes)

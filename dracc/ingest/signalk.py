@@ -27,7 +27,9 @@ from __future__ import annotations
 
 import re
 import tempfile
+from collections import Counter
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -35,15 +37,13 @@ import numpy as np
 
 from dracc.core.errors import IngestError
 from dracc.frames import MISSING_NS, FileResult
+from dracc.ingest.chunks import Chunk, LineCopy, iter_line_chunks
 from dracc.ingest.demux import (
     check_strict,
-    line_bounds,
-    line_copy,
     merge_results,
     relabel,
     scaled_progress,
     take_off_blanks,
-    write_copy,
 )
 from dracc.ingest.signalk_delta import DeltaDecoder, decode_lines
 
@@ -120,102 +120,153 @@ def raw_line(buf: np.ndarray, start: np.ndarray, end: np.ndarray, i: int) -> str
     return buf[start[i] : min(end[i], start[i] + 120)].tobytes().decode("utf-8", "replace")
 
 
+@dataclass
+class _Pass:
+    """What one pass over a Signal K data log gathered, chunk by chunk."""
+
+    lines: int = 0
+    counts: Counter[str] = field(default_factory=Counter)  #: lines by what they are
+    nbytes: Counter[str] = field(default_factory=Counter)  #: their bytes (for progress)
+    other: dict[int, list[tuple[int, str]]] = field(default_factory=dict)  #: letter: examples
+    other_n: Counter[int] = field(default_factory=Counter)
+    #: the ``A`` lines: their numbers and receive times (chunk by chunk), first examples
+    n2k_lines: list[np.ndarray] = field(default_factory=list)
+    n2k_recv: list[np.ndarray] = field(default_factory=list)
+    n2k_examples: list[tuple[int, str]] = field(default_factory=list)
+    nmea_copy: LineCopy | None = None
+    n2k_copy: LineCopy | None = None
+
+
 def read_signalk(
     path: str | Path, cfg: IngestConfig, progress: Callable[[int], object] | None = None
 ) -> FileResult:
     """Read a Signal K server data log (see the module docstring) into one
-    :class:`FileResult` of format ``signalk``."""
+    :class:`FileResult` of format ``signalk``, streamed in chunks of whole lines
+    (:func:`iter_line_chunks`); the copies are written chunk by chunk."""
     from dracc.ingest.nmea import check_readable, read_nmea
 
     p = Path(path)
     check_readable(p)
     file = str(p)
-    raw = p.read_bytes()
-    buf = np.frombuffer(raw, dtype=np.uint8)
-    start, end, nxt = line_bounds(buf)
-    letter, recv, pay = split_prefixes(buf, start, end)
-    blank = start == end
-    size = nxt - start
-    is_nmea = np.isin(letter, np.frombuffer(NMEA_LETTERS, np.uint8)) | ((letter == 0) & ~blank)
-    is_n2k = letter == ord("A")
-    is_delta = letter == ord("I")
-    other = (letter != 0) & ~is_nmea & ~is_n2k & ~is_delta
+    dec = DeltaDecoder(file, max_line_bytes=cfg.max_line_bytes)
     parts: list[FileResult] = []
-    notes: list[str] = []
-    plain = (letter == 0) & ~blank
-    counts = {
-        "NMEA 0183": int(is_nmea.sum() - plain.sum()),
-        "NMEA 2000": int(is_n2k.sum()),
-        "Signal K delta": int(is_delta.sum()),
-        "other": int(other.sum()),
-        "not multiplexed (read as NMEA 0183)": int(plain.sum()),
-    }
-    notes.append(
-        "Signal K data log: " + ", ".join(f"{n} {what} lines" for what, n in counts.items() if n)
-    )
     with tempfile.TemporaryDirectory(prefix="dracc-signalk-") as tmp:
         folder = Path(tmp)
-        if is_nmea.any() or not (is_n2k.any() or is_delta.any()):
-            added = int((~is_nmea & ~blank).sum())
-            if added == 0:  # nothing to blank out: the log is read as it is
+        acc = _Pass()
+        chunks = iter_line_chunks(p, cfg.max_line_bytes)
+        while (ch := next(chunks, None)) is not None:  # None at the end: no chunk held on
+            _take_chunk(p, cfg, ch, acc, dec, folder)
+        c, nb = acc.counts, acc.nbytes
+        nmea_copy = acc.nmea_copy.close() if acc.nmea_copy is not None else None
+        n2k_copy = acc.n2k_copy.close() if acc.n2k_copy is not None else None
+        notes = [_summary(c)]
+        if c["nmea"] or not (c["n2k"] or c["delta"]):
+            if nmea_copy is None:  # nothing to blank out: the log is read as it is
                 parts.append(read_nmea(p, cfg, progress))
             else:
-                (folder / "n").mkdir()
-                copy = write_copy(line_copy(buf, start, end, nxt, is_nmea), folder / "n", p.name)
-                told = scaled_progress(progress, int(size[is_nmea].sum()), copy.stat().st_size)
-                r = relabel(read_nmea(copy, cfg, told), str(copy), file)
-                take_off_blanks(r, added)
+                told = scaled_progress(progress, nb["nmea"], nmea_copy.stat().st_size)
+                r = relabel(read_nmea(nmea_copy, cfg, told), str(nmea_copy), file)
+                take_off_blanks(r, c["added"])
                 parts.append(r)
-        if is_n2k.any():
-            parts.append(
-                _read_n2k_lines(p, cfg, progress, buf, start, end, nxt, is_n2k, pay, recv, folder)
-            )
-        if is_delta.any():
-            dec = DeltaDecoder(file, max_line_bytes=cfg.max_line_bytes)
-            di = np.flatnonzero(is_delta)
-            decode_lines(dec, raw, pay[di], end[di], di + 1, recv[di])
+        if n2k_copy is not None:
+            parts.append(_read_n2k_lines(p, cfg, progress, acc, n2k_copy))
+        if c["delta"]:
             r = dec.finish(cfg)
             r.format = "signalk"
             check_strict(r, cfg)
             parts.append(r)
             if progress is not None:
-                progress(int(size[is_delta].sum()))
-    res = merge_results(file, "signalk", len(start), parts, notes)
+                progress(nb["delta"])
+    res = merge_results(file, "signalk", acc.lines, parts, notes)
+    if acc.other_n:
+        for ch_ in sorted(acc.other_n):
+            what = f"signalk {chr(ch_)}"
+            res.ignored[what] += acc.other_n[ch_]
+            res.ignored_examples[what] = [(file, ln, t) for ln, t in acc.other[ch_]]
+        if progress is not None:
+            progress(nb["other"])
+    return res
+
+
+def _summary(c: Counter[str]) -> str:
+    """The note saying how many lines of each kind the log holds."""
+    counts = {
+        "NMEA 0183": c["nmea"] - c["plain"],
+        "NMEA 2000": c["n2k"],
+        "Signal K delta": c["delta"],
+        "other": c["other"],
+        "not multiplexed (read as NMEA 0183)": c["plain"],
+    }
+    return "Signal K data log: " + ", ".join(f"{n} {what} lines" for what, n in counts.items() if n)
+
+
+def _take_chunk(
+    p: Path, cfg: IngestConfig, ch: Chunk, acc: _Pass, dec: DeltaDecoder, folder: Path
+) -> None:
+    """Split one chunk's lines by their letter: deltas decoded, NMEA 0183 and NMEA 2000
+    lines into their copies (each started where first needed), the rest counted."""
+    buf, start, end = ch.buf, ch.start, ch.end
+    letter, recv, pay = split_prefixes(buf, start, end)
+    blank = start == end
+    size = ch.nxt - start
+    plain = (letter == 0) & ~blank
+    is_nmea = np.isin(letter, np.frombuffer(NMEA_LETTERS, np.uint8)) | plain
+    is_n2k = letter == ord("A")
+    is_delta = letter == ord("I")
+    other = (letter != 0) & ~is_nmea & ~is_n2k & ~is_delta
+    added = ~is_nmea & ~blank
+    for what, m in (("nmea", is_nmea), ("n2k", is_n2k), ("delta", is_delta), ("other", other)):
+        acc.counts[what] += int(m.sum())
+        acc.nbytes[what] += int(size[m].sum())
+    acc.counts["plain"] += int(plain.sum())
+    acc.counts["added"] += int(added.sum())
+    if acc.nmea_copy is None and added.any():
+        # the lines before are NMEA 0183 or blank: copied as they are (read again)
+        (folder / "n").mkdir()
+        acc.nmea_copy = LineCopy(p, folder / "n" / p.name)
+        for before in iter_line_chunks(p, cfg.max_line_bytes, stop=ch.offset):
+            acc.nmea_copy.add(before, np.ones(len(before.start), dtype=bool))
+    if acc.nmea_copy is not None:
+        acc.nmea_copy.add(ch, is_nmea)
+    if is_n2k.any():
+        if acc.n2k_copy is None:
+            (folder / "a").mkdir()
+            acc.n2k_copy = LineCopy(p, folder / "a" / p.name)
+            acc.n2k_copy.pad(acc.lines)
+        ai = np.flatnonzero(is_n2k)
+        acc.n2k_lines.append(ch.numbers(ai))
+        acc.n2k_recv.append(recv[ai])
+        for i in ai[: max(0, 5 - len(acc.n2k_examples))].tolist():
+            acc.n2k_examples.append((i + 1 + ch.line0, raw_line(buf, start, end, i)))
+    if acc.n2k_copy is not None:
+        acc.n2k_copy.add(ch, is_n2k, pay - start)
+    if is_delta.any():
+        di = np.flatnonzero(is_delta)
+        decode_lines(dec, ch.data, pay[di], end[di], ch.numbers(di), recv[di])
+        dec.flush()
     if other.any():
         oi = np.flatnonzero(other)
-        for ch in np.unique(letter[oi]).tolist():
-            rows = oi[letter[oi] == ch]
-            what = f"signalk {chr(ch)}"
-            res.ignored[what] += len(rows)
-            res.ignored_examples[what] = [
-                (file, i + 1, raw_line(buf, start, end, i)) for i in rows[:5].tolist()
-            ]
-        if progress is not None:
-            progress(int(size[other].sum()))
-    return res
+        for x in np.unique(letter[oi]).tolist():
+            rows = oi[letter[oi] == x]
+            acc.other_n[x] += len(rows)
+            ex = acc.other.setdefault(x, [])
+            for i in rows[: max(0, 5 - len(ex))].tolist():
+                ex.append((i + 1 + ch.line0, raw_line(buf, start, end, i)))
+    acc.lines += len(start)
 
 
 def _read_n2k_lines(
     p: Path,
     cfg: IngestConfig,
     progress: Callable[[int], object] | None,
-    buf: np.ndarray,
-    start: np.ndarray,
-    end: np.ndarray,
-    nxt: np.ndarray,
-    keep: np.ndarray,
-    pay: np.ndarray,
-    recv: np.ndarray,
-    folder: Path,
+    acc: _Pass,
+    copy: Path,
 ) -> FileResult:
     """The ``A`` lines' payloads (canboat plain) read by the NMEA 2000 reader from a
     line-preserving copy; rows without a receive time get their line's."""
     file = str(p)
-    rows = np.flatnonzero(keep)
-    n = len(rows)
-    (folder / "a").mkdir()
-    copy = write_copy(line_copy(buf, start, end, nxt, keep, pay - start), folder / "a", p.name)
-    told = scaled_progress(progress, int((nxt - start)[keep].sum()), copy.stat().st_size)
+    n = acc.counts["n2k"]
+    told = scaled_progress(progress, acc.nbytes["n2k"], copy.stat().st_size)
     try:
         from dracc.ingest.n2k import read_n2k
 
@@ -229,16 +280,19 @@ def _read_n2k_lines(
             if isinstance(err, ImportError)
             else str(err).replace(str(copy), file)
         )
-        for i in rows[:5].tolist():
-            r.rejects.add("n2k_unread", file, i + 1, raw_line(buf, start, end, i))
+        for ln, text in acc.n2k_examples:
+            r.rejects.add("n2k_unread", file, ln, text)
         r.rejects.counts["n2k_unread"] += max(0, n - 5)
         r.notes.append(f"{n} NMEA 2000 lines not read: {why}")
         return r
-    take_off_blanks(r, len(start) - n)
+    take_off_blanks(r, acc.lines - n)
+    numbers = np.concatenate(acc.n2k_lines)
+    recv = np.concatenate(acc.n2k_recv)
     for df in r.frames.values():
         if len(df):
             lines = df["line"].to_numpy()
             have = df["recv_ns"].to_numpy()
-            got = recv[np.clip(lines - 1, 0, len(recv) - 1)]
+            at = np.clip(np.searchsorted(numbers, lines), 0, len(numbers) - 1)
+            got = np.where(numbers[at] == lines, recv[at], MISSING_NS)
             df["recv_ns"] = np.where(have == MISSING_NS, got, have)
     return r

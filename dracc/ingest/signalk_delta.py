@@ -48,7 +48,8 @@ import numpy as np
 import pandas as pd
 
 from dracc.frames import MISSING_NS, FileResult, Rejects, concat_blocks, make_frame
-from dracc.ingest.demux import check_strict, line_bounds
+from dracc.ingest.chunks import iter_line_chunks
+from dracc.ingest.demux import check_strict
 from dracc.ingest.nmea.sentences import MAX_LINE_BYTES
 from dracc.ingest.timebase import EventCounter
 
@@ -58,7 +59,7 @@ if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
 try:  # measured: the parse 3.6x faster than json, a whole delta line 1.35-1.6x
     import orjson
 
-    loads: Callable[[bytes], Any] = orjson.loads
+    loads: Callable[[bytes | bytearray], Any] = orjson.loads
     JSON_ERRORS: tuple[type[Exception], ...] = (orjson.JSONDecodeError, ValueError)
 except ImportError:  # pragma: no cover - orjson is optional
     loads = json.loads
@@ -195,6 +196,42 @@ class _Rows:
     sentence: list[str] = field(default_factory=list)
     values: list[tuple[float, ...]] = field(default_factory=list)
     extra: list[Any] = field(default_factory=list)  #: heading reference / position quality
+    #: the rows of earlier chunks as columns (:meth:`flush`), the texts as codes
+    blocks: list[dict[str, np.ndarray]] = field(default_factory=list)
+
+    def flush(self, codes: dict[str, int]) -> None:
+        """The rows so far as compact columns (texts coded in ``codes``), lists emptied."""
+        if not self.line:
+            return
+
+        def code(texts: list[str]) -> np.ndarray:
+            return np.array([codes.setdefault(x, len(codes)) for x in texts], dtype=np.int32)
+
+        self.blocks.append(
+            {
+                "ctx": np.array(self.ctx, dtype=np.int64),
+                "upd": np.array(self.upd, dtype=np.int64),
+                "line": np.array(self.line, dtype=np.int64),
+                "source": code(self.source),
+                "talker": code(self.talker),
+                "sentence": code(self.sentence),
+                "values": np.array(self.values, dtype=np.float64),
+                "extra": np.array(self.extra, dtype=object),
+            }
+        )
+        for col in (self.ctx, self.upd, self.line, self.source, self.talker, self.sentence):
+            col.clear()
+        self.values.clear()
+        self.extra.clear()
+
+    def columns(self, codes: dict[str, int]) -> dict[str, np.ndarray]:
+        """All rows as columns (after :meth:`flush`; the texts as codes), the blocks given
+        up column by column (the rows are held about once)."""
+        self.flush(codes)
+        keys = list(self.blocks[0])
+        out = {k: np.concatenate([b.pop(k) for b in self.blocks]) for k in keys}
+        self.blocks.clear()
+        return out
 
 
 @dataclass
@@ -220,6 +257,10 @@ class DeltaDecoder:
     _ctx_ignored_ex: dict[int, dict[str, list[tuple[int, str]]]] = field(default_factory=dict)
     _times: list[Any] = field(default_factory=list)  #: update timestamps (str or None)
     _recv: list[int] = field(default_factory=list)  #: the receive time of each update
+    #: the updates of earlier chunks (:meth:`flush`): blocks of (time ns, own time, recv)
+    _upd_blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
+    _upd_done: int = 0  #: updates in ``_upd_blocks``
+    _codes: dict[str, int] = field(default_factory=dict)  #: source, talker, sentence texts
 
     def ignore(self, what: str, line: int, text: str) -> None:
         self.ignored[what] += 1
@@ -227,7 +268,7 @@ class DeltaDecoder:
         if len(ex) < _EXAMPLES:
             ex.append((self.file, line, text[:120]))
 
-    def feed(self, payload: bytes, line: int, recv_ns: int = MISSING_NS) -> None:
+    def feed(self, payload: bytes | bytearray, line: int, recv_ns: int = MISSING_NS) -> None:
         """One line of JSON (``line``: its number in the file; ``recv_ns``: its receive
         time or MISSING_NS)."""
         self.lines += 1
@@ -298,7 +339,7 @@ class DeltaDecoder:
         if not got:
             return
         ts = update.get("timestamp")
-        u = len(self._times)
+        u = self._upd_done + len(self._times)
         self._times.append(ts if isinstance(ts, str) else None)
         self._recv.append(recv_ns)
         try:
@@ -355,6 +396,19 @@ class DeltaDecoder:
                     out.append((kind, vals, None))
         return out
 
+    def flush(self) -> None:
+        """The updates and rows fed so far kept as compact columns (times parsed), their
+        lists emptied: a streamed read calls this after each chunk."""
+        if self._times:
+            t = _times(self._times, self._recv)
+            own = np.array([x is not None for x in self._times], dtype=bool)
+            self._upd_blocks.append((t, own, np.array(self._recv, dtype=np.int64)))
+            self._upd_done += len(self._times)
+            self._times.clear()
+            self._recv.clear()
+        for r in self.rows.values():
+            r.flush(self._codes)
+
     def own_contexts(self) -> tuple[set[int], list[str]]:
         """The contexts read as the own vessel, and a note where one was chosen."""
         own = {i for i, c in enumerate(self.contexts) if c is None or c == SELF}
@@ -373,7 +427,8 @@ class DeltaDecoder:
         return own, notes
 
     def finish(self, cfg: IngestConfig | None = None) -> FileResult:
-        """The frames of the own vessel, rejects, ignored counts, notes."""
+        """The frames of the own vessel, rejects, ignored counts, notes (called once: it
+        takes the decoder's columns)."""
         own, notes = self.own_contexts()
         for c in range(len(self.contexts)):
             if c in own:
@@ -391,37 +446,43 @@ class DeltaDecoder:
         others = sum(1 for c in range(len(self.contexts)) if c not in own)
         if others:
             notes.append(f"{others} other vessels' deltas (AIS targets) not read")
-        times = _times(self._times, self._recv)
-        recv = np.asarray(self._recv, dtype=np.int64)
+        self.flush()
+        ub = self._upd_blocks
+        times = np.concatenate([b[0] for b in ub]) if ub else np.zeros(0, np.int64)
+        own_time = np.concatenate([b[1] for b in ub]) if ub else np.zeros(0, bool)
+        recv = np.concatenate([b[2] for b in ub]) if ub else np.zeros(0, np.int64)
+        ub.clear()
         frames: dict[str, pd.DataFrame] = {}
         events = EventCounter()
         if cfg is not None:
             events.gap_s, events.tolerance_s = cfg.gap_s, cfg.backstep_tolerance_s
         no_time = 0
-        for kind, r in self.rows.items():
-            if not r.line:
+        for kind, rows in self.rows.items():
+            if not rows.blocks and not rows.line:
                 continue
-            sel = np.isin(np.asarray(r.ctx, dtype=np.int64), np.fromiter(own, np.int64, len(own)))
-            upd = np.asarray(r.upd, dtype=np.int64)
+            r = rows.columns(self._codes)
+            names = np.array(list(self._codes), dtype=object)
+            sel = np.isin(r["ctx"], np.fromiter(own, np.int64, len(own)))
+            upd = r["upd"]
             t = times[upd]
             ok = sel & (t != MISSING_NS)
             no_time += int((sel & (t == MISSING_NS)).sum())
             if not ok.any():
                 continue
             idx = np.flatnonzero(ok)
-            has_own_time = np.array([self._times[u] is not None for u in upd[idx]])
-            vals = np.asarray(r.values, dtype=np.float64)[idx]
+            has_own_time = own_time[upd[idx]]
+            vals = r["values"][idx]
             data: dict[str, Any] = {
                 "time_ns": t[idx],
                 "recv_ns": np.where(has_own_time, recv[upd[idx]], MISSING_NS),
-                "line": np.asarray(r.line, dtype=np.int64)[idx],
-                "source": np.asarray(r.source, dtype=object)[idx],
-                "talker": np.asarray(r.talker, dtype=object)[idx],
-                "sentence": np.asarray(r.sentence, dtype=object)[idx],
+                "line": r["line"][idx],
+                "source": names[r["source"][idx]],
+                "talker": names[r["talker"][idx]],
+                "sentence": names[r["sentence"][idx]],
             }
             for j, col in enumerate(_COLUMNS[kind]):
                 data[col] = vals[:, j]
-            extra = np.asarray(r.extra, dtype=object)[idx]
+            extra = r["extra"][idx]
             if kind == "position":
                 data["quality"] = extra.astype(np.int8)
             elif kind == "heading":
@@ -484,7 +545,7 @@ def looks_like_signalk_delta(head: bytes) -> bool:
 
 def decode_lines(
     dec: DeltaDecoder,
-    raw: bytes,
+    raw: bytes | bytearray,
     start: np.ndarray,
     end: np.ndarray,
     numbers: np.ndarray,
@@ -500,20 +561,27 @@ def decode_lines(
 def read_signalk_delta(
     path: str | Path, cfg: IngestConfig, progress: Callable[[int], object] | None = None
 ) -> FileResult:
-    """Read a file of bare Signal K delta lines into a :class:`FileResult`."""
+    """Read a file of bare Signal K delta lines into a :class:`FileResult`, streamed in
+    chunks of whole lines (:func:`dracc.ingest.chunks.iter_line_chunks`)."""
     p = Path(path)
-    raw = p.read_bytes()
-    buf = np.frombuffer(raw, dtype=np.uint8)
-    start, end, _nxt = line_bounds(buf)
     dec = DeltaDecoder(str(p), max_line_bytes=cfg.max_line_bytes)
-    blank = start == end
-    if blank.any():
-        dec.ignored["blank"] += int(blank.sum())
-    keep = np.flatnonzero(~blank)
-    decode_lines(dec, raw, start[keep], end[keep], keep + 1)
+    lines = blanks = nbytes = 0
+    chunks = iter_line_chunks(p, cfg.max_line_bytes)
+    while (ch := next(chunks, None)) is not None:  # None at the end: no chunk held on
+        blank = ch.start == ch.end
+        blanks += int(blank.sum())
+        keep = np.flatnonzero(~blank)
+        decode_lines(dec, ch.data, ch.start[keep], ch.end[keep], ch.numbers(keep))
+        dec.flush()
+        lines += len(ch.start)
+        nbytes += ch.nbytes
+    if blanks:  # counted first, as a read of the whole file did
+        ignored: Counter[str] = Counter({"blank": blanks})
+        ignored.update(dec.ignored)
+        dec.ignored = ignored
     res = dec.finish(cfg)
-    res.lines = len(start)
+    res.lines = lines
     check_strict(res, cfg)
     if progress is not None:
-        progress(len(raw))
+        progress(nbytes)
     return res
