@@ -107,6 +107,15 @@ def skew(v: ArrayLike) -> FloatArray:
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
+def _frame_error_rate(
+    err: ArrayLike, omega: ArrayLike, dcm: ArrayLike, d_inner: ArrayLike, d_own: ArrayLike
+) -> FloatArray:
+    """The common form of (19) and (20): e' = -omega x e - C d_inner + d_own."""
+    w, e = np.asarray(omega, float), np.asarray(err, float)
+    d_in, d_ow = np.asarray(d_inner, float), np.asarray(d_own, float)
+    return cast(FloatArray, -np.cross(w, e) - np.asarray(dcm, float) @ d_in + d_ow)
+
+
 def gyro_attitude_error_rate(
     xi: ArrayLike,
     omega_ib_b: ArrayLike,
@@ -115,9 +124,7 @@ def gyro_attitude_error_rate(
     d_omega_ib_b: ArrayLike,
 ) -> FloatArray:
     """(19): xi' = -omega_ib^b x xi - C_g^b d omega_ig^g + d omega_ib^b (from (15)-(18))."""
-    w, x = np.asarray(omega_ib_b, float), np.asarray(xi, float)
-    d_ig, d_ib = np.asarray(d_omega_ig_g, float), np.asarray(d_omega_ib_b, float)
-    return cast(FloatArray, -np.cross(w, x) - np.asarray(c_g_b, float) @ d_ig + d_ib)  # (19)
+    return _frame_error_rate(xi, omega_ib_b, c_g_b, d_omega_ig_g, d_omega_ib_b)  # (19)
 
 
 def body_attitude_error_rate(
@@ -128,9 +135,7 @@ def body_attitude_error_rate(
     d_omega_in_n: ArrayLike,
 ) -> FloatArray:
     """(20): gamma' = -omega_in^n x gamma - C_b^n d omega_ib^b + d omega_in^n."""
-    w, g = np.asarray(omega_in_n, float), np.asarray(gamma, float)
-    d_ib, d_in = np.asarray(d_omega_ib_b, float), np.asarray(d_omega_in_n, float)
-    return cast(FloatArray, -np.cross(w, g) - np.asarray(c_b_n, float) @ d_ib + d_in)  # (20)
+    return _frame_error_rate(gamma, omega_in_n, c_b_n, d_omega_ib_b, d_omega_in_n)  # (20)
 
 
 def nav_rate_error_radps(

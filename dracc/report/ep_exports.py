@@ -91,6 +91,18 @@ def sub_element(parent: ET.Element, tag: str, text: str | None = None, **attrib:
     return el
 
 
+def kml_polygon(pm: ET.Element, lon_deg: Any, lat_deg: Any) -> None:
+    """A tessellated KML Polygon of one ring (lon, lat degrees) inside placemark ``pm``."""
+    k = NS_KML
+    poly = sub_element(pm, f"{{{k}}}Polygon")
+    sub_element(poly, f"{{{k}}}tessellate", "1")
+    ring = sub_element(sub_element(poly, f"{{{k}}}outerBoundaryIs"), f"{{{k}}}LinearRing")
+    coords = " ".join(
+        f"{num_text(x, 8)},{num_text(y, 8)},0" for x, y in zip(lon_deg, lat_deg, strict=True)
+    )
+    sub_element(ring, f"{{{k}}}coordinates", coords)
+
+
 def deg(lat_rad: np.ndarray, lon_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Degrees, the longitude in [-180, 180) (GPX)."""
     lon = np.degrees(np.asarray(lon_rad, float))
@@ -311,16 +323,7 @@ def kml_parts(doc: ET.Element, e: EstimatedPositionSection) -> None:
             sub_element(d, f"{{{k}}}value", num_text(value))
         d = sub_element(ext, f"{{{k}}}Data", name="update")
         sub_element(d, f"{{{k}}}value", e.update_kind[i])
-        poly = sub_element(pm, f"{{{k}}}Polygon")
-        sub_element(poly, f"{{{k}}}tessellate", "1")
-        ring = sub_element(sub_element(poly, f"{{{k}}}outerBoundaryIs"), f"{{{k}}}LinearRing")
-        sub_element(
-            ring,
-            f"{{{k}}}coordinates",
-            " ".join(
-                f"{num_text(x, 8)},{num_text(y, 8)},0" for x, y in zip(rlon, rlat, strict=True)
-            ),
-        )
+        kml_polygon(pm, rlon, rlat)
 
 
 def geojson_features(e: EstimatedPositionSection) -> list[dict[str, Any]]:

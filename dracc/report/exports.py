@@ -74,6 +74,7 @@ from dracc.report.ep_exports import (
     ELLIPSE_SCALE,
     NS_GX,
     NS_KML,
+    kml_polygon,
     polygon_geometry,
     ring_deg,
 )
@@ -585,14 +586,7 @@ def kml_document(a: Analysis) -> bytes:
             ):
                 d = _sub(ext, f"{{{k}}}Data", name=name)
                 _sub(d, f"{{{k}}}value", _num(float(value)))
-            poly = _sub(pm, f"{{{k}}}Polygon")
-            _sub(poly, f"{{{k}}}tessellate", "1")
-            ring = _sub(_sub(poly, f"{{{k}}}outerBoundaryIs"), f"{{{k}}}LinearRing")
-            _sub(
-                ring,
-                f"{{{k}}}coordinates",
-                " ".join(f"{_num(x, 8)},{_num(y, 8)},0" for x, y in zip(lon, lat, strict=True)),
-            )
+            kml_polygon(pm, lon, lat)
         found = misses(dr)
         if found.size:
             folder = _sub(doc, f"{{{k}}}Folder")
