@@ -213,3 +213,12 @@ def test_a_night_without_data_adds_no_row(tmp_path, verdict):
     (tmp_path / "n.json").write_text(json.dumps(doc))
     tasks, summaries, failures = expand_documents(discover([str(tmp_path / "n.json")]))
     assert tasks == [] and summaries == {} and failures == {}
+
+
+def test_an_oversized_document_is_refused_without_reading_it(tmp_path, monkeypatch):
+    import dracc.pipeline.fleet.documents as documents
+
+    monkeypatch.setattr(documents, "MAX_DOCUMENT_BYTES", 1000)
+    (tmp_path / "big.json").write_text(json.dumps(_document("A", "2026-05-01")) + " " * 2000)
+    _, summaries, failures = expand_documents(discover([str(tmp_path / "big.json")]))
+    assert summaries == {} and "is not a nightly audit document" in next(iter(failures.values()))

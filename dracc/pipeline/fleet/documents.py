@@ -23,6 +23,8 @@ from dracc.pipeline.state import NightRecord, StateStore
 
 AUDIT_SCHEMA = "dracc.audit/1"
 _SQLITE_MAGIC = b"SQLite format 3\x00"
+#: the largest audit document read (a whole one with its analysis is a few hundred kB)
+MAX_DOCUMENT_BYTES = 64 << 20
 #: how far into a JSON file its "schema" key is looked for (the audit writes it first)
 _SNIFF_BYTES = 4096
 
@@ -136,6 +138,12 @@ def summary_from_record(r: NightRecord) -> dict:
 def _nights(task: LogTask, kind: str) -> list[tuple[str, str, dict]]:
     """(vessel, night, summary) of every night with data in one document."""
     if kind == "audit-json":
+        size = Path(task.path).stat().st_size
+        if size > MAX_DOCUMENT_BYTES:  # a night's document is kB (brief) to a few MB
+            raise StateError(
+                f"{task.path}: {size:,} bytes is not a nightly audit document (at most "
+                f"{MAX_DOCUMENT_BYTES:,}); not read"
+            )
         try:
             doc = json.loads(Path(task.path).read_text(encoding="utf-8"))
         except (OSError, ValueError) as err:
