@@ -250,9 +250,32 @@ class FileResult:
     #: type -> the first few (file, line or message number, text) of each ignored type
     ignored_examples: dict[str, list[tuple[str, int, str]]] = field(default_factory=dict)
 
+    #: the file carries no clock of its own (a candump without times, a logger whose
+    #: times start at zero): its times are the order of its records, not time of day, and
+    #: no latency, rate or time finding is drawn from them
+    clockless: bool = False
+
     @property
     def records(self) -> int:
         return sum(len(f) for f in self.frames.values())
+
+
+@dataclass(frozen=True)
+class RoleChoice:
+    """One role filled by one source, chosen by evidence among several candidates
+    (:mod:`dracc.ingest.role_evidence`); the runners-up stay as witnesses."""
+
+    role: str  #: 'compass', 'log' or 'gnss'
+    chosen: str  #: the source key that fills the role
+    why: str  #: the evidence that decided, in words
+    #: (source key, why it was not chosen) for every other candidate: the witnesses
+    runners_up: tuple[tuple[str, str], ...] = ()
+    #: source key -> the figures weighed (resolution, availability, agreement ...)
+    evidence: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+    @property
+    def witnesses(self) -> list[str]:
+        return [k for k, _ in self.runners_up]
 
 
 @dataclass
@@ -270,6 +293,14 @@ class Voyage:
     #: valid lines or messages dracc does not use, by type ('GSV', 'VDM', 'comment', an MCAP
     #: schema name, ...): counted, never rejected (only damaged input is rejected)
     ignored: Counter[str] = field(default_factory=Counter)
+    #: roles filled by evidence among several candidates (:class:`RoleChoice`)
+    choices: list[RoleChoice] = field(default_factory=list)
+    #: source keys read from a file without a clock (:attr:`FileResult.clockless`)
+    clockless: frozenset[str] = frozenset()
+
+    def witnesses(self, role: str) -> list[str]:
+        """The candidates for ``role`` not chosen, kept as witnesses."""
+        return [k for c in self.choices if c.role == role for k in c.witnesses]
 
     def role_sources(self, role: str) -> list[str]:
         """Source keys assigned to ``role``."""

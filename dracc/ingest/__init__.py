@@ -360,6 +360,10 @@ def read_logs(
         )
     te.decisions.extend(identity_notes)
     te.decisions.extend(assign_roles(sources, dict(cfg.sources)))
+    # keys already renamed above (rename_sources changed the frames in place)
+    clockless = frozenset(
+        k for r in results if r.clockless for k in summarize_frames(r.frames, r.path)
+    )
     return Voyage(
         frames=frames,
         sources=sources,
@@ -368,4 +372,5 @@ def read_logs(
         inputs=inputs,
         lines=sum(r.lines for r in results),
         ignored=ignored,
+        clockless=clockless,
     )
