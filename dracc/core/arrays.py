@@ -13,7 +13,15 @@ from typing import Any, TypeAlias
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["ArrayLike", "BoolArray", "FloatArray", "FloatOrArray", "IntArray", "unique_sorted"]
+__all__ = [
+    "ArrayLike",
+    "BoolArray",
+    "FloatArray",
+    "FloatOrArray",
+    "IntArray",
+    "hold_at",
+    "unique_sorted",
+]
 
 FloatArray: TypeAlias = NDArray[np.float64]  #: an array of float64
 IntArray: TypeAlias = NDArray[np.int64]  #: an array of int64 (times in nanoseconds)
@@ -32,3 +40,16 @@ def unique_sorted(a: ArrayLike) -> NDArray[Any]:
     if b.size == 0:
         return b
     return b[np.r_[True, b[1:] != b[:-1]]]
+
+
+def hold_at(
+    t_src_ns: NDArray[np.int64], values: NDArray[Any], t_at_ns: NDArray[np.int64], max_age_ns: int
+) -> NDArray[np.float64]:
+    """The last sample at or before each of ``t_at_ns``, NaN where it is older than
+    ``max_age_ns`` or there is none (sample-and-hold; ``t_src_ns`` sorted)."""
+    i = np.searchsorted(t_src_ns, t_at_ns, side="right") - 1
+    ok = i >= 0
+    out = np.full(np.shape(t_at_ns), np.nan)
+    j = i[ok]
+    out[ok] = np.where(t_at_ns[ok] - t_src_ns[j] <= max_age_ns, values[j], np.nan)
+    return out

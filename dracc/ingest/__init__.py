@@ -33,6 +33,7 @@ from dracc.frames import KINDS, FileResult, Rejects, SourceInfo, TimeEvents, Voy
 from dracc.ingest.compressed import STDIN, plain_copy
 from dracc.ingest.demux import relabel, scaled_progress
 from dracc.ingest.nmea import check_readable
+from dracc.ingest.role_evidence import choose_roles
 from dracc.ingest.sources import (
     assign_roles,
     merge_infos,
@@ -359,7 +360,10 @@ def read_logs(
             }
         )
     te.decisions.extend(identity_notes)
-    te.decisions.extend(assign_roles(sources, dict(cfg.sources)))
+    candidates: dict[str, list[str]] = {}
+    te.decisions.extend(assign_roles(sources, dict(cfg.sources), candidates))
+    choices, choice_notes = choose_roles(frames, sources, candidates)
+    te.decisions.extend(choice_notes)
     # keys already renamed above (rename_sources changed the frames in place)
     clockless = frozenset(
         k for r in results if r.clockless for k in summarize_frames(r.frames, r.path)
@@ -373,4 +377,5 @@ def read_logs(
         lines=sum(r.lines for r in results),
         ignored=ignored,
         clockless=clockless,
+        choices=choices,
     )

@@ -31,10 +31,11 @@ import numpy as np
 
 from dracc.core.config import IngestConfig
 from dracc.core.timefmt import iso_utc
-from dracc.frames import FileResult, Rejects, SourceInfo, TimeEvents
+from dracc.frames import FileResult, Rejects, RoleChoice, SourceInfo, TimeEvents
 from dracc.ingest import detect_format, read_file, relabelled, scaled, summarize_frames
 from dracc.ingest.compressed import STDIN, needs_copy, plain_copy
 from dracc.ingest.nmea import StreamState, iter_nmea_blocks
+from dracc.ingest.role_evidence import choice_note
 from dracc.ingest.sources import assign_roles, merge_infos, separate_files
 from dracc.ingest.timebase import EventCounter
 
@@ -265,7 +266,9 @@ def inspect_logs(
                 agg[k] += ev[k]
             agg["max_gap_s"] = max(agg["max_gap_s"], ev["max_gap_s"])
     te.decisions.extend(identity_notes)
-    role_notes = assign_roles(merged, dict(cfg.sources))
+    candidates: dict[str, list[str]] = {}
+    role_notes = assign_roles(merged, dict(cfg.sources), candidates)
+    choices = _choices(paths, cfg, merged, candidates, role_notes)
     all_sent: Counter[str] = Counter()
     for s in merged.values():
         all_sent.update(s.sentences)
@@ -290,9 +293,42 @@ def inspect_logs(
             "examples": [{"file": f, "line": ln, "what": w} for f, ln, w in te.examples],
         },
         "roles": role_notes,
+        "choices": [
+            {
+                "role": c.role,
+                "chosen": c.chosen,
+                "why": c.why,
+                "witnesses": [{"source": k, "why_not": w} for k, w in c.runners_up],
+                "evidence": c.evidence,
+            }
+            for c in choices
+        ],
         "notes": notes,
         "inputs": inputs,
     }
+
+
+def _choices(
+    paths: list[Path],
+    cfg: IngestConfig,
+    merged: dict[str, SourceInfo],
+    candidates: dict[str, list[str]],
+    notes: list[str],
+) -> list[RoleChoice]:
+    """The roles several sources could fill, chosen by the evidence of the values (as
+    ``analyze`` chooses them: the logs are read into frames once more for it; only where
+    a role has several candidates).  The roles are set on ``merged``, the choices said in
+    ``notes``."""
+    if not any(len(v) > 1 for v in candidates.values()):
+        return []
+    from dracc.ingest import read_logs  # the whole reader, only for a choice to make
+
+    voyage = read_logs(paths, cfg)
+    for key, info in voyage.sources.items():
+        if key in merged:
+            merged[key].roles = list(info.roles)
+    notes.extend(choice_note(c) for c in voyage.choices)
+    return voyage.choices
 
 
 def _total_accounting(parts: list[dict[str, int] | None]) -> dict[str, int] | None:

@@ -18,18 +18,21 @@ Role assignment (:func:`assign_roles`), in this order:
    satellite compass, an integrated navigation system), own-ship AIS (``VDO``);
    exactly three INS-type sources (talkers IN, II, IR, keys containing 'INS', or
    senders of an INS's own PASHR/PSXN) with positions -> ins1..3 in sorted order;
-   the only source with heading sentences (HDT/HDG/HDM/THS/ROT, PGN127250/127251) and
-   no positions -> compass (where there is none, the only instrument bus with heading
-   sentences; where there are several, the only one giving true heading, HDT/THS); a
+   the only source with heading sentences (HDT/HDG/HDM/THS, PGN127250; never rate of
+   turn alone, ROT/PGN127251) and no positions -> compass (where there is none, the only
+   instrument bus with heading sentences); a
    source of fixes without log sentences (an INS, a GNSS compass) is never made the
    compass by content, a sender of PASHR/PSXN only where no other heading source is a
    candidate (the Seapath's PSXN beside its GP fixes: openrvdas/NBP1406_seap);
    the only source with VHW/VBW/PGN128259 -> log (a GNSS's PGN128259, speed over
    ground only, gives way to a log's).  An instrument bus (e.g. 'II' with HDG + VHW)
    may be compass and log.
-4. Otherwise the role stays free and a note names the candidates; where the data
-   clearly need a role that two sources claim, :class:`AmbiguousSourceError` is for
-   the caller that requires it (``require_role``).
+4. Where several sources could fill the compass, log or gnss role (by content, or named
+   alike), the role stays free here and the candidates are handed back: one is chosen
+   by evidence from the data (:mod:`dracc.ingest.role_evidence`), the others kept as
+   witnesses -- two instruments are never merged into one series.  Otherwise a note
+   names what is unassigned; :class:`AmbiguousSourceError` is for the caller that
+   requires a role (``require_role``).
 """
 
 from __future__ import annotations
@@ -51,12 +54,14 @@ from dracc.frames import SourceInfo
 GNSS_FAMILY = ("GP", "GN", "GA", "GL", "GB", "GI", "GQ", "BD")
 INS_TALKERS = ("IN", "II", "IR")
 #: NMEA 2000 messages are sentences ``PGN<n>`` (:mod:`dracc.ingest.n2k`)
-N2K_HEADING = {"PGN127250", "PGN127251"}
+N2K_HEADING = {"PGN127250"}
+#: rate of turn (ROT, PGN127251) is never a heading: a device sending only it is no compass
+RATE_SENTENCES = {"ROT", "PGN127251"}
 N2K_LOG = {"PGN128259", "PGN128275"}
 N2K_POSITION = {"PGN129029", "PGN129025"}
 #: proprietary sentences of INS (attitude and true heading: NovAtel/Trimble, Seapath)
 INS_SENTENCES = {"PASHR", "PSXN"}
-HEADING_SENTENCES = {"HDT", "HDG", "HDM", "THS", "ROT"} | INS_SENTENCES | N2K_HEADING
+HEADING_SENTENCES = {"HDT", "HDG", "HDM", "THS"} | INS_SENTENCES | N2K_HEADING
 LOG_SENTENCES = {"VHW", "VBW", "VLW"} | N2K_LOG
 #: own-ship AIS (``!AIVDO``) positions come from the transponder's own receiver
 AIS_POSITION = {"VDO"}
@@ -149,8 +154,17 @@ def _name_role(key: str) -> str | None:
     return None
 
 
-def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> list[str]:
+def assign_roles(
+    sources: dict[str, SourceInfo],
+    mapping: dict[str, str],
+    candidates: dict[str, list[str]] | None = None,
+) -> list[str]:
     """Assign ``SourceInfo.roles`` in place; return human-readable notes.
+
+    A compass, log or gnss role that several sources could fill by content is left free
+    and its candidates put in ``candidates`` (role -> keys): one of them is chosen by
+    evidence from the data (:func:`dracc.ingest.role_evidence.choose_roles`), never
+    several merged.
 
     Raises :class:`ConfigError` for a mapping to an unknown role, and
     :class:`AmbiguousSourceError` when the mapping itself gives one role to sources
@@ -204,6 +218,9 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
     for role, infos in by_name.items():
         if len(infos) == 1:
             give(infos[0], role, "name")
+        elif role in ("compass", "log", "gnss") and candidates is not None:
+            candidates[role] = sorted(i.key for i in infos)  # one chosen by evidence
+            taken[role] = []
         else:
             notes.append(
                 f"{role} role not assigned: several sources are named for it "
@@ -261,14 +278,12 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
         ),
         ([], tiers[0][1]),
     )
+    pending = {} if candidates is None else candidates
     if "gnss" not in taken:
         if len(gnss) == 1:
             give(gnss[0], "gnss", why_gnss(gnss[0]))
         elif len(gnss) > 1:
-            notes.append(
-                "gnss role not assigned: several satellite sources "
-                f"({', '.join(sorted(s.key for s in gnss))}); map one in [ingest.sources]"
-            )
+            pending["gnss"] = sorted(s.key for s in gnss)
     if "compass" not in taken:
         cands = [
             s
@@ -297,21 +312,10 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
         pure = [s for s in cands if not has(s, POSITION_SENTENCES)]  # heading sentences only
         if pure:
             cands = pure
-        true = [s for s in cands if has(s, {"HDT", "THS"})]
-        if len(cands) > 1 and len(true) == 1:  # a gyro (true heading) beside magnetic compasses
-            give(
-                true[0],
-                "compass",
-                "the only source of true heading (HDT/THS) among "
-                f"{', '.join(sorted(s.key for s in cands))}",
-            )
-        elif len(cands) == 1:
+        if len(cands) == 1:
             give(cands[0], "compass", "the only source of heading sentences")
         elif len(cands) > 1:
-            notes.append(
-                "compass role not assigned: several heading sources "
-                f"({', '.join(sorted(s.key for s in cands))}); map one in [ingest.sources]"
-            )
+            pending["compass"] = sorted(s.key for s in cands)
     if "log" not in taken:
         cands = [
             s
@@ -324,11 +328,9 @@ def assign_roles(sources: dict[str, SourceInfo], mapping: dict[str, str]) -> lis
         if len(cands) == 1:
             give(cands[0], "log", "the only source of VHW/VBW/PGN128259")
         elif len(cands) > 1:
-            notes.append(
-                "log role not assigned: several speed-log sources "
-                f"({', '.join(sorted(s.key for s in cands))}); map one in [ingest.sources]"
-            )
-    unassigned = [k for k, s in sources.items() if not s.roles]
+            pending["log"] = sorted(s.key for s in cands)
+    waiting = {k for keys in pending.values() for k in keys}  # chosen or kept as witnesses
+    unassigned = [k for k, s in sources.items() if not s.roles and k not in waiting]
     if unassigned:
         notes.append(f"no role: {', '.join(sorted(unassigned))}")
     return notes

@@ -17,6 +17,7 @@ import pandas as pd
 from dracc.core.errors import InsufficientDataError
 from dracc.core.units import NS_PER_S
 from dracc.frames import Voyage
+from dracc.ingest.role_evidence import choice_note
 from dracc.pipeline.results import HeadingTrack, InputFile, SourceRow, TimeSummary, Track
 from dracc.pipeline.selection import role_of, valid_positions
 
@@ -44,7 +45,10 @@ def input_files(voyage: Voyage) -> tuple[InputFile, ...]:
 
 
 def source_rows(voyage: Voyage) -> tuple[SourceRow, ...]:
-    """One row per source key: roles, records, sentences and time span."""
+    """One row per source key: roles, records, sentences and time span; where a role had
+    several candidates, why each was chosen or kept as a witness."""
+    witness = {k: (c.role, why) for c in voyage.choices for k, why in c.runners_up}
+    chosen = {c.chosen: f"chosen for {c.role}: {c.why}" for c in voyage.choices}
     return tuple(
         SourceRow(
             key=str(k),
@@ -53,6 +57,8 @@ def source_rows(voyage: Voyage) -> tuple[SourceRow, ...]:
             sentences={str(a): int(b) for a, b in s.sentences.items()},
             first_ns=s.first_ns,
             last_ns=s.last_ns,
+            witness_for=witness.get(k, (None, None))[0],
+            choice=witness.get(k, (None, None))[1] or chosen.get(k),
         )
         for k, s in voyage.sources.items()
     )
@@ -139,7 +145,14 @@ def voyage_notes(
             f"apart: {shown}{more}. The period spans them all; the statistics use "
             "the instants with readings only (a stray record with a wrong date shows here)"
         )
-    unassigned = [s.key for s in sources if not s.roles]
+    notes.extend(choice_note(c) for c in voyage.choices)
+    witnesses = {k: c.role for c in voyage.choices for k in c.witnesses}
+    if witnesses:
+        notes.append(
+            "witnesses (candidates not chosen, compared with the chosen source): "
+            + ", ".join(f"{k} ({role})" for k, role in witnesses.items())
+        )
+    unassigned = [s.key for s in sources if not s.roles and s.key not in witnesses]
     if unassigned:
         notes.append(
             "sources without a role: " + ", ".join(unassigned) + "; assign one with --role KEY=ROLE"

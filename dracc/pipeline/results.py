@@ -67,6 +67,10 @@ class SourceRow:
     sentences: dict[str, int]
     first_ns: int | None
     last_ns: int | None
+    #: the role this source was a candidate for and not chosen: it is kept as a witness
+    witness_for: str | None = None
+    #: why it was chosen for its role, or not chosen, where several were candidates
+    choice: str | None = None
 
 
 @dataclass(frozen=True)
@@ -220,6 +224,9 @@ class CalibrationSection:
     segment_s: float
     residual_rms_kn: float  #: RMS of the segment velocity residuals per axis
     notes: tuple[str, ...] = ()
+    #: the quantities the data cannot determine (their Estimate None), and why: keys
+    #: "compass_error_deg", "log_scale", "log_offset_kn" (issue 29)
+    not_determinable: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -17,12 +17,13 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from dracc.core.arrays import unique_sorted
+from dracc.core.arrays import hold_at, unique_sorted
 from dracc.core.config import DeadReckoningConfig
 from dracc.core.geodesy import circmean, interp_position, wrap_pi
 from dracc.core.units import NS_PER_S
 from dracc.core.vocabulary import INS_ROLES
 from dracc.frames import Voyage
+from dracc.ingest.role_evidence import choice_note, rank_sources
 from dracc.math.deadreckoning import TrueHeading, true_heading_rad
 from dracc.math.ep import EstimatedPosition
 
@@ -112,20 +113,21 @@ def heading_series(
             for k in hdg["source"][valid].unique().tolist()
             if not (set(voyage.sources[k].roles) & {"ins1", "ins2", "ins3", "gnss"})
         ]
-        if other:
+        gives_fixes = not other  # the heading there is comes from a unit giving fixes too
+        other = other or [str(k) for k in hdg["source"][valid].unique().tolist()]
+        key = _one_by_evidence(voyage, "compass", other, notes)
+        if key is not None:
             notes.append(
-                f"no source has the role compass; heading taken from {'+'.join(map(str, other))}"
-            )
-        else:  # the heading there is comes from a unit that gives fixes too
-            other = hdg["source"][valid].unique().tolist()
-            if other:
-                notes.append(
-                    "no compass and no heading beside the fixes' units: heading taken from "
-                    f"{'+'.join(map(str, other))}, which also gives fixes (a satellite "
-                    "compass, an INS, or a navigation system relaying the gyro)"
+                f"no source has the role compass; heading taken from {key}"
+                + (
+                    ", which also gives fixes (a satellite compass, an INS, or a navigation "
+                    "system relaying the gyro)"
+                    if gives_fixes
+                    else ""
                 )
-        use = hdg[valid & hdg["source"].isin(other).to_numpy()]
-        who = "heading source " + "+".join(map(str, other))
+            )
+        use = hdg[valid & (hdg["source"] == key).to_numpy()]
+        who = f"heading source {key}"
     if use.empty:
         missing.append(
             "no heading: heading sentences exist but none has a value from a compass "
@@ -205,6 +207,16 @@ def _variation_notes(
     return ""
 
 
+def _one_by_evidence(voyage: Voyage, role: str, keys: list[str], notes: list[str]) -> str | None:
+    """One of ``keys`` for ``role`` where no source has it (never several merged): the
+    only one, else the one the evidence chooses (said in ``notes``)."""
+    if len(keys) < 2:
+        return keys[0] if keys else None
+    c = rank_sources(voyage.frames, role, keys, voyage.sources, voyage.role_sources("gnss"))
+    notes.append(choice_note(c))
+    return c.chosen
+
+
 # -------------------------------------------------------------------------- speed
 
 
@@ -222,7 +234,13 @@ def speed_series(voyage: Voyage, missing: list[str]) -> SpeedSeries | None:
             "and calibration need one"
         )
         return None
-    frame = water[water["source"].isin(logs)] if logs else water
+    if not logs:  # no log role: one source of speed sentences, chosen by evidence
+        keys = [str(k) for k in water["source"].unique().tolist()]
+        key = _one_by_evidence(voyage, "log", keys, [])
+        logs = [] if key is None else [key]
+        frame = water[(water["source"] == key).to_numpy()]
+    else:
+        frame = water[water["source"].isin(logs)]
     for col, col_y, mode, what in (
         ("stw_mps", "stw_transverse_mps", "water", "through the water"),
         ("sog_long_mps", "sog_transverse_mps", "ground", "over the ground"),
@@ -234,11 +252,7 @@ def speed_series(voyage: Voyage, missing: list[str]) -> SpeedSeries | None:
             use["time_ns"].to_numpy(np.int64), use[col].to_numpy(float), use[col_y].to_numpy(float)
         )
         sent = sentence_types(use)
-        who = (
-            "log " + "+".join(logs)
-            if logs
-            else "speed source " + "+".join(map(str, use["source"].unique().tolist()))
-        )
+        who = ("log " if voyage.role_sources("log") else "speed source ") + "+".join(logs)
         return t, v, vy, f"{who} ({sent}, {what})", mode
     missing.append(
         "no log speed: the log sentences carry no speed value, through the water or "
@@ -359,12 +373,7 @@ def hold(
     """The last sample at or before each grid time, NaN where it is older than ``max_age_ns``.
 
     Sample-and-hold, as (B20) holds the velocity over a step; nothing is interpolated."""
-    i = np.searchsorted(t_src_ns, t_grid_ns, side="right") - 1
-    ok = i >= 0
-    out = np.full(t_grid_ns.shape, np.nan)
-    j = i[ok]
-    out[ok] = np.where(t_grid_ns[ok] - t_src_ns[j] <= max_age_ns, values[j], np.nan)
-    return out
+    return hold_at(t_src_ns, values, t_grid_ns, max_age_ns)
 
 
 def dr_grid(

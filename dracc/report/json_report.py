@@ -290,6 +290,8 @@ def to_dict(a: Analysis) -> dict[str, Any]:
                 "sentences": {k: int(v) for k, v in s.sentences.items()},
                 "first_utc": iso_utc(s.first_ns),
                 "last_utc": iso_utc(s.last_ns),
+                "witness_for": s.witness_for,
+                "choice": s.choice,
             }
             for s in a.sources
         },

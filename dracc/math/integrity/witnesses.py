@@ -1,0 +1,235 @@
+"""consistency / ``compass_witness`` and ``log_witness``: the chosen compass and log
+against the candidates not chosen for the role (:class:`dracc.frames.RoleChoice`).
+
+Two gyros, two logs: one fills the role, the other is a witness.  The difference
+``d(t)`` between them, sampled every ``consistency_interval_s``, has a constant part (a
+compass's error, two logs' different scales) that is an accuracy figure, reported as
+evidence ("gyro_2 reads 0.90° above gyro_1, steady"), and a varying part that two
+healthy instruments keep within their noise:
+
+- compasses: ``d = w - c`` (true headings), ``x = d - median(d)``;
+- logs: the witness's scale against the chosen log ``k = sum(w c) / sum(c^2)`` (least
+  squares through the origin), ``x = w - k c``.
+
+Fails beyond ``max(floor, z s)``, ``s`` the robust tail sigma of ``x`` and ``z`` the
+Bonferroni normal quantile at ``[integrity] false_alarm`` over the instants (the floors:
+``heading_gate_min_deg``; A.824's speed accuracy).  A witness the choice found failed
+(a log reading 0.0 kn while the ship moves, a compass that does not turn) fails with
+that evidence.  Which of the two departs is for the other checks to say (the compass
+against the INS, the log against the ground speed); this one says that they disagree,
+when, and by how much.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dracc.core.arrays import FloatArray, IntArray
+from dracc.core.config import IntegrityConfig
+from dracc.core.geodesy import angdiff
+from dracc.core.timefmt import iso_utc
+from dracc.core.units import DEG_RAD, KN_MPS, NS_PER_S
+from dracc.frames import RoleChoice, Voyage
+from dracc.math.deadreckoning import true_heading_rad
+from dracc.math.deviation.sampling import align_at
+from dracc.math.integrity.consistency import speed_accuracy_mps
+from dracc.math.integrity.helpers import (
+    MAX_EVIDENCE,
+    covered_instants,
+    not_checked,
+    runs,
+    statistic,
+    tail_sigma,
+    threshold,
+    time_window,
+    z_two_sided,
+)
+from dracc.math.integrity.results import Check
+
+__all__ = ["witness_checks"]
+
+#: fewer common instants than this: not checked
+MIN_INSTANTS = 30
+#: "steady": the offset's change from the first to the last third of the night, within
+#: this share of the gate
+STEADY_SHARE = 0.5
+
+
+def witness_checks(voyage: Voyage, cfg: IntegrityConfig, start_ns: int, end_ns: int) -> list[Check]:
+    """One check per witness of the compass and the log."""
+    out = []
+    for choice in voyage.choices:
+        if choice.role not in ("compass", "log"):
+            continue
+        for key in choice.witnesses:
+            out.append(_pair_check(voyage, cfg, choice, key, start_ns, end_ns))
+    return out
+
+
+def _series(voyage: Voyage, role: str, key: str) -> tuple[IntArray, FloatArray]:
+    """(time, value): true heading (B2)/(B3) in rad, or speed through the water in m/s."""
+    if role == "compass":
+        h = voyage.frames["heading"]
+        h = h[(h["source"] == key).to_numpy() & np.isfinite(h["heading_rad"].to_numpy(float))]
+        v = true_heading_rad(  # (B2) magnetic with the sentence's deviation and variation, (B3)
+            h["heading_rad"].to_numpy(float),
+            h["reference"].astype(object).to_numpy(),
+            h["deviation_rad"].to_numpy(float),
+            h["variation_rad"].to_numpy(float),
+            missing_variation="zero",
+        ).heading_rad
+    else:
+        w = voyage.frames["water"]
+        w = w[(w["source"] == key).to_numpy()]
+        v = w["stw_mps"].to_numpy(float)
+        if not np.isfinite(v).any():
+            v = w["sog_long_mps"].to_numpy(float)
+        h = w
+    t = h["time_ns"].to_numpy(np.int64)
+    ok = np.isfinite(v)
+    o = np.argsort(t[ok], kind="stable")
+    return t[ok][o], v[ok][o]
+
+
+def _pair_check(
+    voyage: Voyage,
+    cfg: IntegrityConfig,
+    choice: RoleChoice,
+    key: str,
+    start_ns: int,
+    end_ns: int,
+) -> Check:
+    role, chosen = choice.role, choice.chosen
+    compass = role == "compass"
+    name, unit = ("compass_witness", "deg") if compass else ("log_witness", "kn")
+    rule = (
+        "witness true heading minus the compass's, its constant part removed"
+        if compass
+        else "witness log speed minus the chosen log's scaled to it"
+    )
+    failed = choice.evidence.get(key, {}).get("failed")
+    tc, vc = _series(voyage, role, chosen)
+    tw, vw = _series(voyage, role, key)
+    instants = covered_instants(
+        [tc, tw], start_ns, end_ns, int(cfg.consistency_interval_s * NS_PER_S)
+    )
+    gap = cfg.consistency_max_gap_s
+    c, _ = align_at(tc, vc[None, :], instants, gap, circular=(compass,))
+    w, _ = align_at(tw, vw[None, :], instants, gap, circular=(compass,))
+    if compass:
+        d = angdiff(w[0], c[0]) / DEG_RAD
+        ok = np.isfinite(d)
+        offset = float(np.median(d[ok])) if ok.any() else float("nan")
+        x, scale = d - offset, None
+    else:
+        ok = np.isfinite(w[0]) & np.isfinite(c[0])
+        cc, ww = c[0][ok], w[0][ok]
+        scale = float(np.sum(ww * cc) / np.sum(cc**2)) if np.any(cc > 0) else float("nan")
+        x = (w[0] - scale * c[0]) / KN_MPS
+        offset = float(np.median((w[0] - c[0])[ok]) / KN_MPS) if ok.any() else float("nan")
+    if ok.sum() < MIN_INSTANTS and not failed:
+        return not_checked(
+            "consistency",
+            name,
+            key,
+            role,
+            f"{role}_disagreement",
+            unit,
+            rule,
+            f"{key}: fewer than {MIN_INSTANTS} instants beside {chosen} (the {role})",
+            "fewer than 30 common instants",
+        )
+    s = tail_sigma(x[ok]) if ok.sum() >= MIN_INSTANTS else float("nan")
+    z = z_two_sided(cfg.false_alarm, max(int(ok.sum()), 1))
+    floor = (
+        cfg.heading_gate_min_deg
+        if compass
+        else speed_accuracy_mps(float(np.nanmedian(c[0])) if ok.any() else 0.0) / KN_MPS
+    )
+    gate = max(floor, z * s) if np.isfinite(s) else floor
+    over = ok & (np.abs(x) > gate)
+    ev = tuple(
+        {
+            "from": iso_utc(unit="ms", time_ns=instants[a]),
+            "to": iso_utc(unit="ms", time_ns=instants[b - 1]),
+            f"max_{unit}": float(np.nanmax(np.abs(x[a:b]))),
+        }
+        for a, b in runs(over)[:MAX_EVIDENCE]
+    )
+    if failed:
+        ev = ({"why": failed}, *ev)
+    worst = float(np.nanmax(np.abs(x[ok]))) if ok.any() else float("nan")
+    drift = _drift(d if compass else x, ok)
+    msg = _message(key, chosen, role, offset, scale, worst, gate, drift, failed, bool(ev))
+    return Check(
+        "consistency",
+        name,
+        key,
+        role,
+        "fail" if ev else "pass",
+        statistic(f"{role}_disagreement", worst, unit),
+        threshold(
+            gate,
+            unit,
+            f"max({'[integrity] heading_gate_min_deg' if compass else 'A.824 speed accuracy'}"
+            f", z s): z {z:.2f} at {cfg.false_alarm:g} per night, s the robust tail sigma",
+        ),
+        time_window(instants[ok]),
+        cfg.false_alarm,
+        msg,
+        ev,
+        detail={
+            "against": chosen,
+            "offset": offset,
+            "scale": scale,
+            "drift": drift,
+            "sigma": s,
+            "unit": unit,
+        },
+    )
+
+
+def _drift(d: FloatArray, ok: np.ndarray) -> float:
+    """The difference's change from the first third of the instants to the last."""
+    i = np.flatnonzero(ok)
+    if i.size < 3 * 3:
+        return float("nan")
+    third = i.size // 3
+    return float(np.median(d[i[-third:]]) - np.median(d[i[:third]]))
+
+
+def _message(
+    key: str,
+    chosen: str,
+    role: str,
+    offset: float,
+    scale: float | None,
+    worst: float,
+    gate: float,
+    drift: float,
+    failed: str | None,
+    departs: bool,
+) -> str:
+    if role == "compass":
+        level = f"reads {abs(offset):.2f}° {'above' if offset >= 0 else 'below'} {chosen}"
+        u = "°"
+    else:
+        pct = 100 * ((float("nan") if scale is None else scale) - 1)
+        level = f"reads {abs(pct):.1f} % {'above' if pct >= 0 else 'below'} {chosen}"
+        u = " kn"
+    steady = (
+        "steady"
+        if np.isfinite(drift) and abs(drift) <= STEADY_SHARE * gate
+        else f"changing by {drift:+.2f}{u} over the night"
+        if np.isfinite(drift)
+        else ""
+    )
+    head = f"{key} (witness for the {role}) {level}" + (f", {steady}" if steady else "")
+    if failed:
+        return f"{key} (witness for the {role}) {failed}"
+    if departs:
+        return (
+            f"{head}; the two depart from each other by up to {worst:.2f}{u} beyond that "
+            f"(gate {gate:.2f}{u}): one of them is wrong there"
+        )
+    return f"{head}; within {worst:.2f}{u} of each other beyond that (gate {gate:.2f}{u})"
