@@ -15,20 +15,30 @@ Kinds and the rule that finds each (thresholds in :class:`dracc.core.config.Faul
     (the unit catching up) belongs to the ``frozen`` fault, not to a jump.
 ``frozen``
     a position source repeating bit-identical latitude and longitude for at least
-    ``frozen_min_s`` and ``min_records`` records, unless the other sources show the
-    ship stationary then (median speed below ``moving_min_kn``).  A moored ship's
-    receiver still jitters in its last digit; a dead unit does not.
+    ``frozen_min_s`` and ``min_records`` records while another source shows the ship
+    moving (:func:`dracc.math.witness.ground_witness`: another source's SOG, else the
+    net motion of another position source, else the log beyond a berth's current, at
+    ``moving_min_kn`` or more) and farther over the run than three steps of the
+    source's own resolution (learned from its values, :func:`~dracc.math.witness.quantum`).
+    No witness, no fault: a GNSS that holds its fix at rest (SOG 0.0) is a ship at rest
+    (:class:`RepeatRun` ``at_rest``) or unwitnessed (``no_witness``), not frozen.
 ``stuck_heading``
     a heading source repeating a bit-identical heading for at least ``stuck_min_s``
-    and ``min_records`` records, unless the other sources show the ship neither
-    turning (other headings, or COG above ``moving_min_kn``, spanning less than
-    ``turn_min_deg``) nor moving.
+    and ``min_records`` records while another heading source (or another source's COG
+    while moving) turned by more than three steps of the source's resolution learned
+    from its values (an AIS heading in whole degrees: 3 deg; never less than
+    :data:`MIN_TURN_DEG`, and ``turn_min_deg`` always suffices), beyond the witness's
+    own noise and resolution (:func:`~dracc.math.witness.turn_witness`).  Moving on a
+    steady heading proves nothing: a heading repeats within its resolution.
 ``out_of_range``
     values no sensor can produce but that a reader passed through: latitude beyond
     +-90 deg, longitude beyond +-180 deg, heading or course outside [0, 360) deg,
     speed over ground negative, any speed beyond ``max_speed_kn`` in magnitude, rate
     of turn beyond ``max_rot_deg_per_min``.  Consecutive records of one source and
     quantity form one fault.
+
+:func:`faults_and_repeats` also returns every run of repeats judged, with the witnesses'
+verdict (``fault``, ``at_rest``, ``steady``, ``no_witness``) and its evidence in words.
 
 Distances use :func:`dracc.core.geodesy.distance_m`; angles are compared with
 :func:`dracc.core.geodesy.angdiff`.  Times are int64 UTC nanoseconds; degrees, knots and
@@ -49,14 +59,35 @@ from numpy.typing import NDArray
 from dracc.core.arrays import BoolArray, FloatArray, IntArray
 from dracc.core.config import FaultsConfig
 from dracc.core.errors import ConfigError
-from dracc.core.geodesy import angdiff, circmean, distance_m, offset_ne_m
+from dracc.core.geodesy import A_M, distance_m, offset_ne_m
 from dracc.core.timefmt import iso_utc
 from dracc.core.units import DEG_RAD, KN_MPS, NMI_M, NS_PER_S
 from dracc.frames import Voyage
+from dracc.math.witness import (
+    HEADING_QUANTA_RAD,
+    POSITION_QUANTA_RAD,
+    GroundWitness,
+    TurnWitness,
+    ground_witness,
+    heading_spread_deg,
+    quantum,
+    turn_witness,
+)
 
-__all__ = ["FAULT_KINDS", "SensorFault", "check_config", "detect_faults", "exclude_faults"]
+__all__ = [
+    "FAULT_KINDS",
+    "RepeatRun",
+    "SensorFault",
+    "check_config",
+    "detect_faults",
+    "exclude_faults",
+    "faults_and_repeats",
+]
 
 FAULT_KINDS = ("jump", "frozen", "stuck_heading", "out_of_range")
+#: the smallest turn of the witnesses that proves a heading stuck (the finest step headings
+#: are logged with in NMEA 0183, two decimals, is 0.01 deg: five of them)
+MIN_TURN_DEG = 0.05
 
 
 @dataclass(frozen=True)
@@ -175,55 +206,6 @@ def _by_source(df: pd.DataFrame | None) -> Iterator[tuple[str, pd.DataFrame]]:
         yield str(key), g
 
 
-def _window(df: pd.DataFrame | None, exclude: str, a_ns: int, b_ns: int) -> pd.DataFrame | None:
-    if df is None or df.empty:
-        return None
-    t = df["time_ns"].to_numpy(np.int64)
-    i, j = np.searchsorted(t, a_ns, "left"), np.searchsorted(t, b_ns, "right")
-    w = df.iloc[i:j]
-    w = w[(w["source"] != exclude).to_numpy()]
-    return w if len(w) else None
-
-
-def _other_speed_mps(
-    frames: Mapping[str, pd.DataFrame], exclude: str, a_ns: int, b_ns: int
-) -> float:
-    """Median speed shown by the other sources over [a, b]: SOG, else the log, else NaN."""
-    for kind, col in (("ground", "sog_mps"), ("water", "stw_mps")):
-        w = _window(frames.get(kind), exclude, a_ns, b_ns)
-        if w is not None:
-            v = np.abs(w[col].to_numpy(float))
-            v = v[np.isfinite(v)]
-            if v.size:
-                return float(np.median(v))
-    return math.nan
-
-
-def _other_turn_rad(
-    frames: Mapping[str, pd.DataFrame], exclude: str, a_ns: int, b_ns: int, moving_mps: float
-) -> float:
-    """Largest spread (max - min about the circular mean) of another heading source or of
-    the COG while moving, over [a, b]; NaN without such evidence."""
-    spreads = []
-    w = _window(frames.get("heading"), exclude, a_ns, b_ns)
-    if w is not None:
-        for _, g in w.groupby("source", observed=True):
-            h = g["heading_rad"].to_numpy(float)
-            h = h[np.isfinite(h)]
-            if h.size >= 2:
-                d = angdiff(h, circmean(h))
-                spreads.append(float(np.max(d) - np.min(d)))
-    w = _window(frames.get("ground"), exclude, a_ns, b_ns)
-    if w is not None:
-        c = w["cog_rad"].to_numpy(float)
-        s = w["sog_mps"].to_numpy(float)
-        c = c[np.isfinite(c) & (s >= moving_mps)]
-        if c.size >= 2:
-            d = angdiff(c, circmean(c))
-            spreads.append(float(np.max(d) - np.min(d)))
-    return max(spreads) if spreads else math.nan
-
-
 def _fmt_t(t_ns: int) -> str:
     return cast(str, pd.Timestamp(int(t_ns), unit="ns", tz="UTC").strftime("%Y-%m-%d %H:%M:%S"))
 
@@ -311,13 +293,49 @@ def _jumps(
     return out
 
 
+@dataclass(frozen=True)
+class RepeatRun:
+    """A run of bit-identical readings long enough to be judged, and the verdict of the
+    other sources on it (:mod:`dracc.math.witness`).
+
+    ``verdict``: ``fault`` (a witness shows the ship moving or turning beyond the
+    sensor's resolution: ``fault`` holds the :class:`SensorFault`), ``at_rest`` (the
+    witnesses show the ship still), ``steady`` (moving on a heading that did not turn
+    beyond the resolution), ``no_witness`` (no other source to tell).  ``evidence`` says
+    it in words ("at rest: SOG 0.0 kn, heading spread 0.4 deg")."""
+
+    source: str
+    role: str | None
+    kind: str  #: 'frozen' or 'stuck_heading'
+    start_ns: int
+    end_ns: int
+    n_records: int
+    verdict: str
+    evidence: str
+    values: tuple[tuple[str, float], ...]
+    fault: SensorFault | None = None
+
+    @property
+    def duration_s(self) -> float:
+        return (self.end_ns - self.start_ns) / NS_PER_S
+
+
+def _position_quantum_m(g: pd.DataFrame) -> float:
+    """The resolution of a source's positions in metres (the coarser axis; 0 unknown)."""
+    la, lo = g["lat_rad"].to_numpy(float), g["lon_rad"].to_numpy(float)
+    q_lat = quantum(la, POSITION_QUANTA_RAD)
+    q_lon = quantum(lo, POSITION_QUANTA_RAD)
+    coslat = math.cos(float(np.nanmedian(la))) if np.isfinite(la).any() else 1.0
+    return max(q_lat, q_lon * abs(coslat)) * A_M
+
+
 def _frozen(
     key: str,
     role: str | None,
     g: pd.DataFrame,
     frames: Mapping[str, pd.DataFrame],
     cfg: FaultsConfig,
-) -> list[SensorFault]:
+) -> list[RepeatRun]:
     ok = np.isfinite(g["lat_rad"].to_numpy(float)) & np.isfinite(g["lon_rad"].to_numpy(float))
     g = g[ok]
     if len(g) < cfg.min_records:
@@ -326,43 +344,62 @@ def _frozen(
     lat = g["lat_rad"].to_numpy(float)
     lon = g["lon_rad"].to_numpy(float)
     line = g["line"].to_numpy(np.int64)
+    found = _long_equal_runs(t, cfg.min_records, cfg.frozen_min_s, lat, lon)
+    q_m = _position_quantum_m(g) if found else 0.0
     out = []
-    for a, b in _long_equal_runs(t, cfg.min_records, cfg.frozen_min_s, lat, lon):
-        dur_s = (t[b - 1] - t[a]) / NS_PER_S
-        if b - a < cfg.min_records or dur_s < cfg.frozen_min_s:
-            continue
-        v = _other_speed_mps(frames, key, int(t[a]), int(t[b - 1]))
-        if math.isfinite(v) and v < cfg.moving_min_kn * KN_MPS:
-            continue  # the ship lay still: a repeated position proves nothing
-        why = (
-            f"while other sources show {v / KN_MPS:.1f} kn"
-            if math.isfinite(v)
-            else "(no other source tells whether the ship moved)"
+    for a, b in found:
+        ta, tb = int(t[a]), int(t[b - 1])
+        dur_s = (tb - ta) / NS_PER_S
+        wit = ground_witness(frames, key, ta, tb)
+        # the ship moved, by a witness, and farther than the source resolves
+        moved = wit.moving(cfg.moving_min_kn * KN_MPS) and wit.speed_mps * dur_s > 3.0 * q_m
+        spread = heading_spread_deg(frames, key, ta, tb)
+        values = (
+            ("lat_deg", float(lat[a] / DEG_RAD)),
+            ("lon_deg", float(lon[a] / DEG_RAD)),
+            ("duration_s", float(dur_s)),
+            ("other_speed_kn", float(wit.speed_mps / KN_MPS)),
+            ("resolution_m", float(q_m)),
+            ("heading_spread_deg", spread),
         )
+        if not moved:
+            verdict, words = _rest_words(wit, spread)
+            out.append(RepeatRun(key, role, "frozen", ta, tb, b - a, verdict, words, values))
+            continue
         msg = (
             f"{key}: position frozen at {lat[a] / DEG_RAD:.6f}, {lon[a] / DEG_RAD:.6f} deg for "
-            f"{b - a} records, {_span(int(t[a]), int(t[b - 1]))}, {why}"
+            f"{b - a} records, {_span(ta, tb)}, while {wit.words()} (the ship moved about "
+            f"{wit.speed_mps * dur_s:,.0f} m; the source resolves {q_m:.2g} m)"
         )
-        out.append(
-            SensorFault(
-                source=key,
-                role=role,
-                kind="frozen",
-                frame="position",
-                start_ns=int(t[a]),
-                end_ns=int(t[b - 1]),
-                n_records=int(b - a),
-                first_line=int(line[a]),
-                values=(
-                    ("lat_deg", float(lat[a] / DEG_RAD)),
-                    ("lon_deg", float(lon[a] / DEG_RAD)),
-                    ("duration_s", float(dur_s)),
-                    ("other_speed_kn", float(v / KN_MPS)),
-                ),
-                message=msg,
-            )
+        fault = SensorFault(
+            key, role, "frozen", "position", ta, tb, b - a, int(line[a]), values, msg
         )
+        out.append(RepeatRun(key, role, "frozen", ta, tb, b - a, "fault", msg, values, fault))
     return out
+
+
+def _rest_words(wit: GroundWitness, spread_deg: float) -> tuple[str, str]:
+    """(verdict, evidence) of a repeat no witness shows moving."""
+    if not wit.found:
+        return "no_witness", "no other source tells whether the ship moved"
+    head = f", heading spread {spread_deg:.1f} deg" if math.isfinite(spread_deg) else ""
+    return "at_rest", f"at rest: {wit.words()}{head}"
+
+
+def _turn_words(
+    turn: TurnWitness, wit: GroundWitness, moving: bool, gate: float, q: float
+) -> tuple[str, str]:
+    """(verdict, evidence) of a repeated heading no witness shows turning beyond ``gate``."""
+    if not turn.found:
+        if wit.found and not moving:
+            return "at_rest", f"at rest: {wit.words()}; no other heading source"
+        return "no_witness", "no other heading source tells whether the ship turned"
+    state = "steady" if moving else "at rest"
+    return state.replace(" ", "_"), (
+        f"{state}: {wit.words()}, heading spread {turn.spread_rad / DEG_RAD:.1f} deg "
+        f"({', '.join(turn.sources)}), within {gate / DEG_RAD:.2g} deg (three steps of the "
+        f"{q / DEG_RAD:.2g} deg the source resolves)"
+    )
 
 
 def _stuck(
@@ -371,7 +408,8 @@ def _stuck(
     g: pd.DataFrame,
     frames: Mapping[str, pd.DataFrame],
     cfg: FaultsConfig,
-) -> list[SensorFault]:
+    quanta: Mapping[str, float],
+) -> list[RepeatRun]:
     h = g["heading_rad"].to_numpy(float)
     g = g[np.isfinite(h)]
     if len(g) < cfg.min_records:
@@ -379,47 +417,40 @@ def _stuck(
     t = g["time_ns"].to_numpy(np.int64)
     h = g["heading_rad"].to_numpy(float)
     line = g["line"].to_numpy(np.int64)
+    q = quanta.get(key, 0.0)
+    # a turn proves the sensor dead when it is well beyond the sensor's resolution (three
+    # steps), never less than MIN_TURN_DEG; turn_min_deg always proves it
+    gate = min(cfg.turn_min_deg * DEG_RAD, max(3.0 * q, MIN_TURN_DEG * DEG_RAD))
     out = []
     for a, b in _long_equal_runs(t, cfg.min_records, cfg.stuck_min_s, h):
-        dur_s = (t[b - 1] - t[a]) / NS_PER_S
-        if b - a < cfg.min_records or dur_s < cfg.stuck_min_s:
-            continue
         ta, tb = int(t[a]), int(t[b - 1])
-        turn = _other_turn_rad(frames, key, ta, tb, cfg.moving_min_kn * KN_MPS)
-        v = _other_speed_mps(frames, key, ta, tb)
-        turned = math.isfinite(turn) and turn >= cfg.turn_min_deg * DEG_RAD
-        moved = math.isfinite(v) and v >= cfg.moving_min_kn * KN_MPS
-        evidence = math.isfinite(turn) or math.isfinite(v)
-        if evidence and not (turned or moved):
-            continue  # a still ship on a steady heading: a repeated heading proves nothing
-        parts = []
-        if math.isfinite(turn):
-            parts.append(f"other headings span {turn / DEG_RAD:.1f} deg")
-        if math.isfinite(v):
-            parts.append(f"other sources show {v / KN_MPS:.1f} kn")
-        why = ("while " + " and ".join(parts)) if parts else "(no other source to compare with)"
+        dur_s = (tb - ta) / NS_PER_S
+        turn = turn_witness(frames, key, ta, tb, cfg.moving_min_kn * KN_MPS, quanta)
+        wit = ground_witness(frames, key, ta, tb)
+        values = (
+            ("heading_deg", float(h[a] / DEG_RAD)),
+            ("duration_s", float(dur_s)),
+            ("other_turn_deg", float(turn.spread_rad / DEG_RAD)),
+            ("turn_beyond_noise_deg", float(turn.turn_rad / DEG_RAD)),
+            ("resolution_deg", float(q / DEG_RAD)),
+            ("other_speed_kn", float(wit.speed_mps / KN_MPS)),
+        )
+        if not (turn.found and turn.turn_rad > gate):
+            moving = wit.moving(cfg.moving_min_kn * KN_MPS)
+            verdict, words = _turn_words(turn, wit, moving, gate, q)
+            out.append(RepeatRun(key, role, "stuck_heading", ta, tb, b - a, verdict, words, values))
+            continue
         msg = (
             f"{key}: heading stuck at {h[a] / DEG_RAD:.2f} deg for {b - a} records, "
-            f"{_span(ta, tb)}, {why}"
+            f"{_span(ta, tb)}, while other headings span {turn.spread_rad / DEG_RAD:.1f} deg "
+            f"({', '.join(turn.sources)}; {turn.turn_rad / DEG_RAD:.1f} deg beyond their "
+            f"noise, against the {q / DEG_RAD:.2g} deg the source resolves)"
+        )
+        fault = SensorFault(
+            key, role, "stuck_heading", "heading", ta, tb, b - a, int(line[a]), values, msg
         )
         out.append(
-            SensorFault(
-                source=key,
-                role=role,
-                kind="stuck_heading",
-                frame="heading",
-                start_ns=ta,
-                end_ns=tb,
-                n_records=int(b - a),
-                first_line=int(line[a]),
-                values=(
-                    ("heading_deg", float(h[a] / DEG_RAD)),
-                    ("duration_s", float(dur_s)),
-                    ("other_turn_deg", float(turn / DEG_RAD)),
-                    ("other_speed_kn", float(v / KN_MPS)),
-                ),
-                message=msg,
-            )
+            RepeatRun(key, role, "stuck_heading", ta, tb, b - a, "fault", msg, values, fault)
         )
     return out
 
@@ -503,14 +534,11 @@ def _out_of_range(
 # ---------------------------------------------------------------------- public API
 
 
-def detect_faults(
+def faults_and_repeats(
     voyage_or_frames: Voyage | Mapping[str, pd.DataFrame], cfg: FaultsConfig | None = None
-) -> list[SensorFault]:
-    """Every sensor fault in a voyage (or a mapping kind -> canonical frame), by start time.
-
-    Roles come from ``Voyage.sources`` (None for a bare mapping of frames).  ``cfg``
-    defaults to :class:`FaultsConfig` (); invalid thresholds raise ConfigError.
-    """
+) -> tuple[list[SensorFault], list[RepeatRun]]:
+    """Every sensor fault (as :func:`detect_faults`) and every run of repeated positions
+    or headings long enough to judge, with the witnesses' verdict on it."""
     cfg = check_config(cfg or FaultsConfig())
     frames: Mapping[str, pd.DataFrame]
     if isinstance(voyage_or_frames, Voyage):
@@ -520,15 +548,39 @@ def detect_faults(
         frames = voyage_or_frames
         roles = {}
     faults: list[SensorFault] = []
+    repeats: list[RepeatRun] = []
     split = {kind: list(_by_source(frames.get(kind))) for kind in ("position", "heading")}
     for key, g in split["position"]:
         frozen = _frozen(key, roles.get(key), g, frames, cfg)
-        faults += frozen + _jumps(key, roles.get(key), g, cfg, {f.end_ns for f in frozen})
+        repeats += frozen
+        # the step out of a held fix is the unit catching up, not a jump (at rest too)
+        caught_up = {r.end_ns for r in frozen}
+        faults += [r.fault for r in frozen if r.fault is not None]
+        faults += _jumps(key, roles.get(key), g, cfg, caught_up)
+    # the resolution of every heading source, learned from its values over the voyage
+    quanta = {
+        key: quantum(g["heading_rad"].to_numpy(float), HEADING_QUANTA_RAD)
+        for key, g in split["heading"]
+    }
     for key, g in split["heading"]:
-        faults += _stuck(key, roles.get(key), g, frames, cfg)
+        stuck = _stuck(key, roles.get(key), g, frames, cfg, quanta)
+        repeats += stuck
+        faults += [r.fault for r in stuck if r.fault is not None]
     faults += _out_of_range(frames, roles, cfg, split)
     faults.sort(key=lambda f: (f.start_ns, f.source, f.kind))
-    return faults
+    repeats.sort(key=lambda r: (r.start_ns, r.source, r.kind))
+    return faults, repeats
+
+
+def detect_faults(
+    voyage_or_frames: Voyage | Mapping[str, pd.DataFrame], cfg: FaultsConfig | None = None
+) -> list[SensorFault]:
+    """Every sensor fault in a voyage (or a mapping kind -> canonical frame), by start time.
+
+    Roles come from ``Voyage.sources`` (None for a bare mapping of frames).  ``cfg``
+    defaults to :class:`FaultsConfig` (); invalid thresholds raise ConfigError.
+    """
+    return faults_and_repeats(voyage_or_frames, cfg)[0]
 
 
 def exclude_faults(voyage: Voyage, faults: list[SensorFault]) -> tuple[Voyage, dict[str, int]]:

@@ -18,7 +18,7 @@ from dracc.core.geodesy import offset_ne_m
 from dracc.core.timefmt import iso_utc
 from dracc.core.units import NS_PER_S
 from dracc.frames import Voyage
-from dracc.math.faults import SensorFault, detect_faults
+from dracc.math.faults import RepeatRun, SensorFault, faults_and_repeats
 from dracc.math.integrity.helpers import (
     MAX_EVIDENCE,
     by_source,
@@ -122,7 +122,7 @@ def jump_check(
     key: str,
     role: str | None,
     g: pd.DataFrame,
-    frozen: Sequence[SensorFault],
+    frozen: Sequence[SensorFault | RepeatRun],
     cfg: IntegrityConfig,
     water: WaterTrack | None = None,
 ) -> Check:
@@ -166,7 +166,12 @@ def jump_check(
     # up, a 'frozen' fault) are not jumps
     usable = dt <= 10.0 * cadence
     for f in frozen:
-        usable &= ~((t[1:] >= f.start_ns) & (t[1:] <= f.end_ns + int(3 * cadence * NS_PER_S)))
+        # a frozen unit's steps are not fixes at all; a fix held at rest is, but the step
+        # out of the hold is the unit catching up
+        held_from = (
+            f.start_ns if isinstance(f, SensorFault) or f.fault is not None else f.end_ns + 1
+        )
+        usable &= ~((t[1:] >= held_from) & (t[1:] <= f.end_ns + int(3 * cadence * NS_PER_S)))
     quantum = 0.05  # m: below any logged resolution that can show a jump
     sn = max(tail_sigma(rn[usable]), quantum)
     se = max(tail_sigma(re_[usable]), quantum)
@@ -245,11 +250,12 @@ def plausibility_checks(
     voyage: Voyage, cfg: IntegrityConfig
 ) -> tuple[list[Check], list[SensorFault]]:
     fcfg = FaultsConfig(frozen_min_s=cfg.frozen_min_s, stuck_min_s=cfg.frozen_min_s)
-    faults = detect_faults(voyage, fcfg)
+    faults, repeats = faults_and_repeats(voyage, fcfg)
     checks = []
     water = water_track(voyage)
     for key, g in by_source(voyage.frames["position"]):
-        frozen = [f for f in faults if f.source == key and f.kind == "frozen"]
+        # every held fix, faulty or at rest: the step out of it is the unit catching up
+        frozen = [r for r in repeats if r.source == key and r.kind == "frozen"]
         checks.append(jump_check(key, role_of(voyage, key), g, frozen, cfg, water))
     checks += fault_checks(
         voyage,
@@ -257,9 +263,11 @@ def plausibility_checks(
         "frozen",
         ("frozen",),
         ("position",),
-        "bit-identical positions this long while the other sources show the ship moving",
+        "bit-identical positions this long while another source shows the ship moving "
+        "farther than three steps of the source's resolution",
         cfg.frozen_min_s,
         "s",
+        repeats,
     )
     checks += fault_checks(
         voyage,
@@ -267,9 +275,11 @@ def plausibility_checks(
         "stuck",
         ("stuck_heading",),
         ("heading",),
-        "a bit-identical heading this long while the other sources show the ship turning",
+        "a bit-identical heading this long while another heading source (or COG) turns "
+        "beyond its own noise by more than three steps of the source's resolution",
         cfg.frozen_min_s,
         "s",
+        repeats,
     )
     checks += fault_checks(
         voyage,

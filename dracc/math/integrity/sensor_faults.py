@@ -1,6 +1,12 @@
-"""plausibility / ``frozen``, ``stuck``, ``out_of_range``: one pass/fail check per
-source from the faults :mod:`dracc.math.faults` finds with the integrity windows
-(``frozen_min_s``); rules with false-alarm probability 0."""
+"""plausibility / ``frozen``, ``stuck``, ``out_of_range``: one check per source from the
+faults :mod:`dracc.math.faults` finds with the integrity windows (``frozen_min_s``);
+rules with false-alarm probability 0.
+
+A finding needs a witness: ``frozen`` and ``stuck`` fail only where another source shows
+the ship moving or turning beyond the sensor's resolution.  A source whose repeats the
+witnesses show at rest (or steady) passes with that evidence ("at rest: SOG 0.0 kn,
+heading spread 0.4 deg"); one whose repeats no other source can judge is
+``not_checked``, saying so."""
 
 from __future__ import annotations
 
@@ -12,10 +18,11 @@ import numpy as np
 from dracc.core.arrays import IntArray
 from dracc.core.timefmt import iso_utc
 from dracc.frames import Voyage
-from dracc.math.faults import SensorFault
+from dracc.math.faults import RepeatRun, SensorFault
 from dracc.math.integrity.helpers import (
     MAX_EVIDENCE,
     by_source,
+    not_checked,
     role_of,
     statistic,
     threshold,
@@ -24,6 +31,40 @@ from dracc.math.integrity.helpers import (
 from dracc.math.integrity.results import Check
 
 __all__ = ["fault_checks"]
+
+
+def _fault_evidence(f: SensorFault) -> dict[str, object]:
+    return {
+        "start": iso_utc(unit="ms", time_ns=f.start_ns),
+        "end": iso_utc(unit="ms", time_ns=f.end_ns),
+        "duration_s": f.duration_s,
+        "records": f.n_records,
+        "first_line": f.first_line,
+        "kind": f.kind,
+        "values": {k: (float(v) if math.isfinite(v) else None) for k, v in f.values},
+    }
+
+
+def _repeat_evidence(r: RepeatRun) -> dict[str, object]:
+    return {
+        "start": iso_utc(unit="ms", time_ns=r.start_ns),
+        "end": iso_utc(unit="ms", time_ns=r.end_ns),
+        "duration_s": r.duration_s,
+        "records": r.n_records,
+        "kind": r.kind,
+        "verdict": r.verdict,
+        "evidence": r.evidence,
+        "values": {k: (float(v) if math.isfinite(v) else None) for k, v in r.values},
+    }
+
+
+def _repeats_words(key: str, what: str, runs: Sequence[RepeatRun]) -> str:
+    """'GP: position repeated 15.0 min at the longest (3 runs); at rest: SOG ...'."""
+    worst = max(runs, key=lambda r: r.duration_s)
+    return (
+        f"{key}: {what} repeated {worst.duration_s / 60.0:.1f} min at the longest "
+        f"({len(runs)} run(s)); {worst.evidence}"
+    )
 
 
 def fault_checks(
@@ -35,40 +76,58 @@ def fault_checks(
     rule: str,
     cfg_value: float,
     unit: str,
+    repeats: Sequence[RepeatRun] = (),
 ) -> list[Check]:
-    """One pass/fail check per source of ``frames`` from :mod:`dracc.math.faults` results."""
+    """One check per source of ``frames`` from :mod:`dracc.math.faults` results: fail
+    with its faults; else, where ``repeats`` holds runs of the source that no witness
+    could judge, ``not_checked``; else pass (with the at-rest evidence of its runs)."""
     checks = []
     times: dict[str, list[IntArray]] = {}
     for frame in frames:
         for key, g in by_source(voyage.frames[frame]):
             times.setdefault(key, []).append(g["time_ns"].to_numpy(np.int64))
+    what = "position" if "position" in frames and len(frames) == 1 else "heading"
     for key in sorted(times):
         mine = [f for f in faults if f.source == key and f.kind in kinds]
+        runs = [r for r in repeats if r.source == key and r.kind in kinds and r.fault is None]
         t = np.sort(np.concatenate(times[key]))
-        ev = tuple(
-            {
-                "start": iso_utc(unit="ms", time_ns=f.start_ns),
-                "end": iso_utc(unit="ms", time_ns=f.end_ns),
-                "duration_s": f.duration_s,
-                "records": f.n_records,
-                "first_line": f.first_line,
-                "kind": f.kind,
-                "values": {k: (float(v) if math.isfinite(v) else None) for k, v in f.values},
-            }
-            for f in mine[:MAX_EVIDENCE]
+        role = role_of(voyage, key)
+        unjudged = [r for r in runs if r.verdict == "no_witness"]
+        if not mine and unjudged:
+            checks.append(
+                not_checked(
+                    "plausibility",
+                    name,
+                    key,
+                    role,
+                    "longest_s",
+                    "s",
+                    rule,
+                    _repeats_words(key, what, unjudged),
+                    f"{what} repeated for {max(r.duration_s for r in unjudged):.0f} s and no "
+                    "other source tells whether the ship "
+                    + ("moved" if what == "position" else "turned"),
+                    threshold_value=cfg_value,
+                    window=time_window(t),
+                )
+            )
+            continue
+        ev = tuple(_fault_evidence(f) for f in mine[:MAX_EVIDENCE]) or tuple(
+            _repeat_evidence(r) for r in runs[:MAX_EVIDENCE]
         )
         longest = max((f.duration_s for f in mine), default=0.0)
-        msg = (
-            "; ".join(f.message for f in mine[:3])
-            if mine
-            else f"{key}: no {name.replace('_', ' ')}"
-        )
+        if mine:
+            msg = "; ".join(f.message for f in mine[:3])
+        elif runs:
+            msg = _repeats_words(key, what, runs)
+        else:
+            msg = f"{key}: no {name.replace('_', ' ')}"
         checks.append(
             Check(
                 "plausibility",
                 name,
                 key,
-                role_of(voyage, key),
+                role,
                 "fail" if mine else "pass",
                 statistic(
                     "longest_s" if name != "out_of_range" else "faults",
@@ -80,6 +139,7 @@ def fault_checks(
                 0.0,
                 msg,
                 ev,
+                detail={"repeats": len(runs)} if runs else {},
             )
         )
     return checks

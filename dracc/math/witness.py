@@ -1,0 +1,244 @@
+"""Witnesses: what the *other* sources of a voyage say about the ship's motion over a
+stretch of time, and the resolution of a source's readings learned from its values.
+
+No source is the truth; every source is a witness.  A repeated reading (a position that
+does not move, a heading that does not turn) is a fault only where another source shows
+the ship moving or turning by more than the repeating sensor could have resolved.  This
+module measures both sides; :mod:`dracc.math.faults` judges.
+
+Resolution (:func:`quantum`)
+    the largest step ``q`` of a fixed list of the steps logs are written with (whole,
+    half, tenths ... of a degree or of a minute of arc; 1e-4 rad of NMEA 2000 ...) of
+    which at least 98 % of a source's distinct values are whole multiples: an AIS
+    heading in whole degrees has ``q = 1 deg``, a gyro's HDT with one decimal
+    ``0.1 deg``; values on no such grid (simulated, or computed) give ``q = 0``.
+Motion over the ground (:func:`ground_witness`)
+    the median SOG of the other sources' ground records; without any, the net
+    displacement of each other position source over the stretch divided by its length
+    (the median over those sources); without either, the log, whose speed through the
+    water proves motion over the ground only beyond the current a ship can lie in at a
+    berth (:data:`BERTH_CURRENT_KN`).  An INS's own drift (a knot an hour) is why its
+    velocity, not its position, witnesses first.
+Turning (:func:`turn_witness`)
+    per other heading source (and the COG of the other sources while they show the ship
+    moving), the spread ``max - min`` of its readings about their circular mean over the
+    stretch, less what its own noise and resolution could make of a steady heading:
+    ``spread - 2 sqrt(2 ln N) sigma - q_w`` (the expected range of ``N`` normal samples;
+    ``sigma^2 = max(0, -mean(d_k d_{k+1}))`` from successive first differences ``d``,
+    which white noise makes anticorrelated and a real turn or yaw does not).  The largest
+    such turn over the witnesses is what they prove.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from dracc.core.arrays import FloatArray
+from dracc.core.geodesy import angdiff, circmean, distance_m
+from dracc.core.units import DEG_RAD, KN_MPS, NS_PER_S
+
+__all__ = [
+    "BERTH_CURRENT_KN",
+    "HEADING_QUANTA_RAD",
+    "POSITION_QUANTA_RAD",
+    "GroundWitness",
+    "TurnWitness",
+    "ground_witness",
+    "quantum",
+    "turn_witness",
+]
+
+#: the steps headings are logged with: degrees (whole to 1e-4) and radians (NMEA 2000,
+#: Signal K), largest first
+HEADING_QUANTA_RAD = tuple(
+    sorted(
+        [d * DEG_RAD for d in (1.0, 0.5, 0.2, 0.1, 0.05, 0.01, 1e-3, 1e-4)]
+        + [1e-2, 1e-3, 1e-4, 1e-5, 1e-6],
+        reverse=True,
+    )
+)
+#: the steps positions are logged with: minutes of arc (NMEA 0183, 1 to 7 decimals) and
+#: degrees (NMEA 2000, Signal K, CSV: 3 to 8 decimals), largest first
+POSITION_QUANTA_RAD = tuple(
+    sorted(
+        [10.0**-k / 60.0 * DEG_RAD for k in range(1, 8)]
+        + [10.0**-k * DEG_RAD for k in range(3, 9)],
+        reverse=True,
+    )
+)
+#: a log alone proves the ship moved over the ground only beyond this speed through the
+#: water: the tidal stream a moored ship's log can read at a berth
+BERTH_CURRENT_KN = 2.0
+#: at most this many distinct values are examined to learn a resolution
+_QUANTUM_SAMPLE = 20_000
+
+
+def quantum(values: FloatArray, candidates: tuple[float, ...], share: float = 0.98) -> float:
+    """The resolution of readings ``values``: the largest of ``candidates`` (same unit)
+    of which at least ``share`` of the distinct finite values are whole multiples (to
+    1e-3 of the step); 0.0 for values on no such grid or fewer than 10 distinct ones."""
+    x = np.unique(np.asarray(values, float)[np.isfinite(values)])
+    if x.size < 10:
+        return 0.0
+    if x.size > _QUANTUM_SAMPLE:  # evenly spaced, deterministic
+        x = x[np.linspace(0, x.size - 1, _QUANTUM_SAMPLE).astype(np.int64)]
+    for q in candidates:
+        k = x / q
+        if float(np.mean(np.abs(k - np.round(k)) < 1e-3)) >= share:
+            return float(q)
+    return 0.0
+
+
+def _window(df: pd.DataFrame | None, exclude: str, a_ns: int, b_ns: int) -> pd.DataFrame | None:
+    """Rows of the other sources of a time-sorted frame within [a, b]."""
+    if df is None or df.empty:
+        return None
+    t = df["time_ns"].to_numpy(np.int64)
+    i, j = np.searchsorted(t, a_ns, "left"), np.searchsorted(t, b_ns, "right")
+    w = df.iloc[i:j]
+    w = w[(w["source"] != exclude).to_numpy()]
+    return w if len(w) else None
+
+
+@dataclass(frozen=True)
+class GroundWitness:
+    """What the other sources say about motion over the ground over [a, b]."""
+
+    speed_mps: float  #: NaN without a witness
+    how: str  #: 'SOG', 'positions', 'log' or '' (none)
+    sources: tuple[str, ...]  #: the witnesses' keys
+
+    @property
+    def found(self) -> bool:
+        return math.isfinite(self.speed_mps)
+
+    def moving(self, moving_mps: float) -> bool:
+        """True where the witness shows the ship moving at ``moving_mps`` or more (a log
+        alone only beyond the current it may read at a berth)."""
+        floor = moving_mps + (BERTH_CURRENT_KN * KN_MPS if self.how == "log" else 0.0)
+        return self.found and self.speed_mps >= floor
+
+    def words(self) -> str:
+        if not self.found:
+            return "no other source of speed"
+        via = {"SOG": "SOG", "positions": "speed of the fixes", "log": "log speed"}[self.how]
+        return f"{via} {self.speed_mps / KN_MPS:.1f} kn ({', '.join(self.sources)})"
+
+
+def ground_witness(
+    frames: Mapping[str, pd.DataFrame], exclude: str, a_ns: int, b_ns: int
+) -> GroundWitness:
+    """The other sources' evidence of motion over the ground over [a, b] (module
+    docstring): SOG, else the net motion of other position sources, else the log."""
+    w = _window(frames.get("ground"), exclude, a_ns, b_ns)
+    if w is not None:
+        v = np.abs(w["sog_mps"].to_numpy(float))
+        ok = np.isfinite(v)
+        if ok.any():
+            sog = tuple(sorted({str(s) for s in w["source"].to_numpy()[ok]}))
+            return GroundWitness(float(np.median(v[ok])), "SOG", sog)
+    w = _window(frames.get("position"), exclude, a_ns, b_ns)
+    if w is not None and b_ns > a_ns:
+        speeds: list[float] = []
+        keys: list[str] = []
+        for key, g in w.groupby("source", observed=True):
+            q = g["quality"].to_numpy() if "quality" in g else np.ones(len(g))
+            la, lo = g["lat_rad"].to_numpy(float), g["lon_rad"].to_numpy(float)
+            ok = np.isfinite(la) & np.isfinite(lo) & (q != 0)
+            t = g["time_ns"].to_numpy(np.int64)[ok]
+            if ok.sum() < 2 or (t[-1] - t[0]) < 0.5 * (b_ns - a_ns):
+                continue
+            la, lo = la[ok], lo[ok]
+            d = float(distance_m(la[0], lo[0], la[-1], lo[-1]))
+            speeds.append(d / ((t[-1] - t[0]) / NS_PER_S))
+            keys.append(str(key))
+        if speeds:
+            return GroundWitness(float(np.median(speeds)), "positions", tuple(sorted(keys)))
+    w = _window(frames.get("water"), exclude, a_ns, b_ns)
+    if w is not None:
+        v = np.abs(w["stw_mps"].to_numpy(float))
+        ok = np.isfinite(v)
+        if ok.any():
+            logs = tuple(sorted({str(s) for s in w["source"].to_numpy()[ok]}))
+            return GroundWitness(float(np.median(v[ok])), "log", logs)
+    return GroundWitness(math.nan, "", ())
+
+
+@dataclass(frozen=True)
+class TurnWitness:
+    """What the other sources say about turning over [a, b]: the largest spread of a
+    witness's headings (or COG) and the largest turn beyond its own noise and resolution."""
+
+    spread_rad: float  #: NaN without a witness
+    turn_rad: float  #: spread less noise and resolution (NaN without a witness)
+    sources: tuple[str, ...]
+
+    @property
+    def found(self) -> bool:
+        return math.isfinite(self.turn_rad)
+
+
+def _spread_and_turn(h: FloatArray, q_w: float) -> tuple[float, float]:
+    """(spread about the circular mean, spread less noise range and resolution)."""
+    d = angdiff(h, circmean(h))
+    spread = float(np.max(d) - np.min(d))
+    dd = np.diff(d)
+    var = -float(np.mean(dd[1:] * dd[:-1])) if dd.size >= 3 else 0.0
+    noise = 2.0 * math.sqrt(2.0 * math.log(max(h.size, 2))) * math.sqrt(max(var, 0.0))
+    return spread, spread - noise - q_w
+
+
+def turn_witness(
+    frames: Mapping[str, pd.DataFrame],
+    exclude: str,
+    a_ns: int,
+    b_ns: int,
+    moving_mps: float,
+    quanta: Mapping[str, float],
+) -> TurnWitness:
+    """The other heading sources (and COG while moving) over [a, b] (module docstring);
+    ``quanta``: source key -> resolution of its headings (0 where unknown)."""
+    best_spread, best_turn, keys = -math.inf, -math.inf, []
+    w = _window(frames.get("heading"), exclude, a_ns, b_ns)
+    if w is not None:
+        for key, g in w.groupby("source", observed=True):
+            h = g["heading_rad"].to_numpy(float)
+            h = h[np.isfinite(h)]
+            if h.size >= 2:
+                s, t = _spread_and_turn(h, quanta.get(str(key), 0.0))
+                best_spread, best_turn = max(best_spread, s), max(best_turn, t)
+                keys.append(str(key))
+    w = _window(frames.get("ground"), exclude, a_ns, b_ns)
+    if w is not None:
+        for key, g in w.groupby("source", observed=True):
+            c = g["cog_rad"].to_numpy(float)
+            c = c[np.isfinite(c) & (g["sog_mps"].to_numpy(float) >= moving_mps)]
+            if c.size >= 2:
+                s, t = _spread_and_turn(c, 0.0)
+                best_spread, best_turn = max(best_spread, s), max(best_turn, t)
+                keys.append(f"{key} COG")
+    if not keys:
+        return TurnWitness(math.nan, math.nan, ())
+    return TurnWitness(best_spread, max(best_turn, 0.0), tuple(sorted(set(keys))))
+
+
+def heading_spread_deg(
+    frames: Mapping[str, pd.DataFrame], exclude: str, a_ns: int, b_ns: int
+) -> float:
+    """The largest spread of the other heading sources over [a, b] in degrees (NaN
+    without one): the 'heading spread' a report of a ship at rest states."""
+    w = _window(frames.get("heading"), exclude, a_ns, b_ns)
+    spreads = []
+    if w is not None:
+        for _, g in w.groupby("source", observed=True):
+            h = g["heading_rad"].to_numpy(float)
+            h = h[np.isfinite(h)]
+            if h.size >= 2:
+                d = angdiff(h, circmean(h))
+                spreads.append(float(np.max(d) - np.min(d)) / DEG_RAD)
+    return max(spreads) if spreads else math.nan
