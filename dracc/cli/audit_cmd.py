@@ -15,9 +15,15 @@ import typer
 from typer.core import TyperGroup
 
 from dracc.cli.app import app, out, progress
-from dracc.cli.options import ConfigFile, JsonOut, check_choice, check_date, check_pattern
+from dracc.cli.options import (
+    ConfigFile,
+    JsonOut,
+    build_config,
+    check_choice,
+    check_date,
+    check_pattern,
+)
 from dracc.core import atomic
-from dracc.core.config import load_config
 from dracc.core.errors import ExitCode
 from dracc.core.safetext import printable
 from dracc.core.vocabulary import CHANNELS
@@ -101,7 +107,7 @@ def audit_run(
     '--json -' it is printed on stdout instead of the summary.
     """
     pattern = check_pattern(pattern, "--pattern")
-    cfg = load_config(config)
+    cfg = build_config(config)  # as analyze takes it: one validation path
     with progress("audit: analysing", total=100.0) as advance:
         last = [0.0]
 
@@ -142,7 +148,7 @@ def audit_history(
     night (--json: the history document, dracc.audit.history/1)."""
     check_choice(unit, UNITS, "--unit")
     check_choice(channel, CHANNELS, "--channel")
-    with open_state(load_config(config), db) as store:
+    with open_state(build_config(config), db) as store:
         check_choice(
             vessel, store.vessels(), "--vessel", "no vessel is recorded in this database yet"
         )

@@ -12,11 +12,14 @@ import functools
 import re
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path, PurePath
 from typing import Annotated, Any
 
 import typer
 
+from dracc.core.config import Config, load_config, validate
+from dracc.core.durations import parse_duration_s, parse_reset_s
 from dracc.core.errors import ConfigError, OptionError
 from dracc.core.vocabulary import ROLES
 
@@ -179,3 +182,68 @@ def check_pattern(value: str | None, option: str = "--pattern") -> str | None:
             "e.g. '*.nmea' or '**/*.nmea'"
         )
     return value
+
+
+def build_config(
+    config: Path | None,
+    *,
+    interval: str | None = None,
+    window: str | None = None,
+    dr_reset: str | None = None,
+    probability: float | None = None,
+    roles: list[str] | None = None,
+    date: str | None = None,
+    strict: bool = False,
+    ignore_checksum: bool = False,
+    epoch_interval: str | None = None,
+    variation_deg: float | None = None,
+    fix_role: str | None = None,
+) -> Config:
+    """The configuration file with the options on top: how analyze, audit and records
+    take it (one validation path: a file one accepts the others accept).  An error of the
+    file is a ConfigError (exit 4); a bad option value, or one the validated file's
+    settings cannot take, an OptionError (exit 2)."""
+    cfg = load_config(config)  # validated: what fails below comes from the options
+    with option_values():
+        ing = cfg.ingest
+        sources = {**ing.sources, **parse_roles(roles or [])}
+        date = check_date(date)
+        ing = replace(
+            ing,
+            sources=sources,
+            strict=ing.strict or strict,
+            ignore_checksum=ing.ignore_checksum or ignore_checksum,
+            date=date if date is not None else ing.date,
+        )
+        dev = cfg.deviation
+        if interval is not None:
+            dev = replace(dev, interval_s=parse_duration_s(interval, "--interval"))
+        if window is not None:
+            dev = replace(dev, window_s=parse_duration_s(window, "--window"))
+        if probability is not None:
+            if not 0.5 <= probability < 1.0:
+                raise ConfigError(f"--probability {probability}: must be in [0.5, 1)")
+            dev = replace(dev, probability=probability)
+        dr = cfg.dead_reckoning
+        if dr_reset is not None:
+            try:
+                if dr_reset.strip().lower() != "auto":
+                    parse_reset_s(dr_reset)
+            except ConfigError as e:
+                raise ConfigError(
+                    f"--dr-reset {dr_reset!r}: expected auto, 1h, 4h, 30min, watch or never"
+                ) from e
+            dr = replace(dr, reset=dr_reset)
+        if epoch_interval is not None:
+            dr = replace(dr, epoch_interval_s=parse_duration_s(epoch_interval, "--epoch-interval"))
+        if variation_deg is not None:
+            if not -180.0 <= variation_deg <= 180.0:
+                raise ConfigError(
+                    f"--variation {variation_deg}: must be within ±180 degrees (east +)"
+                )
+            dr = replace(dr, variation_deg=variation_deg)
+        if fix_role is not None:
+            if fix_role not in ("gnss", "ins_mean"):
+                raise ConfigError(f"--fix-role {fix_role!r}: must be gnss or ins_mean")
+            dr = replace(dr, fix_role=fix_role)
+        return validate(replace(cfg, ingest=ing, deviation=dev, dead_reckoning=dr))

@@ -531,8 +531,13 @@ def _check_apriori(
 
 def _berth(value: object, section: str, key: str) -> BerthConfig:
     """One berth of ``[reference] alongside``: its keys and values checked as a section's
-    are (:func:`_section`), then its own rules (:func:`check_berth`)."""
+    are (:func:`_section`), then its own rules (:func:`check_berth`).  A berth already
+    built (a validated configuration validated again, as every command's options are
+    merged) is checked as the table of its fields: one path, so :func:`validate` is
+    idempotent."""
     where = f"{section}.{_key(key)}"
+    if isinstance(value, BerthConfig):
+        value = {f.name: getattr(value, f.name) for f in fields(BerthConfig)}
     if not isinstance(value, dict):
         raise _wrong(
             section, key, value, "a table {pier = [...], side = ..., half_breadth_m = ...}"

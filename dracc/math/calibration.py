@@ -33,7 +33,12 @@ Three estimators:
     Current and log scale are separable only where the ship steers different headings
     within the current's time scale (a 3 % scale error on a northerly course looks
     exactly like a 0.3 kn northerly current); speed changes separate scale from offset.
-    Singular geometry raises InsufficientDataError saying which.  Uncertainties are
+    What the data cannot separate is judged from the fit itself and named with why in
+    ``not_determinable`` (issue 29): a parameter whose variance the current (or, for the
+    scale, the offset) inflates more than ``VIF_MAX``-fold, or whose sigma against its
+    estimate cannot tell the log's water track from none (``DETERMINABLE_Z``; a ship at
+    rest).  An offset the fit cannot separate from the scale is dropped (the scale then
+    absorbs it).  Heading errors are wrapped to (-pi, pi].  Uncertainties are
     f s^2 (J^T J)^-1 with s^2 the residual variance per segment and f = (1+rho)/(1-rho)
     the AR(1) inflation for the lag-1 correlation rho of consecutive segments' residuals
     (current wander and slow sensor noise make them correlated).
@@ -42,8 +47,8 @@ Three estimators:
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
 from typing import cast
 
 import numpy as np
@@ -52,6 +57,7 @@ from dracc.core import distributions as dist
 from dracc.core.arrays import ArrayLike, BoolArray, FloatArray, IntArray
 from dracc.core.errors import InsufficientDataError
 from dracc.core.geodesy import angdiff, offset_ne_m, wrap_pi
+from dracc.core.units import KN_MPS
 
 __all__ = [
     "CompassErrorEstimate",
@@ -349,6 +355,10 @@ class TrackCalibration:
     residual_lag1_correlation: float  #: rho used to inflate the covariance by (1+rho)/(1-rho)
     n_segments: int
     segment_s: float
+    #: the quantities the data cannot determine, and why: keys "compass_error",
+    #: "log_scale", "log_offset" (see :func:`calibrate_from_track`); their figures are
+    #: the fit's but mean nothing
+    not_determinable: Mapping[str, str] = field(default_factory=dict)
 
 
 def _segment_reference_velocity(
@@ -382,12 +392,171 @@ def _segment_reference_velocity(
     return vel, good[:-1] & good[1:]
 
 
-#: Smallest eigenvalue of the correlation-normalised normal matrix below which the fit
-#: cannot separate its parameters.  A straight leg with yaw noise is not exactly singular
-#: (3.8e-5 measured on a simulated 3 h single-course voyage, where the fit then gave a
-#: compass error of -0.3 +- 31 deg and a log scale of 175 +- 151 %); voyages with course
-#: changes give 0.05-0.2.
-ILL_CONDITIONED = 1e-3
+#: Variance inflation beyond which a parameter cannot be separated from another: the
+#: variance of the one fitted beside the other over its variance with the other held,
+#: ``[A^-1]_ii / [A_(-j)^-1]_ii`` of the normal matrix A (Marquardt 1970's threshold of
+#: serious collinearity, a factor 3.2 on the sigma).  A straight leg with yaw noise is
+#: not exactly singular (a simulated 3 h single-course voyage fitted a compass error of
+#: -0.3 +- 31 deg and a log scale of 175 +- 151 %); scale and offset at one speed, or a
+#: heading error beside the current on one heading, give thousands.
+VIF_MAX = 10.0
+#: a quantity is determinable where the fit tells the log's water track from none at 95 %
+#: (two-sided): the heading error's sigma below 1/z rad (29 deg), the log scale's below
+#: (1 + s)/z (its gain 1/(1 + s) z sigma from 0).  Beyond it the linearised sigma is not
+#: even a sigma: the ship lying still fitted +511 +- 53 deg and -56 % (issue 29).
+DETERMINABLE_Z = 1.96
+
+
+def _start(
+    hs: FloatArray,
+    vs: FloatArray,
+    wn: FloatArray,
+    si: IntArray,
+    B: FloatArray,
+    u: FloatArray,
+    Hd: FloatArray,
+    n_b: int,
+) -> FloatArray:
+    """A starting point from the linear form of the model without offset: the reference
+    velocity is ``a W + b W_perp + c`` with W the log's water track, a = cos(eps)/(1+s),
+    b = sin(eps)/(1+s); so a compass error of any size (a compass 178 deg off) starts
+    near its value, not at 0, where a reversed water track fits a negative gain."""
+    m, nk = B.shape
+    wn_n = np.bincount(si, weights=wn * vs * np.cos(hs), minlength=m)
+    wn_e = np.bincount(si, weights=wn * vs * np.sin(hs), minlength=m)
+    X = np.zeros((2 * m, 2 + 2 * nk))
+    X[0::2, 0], X[1::2, 0] = wn_n, wn_e
+    X[0::2, 1], X[1::2, 1] = wn_e, -wn_n
+    X[0::2, 2 : 2 + nk], X[1::2, 2 + nk :] = B, B
+    coef = np.linalg.lstsq(X, u.ravel(), rcond=None)[0]
+    gain = math.hypot(coef[0], coef[1])
+    eps = math.atan2(coef[1], coef[0]) if gain > 0 else 0.0
+    n_h = Hd.shape[1]
+    theta = np.zeros(n_h + 1 + n_b + 2 * nk)
+    # eps = Hd @ theta: every knot at eps (constant, varying), or A = -eps (deviation)
+    theta[:n_h] = np.linalg.lstsq(Hd, np.full(Hd.shape[0], eps), rcond=None)[0]
+    theta[n_h] = 1.0 / gain - 1.0 if gain > 0 else 0.0
+    theta[n_h + 1 + n_b :] = coef[2:]
+    return theta
+
+
+def _inverse(A: FloatArray) -> FloatArray:
+    """A^-1 of a normal matrix, through its correlation form; a parameter in a (near)
+    null direction or without data gets an infinite variance, never a small one."""
+    d = np.sqrt(np.diag(A))
+    out = np.full_like(A, np.nan)
+    ok = np.flatnonzero(d > 0)
+    np.fill_diagonal(out, np.inf)
+    if ok.size:
+        An = A[np.ix_(ok, ok)] / np.outer(d[ok], d[ok])
+        w, V = np.linalg.eigh(An)
+        small = w <= 1e-12 * max(float(w[-1]), 1e-300)
+        inv_w = np.where(small, 0.0, 1.0 / np.where(small, 1.0, w))
+        inv = (V * inv_w) @ V.T / np.outer(d[ok], d[ok])
+        # a parameter carried by a null direction has no finite variance
+        null = (V[:, small] ** 2).sum(axis=1) > 1e-6
+        inv[null, :] = np.where(np.eye(ok.size, dtype=bool)[null], np.inf, np.nan)
+        out[np.ix_(ok, ok)] = inv
+    return out
+
+
+def _vif(A: FloatArray, names: list[str], of: str, beside: str) -> float:
+    """The largest variance inflation of the ``of`` parameters from fitting the ``beside``
+    ones with them (inf where they cannot be told apart at all)."""
+    i = [k for k, nm in enumerate(names) if nm == of]
+    keep = [k for k, nm in enumerate(names) if nm != beside]
+    joint = np.diag(_inverse(A))[i]
+    held = np.diag(_inverse(A[np.ix_(keep, keep)]))[[keep.index(k) for k in i]]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.where(np.isinf(joint), np.inf, joint / held)
+    return float(np.max(np.nan_to_num(ratio, nan=np.inf, posinf=np.inf)))
+
+
+def _times(vif: float) -> str:
+    return "without bound" if not math.isfinite(vif) else f"{vif:,.0f}-fold"
+
+
+@dataclass(frozen=True)
+class _Water:
+    """The water track the fit saw: segment-mean speeds and courses (for the whys)."""
+
+    mean_mps: float
+    span_kn: float  #: 5-95 % of the segment-mean speeds
+    heading_span_deg: float  #: the widest spread of courses within one current interval
+
+    @classmethod
+    def of(
+        cls, vs: FloatArray, hs: FloatArray, wn: FloatArray, si: IntArray, m: int, k_lo: IntArray
+    ) -> _Water:
+        v = np.bincount(si, weights=wn * vs, minlength=m)
+        c = np.bincount(si, weights=wn * np.cos(hs), minlength=m)
+        sn = np.bincount(si, weights=wn * np.sin(hs), minlength=m)
+        course = np.mod(np.arctan2(sn, c), 2 * np.pi)
+        spans = []
+        for k in np.unique(k_lo):
+            a = np.sort(course[k_lo == k])
+            gaps = np.diff(np.r_[a, a[0] + 2 * np.pi])
+            spans.append(2 * np.pi - float(gaps.max()))
+        return cls(
+            mean_mps=float(np.mean(v)),
+            span_kn=float(np.ptp(np.percentile(v, [5, 95]))) / KN_MPS,
+            heading_span_deg=math.degrees(max(spans)),
+        )
+
+
+def _not_determinable(
+    A: FloatArray,
+    names: list[str],
+    x: FloatArray,
+    sig: FloatArray,
+    water: _Water,
+    *,
+    moving: bool,
+) -> dict[str, str]:
+    """Which of the compass error and the log scale the fit does not determine, and why:
+    judged from the fit itself (the variance inflation by the current, the sigma against
+    the estimate), the water track's figures only said."""
+    out: dict[str, str] = {}
+    h = [k for k, nm in enumerate(names) if nm == "heading"]
+    i_s = names.index("log scale")
+    still = (
+        f"the ship did not move through the water ({water.mean_mps / KN_MPS:.1f} kn on "
+        "average, within the noise of the reference's velocity)"
+    )
+    sig_h = float(np.max(sig[h]))
+    if not moving and not sig_h < 1 / DETERMINABLE_Z:
+        out["compass_error"] = f"compass error not observable: {still}"
+    elif (vif := _vif(A, names, "heading", "current")) > VIF_MAX:
+        out["compass_error"] = (
+            "compass error and current cannot be separated: the courses steered within "
+            f"one current interval span {water.heading_span_deg:.0f} deg at most (the "
+            f"current inflates its variance {_times(vif)}; a turn tells a heading error "
+            "from a cross-track current)"
+        )
+    elif not sig_h < 1 / DETERMINABLE_Z:
+        out["compass_error"] = (
+            f"compass error not observable: +-{math.degrees(sig_h):.0f} deg (1 sigma) "
+            "tells the log's water track from none at all less than 95 % of the time"
+        )
+    gain = 1.0 + x[i_s]
+    if not moving and not (gain > 0 and sig[i_s] < gain / DETERMINABLE_Z):
+        out["log_scale"] = f"log scale not determinable: {still}"
+    elif (vif := _vif(A, names, "log scale", "current")) > VIF_MAX:
+        out["log_scale"] = (
+            "log scale and current cannot be separated: the courses steered within one "
+            f"current interval span {water.heading_span_deg:.0f} deg at most and the speed "
+            f"through the water {water.span_kn:.1f} kn (the current inflates its variance "
+            f"{_times(vif)})"
+        )
+    elif not (gain > 0 and sig[i_s] < gain / DETERMINABLE_Z):
+        out["log_scale"] = (
+            f"log scale not determinable: {100 * x[i_s]:+.0f} +- {100 * sig[i_s]:.0f} %: "
+            "the log's speed does not show in the reference's motion (its gain 1/(1+s) "
+            "is not 1.96 sigma from 0)"
+        )
+    if "log_scale" in out and "log offset" in names:  # b is read through (V - b)/(1 + s)
+        out["log_offset"] = f"log offset not determinable beside the scale: {out['log_scale']}"
+    return out
 
 
 def calibrate_from_track(
@@ -490,7 +659,6 @@ def calibrate_from_track(
         Hd = np.ones((hs.size, 1))
     n_h: int = Hd.shape[1]
     n_b = 1 if fit_log_offset else 0
-    vspan = float(np.ptp(vs))
 
     def speed_course(theta: FloatArray) -> tuple[FloatArray, FloatArray, float]:
         """Log speed corrected by scale s and offset b, (vs - b) / (1 + s); course hs - eps."""
@@ -538,38 +706,40 @@ def calibrate_from_track(
             f"log calibration: {m} segments cannot determine {n_par} parameters; use a longer "
             "log, shorter segments or a longer current_knot_s"
         )
-    sol = levenberg_marquardt(resid, jac, np.zeros(n_par))
+    sol = levenberg_marquardt(resid, jac, _start(hs, vs, wn, si, B, u_ref[seg_ids], Hd, n_b))
     J = sol.jac
     JtJ = J.T @ J
+    if not np.all(np.isfinite(JtJ)):
+        raise InsufficientDataError("log calibration: the fit diverged (non-finite Jacobian)")
     names = ["heading"] * n_h + ["log scale"] + ["log offset"] * n_b + ["current"] * (2 * nk)
-    # singular or nearly singular geometry: report which parameter cannot be separated
-    d = np.sqrt(np.diag(JtJ))
-    if not np.all(np.isfinite(JtJ)) or np.any(d == 0):  # a parameter the data never touch
-        raise InsufficientDataError(
-            "log calibration: the data do not determine every parameter (a segment or "
-            "current knot without data)"
+    speeds = _Water.of(vs, hs, wn, si, m, k_lo)
+    vif_offset = _vif(JtJ, names, "log scale", "log offset") if n_b else 1.0
+    if vif_offset > VIF_MAX:
+        # scale and offset act alike where the speed hardly changes: fit the scale alone
+        # (the offset taken as 0: the scale absorbs it) and say why
+        cal = calibrate_from_track(
+            time_s,
+            heading_rad,
+            speed_mps,
+            ref_time_s,
+            ref_lat_rad,
+            ref_lon_rad,
+            heading_model=heading_model,
+            fit_log_offset=False,
+            segment_s=segment_s,
+            current_knot_s=current_knot_s,
+            heading_knot_s=heading_knot_s,
+            max_ref_gap_s=max_ref_gap_s,
+            min_coverage=min_coverage,
+            variation_rad=variation_rad,
         )
-    w, vecs = np.linalg.eigh(JtJ / np.outer(d, d))
-    if w[0] < ILL_CONDITIONED:
-        # parameter groups carrying > 5 % of any near-null direction
-        null = vecs[:, w < ILL_CONDITIONED] ** 2
-        groups = sorted(set(names))
-        culprits = [
-            g
-            for g in groups
-            if np.any(null[[i for i, nm in enumerate(names) if nm == g]].sum(0) > 0.05)
-        ]
-        hint = ""
-        if "log offset" in culprits and vspan < 0.5:
-            hint = (
-                f"; the log speed spans only {vspan:.2f} m/s, too little to separate "
-                "scale from offset (fit_log_offset=False)"
-            )
-        elif "current" in culprits:
-            hint = "; steer different headings within each current knot interval"
-        raise InsufficientDataError(
-            "log calibration: the data cannot separate " + ", ".join(culprits) + hint
+        why = (
+            "log scale and offset cannot be separated: speed through the water spans "
+            f"{speeds.span_kn:.1f} kn (5-95 % of the segments' means), and fitting the "
+            f"offset would inflate the scale's variance {_times(vif_offset)} (more than "
+            f"{VIF_MAX:g}-fold); the scale absorbs the offset"
         )
+        return replace(cal, not_determinable={"log_offset": why, **cal.not_determinable})
     res = sol.fun
     dof = res.size - n_par
     s2 = float(res @ res) / dof
@@ -582,10 +752,18 @@ def calibrate_from_track(
     den = float(np.sum(rn**2))
     rho = min(max(num / den, 0.0), 0.9) if den > 0 and consecutive.any() else 0.0
     inflation = (1 + rho) / (1 - rho)
-    cov = inflation * s2 * np.linalg.inv(JtJ)
+    cov = inflation * s2 * _inverse(JtJ)
     sig = np.sqrt(np.diag(cov))
-    x = sol.x
-    if heading_model == "varying" and n_h > 1:
+    x = sol.x.copy()
+    # the heading error on the circle (the fit is free to wander a turn or more)
+    x[: 1 if heading_model == "deviation" else n_h] = wrap_pi(
+        x[: 1 if heading_model == "deviation" else n_h]
+    )
+    residual_rms = math.sqrt(float(np.mean(res**2)))
+    unknown = _not_determinable(
+        JtJ, names, x, sig, speeds, moving=speeds.mean_mps > DETERMINABLE_Z * residual_rms
+    )
+    if heading_model == "varying" and n_h > 1 and "compass_error" not in unknown:
         # constancy of the heading error: GLS mean of the knot values and its chi-square
         C = cov[:n_h, :n_h]
         Ci = np.linalg.inv(C)
@@ -612,8 +790,9 @@ def calibrate_from_track(
         current_ne_mps=cur,
         current_sigma_ne_mps=cur_sig,
         covariance=cov,
-        residual_rms_mps=math.sqrt(float(np.mean(res**2))),
+        residual_rms_mps=residual_rms,
         residual_lag1_correlation=rho,
         n_segments=m,
         segment_s=segment_s,
+        not_determinable=unknown,
     )

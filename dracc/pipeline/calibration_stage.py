@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from dracc.core.errors import InsufficientDataError
 from dracc.core.units import KN_MPS
 from dracc.pipeline.results import CalibrationSection, Estimate
@@ -15,26 +13,24 @@ from dracc.pipeline.selection import DRInputs, Fixes
 #: calibration segments (reference displacement over each) and current knots
 CAL_SEGMENT_S = 600.0
 CAL_KNOT_S = 2 * 3600.0
-#: the log offset is fitted only where the speed spans at least this much (5-95 %)
-CAL_OFFSET_SPREAD_KN = 2.0
+
+#: the section's names of the quantities dracc.math.calibration names
+_QUANTITY = {
+    "compass_error": "compass_error_deg",
+    "log_scale": "log_scale",
+    "log_offset": "log_offset_kn",
+}
 
 
 def calibration(dr: DRInputs, fixes: Fixes, missing: list[str]) -> CalibrationSection | None:
-    """Compass error, log scale and offset against the reference positions (dracc.math.calibration)."""
+    """Compass error, log scale and offset against the reference positions
+    (dracc.math.calibration); a quantity the data cannot determine is None, and
+    ``not_determinable`` says why (judged from the fit, issue 29)."""
     from dracc.math.calibration import calibrate_from_track
 
     ft, flat, flon, fdesc = fixes
     fix_s = (ft - dr.t0_ns) / 1e9
     notes: list[str] = []
-    spd = dr.speed_mps[np.isfinite(dr.speed_mps)]
-    spread_mps = float(np.ptp(np.percentile(spd, [5, 95]))) if spd.size else 0.0
-    fit_offset = spread_mps >= CAL_OFFSET_SPREAD_KN * KN_MPS
-    if not fit_offset:
-        notes.append(
-            f"log offset not fitted: the log speed spans only {spread_mps / KN_MPS:.1f} kn "
-            f"(5-95 %), less than {CAL_OFFSET_SPREAD_KN:g} kn, too little to separate an "
-            "offset from the scale; the scale absorbs it"
-        )
     try:
         cal = calibrate_from_track(
             dr.time_s,
@@ -46,13 +42,16 @@ def calibration(dr: DRInputs, fixes: Fixes, missing: list[str]) -> CalibrationSe
             segment_s=CAL_SEGMENT_S,
             current_knot_s=CAL_KNOT_S,
             max_ref_gap_s=dr.ref_gap_s,
-            fit_log_offset=fit_offset,
+            fit_log_offset=True,  # dropped by the fit where it cannot tell it from the scale
         )
     except InsufficientDataError as err:
         missing.append(f"calibration not computed: {err}")
         return None
+    unknown = {_QUANTITY[k]: why for k, why in cal.not_determinable.items()}
     eps = float(cal.heading_error_rad[0])
     eps_sig = float(cal.heading_error_sigma_rad[0])
+    compass = Estimate(math.degrees(eps), math.degrees(eps_sig))
+    scale = Estimate(cal.log_scale, cal.log_scale_sigma)
     offset = None
     if math.isfinite(cal.log_offset_sigma_mps):
         offset = Estimate(cal.log_offset_mps / KN_MPS, cal.log_offset_sigma_mps / KN_MPS)
@@ -60,7 +59,7 @@ def calibration(dr: DRInputs, fixes: Fixes, missing: list[str]) -> CalibrationSe
     notes.append(
         f"compass error eps = course {through} used by the DR (heading + "
         f"variation + deviation + leeway/drift angle from the log) - true course "
-        f"(correct by -eps); "
+        f"(correct by -eps, within +-180 deg); "
         f"log: V_log = (1 + s) V_true + b; current fitted beside them, piecewise linear "
         f"with knots every {CAL_KNOT_S / 3600:g} h; {cal.n_segments} segments of "
         f"{CAL_SEGMENT_S:g} s; sigmas inflated for correlated residuals "
@@ -68,11 +67,12 @@ def calibration(dr: DRInputs, fixes: Fixes, missing: list[str]) -> CalibrationSe
     )
     return CalibrationSection(
         reference_role=fdesc,
-        compass_error_deg=Estimate(math.degrees(eps), math.degrees(eps_sig)),
-        log_scale=Estimate(cal.log_scale, cal.log_scale_sigma),
-        log_offset_kn=offset,
+        compass_error_deg=None if "compass_error_deg" in unknown else compass,
+        log_scale=None if "log_scale" in unknown else scale,
+        log_offset_kn=None if "log_offset_kn" in unknown else offset,
         n=int(cal.n_segments),
         segment_s=float(cal.segment_s),
         residual_rms_kn=float(cal.residual_rms_mps / KN_MPS),
         notes=tuple(notes),
+        not_determinable=unknown,
     )

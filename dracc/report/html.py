@@ -428,12 +428,16 @@ def _calibration_current(a: Analysis) -> str:
     if c is None:
         out.append('<p class="missing">Calibration not computed (see Missing).</p>')
     else:
+        nd = c.not_determinable  # said in words, and why (issue 29)
         rows = [
             ("against", f"{_e(c.reference_role)} ({c.n} segments of {c.segment_s:g} s)"),
             ("compass error", _est(c.compass_error_deg, "°")),
             ("log scale error", _est(c.log_scale, "%", scale=100.0)),
             ("log offset", _est(c.log_offset_kn, "kn")),
         ]
+        for i, key in enumerate(("compass_error_deg", "log_scale", "log_offset_kn"), 1):
+            if key in nd:
+                rows[i] = (rows[i][0], f"NOT DETERMINABLE: {_e(nd[key])}")
         out.append(
             '<table class="kv">'
             + "".join(f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in rows)

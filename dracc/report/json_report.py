@@ -168,6 +168,7 @@ def _calibration(c: CalibrationSection) -> dict[str, Any]:
         "segment_s": float(c.segment_s),
         "residual_rms_kn": _num(c.residual_rms_kn),
         "notes": list(c.notes),
+        "not_determinable": dict(c.not_determinable),
     }
 
 

@@ -257,15 +257,21 @@ def _deviation_body(page: _Page, d: DeviationResult) -> None:
 
 def _calibration_body(page: _Page, c: CalibrationSection) -> None:
     scale = c.log_scale and Estimate(100 * c.log_scale.value, 100 * c.log_scale.sigma)
+    nd = c.not_determinable  # each quantity the data cannot determine says so, and why
+
+    def est(key: str, e: Estimate | None, unit: str) -> str:
+        return "NOT DETERMINABLE" if key in nd else _est(e, unit)
+
     page.add(
         wrap_text(
             f"against {c.reference_role} ({c.n} segments of {c.segment_s:g} s): compass error "
-            f"{_est(c.compass_error_deg, '°')}; log scale {_est(scale, '%')}; "
-            f"log offset {_est(c.log_offset_kn, 'kn')}",
+            f"{est('compass_error_deg', c.compass_error_deg, '°')}; log scale "
+            f"{est('log_scale', scale, '%')}; log offset "
+            f"{est('log_offset_kn', c.log_offset_kn, 'kn')}",
             page.lay.width,
         )
     )
-    _notes(page, c.notes)
+    _notes(page, (*nd.values(), *c.notes))
 
 
 def _current_body(page: _Page, cur: CurrentSection) -> None:
