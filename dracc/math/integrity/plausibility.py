@@ -94,28 +94,35 @@ def water_track(voyage: Voyage) -> WaterTrack | None:
 
 def _water_steps(
     t: np.ndarray, water: WaterTrack | None, max_gap_s: float
-) -> tuple[FloatArray, FloatArray]:
-    """North/east water-track displacement over each step between fix times ``t``; NaN
-    where the water track does not cover the step (outside it, or a heading gap longer
-    than ``max_gap_s`` inside it)."""
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """North/east water-track displacement over each step between fix times ``t`` (NaN
+    where the water track does not cover the step), and the seconds of each step that
+    fall in a hole of the water track (a heading gap longer than ``max_gap_s``): there
+    the track holds the heading and speed of the hole's two ends (the trapezoid across
+    it), and a turn inside the hole is unseen."""
     n = len(t) - 1
     if water is None or n <= 0:
-        return np.full(max(n, 0), np.nan), np.full(max(n, 0), np.nan)
+        nan = np.full(max(n, 0), np.nan)
+        return nan, nan.copy(), np.zeros(max(n, 0))
     th, cn, ce = water
-    tf = t.astype(float)
-    at_n = np.interp(tf, th.astype(float), cn)
-    at_e = np.interp(tf, th.astype(float), ce)
+    tf, thf = t.astype(float), th.astype(float)
+    at_n = np.interp(tf, thf, cn)
+    at_e = np.interp(tf, thf, ce)
     inside = (t >= th[0]) & (t <= th[-1])
-    # the longest heading gap within each step: the gap of the sample before each end
+    # G(t): the time spent in holes before t, piecewise linear over the heading times
     gap = np.diff(th) / NS_PER_S
-    k0 = np.clip(np.searchsorted(th, t[:-1], side="right") - 1, 0, len(gap) - 1)
-    k1 = np.clip(np.searchsorted(th, t[1:], side="left"), 1, len(th) - 1) - 1
-    big = np.flatnonzero(gap > max_gap_s)
-    has_gap = np.searchsorted(big, k1, side="right") > np.searchsorted(big, k0, side="left")
-    good = inside[:-1] & inside[1:] & ~has_gap
+    in_holes = np.concatenate(([0.0], np.cumsum(np.where(gap > max_gap_s, gap, 0.0))))
+    hole = np.diff(np.interp(tf, thf, in_holes))
+    good = inside[:-1] & inside[1:]
     dn = np.where(good, np.diff(at_n), np.nan)
     de = np.where(good, np.diff(at_e), np.nan)
-    return dn, de
+    return dn, de, np.where(good, hole, 0.0)
+
+
+def _running_median(x: FloatArray) -> FloatArray:
+    """Centred running median over 11 steps (NaN steps left out; at least 3 needed)."""
+    out: FloatArray = pd.Series(x).rolling(11, center=True, min_periods=3).median().to_numpy()
+    return out
 
 
 def jump_check(
@@ -156,12 +163,26 @@ def jump_check(
     cadence = float(np.median(dt))
     # the ship's own motion: the water track (compass and log) over each step, where it
     # covers it, so a turn or a change of speed is predicted; what is left (the current,
-    # the compass and log errors) changes slowly: its running median over 11 steps
-    wn, we = _water_steps(t, water, max_gap_s=max(10.0, cadence))
-    xn, xe = np.where(np.isfinite(wn), dn - wn, dn), np.where(np.isfinite(we), de - we, de)
-    vn = pd.Series(xn / dt).rolling(11, center=True, min_periods=3).median().to_numpy()
-    ve = pd.Series(xe / dt).rolling(11, center=True, min_periods=3).median().to_numpy()
-    rn, re_ = xn - vn * dt, xe - ve * dt
+    # the compass and log errors) changes slowly: its running median over 11 steps.
+    # Where there is no water track, the fixes' own recent velocity (running median)
+    wn, we, hole_s = _water_steps(t, water, max_gap_s=max(10.0, cadence))
+    has_w = np.isfinite(wn) & np.isfinite(we)
+    un, ue = _running_median(dn / dt), _running_median(de / dt)
+    vn = np.nan_to_num(_running_median(np.where(has_w, (dn - wn) / dt, np.nan)))
+    ve = np.nan_to_num(_running_median(np.where(has_w, (de - we) / dt, np.nan)))
+    pn = np.where(has_w, wn + vn * dt, un * dt)
+    pe = np.where(has_w, we + ve * dt, ue * dt)
+    rn, re_ = dn - pn, de - pe
+    # the time of a step no instrument saw the ship move through: a hole in the water
+    # track, or, predicted from the fixes, whatever the step lasts beyond one cadence.
+    # A manoeuvre at the ship's speed over that time can move the fix by up to
+    # speed * unseen: that much of the innovation is no evidence of a jump
+    unseen_s = np.where(has_w, hole_s, np.maximum(dt - cadence, 0.0))
+    allow_m = np.nan_to_num(np.hypot(un, ue)) * unseen_s
+    size = np.hypot(rn, re_)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        shrink = np.where(size > 0, np.maximum(size - allow_m, 0.0) / size, 0.0)
+    rn, re_ = rn * shrink, re_ * shrink
     # steps over a drop-out (availability) or out of a frozen run (the unit catching
     # up, a 'frozen' fault) are not jumps
     usable = dt <= 10.0 * cadence
@@ -201,8 +222,10 @@ def jump_check(
                 "time": iso_utc(unit="ms", time_ns=t[k + 1]),
                 "line": int(lines[k + 1]),
                 "step_m": float(math.hypot(dn[k], de[k])),
-                "expected_step_m": float(math.hypot(dn[k] - rn[k], de[k] - re_[k])),
-                "innovation_m": float(math.hypot(rn[k], re_[k])),
+                "expected_step_m": float(math.hypot(pn[k], pe[k])),
+                "innovation_m": float(math.hypot(dn[k] - pn[k], de[k] - pe[k])),
+                "unseen_s": float(unseen_s[k]),
+                "allowance_m": float(allow_m[k]),
                 "dt_s": float(dt[k]),
                 "flagged_valid": bool(quality[k + 1] > 0),
             }
