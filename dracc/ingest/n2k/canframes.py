@@ -7,7 +7,9 @@
 both kept, as canboat's analyzer keeps them: both were on the bus). The CAN id gives
 priority, PGN (PDU1: PF < 240 carries the destination in PS; PDU2: PS is part of the
 PGN and the message is broadcast) and source. ``candump -l`` and YDWG's fixed layouts
-are read vectorised; other lines one at a time.
+are read vectorised; other lines one at a time.  A candump whose lines carry no
+``(time)`` (``candump can0``) has no clock: its messages are ``TIME_NONE``, timed by
+their order (a line without a time among timed ones takes the time before it).
 """
 
 from __future__ import annotations
@@ -16,11 +18,13 @@ import numpy as np
 
 from dracc.ingest.n2k.fastpacket import rows_to_messages
 from dracc.ingest.n2k.messages import (
+    TIME_NONE,
     TIME_OF_DAY,
     TIME_RELATIVE,
     TIME_UTC,
     Messages,
     add_reject,
+    fill_forward,
 )
 from dracc.ingest.n2k.textscan import (
     HEX_VALUE,
@@ -147,15 +151,22 @@ def parse_candump(lines: Lines) -> Messages:
     kind = TIME_RELATIVE
     if len(times) and times.max() >= UNIX_TIME_FROM_S * 1_000_000_000:
         kind = TIME_UTC
+    untimed = times < 0  # screen-form lines without a (time)
+    if untimed.all():
+        kind, times = TIME_NONE, np.zeros(len(times), dtype=np.int64)
+    elif untimed.any():  # a line without a time takes the time of the line before it
+        order = np.argsort(idx, kind="stable")
+        times[order] = fill_forward(times[order])
     msgs = _frames_to_messages(lines, idx, times, ids, dlen, payload, kind)
     add_reject(msgs, "candump_line", len(bad), [(int(lines.number[i]), lines.text(i)) for i in bad])
     return msgs
 
 
 def _candump_line(text: str) -> tuple[int, int, bytes] | None:
-    """(time ns, CAN id, data) of one candump line of any form; None if it is none."""
+    """(time ns, -1 where the line has none; CAN id, data) of one candump line of any
+    form; None if it is none."""
     tokens = text.replace("#", " # ").split()
-    t = 0
+    t = -1  # no time on the line
     if tokens and tokens[0].startswith("(") and tokens[0].endswith(")"):
         try:
             secs = float(tokens[0][1:-1])

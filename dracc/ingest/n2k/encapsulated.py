@@ -9,7 +9,8 @@
 - Shipmodul MiniPlex ``$MXPGN,pgn,attr,hex*cs`` -- one CAN frame: the attribute word
   holds the send flag (bit 15), priority (14-12), data length (11-8) and address (7-0,
   the destination of sent frames, else the source); the data is written last byte
-  first. Frames of fast-packet PGNs are reassembled. No time: times are 0.
+  first. Frames of fast-packet PGNs are reassembled. No time: times are 0 and the log
+  has no clock (``TIME_NONE``).
 
 Checksums (``*hh``, XOR of the characters between ``$`` and ``*``) are checked where
 present; a wrong one rejects the line as ``checksum``.
@@ -23,7 +24,7 @@ import binascii
 import numpy as np
 
 from dracc.ingest.n2k.fastpacket import rows_to_messages
-from dracc.ingest.n2k.messages import TIME_RELATIVE, Messages, add_reject
+from dracc.ingest.n2k.messages import TIME_NONE, TIME_RELATIVE, Messages, add_reject
 from dracc.ingest.n2k.textscan import Lines
 
 #: gateway times from this many seconds on are not believed
@@ -49,7 +50,7 @@ class _Collect:
     def reject(self, i: int, reason: str) -> None:
         self.bad.setdefault(reason, []).append(i)
 
-    def messages(self, reassemble: bool) -> Messages:
+    def messages(self, reassemble: bool, time_kind: str = TIME_RELATIVE) -> Messages:
         t, line, prio, pgn, src, dst = (np.array(c, dtype=np.int64) for c in self.cols)
         msgs = rows_to_messages(
             t,
@@ -60,7 +61,7 @@ class _Collect:
             dst,
             np.array([len(d) for d in self.data], dtype=np.int64),
             np.frombuffer(b"".join(self.data), dtype=np.uint8),
-            TIME_RELATIVE,
+            time_kind,
             reassemble_fast=reassemble,
         )
         for reason, rows in self.bad.items():
@@ -165,4 +166,4 @@ def parse_mxpgn(lines: Lines) -> Messages:
             continue
         src, dst = (0, addr) if send else (addr, 255)
         out.add(i, 0, prio, pgn, src, dst, data)
-    return out.messages(reassemble=True)
+    return out.messages(reassemble=True, time_kind=TIME_NONE)

@@ -10,6 +10,7 @@ Formats (names as :func:`sniff_n2k` gives them and :func:`parse_n2k` takes them)
 ``n2k-ydraw``          Yacht Devices RAW (time of day only)
 ``n2k-pdgy``           Digital Yacht iKonvert ``!PDGY``
 ``n2k-ebl``            Actisense EBL binary
+``n2k-ngt1``           Actisense NGT-1 binary stream (BST over DLE framing; YDNU-02 ``.dle``)
 ``n2k-pcdin``          ``$PCDIN`` sentences
 ``n2k-mxpgn``          ``$MXPGN`` sentences
 =====================  ===========================================================
@@ -28,7 +29,7 @@ from collections import Counter
 import numpy as np
 
 from dracc.ingest.n2k.canframes import parse_candump, parse_ydraw
-from dracc.ingest.n2k.ebl import parse_ebl
+from dracc.ingest.n2k.ebl import parse_ebl, parse_ngt1
 from dracc.ingest.n2k.encapsulated import parse_mxpgn, parse_pcdin, parse_pdgy
 from dracc.ingest.n2k.fastpacket import is_fast_pgn
 from dracc.ingest.n2k.messages import Messages
@@ -37,8 +38,8 @@ from dracc.ingest.n2k.textscan import Lines, join_lines, split_lines
 
 PLAIN, FAST, MIX = "n2k-plain", "n2k-fast", "n2k-plain-mix-fast"
 CANDUMP, YDRAW, PDGY, EBL = "n2k-candump", "n2k-ydraw", "n2k-pdgy", "n2k-ebl"
-PCDIN, MXPGN = "n2k-pcdin", "n2k-mxpgn"
-FORMATS = (PLAIN, FAST, MIX, CANDUMP, YDRAW, PDGY, EBL, PCDIN, MXPGN)
+PCDIN, MXPGN, NGT1 = "n2k-pcdin", "n2k-mxpgn", "n2k-ngt1"
+FORMATS = (PLAIN, FAST, MIX, CANDUMP, YDRAW, PDGY, EBL, NGT1, PCDIN, MXPGN)
 #: how much of a file :func:`sniff_n2k` looks at
 SNIFF_BYTES = 65536
 #: lines of the head classified
@@ -61,11 +62,15 @@ def sniff_n2k(head: bytes) -> str | None:
     """The N2K format of a log whose first bytes are ``head`` (up to 64 KiB are read),
     or None if it is none (an NMEA 0183 log with a few ``$PCDIN`` lines is none)."""
     head = head[:SNIFF_BYTES]
-    if head.startswith(b"\x1b\x01") or (
+    # an EBL file begins with a logger record, and its records end ESC LF before a
+    # frame's DLE STX (a bare stream has DLE ETX there)
+    if head.startswith(b"\x1b\x01") or head.count(b"\x1b\x0a\x10\x02") >= 2:
+        return EBL
+    if (
         head.count(b"\x10\x02\x93") + head.count(b"\x10\x02\x94") >= 2
         and sum(b < 9 or 13 < b < 32 for b in head[:2048]) > len(head[:2048]) // 20
     ):
-        return EBL
+        return NGT1
     text = head.decode("latin-1")
     lines = re.split(r"\r\n|\r|\n", text)
     if len(head) == SNIFF_BYTES and len(lines) > 1:
@@ -150,6 +155,8 @@ def parse_n2k(data: bytes, fmt: str, first_line: int = 1) -> Messages:
     ``Messages.rejects``, never raised."""
     if fmt == EBL:
         return parse_ebl(data)
+    if fmt == NGT1:
+        return parse_ngt1(data)
     return _parse_lines(split_lines(data, first_line), fmt)
 
 

@@ -18,6 +18,9 @@ TIME_UTC = "utc"  #: ns since the Unix epoch (dated times, candump -l, EBL)
 TIME_OF_DAY = "time_of_day"  #: ns since midnight of an unknown day (YDWG raw)
 #: ns since an unknown start (iKonvert, PCDIN, candump and EBL without absolute times)
 TIME_RELATIVE = "relative"
+#: no clock at all (a candump without times, ``$MXPGN``): the times are 0, the order of
+#: the messages is all there is
+TIME_NONE = "none"
 
 
 @dataclass
@@ -152,3 +155,17 @@ def concat_messages(parts: list[Messages]) -> Messages:
         rejects=rejects,
         examples=examples,
     )
+
+
+def fill_forward(t: np.ndarray) -> np.ndarray:
+    """``t`` (int64) with every negative value replaced by the value before it (the first
+    ones by the first value there is); all zeros where there is none."""
+    t = np.asarray(t, dtype=np.int64)
+    have = t >= 0
+    if have.all() or not have.any():
+        return np.where(have, t, 0)
+    idx = np.where(have, np.arange(len(t)), 0)
+    np.maximum.accumulate(idx, out=idx)
+    first = int(np.flatnonzero(have)[0])
+    idx[:first] = first
+    return t[idx]

@@ -5,7 +5,11 @@
 Times (``Messages.time_kind``):
 
 * ``utc``: as the log gives them (a log whose times lie before 2000, a logger without a
-  clock, is taken as relative times);
+  clock, is taken as relative times, and is clockless);
+* ``none``: the log has no clock (a candump without times, ``$MXPGN``, a log whose every
+  message has the same time): it is *clockless*, its messages are timed by their order,
+  one millisecond apart, and ``FileResult.clockless`` says no latency, rate or time
+  finding may be drawn from them (the notes say :data:`NO_CLOCK_NOTE`);
 * ``time_of_day`` / ``relative``: anchored to UTC by the offset ``median(UTC time -
   frame time)`` over the PGN 126992 system times and PGN 129029 times of fix of the log;
   with neither, placed on the date of ``--date`` / ``ingest.date``, else on the assumed
@@ -36,7 +40,7 @@ from dracc.frames import (
     make_frame,
 )
 from dracc.ingest.n2k.formats import SNIFF_BYTES, parse_n2k, sniff_n2k
-from dracc.ingest.n2k.messages import TIME_OF_DAY, TIME_UTC, Messages
+from dracc.ingest.n2k.messages import TIME_NONE, TIME_OF_DAY, TIME_UTC, Messages
 from dracc.ingest.n2k.names import source_keys
 from dracc.ingest.n2k.pgns import DAY_NS, Decoded, decode
 from dracc.ingest.nmea import check_readable
@@ -55,6 +59,10 @@ if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
 
 HALF_DAY_NS = DAY_NS // 2
 EPOCH_2000_NS = 10957 * DAY_NS  #: 2000-01-01: a UTC log time before it is no clock time
+#: what the notes of a log without a clock say
+NO_CLOCK_NOTE = "no clock: times are the order of the records"
+#: the time between two messages of a log without a clock: their order, nothing more
+ORDER_STEP_NS = 1_000_000
 
 
 #: a ``Messages.rejects`` reason with this prefix counts valid lines that carry no
@@ -84,12 +92,17 @@ def resolve_times(
     notes: list[str] = []
     if len(t) == 0:
         return t, notes
+    if kind == TIME_NONE:
+        notes.append(NO_CLOCK_NOTE)
+        t = np.arange(len(t), dtype=np.int64) * ORDER_STEP_NS
+        kind = "relative"
     if kind == TIME_UTC:
         if np.median(t) >= EPOCH_2000_NS:
             return t, notes
-        notes.append(
-            "NMEA 2000 log times before 2000 (a logger without a clock): taken as relative"
-        )
+        notes += [
+            "NMEA 2000 log times before 2000 (a logger without a clock): taken as relative",
+            NO_CLOCK_NOTE,
+        ]
         kind = "relative"
     if kind == TIME_OF_DAY:  # unwrap midnights: a drop of more than 12 h is a new day
         step = np.diff(t, prepend=t[0]) < -HALF_DAY_NS
@@ -100,7 +113,8 @@ def resolve_times(
     ok = utc != MISSING_NS
     if ok.any():
         off = utc[ok] - t[dec.clock_row[ok]]
-        offset = int(np.median(off))
+        # the (lower) median in int64: a float64 has 256 ns steps at today's ns since 1970
+        offset = int(np.sort(off)[(len(off) - 1) // 2])
         spread = float(np.percentile(np.abs(off - offset), 95)) / 1e9
         notes.append(
             f"NMEA 2000 {kind.replace('_', ' ')} times put on UTC by {int(ok.sum())} "
@@ -206,6 +220,7 @@ def n2k_result(
         rejects=rejects,
         time_events=events,
         notes=notes + dec.notes + name_notes,
+        clockless=NO_CLOCK_NOTE in notes,
     )
     for key, (cnt, exs) in skipped.items():
         res.ignored[key] = cnt
@@ -236,6 +251,8 @@ def read_n2k(
     if fmt is None:
         raise IngestError(f"{path}: not an NMEA 2000 log in a format dracc reads")
     msgs = parse_n2k(data, fmt)
+    if len(msgs) > 1 and msgs.time_kind != TIME_NONE and msgs.time_ns.min() == msgs.time_ns.max():
+        msgs.time_kind = TIME_NONE  # times that never advance are no clock
     res = n2k_result(msgs, str(path), fmt, cfg, _line_count(data))
     if progress is not None:
         progress(len(data))
