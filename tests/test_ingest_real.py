@@ -128,7 +128,10 @@ def test_hakefjord_two_receivers_one_talker(real_dir):
     assert v.sources["II"].roles == ["compass", "log"]
     assert v.sources["GP/5dp"].sentences["RMC"] > 300 and "GGA" not in v.sources["GP/5dp"].sentences
     assert v.sources["GP/3dp"].sentences["GGA"] > 600
-    assert any("several satellite sources" in d for d in v.time_events.decisions)
+    # two receivers behind one talker: one chosen by evidence (the finer 5-decimal one), the
+    # other kept as a witness, never both interleaved
+    assert v.role_sources("gnss") == ["GP/5dp"]
+    assert any("gnss: GP/5dp chosen by evidence" in d for d in v.time_events.decisions)
 
 
 def test_spliced_addresses_rejected(real_dir):

@@ -77,16 +77,18 @@ def test_config_mapping_by_key_and_by_talker_first():
     assert s["x"].roles == ["compass"]
 
 
-def test_ambiguous_candidates_are_named_not_guessed():
+def test_ambiguous_candidates_are_handed_back_not_guessed():
+    """On counts alone nothing is guessed: the candidates go to the evidence of the values."""
     s = {
         "GP/3dp": src("GP/3dp", "GP", RMC=5),
         "GP/5dp": src("GP/5dp", "GP", RMC=5),
         "HE": src("HE", "HE", HDT=5),
         "HN": src("HN", "HN", THS=5),
     }
-    notes = assign_roles(s, {})
+    candidates: dict[str, list[str]] = {}
+    assign_roles(s, {}, candidates)
     assert all(v is None for v in roles(s).values())
-    assert any("GP/3dp, GP/5dp" in n for n in notes) and any("HE, HN" in n for n in notes)
+    assert candidates == {"gnss": ["GP/3dp", "GP/5dp"], "compass": ["HE", "HN"]}
     with pytest.raises(AmbiguousSourceError, match="no source has role gnss"):
         require_role(s, "gnss")
 
@@ -120,8 +122,11 @@ def test_heading_only_source_is_the_compass_beside_an_ins_talker():
     assert roles(s) == {"IN": None, "HE": "compass", "GP": "gnss"}
 
 
-def test_gyro_preferred_over_magnetic_compass():
+def test_gyro_and_magnetic_compass_both_candidates_for_the_evidence():
+    """Two heading sources: neither given the role on counts alone; both handed back as
+    candidates (the evidence of the values chooses one: tests/test_role_evidence.py)."""
     s = {"HE": src("HE", "HE", HDT=100, ROT=10), "HC": src("HC", "HC", HDG=100)}
-    notes = assign_roles(s, {})
-    assert roles(s) == {"HE": "compass", "HC": None}
-    assert any("true heading" in n for n in notes)
+    candidates: dict[str, list[str]] = {}
+    assign_roles(s, {}, candidates)
+    assert roles(s) == {"HE": None, "HC": None}
+    assert candidates == {"compass": ["HC", "HE"]}

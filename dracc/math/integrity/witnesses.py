@@ -50,6 +50,11 @@ __all__ = ["witness_checks"]
 
 #: fewer common instants than this: not checked
 MIN_INSTANTS = 30
+#: the constant part fails beyond these: two gyros within IMO A.424's settle-point error
+#: and a compass's residual deviation stay within 5°; two logs within A.824's 2 % each
+#: differ in scale by at most 1.02 / 0.98 - 1 = 4.1 %
+OFFSET_GATE_DEG = 5.0
+SCALE_GATE = 1.02 / 0.98 - 1.0
 #: "steady": the offset's change from the first to the last third of the night, within
 #: this share of the gate
 STEADY_SHARE = 0.5
@@ -158,6 +163,10 @@ def _pair_check(
     )
     if failed:
         ev = ({"why": failed}, *ev)
+    elif compass and abs(offset) > OFFSET_GATE_DEG and _variation_known(voyage, (chosen, key)):
+        ev = ({"why": f"constant difference {offset:+.2f}° beyond {OFFSET_GATE_DEG:g}°"}, *ev)
+    elif not compass and scale is not None and abs(scale - 1.0) > SCALE_GATE:
+        ev = ({"why": f"scale {scale:.3f} beyond 1 ± {SCALE_GATE:.3f}"}, *ev)
     worst = float(np.nanmax(np.abs(x[ok]))) if ok.any() else float("nan")
     drift = _drift(d if compass else x, ok)
     msg = _message(key, chosen, role, offset, scale, worst, gate, drift, failed, bool(ev))
@@ -187,6 +196,15 @@ def _pair_check(
             "unit": unit,
         },
     )
+
+
+def _variation_known(voyage: Voyage, keys: tuple[str, ...]) -> bool:
+    """Both headings true, or magnetic with a variation sent: their constant difference
+    is the compasses' own (not the local variation taken as 0)."""
+    h = voyage.frames["heading"]
+    h = h[h["source"].isin(keys).to_numpy()]
+    magnetic = (h["reference"] == "M").to_numpy()
+    return bool(np.all(np.isfinite(h["variation_rad"].to_numpy(float))[magnetic]))
 
 
 def _drift(d: FloatArray, ok: np.ndarray) -> float:
@@ -227,6 +245,8 @@ def _message(
     head = f"{key} (witness for the {role}) {level}" + (f", {steady}" if steady else "")
     if failed:
         return f"{key} (witness for the {role}) {failed}"
+    if departs and abs(worst) <= gate:  # only the constant part is out of bounds
+        return f"{head}: more than two healthy instruments differ by; one of them is wrong"
     if departs:
         return (
             f"{head}; the two depart from each other by up to {worst:.2f}{u} beyond that "
