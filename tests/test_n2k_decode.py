@@ -482,6 +482,7 @@ def test_clockless_utc_log_is_anchored():
                      IngestConfig())  # fmt: skip
     assert any("taken as relative" in n for n in res.notes)
     assert abs(int(res.frames["heading"]["time_ns"].iloc[0]) - utc("2014-08-15T19:00:00.892")) < 6e8
+    assert res.clockless  # times from zero: no clock, no latency or rate finding from them
 
 
 # ----------------------------------------------------------------------------- reader
