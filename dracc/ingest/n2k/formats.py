@@ -11,6 +11,8 @@ Formats (names as :func:`sniff_n2k` gives them and :func:`parse_n2k` takes them)
 ``n2k-pdgy``           Digital Yacht iKonvert ``!PDGY``
 ``n2k-ebl``            Actisense EBL binary
 ``n2k-ngt1``           Actisense NGT-1 binary stream (BST over DLE framing; YDNU-02 ``.dle``)
+``n2k-garmin-csv1``    Garmin chartplotter CSV, the plotter's ms counter (canboat GARMIN_CSV1)
+``n2k-garmin-csv2``    Garmin chartplotter CSV with its clock (canboat GARMIN_CSV2)
 ``n2k-pcdin``          ``$PCDIN`` sentences
 ``n2k-mxpgn``          ``$MXPGN`` sentences
 =====================  ===========================================================
@@ -32,6 +34,7 @@ from dracc.ingest.n2k.canframes import parse_candump, parse_ydraw
 from dracc.ingest.n2k.ebl import parse_ebl, parse_ngt1
 from dracc.ingest.n2k.encapsulated import parse_mxpgn, parse_pcdin, parse_pdgy
 from dracc.ingest.n2k.fastpacket import is_fast_pgn
+from dracc.ingest.n2k.garmin import garmin_form, parse_garmin_csv
 from dracc.ingest.n2k.messages import Messages
 from dracc.ingest.n2k.plain import parse_plain
 from dracc.ingest.n2k.textscan import Lines, join_lines, split_lines
@@ -39,7 +42,9 @@ from dracc.ingest.n2k.textscan import Lines, join_lines, split_lines
 PLAIN, FAST, MIX = "n2k-plain", "n2k-fast", "n2k-plain-mix-fast"
 CANDUMP, YDRAW, PDGY, EBL = "n2k-candump", "n2k-ydraw", "n2k-pdgy", "n2k-ebl"
 PCDIN, MXPGN, NGT1 = "n2k-pcdin", "n2k-mxpgn", "n2k-ngt1"
-FORMATS = (PLAIN, FAST, MIX, CANDUMP, YDRAW, PDGY, EBL, NGT1, PCDIN, MXPGN)
+GARMIN1, GARMIN2 = "n2k-garmin-csv1", "n2k-garmin-csv2"
+FORMATS = (PLAIN, FAST, MIX, CANDUMP, YDRAW, PDGY, EBL, NGT1, PCDIN, MXPGN, GARMIN1, GARMIN2)
+_GARMIN = {"csv1": GARMIN1, "csv2": GARMIN2}
 #: how much of a file :func:`sniff_n2k` looks at
 SNIFF_BYTES = 65536
 #: lines of the head classified
@@ -82,6 +87,8 @@ def sniff_n2k(head: bytes) -> str | None:
         s = line.strip()
         if not s:
             continue
+        if total == 0 and (form := garmin_form(s)) is not None:
+            return _GARMIN[form]
         if s.startswith("#"):
             m = re.match(r"#\s*format=(\w+)", s)
             if m and m.group(1).upper() in _HEADER_FORMATS:
@@ -146,6 +153,8 @@ def _parse_lines(lines: Lines, fmt: str) -> Messages:
         return parse_pcdin(lines)
     if fmt == MXPGN:
         return parse_mxpgn(lines)
+    if fmt in (GARMIN1, GARMIN2):
+        return parse_garmin_csv(lines, "csv1" if fmt == GARMIN1 else "csv2")
     raise ValueError(f"not a line-based N2K format: {fmt!r} (one of {', '.join(FORMATS)})")
 
 

@@ -43,6 +43,8 @@ class Messages:
     rejects: dict[str, int] = field(default_factory=dict)
     #: reason -> first few (line, text) examples of them
     examples: dict[str, list[tuple[int, str]]] = field(default_factory=dict)
+    #: what the parser decided about the log (its clock, its time base), for the notes
+    notes: list[str] = field(default_factory=list)
 
     def __len__(self) -> int:
         return len(self.pgn)
@@ -63,6 +65,7 @@ class Messages:
             time_kind=self.time_kind,
             rejects=dict(self.rejects),
             examples={k: list(v) for k, v in self.examples.items()},
+            notes=list(self.notes),
         )
 
     def byte(self, offset: int) -> np.ndarray:
@@ -154,6 +157,7 @@ def concat_messages(parts: list[Messages]) -> Messages:
         time_kind=kinds.pop() if len(kinds) == 1 else parts[0].time_kind,
         rejects=rejects,
         examples=examples,
+        notes=[n for p in parts for n in p.notes],
     )
 
 

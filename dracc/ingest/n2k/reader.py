@@ -219,7 +219,7 @@ def n2k_result(
         lines=int(lines) if lines is not None else len(msgs) + sum(msgs.rejects.values()),
         rejects=rejects,
         time_events=events,
-        notes=notes + dec.notes + name_notes,
+        notes=msgs.notes + notes + dec.notes + name_notes,
         clockless=NO_CLOCK_NOTE in notes,
     )
     for key, (cnt, exs) in skipped.items():
