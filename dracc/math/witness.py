@@ -20,13 +20,16 @@ Motion over the ground (:func:`ground_witness`)
     berth (:data:`BERTH_CURRENT_KN`).  An INS's own drift (a knot an hour) is why its
     velocity, not its position, witnesses first.
 Turning (:func:`turn_witness`)
-    per other heading source (and the COG of the other sources while they show the ship
-    moving), the spread ``max - min`` of its readings about their circular mean over the
-    stretch, less what its own noise and resolution could make of a steady heading:
-    ``spread - 2 sqrt(2 ln N) sigma - q_w`` (the expected range of ``N`` normal samples;
-    ``sigma^2 = max(0, -mean(d_k d_{k+1}))`` from successive first differences ``d``,
-    which white noise makes anticorrelated and a real turn or yaw does not).  The largest
-    such turn over the witnesses is what they prove.
+    per other heading source, the spread ``max - min`` of its readings about their
+    circular mean over the stretch, less what its own noise and resolution could make of
+    a steady heading: ``spread - 2 sqrt(2 ln N) sigma - q_w`` (the expected range of
+    ``N`` normal samples; ``sigma^2 = max(0, -mean(d_k d_{k+1}))`` from successive first
+    differences ``d``, which white noise makes anticorrelated and a real turn or yaw
+    does not).  The largest such turn over the witnesses is what they prove.  Only where
+    no other source gives a heading, the other sources' COG while they show the ship
+    moving, and then its net change (the first third's circular mean against the
+    last's): a course swings with the current, the leeway and the yaw by degrees while
+    the heading holds.
 """
 
 from __future__ import annotations
@@ -81,9 +84,9 @@ _QUANTUM_SAMPLE = 20_000
 def quantum(values: FloatArray, candidates: tuple[float, ...], share: float = 0.98) -> float:
     """The resolution of readings ``values``: the largest of ``candidates`` (same unit)
     of which at least ``share`` of the distinct finite values are whole multiples (to
-    1e-3 of the step); 0.0 for values on no such grid or fewer than 10 distinct ones."""
+    1e-3 of the step); 0.0 for values on no such grid or fewer than 3 distinct ones."""
     x = np.unique(np.asarray(values, float)[np.isfinite(values)])
-    if x.size < 10:
+    if x.size < 3:
         return 0.0
     if x.size > _QUANTUM_SAMPLE:  # evenly spaced, deterministic
         x = x[np.linspace(0, x.size - 1, _QUANTUM_SAMPLE).astype(np.int64)]
@@ -213,14 +216,16 @@ def turn_witness(
                 s, t = _spread_and_turn(h, quanta.get(str(key), 0.0))
                 best_spread, best_turn = max(best_spread, s), max(best_turn, t)
                 keys.append(str(key))
-    w = _window(frames.get("ground"), exclude, a_ns, b_ns)
-    if w is not None:
+    w = _window(frames.get("ground"), exclude, a_ns, b_ns) if not keys else None
+    if w is not None:  # no other heading: the course, while moving, net of its swing
         for key, g in w.groupby("source", observed=True):
             c = g["cog_rad"].to_numpy(float)
             c = c[np.isfinite(c) & (g["sog_mps"].to_numpy(float) >= moving_mps)]
-            if c.size >= 2:
-                s, t = _spread_and_turn(c, 0.0)
-                best_spread, best_turn = max(best_spread, s), max(best_turn, t)
+            if c.size >= 6:
+                s, _ = _spread_and_turn(c, 0.0)
+                third = c.size // 3
+                net = abs(float(angdiff(circmean(c[-third:]), circmean(c[:third]))))
+                best_spread, best_turn = max(best_spread, s), max(best_turn, net)
                 keys.append(f"{key} COG")
     if not keys:
         return TurnWitness(math.nan, math.nan, ())

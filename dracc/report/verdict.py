@@ -393,6 +393,10 @@ def _faults(a: Analysis) -> tuple[Finding, str]:
     topic = "sensor faults"
     pos, hdg = _fault_coverage(a)
     gaps = []
+    # a repeat no other source could judge (no witness): said, never called a fault
+    for c in a.integrity.checks if a.integrity is not None else ():
+        if c.name in ("frozen", "stuck") and c.status == "not_checked":
+            gaps.append(f"{c.name} {c.source} not judged: {c.why_not or c.message}")
     if not pos:
         gaps.append("jumps and frozen positions not checked: no position source")
     if not hdg:

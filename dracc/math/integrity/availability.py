@@ -1,6 +1,8 @@
 """availability / ``dropout``: gaps in a source's records longer than
 ``dropout_cadences`` of its own median interval and at least ``dropout_min_s``
-(a late start or an early end within the night too)."""
+(a late start or an early end within the night too).  A source of a log without a
+clock (:attr:`dracc.frames.Voyage.clockless`) has no cadence to measure: it is
+``not_checked``, and its summary has neither cadence nor availability."""
 
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ from dracc.core.units import NS_PER_S
 from dracc.frames import Voyage
 from dracc.math.integrity.helpers import (
     MAX_EVIDENCE,
+    NO_CLOCK,
     not_checked,
     role_of,
     statistic,
@@ -45,11 +48,28 @@ def availability_checks(
     start_ns: int,
     end_ns: int,
     times: Mapping[str, IntArray],
-) -> tuple[list[Check], dict[str, tuple[float, float]]]:
-    checks, summary = [], {}
+) -> tuple[list[Check], dict[str, tuple[float | None, float | None]]]:
+    checks: list[Check] = []
+    summary: dict[str, tuple[float | None, float | None]] = {}
     span = max(end_ns - start_ns, 1)
     for key in sorted(times):
         t = times[key]
+        if key in voyage.clockless:
+            summary[key] = (None, None)
+            checks.append(
+                not_checked(
+                    "availability",
+                    "dropout",
+                    key,
+                    role_of(voyage, key),
+                    "longest_dropout",
+                    "s",
+                    "",
+                    f"{key}: drop-outs not checked: {NO_CLOCK}",
+                    NO_CLOCK,
+                )
+            )
+            continue
         if len(t) < 3:
             summary[key] = (math.nan, math.nan)
             checks.append(
@@ -77,7 +97,8 @@ def availability_checks(
         if end_ns - t[-1] > thr:
             gaps.append((int(t[-1]), end_ns))
         lost = sum(b - a for a, b in gaps)
-        summary[key] = (cadence, 1.0 - lost / span)
+        available = 1.0 - lost / span
+        summary[key] = (cadence, available)
         longest = max(((b - a) / NS_PER_S for a, b in gaps), default=0.0)
         ev = tuple(
             {
@@ -92,7 +113,7 @@ def availability_checks(
         msg = (
             f"{key}: silent for {longest:.0f} s at the longest ({len(gaps)} drop-out(s) "
             f"beyond {thr_s:.0f} s against its {cadence:g} s cadence; available "
-            f"{100 * summary[key][1]:.1f} % of the night)"
+            f"{100 * available:.1f} % of the night)"
             if gaps
             else f"{key}: no drop-out beyond {thr_s:.0f} s (cadence {cadence:g} s)"
         )
@@ -114,7 +135,7 @@ def availability_checks(
                 0.0,
                 msg,
                 ev,
-                detail={"cadence_s": cadence, "availability": summary[key][1]},
+                detail={"cadence_s": cadence, "availability": available},
             )
         )
     return checks, summary

@@ -163,3 +163,7 @@ def shifted_index(instants: IntArray, shift_ns: int) -> tuple[IntArray, NDArray[
     inside = idx < len(instants)
     idx_c = np.where(inside, idx, 0)
     return idx_c, inside & (instants[idx_c] == want)
+
+
+#: why a source of a log without a clock gets no latency, rate or time check
+NO_CLOCK = "no clock: the log carries no time (its times are only the order of its records)"

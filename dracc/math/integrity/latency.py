@@ -1,6 +1,12 @@
 """latency: receive time minus the record's own time of fix, per source, as a
 distribution (p50, p95, p99, max, min); spells of at least ``spell_min_s`` beyond
-``latency_max_s`` fail."""
+``latency_max_s`` fail.
+
+The sign says which clock leads: a positive latency is a time of fix behind the logger's
+clock (data that old on receipt, or the clocks apart); a negative one a time of fix ahead
+of it, which no delay makes: a clock offset, never "old" data.  A source of a log
+without a clock (:attr:`dracc.frames.Voyage.clockless`: its times are only the order of
+its records) is ``not_checked``."""
 
 from __future__ import annotations
 
@@ -16,7 +22,9 @@ from dracc.core.units import NS_PER_S
 from dracc.frames import MISSING_NS, Voyage
 from dracc.math.integrity.helpers import (
     MAX_EVIDENCE,
+    NO_CLOCK,
     by_source,
+    not_checked,
     role_of,
     runs,
     statistic,
@@ -25,7 +33,18 @@ from dracc.math.integrity.helpers import (
 )
 from dracc.math.integrity.results import Check
 
-__all__ = ["latency_checks"]
+__all__ = ["clock_lead_words", "latency_checks"]
+
+
+def clock_lead_words(latency_s: float) -> str:
+    """Which clock leads, in words: 'the receiver's time of fix is 2.17 s behind the
+    logger clock' (latency > 0) or '... ahead of ...' (< 0, a clock offset)."""
+    if latency_s >= 0:
+        return f"the receiver's time of fix is {latency_s:.2f} s behind the logger clock"
+    return (
+        f"the receiver's time of fix is {-latency_s:.2f} s ahead of the logger clock "
+        "(a clock offset: no delay makes data arrive before its time of fix)"
+    )
 
 
 def latency_checks(
@@ -42,6 +61,8 @@ def latency_checks(
             continue
         sub = df[has]
         for key, g in by_source(sub):
+            if key in voyage.clockless:
+                continue
             per.setdefault(key, []).append(
                 (
                     g["time_ns"].to_numpy(np.int64),
@@ -51,6 +72,22 @@ def latency_checks(
             )
     max_ns = cfg.latency_max_s * NS_PER_S
     spell_ns = int(cfg.spell_min_s * NS_PER_S)
+    rule = f"|receive time - time of fix| above this for at least {cfg.spell_min_s:g} s"
+    for key in sorted(voyage.clockless & _present_keys(voyage)):
+        checks.append(
+            not_checked(
+                "latency",
+                "latency",
+                key,
+                role_of(voyage, key),
+                "longest_late_spell",
+                "s",
+                rule,
+                f"{key}: latency not checked: {NO_CLOCK}",
+                NO_CLOCK,
+                threshold_value=cfg.latency_max_s,
+            )
+        )
     for key in sorted(per):
         t = np.concatenate([p[0] for p in per[key]])
         r = np.concatenate([p[1] for p in per[key]])
@@ -85,10 +122,12 @@ def latency_checks(
                     }
                 )
         failed = bool(evidence)
-        worst = max((abs(e["median_latency_s"]) for e in evidence), default=0.0)
+        # the spell furthest from the logger clock, with its sign
+        worst = max((e["median_latency_s"] for e in evidence), key=abs, default=0.0)
         msg = (
-            f"{key}: data {worst:.2f} s old on receipt for {longest:.0f} s at the longest "
-            f"(limit {cfg.latency_max_s:g} s; latency p50 {q[0]:.2f} s, p95 {q[1]:.2f} s)"
+            f"{key}: {clock_lead_words(worst)} for {longest:.0f} s at the longest "
+            f"(limit {cfg.latency_max_s:g} s either way; latency p50 {q[0]:.2f} s, "
+            f"p95 {q[1]:.2f} s)"
             if failed
             else f"{key}: latency p50 {q[0]:.2f} s, p95 {q[1]:.2f} s, max "
             f"{lat_s.max():.2f} s over {len(lat_s)} records"
@@ -101,16 +140,21 @@ def latency_checks(
                 role_of(voyage, key),
                 "fail" if failed else "pass",
                 statistic("longest_late_spell", longest, "s"),
-                threshold(
-                    cfg.latency_max_s,
-                    "s",
-                    f"|receive time - time of fix| above this for at least {cfg.spell_min_s:g} s",
-                ),
+                threshold(cfg.latency_max_s, "s", rule),
                 time_window(t),
                 0.0,
                 msg,
                 tuple(evidence),
-                detail={"latency_s": dists[key]},
+                detail={"latency_s": dists[key], "worst_spell_latency_s": worst},
             )
         )
     return checks, dists
+
+
+def _present_keys(voyage: Voyage) -> set[str]:
+    """Source keys with at least one record in any frame."""
+    keys: set[str] = set()
+    for df in voyage.frames.values():
+        if len(df):
+            keys.update(str(k) for k in df["source"].unique())
+    return keys
