@@ -116,16 +116,14 @@ def heading_series(
         gives_fixes = not other  # the heading there is comes from a unit giving fixes too
         other = other or [str(k) for k in hdg["source"][valid].unique().tolist()]
         key = _one_by_evidence(voyage, "compass", other, notes)
-        if key is not None:
+        if key is not None and gives_fixes:
             notes.append(
-                f"no source has the role compass; heading taken from {key}"
-                + (
-                    ", which also gives fixes (a satellite compass, an INS, or a navigation "
-                    "system relaying the gyro)"
-                    if gives_fixes
-                    else ""
-                )
+                f"no compass and no heading beside the fixes' units: heading taken from {key}, "
+                "which also gives fixes (a satellite compass, an INS, or a navigation system "
+                "relaying the gyro)"
             )
+        elif key is not None:
+            notes.append(f"no source has the role compass; heading taken from {key}")
         use = hdg[valid & (hdg["source"] == key).to_numpy()]
         who = f"heading source {key}"
     if use.empty:

@@ -113,6 +113,18 @@ def _pair_check(
         else "witness log speed minus the chosen log's scaled to it"
     )
     failed = choice.evidence.get(key, {}).get("failed")
+    if not choice.evidence.get(key, {}).get("samples", 1):  # a device silent in this kind
+        return not_checked(
+            "consistency",
+            name,
+            key,
+            role,
+            f"{role}_disagreement",
+            unit,
+            rule,
+            f"{key}: sends no {role} reading with a value to compare with {chosen}",
+            "no readings with a value",
+        )
     tc, vc = _series(voyage, role, chosen)
     tw, vw = _series(voyage, role, key)
     instants = covered_instants(
