@@ -112,6 +112,12 @@ def analyse_voyage(
 
     report("integrity checks", 0.0)
     integrity = check_night(voyage, cfg.integrity)
+    if integrity is not None:  # the witnesses' evidence (failures are in the integrity list)
+        notes.extend(
+            c.message
+            for c in integrity.checks
+            if c.name.endswith("_witness") and c.status == "pass"
+        )
     report("integrity checks", 1.0)
     report("sensor faults", 0.0)
     faults, voyage = sensor_faults(voyage, cfg, notes)
