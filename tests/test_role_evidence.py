@@ -182,3 +182,26 @@ def test_real_susteranna_two_compasses_one_chosen(real_dir):
     assert failed, c.runners_up  # the paddle wheels with no value are named as failed
     a = analyse_voyage(v, Config())
     assert a.dead_reckoning is None or "+" not in a.dead_reckoning.heading_source.split("(")[0]
+
+
+SKQ = Path(__file__).parent / "data" / "openrvdas_skq"
+
+
+def test_real_bridge_sikuliaq_one_instrument_per_role():
+    """R/V Sikuliaq's recorder (tests/data/openrvdas_skq): the DR's heading was
+    'AI+gyro_1:HE+gyro_2:HE+GP+PSXN' and its speed 'adcp_speedlog:VD+speedlog:VD'."""
+    v = read_logs(sorted(SKQ.glob("SKQ*")), IngestConfig())
+    roles = _roles(v)
+    assert all(len(k) == 1 for k in roles.values()), roles
+    assert roles["compass"][0] in {"gyro_1:HE", "gyro_2:HE"}
+    assert roles["log"][0] in {"adcp_speedlog:VD", "speedlog:VD"}
+    assert not {"AI", "PSXN", "gyro_1:TI", "gyro_2:TI"} & set(roles["compass"])
+    a = analyse_voyage(v, Config())
+    dr = a.dead_reckoning
+    assert dr is not None
+    assert dr.heading_source.startswith(f"compass {roles['compass'][0]} (HDT, true)")
+    assert dr.speed_source.startswith(f"log {roles['log'][0]} (VBW")
+    witness = {c.source: c for c in a.integrity.checks if c.name.endswith("_witness")}
+    other_gyro = ({"gyro_1:HE", "gyro_2:HE"} - set(roles["compass"])).pop()
+    assert witness[other_gyro].status == "pass"  # two healthy gyros, 0.1-0.2 deg apart
+    assert abs(witness[other_gyro].detail["offset"]) < 0.5

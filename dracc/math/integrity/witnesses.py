@@ -2,7 +2,8 @@
 against the candidates not chosen for the role (:class:`dracc.frames.RoleChoice`).
 
 Two gyros, two logs: one fills the role, the other is a witness.  The difference
-``d(t)`` between them, sampled every ``consistency_interval_s``, has a constant part (a
+``d(t)`` between them, sampled every ``consistency_interval_s`` (finer, down to 1 s, where
+both report faster), has a constant part (a
 compass's error, two logs' different scales) that is an accuracy figure, reported as
 evidence ("gyro_2 reads 0.90° above gyro_1, steady"), and a varying part that two
 healthy instruments keep within their noise:
@@ -127,9 +128,7 @@ def _pair_check(
         )
     tc, vc = _series(voyage, role, chosen)
     tw, vw = _series(voyage, role, key)
-    instants = covered_instants(
-        [tc, tw], start_ns, end_ns, int(cfg.consistency_interval_s * NS_PER_S)
-    )
+    instants = covered_instants([tc, tw], start_ns, end_ns, _step_ns(cfg, tc, tw))
     gap = cfg.consistency_max_gap_s
     c, _ = align_at(tc, vc[None, :], instants, gap, circular=(compass,))
     w, _ = align_at(tw, vw[None, :], instants, gap, circular=(compass,))
@@ -208,6 +207,15 @@ def _pair_check(
             "unit": unit,
         },
     )
+
+
+def _step_ns(cfg: IntegrityConfig, *times: IntArray) -> int:
+    """The comparison step: ``consistency_interval_s``, or finer for two instruments that
+    both report faster (two readings of the slower one a step, at least 1 s): a short log
+    of two gyros still has its instants."""
+    typical = [float(np.median(np.diff(t))) / NS_PER_S for t in times if t.size > 1]
+    finest = max([1.0, *(2.0 * x for x in typical)])
+    return int(min(cfg.consistency_interval_s, finest) * NS_PER_S)
 
 
 def _variation_known(voyage: Voyage, keys: tuple[str, ...]) -> bool:
