@@ -14,15 +14,23 @@ validity / ``invalid_flag``
     leave them empty).  Flagged spells of at least ``spell_min_s`` fail.  Rule on recorded
     flags: a healthy source cannot trigger it (false-alarm probability 0).
 validity / ``contradiction``
-    a source flagging fixes valid while they fail a plausibility check.
+    a source flagging fixes valid while they fail a plausibility check (a jump, a frozen
+    run a witness contradicts; a fix held at rest is no contradiction).
 plausibility / ``jump``
     the step between consecutive fixes against the step the ship's own motion predicts:
     innovation ``r_k = (p_k - p_{k-1}) - w_k - v_k dt_k`` with ``w_k`` the water track
     over the step (the compass and the log integrated: the ship's own turns and changes
-    of speed; 0 where there is no compass and log or a heading gap inside the step) and
-    ``v_k`` the running median over 11 steps of what is left, ``(p_k - p_{k-1} - w_k) /
-    dt_k`` (the current and the sensors' slow errors: it follows them but not one
-    displaced fix).  ``r`` is scaled per axis by its robust sigma learned from
+    of speed; across a heading gap longer than ``max(10 s, cadence)`` inside the step it
+    holds the heading and speed of the gap's two ends) and ``v_k`` the running median
+    over 11 steps of what is left, ``(p_k - p_{k-1} - w_k) / dt_k`` (the current and
+    the sensors' slow errors: it follows them but not one displaced fix).  Where there
+    is no water track, ``w_k + v_k dt_k`` is the fixes' own recent velocity (the running
+    median of ``(p_k - p_{k-1}) / dt_k``) times ``dt_k``; the two are never mixed in one
+    median.  The time of a step no instrument saw (the heading gap inside it; without a
+    water track, what the step lasts beyond one cadence) times the ship's speed is what
+    a manoeuvre could make of the step: that much of ``|r_k|`` is no evidence of a jump
+    (``|r_k|`` is shortened by it), so ordinary motion across a gap is not a jump.
+    ``r`` is scaled per axis by its robust sigma learned from
     the night (the larger of the MAD sigma and the one its 99th percentile implies); ``(r_n/s_n)^2 + (r_e/s_e)^2`` is chi-square with 2 degrees of freedom
     for Gaussian fix noise, so the gate ``-2 ln(alpha / N)`` over the N steps holds the
     night's false-alarm probability at ``alpha`` (Bonferroni).  A jump is one displaced
@@ -32,6 +40,7 @@ plausibility / ``jump``
     innovation on several steps in a row) is not a jump.  A step within
     ``jump_floor_m`` (10 m: the 95 % accuracy IMO A.1046(27) asks of a receiver) is not a
     finding however sure the statistics are (a satellite change moves a fix by metres).
+    The step out of a held fix (frozen, or at rest) is the unit catching up, not a jump.
     The check reports the smallest jump it could have seen,
     ``max(sqrt(gate) max(s_n, s_e), jump_floor_m)``.
 plausibility / ``dr_2m``
@@ -39,12 +48,22 @@ plausibility / ``dr_2m``
     covariance (:func:`dr_innovation_check`, made by the pipeline after the DR).
 plausibility / ``frozen``, ``stuck``, ``out_of_range``
     :mod:`dracc.math.faults` with the integrity windows (``frozen_min_s``): bit-identical
-    positions while the other sources show the ship moving, a heading repeating while
-    they show it turning, values no sensor can produce.  Rules: probability 0.
+    positions while another source shows the ship moving farther than three steps of the
+    source's resolution, a heading repeating while another heading source turns beyond
+    its own noise by more than three steps of the source's resolution (both resolutions
+    learned from the values: an AIS heading in whole degrees is not stuck while a gyro
+    yaws 0.9 deg), values no sensor can produce.  A finding needs a witness
+    (:mod:`dracc.math.witness`): a repeat the witnesses show at rest passes with that
+    evidence ("at rest: SOG 0.0 kn, heading spread 0.4 deg"); one no other source can
+    judge is ``not_checked``.  Rules: probability 0.
 latency
     receive time (TAG ``c:``, logger prefix, MCAP log time) minus the record's own time
     of fix, per source, as a distribution (p50, p95, p99, max); spells of at least
-    ``spell_min_s`` with ``|latency| > latency_max_s`` fail.
+    ``spell_min_s`` with ``|latency| > latency_max_s`` fail, worded by which clock leads
+    (a negative latency is a time of fix ahead of the logger clock: a clock offset,
+    never old data).  A source of a log without a clock (``Voyage.clockless``) is
+    ``not_checked`` here and under availability, with no cadence, availability or
+    latency figures.
 availability / ``dropout``
     gaps in a source's records longer than ``dropout_cadences`` of its own median
     interval and at least ``dropout_min_s`` (also a late start or an early end within the
