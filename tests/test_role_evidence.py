@@ -205,3 +205,12 @@ def test_real_bridge_sikuliaq_one_instrument_per_role():
     other_gyro = ({"gyro_1:HE", "gyro_2:HE"} - set(roles["compass"])).pop()
     assert witness[other_gyro].status == "pass"  # two healthy gyros, 0.1-0.2 deg apart
     assert abs(witness[other_gyro].detail["offset"]) < 0.5
+
+
+def test_role_override_keeps_the_others_as_witnesses(bridge):
+    """--role gyro_2=compass: the choice is the user's; gyro_1 is still compared with it."""
+    v = read_logs([bridge], IngestConfig(sources={"gyro_2": "compass"}))
+    assert v.role_sources("compass") == ["gyro_2"]
+    c = next(c for c in v.choices if c.role == "compass")
+    assert c.chosen == "gyro_2" and c.witnesses == ["gyro_1"]
+    assert "the evidence would have chosen gyro_1" in dict(c.runners_up)["gyro_1"]

@@ -475,14 +475,55 @@ def choose_roles(
             for k in holders:
                 sources[k].roles.remove(role)
         frame = frames.get(FRAME_OF[role])
-        if len(keys) < 2 or frame is None or not len(frame):
+        if frame is None or not len(frame):
             continue
         gnss = [k for k, s in sources.items() if "gnss" in s.roles]
+        if len(holders) == 1:  # given by the configuration or by name: the others witness
+            others = [] if role == "gnss" else _same_kind(frame, role, sources)
+            others = [k for k in others if k != holders[0]]
+            if others:
+                c = rank_sources(frames, role, [*holders, *others], sources, gnss)
+                choices.append(_given(c, holders[0]))
+            continue
+        if len(keys) < 2:
+            continue
         c = rank_sources(frames, role, keys, sources, gnss, _gnss_kinds(sources, keys))
         sources[c.chosen].roles.append(role)
         choices.append(c)
         notes.append(choice_note(c))
     return choices, notes
+
+
+def _same_kind(frame: pd.DataFrame, role: str, sources: dict[str, SourceInfo]) -> list[str]:
+    """The sources that could witness for ``role``: a compass's or a log's readings with a
+    value, from a source that is not an INS or a GNSS and sends no fixes of its own."""
+    col = "heading_rad" if role == "compass" else "stw_mps"
+    keys = frame["source"][np.isfinite(frame[col].to_numpy(float))].astype(str).unique()
+    fixes = {"GGA", "GLL", "RMC", "GNS", "VDO", *N2K_POSITION}
+    return [
+        str(k)
+        for k in keys
+        if k in sources
+        and not (set(sources[k].roles) & {"gnss", "ins1", "ins2", "ins3"})
+        and not any(sources[k].sentences.get(x) for x in fixes)
+    ]
+
+
+def _given(c: RoleChoice, holder: str) -> RoleChoice:
+    """``c`` with the role kept where the configuration or a name put it."""
+    return RoleChoice(
+        role=c.role,
+        chosen=holder,
+        why=f"given by the configuration or its name ({c.evidence[holder]['kind']})",
+        runners_up=tuple(
+            (k, f"the role is given to {holder}; the evidence would say: {why}")
+            if k != c.chosen
+            else (k, f"the role is given to {holder}; the evidence would have chosen {k}")
+            for k, why in ((k, dict(c.runners_up).get(k, "")) for k in c.evidence)
+            if k != holder
+        ),
+        evidence=c.evidence,
+    )
 
 
 def _gnss_kinds(sources: dict[str, SourceInfo], keys: list[str]) -> dict[str, int]:
