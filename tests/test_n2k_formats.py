@@ -50,8 +50,10 @@ FORMAT = {
 #: where we knowingly differ from canboat: susteranna2020.raw has 6 complete, in-order
 #: 130824 bursts (e.g. lines 1279-1294, sequence 4, frames 0-14) that canboat's analyzer
 #: loses because stale frames of an earlier broken burst with the same sequence counter
-#: sit in its reassembly slot (a later duplicate frame index resets the slot mid-burst)
-DIFFERS = {("canboat", "susteranna2020.raw"): {130824: 234}}
+#: sit in its reassembly slot (a later duplicate frame index resets the slot mid-burst);
+#: and 4 that canboat glues from two broken bursts 0.78-1.57 s apart (first frames at
+#: lines 4025, 5386, 5538, 5855), which dracc does not: 228 - 4 + 6
+DIFFERS = {("canboat", "susteranna2020.raw"): {130824: 230}}
 #: canboat times an EBL message by the PC's FILETIME record before it; dracc by the
 #: gateway's own millisecond timer put on UTC (the lower envelope of FILETIME - timer),
 #: so dracc's time is earlier by the PC's latency, under 100 ms in this file
@@ -103,7 +105,7 @@ def test_rejects_of_susteranna():
     assert msgs.rejects["plain_number"] == 1
     assert msgs.examples["plain_number"][0][0] == 202
     assert "16712965" in msgs.examples["plain_number"][0][1]
-    assert msgs.rejects["fast_packet_incomplete"] > 0
+    assert msgs.rejects["fast_packet_incomplete"] == 645
 
 
 # the nmea2000 package's decode of ikonvert.log (its PdgyDecoder), messages per PGN
@@ -175,6 +177,58 @@ def test_fast_packet_reassembly_out_of_order_and_missing():
     assert bytes(msgs.payload[msgs.start[0] : msgs.start[0] + msgs.length[0]]) == body
     assert msgs.line.tolist() == [1, 14]
     assert msgs.rejects == {"fast_packet_incomplete": 6}
+
+
+def test_stale_fast_packet_frames_are_not_glued_to_a_later_burst():
+    """Regression: frames 3-6 of a 46-byte 130824 burst whose frames 0-2 were lost (lines
+    5388-5391 of susteranna2020.raw) were completed 0.93 s later by frames 0-2 of the
+    next burst with the same sequence counter, one message of two (as canboat does)."""
+    body = bytes(range(1, 47))  # 46 bytes: 7 frames
+    old, new = _fast_frames(130824, 27, body, 7), _fast_frames(130824, 27, body[::-1], 7)
+    t0, t1 = "2020-01-01T00:00:00.000Z", "2020-01-01T00:00:00.930Z"
+    lines = [_plain(130824, 27, f, t0) for f in old[3:]]
+    lines += [_plain(130824, 27, f, t1) for f in new[:3]]
+    msgs = parse_n2k(("\n".join(lines) + "\n").encode(), "n2k-plain")
+    assert len(msgs) == 0 and msgs.rejects == {"fast_packet_incomplete": 7}
+    # frames out of order within milliseconds (a YDWG gateway) still make one message
+    t1 = "2020-01-01T00:00:00.004Z"
+    lines = [_plain(130824, 27, f, t0) for f in old[3:]]
+    lines += [_plain(130824, 27, f, t1) for f in old[:3]]
+    msgs = parse_n2k(("\n".join(lines) + "\n").encode(), "n2k-plain")
+    assert len(msgs) == 1
+    assert bytes(msgs.payload[msgs.start[0] : msgs.start[0] + msgs.length[0]]) == body
+
+
+def test_susteranna_incomplete_fast_packets_lack_frames_in_the_log():
+    """The 645 fast_packet_incomplete frames of susteranna2020.raw are exactly the frames
+    that belong to no complete in-order burst in the log (frame 0 lost, or a frame of the
+    burst lost): none are lost by reassembly, and every message is such a burst."""
+    path = real_path("canboat", "susteranna2020.raw")
+    frames, whole = [], collections.Counter()
+    for line in path.read_text().splitlines():
+        f = line.split(",")
+        if len(f) > 14 and is_fast_pgn(int(f[2])):
+            whole[int(f[2])] += 1  # a whole message on one line (PLAIN_MIX_FAST)
+        if len(f) == 14 and f[5] == "8" and is_fast_pgn(int(f[2])):
+            frames.append((int(f[2]), int(f[3]), [int(x, 16) for x in f[6:]]))
+    held: dict[tuple[int, int, int], list[int]] = {}
+    in_bursts, bursts = 0, collections.Counter()
+    for pgn, src, b in frames:
+        key, idx = (pgn, src, b[0] >> 5), b[0] & 0x1F
+        if idx == 0:
+            held[key] = [1 + b[1] // 7, 1]
+        elif key in held and idx == held[key][1]:
+            held[key][1] += 1
+        else:
+            held.pop(key, None)
+            continue
+        if held[key][1] == held[key][0]:
+            in_bursts += held.pop(key)[0]
+            bursts[pgn] += 1
+    msgs = parse_n2k(path.read_bytes(), "n2k-plain-mix-fast")
+    assert len(frames) - in_bursts == msgs.rejects["fast_packet_incomplete"] == 645
+    got = collections.Counter(msgs.pgn[fast_mask(msgs.pgn)].tolist())
+    assert got == bursts + whole
 
 
 def test_fast_packet_in_order_many():
