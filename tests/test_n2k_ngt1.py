@@ -177,6 +177,17 @@ def test_timer_wraps_and_restarts():
     assert dev[5] == dev[4] and dev[6] == dev[4] + 10  # a restart continues the time
 
 
+def test_a_gateway_restart_is_a_note_and_keeps_the_order():
+    data = bytes([0xFF, 0x4B, 0xED, 0xFF, 0x7F, 0xFF, 0x7F, 0xFD])
+    timers = [500_000, 500_100, 200, 300]  # the gateway restarted after the second
+    raw = b"".join(ngt1_frame(2, 127250, 255, 204, t, data) for t in timers)
+    msgs = parse_n2k(raw, "n2k-ngt1")
+    assert (msgs.time_ns // 1_000_000).tolist() == [500_000, 500_100, 500_100, 500_200]
+    assert any("restarted 1 times" in n for n in msgs.notes)
+    res = n2k_result(msgs, "x.dle", "n2k-ngt1", IngestConfig())
+    assert any("restarted 1 times" in n for n in res.notes)
+
+
 def test_frames_without_timer_or_filetime_have_no_clock():
     sent = bytes([0x94, 6 + 8, 2, 0x12, 0xF1, 0x01, 255, 8]) + bytes(8)
     sent += bytes([-sum(sent) & 0xFF])

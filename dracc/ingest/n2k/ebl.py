@@ -118,6 +118,14 @@ def _parse(data: bytes, ebl: bool) -> Messages:
     )
     for reason, ex in bad.items():
         add_reject(msgs, reason, len(ex), ex)
+    timed = timer_a >= 0
+    runs = int(unwrap_timer(timer_a[timed])[1].max(initial=0)) if timed.any() else 0
+    if runs:
+        msgs.notes.append(
+            f"the gateway's millisecond timer restarted {runs} times (the gateway restarted): "
+            "each run of its times follows the one before, the gap between them unknown"
+            + (" (put on UTC by the FILETIMEs of each run)" if kind_of_time == TIME_UTC else "")
+        )
     return msgs
 
 
