@@ -113,3 +113,16 @@ def test_mxpgn_alone_is_clockless_but_not_inside_a_timed_log(tmp_path):
     msgs.time_ns = np.array([1, 2, 3], dtype=np.int64) * 10**9 + 1_700_000_000 * 10**9
     msgs.time_kind = TIME_UTC
     assert not n2k_result(msgs, "x", "n2k-mxpgn", IngestConfig(), lines=0).clockless
+
+
+def test_older_candump_banner_is_ignored_not_rejected(tmp_path):
+    """candumpSample1.txt (canboat's samples) begins ``interface = can0, family = 29, ...``:
+    candump's own banner, a valid line without a frame; then ``<0x18eeff01> [8] ...``
+    frames without times."""
+    path = tmp_path / "old.txt"
+    lines = ["interface = can0, family = 29, type = 3, proto = 1"]
+    lines += ["<0x09f11201> [8] ff 34 12 ff 7f ff 7f fd "] * 3
+    path.write_text("\n".join(lines) + "\n")
+    res = read_n2k(path, IngestConfig())
+    assert res.rejects.total == 0 and res.ignored["candump banner"] == 1
+    assert res.clockless and len(res.frames["heading"]) == 3

@@ -158,7 +158,13 @@ def parse_candump(lines: Lines) -> Messages:
         order = np.argsort(idx, kind="stable")
         times[order] = fill_forward(times[order])
     msgs = _frames_to_messages(lines, idx, times, ids, dlen, payload, kind)
+    # candump's own banner (``interface = can0, family = 29, type = 3, proto = 1``) is a
+    # valid line that holds no frame: ignored, not rejected
+    banner = [i for i in bad if lines.text(i).lstrip().startswith("interface = ")]
+    bad = [i for i in bad if i not in banner]
     add_reject(msgs, "candump_line", len(bad), [(int(lines.number[i]), lines.text(i)) for i in bad])
+    ex = [(int(lines.number[i]), lines.text(i)) for i in banner[:1]]
+    add_reject(msgs, "ignored_candump_banner", len(banner), ex)
     return msgs
 
 
