@@ -23,6 +23,8 @@ when, and by how much.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from dracc.core.arrays import FloatArray, IntArray
@@ -97,6 +99,40 @@ def _series(voyage: Voyage, role: str, key: str) -> tuple[IntArray, FloatArray]:
     return t[ok][o], v[ok][o]
 
 
+@dataclass(frozen=True)
+class _Difference:
+    """The witness against the chosen instrument at the common instants."""
+
+    instants: IntArray
+    ok: np.ndarray  #: instants where both have a reading
+    x: FloatArray  #: the varying part (deg or kn)
+    level: FloatArray  #: the difference whose drift is reported (deg or kn)
+    offset: float  #: median difference (deg or kn)
+    scale: float | None  #: the witness log's scale against the chosen one
+
+
+def _difference(
+    voyage: Voyage, cfg: IntegrityConfig, role: str, keys: tuple[str, str], span: tuple[int, int]
+) -> _Difference:
+    compass = role == "compass"
+    (tc, vc), (tw, vw) = (_series(voyage, role, k) for k in keys)
+    instants = covered_instants([tc, tw], *span, _step_ns(cfg, tc, tw))
+    gap = cfg.consistency_max_gap_s
+    c = align_at(tc, vc[None, :], instants, gap, circular=(compass,))[0][0]
+    w = align_at(tw, vw[None, :], instants, gap, circular=(compass,))[0][0]
+    if compass:
+        d = angdiff(w, c) / DEG_RAD
+        ok = np.isfinite(d)
+        offset = float(np.median(d[ok])) if ok.any() else float("nan")
+        return _Difference(instants, ok, d - offset, d, offset, None)
+    ok = np.isfinite(w) & np.isfinite(c)
+    cc, ww = c[ok], w[ok]
+    scale = float(np.sum(ww * cc) / np.sum(cc**2)) if np.any(cc > 0) else float("nan")
+    x = (w - scale * c) / KN_MPS
+    offset = float(np.median((w - c)[ok]) / KN_MPS) if ok.any() else float("nan")
+    return _Difference(instants, ok, x, x, offset, scale)
+
+
 def _pair_check(
     voyage: Voyage,
     cfg: IntegrityConfig,
@@ -113,74 +149,35 @@ def _pair_check(
         if compass
         else "witness log speed minus the chosen log's scaled to it"
     )
+
+    def skip(message: str, why: str) -> Check:
+        return not_checked(
+            "consistency", name, key, role, f"{role}_disagreement", unit, rule, message, why
+        )
+
     failed = choice.evidence.get(key, {}).get("failed")
     if not choice.evidence.get(key, {}).get("samples", 1):  # a device silent in this kind
-        return not_checked(
-            "consistency",
-            name,
-            key,
-            role,
-            f"{role}_disagreement",
-            unit,
-            rule,
+        return skip(
             f"{key}: sends no {role} reading with a value to compare with {chosen}",
             "no readings with a value",
         )
-    tc, vc = _series(voyage, role, chosen)
-    tw, vw = _series(voyage, role, key)
-    instants = covered_instants([tc, tw], start_ns, end_ns, _step_ns(cfg, tc, tw))
-    gap = cfg.consistency_max_gap_s
-    c, _ = align_at(tc, vc[None, :], instants, gap, circular=(compass,))
-    w, _ = align_at(tw, vw[None, :], instants, gap, circular=(compass,))
-    if compass:
-        d = angdiff(w[0], c[0]) / DEG_RAD
-        ok = np.isfinite(d)
-        offset = float(np.median(d[ok])) if ok.any() else float("nan")
-        x, scale = d - offset, None
-    else:
-        ok = np.isfinite(w[0]) & np.isfinite(c[0])
-        cc, ww = c[0][ok], w[0][ok]
-        scale = float(np.sum(ww * cc) / np.sum(cc**2)) if np.any(cc > 0) else float("nan")
-        x = (w[0] - scale * c[0]) / KN_MPS
-        offset = float(np.median((w[0] - c[0])[ok]) / KN_MPS) if ok.any() else float("nan")
-    if ok.sum() < MIN_INSTANTS and not failed:
-        return not_checked(
-            "consistency",
-            name,
-            key,
-            role,
-            f"{role}_disagreement",
-            unit,
-            rule,
+    diff = _difference(voyage, cfg, role, (chosen, key), (start_ns, end_ns))
+    ok, x, n = diff.ok, diff.x, int(diff.ok.sum())
+    if n < MIN_INSTANTS and not failed:
+        return skip(
             f"{key}: fewer than {MIN_INSTANTS} instants beside {chosen} (the {role})",
             "fewer than 30 common instants",
         )
-    s = tail_sigma(x[ok]) if ok.sum() >= MIN_INSTANTS else float("nan")
-    z = z_two_sided(cfg.false_alarm, max(int(ok.sum()), 1))
+    s = tail_sigma(x[ok]) if n >= MIN_INSTANTS else float("nan")
+    z = z_two_sided(cfg.false_alarm, max(n, 1))
     floor = (
-        cfg.heading_gate_min_deg
-        if compass
-        else speed_accuracy_mps(float(np.nanmedian(c[0])) if ok.any() else 0.0) / KN_MPS
+        cfg.heading_gate_min_deg if compass else speed_accuracy_mps(_speed(voyage, chosen)) / KN_MPS
     )
     gate = max(floor, z * s) if np.isfinite(s) else floor
-    over = ok & (np.abs(x) > gate)
-    ev = tuple(
-        {
-            "from": iso_utc(unit="ms", time_ns=instants[a]),
-            "to": iso_utc(unit="ms", time_ns=instants[b - 1]),
-            f"max_{unit}": float(np.nanmax(np.abs(x[a:b]))),
-        }
-        for a, b in runs(over)[:MAX_EVIDENCE]
-    )
-    if failed:
-        ev = ({"why": failed}, *ev)
-    elif compass and abs(offset) > OFFSET_GATE_DEG and _variation_known(voyage, (chosen, key)):
-        ev = ({"why": f"constant difference {offset:+.2f}° beyond {OFFSET_GATE_DEG:g}°"}, *ev)
-    elif not compass and scale is not None and abs(scale - 1.0) > SCALE_GATE:
-        ev = ({"why": f"scale {scale:.3f} beyond 1 ± {SCALE_GATE:.3f}"}, *ev)
+    ev = _evidence(voyage, diff, gate, unit, failed, compass, (chosen, key))
     worst = float(np.nanmax(np.abs(x[ok]))) if ok.any() else float("nan")
-    drift = _drift(d if compass else x, ok)
-    msg = _message(key, chosen, role, offset, scale, worst, gate, drift, failed, bool(ev))
+    drift = _drift(diff.level, ok)
+    msg = _message(key, chosen, role, diff, worst, gate, drift, failed, bool(ev))
     return Check(
         "consistency",
         name,
@@ -194,19 +191,54 @@ def _pair_check(
             f"max({'[integrity] heading_gate_min_deg' if compass else 'A.824 speed accuracy'}"
             f", z s): z {z:.2f} at {cfg.false_alarm:g} per night, s the robust tail sigma",
         ),
-        time_window(instants[ok]),
+        time_window(diff.instants[ok]),
         cfg.false_alarm,
         msg,
         ev,
         detail={
             "against": chosen,
-            "offset": offset,
-            "scale": scale,
+            "offset": diff.offset,
+            "scale": diff.scale,
             "drift": drift,
             "sigma": s,
             "unit": unit,
         },
     )
+
+
+def _speed(voyage: Voyage, key: str) -> float:
+    """The median speed through the water of log ``key`` (m/s)."""
+    v = _series(voyage, "log", key)[1]
+    return float(np.median(v)) if v.size else 0.0
+
+
+def _evidence(
+    voyage: Voyage,
+    diff: _Difference,
+    gate: float,
+    unit: str,
+    failed: str | None,
+    compass: bool,
+    keys: tuple[str, str],
+) -> tuple[dict[str, object], ...]:
+    """The spells beyond the gate, led by what fails the pair as a whole."""
+    over = diff.ok & (np.abs(diff.x) > gate)
+    ev: tuple[dict[str, object], ...] = tuple(
+        {
+            "from": iso_utc(unit="ms", time_ns=diff.instants[a]),
+            "to": iso_utc(unit="ms", time_ns=diff.instants[b - 1]),
+            f"max_{unit}": float(np.nanmax(np.abs(diff.x[a:b]))),
+        }
+        for a, b in runs(over)[:MAX_EVIDENCE]
+    )
+    off, scale = diff.offset, diff.scale
+    if failed:
+        return ({"why": failed}, *ev)
+    if compass and abs(off) > OFFSET_GATE_DEG and _variation_known(voyage, keys):
+        return ({"why": f"constant difference {off:+.2f}° beyond {OFFSET_GATE_DEG:g}°"}, *ev)
+    if not compass and scale is not None and abs(scale - 1.0) > SCALE_GATE:
+        return ({"why": f"scale {scale:.3f} beyond 1 ± {SCALE_GATE:.3f}"}, *ev)
+    return ev
 
 
 def _step_ns(cfg: IntegrityConfig, *times: IntArray) -> int:
@@ -240,14 +272,14 @@ def _message(
     key: str,
     chosen: str,
     role: str,
-    offset: float,
-    scale: float | None,
+    diff: _Difference,
     worst: float,
     gate: float,
     drift: float,
     failed: str | None,
     departs: bool,
 ) -> str:
+    offset, scale = diff.offset, diff.scale
     if role == "compass":
         level = f"reads {abs(offset):.2f}° {'above' if offset >= 0 else 'below'} {chosen}"
         u = "°"
