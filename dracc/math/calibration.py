@@ -34,10 +34,11 @@ Three estimators:
     within the current's time scale (a 3 % scale error on a northerly course looks
     exactly like a 0.3 kn northerly current); speed changes separate scale from offset.
     What the data cannot separate is judged from the fit itself and named with why in
-    ``not_determinable`` (issue 29): a parameter whose variance the current (or, for the
-    scale, the offset) inflates more than ``VIF_MAX``-fold, or whose sigma against its
-    estimate cannot tell the log's water track from none (``DETERMINABLE_Z``; a ship at
-    rest).  An offset the fit cannot separate from the scale is dropped (the scale then
+    ``not_determinable`` (issue 29): a parameter in a near-null direction of the
+    normal matrix (``ILL_CONDITIONED``: the current on one course), an offset that would
+    inflate the scale's variance more than ``VIF_MAX``-fold (one speed), or a parameter
+    whose sigma against its estimate cannot tell the log's water track from none
+    (``DETERMINABLE_Z``; a ship at rest).  An offset the fit cannot separate from the scale is dropped (the scale then
     absorbs it).  Heading errors are wrapped to (-pi, pi].  Uncertainties are
     f s^2 (J^T J)^-1 with s^2 the residual variance per segment and f = (1+rho)/(1-rho)
     the AR(1) inflation for the lag-1 correlation rho of consecutive segments' residuals
@@ -392,14 +393,18 @@ def _segment_reference_velocity(
     return vel, good[:-1] & good[1:]
 
 
-#: Variance inflation beyond which a parameter cannot be separated from another: the
-#: variance of the one fitted beside the other over its variance with the other held,
-#: ``[A^-1]_ii / [A_(-j)^-1]_ii`` of the normal matrix A (Marquardt 1970's threshold of
-#: serious collinearity, a factor 3.2 on the sigma).  A straight leg with yaw noise is
-#: not exactly singular (a simulated 3 h single-course voyage fitted a compass error of
-#: -0.3 +- 31 deg and a log scale of 175 +- 151 %); scale and offset at one speed, or a
-#: heading error beside the current on one heading, give thousands.
+#: Variance inflation beyond which the log offset cannot be separated from the scale: the
+#: scale's variance fitted beside the offset over its variance with the offset held at 0,
+#: ``[A^-1]_ss / [A_(-b)^-1]_ss`` of the normal matrix A (Marquardt 1970's threshold of
+#: serious collinearity, a factor 3.2 on the sigma).  At one speed it is thousands; a
+#: speed range of 1.5-8 m/s gives 7.
 VIF_MAX = 10.0
+#: Smallest eigenvalue of the correlation-normalised normal matrix below which the fit
+#: cannot separate its parameters (from the current above all).  A straight leg with yaw
+#: noise is not exactly singular (3.8e-5 measured on a simulated 3 h single-course voyage,
+#: where the fit then gave a compass error of -0.3 +- 31 deg and a log scale of 175 +-
+#: 151 %); voyages with course changes give 0.05-0.2.
+ILL_CONDITIONED = 1e-3
 #: a quantity is determinable where the fit tells the log's water track from none at 95 %
 #: (two-sided): the heading error's sigma below 1/z rad (29 deg), the log scale's below
 #: (1 + s)/z (its gain 1/(1 + s) z sigma from 0).  Beyond it the linearised sigma is not
@@ -473,7 +478,23 @@ def _vif(A: FloatArray, names: list[str], of: str, beside: str) -> float:
 
 
 def _times(vif: float) -> str:
-    return "without bound" if not math.isfinite(vif) else f"{vif:,.0f}-fold"
+    if not math.isfinite(vif):
+        return "without bound"
+    return "over a thousand-fold" if vif >= 1000 else f"{vif:.0f}-fold"
+
+
+def _inseparable(A: FloatArray, names: list[str]) -> set[str]:
+    """The parameter groups carrying more than 5 % of any near-null direction of the
+    correlation-normalised normal matrix (``ILL_CONDITIONED``), and those without data."""
+    d = np.sqrt(np.diag(A))
+    out = {names[k] for k in np.flatnonzero(~(d > 0))}
+    ok = np.flatnonzero(d > 0)
+    w, V = np.linalg.eigh(A[np.ix_(ok, ok)] / np.outer(d[ok], d[ok]))
+    weight = (V[:, w < ILL_CONDITIONED] ** 2).sum(axis=1)
+    for g in set(names):
+        if weight[[i for i, k in enumerate(ok) if names[k] == g]].sum() > 0.05:
+            out.add(g)
+    return out
 
 
 @dataclass(frozen=True)
@@ -514,8 +535,8 @@ def _not_determinable(
     moving: bool,
 ) -> dict[str, str]:
     """Which of the compass error and the log scale the fit does not determine, and why:
-    judged from the fit itself (the variance inflation by the current, the sigma against
-    the estimate), the water track's figures only said."""
+    judged from the fit itself (the near-null directions of its normal matrix, the sigma
+    against the estimate), the water track's figures only said."""
     out: dict[str, str] = {}
     h = [k for k, nm in enumerate(names) if nm == "heading"]
     i_s = names.index("log scale")
@@ -524,14 +545,14 @@ def _not_determinable(
         "average, within the noise of the reference's velocity)"
     )
     sig_h = float(np.max(sig[h]))
+    culprits = _inseparable(A, names)
     if not moving and not sig_h < 1 / DETERMINABLE_Z:
         out["compass_error"] = f"compass error not observable: {still}"
-    elif (vif := _vif(A, names, "heading", "current")) > VIF_MAX:
+    elif "heading" in culprits:
         out["compass_error"] = (
             "compass error and current cannot be separated: the courses steered within "
-            f"one current interval span {water.heading_span_deg:.0f} deg at most (the "
-            f"current inflates its variance {_times(vif)}; a turn tells a heading error "
-            "from a cross-track current)"
+            f"one current interval span {water.heading_span_deg:.0f} deg at most (a turn "
+            "tells a heading error from a cross-track current)"
         )
     elif not sig_h < 1 / DETERMINABLE_Z:
         out["compass_error"] = (
@@ -541,12 +562,11 @@ def _not_determinable(
     gain = 1.0 + x[i_s]
     if not moving and not (gain > 0 and sig[i_s] < gain / DETERMINABLE_Z):
         out["log_scale"] = f"log scale not determinable: {still}"
-    elif (vif := _vif(A, names, "log scale", "current")) > VIF_MAX:
+    elif "log scale" in culprits:
         out["log_scale"] = (
             "log scale and current cannot be separated: the courses steered within one "
             f"current interval span {water.heading_span_deg:.0f} deg at most and the speed "
-            f"through the water {water.span_kn:.1f} kn (the current inflates its variance "
-            f"{_times(vif)})"
+            f"through the water {water.span_kn:.1f} kn"
         )
     elif not (gain > 0 and sig[i_s] < gain / DETERMINABLE_Z):
         out["log_scale"] = (
@@ -556,6 +576,11 @@ def _not_determinable(
         )
     if "log_scale" in out and "log offset" in names:  # b is read through (V - b)/(1 + s)
         out["log_offset"] = f"log offset not determinable beside the scale: {out['log_scale']}"
+    elif "log offset" in culprits:
+        out["log_offset"] = (
+            "log offset and current cannot be separated: the speed through the water spans "
+            f"{water.span_kn:.1f} kn"
+        )
     return out
 
 

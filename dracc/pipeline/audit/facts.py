@@ -62,6 +62,8 @@ class NightFacts:
     integrity_false_alarm: float | None = None  #: per-night bound of its statistical checks
     #: the fleet ranking's measures (:func:`dracc.pipeline.audit.measures.night_measures`)
     measures: Mapping[str, Any] = field(default_factory=dict)
+    #: calibrated quantities the data could not determine, and why (issue 29)
+    calibration_not_determinable: Mapping[str, str] = field(default_factory=dict)
 
 
 #: reject reasons of older analyses that were valid input dracc does not use
@@ -196,6 +198,7 @@ def facts_from_analysis(a: Analysis) -> NightFacts:
             finite_or_none(integ.false_alarm_per_night) if integ is not None else None
         ),
         measures=night_measures(a),
+        calibration_not_determinable=dict(cal.not_determinable) if cal is not None else {},
         **_dr_facts(a.dead_reckoning),
     )
 

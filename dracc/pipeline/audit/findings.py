@@ -16,6 +16,7 @@ from dracc.core.numbers import finite_or_none, jsonable
 from dracc.core.timefmt import iso_utc
 from dracc.pipeline.audit.facts import NightFacts
 from dracc.pipeline.audit.limits import AuditConfig
+from dracc.pipeline.audit.sensor_checks import missing_source_args, sensor_error_checks
 
 if TYPE_CHECKING:
     from dracc.math.integrity import Check
@@ -138,23 +139,8 @@ def evaluate(
     found: list[Finding] = []
     skipped: list[dict[str, Any]] = []
     window = {"start_utc": facts.period_start_utc, "end_utc": facts.period_end_utc}
-    for role in acfg.required_sources:
-        if role not in facts.sources:
-            found.append(
-                make_finding(
-                    "availability",
-                    "missing_source",
-                    role,
-                    None,
-                    None,
-                    "",
-                    f"required source {role} is missing from the logs",
-                    role=role,
-                    rule="[audit] required_sources",
-                    window=window,
-                    false_alarm=0.0,
-                )
-            )
+    # the required sources, naming the key to change (dracc.pipeline.audit.sensor_checks)
+    found += [make_finding(**kw) for kw in missing_source_args(facts, acfg, window)]
     for c in facts.integrity_checks:
         if c.status == "fail":
             found.append(integrity_finding(c))
@@ -191,56 +177,10 @@ def evaluate(
         )
     if facts.dr_verdict == "undetermined":
         skipped.append(not_checked("consistency", "dr", f"DR verdict: {facts.dr_verdict_text}"))
-    if facts.compass_error_deg is None:
-        skipped.append(
-            not_checked(
-                "accuracy",
-                "compass_error",
-                "compass error not estimated (no heading or no reference)",
-                role="compass",
-            )
-        )
-    elif abs(facts.compass_error_deg) > acfg.compass_error_max_deg:
-        found.append(
-            make_finding(
-                "accuracy",
-                "compass_error",
-                "compass",
-                facts.compass_error_deg,
-                acfg.compass_error_max_deg,
-                "deg",
-                f"compass error {facts.compass_error_deg:+.2f}° exceeds "
-                f"±{acfg.compass_error_max_deg:.2f}°",
-                role="compass",
-                rule="[audit] compass_error_max_deg",
-                window=window,
-            )
-        )
-    if facts.log_scale is None:
-        skipped.append(
-            not_checked(
-                "accuracy",
-                "log_scale",
-                "log scale not estimated (no speed log or no reference)",
-                role="log",
-            )
-        )
-    elif 100 * abs(facts.log_scale) > acfg.log_scale_max_pct:
-        found.append(
-            make_finding(
-                "accuracy",
-                "log_scale",
-                "log",
-                100 * facts.log_scale,
-                acfg.log_scale_max_pct,
-                "%",
-                f"log scale error {100 * facts.log_scale:+.2f} % exceeds "
-                f"±{acfg.log_scale_max_pct:.2f} %",
-                role="log",
-                rule="[audit] log_scale_max_pct",
-                window=window,
-            )
-        )
+    # compass and log against their limits, with their sigma, from fits that determine them
+    sensor_found, sensor_skipped = sensor_error_checks(facts, acfg, window)
+    found += [make_finding(**kw) for kw in sensor_found]
+    skipped += sensor_skipped
     if facts.rejected_rate is not None and 100 * facts.rejected_rate > acfg.rejected_rate_max_pct:
         found.append(
             make_finding(

@@ -43,6 +43,10 @@ class AuditConfig:
     #: the limiting errors are judged over the nights of at least this many hours (seed 001
     #: asks 72 h for a kurtosis that means something): a short night cannot raise a limit
     accuracy_window_h: float = 72.0
+    #: false-alarm probability of each sensor-error check a night (compass, log): a finding
+    #: needs the estimate beyond its limit by Phi^-1(1 - false_alarm) sigma; not given:
+    #: ``[integrity] false_alarm`` (dracc.pipeline.audit.sensor_checks)
+    false_alarm: float = 1e-3
 
     def limit_for(self, unit: str, channel: str) -> float | None:
         key = CHANNEL_KEYS[channel]
@@ -79,7 +83,12 @@ def audit_config(cfg: Config) -> AuditConfig:
     default = AuditConfig()
     known = list(asdict(default))
     _unknown(table, known, "audit")
-    kw: dict = {}
+    kw: dict = {"false_alarm": cfg.integrity.false_alarm}
+    if "false_alarm" in table:
+        v = _number(table["false_alarm"], "audit.false_alarm")
+        if not v < 0.5:
+            raise ConfigError(f"[audit.false_alarm] is a probability in (0, 0.5), got {v}")
+        kw["false_alarm"] = v
     for key in ("db", "vessel", "pattern"):
         if key in table:
             if not isinstance(table[key], str) or not table[key].strip():

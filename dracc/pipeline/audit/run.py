@@ -46,6 +46,7 @@ from dracc.pipeline.audit.logs import (
     yesterday_utc,
 )
 from dracc.pipeline.audit.rule import apriori_chain
+from dracc.pipeline.audit.sensor_checks import sensor_checks_made
 from dracc.pipeline.state import AprioriEvent, NightRecord, StateStore
 
 if TYPE_CHECKING:
@@ -147,6 +148,7 @@ def audit_night(
     fa = [f for f in (facts.integrity_false_alarm,) if f is not None]
     if facts.dr_verdict in ("consistent", "conservative", "inconsistent"):
         fa.append(DR_FALSE_ALARM)
+    fa += [acfg.false_alarm] * sensor_checks_made(facts, acfg)  # compass, log (issue 29)
     return AuditOutcome(
         stored,
         findings + tuple(extra),
