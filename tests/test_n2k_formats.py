@@ -23,6 +23,7 @@ from dracc.ingest.n2k.fastpacket import FAST_PGNS, fast_mask, is_fast_pgn
 from dracc.ingest.n2k.formats import parse_n2k, parse_n2k_lines, sniff_n2k
 from dracc.ingest.n2k.messages import TIME_OF_DAY, TIME_RELATIVE, TIME_UTC
 from tests.conftest import real_path
+from tests.n2k_reference import DATA
 
 # fmt: off
 CANBOAT = {
@@ -392,9 +393,13 @@ def test_mangled_logs_never_raise(seed):
              ("canboat", "merrimac-ydwg-2020.raw"), ("canboat", "ikonvert.log"),
              ("canboat", "actisense-523.rx.ebl")]  # fmt: skip
     fmts = ["n2k-plain", "n2k-fast", "n2k-plain-mix-fast", "n2k-candump", "n2k-ydraw",
-            "n2k-pdgy", "n2k-ebl", "n2k-pcdin", "n2k-mxpgn"]  # fmt: skip
+            "n2k-pdgy", "n2k-ebl", "n2k-ngt1", "n2k-pcdin", "n2k-mxpgn", "n2k-garmin-csv1",
+            "n2k-garmin-csv2"]  # fmt: skip
+    paths = [real_path(*n) for n in names]
+    paths += [DATA / "ydnu02-ev1-head.dle", DATA / "garmin-gpsmap4008-head.csv"]
+    paths += [DATA / "garmin-gpsmap820-part.csv", DATA / "candumpSample2.txt"]
     for _ in range(15):
-        raw = bytearray(real_path(*rnd.choice(names)).read_bytes()[: rnd.randint(0, 6000)])
+        raw = bytearray(rnd.choice(paths).read_bytes()[: rnd.randint(0, 6000)])
         for _ in range(rnd.randint(1, 40)):
             if not raw:
                 break

@@ -50,6 +50,8 @@ HEADERS = {
 }
 #: PGNs are 18 bits
 MAX_PGN = (1 << 18) - 1
+#: a millisecond counter at or above this (35 years) is no counter
+MAX_TICKS = 1 << 40
 
 
 def garmin_form(line: str) -> str | None:
@@ -132,7 +134,7 @@ def _row(text: str, width: int, absolute: bool) -> tuple[int, int, int, int, int
         return "garmin_csv_line"
     if not (0 <= pgn <= MAX_PGN and 0 <= prio <= 7 and 0 <= src <= 255 and 0 <= dst <= 255):
         return "garmin_csv_line"
-    if ticks < 0 or (absolute and clock < 0):
+    if not 0 <= ticks < MAX_TICKS or (absolute and clock < 0):
         return "garmin_csv_line"
     if size != len(body) or size > MAX_FAST_LENGTH:
         return "garmin_csv_size"
