@@ -363,7 +363,8 @@ def _frozen(
             ("heading_spread_deg", spread),
         )
         if not moved:
-            verdict, words = _rest_words(wit, spread)
+            own = ground_witness(frames, "", ta, tb, only=key) if not wit.found else wit
+            verdict, words = _rest_words(wit, spread, own)
             out.append(RepeatRun(key, role, "frozen", ta, tb, b - a, verdict, words, values))
             continue
         msg = (
@@ -378,10 +379,12 @@ def _frozen(
     return out
 
 
-def _rest_words(wit: GroundWitness, spread_deg: float) -> tuple[str, str]:
-    """(verdict, evidence) of a repeat no witness shows moving."""
+def _rest_words(wit: GroundWitness, spread_deg: float, own: GroundWitness) -> tuple[str, str]:
+    """(verdict, evidence) of a repeat no witness shows moving (``own``: what the source
+    itself says, shown, never a witness of itself)."""
     if not wit.found:
-        return "no_witness", "no other source tells whether the ship moved"
+        said = f"its own SOG {own.speed_mps / KN_MPS:.1f} kn; " if own.how == "SOG" else ""
+        return "no_witness", f"{said}no other source tells whether the ship moved"
     head = f", heading spread {spread_deg:.1f} deg" if math.isfinite(spread_deg) else ""
     return "at_rest", f"at rest: {wit.words()}{head}"
 

@@ -97,14 +97,18 @@ def quantum(values: FloatArray, candidates: tuple[float, ...], share: float = 0.
     return 0.0
 
 
-def _window(df: pd.DataFrame | None, exclude: str, a_ns: int, b_ns: int) -> pd.DataFrame | None:
-    """Rows of the other sources of a time-sorted frame within [a, b]."""
+def _window(
+    df: pd.DataFrame | None, exclude: str, a_ns: int, b_ns: int, only: str | None = None
+) -> pd.DataFrame | None:
+    """Rows of the other sources (or of source ``only``) of a time-sorted frame within
+    [a, b]."""
     if df is None or df.empty:
         return None
     t = df["time_ns"].to_numpy(np.int64)
     i, j = np.searchsorted(t, a_ns, "left"), np.searchsorted(t, b_ns, "right")
     w = df.iloc[i:j]
-    w = w[(w["source"] != exclude).to_numpy()]
+    src = w["source"].to_numpy()
+    w = w[(src == only) if only is not None else (src != exclude)]
     return w if len(w) else None
 
 
@@ -134,19 +138,24 @@ class GroundWitness:
 
 
 def ground_witness(
-    frames: Mapping[str, pd.DataFrame], exclude: str, a_ns: int, b_ns: int
+    frames: Mapping[str, pd.DataFrame],
+    exclude: str,
+    a_ns: int,
+    b_ns: int,
+    only: str | None = None,
 ) -> GroundWitness:
     """The other sources' evidence of motion over the ground over [a, b] (module
-    docstring): SOG, else the net motion of other position sources, else the log."""
-    w = _window(frames.get("ground"), exclude, a_ns, b_ns)
+    docstring): SOG, else the net motion of other position sources, else the log.
+    With ``only``, what that one source says of itself (shown, never a witness)."""
+    w = _window(frames.get("ground"), exclude, a_ns, b_ns, only)
     if w is not None:
         v = np.abs(w["sog_mps"].to_numpy(float))
         ok = np.isfinite(v)
         if ok.any():
             sog = tuple(sorted({str(s) for s in w["source"].to_numpy()[ok]}))
             return GroundWitness(float(np.median(v[ok])), "SOG", sog)
-    w = _window(frames.get("position"), exclude, a_ns, b_ns)
-    if w is not None and b_ns > a_ns:
+    w = _window(frames.get("position"), exclude, a_ns, b_ns, only)
+    if w is not None and b_ns > a_ns and only is None:
         speeds: list[float] = []
         keys: list[str] = []
         for key, g in w.groupby("source", observed=True):
@@ -162,7 +171,7 @@ def ground_witness(
             keys.append(str(key))
         if speeds:
             return GroundWitness(float(np.median(speeds)), "positions", tuple(sorted(keys)))
-    w = _window(frames.get("water"), exclude, a_ns, b_ns)
+    w = _window(frames.get("water"), exclude, a_ns, b_ns, only)
     if w is not None:
         v = np.abs(w["stw_mps"].to_numpy(float))
         ok = np.isfinite(v)
