@@ -188,6 +188,18 @@ def test_a_gateway_restart_is_a_note_and_keeps_the_order():
     assert any("restarted 1 times" in n for n in res.notes)
 
 
+def test_other_bst_traffic_is_counted_as_ignored():
+    command = bytes([0xA1, 3, 0x11, 0x02, 0x00])  # a command to the NGT, not a bus message
+    command += bytes([-sum(command) & 0xFF])
+    data = bytes([0xFF, 0x4B, 0xED, 0xFF, 0x7F, 0xFF, 0x7F, 0xFD])
+    raw = ngt1_frame(2, 127250, 255, 204, 100, data) + DLE_STX + command + DLE_ETX
+    raw += ngt1_frame(2, 127250, 255, 204, 200, data)
+    msgs = parse_n2k(raw, "n2k-ngt1")
+    assert len(msgs) == 2 and msgs.rejects == {"ignored_bst_command": 1}
+    res = n2k_result(msgs, "x.dle", "n2k-ngt1", IngestConfig())
+    assert res.ignored["bst command"] == 1 and res.rejects.total == 0
+
+
 def test_frames_without_timer_or_filetime_have_no_clock():
     sent = bytes([0x94, 6 + 8, 2, 0x12, 0xF1, 0x01, 255, 8]) + bytes(8)
     sent += bytes([-sum(sent) & 0xFF])

@@ -143,12 +143,12 @@ def _header(body: bytes) -> tuple[str, int]:
 
 def _message(body: bytes, tag: str) -> tuple[str, tuple[int, int, int, int, bytes] | None]:
     """(reject reason or "", its message or None) of an unescaped BST frame; other BST
-    traffic (commands, replies) carries no bus message and is neither."""
+    traffic (commands, replies) carries no bus message: ``ignored_bst_command``."""
     if len(body) < 3 or sum(body) & 0xFF:
         return "checksum", None
     command, n = body[0], body[1]
     if command not in (N2K_RECEIVED, N2K_SENT, NGT_MESSAGE):
-        return "", None
+        return "ignored_bst_command", None  # valid, but no bus message: counted as ignored
     got = _bst(command, body[2 : 2 + n])
     return ("", got) if got is not None else (f"{tag}_message", None)
 
