@@ -246,6 +246,14 @@ def test_clockless_log_no_latency_finding(tmp_path):
     assert any(s["name"] == "latency" and "no clock" in s["why"] for s in skipped), skipped
     rows = facts.measures["rows"]
     assert not [m for m in rows if m["quantity"] in ("latency", "availability")], rows
+    # a real candump without times (canboat's candumpSample2, read as clockless)
+    from conftest import REPO
+
+    dump = read_logs([REPO / "tests" / "data" / "n2k" / "candumpSample2.txt"], IngestConfig())
+    assert dump.clockless
+    r = check_night(dump, IntegrityConfig())
+    timed = [c for c in r.checks if c.check in ("latency", "availability")]
+    assert timed and all(c.status == "not_checked" and "no clock" in c.why_not for c in timed)
 
 
 def test_negative_latency_worded_as_clock_lead():
