@@ -364,7 +364,7 @@ def _frozen(
         )
         if not moved:
             own = ground_witness(frames, "", ta, tb, only=key) if not wit.found else wit
-            verdict, words = _rest_words(wit, spread, own)
+            verdict, words = _rest_words(wit, spread, own, cfg.moving_min_kn * KN_MPS)
             out.append(RepeatRun(key, role, "frozen", ta, tb, b - a, verdict, words, values))
             continue
         msg = (
@@ -379,25 +379,32 @@ def _frozen(
     return out
 
 
-def _rest_words(wit: GroundWitness, spread_deg: float, own: GroundWitness) -> tuple[str, str]:
+def _rest_words(
+    wit: GroundWitness, spread_deg: float, own: GroundWitness, moving_mps: float
+) -> tuple[str, str]:
     """(verdict, evidence) of a repeat no witness shows moving (``own``: what the source
     itself says, shown, never a witness of itself)."""
     if not wit.found:
         said = f"its own SOG {own.speed_mps / KN_MPS:.1f} kn; " if own.how == "SOG" else ""
         return "no_witness", f"{said}no other source tells whether the ship moved"
+    if wit.how == "log" and wit.speed_mps >= moving_mps:  # moving, or a current past a berth
+        return "no_witness", (
+            f"{wit.words()}, which a current past a moored ship reads as well; no other "
+            "source tells whether the ship moved over the ground"
+        )
     head = f", heading spread {spread_deg:.1f} deg" if math.isfinite(spread_deg) else ""
     return "at_rest", f"at rest: {wit.words()}{head}"
 
 
 def _turn_words(
-    turn: TurnWitness, wit: GroundWitness, moving: bool, gate: float, q: float
+    turn: TurnWitness, wit: GroundWitness, still: bool, gate: float, q: float
 ) -> tuple[str, str]:
-    """(verdict, evidence) of a repeated heading no witness shows turning beyond ``gate``."""
-    if not turn.found:
-        if wit.found and not moving:
-            return "at_rest", f"at rest: {wit.words()}; no other heading source"
-        return "no_witness", "no other heading source tells whether the ship turned"
-    state = "steady" if moving else "at rest"
+    """(verdict, evidence) of a repeated heading no witness shows turning beyond ``gate``
+    (``still``: a witness shows the ship below the moving speed)."""
+    if not turn.found:  # at rest or not, nobody saw the heading: it cannot be judged
+        rest = f"at rest ({wit.words()}), but " if still else ""
+        return "no_witness", f"{rest}no other heading source tells whether the ship turned"
+    state = "at rest" if still else "steady"
     return state.replace(" ", "_"), (
         f"{state}: {wit.words()}, heading spread {turn.spread_rad / DEG_RAD:.1f} deg "
         f"({', '.join(turn.sources)}), within {gate / DEG_RAD:.2g} deg (three steps of the "
@@ -439,8 +446,8 @@ def _stuck(
             ("other_speed_kn", float(wit.speed_mps / KN_MPS)),
         )
         if not (turn.found and turn.turn_rad > gate):
-            moving = wit.moving(cfg.moving_min_kn * KN_MPS)
-            verdict, words = _turn_words(turn, wit, moving, gate, q)
+            still = wit.found and wit.speed_mps < cfg.moving_min_kn * KN_MPS
+            verdict, words = _turn_words(turn, wit, still, gate, q)
             out.append(RepeatRun(key, role, "stuck_heading", ta, tb, b - a, verdict, words, values))
             continue
         msg = (
