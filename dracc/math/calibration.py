@@ -59,6 +59,13 @@ from dracc.core.arrays import ArrayLike, BoolArray, FloatArray, IntArray
 from dracc.core.errors import InsufficientDataError
 from dracc.core.geodesy import angdiff, offset_ne_m, wrap_pi
 from dracc.core.units import KN_MPS
+from dracc.math.identifiability import (
+    DETERMINABLE_Z,
+    VIF_MAX,
+    inseparable,
+    normal_inverse,
+    variance_inflation,
+)
 
 __all__ = [
     "CompassErrorEstimate",
@@ -393,25 +400,6 @@ def _segment_reference_velocity(
     return vel, good[:-1] & good[1:]
 
 
-#: Variance inflation beyond which the log offset cannot be separated from the scale: the
-#: scale's variance fitted beside the offset over its variance with the offset held at 0,
-#: ``[A^-1]_ss / [A_(-b)^-1]_ss`` of the normal matrix A (Marquardt 1970's threshold of
-#: serious collinearity, a factor 3.2 on the sigma).  At one speed it is thousands; a
-#: speed range of 1.5-8 m/s gives 7.
-VIF_MAX = 10.0
-#: Smallest eigenvalue of the correlation-normalised normal matrix below which the fit
-#: cannot separate its parameters (from the current above all).  A straight leg with yaw
-#: noise is not exactly singular (3.8e-5 measured on a simulated 3 h single-course voyage,
-#: where the fit then gave a compass error of -0.3 +- 31 deg and a log scale of 175 +-
-#: 151 %); voyages with course changes give 0.05-0.2.
-ILL_CONDITIONED = 1e-3
-#: a quantity is determinable where the fit tells the log's water track from none at 95 %
-#: (two-sided): the heading error's sigma below 1/z rad (29 deg), the log scale's below
-#: (1 + s)/z (its gain 1/(1 + s) z sigma from 0).  Beyond it the linearised sigma is not
-#: even a sigma: the ship lying still fitted +511 +- 53 deg and -56 % (issue 29).
-DETERMINABLE_Z = 1.96
-
-
 def _start(
     hs: FloatArray,
     vs: FloatArray,
@@ -445,56 +433,10 @@ def _start(
     return theta
 
 
-def _inverse(A: FloatArray) -> FloatArray:
-    """A^-1 of a normal matrix, through its correlation form; a parameter in a (near)
-    null direction or without data gets an infinite variance, never a small one."""
-    d = np.sqrt(np.diag(A))
-    out = np.full_like(A, np.nan)
-    ok = np.flatnonzero(d > 0)
-    np.fill_diagonal(out, np.inf)
-    if ok.size:
-        An = A[np.ix_(ok, ok)] / np.outer(d[ok], d[ok])
-        w, V = np.linalg.eigh(An)
-        small = w <= 1e-12 * max(float(w[-1]), 1e-300)
-        inv_w = np.where(small, 0.0, 1.0 / np.where(small, 1.0, w))
-        inv = (V * inv_w) @ V.T / np.outer(d[ok], d[ok])
-        # a parameter carried by a null direction has no finite variance
-        null = (V[:, small] ** 2).sum(axis=1) > 1e-6
-        inv[null, :] = np.where(np.eye(ok.size, dtype=bool)[null], np.inf, np.nan)
-        out[np.ix_(ok, ok)] = inv
-    return out
-
-
-def _vif(A: FloatArray, names: list[str], of: str, beside: str) -> float:
-    """The largest variance inflation of the ``of`` parameters from fitting the ``beside``
-    ones with them (inf where they cannot be told apart at all)."""
-    i = [k for k, nm in enumerate(names) if nm == of]
-    keep = [k for k, nm in enumerate(names) if nm != beside]
-    joint = np.diag(_inverse(A))[i]
-    held = np.diag(_inverse(A[np.ix_(keep, keep)]))[[keep.index(k) for k in i]]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = np.where(np.isinf(joint), np.inf, joint / held)
-    return float(np.max(np.nan_to_num(ratio, nan=np.inf, posinf=np.inf)))
-
-
 def _times(vif: float) -> str:
     if not math.isfinite(vif):
         return "without bound"
     return "over a thousand-fold" if vif >= 1000 else f"{vif:.0f}-fold"
-
-
-def _inseparable(A: FloatArray, names: list[str]) -> set[str]:
-    """The parameter groups carrying more than 5 % of any near-null direction of the
-    correlation-normalised normal matrix (``ILL_CONDITIONED``), and those without data."""
-    d = np.sqrt(np.diag(A))
-    out = {names[k] for k in np.flatnonzero(~(d > 0))}
-    ok = np.flatnonzero(d > 0)
-    w, V = np.linalg.eigh(A[np.ix_(ok, ok)] / np.outer(d[ok], d[ok]))
-    weight = (V[:, w < ILL_CONDITIONED] ** 2).sum(axis=1)
-    for g in set(names):
-        if weight[[i for i, k in enumerate(ok) if names[k] == g]].sum() > 0.05:
-            out.add(g)
-    return out
 
 
 @dataclass(frozen=True)
@@ -545,7 +487,7 @@ def _not_determinable(
         "average, within the noise of the reference's velocity)"
     )
     sig_h = float(np.max(sig[h]))
-    culprits = _inseparable(A, names)
+    culprits = inseparable(A, names)
     if not moving and not sig_h < 1 / DETERMINABLE_Z:
         out["compass_error"] = f"compass error not observable: {still}"
     elif "heading" in culprits:
@@ -738,7 +680,7 @@ def calibrate_from_track(
         raise InsufficientDataError("log calibration: the fit diverged (non-finite Jacobian)")
     names = ["heading"] * n_h + ["log scale"] + ["log offset"] * n_b + ["current"] * (2 * nk)
     speeds = _Water.of(vs, hs, wn, si, m, k_lo)
-    vif_offset = _vif(JtJ, names, "log scale", "log offset") if n_b else 1.0
+    vif_offset = variance_inflation(JtJ, names, "log scale", "log offset") if n_b else 1.0
     if vif_offset > VIF_MAX:
         # scale and offset act alike where the speed hardly changes: fit the scale alone
         # (the offset taken as 0: the scale absorbs it) and say why
@@ -777,7 +719,7 @@ def calibrate_from_track(
     den = float(np.sum(rn**2))
     rho = min(max(num / den, 0.0), 0.9) if den > 0 and consecutive.any() else 0.0
     inflation = (1 + rho) / (1 - rho)
-    cov = inflation * s2 * _inverse(JtJ)
+    cov = inflation * s2 * normal_inverse(JtJ)
     sig = np.sqrt(np.diag(cov))
     x = sol.x.copy()
     # the heading error on the circle (the fit is free to wander a turn or more)
