@@ -96,6 +96,24 @@ def test_moored_boat_is_at_rest_not_frozen():
     assert not [c for c in failed if c.name in ("frozen", "stuck", "contradiction")], failed
 
 
+def test_moored_boat_heading_not_stuck_while_witnesses_wander():
+    """A moored boat's gyro repeating its heading was 'heading stuck': at rest (the INS
+    SOG says so) the INS headings' 1.3 deg of yaw is no swing that proves it dead.  The
+    same gyro held while the boat swings 20 deg at its mooring is stuck."""
+    v = _held_gnss_voyage(0.0)
+    hd = v.frames["heading"]
+    t0 = int(hd["time_ns"].min())
+    a, b = t0 + 20 * MIN, t0 + 40 * MIN
+    _hold(hd, "GYRO", ("heading_rad",), a, b)
+    c = _check(check_night(v), "stuck", "GYRO")
+    assert c.status == "pass" and "at rest: SOG" in c.message, c.message
+    t = hd["time_ns"].to_numpy(np.int64)
+    ins = hd["source"].isin(["INS1", "INS2", "INS3"]).to_numpy() & (t >= a) & (t <= b)
+    hd.loc[ins, "heading_rad"] += 20.0 * DEG_RAD * (t[ins] - a) / (b - a)  # the swing
+    c = _check(check_night(v), "stuck", "GYRO")
+    assert c.status == "fail", c.message
+
+
 def test_held_gnss_fix_under_way_is_still_frozen():
     """The same held fix at 12 kn: the INS witness the motion, frozen fails (and the
     source flagged the frozen fixes valid: a contradiction)."""

@@ -405,10 +405,15 @@ def _turn_words(
         rest = f"at rest ({wit.words()}), but " if still else ""
         return "no_witness", f"{rest}no other heading source tells whether the ship turned"
     state = "at rest" if still else "steady"
+    why = (
+        f"at rest only a swing that large proves a heading dead; the source resolves "
+        f"{q / DEG_RAD:.2g} deg"
+        if still
+        else f"three steps of the {q / DEG_RAD:.2g} deg the source resolves"
+    )
     return state.replace(" ", "_"), (
         f"{state}: {wit.words()}, heading spread {turn.spread_rad / DEG_RAD:.1f} deg "
-        f"({', '.join(turn.sources)}), within {gate / DEG_RAD:.2g} deg (three steps of the "
-        f"{q / DEG_RAD:.2g} deg the source resolves)"
+        f"({', '.join(turn.sources)}), within {gate / DEG_RAD:.2g} deg ({why})"
     )
 
 
@@ -445,9 +450,12 @@ def _stuck(
             ("resolution_deg", float(q / DEG_RAD)),
             ("other_speed_kn", float(wit.speed_mps / KN_MPS)),
         )
-        if not (turn.found and turn.turn_rad > gate):
-            still = wit.found and wit.speed_mps < cfg.moving_min_kn * KN_MPS
-            verdict, words = _turn_words(turn, wit, still, gate, q)
+        # at rest (a witness says so), a compass wanders with the steel and cranes of a
+        # berth and a gyro settles: only a swing of turn_min_deg proves the heading dead
+        still = wit.found and wit.speed_mps < cfg.moving_min_kn * KN_MPS
+        run_gate = max(gate, cfg.turn_min_deg * DEG_RAD) if still else gate
+        if not (turn.found and turn.turn_rad > run_gate):
+            verdict, words = _turn_words(turn, wit, still, run_gate, q)
             out.append(RepeatRun(key, role, "stuck_heading", ta, tb, b - a, verdict, words, values))
             continue
         msg = (
