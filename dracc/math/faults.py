@@ -29,7 +29,9 @@ Kinds and the rule that finds each (thresholds in :class:`dracc.core.config.Faul
     from its values (an AIS heading in whole degrees: 3 deg; never less than
     :data:`MIN_TURN_DEG`, and ``turn_min_deg`` always suffices), beyond the witness's
     own noise and resolution (:func:`~dracc.math.witness.turn_witness`).  Moving on a
-    steady heading proves nothing: a heading repeats within its resolution.
+    steady heading proves nothing: a heading repeats within its resolution.  At rest (a
+    witness below ``moving_min_kn``) only a swing of ``turn_min_deg`` proves it: at a
+    berth a compass wanders with the steel about it and a gyro settles.
 ``out_of_range``
     values no sensor can produce but that a reader passed through: latitude beyond
     +-90 deg, longitude beyond +-180 deg, heading or course outside [0, 360) deg,

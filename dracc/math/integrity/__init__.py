@@ -52,7 +52,8 @@ plausibility / ``frozen``, ``stuck``, ``out_of_range``
     source's resolution, a heading repeating while another heading source turns beyond
     its own noise by more than three steps of the source's resolution (both resolutions
     learned from the values: an AIS heading in whole degrees is not stuck while a gyro
-    yaws 0.9 deg), values no sensor can produce.  A finding needs a witness
+    yaws 0.9 deg; at rest only a swing of ``[faults] turn_min_deg``), values no sensor
+    can produce.  A finding needs a witness
     (:mod:`dracc.math.witness`): a repeat the witnesses show at rest passes with that
     evidence ("at rest: SOG 0.0 kn, heading spread 0.4 deg"); one no other source can
     judge is ``not_checked``.  Rules: probability 0.
