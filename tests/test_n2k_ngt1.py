@@ -10,6 +10,10 @@ EV-1 autopilot bus); canboat's text twin of the whole capture, ``raymarine-ev1.r
 the head, decoded by ``analyzer -json`` into ``ydnu02-ev1-head.canboat.json``.  On the
 whole capture (not kept here) dracc reads 23 795 messages, each equal to the twin's line
 (PGN, source, destination, priority, data), where it read 21 125 before (11 % lost).
+The twin's times are the wall clock of the machine that replayed the file (actisense-serial
+skips the gateway timer), so the time oracle is the timer bytes themselves, read by a
+plain split of the undamaged stream; speed through water, position and COG/SOG, which
+this bus lacks, come from canboat's susteranna NGT-1 text framed back into NGT-1 bytes.
 """
 
 from __future__ import annotations
