@@ -279,7 +279,7 @@ def unwrap_timer(timer_ms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _envelope_offset(dev: np.ndarray, run: np.ndarray, pc: np.ndarray) -> np.ndarray:
     """Offset (ms) from gateway time ``dev`` to UTC at every row: per run, the least
     ``pc - dev`` of each window of :data:`ENVELOPE_WINDOW_MS`, interpolated between the
-    windows' middles (the nearest window's where a run has no FILETIME of its own)."""
+    windows' middles (where a run has no FILETIME of its own: the least over the file)."""
     off = np.zeros(len(dev), dtype=np.int64)
     ok = pc >= 0
     fallback = int(np.min((pc - dev)[ok]))
