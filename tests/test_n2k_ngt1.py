@@ -24,7 +24,7 @@ from datetime import datetime
 import numpy as np
 
 from dracc.core.config import IngestConfig
-from dracc.ingest.n2k.ebl import frames, parse_ebl, unwrap_timer
+from dracc.ingest.n2k.ebl import frames, message_times, parse_ebl, unwrap_timer
 from dracc.ingest.n2k.formats import parse_n2k, sniff_n2k
 from dracc.ingest.n2k.messages import TIME_NONE, TIME_RELATIVE, TIME_UTC
 from dracc.ingest.n2k.reader import n2k_result, read_n2k
@@ -171,6 +171,19 @@ def test_ebl_times_are_the_gateway_timer_on_utc():
     assert late.min() >= 0 and late.max() < 100  # the PC stamps after the gateway
     # between messages, exactly the gateway's own intervals
     assert np.array_equal(np.diff(t_ms[got]), np.diff(timer_a[got]))
+
+
+def test_filetime_envelope_follows_a_drifting_pc_clock():
+    """EBL: the PC stamps each batch 0-300 ms after the gateway timed its messages, and
+    the two clocks drift apart 50 ppm over two hours (360 ms): the gateway times put on
+    UTC follow the drift and stay within 30 ms of the truth."""
+    rng = np.random.default_rng(7)
+    timer = np.arange(0, 7_200_000, 250, dtype=np.int64) + 1_000_000
+    utc = 1_700_000_000_000 + (timer - timer[0]) + (timer - timer[0]) * 50 // 1_000_000
+    pc = utc + rng.integers(0, 300, len(timer))
+    t, kind = message_times(timer, pc)
+    assert kind == TIME_UTC
+    assert np.abs(t // 1_000_000 - utc).max() < 30
 
 
 def test_timer_wraps_and_restarts():
