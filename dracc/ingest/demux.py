@@ -159,6 +159,8 @@ def merge_results(
         notes=out_notes,
         ignored=ignored,
         ignored_examples=ignored_examples,
+        # without a clock only where no part has one (a part's own times are the file's)
+        clockless=bool(parts) and all(r.clockless for r in parts),
     )
 
 
