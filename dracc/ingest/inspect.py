@@ -58,6 +58,8 @@ class _FileRead:
     records: int | None = None  #: frame rows (None: the sum over the file's sources)
     time_only: Counter[str] = field(default_factory=Counter)  #: time-only sentences by type
     qualifiers: Counter[str] = field(default_factory=Counter)  #: qualifying sentences by type
+    #: the file has no clock (:attr:`FileResult.clockless`): its sources get no rate
+    clockless: bool = False
 
 
 def _add_no_record(
@@ -167,6 +169,7 @@ def _whole(
         r.ignored,
         r.ignored_examples,
         records=r.records,
+        clockless=r.clockless,
     )
 
 
@@ -206,6 +209,7 @@ def inspect_logs(
     # each file's sources: a key two files share is one source only if separate_files says so
     per_file: list[tuple[str, dict[str, SourceInfo]]] = []
     per_file_events: list[tuple[str, dict[str, Any]]] = []
+    clockless_files: set[str] = set()
     rejects = Rejects()
     te = TimeEvents()
     inputs: list[dict[str, Any]] = []
@@ -236,6 +240,8 @@ def inspect_logs(
         te.examples.extend(tev.examples[:6])
         notes.extend(f"{p.name}: {n}" for n in f.notes)
         per_file_events.append((str(p), f.events))
+        if f.clockless:
+            clockless_files.add(str(p))
         file_sent: Counter[str] = Counter()
         for s in sources.values():
             file_sent.update(s.sentences)
@@ -276,7 +282,12 @@ def inspect_logs(
         "lines": lines,
         "sentences": dict(sorted(all_sent.items())),
         "sources": {
-            key: _source_out(merged[key], events.get(key, _NO_EVENTS)) for key in sorted(merged)
+            key: _source_out(
+                merged[key],
+                events.get(key, _NO_EVENTS),
+                clockless=bool(merged[key].files) and merged[key].files <= clockless_files,
+            )
+            for key in sorted(merged)
         },
         "rejected": dict(sorted(rejects.counts.items())),
         "rejected_examples": _examples(rejects.examples),
@@ -337,8 +348,9 @@ def _total_accounting(parts: list[dict[str, int] | None]) -> dict[str, int] | No
     return {k: sum(a[k] for a in have) for k in have[0]} if have else None
 
 
-def _source_out(s: SourceInfo, ev: dict[str, Any]) -> dict[str, Any]:
-    """One source's entry of the report."""
+def _source_out(s: SourceInfo, ev: dict[str, Any], clockless: bool = False) -> dict[str, Any]:
+    """One source's entry of the report (no rate where its file has no clock: the times
+    are only the records' order)."""
     span_s = (
         (s.last_ns - s.first_ns) / 1e9 if s.first_ns is not None and s.last_ns is not None else 0.0
     )
@@ -352,7 +364,8 @@ def _source_out(s: SourceInfo, ev: dict[str, Any]) -> dict[str, Any]:
         "first_utc": iso_utc(s.first_ns),
         "last_utc": iso_utc(s.last_ns),
         "span_s": span_s,
-        "rate_hz": (nsent - 1) / span_s if span_s > 0 else None,
+        "rate_hz": (nsent - 1) / span_s if span_s > 0 and not clockless else None,
+        "clockless": clockless,
         "gaps": ev["gaps"],
         "max_gap_s": ev["max_gap_s"],
         "duplicates": ev["duplicates"],
