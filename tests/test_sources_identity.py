@@ -149,7 +149,10 @@ def test_real_skytraq_gnss_compass_is_not_the_compass(real_dir):
     missing, notes = [], []
     got = _heading_series(v, DeadReckoningConfig(), missing, notes)
     assert got is not None and "heading source GN" in got[2]
-    assert any("no source has the role compass; heading taken from GN" in n for n in notes)
+    # GN is the GNSS (chosen by evidence over GP): its heading is taken as from a unit that
+    # gives fixes too
+    assert v.role_sources("gnss") == ["GN"]
+    assert any("heading taken from GN, which also gives fixes" in n for n in notes)
 
 
 def test_instrument_bus_with_fixes_is_still_compass_and_log():
