@@ -114,6 +114,35 @@ def test_moored_boat_heading_not_stuck_while_witnesses_wander():
     assert c.status == "fail", c.message
 
 
+def _instrument_bus(speed_kn: float) -> Voyage:
+    """GNSS, compass (whole degrees) and log all under one talker, 'II', as an NKE or B&G
+    bus logs them; the fix held in blocks of 15 min, its SOG 0.0."""
+    v = _held_gnss_voyage(speed_kn, drop=("INS1", "INS2", "INS3"))
+    frames = {}
+    for k, df in v.frames.items():
+        df = df.copy()
+        df["source"] = "II"
+        frames[k] = df
+    frames["water"]["stw_mps"] *= speed_kn > 0
+    h = frames["heading"]
+    h["heading_rad"] = np.round(h["heading_rad"] / DEG_RAD) * DEG_RAD
+    return replace(v, frames=frames, sources={"II": SourceInfo("II", roles=["compass", "log"])})
+
+
+def test_moored_instrument_bus_is_at_rest_not_frozen_stuck_or_contradicted():
+    """One talker for everything (an instrument bus) moored, SOG 0.0 and STW 0.0: was
+    frozen, stuck and a contradiction.  The log is another instrument under the same key:
+    at rest; the heading has no other witness: never stuck.  Under way at 12 kn the log
+    witnesses the held fix."""
+    r = check_night(_instrument_bus(0.0))
+    assert not r.failed, [c.message for c in r.failed]
+    frozen = _check(r, "frozen", "II")
+    assert frozen.status == "pass" and "at rest: log speed 0.0 kn (II)" in frozen.message
+    assert _check(r, "stuck", "II").status in ("pass", "not_checked")
+    moving = check_night(_instrument_bus(12.0))
+    assert _check(moving, "frozen", "II").status == "fail"
+
+
 def test_held_gnss_fix_under_way_is_still_frozen():
     """The same held fix at 12 kn: the INS witness the motion, frozen fails (and the
     source flagged the frozen fixes valid: a contradiction)."""

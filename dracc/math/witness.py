@@ -26,10 +26,10 @@ Turning (:func:`turn_witness`)
     ``N`` normal samples; ``sigma^2 = max(0, -mean(d_k d_{k+1}))`` from successive first
     differences ``d``, which white noise makes anticorrelated and a real turn or yaw
     does not).  The largest such turn over the witnesses is what they prove.  Only where
-    no other source gives a heading, the other sources' COG while they show the ship
-    moving, and then its net change (the first third's circular mean against the
-    last's): a course swings with the current, the leeway and the yaw by degrees while
-    the heading holds.
+    no other source gives a heading, the COG of any source (also one under the
+    heading's own key: another instrument) while it shows the ship moving, and then its
+    net change (the first third's circular mean against the last's): a course swings
+    with the current, the leeway and the yaw by degrees while the heading holds.
 """
 
 from __future__ import annotations
@@ -171,7 +171,9 @@ def ground_witness(
             keys.append(str(key))
         if speeds:
             return GroundWitness(float(np.median(speeds)), "positions", tuple(sorted(keys)))
-    w = _window(frames.get("water"), exclude, a_ns, b_ns, only)
+    # the log is another instrument even where it talks under the position's own key (an
+    # instrument bus, NMEA 0183 'II', relays the GNSS, the compass and the log alike)
+    w = _window(frames.get("water"), "" if only is None else exclude, a_ns, b_ns, only)
     if w is not None:
         v = np.abs(w["stw_mps"].to_numpy(float))
         ok = np.isfinite(v)
@@ -225,8 +227,10 @@ def turn_witness(
                 s, t = _spread_and_turn(h, quanta.get(str(key), 0.0))
                 best_spread, best_turn = max(best_spread, s), max(best_turn, t)
                 keys.append(str(key))
-    w = _window(frames.get("ground"), exclude, a_ns, b_ns) if not keys else None
-    if w is not None:  # no other heading: the course, while moving, net of its swing
+    # no other heading: the course of any GNSS, also one under the heading's own key (an
+    # instrument bus relays compass and GNSS alike), while moving, net of its swing
+    w = _window(frames.get("ground"), "", a_ns, b_ns) if not keys else None
+    if w is not None:
         for key, g in w.groupby("source", observed=True):
             c = g["cog_rad"].to_numpy(float)
             c = c[np.isfinite(c) & (g["sog_mps"].to_numpy(float) >= moving_mps)]
