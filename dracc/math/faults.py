@@ -463,8 +463,8 @@ def _stuck(
         msg = (
             f"{key}: heading stuck at {h[a] / DEG_RAD:.2f} deg for {b - a} records, "
             f"{_span(ta, tb)}, while other headings span {turn.spread_rad / DEG_RAD:.1f} deg "
-            f"({', '.join(turn.sources)}; {turn.turn_rad / DEG_RAD:.1f} deg beyond their "
-            f"noise, against the {q / DEG_RAD:.2g} deg the source resolves)"
+            f"({', '.join(turn.sources)}; each turned {turn.turn_rad / DEG_RAD:.1f} deg or "
+            f"more beyond its noise, against the {q / DEG_RAD:.2g} deg the source resolves)"
         )
         fault = SensorFault(
             key, role, "stuck_heading", "heading", ta, tb, b - a, int(line[a]), values, msg

@@ -25,7 +25,8 @@ Turning (:func:`turn_witness`)
     a steady heading: ``spread - 2 sqrt(2 ln N) sigma - q_w`` (the expected range of
     ``N`` normal samples; ``sigma^2 = max(0, -mean(d_k d_{k+1}))`` from successive first
     differences ``d``, which white noise makes anticorrelated and a real turn or yaw
-    does not).  The largest such turn over the witnesses is what they prove.  Only where
+    does not).  The smallest such turn over the witnesses covering the stretch is what
+    they prove (every one must show it).  Only where
     no other source gives a heading, the COG of any source (also one under the
     heading's own key: another instrument) while it shows the ship moving, and then its
     net change (the first third's circular mean against the last's): a course swings
@@ -216,16 +217,20 @@ def turn_witness(
     quanta: Mapping[str, float],
 ) -> TurnWitness:
     """The other heading sources (and COG while moving) over [a, b] (module docstring);
-    ``quanta``: source key -> resolution of its headings (0 where unknown)."""
-    best_spread, best_turn, keys = -math.inf, -math.inf, []
+    ``quanta``: source key -> resolution of its headings (0 where unknown).  A witness
+    must cover half the stretch with at least 6 readings; the turn proven is the
+    smallest over the witnesses (every one must show it: one wandering compass among
+    steady gyros proves nothing), the spread shown the largest."""
+    spreads, turns, keys = [], [], []
     w = _window(frames.get("heading"), exclude, a_ns, b_ns)
     if w is not None:
         for key, g in w.groupby("source", observed=True):
             h = g["heading_rad"].to_numpy(float)
-            h = h[np.isfinite(h)]
-            if h.size >= 2:
-                s, t = _spread_and_turn(h, quanta.get(str(key), 0.0))
-                best_spread, best_turn = max(best_spread, s), max(best_turn, t)
+            ok = np.isfinite(h)
+            if _covers(g["time_ns"].to_numpy(np.int64)[ok], a_ns, b_ns):
+                s, t = _spread_and_turn(h[ok], quanta.get(str(key), 0.0))
+                spreads.append(s)
+                turns.append(t)
                 keys.append(str(key))
     # no other heading: the course of any GNSS, also one under the heading's own key (an
     # instrument bus relays compass and GNSS alike), while moving, net of its swing
@@ -233,16 +238,21 @@ def turn_witness(
     if w is not None:
         for key, g in w.groupby("source", observed=True):
             c = g["cog_rad"].to_numpy(float)
-            c = c[np.isfinite(c) & (g["sog_mps"].to_numpy(float) >= moving_mps)]
-            if c.size >= 6:
-                s, _ = _spread_and_turn(c, 0.0)
+            ok = np.isfinite(c) & (g["sog_mps"].to_numpy(float) >= moving_mps)
+            if _covers(g["time_ns"].to_numpy(np.int64)[ok], a_ns, b_ns):
+                c = c[ok]
                 third = c.size // 3
-                net = abs(float(angdiff(circmean(c[-third:]), circmean(c[:third]))))
-                best_spread, best_turn = max(best_spread, s), max(best_turn, net)
+                spreads.append(_spread_and_turn(c, 0.0)[0])
+                turns.append(abs(float(angdiff(circmean(c[-third:]), circmean(c[:third])))))
                 keys.append(f"{key} COG")
     if not keys:
         return TurnWitness(math.nan, math.nan, ())
-    return TurnWitness(best_spread, max(best_turn, 0.0), tuple(sorted(set(keys))))
+    return TurnWitness(max(spreads), max(min(turns), 0.0), tuple(sorted(set(keys))))
+
+
+def _covers(t: np.ndarray, a_ns: int, b_ns: int) -> bool:
+    """At least 6 readings spanning half of [a, b]."""
+    return t.size >= 6 and (t[-1] - t[0]) >= 0.5 * (b_ns - a_ns)
 
 
 def heading_spread_deg(
