@@ -49,8 +49,8 @@ plausibility / ``dr_2m``
 plausibility / ``frozen``, ``stuck``, ``out_of_range``
     :mod:`dracc.math.faults` with the integrity windows (``frozen_min_s``): bit-identical
     positions while another source shows the ship moving farther than three steps of the
-    source's resolution, a heading repeating while another heading source turns beyond
-    its own noise by more than three steps of the source's resolution (both resolutions
+    source's resolution, a heading repeating while the other heading sources (each one)
+    turn beyond their noise by more than three steps of the source's resolution (both resolutions
     learned from the values: an AIS heading in whole degrees is not stuck while a gyro
     yaws 0.9 deg; at rest only a swing of ``[faults] turn_min_deg``), values no sensor
     can produce.  A finding needs a witness
