@@ -35,9 +35,15 @@ def main(argv: list[str] | None = None) -> int:
     if argv is None:
         if QUICK_EXIT["on"] and code == ExitCode.OK:
             quick_exit(code)
-        if code == ExitCode.INTERRUPTED and SIGNALLED["on"]:
-            # everything has unwound; a library cut off in its module init may not survive
-            # the interpreter's shutdown (an abort, exit -6): end here, with 130
+        if code != ExitCode.OK:
+            # a failed run has unwound (atomic writes rolled back, the one line said) and
+            # has nothing left to do; the interpreter's shutdown would only race the native
+            # libraries' worker threads: pyarrow's I/O thread dropping the last reference to
+            # a CSV reader takes the GIL to free its Python row handler, and a thread that
+            # takes the GIL while the interpreter finalizes is ended by pthread_exit, whose
+            # unwinding through C++ is std::terminate (SIGABRT, exit 134, 2 runs in 90 of
+            # a CSV that failed at once, on a loaded machine).  The same holds for a library
+            # cut off in its module init by an interrupt (exit -6).  End here, with the code.
             quick_exit(code)
         sys.exit(int(code))
     return int(code)

@@ -30,6 +30,7 @@ import pandas as pd
 
 from dracc.core.errors import DraccError, IngestError
 from dracc.frames import KINDS, FileResult, Rejects, SourceInfo, TimeEvents, Voyage, empty_frame
+from dracc.ingest import unsupported
 from dracc.ingest.compressed import STDIN, plain_copy
 from dracc.ingest.demux import relabel, scaled_progress
 from dracc.ingest.nmea import check_readable
@@ -46,12 +47,6 @@ if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
     from dracc.core.config import IngestConfig
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
-_BINARY_MAGIC = {
-    b"\xff\xd8\xff": "a JPEG image",
-    b"\x89PNG": "a PNG image",
-    b"PK\x03\x04": "a ZIP archive",
-    b"%PDF": "a PDF document",
-}
 
 __all__ = ["MCAP_MAGIC", "assign_roles", "detect_format", "read_file", "read_logs"]
 
@@ -102,9 +97,10 @@ def _damaged_container(head: bytes, tail: bytes) -> str | None:
 
 def detect_format(path: str | Path) -> str:
     """'mcap', 'gpsd-json', 'signalk-delta', 'signalk', 'n2k', 'csv' or 'nmea' from the
-    first bytes; IngestError for known non-logs and for
-    an MCAP file damaged in transfer (:func:`_damaged_container`), which would otherwise be
-    read as NMEA text and give nothing but rejected lines."""
+    first bytes; IngestError for known non-logs (:mod:`dracc.ingest.unsupported`: packet
+    captures, PCAN-View traces, tab-separated tables dracc cannot read, binary files ...)
+    and for an MCAP file damaged in transfer (:func:`_damaged_container`), which would
+    otherwise be read as NMEA text and give nothing but rejected lines."""
     p = Path(path)
     check_readable(p)
     with p.open("rb") as fh:
@@ -122,9 +118,9 @@ def detect_format(path: str | Path) -> str:
             f"{p}: not readable: looks like an MCAP file damaged in transfer ({damage}); "
             "copy the original again in binary mode"
         )
-    for magic, what in _BINARY_MAGIC.items():
-        if head.startswith(magic):
-            raise IngestError(f"{p}: not a log file: looks like {what}")
+    what = unsupported.container(head)
+    if what is not None:
+        raise IngestError(f"{p}: not a log file: looks like {what}")
     from dracc.ingest.gpsd_json import looks_like_gpsd_json
     from dracc.ingest.n2k import sniff_n2k
     from dracc.ingest.signalk import looks_like_signalk
@@ -147,6 +143,9 @@ def detect_format(path: str | Path) -> str:
         is_csv = None
     if is_csv is not None and is_csv(head):
         return "csv"
+    what = unsupported.text_form(head)
+    if what is not None:
+        raise IngestError(f"{p}: not a log dracc reads: looks like {what}")
     return "nmea"
 
 

@@ -48,8 +48,10 @@ of 30 000 rows took 3.8 GB).
 from __future__ import annotations
 
 import codecs
+import csv as stdcsv
 import functools
 import io
+import re
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -58,7 +60,7 @@ import numpy as np
 import pandas as pd
 
 from dracc.core.config import IngestConfig
-from dracc.core.errors import IngestError
+from dracc.core.errors import ConfigError, IngestError
 from dracc.core.quantities import REF_QUANTITIES
 from dracc.frames import FileResult, Rejects, concat_blocks
 from dracc.ingest.csv_cells import (
@@ -66,6 +68,7 @@ from dracc.ingest.csv_cells import (
     TIME_COLUMNS,
     Columns,
     cell_numbers,
+    column_name,
     drop_blank_rows,
     find_column,
     parse_times,
@@ -88,7 +91,16 @@ __all__ = ["RAW_COLUMNS", "TIME_COLUMNS", "looks_like_csv", "parse_times", "read
 _BLOCK_BYTES = 4 << 20
 
 
-def _split_header(head: bytes) -> list[str] | None:
+def header_delimiter(head: bytes) -> str:
+    """The delimiter of a table whose first bytes are ``head``: a tab where its first line
+    has more tabs than commas (instruments' tab-separated exports), else a comma."""
+    first = head.split(b"\n", 1)[0]
+    return "\t" if first.count(b"\t") > first.count(b",") else ","
+
+
+def raw_header(head: bytes, delimiter: str = ",") -> list[str] | None:
+    """The names of the first line of ``head`` as written (blanks kept, quotes as a CSV
+    parser reads them), or None where it is no table header."""
     if head.startswith(b"\xef\xbb\xbf"):
         head = head[3:]
     first = head.split(b"\n", 1)[0].rstrip(b"\r")
@@ -96,15 +108,23 @@ def _split_header(head: bytes) -> list[str] | None:
         text = first.decode("utf-8")
     except UnicodeDecodeError:
         return None
-    if not text or text[0] in "$!\\" or "," not in text:
+    if not text or text[0] in "$!\\" or delimiter not in text:
         return None
-    return [c.strip().strip('"').strip() for c in text.split(",")]
+    return next(stdcsv.reader([text], delimiter=delimiter), None)
+
+
+def _split_header(head: bytes, delimiter: str = ",") -> list[str] | None:
+    """The header names as dracc matches them: blanks around each name left out
+    (``Lat. , Long.`` names ``Lat.`` and ``Long.``)."""
+    raw = raw_header(head, delimiter)
+    return None if raw is None else [column_name(c) for c in raw]
 
 
 def looks_like_csv(head: bytes) -> bool:
     """True when the first line of ``head`` is a header dracc reads: a time column and
-    either ``quantity,value``, a raw-sentence column, or at least one other column."""
-    cols = _split_header(head)
+    either ``quantity,value``, a raw-sentence column, or at least one other column;
+    comma- or tab-separated (:func:`header_delimiter`)."""
+    cols = _split_header(head, header_delimiter(head))
     if not cols or len(cols) < 2:
         return False
     return find_column(cols, TIME_COLUMNS) is not None
@@ -138,6 +158,8 @@ class _Scan:
     """What the first pass over a CSV found: its codec and the rows too long to read."""
 
     encoding: str = "utf8"
+    delimiter: str = ","  #: a comma, or a tab (:func:`header_delimiter`)
+    names: list[str] = field(default_factory=list)  #: the header's names as written
     #: rows longer than the limit: (file line number, byte offset, end offset incl. the line
     #: end, length without the line end, their first bytes)
     long_rows: list[tuple[int, int, int, int, bytes]] = field(default_factory=list)
@@ -312,10 +334,14 @@ def _iter_blocks(
                 encoding=scan.encoding,
             ),
             parse_options=pcsv.ParseOptions(
-                invalid_row_handler=on_invalid, ignore_empty_lines=False, newlines_in_values=False
+                delimiter=scan.delimiter,
+                invalid_row_handler=on_invalid,
+                ignore_empty_lines=False,
+                newlines_in_values=False,
             ),
             convert_options=pcsv.ConvertOptions(
-                column_types={c: pa.string() for c in cols},
+                # by the names as written (``Lat. `` with its blank): every cell a string
+                column_types={c: pa.string() for c in [*cols, *scan.names]},
                 strings_can_be_null=False,
                 quoted_strings_can_be_null=False,
             ),
@@ -333,9 +359,13 @@ def _iter_blocks(
                 continue
             lines = _line_numbers(k0, n, invalid)
             k0 += n
+            # the columns by position, named as dracc matches them (blanks around a
+            # name left out: pyarrow keeps them, and ``Lat. `` is the column ``Lat.``)
+            names = batch.schema.names
+            keys = cols if len(cols) == len(names) else [column_name(c) for c in names]
             data = {
-                name: batch.column(i).to_numpy(zero_copy_only=False).astype(object)
-                for i, name in enumerate(batch.schema.names)
+                key: batch.column(i).to_numpy(zero_copy_only=False).astype(object)
+                for i, key in enumerate(keys)
             }
             yield data, lines
     except pa.ArrowInvalid as err:
@@ -356,14 +386,17 @@ def read_csv(
     """
     p = Path(path)
     file = str(p)
-    declared = dict(getattr(cfg, "quantities", {}) or {})
-    check_declared(declared, file)
+    given = dict(getattr(cfg, "quantities", {}) or {})
+    check_declared(given, file)
+    declared = {column_name(k): v for k, v in given.items()}  # matched as header names are
     try:
         with p.open("rb") as fh:
             head = fh.read(65536)
     except OSError as err:
         raise IngestError(f"{file}: cannot read: {err}") from err
-    cols = _split_header(head)
+    delimiter = header_delimiter(head)
+    names = raw_header(head, delimiter)
+    cols = None if names is None else [column_name(c) for c in names]
     if not cols or find_column(cols, TIME_COLUMNS) is None:
         first = head.split(b"\n", 1)[0][:80].decode("utf-8", "replace")
         raise IngestError(
@@ -382,6 +415,9 @@ def read_csv(
         scan = _scan(p, limit)
     except OSError as err:
         raise IngestError(f"{file}: cannot read: {err}") from err
+    scan.delimiter, scan.names = delimiter, list(names or [])
+    if delimiter == "\t":
+        notes.append(f"{file}: a tab-separated table, read as CSV with the tab as delimiter")
     if scan.long_rows:
         if scan.long_rows[0][0] == 1:
             raise IngestError(
@@ -438,6 +474,7 @@ def _read_wide(
 ) -> FramesAndRows:
     tcol = required_column(cols, TIME_COLUMNS)
     scol = find_column(cols, ("source",))
+    unmatched_keys(declared, cols, file)
     qcols: dict[str, str] = {}
     ignored = []
     for c in cols:
@@ -459,9 +496,11 @@ def _read_wide(
         )
         notes.append(f"{file}: column {c!r} ignored: not a quantity name{hint}")
     if not qcols:
+        what = "a tab-separated table" if scan.delimiter == "\t" else "a table"
         raise IngestError(
-            f"{file}:1: no column names a quantity (e.g. lat_deg, heading_deg, stw_kn); "
-            f"columns: {', '.join(cols)}"
+            f"{file}:1: {what} with columns {', '.join(repr(c) for c in cols)}, none of "
+            "which names a quantity with its unit (e.g. lat_deg, heading_deg, stw_kn): map "
+            'its columns in [ingest.quantities] (e.g. "Lat." = "lat_deg")'
         )
     parts: list[dict[str, pd.DataFrame]] = []
     rows = 0
@@ -481,6 +520,22 @@ def _read_wide(
         # column of every row, and a string per row, made memory grow with the file)
         parts.append(build_frames(t_ns[ok], src, lines[ok], "csv", vals, file, rejects))
     return sorted_frames(concat_blocks(parts, every_kind=False)), rows
+
+
+def unmatched_keys(declared: dict[str, str], cols: list[str], file: str) -> None:
+    """ConfigError where a key of ``[ingest.quantities]`` names no column of a wide table:
+    its column would be left out without a word (a key ``"Lat"`` for the column ``Lat.``).
+    The error names the key, the column it nearly matches, and the columns there are."""
+    loose = {re.sub(r"[^a-z0-9]", "", c.lower()): c for c in cols}
+    for key in declared:
+        if key in cols:
+            continue
+        near = loose.get(re.sub(r"[^a-z0-9]", "", key.lower()))
+        hint = f" (did you mean {near!r}?)" if near else ""
+        raise ConfigError(
+            f"{file}: [ingest.quantities] {key!r} names no column of this table{hint}; "
+            f"its columns are: {', '.join(repr(c) for c in cols)}"
+        )
 
 
 def _read_raw(

@@ -8,6 +8,7 @@ Text cells are Python strings in object arrays: nothing here builds a fixed-widt
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 import numpy as np
@@ -34,12 +35,33 @@ TIME_COLUMNS = (
 RAW_COLUMNS = ("raw_data", "raw", "nmea", "raw_sentence", "sentence_raw")
 
 
+#: time columns as instruments' exports name them, compared without case, blanks or
+#: punctuation, the zone word ``utc``/``gmt`` left out: ``DATE/TIME(UTC)``, ``Time (UTC)``,
+#: ``UTC Time``, ``Date Time``.  A name that says ``local`` is never one (not UTC).
+_LOOSE_TIME = {"datetime", "time", "timestamp", "dateandtime", "timeanddate", "timeofday"}
+
+
+def column_name(name: str) -> str:
+    """A header name as dracc matches it: without blanks (and quotes) around it, as
+    instruments write ``Lat. , Long.``."""
+    return name.strip().strip('"').strip()
+
+
 def find_column(cols: list[str], names: tuple[str, ...]) -> str | None:
-    """The first of ``names`` among the columns ``cols`` (any case), as spelled there."""
-    low = {c.lower(): c for c in cols}
+    """The first of ``names`` among the columns ``cols`` (any case, blanks around a name
+    ignored), as spelled there."""
+    low = {column_name(c).lower(): c for c in cols}
     for n in names:
         if n in low:
             return low[n]
+    if names is TIME_COLUMNS:
+        for c in cols:
+            key = re.sub(r"[^a-z]", "", c.lower())
+            if "local" in key:
+                continue
+            bare = re.sub(r"^(utc|gmt)|(utc|gmt)$", "", key)
+            if bare in _LOOSE_TIME:
+                return c
     return None
 
 

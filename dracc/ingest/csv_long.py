@@ -120,7 +120,7 @@ def read_long_pass(
         data, lines = drop_blank_rows(data, lines, rejects, file)
         t_ns, ok = row_times(data, lines, tcol, rejects, file)
         qname = data[qcol]
-        qmapped = np.array([declared.get(q, q) for q in qname], dtype=object) if declared else qname
+        qmapped = quantity_names(qname, declared)
         known = np.isin(qmapped, list(QUANTITIES))
         unk = ok & ~known
         if unk.any():
@@ -173,6 +173,17 @@ def read_long_pass(
         held = []
         parts.append(long_records(*rows_now, sources, quantities, file, rejects))
     return sorted_frames(concat_blocks(parts, every_kind=False)), rows
+
+
+def quantity_names(qname: np.ndarray, declared: dict[str, str]) -> np.ndarray:
+    """The quantity each row names: its cell without blanks around it (`` lat_deg``), or
+    what ``[ingest.quantities]`` maps that name to; one look-up per distinct name."""
+    codes, uniq = pd.factorize(qname)
+    if not len(uniq):
+        return qname
+    names = [str(u).strip() for u in uniq]
+    lut = np.array([declared.get(n, n) for n in names], dtype=object)
+    return lut[codes]
 
 
 def long_records(
