@@ -274,3 +274,22 @@ def test_nmea_logs_with_tabs_or_a_little_binary_are_still_read(tmp_path):
     noisy = tmp_path / "noisy.log"
     noisy.write_bytes(gga * 5 + _binary()[:3000] + gga * 5)
     assert detect_format(noisy) == "nmea"
+
+
+def test_date_and_time_of_day_columns_make_the_time(tmp_path):
+    """Instrument tables give ``Date`` and ``Time (UTC)`` apart: each row's time is both
+    (the time of day alone was a ``bad time`` on every row)."""
+    from dracc.core.config import IngestConfig
+    from dracc.ingest.csv import read_csv
+
+    log = tmp_path / "instruments.txt"
+    log.write_text(
+        "Date\tTime (UTC)\tLat.\tLong.\n"
+        "2015-09-21\t13:13:21\t43.47\t6.99\n"
+        "2015-09-21\t23:59:59.5\t43.4701\t6.9902\n",
+        encoding="utf-8",
+    )
+    r = read_csv(log, IngestConfig(quantities={"Lat.": "lat_deg", "Long.": "lon_deg"}))
+    t = r.frames["position"]["time_ns"].tolist()
+    assert t == [1442841201_000_000_000, 1442879999_500_000_000]
+    assert not r.rejects.total

@@ -69,6 +69,7 @@ from dracc.ingest.csv_cells import (
     Columns,
     cell_numbers,
     column_name,
+    date_column,
     drop_blank_rows,
     find_column,
     parse_times,
@@ -473,12 +474,13 @@ def _read_wide(
     scan: _Scan,
 ) -> FramesAndRows:
     tcol = required_column(cols, TIME_COLUMNS)
+    dcol = date_column(cols, tcol)  #: ``Date`` beside ``Time``: each row's time is both
     scol = find_column(cols, ("source",))
     unmatched_keys(declared, cols, file)
     qcols: dict[str, str] = {}
     ignored = []
     for c in cols:
-        if c in (tcol, scol):
+        if c in (tcol, scol, dcol):
             continue
         q = lookup(c, declared)
         if q is None:
@@ -507,6 +509,8 @@ def _read_wide(
     for data, lines in _iter_blocks(p, cols, rejects, file, scan):
         rows += len(lines)
         data, lines = drop_blank_rows(data, lines, rejects, file)
+        if dcol is not None:
+            data[tcol] = data[dcol] + " " + data[tcol]
         t_ns, ok = row_times(data, lines, tcol, rejects, file)
         vals: dict[str, np.ndarray] = {}
         for c, qname in qcols.items():

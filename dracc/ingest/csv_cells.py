@@ -56,13 +56,22 @@ def find_column(cols: list[str], names: tuple[str, ...]) -> str | None:
             return low[n]
     if names is TIME_COLUMNS:
         for c in cols:
-            key = re.sub(r"[^a-z]", "", c.lower())
-            if "local" in key:
-                continue
-            bare = re.sub(r"^(utc|gmt)|(utc|gmt)$", "", key)
-            if bare in _LOOSE_TIME:
+            if "local" not in c.lower() and _loose(c) in _LOOSE_TIME:
                 return c
     return None
+
+
+def date_column(cols: list[str], tcol: str) -> str | None:
+    """The date column beside a time-of-day column (``Date`` and ``Time (UTC)``, as
+    instrument tables give them), or None where the time column holds whole times."""
+    if _loose(tcol) not in ("time", "timeofday"):
+        return None
+    return next((c for c in cols if c != tcol and _loose(c) == "date"), None)
+
+
+def _loose(name: str) -> str:
+    key = re.sub(r"[^a-z]", "", name.lower())
+    return re.sub(r"^(utc|gmt)|(utc|gmt)$", "", key)
 
 
 def required_column(cols: list[str], names: tuple[str, ...]) -> str:
