@@ -16,10 +16,11 @@ import pytest
 from bridge_log import Bridge
 
 from dracc.core.config import Config, IngestConfig
+from dracc.core.resolution import HEADING_QUANTA_RAD, quantum
 from dracc.frames import SourceInfo, make_frame
 from dracc.ingest import read_logs
 from dracc.ingest.inspect import inspect_logs
-from dracc.ingest.role_evidence import quantum, rank_sources
+from dracc.ingest.role_evidence import rank_sources
 from dracc.pipeline.analysis import analyse_voyage
 
 
@@ -135,20 +136,22 @@ def test_ais_integer_heading_is_the_last_resort():
     c = rank_sources(frames, "compass", ["AI", "gyro"], infos)
     assert c.chosen == "gyro"
     assert "AIS own-ship heading" in dict(c.runners_up)["AI"]
-    assert c.evidence["AI"]["resolution"] == 1.0 and c.evidence["gyro"]["resolution"] == 0.1
+    assert c.evidence["AI"]["resolution"] == pytest.approx(1.0)
+    assert c.evidence["gyro"]["resolution"] == pytest.approx(0.1)
 
 
 @pytest.mark.parametrize(
-    ("values", "q"),
+    ("values_deg", "q_deg"),
     [
         (np.arange(0, 360, 1.0), 1.0),
         (np.round(np.linspace(0, 20, 500), 1), 0.1),
-        (np.degrees(np.round(np.linspace(0, 6, 500) / 1e-4) * 1e-4), 0.001),
-        (np.zeros(50), 0.001),
+        (np.degrees(np.round(np.linspace(0, 6, 500) / 1e-4) * 1e-4), np.degrees(1e-4)),
+        (np.zeros(50), 0.0),
     ],
 )
-def test_resolution_is_the_quantum_of_the_readings(values, q):
-    assert quantum(values) == q
+def test_resolution_is_the_step_of_the_readings(values_deg, q_deg):
+    got = quantum(np.radians(values_deg), HEADING_QUANTA_RAD)
+    assert got == pytest.approx(np.radians(q_deg), rel=1e-9)
 
 
 def test_real_logs_no_role_filled_by_two_sources(real_dir):

@@ -14,11 +14,11 @@ from conftest import real_path
 
 from dracc.core.config import Config, IngestConfig, IntegrityConfig
 from dracc.core.geodesy import add_offset_ne
+from dracc.core.resolution import HEADING_QUANTA_RAD, quantum
 from dracc.core.units import DEG_RAD, NS_PER_S
 from dracc.frames import KINDS, MISSING_NS, Rejects, SourceInfo, TimeEvents, Voyage, empty_frame
 from dracc.ingest import read_logs
 from dracc.math.integrity import check_night
-from dracc.math.witness import HEADING_QUANTA_RAD, quantum
 from dracc.sim import SimParams, simulate
 from dracc.sim.faults import parse_fault
 from dracc.sim.params import GM

@@ -20,7 +20,9 @@ order (the first that tells the best candidates apart decides):
    under way, log speed against the GNSS speed over ground, a receiver against the other
    receivers' median position -- the RMS of the difference, drift angle and current
    included for every candidate alike (kept if within 1.5x the best plus a floor);
-5. **resolution**: the quantum of the readings (kept if within 5x the finest);
+5. **resolution**: the step the readings are logged with
+   (:func:`dracc.core.resolution.quantum`; kept if within 5x the finest, an unknown step
+   counting as fine);
 6. more readings, then the key (a deterministic tie).
 
 Every runner-up is named with the step at which it lost: the notes say what was chosen,
@@ -37,11 +39,17 @@ import numpy as np
 import pandas as pd
 
 from dracc.core.arrays import FloatArray, IntArray, hold_at
+from dracc.core.resolution import (
+    HEADING_QUANTA_RAD,
+    POSITION_QUANTA_RAD,
+    SPEED_QUANTA_MPS,
+    quantum,
+)
 from dracc.core.units import DEG_RAD, KN_MPS, NS_PER_S
 from dracc.frames import RoleChoice, SourceInfo
 from dracc.ingest.sources import GNSS_FAMILY, N2K_HEADING, N2K_POSITION
 
-__all__ = ["CHOSEN_ROLES", "choose_roles", "rank_sources"]
+__all__ = ["CHOSEN_ROLES", "choice_note", "choose_roles", "rank_sources"]
 
 CHOSEN_ROLES = ("gnss", "compass", "log")  #: the GNSS first: the others' reference
 #: availability bins (s); a candidate within AVAILABLE_SHARE of the best is as available
@@ -65,10 +73,6 @@ HOLD_S = 5.0
 #: the track made good between fixes this far apart (s), where no COG/SOG is sent
 TRACK_STEP_S = 10.0
 EARTH_RADIUS_M = 6371000.0  #: a local scale for metres between nearby fixes
-#: the quanta tried, coarse to fine, in the role's display unit (deg, kn, m)
-QUANTA = (10.0, 5.0, 1.0, 0.5, 0.1, 0.05, 0.01, 0.001)
-#: a position's quanta in minutes of latitude (NMEA's 3, 4 or 5 decimals of minutes)
-MINUTE_QUANTA = (1.0, 0.1, 0.01, 0.001, 1e-4, 1e-5, 1e-6)
 
 UNITS = {"compass": ("°", 1.0 / DEG_RAD), "log": (" kn", 1.0 / KN_MPS), "gnss": (" m", 1.0)}
 FLOORS = {"compass": 1.0, "log": 0.1, "gnss": 5.0}  #: in display units
@@ -111,21 +115,6 @@ class Evidence:
 
 
 # ----------------------------------------------------------------- the figures
-
-
-def quantum(values: FloatArray, quanta: tuple[float, ...] = QUANTA) -> float:
-    """The largest of :data:`QUANTA` that 99 % of ``values`` are whole multiples of (the
-    finest where none is): an AIS heading's 1°, a log's 0.1 kn, N2K's 1e-4 rad."""
-    v = values[np.isfinite(values) & (values != 0)]  # zero is a multiple of every quantum
-    if v.size == 0:
-        return quanta[-1]
-    if v.size > 5000:
-        v = v[:: v.size // 5000]
-    for q in quanta:
-        r = v / q
-        if np.mean(np.abs(r - np.round(r)) < 1e-3) >= 0.99:
-            return q
-    return quanta[-1]
 
 
 def _availability(times: dict[str, IntArray]) -> dict[str, float]:
@@ -239,7 +228,8 @@ def _compass_evidence(
             kind = 1
         else:
             kind = 0
-        e = Evidence(k, kind, int(ok.sum()), resolution=quantum(h[ok] / DEG_RAD))
+        res_deg = quantum(h[ok], HEADING_QUANTA_RAD) / DEG_RAD
+        e = Evidence(k, kind, int(ok.sum()), resolution=res_deg)
         out.append(e)
     if ref is not None:
         tr, cog, sog = ref
@@ -283,7 +273,8 @@ def _log_evidence(
             t, v = _series(w, k, "sog_long_mps")
             kind = 1
         series[k] = (t, v)
-        out.append(Evidence(k, kind, int(t.size), resolution=quantum(v / KN_MPS)))
+        res_kn = quantum(v, SPEED_QUANTA_MPS) / KN_MPS
+        out.append(Evidence(k, kind, int(t.size), resolution=res_kn))
     if ref is not None:
         tr, _, sog = ref
         moving = sog > UNDER_WAY_MPS
@@ -330,8 +321,7 @@ def _gnss_evidence(
         o = np.argsort(t, kind="stable")
         la, lo = d["lat_rad"].to_numpy(float)[o], d["lon_rad"].to_numpy(float)[o]
         series[k] = (t[o], la, lo)
-        minutes = (np.abs(la) / DEG_RAD * 60.0) % 60.0
-        res_m = quantum(minutes, MINUTE_QUANTA) * 1852.0  # a minute of latitude is 1852 m
+        res_m = quantum(la, POSITION_QUANTA_RAD) * EARTH_RADIUS_M  # a minute of latitude is 1852 m
         out.append(Evidence(k, kinds.get(k, 0), int(t.size), resolution=res_m))
     if len(keys) >= 3:  # the others' median position is a reference only among three or more
         for e in out:
@@ -397,12 +387,13 @@ def _decide(role: str, ev: list[Evidence]) -> tuple[Evidence, dict[str, str], st
             lambda e: e.rms is not None and e.rms <= AGREE_FACTOR * r_best + FLOORS[role],
             lambda e: f"{e.rms:.2f}{unit} RMS from the reference against {r_best:.2f}{unit}",
         )
-    q_best = min(e.resolution for e in pool)
+    known = [e.resolution for e in pool if e.resolution > 0]  # 0: fewer than 3 values
+    q_best = min(known, default=0.0)
     pool = _keep(
         pool,
         lost,
-        lambda e: e.resolution <= RESOLUTION_FACTOR * q_best,
-        lambda e: f"resolution {e.resolution:g}{unit} against {q_best:g}{unit}",
+        lambda e: e.resolution <= RESOLUTION_FACTOR * q_best or not e.resolution,
+        lambda e: f"resolution {e.resolution:.3g}{unit} against {q_best:.3g}{unit}",
     )
     chosen = sorted(pool, key=lambda e: (-e.samples, e.key))[0]
     for e in pool:
@@ -415,7 +406,8 @@ def _decide(role: str, ev: list[Evidence]) -> tuple[Evidence, dict[str, str], st
     why = [KIND_NAMES[role][chosen.kind], f"{100 * chosen.availability:.0f} % available"]
     if chosen.rms is not None:
         why.append(f"{chosen.rms:.2f}{unit} RMS from the reference")
-    why.append(f"resolution {chosen.resolution:g}{unit}")
+    if chosen.resolution:
+        why.append(f"resolution {chosen.resolution:.3g}{unit}")
     return chosen, lost, ", ".join(why)
 
 

@@ -19,7 +19,7 @@ Kinds and the rule that finds each (thresholds in :class:`dracc.core.config.Faul
     moving (:func:`dracc.math.witness.ground_witness`: another source's SOG, else the
     net motion of another position source, else the log beyond a berth's current, at
     ``moving_min_kn`` or more) and farther over the run than three steps of the
-    source's own resolution (learned from its values, :func:`~dracc.math.witness.quantum`).
+    source's own resolution (learned from its values, :func:`~dracc.core.resolution.quantum`).
     No witness, no fault: a GNSS that holds its fix at rest (SOG 0.0) is a ship at rest
     (:class:`RepeatRun` ``at_rest``) or unwitnessed (``no_witness``), not frozen.
 ``stuck_heading``
@@ -62,17 +62,15 @@ from dracc.core.arrays import BoolArray, FloatArray, IntArray
 from dracc.core.config import FaultsConfig
 from dracc.core.errors import ConfigError
 from dracc.core.geodesy import A_M, distance_m, offset_ne_m
+from dracc.core.resolution import HEADING_QUANTA_RAD, POSITION_QUANTA_RAD, quantum
 from dracc.core.timefmt import iso_utc
 from dracc.core.units import DEG_RAD, KN_MPS, NMI_M, NS_PER_S
 from dracc.frames import Voyage
 from dracc.math.witness import (
-    HEADING_QUANTA_RAD,
-    POSITION_QUANTA_RAD,
     GroundWitness,
     TurnWitness,
     ground_witness,
     heading_spread_deg,
-    quantum,
     turn_witness,
 )
 

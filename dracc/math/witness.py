@@ -48,54 +48,15 @@ from dracc.core.units import DEG_RAD, KN_MPS, NS_PER_S
 
 __all__ = [
     "BERTH_CURRENT_KN",
-    "HEADING_QUANTA_RAD",
-    "POSITION_QUANTA_RAD",
     "GroundWitness",
     "TurnWitness",
     "ground_witness",
-    "quantum",
     "turn_witness",
 ]
 
-#: the steps headings are logged with: degrees (whole to 1e-4) and radians (NMEA 2000,
-#: Signal K), largest first
-HEADING_QUANTA_RAD = tuple(
-    sorted(
-        [d * DEG_RAD for d in (1.0, 0.5, 0.2, 0.1, 0.05, 0.01, 1e-3, 1e-4)]
-        + [1e-2, 1e-3, 1e-4, 1e-5, 1e-6],
-        reverse=True,
-    )
-)
-#: the steps positions are logged with: minutes of arc (NMEA 0183, 1 to 7 decimals) and
-#: degrees (NMEA 2000, Signal K, CSV: 3 to 8 decimals), largest first
-POSITION_QUANTA_RAD = tuple(
-    sorted(
-        [10.0**-k / 60.0 * DEG_RAD for k in range(1, 8)]
-        + [10.0**-k * DEG_RAD for k in range(3, 9)],
-        reverse=True,
-    )
-)
 #: a log alone proves the ship moved over the ground only beyond this speed through the
 #: water: the tidal stream a moored ship's log can read at a berth
 BERTH_CURRENT_KN = 2.0
-#: at most this many distinct values are examined to learn a resolution
-_QUANTUM_SAMPLE = 20_000
-
-
-def quantum(values: FloatArray, candidates: tuple[float, ...], share: float = 0.98) -> float:
-    """The resolution of readings ``values``: the largest of ``candidates`` (same unit)
-    of which at least ``share`` of the distinct finite values are whole multiples (to
-    1e-3 of the step); 0.0 for values on no such grid or fewer than 3 distinct ones."""
-    x = np.unique(np.asarray(values, float)[np.isfinite(values)])
-    if x.size < 3:
-        return 0.0
-    if x.size > _QUANTUM_SAMPLE:  # evenly spaced, deterministic
-        x = x[np.linspace(0, x.size - 1, _QUANTUM_SAMPLE).astype(np.int64)]
-    for q in candidates:
-        k = x / q
-        if float(np.mean(np.abs(k - np.round(k)) < 1e-3)) >= share:
-            return float(q)
-    return 0.0
 
 
 def _window(
