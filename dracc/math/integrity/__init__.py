@@ -94,7 +94,7 @@ consistency / ``speed``
 
 consistency / ``compass_witness``, ``log_witness``
     the chosen compass and log against each candidate not chosen for the role (two gyros,
-    two logs: :mod:`.witnesses`): the difference's constant part (an error, a scale) is
+    two logs: :mod:`.role_witnesses`): the difference's constant part (an error, a scale) is
     evidence, its varying part fails beyond ``max(floor, z s)``; a witness the choice
     found failed (a log at 0.0 kn while the ship moves) fails with that evidence.
 
@@ -104,7 +104,7 @@ The modules
 - :mod:`.helpers`        runs, robust sigmas, the statistic/threshold records, ``not_checked``
 - :mod:`.validity`       ``invalid_flag``, ``contradiction``
 - :mod:`.plausibility`   ``jump`` (and the fault checks below)
-- :mod:`.witnesses`      ``compass_witness``, ``log_witness``
+- :mod:`.role_witnesses` ``compass_witness``, ``log_witness``
 - :mod:`.sensor_faults`  ``frozen``, ``stuck``, ``out_of_range``
 - :mod:`.latency`        ``latency``
 - :mod:`.availability`   ``dropout``
@@ -143,7 +143,7 @@ from dracc.math.integrity.latency import latency_checks
 from dracc.math.integrity.plausibility import plausibility_checks
 from dracc.math.integrity.results import CHECK_KINDS, Check, IntegrityResult, SourceSummary
 from dracc.math.integrity.validity import contradiction_checks, validity_checks
-from dracc.math.integrity.witnesses import witness_checks
+from dracc.math.integrity.role_witnesses import witness_checks
 
 __all__ = [
     "CHECK_KINDS",
