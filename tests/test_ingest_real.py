@@ -198,11 +198,13 @@ def test_unreadable_inputs_are_clear_errors(tmp_path, content, match):
         read_logs([p], IngestConfig())
 
 
-def test_random_binary_is_counted_not_a_traceback(tmp_path):
+def test_random_binary_is_named_once_not_a_traceback(tmp_path):
+    """Issue 29: random bytes are one IngestError saying what they are (were read as
+    NMEA text, every line rejected)."""
     p = tmp_path / "noise.bin"
     p.write_bytes(np.random.default_rng(1).integers(0, 256, 200_000, dtype=np.uint8).tobytes())
-    v = read_logs([p], IngestConfig())
-    assert v.rejects.total > 0 and set(v.rejects.counts) <= set(REASONS)
+    with pytest.raises(IngestError, match="binary file with no NMEA sentence"):
+        read_logs([p], IngestConfig())
 
 
 # ------------------------------------------------ rejected = damaged; ignored = valid, unused
