@@ -293,3 +293,31 @@ def test_date_and_time_of_day_columns_make_the_time(tmp_path):
     t = r.frames["position"]["time_ns"].tolist()
     assert t == [1442841201_000_000_000, 1442879999_500_000_000]
     assert not r.rejects.total
+
+
+@pytest.mark.parametrize(
+    "name,text,needles",
+    [
+        (
+            "semi.csv",
+            "Zeit;Breite;Laenge\n13:13:21;43,47;6,99\n13:13:22;43,4701;6,99\n",
+            ["semicolon"],
+        ),
+        (
+            "comma.csv",
+            "Zeit,Lat,Lon\n13:13:21,43.47,6.99\n13:13:22,43.4701,6.99\n",
+            ["'Zeit', 'Lat'"],
+        ),
+        (
+            "track.gpx",
+            '<?xml version="1.0"?>\n<gpx version="1.1"><trk/></gpx>\n',
+            ["a GPX document"],
+        ),
+    ],
+)
+def test_other_tables_and_documents_are_named(run_cli, tmp_path, name, text, needles):
+    p = tmp_path / name
+    p.write_text(text, encoding="utf-8")
+    code, _, err = run_cli("inspect", p)
+    assert code == ExitCode.INPUT
+    _one_line(err, *needles)

@@ -4,7 +4,7 @@ thousands of lines counted as ``not_nmea``.
 :func:`container` looks at the first bytes for a binary form's magic number (packet
 captures, CAN logs of other tools, documents, archives, databases); :func:`text_form`,
 asked only after every reader has declined the file, names text forms of other tools (a
-PCAN-View trace, a tab-separated table without a time column dracc knows, UTF-16 text)
+PCAN-View trace, a table without a time column dracc knows, UTF-16 text)
 and binary files that are no log at all.  Each answer is what the file is and what dracc
 reads instead; :func:`dracc.ingest.detect_format` raises it as an IngestError.
 """
@@ -115,6 +115,14 @@ def text_form(head: bytes) -> str | None:
         return f"a PEAK PCAN-View CAN trace (.trc, {fmt}); {_CAN_INSTEAD}"
     if _SENTENCE.search(head):
         return None  # NMEA sentences in it: read them, count the rest
+    start = head.lstrip(b"\xef\xbb\xbf \t\r\n")[:512].lower()
+    if start.startswith((b"<?xml", b"<gpx", b"<kml", b"<html", b"<!doctype")):
+        kind = next((k for k in ("gpx", "kml", "html") if f"<{k}".encode() in start), "xml")
+        article = "a" if kind in ("gpx", "kml") else "an"
+        return (
+            f"{article} {kind.upper()} document, not a log of the sensors: dracc reads NMEA 0183, "
+            "NMEA 2000, Signal K, gpsd JSON, CSV and MCAP logs"
+        )
     table = _tab_table(lines)
     if table is not None:
         return table
@@ -128,20 +136,37 @@ def text_form(head: bytes) -> str | None:
     return None
 
 
+_DELIMITERS = {"\t": "tab", ";": "semicolon", ",": "comma"}
+
+
 def _tab_table(lines: list[str]) -> str | None:
-    """A tab-separated table (an instrument's export) the CSV reader cannot read: its
-    header names no time column dracc knows."""
+    """A table (an instrument's export, tab-, semicolon- or comma-separated) the CSV
+    reader cannot read: its header names no time column dracc knows.  A header is names,
+    not numbers, and the rows below it have as many fields."""
     header = lines[0].lstrip("\ufeff\xef\xbb\xbf")
-    tabs = header.count("\t")
-    if tabs < 1 or header.count(",") >= tabs:
+    if header.lstrip().startswith(("{", "[", "<", "#")):
+        return None  # JSON, XML, comments: no table
+    counts = {d: header.count(d) for d in _DELIMITERS}
+    delim = max(counts, key=lambda d: counts[d])  # the first of the most frequent
+    n = counts[delim]
+    if n < 1:
         return None
     rows = lines[1:11]
-    if rows and sum(r.count("\t") == tabs for r in rows) < len(rows) / 2:
+    if not rows or sum(r.count(delim) == n for r in rows) < len(rows) / 2:
         return None
-    cols = [c.strip().strip('"').strip() for c in header.split("\t")]
+    cols = [c.strip().strip('"').strip() for c in header.split(delim)]
+    if sum(bool(re.fullmatch(r"[-+\d.:/ TZ]*", c)) for c in cols) > len(cols) // 2:
+        return None  # a row of numbers and times, not a header of names
     shown = ", ".join(repr(c) for c in cols[:12]) + (", ..." if len(cols) > 12 else "")
+    if delim == ";":
+        return (
+            f"a semicolon-separated table with columns {shown}: save it as comma-separated "
+            "CSV (decimal points) with a time column named time_utc, and map its columns in "
+            "[ingest.quantities]"
+        )
+    what = "a tab-separated" if delim == "\t" else "a"
     return (
-        f"a tab-separated table with columns {shown}, none of them a time column dracc "
-        "knows (time_utc, timestamp, date_time, 'Time (UTC)' ...): name its time column so, "
+        f"{what} table with columns {shown}, none of them a time column dracc knows "
+        "(time_utc, timestamp, date_time, 'Time (UTC)' ...): name its time column so, "
         'and map its columns in [ingest.quantities] (e.g. "Lat." = "lat_deg")'
     )
