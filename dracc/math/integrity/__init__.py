@@ -142,8 +142,8 @@ from dracc.math.integrity.helpers import (
 from dracc.math.integrity.latency import latency_checks
 from dracc.math.integrity.plausibility import plausibility_checks
 from dracc.math.integrity.results import CHECK_KINDS, Check, IntegrityResult, SourceSummary
-from dracc.math.integrity.validity import contradiction_checks, validity_checks
 from dracc.math.integrity.role_witnesses import witness_checks
+from dracc.math.integrity.validity import contradiction_checks, validity_checks
 
 __all__ = [
     "CHECK_KINDS",
