@@ -219,6 +219,9 @@ class SourceInfo:
     first_ns: int | None = None
     last_ns: int | None = None
     files: set[str] = field(default_factory=set)
+    #: several units behind this one key, their positions of one instant far apart
+    #: (:mod:`dracc.ingest.interleaved`): what was seen, None for one unit
+    interleaved: str | None = None
 
     @property
     def role(self) -> str | None:

@@ -217,3 +217,47 @@ def test_role_override_keeps_the_others_as_witnesses(bridge):
     c = next(c for c in v.choices if c.role == "compass")
     assert c.chosen == "gyro_2" and c.witnesses == ["gyro_1"]
     assert "the evidence would have chosen gyro_1" in dict(c.runners_up)["gyro_1"]
+
+
+def test_three_ins_behind_one_talker_named_not_sixteen_thousand_jumps(tmp_path):
+    """Three INS writing $INGGA to one logger without TAG blocks: one key 'IN' whose fixes
+    of one second are hundreds of metres apart.  Named as several units, given no role,
+    its steps not judged as jumps; a GNSS sending GGA and RMC of one fix is one unit."""
+    from bridge_log import _hms, _latlon
+
+    lines = []
+    for i in range(120):
+        t = 1_780_000_000.0 + i
+        for k, off in enumerate((0.0, 0.004, -0.003)):  # ~450 m and ~330 m apart
+            ll = _latlon(57.0 + off + i * 1e-5, 11.0 + off)
+            body = f"INGGA,{_hms(t)},{ll},1,10,0.9,5.0,M,40.0,M,,"
+            lines.append(f"{_iso(t + 0.01 * k)} ${body}*{_xor(body)}")
+        ll = _latlon(57.0 + i * 1e-5, 11.0)
+        for body in (
+            f"GPGGA,{_hms(t)},{ll},1,10,0.9,5.0,M,40.0,M,,",
+            f"GPRMC,{_hms(t)},A,{ll},11.0,0.0,280526,,,A",
+        ):
+            lines.append(f"{_iso(t + 0.05)} ${body}*{_xor(body)}")
+    (tmp_path / "ins.nmea").write_text("\n".join(lines) + "\n")
+    v = read_logs([tmp_path / "ins.nmea"], IngestConfig())
+    assert v.sources["IN"].interleaved and "3 positions" in v.sources["IN"].interleaved
+    assert v.sources["GP"].interleaved is None
+    assert v.sources["IN"].roles == [] and v.role_sources("gnss") == ["GP"]
+    a = analyse_voyage(v, Config())
+    assert not [f for f in a.faults if f.source == "IN"]
+    jump = next(c for c in a.integrity.checks if c.name == "jump" and c.source == "IN")
+    assert jump.status == "not_checked"
+    assert any("IN: several units behind one key" in n for n in a.notes)
+
+
+def _iso(t_s: float) -> str:
+    import datetime as dt
+
+    return dt.datetime.fromtimestamp(t_s, tz=dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+
+def _xor(body: str) -> str:
+    x = 0
+    for ch in body:
+        x ^= ord(ch)
+    return f"{x:02X}"

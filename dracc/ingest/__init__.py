@@ -33,6 +33,7 @@ from dracc.frames import KINDS, FileResult, Rejects, SourceInfo, TimeEvents, Voy
 from dracc.ingest import unsupported
 from dracc.ingest.compressed import STDIN, plain_copy
 from dracc.ingest.demux import relabel, scaled_progress
+from dracc.ingest.interleaved import mark_interleaved
 from dracc.ingest.nmea import check_readable
 from dracc.ingest.role_evidence import choose_roles
 from dracc.ingest.sources import (
@@ -359,6 +360,7 @@ def read_logs(
             }
         )
     te.decisions.extend(identity_notes)
+    te.decisions.extend(mark_interleaved(frames, sources))
     candidates: dict[str, list[str]] = {}
     te.decisions.extend(assign_roles(sources, dict(cfg.sources), candidates))
     choices, choice_notes = choose_roles(frames, sources, candidates)

@@ -226,7 +226,9 @@ def assign_roles(
                 f"{role} role not assigned: several sources are named for it "
                 f"({', '.join(sorted(i.key for i in infos))}); map one in [ingest.sources]"
             )
-    free = {k: s for k, s in free.items() if not s.roles}
+    # several units behind one key (dracc.ingest.interleaved) get a role only by mapping
+    free = {k: s for k, s in free.items() if not s.roles and not s.interleaved}
+    one_unit = {k: s for k, s in sources.items() if not s.interleaved}
 
     # 3. content
     def has(info: SourceInfo, sents: set[str]) -> bool:
@@ -287,7 +289,7 @@ def assign_roles(
     if "compass" not in taken:
         cands = [
             s
-            for s in sources.values()
+            for s in one_unit.values()
             if has(s, HEADING_SENTENCES) and not any(r in INS_ROLES or r == "gnss" for r in s.roles)
         ]
         # what a sentence type can be: a source of fixes (GGA/GLL/RMC/GNS) that gives heading
@@ -319,7 +321,7 @@ def assign_roles(
     if "log" not in taken:
         cands = [
             s
-            for s in sources.values()
+            for s in one_unit.values()
             if has(s, {"VHW", "VBW", "PGN128259"})
             and not any(r in INS_ROLES or r == "gnss" for r in s.roles)
         ]

@@ -559,9 +559,11 @@ def faults_and_repeats(
     or headings long enough to judge, with the witnesses' verdict on it."""
     cfg = check_config(cfg or FaultsConfig())
     frames: Mapping[str, pd.DataFrame]
+    interleaved: set[str] = set()  # several units behind one key: steps are no jumps
     if isinstance(voyage_or_frames, Voyage):
         frames = voyage_or_frames.frames
         roles = {k: s.role for k, s in voyage_or_frames.sources.items()}
+        interleaved = {k for k, s in voyage_or_frames.sources.items() if s.interleaved}
     else:
         frames = voyage_or_frames
         roles = {}
@@ -574,7 +576,8 @@ def faults_and_repeats(
         # the step out of a held fix is the unit catching up, not a jump (at rest too)
         caught_up = {r.end_ns for r in frozen}
         faults += [r.fault for r in frozen if r.fault is not None]
-        faults += _jumps(key, roles.get(key), g, cfg, caught_up)
+        if key not in interleaved:
+            faults += _jumps(key, roles.get(key), g, cfg, caught_up)
     # the resolution of every heading source, learned from its values over the voyage
     quanta = {
         key: quantum(g["heading_rad"].to_numpy(float), HEADING_QUANTA_RAD)

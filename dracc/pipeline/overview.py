@@ -17,6 +17,7 @@ import pandas as pd
 from dracc.core.errors import InsufficientDataError
 from dracc.core.units import NS_PER_S
 from dracc.frames import Voyage
+from dracc.ingest.interleaved import interleaved_note
 from dracc.ingest.role_evidence import choice_note
 from dracc.pipeline.results import HeadingTrack, InputFile, SourceRow, TimeSummary, Track
 from dracc.pipeline.selection import role_of, valid_positions
@@ -146,13 +147,20 @@ def voyage_notes(
             "the instants with readings only (a stray record with a wrong date shows here)"
         )
     notes.extend(choice_note(c) for c in voyage.choices)
+    notes.extend(
+        interleaved_note(k, s.interleaved) for k, s in voyage.sources.items() if s.interleaved
+    )
     witnesses = {k: c.role for c in voyage.choices for k in c.witnesses}
     if witnesses:
         notes.append(
             "witnesses (candidates not chosen, compared with the chosen source): "
             + ", ".join(f"{k} ({role})" for k, role in witnesses.items())
         )
-    unassigned = [s.key for s in sources if not s.roles and s.key not in witnesses]
+    unassigned = [
+        s.key
+        for s in sources
+        if not s.roles and s.key not in witnesses and not voyage.sources[s.key].interleaved
+    ]
     if unassigned:
         notes.append(
             "sources without a role: " + ", ".join(unassigned) + "; assign one with --role KEY=ROLE"

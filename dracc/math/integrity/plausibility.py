@@ -279,6 +279,22 @@ def plausibility_checks(
     for key, g in by_source(voyage.frames["position"]):
         # every held fix, faulty or at rest: the step out of it is the unit catching up
         frozen = [r for r in repeats if r.source == key and r.kind == "frozen"]
+        info = voyage.sources.get(key)
+        if info is not None and info.interleaved:  # several units: a step is no evidence
+            checks.append(
+                not_checked(
+                    "plausibility",
+                    "jump",
+                    key,
+                    role_of(voyage, key),
+                    "innovation",
+                    "m",
+                    "",
+                    f"{key}: several units behind one key ({info.interleaved})",
+                    "several units interleaved under one key",
+                )
+            )
+            continue
         checks.append(jump_check(key, role_of(voyage, key), g, frozen, cfg, water))
     checks += fault_checks(
         voyage,
