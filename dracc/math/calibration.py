@@ -719,8 +719,9 @@ def calibrate_from_track(
     den = float(np.sum(rn**2))
     rho = min(max(num / den, 0.0), 0.9) if den > 0 and consecutive.any() else 0.0
     inflation = (1 + rho) / (1 - rho)
-    cov = inflation * s2 * normal_inverse(JtJ)
-    sig = np.sqrt(np.diag(cov))
+    with np.errstate(invalid="ignore"):  # an unobservable direction: NaN, reported below
+        cov = inflation * s2 * normal_inverse(JtJ)
+        sig = np.sqrt(np.diag(cov))
     x = sol.x.copy()
     # the heading error on the circle (the fit is free to wander a turn or more)
     x[: 1 if heading_model == "deviation" else n_h] = wrap_pi(
