@@ -321,3 +321,14 @@ def test_negative_latency_worded_as_clock_lead():
     assert early.status == "fail"
     assert "2.17 s ahead of the logger clock" in early.message, early.message
     assert " old" not in early.message
+
+
+def test_integrity_frozen_uses_the_users_faults_thresholds():
+    """[faults] moving_min_kn reaches the integrity checks: a fix held at 12 kn is frozen
+    by default; where the user says only 20 kn proves motion, no witness shows it."""
+    from dracc.core.config import FaultsConfig
+
+    v = _held_gnss_voyage(12.0)
+    assert _check(check_night(v), "frozen", "GNSS").status == "fail"
+    r = check_night(v, faults_cfg=FaultsConfig(moving_min_kn=20.0))
+    assert _check(r, "frozen", "GNSS").status != "fail"

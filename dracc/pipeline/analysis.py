@@ -111,7 +111,7 @@ def analyse_voyage(
     headings = overview.heading_tracks(voyage)
 
     report("integrity checks", 0.0)
-    integrity = check_night(voyage, cfg.integrity)
+    integrity = check_night(voyage, cfg.integrity, cfg.faults)
     if integrity is not None:  # the witnesses' evidence (failures are in the integrity list)
         notes.extend(
             c.message

@@ -121,7 +121,7 @@ from dataclasses import replace
 import numpy as np
 
 from dracc.core.arrays import FloatArray, IntArray
-from dracc.core.config import IntegrityConfig
+from dracc.core.config import FaultsConfig, IntegrityConfig
 from dracc.core.timefmt import iso_utc
 from dracc.frames import Voyage
 from dracc.math.ep import OUTLIER_NIS
@@ -235,8 +235,11 @@ def with_dr_check(result: IntegrityResult, check: Check) -> IntegrityResult:
 # ------------------------------------------------------------------------ the night
 
 
-def check_night(voyage: Voyage, cfg: IntegrityConfig | None = None) -> IntegrityResult | None:
-    """Every integrity check of every source of ``voyage`` (None without records)."""
+def check_night(
+    voyage: Voyage, cfg: IntegrityConfig | None = None, faults_cfg: FaultsConfig | None = None
+) -> IntegrityResult | None:
+    """Every integrity check of every source of ``voyage`` (None without records);
+    ``faults_cfg``: the ``[faults]`` thresholds the frozen/stuck witnesses use."""
     cfg = cfg or IntegrityConfig()
     times = source_times(voyage)
     if not times:
@@ -245,7 +248,7 @@ def check_night(voyage: Voyage, cfg: IntegrityConfig | None = None) -> Integrity
     end_ns = int(max(t[-1] for t in times.values()))
     checks: list[Check] = []
     checks += validity_checks(voyage, cfg)
-    plaus, faults = plausibility_checks(voyage, cfg)
+    plaus, faults = plausibility_checks(voyage, cfg, faults_cfg)
     checks += plaus
     checks += contradiction_checks(voyage, plaus, faults)
     lat_checks, lat = latency_checks(voyage, cfg)

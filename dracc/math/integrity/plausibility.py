@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -270,9 +271,13 @@ def jump_check(
 
 
 def plausibility_checks(
-    voyage: Voyage, cfg: IntegrityConfig
+    voyage: Voyage, cfg: IntegrityConfig, faults_cfg: FaultsConfig | None = None
 ) -> tuple[list[Check], list[SensorFault]]:
-    fcfg = FaultsConfig(frozen_min_s=cfg.frozen_min_s, stuck_min_s=cfg.frozen_min_s)
+    """The jump, frozen, stuck and out-of-range checks; ``faults_cfg`` the user's
+    ``[faults]`` thresholds (what proves motion and a turn), with the night's windows."""
+    fcfg = replace(
+        faults_cfg or FaultsConfig(), frozen_min_s=cfg.frozen_min_s, stuck_min_s=cfg.frozen_min_s
+    )
     faults, repeats = faults_and_repeats(voyage, fcfg)
     checks = []
     water = water_track(voyage)
