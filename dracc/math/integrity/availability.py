@@ -57,33 +57,18 @@ def availability_checks(
         if key in voyage.clockless:
             summary[key] = (None, None)
             checks.append(
-                not_checked(
-                    "availability",
-                    "dropout",
-                    key,
-                    role_of(voyage, key),
-                    "longest_dropout",
-                    "s",
-                    "",
-                    f"{key}: drop-outs not checked: {NO_CLOCK}",
-                    NO_CLOCK,
-                )
+                _no_dropout_check(voyage, key, f"drop-outs not checked: {NO_CLOCK}", NO_CLOCK)
             )
             continue
         if len(t) < 3:
             summary[key] = (math.nan, math.nan)
             checks.append(
-                not_checked(
-                    "availability",
-                    "dropout",
+                _no_dropout_check(
+                    voyage,
                     key,
-                    role_of(voyage, key),
-                    "longest_dropout",
-                    "s",
-                    "",
-                    f"{key}: {len(t)} record(s): no cadence to measure against",
+                    f"{len(t)} record(s): no cadence to measure against",
                     "fewer than 3 records",
-                    window=time_window(t),
+                    time_window(t),
                 )
             )
             continue
@@ -139,3 +124,21 @@ def availability_checks(
             )
         )
     return checks, summary
+
+
+def _no_dropout_check(
+    voyage: Voyage, key: str, message: str, why: str, window: dict[str, int] | None = None
+) -> Check:
+    """The drop-out check of ``key`` that could not be made, with why."""
+    return not_checked(
+        "availability",
+        "dropout",
+        key,
+        role_of(voyage, key),
+        "longest_dropout",
+        "s",
+        "",
+        f"{key}: {message}",
+        why,
+        window=window,
+    )
