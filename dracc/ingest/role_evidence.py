@@ -141,17 +141,23 @@ def _ground_reference(
     source sends speed without a true course, as NMEA 2000 magnetic COG)."""
     g = frames.get("ground")
     if g is not None and len(g):
-        ok = np.isfinite(g["sog_mps"].to_numpy(float))
-        mine = ok & g["source"].isin(reference_keys).to_numpy()
-        use = g[mine] if mine.any() else g[ok]
-        if len(use) >= 10:  # one source: the one with most rows, never two interleaved
-            key = use["source"].astype(str).value_counts().index[0]
-            use = use[(use["source"] == key).to_numpy()]
-            if np.isfinite(use["cog_rad"].to_numpy(float)).mean() > 0.5:
-                t = use["time_ns"].to_numpy(np.int64)
-                o = np.argsort(t, kind="stable")
-                return t[o], use["cog_rad"].to_numpy(float)[o], use["sog_mps"].to_numpy(float)[o]
+        use = _one_source(g, np.isfinite(g["sog_mps"].to_numpy(float)), reference_keys)
+        if use is not None and np.isfinite(use["cog_rad"].to_numpy(float)).mean() > 0.5:
+            t = use["time_ns"].to_numpy(np.int64)
+            o = np.argsort(t, kind="stable")
+            return t[o], use["cog_rad"].to_numpy(float)[o], use["sog_mps"].to_numpy(float)[o]
     return _track_made_good(frames.get("position"), reference_keys)
+
+
+def _one_source(df: pd.DataFrame, ok: np.ndarray, reference_keys: list[str]) -> pd.DataFrame | None:
+    """The ``ok`` rows of one source, never two interleaved: of the reference keys where
+    they have rows, else of any; the one with most rows; None under 10 rows."""
+    mine = ok & df["source"].isin(reference_keys).to_numpy()
+    use = df[mine] if mine.any() else df[ok]
+    if len(use) < 10:
+        return None
+    key = use["source"].astype(str).value_counts().index[0]
+    return use[(use["source"] == key).to_numpy()]
 
 
 def _track_made_good(
@@ -161,12 +167,9 @@ def _track_made_good(
     if pos is None or not len(pos):
         return None
     ok = (pos["quality"].to_numpy() != 0) & np.isfinite(pos["lat_rad"].to_numpy(float))
-    mine = ok & pos["source"].isin(reference_keys).to_numpy()
-    use = pos[mine] if mine.any() else pos[ok]
-    if len(use) < 10:
+    use = _one_source(pos, ok, reference_keys)
+    if use is None:
         return None
-    key = use["source"].astype(str).value_counts().index[0]
-    use = use[(use["source"] == key).to_numpy()]
     t = use["time_ns"].to_numpy(np.int64)
     o = np.argsort(t, kind="stable")
     t, la, lo = t[o], use["lat_rad"].to_numpy(float)[o], use["lon_rad"].to_numpy(float)[o]

@@ -11,7 +11,7 @@ heading spread 0.4 deg"); one whose repeats no other source can judge is
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
@@ -33,28 +33,35 @@ from dracc.math.integrity.results import Check
 __all__ = ["fault_checks"]
 
 
+def _span(kind: str, start_ns: int, end_ns: int, duration_s: float, n: int) -> dict[str, object]:
+    """The fields a fault and a repeat share: when, how long, how many records."""
+    return {
+        "start": iso_utc(unit="ms", time_ns=start_ns),
+        "end": iso_utc(unit="ms", time_ns=end_ns),
+        "duration_s": duration_s,
+        "records": n,
+        "kind": kind,
+    }
+
+
+def _values(values: Iterable[tuple[str, float]]) -> dict[str, float | None]:
+    return {k: (float(v) if math.isfinite(v) else None) for k, v in values}
+
+
 def _fault_evidence(f: SensorFault) -> dict[str, object]:
     return {
-        "start": iso_utc(unit="ms", time_ns=f.start_ns),
-        "end": iso_utc(unit="ms", time_ns=f.end_ns),
-        "duration_s": f.duration_s,
-        "records": f.n_records,
+        **_span(f.kind, f.start_ns, f.end_ns, f.duration_s, f.n_records),
         "first_line": f.first_line,
-        "kind": f.kind,
-        "values": {k: (float(v) if math.isfinite(v) else None) for k, v in f.values},
+        "values": _values(f.values),
     }
 
 
 def _repeat_evidence(r: RepeatRun) -> dict[str, object]:
     return {
-        "start": iso_utc(unit="ms", time_ns=r.start_ns),
-        "end": iso_utc(unit="ms", time_ns=r.end_ns),
-        "duration_s": r.duration_s,
-        "records": r.n_records,
-        "kind": r.kind,
+        **_span(r.kind, r.start_ns, r.end_ns, r.duration_s, r.n_records),
         "verdict": r.verdict,
         "evidence": r.evidence,
-        "values": {k: (float(v) if math.isfinite(v) else None) for k, v in r.values},
+        "values": _values(r.values),
     }
 
 
