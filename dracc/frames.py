@@ -189,6 +189,21 @@ class Rejects:
         return sum(self.counts.values())
 
 
+@dataclass(frozen=True)
+class ClockStep:
+    """One jump of a source's clock seen in stream order: a back-step (``to_ns <
+    from_ns``: a logger replaying a recording, a clock set back) or a forward jump
+    beyond the gap threshold.  Recorded by the time base, judged by the time checks
+    (:mod:`dracc.math.integrity.time_checks`)."""
+
+    file: str
+    line: int  #: the first record after the step
+    source: str
+    sentence: str
+    from_ns: int  #: the last time before the step
+    to_ns: int  #: the first time after it
+
+
 @dataclass
 class TimeEvents:
     """What the time base found and decided; counted, never silently applied."""
@@ -203,6 +218,9 @@ class TimeEvents:
     decisions: list[str] = field(default_factory=list)  #: human-readable notes
     #: (file, line, what) for the first few of each event
     examples: list[tuple[str, int, str]] = field(default_factory=list)
+    #: every back-step of a source's own times, in stream order (at most a few hundred
+    #: per file are kept; ``backsteps`` counts them all)
+    steps: list[ClockStep] = field(default_factory=list)
 
 
 @dataclass
