@@ -61,6 +61,20 @@ COMMON_COLUMNS = {
 #: ``recv_ns`` where a record has no receive time distinct from its time of fix
 MISSING_NS = np.iinfo(np.int64).min
 
+#: NMEA 0183 sentences that carry their own time of fix (the others are timed by a stamp)
+OWN_TIME_SENTENCES = frozenset({"GGA", "GLL", "RMC", "GNS", "ZDA"})
+
+
+def own_time(df: pd.DataFrame) -> np.ndarray:
+    """Rows whose ``time_ns`` is their own time of fix (a receive time beside it, or a
+    sentence that carries one); the others are timed by a stamp (TAG ``c:``, a logger
+    prefix, an MCAP log time, or the preceding timed record)."""
+    mask: np.ndarray = (df["recv_ns"].to_numpy(np.int64) != MISSING_NS) | df["sentence"].isin(
+        OWN_TIME_SENTENCES
+    ).to_numpy(bool)
+    return mask
+
+
 KIND_COLUMNS: dict[str, dict[str, str]] = {
     "position": {
         "lat_rad": "float64",

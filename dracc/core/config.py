@@ -44,6 +44,7 @@ from dracc.core.reference_config import (
     one_or_many,
     toml_datetime,
 )
+from dracc.core.source_config import source_latencies
 from dracc.core.vocabulary import CHANNEL_KEYS, INS_ROLES, ROLES
 
 
@@ -176,6 +177,14 @@ class IntegrityConfig:
     heading_gate_min_deg: float = 1.0
     #: the INS/GNSS velocity consistency gate: 3 x the 0.2 kn of IMO A.824(19)
     velocity_gate_kn: float = 0.6
+    #: a time of fix ahead of the logger clock by this much (at least the resolution of the
+    #: logger's stamps) for ``spell_min_s`` is a clock offset no delay makes (time/leap_second)
+    clock_ahead_min_s: float = 0.5
+    #: a receiver's time of fix drifting against the logger clock matters when the offset
+    #: changes by more than this over the night (time/clock_drift)
+    clock_drift_max_s: float = 1.0
+    #: the logger's times going back by more than this is a clock step (time/backstep, loop)
+    backstep_min_s: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -186,12 +195,12 @@ class Config:
     faults: FaultsConfig = FaultsConfig()
     integrity: IntegrityConfig = IntegrityConfig()
     reference: ReferenceConfig = field(default_factory=ReferenceConfig)
-    #: further sections (audit, fleet, report, vessel) as plain tables, validated by their
+    #: further sections (audit, fleet, report, vessel, sources) as plain tables, validated by their
     #: owners (dracc.pipeline.audit.audit_config, dracc.pipeline.fleet.fleet_config); here only: each is a table
     extra: dict[str, Any] = field(default_factory=dict)
 
 
-_KNOWN_EXTRA = {"audit", "fleet", "report", "vessel"}
+_KNOWN_EXTRA = {"audit", "fleet", "report", "vessel", "sources"}
 _SECTIONS: dict[str, type] = {
     "ingest": IngestConfig,
     "dead_reckoning": DeadReckoningConfig,
@@ -643,6 +652,9 @@ _RULES: dict[type, dict[str, _Rule]] = {
                 "consistency_max_gap_s",
                 "heading_gate_min_deg",
                 "velocity_gate_kn",
+                "clock_ahead_min_s",
+                "clock_drift_max_s",
+                "backstep_min_s",
             ),
             _POS,
         ),
@@ -700,6 +712,7 @@ def validate(cfg: Config) -> Config:
     for name, table in cfg.extra.items():
         if not isinstance(table, dict):
             raise ConfigError(f"[{name}] must be a table, got {_kind(table)}")
+    source_latencies(cfg.extra.get("sources"))  # [sources.KEY]: checked here, read by its owner
     return replace(cfg, **sections)
 
 

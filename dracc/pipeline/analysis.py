@@ -9,6 +9,7 @@ This module only orchestrates; the work is in
 
 - :mod:`.results`            the typed results (:class:`Analysis` and its sections)
 - :mod:`.overview`           what the ingest saw: files, sources, time base, tracks
+- :mod:`.clock_stage`        each source's clock, learned and applied first
 - :mod:`.selection`          which sensors feed the DR; true heading; the DR grid
 - :mod:`.faults_stage`       sensor faults
 - :mod:`.dr_stage`           dead reckoning and its consistency (:mod:`.dr_model`, :mod:`.notes`)
@@ -38,6 +39,7 @@ from dracc.frames import Voyage
 from dracc.math.integrity import check_night, dr_innovation_check, with_dr_check
 from dracc.pipeline import overview, selection
 from dracc.pipeline.calibration_stage import calibration as calibration_section
+from dracc.pipeline.clock_stage import learn_clocks
 from dracc.pipeline.current_stage import current as current_section
 from dracc.pipeline.current_stage import estimated_position
 from dracc.pipeline.deviation_stage import deviation as deviation_section
@@ -102,7 +104,8 @@ def analyse_voyage(
     missing: list[str] = []
 
     inputs = overview.input_files(voyage)
-    sources = overview.source_rows(voyage)
+    voyage, clocks = learn_clocks(voyage, cfg)
+    sources = overview.source_rows(voyage, clocks)
     start_ns, end_ns = overview.time_span(voyage, inputs, sources)
     time = overview.time_summary(voyage)
     notes = overview.voyage_notes(voyage, inputs, sources)

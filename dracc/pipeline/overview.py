@@ -19,6 +19,7 @@ from dracc.core.units import NS_PER_S
 from dracc.frames import Voyage
 from dracc.ingest.interleaved import interleaved_note
 from dracc.ingest.role_evidence import choice_note
+from dracc.math.clock import SourceClock
 from dracc.pipeline.results import HeadingTrack, InputFile, SourceRow, TimeSummary, Track
 from dracc.pipeline.selection import role_of, valid_positions
 
@@ -45,9 +46,12 @@ def input_files(voyage: Voyage) -> tuple[InputFile, ...]:
     )
 
 
-def source_rows(voyage: Voyage) -> tuple[SourceRow, ...]:
+def source_rows(
+    voyage: Voyage, clocks: dict[str, SourceClock] | None = None
+) -> tuple[SourceRow, ...]:
     """One row per source key: roles, records, sentences and time span; where a role had
-    several candidates, why each was chosen or kept as a witness."""
+    several candidates, why each was chosen or kept as a witness; its clock."""
+    clocks = clocks or {}
     witness = {k: (c.role, why) for c in voyage.choices for k, why in c.runners_up}
     chosen = {c.chosen: f"chosen for {c.role}: {c.why}" for c in voyage.choices}
     return tuple(
@@ -60,6 +64,7 @@ def source_rows(voyage: Voyage) -> tuple[SourceRow, ...]:
             last_ns=s.last_ns,
             witness_for=witness.get(k, (None, None))[0],
             choice=witness.get(k, (None, None))[1] or chosen.get(k),
+            clock=clocks.get(k),
         )
         for k, s in voyage.sources.items()
     )

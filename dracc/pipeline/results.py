@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dracc.ingest.timed_observations import TimedObservation
+from dracc.math.clock import SourceClock
 from dracc.math.deadreckoning import LegConsistency
 from dracc.math.deviation import DeviationResult
 from dracc.math.ep.aided import IntervalRow
@@ -71,6 +72,8 @@ class SourceRow:
     witness_for: str | None = None
     #: why it was chosen for its role, or not chosen, where several were candidates
     choice: str | None = None
+    #: its clock against the time base of the analysis (:mod:`dracc.math.clock`)
+    clock: SourceClock | None = None
 
 
 @dataclass(frozen=True)

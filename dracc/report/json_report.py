@@ -18,6 +18,7 @@ from dracc.core import atomic
 from dracc.core.numbers import finite_or_none as _num
 from dracc.core.timefmt import iso_utc
 from dracc.core.units import mps_to_kn
+from dracc.math.clock import SourceClock
 from dracc.math.integrity import Check, IntegrityResult
 from dracc.pipeline.results import (
     Analysis,
@@ -244,6 +245,22 @@ def _plain(x: Any) -> Any:
     return str(x)
 
 
+def clock_dict(c: SourceClock | None) -> dict[str, Any] | None:
+    """``sources[KEY].clock``: offset_s > 0 is data stamped after the instant described."""
+    if c is None:
+        return None
+    return {
+        "offset_s": _num(c.offset_s),
+        "offset_sigma_s": _num(c.offset_sigma_s),
+        "drift_ppm": _num(c.drift_ppm),
+        "method": c.method,
+        "basis": c.basis,
+        "samples": int(c.samples),
+        "spread_records": int(c.spread),
+        "stamp_resolution_s": c.stamp_s,
+    }
+
+
 def to_dict(a: Analysis) -> dict[str, Any]:
     """The report as plain JSON types (validates against ``analysis.schema.json``)."""
     by_role: dict[str, dict[str, Any]] = {}
@@ -293,6 +310,7 @@ def to_dict(a: Analysis) -> dict[str, Any]:
                 "last_utc": iso_utc(s.last_ns),
                 "witness_for": s.witness_for,
                 "choice": s.choice,
+                "clock": clock_dict(s.clock),
             }
             for s in a.sources
         },
