@@ -21,7 +21,7 @@ from dracc.pipeline.results import Analysis, DRLeg, DRSection, Estimate
 from dracc.report import fmt, fmt_duration, fmt_pct, fmt_signed, short_utc
 from dracc.report.glossary import GLOSSARY, anchor
 from dracc.report.page import CSP, data_uri  # one policy and one data URI for every page
-from dracc.report.rows import EXCEEDS, WITHIN, channel_rows, unit_rows
+from dracc.report.rows import EXCEEDS, WITHIN, channel_rows, clock_text, unit_rows
 from dracc.report.verdict import FAULTS_FOUND, Finding, Verdict, verdict
 
 #: a column header: the glossary term (shown as it is), or (term, header html)
@@ -164,7 +164,7 @@ def _summary(a: Analysis) -> str:
         rows.append(("dead reckoning", f'<span class="{cls}">{_e(dr.verdict)}</span>'))
     kv = "".join(f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in rows)
     src = _table(
-        ["source", "roles", "records", "sentences", "first", "last"],
+        ["source", "roles", "records", "sentences", "first", "last", "clock"],
         [
             [
                 _e(s.key),
@@ -173,6 +173,7 @@ def _summary(a: Analysis) -> str:
                 _e(" ".join(f"{k}:{v}" for k, v in sorted(s.sentences.items()))),
                 short_utc(s.first_ns),
                 short_utc(s.last_ns),
+                _e(clock_text(s.clock)),
             ]
             for s in a.sources
         ],

@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass
 
 from dracc.core.vocabulary import CHANNEL_UNITS, CHANNELS
+from dracc.math.clock import SourceClock
 from dracc.math.deviation import DeviationResult, UnitStats
 from dracc.report import fmt
 
@@ -111,3 +112,31 @@ def unit_rows(d: DeviationResult) -> list[tuple[str, list[UnitRow] | None]]:
         u = d.whole.units.get(name)
         out.append((name, None if u is None else channel_rows(name, u)))
     return out
+
+
+#: how each clock method reads in a table cell
+_CLOCK_BASIS = {
+    "time_of_fix": "own time of fix",
+    "heading_rate": "heading against {basis}",
+    "course_rate": "against the GNSS course in turns",
+    "speed_rate": "against the GNSS speed in speed changes",
+    "configured": "configured",
+}
+
+
+def clock_text(c: SourceClock | None) -> str:
+    """A source's clock in a cell: '+0.70 ± 0.01 s late (heading against INS2)'; the sign
+    says which way: late (stamped after the instant described) or early."""
+    if c is None:
+        return "-"
+    if c.method == "no_clock":
+        return "no clock (times are the order of records)"
+    if c.method == "own_time":
+        return "own time of fix (no receive stamp)"
+    if not c.known:
+        return "not determinable" + (f" ({c.basis})" if c.basis else "")
+    how = _CLOCK_BASIS.get(c.method, c.method).format(basis=c.basis)
+    if abs(c.offset_s) < 0.005 and c.offset_sigma_s < 0.005:
+        return f"on time ({how})"
+    way = "late" if c.offset_s >= 0 else "early"
+    return f"{abs(c.offset_s):.2f} ± {c.offset_sigma_s:.2f} s {way} ({how})"

@@ -32,7 +32,7 @@ from dracc.pipeline.results import (
     EstimatedPositionSection,
 )
 from dracc.report import fmt, fmt_duration, fmt_pct, fmt_signed, short_utc
-from dracc.report.rows import EXCEEDS, unit_rows
+from dracc.report.rows import EXCEEDS, clock_text, unit_rows
 from dracc.report.textout import Layout, Page, bullet, labelled, layout
 from dracc.report.verdict import verdict
 
@@ -70,6 +70,7 @@ _SOURCE_COLUMNS = (
     ("sentences", False, 2),
     ("first", False, 3),
     ("last", False, 3),
+    ("clock", False, 2),
 )
 
 
@@ -87,6 +88,7 @@ def _sources_table(page: _Page, a: Analysis) -> None:
                 sent,
                 short_utc(s.first_ns),
                 short_utc(s.last_ns),
+                clock_text(s.clock),
             )
         )
     headers, right, prio = zip(*_SOURCE_COLUMNS, strict=True)
