@@ -23,7 +23,8 @@ from dracc.cli.options import (
 )
 from dracc.core.config import IngestConfig, load_config, with_overrides
 from dracc.ingest import inspect as log_inspection
-from dracc.report.inspect_report import render_inspection
+from dracc.pipeline.clock_stage import source_clocks
+from dracc.report.inspect_report import render_inspection, with_clocks
 from dracc.report.output import STDOUT, emit_json
 from dracc.report.write import writing
 
@@ -59,10 +60,12 @@ def inspect_cmd(
         )
     paths_exist(logs)
     rep = inspect_logs(logs, cfg.ingest)
+    clocks = source_clocks(logs, cfg) if rep["sources"] else {}
+    rep = with_clocks(rep, clocks)
     if json_path == STDOUT:
         emit_json(rep, STDOUT)
         return
-    render_inspection(rep, out)
+    render_inspection(rep, out, clocks)
     if json_path:
         with writing(json_path):
             emit_json(rep, json_path)

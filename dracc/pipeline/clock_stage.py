@@ -18,7 +18,9 @@ and applied to its records before anything else looks at time.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -36,7 +38,7 @@ from dracc.math.clock import (
     time_of_fix_offset,
 )
 
-__all__ = ["learn_clocks"]
+__all__ = ["learn_clocks", "source_clocks"]
 
 #: the value that tells two samples of a source apart, per frame kind
 PRIMARY = {
@@ -79,6 +81,14 @@ def learn_clocks(voyage: Voyage, cfg: Config) -> tuple[Voyage, dict[str, SourceC
         k: replace(c, spread=spread.get(k, 0), stamp_s=stamp.get(k)) for k, c in clocks.items()
     }
     return replace(voyage, frames=_apply(frames, clocks)), clocks
+
+
+def source_clocks(paths: Sequence[Path], cfg: Config) -> dict[str, SourceClock]:
+    """Each source's clock in the logs ``paths`` (``dracc inspect``: the logs are read
+    into frames for it)."""
+    from dracc.ingest import read_logs  # the readers are heavy; import on use
+
+    return learn_clocks(read_logs(list(paths), cfg.ingest), cfg)[1]
 
 
 def _stamped(df: pd.DataFrame) -> np.ndarray:

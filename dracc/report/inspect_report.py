@@ -5,12 +5,16 @@ out by :mod:`dracc.report.textout`."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from rich.console import Console
 
 from dracc.core.safetext import printable
+from dracc.math.clock import SourceClock
+from dracc.report.json_report import clock_dict
+from dracc.report.rows import clock_text
 from dracc.report.textout import Layout, Page, layout
 
 #: the sources table: name, right-aligned, priority (0: always shown; higher: left out
@@ -31,14 +35,23 @@ _COLUMNS = (
 )
 
 
-def render_inspection(rep: dict[str, Any], out: Console) -> None:
+def with_clocks(rep: dict[str, Any], clocks: Mapping[str, SourceClock]) -> dict[str, Any]:
+    """The report with ``sources[KEY].clock`` (as in the analysis JSON) for every source."""
+    for key, s in rep["sources"].items():
+        s["clock"] = clock_dict(clocks.get(key))
+    return rep
+
+
+def render_inspection(
+    rep: dict[str, Any], out: Console, clocks: Mapping[str, SourceClock] | None = None
+) -> None:
     """The report of :func:`dracc.ingest.inspect.inspect_logs` as plain tables on ``out``,
     laid out for it (:mod:`dracc.report.textout`: natural width on a pipe, fewer columns
     on a narrow terminal, lines wrapped on spaces).  Every text from the log (source keys,
     talkers, sentence types, file names, rejected lines, notes) is shown as text, never
     markup, with its control characters escaped (:func:`dracc.core.safetext.printable`):
     a source key holding ESC sequences cannot command the terminal."""
-    inspection_page(rep, layout(out)).print(out)
+    inspection_page(rep, layout(out), clocks).print(out)
 
 
 def render_inspection_text(rep: dict[str, Any], width: int = 100, tty: bool = False) -> str:
@@ -46,8 +59,10 @@ def render_inspection_text(rep: dict[str, Any], width: int = 100, tty: bool = Fa
     return inspection_page(rep, Layout(width, tty)).text()
 
 
-def inspection_page(rep: dict[str, Any], lay: Layout) -> Page:
-    """The inspection's lines laid out for ``lay``."""
+def inspection_page(
+    rep: dict[str, Any], lay: Layout, clocks: Mapping[str, SourceClock] | None = None
+) -> Page:
+    """The inspection's lines laid out for ``lay`` (``clocks``: each source's clock)."""
     page = Page(lay)
     rows = [
         (
@@ -100,6 +115,10 @@ def inspection_page(rep: dict[str, Any], lay: Layout) -> Page:
     )
     for d in tm["decisions"] + rep["notes"] + rep["roles"]:
         page.wrapped(f"  - {printable(d)}", hang=4)
+    if clocks:
+        page.wrapped("clocks (stamped after the instant described: late):", hang=2)
+        for key in rep["sources"]:
+            page.wrapped(f"  {printable(key)}: {clock_text(clocks.get(key))}", hang=4)
     return page
 
 
