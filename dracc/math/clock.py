@@ -160,9 +160,11 @@ def combine(lags: FloatArray, sigmas: FloatArray) -> LagEstimate:
     lags, sigmas = lags[ok], sigmas[ok]
     if len(lags) == 0:
         return LagEstimate(math.nan, math.nan, 0)
-    # a window more than 5σ from the median of the others is a model failure, not data
+    # a window far from the median, beyond both its σ and the windows' own spread, is a
+    # model failure (a manoeuvre the linear model does not hold through), not data
     med = float(np.median(lags))
-    keep = np.abs(lags - med) <= 5.0 * np.hypot(sigmas, np.median(sigmas))
+    spread = 1.4826 * float(np.median(np.abs(lags - med)))
+    keep = np.abs(lags - med) <= 5.0 * np.maximum(sigmas, spread)
     lags, sigmas = lags[keep], sigmas[keep]
     w = 1.0 / sigmas**2
     mean = float(np.sum(w * lags) / np.sum(w))
