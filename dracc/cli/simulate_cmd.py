@@ -101,14 +101,34 @@ def simulate_cmd(
         "dropout, drift, latency or invalid, e.g. "
         "jump:GNSS@2h=670m, freeze:INS2@1.5h+40min, "
         "dropout:INS3+25min, drift:INS1=1kn, latency:GNSS=3s, "
-        "invalid:GNSS+10min (docs/simulate.md).",
+        "invalid:GNSS+10min; time faults leap:GNSS=18s, rollover:GNSS, "
+        "loop:ALL@2h=22min, clockstep:ALL@2h+1h=-22min (docs/simulate.md).",
+    ),
+    clocks: str = typer.Option(
+        "none",
+        "--clocks",
+        help="Sources' clocks: none (every source samples the same grid, no delay) or "
+        "random (a phase and a latency per source from --seed).",
+    ),
+    latency_max: float = typer.Option(
+        2.0, "--latency-max", help="--clocks random: latency at most this, s (GNSS 0.5 s)."
+    ),
+    phase: list[str] = typer.Option(
+        [], "--phase", metavar="SRC=S", help="A source's sample phase in s (repeatable)."
+    ),
+    latency: list[str] = typer.Option(
+        [],
+        "--latency",
+        metavar="SRC=S",
+        help="A source's delay from sampling to the logger in s (repeatable).",
     ),
 ) -> None:
     """Simulate a voyage with known truth; write its log, truth.csv, errors.csv, params.json.
 
     The log is OUT/<name>.nmea (or .csv, .mcap); truth.csv and errors.csv hold the true
     track and every true sensor error (measured - true) at --truth-hz; params.json the
-    parameters, the source roles, each INS unit's true error RMS and the seeded faults.
+    parameters, the source roles, each INS unit's true error RMS, the seeded faults and
+    each source's clock.
     """
     options = dict(locals())  # every option, by its name, as simulate_to_folder takes it
     from dracc.sim.output import simulate_to_folder

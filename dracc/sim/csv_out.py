@@ -6,6 +6,12 @@ Values are written in the units a navigator reads, with the unit in the name
 :func:`dracc.ingest.csv_quantities.frame_quantities`), each with 17 significant digits so
 that reading back reproduces the value to the last bit in those units.  Times are ISO
 8601 UTC with nanoseconds (``2024-05-01T12:00:00.000000000Z``).
+
+One time per record, ``time_ns``: the time of fix of a record that has one, the receive
+time of the others; so a CSV shows the sources' latencies on records without a time of
+fix, a leap (GNSS time) and a clock step, and with ``date_shifts`` (a week rollover) the
+GNSS's early dates; not the receive times of fixes, and rows in time order show a loop as
+records repeated, not as a step back.
 """
 
 from __future__ import annotations
@@ -20,6 +26,7 @@ from dracc.core.atomic import atomic_path
 from dracc.core.timefmt import iso_utc
 from dracc.frames import KINDS
 from dracc.ingest.csv_quantities import frame_quantities
+from dracc.sim.nmea_out import DateShifts, date_shift_days
 
 
 def _fmt(v: np.ndarray) -> np.ndarray:
@@ -46,15 +53,30 @@ def _tables(
         yield kind, df, frame_quantities(kind, df)
 
 
-def write_csv(frames: dict[str, pd.DataFrame], path: str | Path, form: str = "long") -> Path:
+def _early(df: pd.DataFrame, shifts: DateShifts) -> pd.DataFrame:
+    """``df`` with its times ``date_shift_days`` early where ``shifts`` say."""
+    t = df["time_ns"].to_numpy(np.int64)
+    days = date_shift_days(df["source"].astype(str).to_numpy(object), t, shifts)
+    return df.assign(time_ns=t - days * 86_400 * 1_000_000_000) if days.any() else df
+
+
+def write_csv(
+    frames: dict[str, pd.DataFrame],
+    path: str | Path,
+    form: str = "long",
+    date_shifts: DateShifts = (),
+) -> Path:
     """Write ``frames`` (kind -> canonical frame) to ``path`` atomically; return the path.
 
     ``form='long'``: ``time_utc,source,quantity,value``, one present value per row, rows in
     time order.  ``form='wide'``: ``time_utc,source,<quantities...>``, one row per time and
     source (records of several kinds at the same time and source share a row).
+    ``date_shifts``: a source's times that many days early in a window (a rollover).
     """
     if form not in ("long", "wide"):
         raise ValueError(f"form must be 'long' or 'wide', got {form!r}")
+    if date_shifts:
+        frames = {k: _early(df, date_shifts) if len(df) else df for k, df in frames.items()}
     path = Path(path)
     parts = []
     if form == "long":

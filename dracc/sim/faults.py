@@ -19,13 +19,29 @@ the end of the voyage includes its last sample):
 ``drift``    the position error gains ``size * (t - start)`` (m/s) in a fixed direction;
              back to normal after the window.
 ``latency``  records *received* in the window carry their time of fix ``size`` seconds
-             earlier: ``recv_ns = time_ns + size``, values those of the time of fix.
+             earlier: ``recv_ns = time_ns + size``, values those of the time of fix (with
+             a source latency, ``SimParams.latency_s``, on top of it).
 ``invalid``  the source's position records flagged invalid (``quality`` 0), values kept.
+``leap``     (GNSS) the receiver's own time fields read ``size`` seconds ahead (GPS time
+             without the UTC offset, default 18 s): ``time_ns`` (time of fix, ZDA too) +
+             size for fixes in the window, ``recv_ns`` the true receive time; values kept.
+``rollover`` (GNSS) the receiver's dates read 1024 weeks (7168 days) early (RMC and ZDA
+             date fields; MCAP stamps): frames unchanged -- a parser places a time of fix
+             on the day of its receive time -- the writers take :func:`date_shifts`.
+``loop``     (source ``ALL``: the logger, or one source) at the start the log's records
+             received in the previous ``size`` seconds (default 1320) are written again,
+             same values and times, before the log goes on; lines renumbered in the
+             written order.  No duration (it is resolved as 0).
+``clockstep`` (``ALL`` or one source) the logger clock steps by ``size`` seconds (signed,
+             default -1320) for the window: receive stamps shifted (``recv_ns``, and the
+             ``time_ns`` of records without a time of fix); time-of-fix fields unchanged.
 
 Jump and drift change the true errors (``errors`` holds measured - true) before the
 frames are made, so frames and errors agree; freeze changes the errors in its window to
 the frozen reading minus the truth.  Dropout, latency and invalid leave the errors alone
-(the error process of the sensor goes on; the record's values are of its time of fix).
+(the error process of the sensor goes on; the record's values are of its time of fix);
+so do the four time faults.  Windows are on ``time_ns`` (a latency, clockstep and loop:
+on the receive time, ``recv_ns`` where set).
 """
 
 from __future__ import annotations
@@ -43,10 +59,17 @@ from dracc.core.errors import ConfigError
 from dracc.core.geodesy import angdiff, offset_ne_m
 from dracc.core.timefmt import iso_utc
 from dracc.core.units import KN_MPS
+from dracc.frames import MISSING_NS
 
-FAULT_KINDS = ("jump", "freeze", "dropout", "drift", "latency", "invalid")
+FAULT_KINDS = ("jump", "freeze", "dropout", "drift", "latency", "invalid")  #: sensor faults
+TIME_FAULT_KINDS = ("leap", "rollover", "loop", "clockstep")  #: a receiver's or logger's clock
+ALL_FAULT_KINDS = FAULT_KINDS + TIME_FAULT_KINDS
 #: every source key the simulator can write (as :data:`dracc.sim.readings.SOURCES`)
 ALL_SOURCES = ("GYRO", "MAG", "LOG", "INS1", "INS2", "INS3", "GNSS")
+LOGGER = "ALL"  #: the source of a loop or clockstep of the whole log
+#: sentences with their own time of fix (``time_ns``); the others are timed on receipt
+OWN_TIME_SENTENCES = ("GGA", "GLL", "RMC", "GNS", "ZDA")
+ROLLOVER_DAYS = 1024 * 7  #: a GPS week-number rollover
 POSITION_SOURCES = ("INS1", "INS2", "INS3", "GNSS")
 COMPASS_SOURCES = ("GYRO", "MAG")
 #: kind -> the sources it can hit
@@ -57,6 +80,10 @@ KIND_SOURCES = {
     "drift": POSITION_SOURCES,
     "latency": ALL_SOURCES,
     "invalid": POSITION_SOURCES,
+    "leap": ("GNSS",),
+    "rollover": ("GNSS",),
+    "loop": (LOGGER, *ALL_SOURCES),
+    "clockstep": (LOGGER, *ALL_SOURCES),
 }
 DEFAULT_SOURCE = {
     "jump": "GNSS",
@@ -65,6 +92,10 @@ DEFAULT_SOURCE = {
     "drift": "INS1",
     "latency": "GNSS",
     "invalid": "GNSS",
+    "leap": "GNSS",
+    "rollover": "GNSS",
+    "loop": LOGGER,
+    "clockstep": LOGGER,
 }
 #: default window lengths in seconds (inf: to the end of the voyage)
 DEFAULT_DURATION_S = {
@@ -74,10 +105,29 @@ DEFAULT_DURATION_S = {
     "drift": math.inf,
     "latency": 3600.0,
     "invalid": 600.0,
+    "leap": 3600.0,
+    "rollover": math.inf,
+    "loop": 0.0,  #: an instant: the replay is written at the start
+    "clockstep": 3600.0,
 }
 #: default sizes in SI (jump m, drift m/s, latency s); kinds without a size are absent
-DEFAULT_SIZE = {"jump": 670.0, "drift": 1.0 * KN_MPS, "latency": 3.0}
-SIZE_UNIT = {"jump": "m", "drift": "m/s", "latency": "s"}
+DEFAULT_SIZE = {
+    "jump": 670.0,
+    "drift": 1.0 * KN_MPS,
+    "latency": 3.0,
+    "leap": 18.0,
+    "loop": 1320.0,
+    "clockstep": -1320.0,
+}
+SIZE_UNIT = {
+    "jump": "m",
+    "drift": "m/s",
+    "latency": "s",
+    "leap": "s",
+    "loop": "s",
+    "clockstep": "s",
+}
+SIGNED_SIZE = ("clockstep",)  #: kinds whose size may be negative
 #: the default start is drawn uniformly in this fraction of the voyage
 START_RANGE = (0.2, 0.5)
 RNG_COMPONENT = 60  #: random stream of the fault draws (see dracc.sim.processes.component_rng)
@@ -88,6 +138,15 @@ _SIZE_UNITS = {
     "jump": {"": 1.0, "m": 1.0, "km": 1000.0},
     "drift": {"": KN_MPS, "kn": KN_MPS, "m/s": 1.0},
     "latency": {"": 1.0, "s": 1.0, "ms": 1e-3, "min": 60.0},
+    **{k: {**_TIME_UNITS, "ms": 1e-3} for k in ("leap", "loop", "clockstep")},
+}
+_SIZE_EXAMPLE = {
+    "jump": "=670m",
+    "drift": "=1kn or =0.5m/s",
+    "latency": "=3s",
+    "leap": "=18s",
+    "loop": "=22min",
+    "clockstep": "=-22min",
 }
 _SPEC = re.compile(
     r"(?P<kind>[A-Za-z_]+)(?::(?P<source>[^@+=]*))?(?:@(?P<start>[^+=]*))?"
@@ -103,9 +162,10 @@ class SimFault:
     """One seeded sensor fault.  ``None`` fields take the kind's default when resolved
     (:func:`resolve_faults`).
 
-    ``start_s`` from the voyage start; ``duration_s`` (``inf``: to the end); ``size`` in SI:
-    metres (jump), m/s (drift), seconds (latency), ``None`` for freeze, dropout and
-    invalid; ``direction_deg`` (true, towards) of a jump or drift.
+    ``start_s`` from the voyage start; ``duration_s`` (``inf``: to the end; 0 for a loop);
+    ``size`` in SI: metres (jump), m/s (drift), seconds (latency, leap, loop, clockstep),
+    ``None`` for freeze, dropout, invalid and rollover; ``direction_deg`` (true, towards)
+    of a jump or drift.  ``source`` ``ALL``: every source (the logger; loop, clockstep).
     """
 
     kind: str
@@ -129,7 +189,8 @@ class SimFault:
         """The spec of a resolved fault, e.g. ``jump:GNSS@1234s+600s=670m``."""
         assert self.duration_s is not None  # resolved
         s = f"{self.kind}:{self.source}@{self.start_s:g}s"
-        s += "+end" if math.isinf(self.duration_s) else f"+{self.duration_s:g}s"
+        if self.kind != "loop":
+            s += "+end" if math.isinf(self.duration_s) else f"+{self.duration_s:g}s"
         if self.size is not None:
             unit = "kn" if self.kind == "drift" else SIZE_UNIT[self.kind]
             s += f"={self.size / KN_MPS if self.kind == 'drift' else self.size:g}{unit}"
@@ -157,23 +218,25 @@ def _number(text: str, units: dict[str, float], what: str, spec: str, example: s
 def parse_fault(spec: str) -> SimFault:
     """A ``--fault`` spec ``KIND[:SOURCE][@START][+DURATION][=SIZE]`` as an unresolved
     :class:`SimFault` (omitted parts None).  START and DURATION: a number with ``s``,
-    ``min`` or ``h`` (bare: seconds); DURATION ``end``: to the end of the voyage; SIZE: jump ``m``/``km`` (bare: m), drift ``kn``/``m/s``
-    (bare: kn), latency ``s``/``ms``/``min`` (bare: s); freeze, dropout and invalid take
-    none.  Kind and source are case-insensitive.  Raises :class:`ConfigError`."""
+    ``min`` or ``h`` (bare: seconds); DURATION ``end``: to the end of the voyage (a loop
+    takes none); SIZE: jump ``m``/``km`` (bare: m), drift ``kn``/``m/s`` (bare: kn),
+    latency ``s``/``ms``/``min``, leap, loop and clockstep (signed) ``s``/``ms``/``min``/``h``
+    (bare: s); freeze, dropout, invalid and rollover take none.  Kind and source (``ALL``:
+    the logger) are case-insensitive.  Raises :class:`ConfigError`."""
     text = spec.strip()
     m = _SPEC.fullmatch(text)
     if m is None:
         raise ConfigError(f"--fault {spec!r}: expected {SPEC_GRAMMAR}, e.g. jump:GNSS@2h=670m")
     kind = m.group("kind").lower()
-    if kind not in FAULT_KINDS:
+    if kind not in ALL_FAULT_KINDS:
         raise ConfigError(
             f"--fault {spec!r}: unknown kind {m.group('kind')!r}; expected one "
-            f"of {', '.join(FAULT_KINDS)}"
+            f"of {', '.join(ALL_FAULT_KINDS)}"
         )
     source = m.group("source")
     if source is not None:
         source = source.strip().upper()
-        if source not in ALL_SOURCES:
+        if source not in (*ALL_SOURCES, LOGGER):
             raise ConfigError(
                 f"--fault {spec!r}: unknown source {m.group('source')!r}; "
                 f"expected one of {', '.join(KIND_SOURCES[kind])}"
@@ -181,6 +244,10 @@ def parse_fault(spec: str) -> SimFault:
     start = dur = size = None
     if m.group("start") is not None:
         start = _number(m.group("start"), _TIME_UNITS, "START", spec, "@1.5h, @40min, @600")
+    if m.group("duration") is not None and kind == "loop":
+        raise ConfigError(
+            f"--fault {spec!r}: loop takes no +DURATION; expected loop[:SOURCE][@START][=SIZE]"
+        )
     if m.group("duration") is not None:
         dur = (
             math.inf
@@ -193,8 +260,7 @@ def parse_fault(spec: str) -> SimFault:
                 f"--fault {spec!r}: {kind} takes no =SIZE; expected "
                 f"{kind}[:SOURCE][@START][+DURATION]"
             )
-        example = {"jump": "=670m", "drift": "=1kn or =0.5m/s", "latency": "=3s"}[kind]
-        size = _number(m.group("size"), _SIZE_UNITS[kind], "SIZE", spec, example)
+        size = _number(m.group("size"), _SIZE_UNITS[kind], "SIZE", spec, _SIZE_EXAMPLE[kind])
     return SimFault(kind, source, start, dur, size)
 
 
@@ -224,7 +290,7 @@ def resolve_faults(
     """
     out = []
     seen: dict[tuple[str, str], int] = {}
-    fitted = set(ALL_SOURCES)
+    fitted = {*ALL_SOURCES, LOGGER}
     if compass == "gyro":
         fitted.discard("MAG")
     elif compass == "magnetic":
@@ -233,9 +299,9 @@ def resolve_faults(
         if not isinstance(f, SimFault):
             raise ConfigError(f"faults must be SimFault, got {type(f).__name__}")
         label = f"--fault {labels[i]!r}" if labels is not None else f"fault {f.kind}"
-        if f.kind not in FAULT_KINDS:
+        if f.kind not in ALL_FAULT_KINDS:
             raise ConfigError(
-                f"{label}: unknown kind {f.kind!r}; expected one of {', '.join(FAULT_KINDS)}"
+                f"{label}: unknown kind {f.kind!r}; expected one of {', '.join(ALL_FAULT_KINDS)}"
             )
         src = f.source if f.source is not None else DEFAULT_SOURCE[f.kind]
         if src not in KIND_SOURCES[f.kind]:
@@ -254,8 +320,8 @@ def resolve_faults(
             [
                 int(seed) & 0xFFFFFFFF,
                 RNG_COMPONENT,
-                FAULT_KINDS.index(f.kind),
-                ALL_SOURCES.index(src),
+                ALL_FAULT_KINDS.index(f.kind),
+                (*ALL_SOURCES, LOGGER).index(src),
                 occ,
             ]
         )
@@ -273,16 +339,20 @@ def resolve_faults(
                 f"START in [0, {_fmt_s(voyage_s)})"
             )
         dur = f.duration_s if f.duration_s is not None else DEFAULT_DURATION_S[f.kind]
-        if math.isnan(dur) or dur <= 0:
+        if f.kind == "loop":
+            if dur != 0:
+                raise ConfigError(f"{label}: loop takes no duration, got {dur:g} s")
+        elif math.isnan(dur) or dur <= 0:
             raise ConfigError(f"{label}: duration {dur:g} s; expected DURATION > 0")
-        if start + dur >= voyage_s:
+        elif start + dur >= voyage_s:
             dur = math.inf
         size = f.size
         if f.kind in DEFAULT_SIZE:
             size = size if size is not None else DEFAULT_SIZE[f.kind]
-            if not (math.isfinite(size) and size >= 0):
+            if not (math.isfinite(size) and (size >= 0 or f.kind in SIGNED_SIZE)):
                 raise ConfigError(
-                    f"{label}: size {size:g} {SIZE_UNIT[f.kind]}; expected a finite SIZE >= 0"
+                    f"{label}: size {size:g} {SIZE_UNIT[f.kind]}; expected a finite SIZE"
+                    + ("" if f.kind in SIGNED_SIZE else " >= 0")
                 )
         elif size is not None:
             raise ConfigError(f"{label}: {f.kind} takes no size, got {size!r}")
@@ -304,6 +374,18 @@ def resolve_faults(
             )
         )
     return tuple(out)
+
+
+def date_shifts(
+    faults: Iterable[SimFault], voyage_start_ns: int
+) -> tuple[tuple[str, int, int | None, int], ...]:
+    """``(source, lo_ns, hi_ns, days)`` per rollover: the writers date the source's records
+    with ``time_ns`` in ``[lo, hi)`` (hi None: to the end) ``days`` early."""
+    return tuple(
+        (str(f.source), *f.window_ns(voyage_start_ns), ROLLOVER_DAYS)
+        for f in faults
+        if f.kind == "rollover"
+    )
 
 
 def fault_table(
@@ -399,8 +481,9 @@ def apply_frame_faults(
     voyage_start_ns: int,
     state_in: dict[str, Any] | None = None,
 ) -> tuple[dict[str, pd.DataFrame], pd.DataFrame, pd.DataFrame, dict[str, Any]]:
-    """Apply the freezes, dropouts, latencies and invalid flags of ``faults`` (in their
-    order) to the canonical frames of one simulated segment.
+    """Apply the freezes, dropouts, latencies, invalid flags and time faults (leap,
+    clockstep, loop) of ``faults`` (in their order) to the canonical frames of one
+    simulated segment (a rollover changes only the written dates: :func:`date_shifts`).
 
     ``errors`` and ``truth`` share the segment's time base (a freeze sets the errors in
     its window to the frozen reading minus the truth).  ``state_in``: what the previous
@@ -470,13 +553,23 @@ def apply_frame_faults(
                 q[win] = 0
                 df["quality"] = q
                 frames["position"] = df
+        elif f.kind in ("leap", "clockstep"):
+            assert f.size is not None  # resolved: a size
+            shift = int(round(f.size * 1e9))
+            if f.kind == "leap":
+                frames, zda = _leap(frames, zda, shift, lo, hi)
+            else:
+                frames = {k: _clockstep(df, f.source, shift, lo, hi) for k, df in frames.items()}
+        elif f.kind == "loop":
+            assert f.size is not None  # resolved: a size
+            frames, zda = _loop(frames, zda, f.source, lo, int(round(f.size * 1e9)))
         elif f.kind == "latency":
             assert f.size is not None  # a resolved latency has a size
             lag = int(round(f.size * 1e9))
             for kind, df in list(frames.items()):
                 if not len(df):
                     continue
-                t = df["time_ns"].to_numpy(np.int64)
+                t = received_ns(df)  # the time of fix, or a source's own latency on it
                 win = (df["source"] == f.source).to_numpy(bool) & _in(t + lag, lo, hi)
                 if win.any():
                     df = df.copy()
@@ -520,6 +613,111 @@ def _frozen_errors(
         a[w] = angdiff(held[0], truth[true].to_numpy(float)[w])
         errors[col] = a
     return errors
+
+
+def received_ns(df: pd.DataFrame) -> np.ndarray:
+    """The receive (logger) time of each record: ``recv_ns`` where set, else ``time_ns``."""
+    t = df["time_ns"].to_numpy(np.int64)
+    r = df["recv_ns"].to_numpy(np.int64)
+    out: np.ndarray = np.where(r != MISSING_NS, r, t)
+    return out
+
+
+def _of(df: pd.DataFrame, source: str | None) -> np.ndarray:
+    """Rows of ``source`` (every row for the logger, ``ALL``)."""
+    if source == LOGGER:
+        return np.ones(len(df), bool)
+    out: np.ndarray = (df["source"] == source).to_numpy(bool)
+    return out
+
+
+def _own_time(df: pd.DataFrame) -> np.ndarray:
+    out: np.ndarray = df["sentence"].astype(str).isin(OWN_TIME_SENTENCES).to_numpy(bool)
+    return out
+
+
+def _leap(
+    frames: dict[str, pd.DataFrame], zda: pd.DataFrame, shift: int, lo: int, hi: int | None
+) -> tuple[dict[str, pd.DataFrame], pd.DataFrame]:
+    """The GNSS's times of fix in the window ``shift`` ns ahead; its receive times kept."""
+    out = dict(frames)
+    for kind, df in frames.items():
+        if not len(df):
+            continue
+        t = df["time_ns"].to_numpy(np.int64)
+        win = _of(df, "GNSS") & _own_time(df) & _in(t, lo, hi)
+        if win.any():
+            df = df.copy()
+            df["recv_ns"] = np.where(win, received_ns(df), df["recv_ns"].to_numpy(np.int64))
+            df["time_ns"] = np.where(win, t + shift, t)
+            out[kind] = df
+    if len(zda):
+        t = zda["time_ns"].to_numpy(np.int64)
+        win = (zda["source"].to_numpy(object) == "GNSS") & _in(t, lo, hi)
+        zda = zda.assign(time_ns=np.where(win, t + shift, t))
+    return out, zda
+
+
+def _clockstep(
+    df: pd.DataFrame, source: str | None, step: int, lo: int, hi: int | None
+) -> pd.DataFrame:
+    """Receive stamps of records received in the window shifted by ``step`` ns: ``recv_ns``
+    (set where the record has a time of fix) and the ``time_ns`` of records without."""
+    if not len(df):
+        return df
+    rcv = received_ns(df)
+    win = _of(df, source) & _in(rcv, lo, hi)
+    if not win.any():
+        return df
+    own, r = _own_time(df), df["recv_ns"].to_numpy(np.int64)
+    t = df["time_ns"].to_numpy(np.int64)
+    df = df.copy()
+    df["recv_ns"] = np.where(win & (own | (r != MISSING_NS)), rcv + step, r)
+    df["time_ns"] = np.where(win & ~own, t + step, t)
+    return df
+
+
+def _loop(
+    frames: dict[str, pd.DataFrame],
+    zda: pd.DataFrame,
+    source: str | None,
+    lo: int,
+    size: int,
+) -> tuple[dict[str, pd.DataFrame], pd.DataFrame]:
+    """The records received in ``[lo - size, lo)`` (of ``source``, or all) written again
+    before the first line received at ``lo`` or later; lines renumbered in written order."""
+    live = [df for df in frames.values() if len(df)]
+    if not live:
+        return frames, zda
+    lines = np.concatenate([df["line"].to_numpy(np.int64) for df in live])
+    late = np.concatenate([received_ns(df) >= lo for df in live])
+    at = int(lines[late].min()) if late.any() else int(lines.max()) + 1
+    pick = {
+        k: _of(df, source)
+        & (df["line"].to_numpy(np.int64) < at)
+        & _in(received_ns(df), lo - size, lo)
+        for k, df in frames.items()
+        if len(df)
+    }
+    copied = np.unique(
+        np.concatenate([frames[k]["line"].to_numpy(np.int64)[m] for k, m in pick.items()])
+    )
+    zl = zda["line"].to_numpy(np.int64) if len(zda) else np.zeros(0, np.int64)
+    zpick = np.isin(zl - 1, copied) & (zl < at)  # a ZDA follows its RMC: copied with it
+    copied = np.union1d(copied, zl[zpick])
+    if not len(copied):
+        return frames, zda
+    # order keys: the originals at line * K, the copies just before line ``at``
+    big = len(copied) + 2
+
+    def keyed(df: pd.DataFrame, m: np.ndarray) -> pd.DataFrame:
+        ln = df["line"].to_numpy(np.int64)
+        copy = df[m].assign(line=(at - 1) * big + 1 + np.searchsorted(copied, ln[m]))
+        both = pd.concat([df.assign(line=ln * big), copy], ignore_index=True)
+        return both.iloc[np.argsort(both["line"].to_numpy(np.int64), kind="stable")]
+
+    out = {k: keyed(df, pick[k]) if k in pick else df for k, df in frames.items()}
+    return renumber_lines(out, keyed(zda, zpick) if len(zda) else zda)
 
 
 def renumber_lines(

@@ -4,8 +4,11 @@ One channel per source and kind, topic ``/<source>/<leaf>`` (leaf: position ``fi
 heading ``heading``, ground ``velocity``, water ``water``, distance ``distance``, rot
 ``rot``; raw NMEA ``nmea``), so the reader's source key is the source again.  Log and
 publish times are the record's receive time (``recv_ns`` where set, e.g. a simulated
-latency, else ``time_ns``); message stamps are ``time_ns`` (the time of fix); messages are
-written in log-time order.
+latency, else ``time_ns``); message stamps are ``time_ns`` (the time of fix; a record
+without one is stamped on receipt); messages are written in log-time order, or with
+``order='line'`` in the frames' line order (the simulator's logger order: a loop or a
+clock step goes back in log time).  ``date_shifts`` (a GNSS week rollover): the stamps of
+a source's records in a window that many days early (the NMEA encoding: the dates).
 
 Encodings
     ``json``: positions as ``foxglove.LocationFix`` (``timestamp {sec, nsec}``,
@@ -36,6 +39,7 @@ from dracc.core.atomic import atomic_path
 from dracc.frames import KIND_COLUMNS, KINDS, MISSING_NS
 from dracc.ingest.csv_quantities import frame_quantities
 from dracc.ingest.mcap.cdr import compile_schema, encode_fixed
+from dracc.sim.nmea_out import DateShifts, date_shift_days
 
 LEAF = {
     "position": "fix",
@@ -115,12 +119,21 @@ def _dracc_msg(kind: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _kind_tables(frames: dict[str, pd.DataFrame]) -> Iterator[tuple[str, str, pd.DataFrame]]:
+def _kind_tables(
+    frames: dict[str, pd.DataFrame], shifts: DateShifts = ()
+) -> Iterator[tuple[str, str, pd.DataFrame]]:
+    """(kind, source, rows) per channel; ``time_ns`` early by ``shifts`` (the stamps)."""
     for kind in KINDS:
         df = frames.get(kind)
         if df is None or len(df) == 0:
             continue
         for src, sub in df.groupby(df["source"].astype(str), sort=True, observed=True):
+            if shifts:
+                t = sub["time_ns"].to_numpy(np.int64)
+                days = date_shift_days(np.full(len(sub), str(src), object), t, shifts)
+                if days.any():
+                    stamp = np.where(days != 0, t - days * 86_400 * 1_000_000_000, t)
+                    sub = sub.assign(time_ns=stamp, recv_ns=_log_times(sub))
             yield kind, str(src), sub
 
 
@@ -351,16 +364,21 @@ def write_mcap(
     chunk_size: int = 1 << 20,
     compression: str | None = "zstd",
     indexed: bool = True,
+    order: str = "time",
+    date_shifts: DateShifts = (),
 ) -> Path:
     """Write ``frames`` (kind -> canonical frame) as MCAP at ``path`` atomically; return the path.
 
     ``roles`` (source key -> role) goes into a ``dracc.roles`` metadata record and, for
     ``encoding='nmea'``, to the sentence writer (talker IDs).  ``compression``: 'zstd',
     'lz4' or None; ``indexed=False`` writes no message/chunk indexes and no summary
-    (as a recorder that stops without finishing does).
+    (as a recorder that stops without finishing does).  ``order``: 'time' (log-time order)
+    or 'line' (the frames' line order); ``date_shifts``: see the module docstring.
     """
     from mcap.writer import CompressionType, IndexType, Writer
 
+    if order not in ("time", "line"):
+        raise ValueError(f"order must be 'time' or 'line', got {order!r}")
     if encoding not in ("json", "ros2", "protobuf", "nmea"):
         raise ValueError(f"encoding must be json, ros2, protobuf or nmea, got {encoding!r}")
     comp = {
@@ -373,10 +391,12 @@ def write_mcap(
         raise ValueError(f"compression must be 'zstd', 'lz4' or None, got {compression!r}")
     path = Path(path)
     streams: list[tuple[str, str, str, bytes, str, np.ndarray, list[bytes]]] = []
+    keys: list[np.ndarray] = []  #: per stream the write-order key of each message
     if encoding == "nmea":
         from dracc.sim.nmea_out import frames_to_lines
 
-        t, line_src, lines = frames_to_lines(frames, roles)
+        t, line_src, lines = frames_to_lines(frames, roles, order, date_shifts)
+        pos = np.arange(len(lines), dtype=np.int64)
         line_src = np.asarray(line_src, dtype=object)
         for s in sorted(set(line_src.tolist())):
             m = line_src == s
@@ -391,9 +411,10 @@ def write_mcap(
                     [ln for ln, k in zip(lines, m, strict=False) if k],
                 )
             )
+            keys.append(pos[m])
     else:
         protos = _proto_classes() if encoding == "protobuf" else None
-        for kind, src, df in _kind_tables(frames):
+        for kind, src, df in _kind_tables(frames, date_shifts):
             if encoding == "json":
                 name, sdata, msgs = _json_messages(kind, src, df)
                 senc, menc = "jsonschema", "json"
@@ -407,6 +428,7 @@ def write_mcap(
             streams.append(
                 (f"/{src.strip('/')}/{LEAF[kind]}", name, senc, sdata, menc, _log_times(df), msgs)
             )
+            keys.append(df["line"].to_numpy(np.int64))
     # one global log-time order over all channels (a recorder writes in arrival order)
     t_all = np.concatenate([s[5] for s in streams]) if streams else np.zeros(0, np.int64)
     ch_all = np.repeat(np.arange(len(streams)), [len(s[5]) for s in streams])
@@ -415,7 +437,8 @@ def write_mcap(
         if streams
         else np.zeros(0, np.int64)
     )
-    order = np.lexsort((ch_all, t_all))
+    key = t_all if order == "time" else np.concatenate(keys) if keys else t_all
+    written = np.lexsort((ch_all, key))
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         w = Writer(
             fh,
@@ -443,7 +466,10 @@ def write_mcap(
         seq = [0] * len(streams)
         add = w.add_message
         for c, r, t in zip(
-            ch_all[order].tolist(), row_all[order].tolist(), t_all[order].tolist(), strict=False
+            ch_all[written].tolist(),
+            row_all[written].tolist(),
+            t_all[written].tolist(),
+            strict=False,
         ):
             seq[c] += 1
             add(

@@ -25,6 +25,7 @@ Error processes: :mod:`dracc.sim.processes`; written precision: :mod:`dracc.sim.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -34,7 +35,13 @@ import pandas as pd
 
 from dracc.core.errors import ConfigError
 from dracc.core.units import DEG_RAD
-from dracc.sim.faults import apply_error_faults, apply_frame_faults, resolve_faults
+from dracc.sim.faults import (
+    SimFault,
+    apply_error_faults,
+    apply_frame_faults,
+    date_shifts,
+    resolve_faults,
+)
 from dracc.sim.params import SimParams
 from dracc.sim.processes import (
     gauss_markov,
@@ -71,6 +78,12 @@ class SimVoyage:
     #: every Gauss-Markov process's last value, the VLW trip and the last position: what
     #: the next segment continues from
     state: dict[str, Any] = field(default_factory=dict)
+    #: source key -> its clock truth: ``phase_s``, ``latency_s``, ``offset_s``,
+    #: ``offset_whole_s_stamps``, ``records`` (:func:`dracc.sim.readings.clock_truth`)
+    clocks: dict[str, dict[str, float]] = field(default_factory=dict)
+    #: ``(source, lo_ns, hi_ns, days)``: dates the writers put ``days`` early (a rollover;
+    #: :func:`dracc.sim.faults.date_shifts`)
+    date_shifts: tuple[tuple[str, int, int | None, int], ...] = ()
 
 
 def _check(p: SimParams) -> float:
@@ -95,6 +108,7 @@ def _check(p: SimParams) -> float:
     for k, v in rates.items():
         if not v > 0:
             raise ConfigError(f"{k} must be positive, got {v}")
+    p.clock_steps()  # raises on a phase or latency the voyage cannot have
     if p.aux_hz < 0:
         raise ConfigError(f"aux_hz must be >= 0, got {p.aux_hz}")
     base = max(*rates.values(), p.aux_hz)
@@ -135,6 +149,10 @@ def simulate(params: SimParams) -> SimVoyage:
     ``params.faults`` (:mod:`dracc.sim.faults`) are resolved over the voyage (the result's
     ``params.faults`` holds them resolved) and applied to the errors and frames; without
     faults nothing of this runs.
+
+    ``params.phases_s`` and ``latency_s`` (the sources' clocks) choose the samples each
+    source takes and the times of its records (:mod:`dracc.sim.readings`); ``clocks`` holds
+    their truth.  They change neither the truth nor the errors.
     """
     p = params
     base_hz = _check(p)
@@ -183,7 +201,7 @@ def simulate(params: SimParams) -> SimVoyage:
         state_out.update(fstate)
         if "voyage_s" in state_in:
             state_out["voyage_s"] = voyage_s
-        unit_rms = unit_rms_from_frames(frames, time_ns, lat, lon, psi)
+        unit_rms = unit_rms_from_frames(frames, time_ns, lat, lon, psi, p.clock_steps()[1])
     state_out.update(
         lat_rad=float(lat[-1]), lon_rad=float(lon[-1]), t0_s=float(t_s[-1]), segment=seg
     )
@@ -199,7 +217,29 @@ def simulate(params: SimParams) -> SimVoyage:
         params=p,
         zda=zda,
         state=state_out,
+        clocks=r.clocks,
+        date_shifts=date_shifts(faults, v0_ns),
     )
+
+
+def _segment_len(t0: float, segment_s: float, faults: tuple[SimFault, ...], p: SimParams) -> float:
+    """The length of the segment from ``t0``: ``segment_s``, longer (to the truth's grid)
+    where its end would cut a loop's replay (a loop needs its replayed records in its
+    segment); at most to the voyage's end."""
+    margin = 10.0 + max((v for _, v in p.latency_s), default=0.0)
+    loops = [(f.start_s, f.size) for f in faults if f.kind == "loop"]
+    end_s, moved = t0 + segment_s, False
+    for _ in range(len(loops) + 1):
+        cut = [
+            a
+            for a, b in loops
+            if a is not None and b is not None and a - b - margin < end_s < a + margin
+        ]
+        if not cut:
+            break
+        end_s = math.ceil((cut[0] + margin) * p.base_hz()) / p.base_hz()
+        moved = True
+    return min(end_s - t0 if moved else segment_s, p.duration_s - t0)
 
 
 def simulate_segments(params: SimParams, segment_s: float = 6 * 3600.0) -> Iterator[SimVoyage]:
@@ -226,7 +266,7 @@ def simulate_segments(params: SimParams, segment_s: float = 6 * 3600.0) -> Itera
         )
         state = {"voyage_s": total}
     while True:
-        seg_len = min(segment_s, total - t0)
+        seg_len = _segment_len(t0, segment_s, params.faults, params)
         p = replace(
             params, legs=legs, duration_s=seg_len, t0_s=t0, segment=k, skip_first=k > 0, state=state
         )

@@ -30,7 +30,12 @@ simulator are reproduced exactly.  Line forms:
 
 The TAG ``c:`` and the prefix carry the receive time: a frame's ``recv_ns`` where it is not
 ``MISSING_NS`` (a simulated latency), else its ``time_ns``; the sentences' own time fields
-(GGA, RMC, ZDA) are always ``time_ns``, the time of fix.  Lines stay in time-of-fix order.
+(GGA, RMC, ZDA) are always ``time_ns``, the time of fix.  Lines are in time order
+(``order='time'``: ``time_ns``, then ``line``) or in the frames' line order
+(``order='line'``: the simulator's, the order its logger writes, which a loop or a clock
+step takes back in time; :func:`write_nmea` of a :class:`SimVoyage` takes it).
+``date_shifts`` (a GNSS week rollover, :func:`dracc.sim.faults.date_shifts`): RMC and ZDA
+dates of a source ``days`` early where ``time_ns`` is in a window.
 Validity comes from the position frame's ``quality``: GGA writes it as the fix quality,
 RMC writes status ``V`` and mode ``N`` where it is 0, and a VTG is written with mode ``N``
 where its source's position record at the same time has quality 0.
@@ -232,6 +237,11 @@ def _gga(r: _Row, d: _Columns) -> None:
     r.lit(b",").num(hdop, HDOP_DEC).lit(b",").num(d["alt_m"], ALT_DEC).lit(b",M,,M,,")
 
 
+def _early(d: _Columns, cs: np.ndarray) -> np.ndarray:
+    """Centiseconds of the written date: ``date_shift_days`` early where set."""
+    return cs - d["date_shift_days"] * 8_640_000 if "date_shift_days" in d else cs
+
+
 def _rmc(r: _Row, d: _Columns) -> None:
     cs = _hms(r, d["time_ns"])
     ok = np.asarray(d["quality"], np.int64) > 0
@@ -241,13 +251,13 @@ def _rmc(r: _Row, d: _Columns) -> None:
     _latlon(r, d["lon_rad"], 3, b"E", b"W")
     r.lit(b",").num(d["sog_mps"] / KN_MPS, SPEED_DEC).lit(b",")
     r.num(_angle_deg(d["cog_rad"]), ANGLE_DEC).lit(b",")
-    dd, mm, yy = _date(cs)
+    dd, mm, yy = _date(_early(d, cs))
     r.uint(dd, 2).uint(mm, 2).uint(yy % 100, 2).lit(b",,,").choice(ok, b"A", b"N")
 
 
 def _zda(r: _Row, d: _Columns) -> None:
     cs = _hms(r, d["time_ns"])
-    dd, mm, yy = _date(cs)
+    dd, mm, yy = _date(_early(d, cs))
     r.lit(b",").uint(dd, 2).lit(b",").uint(mm, 2).lit(b",").uint(yy, 4).lit(b",00,00")
 
 
@@ -331,8 +341,21 @@ _NUMERIC = {
 # --------------------------------------------------------------------------- frames -> sentences
 
 
+#: ``(source, lo_ns, hi_ns or None, days)``: dates written ``days`` early
+DateShifts: TypeAlias = "tuple[tuple[str, int, int | None, int], ...]"
+
+
+def date_shift_days(source: np.ndarray, time_ns: np.ndarray, shifts: DateShifts) -> np.ndarray:
+    """Days each row's date is written early (0 outside every window of ``shifts``)."""
+    days = np.zeros(len(time_ns), np.int64)
+    for src, lo, hi, d in shifts:
+        win = (source == src) & (time_ns >= lo) & ((time_ns < hi) if hi is not None else True)
+        days[win] += d
+    return days
+
+
 def _sentence_tables(
-    frames: dict[str, pd.DataFrame], roles: dict[str, str] | None
+    frames: dict[str, pd.DataFrame], roles: dict[str, str] | None, shifts: DateShifts = ()
 ) -> list[tuple[str, pd.DataFrame]]:
     """Group frame rows into sentence tables: {type: DataFrame with time_ns, source, talker,
     line, sub (order after line) and the numeric columns the layout needs}."""
@@ -426,6 +449,11 @@ def _sentence_tables(
         else:
             rmc = bp.merge(bg, on=keys, how="outer", sort=False)
             rmc["quality"] = rmc["quality"].fillna(1).astype(np.int64)
+        if shifts:
+            rmc["date_shift_days"] = date_shift_days(
+                rmc["source"].to_numpy(object), rmc["time_ns"].to_numpy(np.int64), shifts
+            )
+            keys = [*keys, "date_shift_days"]
         tables.append(("RMC", rmc))
         if roles:
             is_gnss = (pd.Series(rmc["source"]).map(roles) == "gnss").to_numpy(bool)
@@ -479,16 +507,18 @@ def _arrays(tb: pd.DataFrame) -> _Columns:
     for c in tb.columns:
         if c in ("source", "talker"):
             out[c] = tb[c].astype(str).to_numpy(dtype=object).astype("S")
-        elif c in ("time_ns", "line", "sub", "quality", "recv_ns", "valid"):
+        elif c in ("time_ns", "line", "sub", "quality", "recv_ns", "valid", "date_shift_days"):
             out[c] = tb[c].to_numpy(dtype=np.int64)
         else:
             out[c] = tb[c].to_numpy(dtype=float, na_value=np.nan)
     return out
 
 
-def _order(tables: list[tuple[str, _Columns]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Global time order: (time_ns, line, sub, type order); returns (type_id, row, receive
-    time) per line."""
+def _order(
+    tables: list[tuple[str, _Columns]], order: str = "time"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Global order: (time_ns, line, sub, type order), or (line, sub, type order) for
+    ``order='line'``; returns (type_id, row, receive time) per line."""
     t = np.concatenate([tb["time_ns"] for _, tb in tables])
     rcv = np.concatenate([_received(tb) for _, tb in tables])
     ln = np.concatenate([tb["line"] for _, tb in tables])
@@ -496,7 +526,7 @@ def _order(tables: list[tuple[str, _Columns]]) -> tuple[np.ndarray, np.ndarray, 
     sizes = [len(tb["time_ns"]) for _, tb in tables]
     tid = np.repeat(np.arange(len(tables)), sizes)
     row = np.concatenate([np.arange(k) for k in sizes])
-    o = np.lexsort((tid, sub, ln, t))
+    o = np.lexsort((tid, sub, ln) if order == "line" else (tid, sub, ln, t))
     return tid[o], row[o], rcv[o]
 
 
@@ -545,11 +575,14 @@ def _fix_valid(pos: pd.DataFrame | None, vtg: pd.DataFrame) -> np.ndarray:
     bad = pos["quality"].to_numpy(np.int64) == 0
     if not bad.any():
         return ok
-    keys = pd.MultiIndex.from_arrays(
-        [pos["source"].astype(str).to_numpy(object)[bad], pos["time_ns"].to_numpy(np.int64)[bad]]
-    )
+    # matched by receive time: a GGA's time of fix precedes its receipt, a VTG's does not
+    rcv = _received({c: pos[c].to_numpy(np.int64) for c in ("time_ns", "recv_ns") if c in pos})
+    keys = pd.MultiIndex.from_arrays([pos["source"].astype(str).to_numpy(object)[bad], rcv[bad]])
     mine = pd.MultiIndex.from_arrays(
-        [vtg["source"].to_numpy(object), vtg["time_ns"].to_numpy(np.int64)]
+        [
+            vtg["source"].to_numpy(object),
+            _received({c: vtg[c].to_numpy(np.int64) for c in ("time_ns", "recv_ns")}),
+        ]
     )
     ok[mine.isin(keys)] = 0
     return ok
@@ -559,7 +592,9 @@ def _width(v: np.ndarray) -> int:
     return int(_ndigits(np.asarray(v, np.int64)).max(initial=1))
 
 
-def _check_form(form: str, tag_time: str) -> None:
+def _check_form(form: str, tag_time: str, order: str = "time") -> None:
+    if order not in ("time", "line"):
+        raise DraccError(f"line order must be 'time' or 'line', got {order!r}")
     if form not in FORMS:
         raise DraccError(f"NMEA line form must be one of {', '.join(FORMS)}, got {form!r}")
     if tag_time not in ("s", "ms"):
@@ -573,16 +608,19 @@ def iter_blocks(
     tag_time: str = "s",
     newline: bytes = b"\r\n",
     chunk_rows: int = CHUNK_ROWS,
+    order: str = "time",
+    date_shifts: DateShifts = (),
 ) -> Iterator[tuple[np.ndarray, np.ndarray, bytes]]:
     """Yield ``(time_ns, source, bytes)`` blocks of complete lines in time-of-fix order
-    (``source`` as an ASCII bytes array; ``time_ns`` the time a logger stamps each line:
-    ``recv_ns`` where set, else ``time_ns``).  TAG ``c:`` and prefix times are those
-    receive times; the sentences' own time fields are the time of fix."""
-    _check_form(form, tag_time)
-    tables = [(typ, _arrays(tb)) for typ, tb in _sentence_tables(frames, roles)]
+    (``order='line'``: the frames' line order; ``source`` as an ASCII bytes array;
+    ``time_ns`` the time a logger stamps each line: ``recv_ns`` where set, else
+    ``time_ns``).  TAG ``c:`` and prefix times are those receive times; the sentences'
+    own time fields are the time of fix (RMC/ZDA dates early by ``date_shifts``)."""
+    _check_form(form, tag_time, order)
+    tables = [(typ, _arrays(tb)) for typ, tb in _sentence_tables(frames, roles, date_shifts)]
     if not tables:
         return
-    tid, row, t = _order(tables)
+    tid, row, t = _order(tables, order)
     for start in range(0, len(tid), chunk_rows):
         ctid, crow = tid[start : start + chunk_rows], row[start : start + chunk_rows]
         m = len(ctid)
@@ -606,13 +644,19 @@ def iter_blocks(
 
 
 def frames_to_lines(
-    frames: dict[str, pd.DataFrame], roles: dict[str, str] | None = None
+    frames: dict[str, pd.DataFrame],
+    roles: dict[str, str] | None = None,
+    order: str = "time",
+    date_shifts: DateShifts = (),
 ) -> tuple[np.ndarray, np.ndarray, list[bytes]]:
-    """Bare sentences with checksums, time-ordered: ``(time_ns int64, source str array,
-    lines list[bytes])`` (no line terminators; ``time_ns`` the receive time, as
-    :func:`iter_blocks`)."""
+    """Bare sentences with checksums, time-ordered (or in line order): ``(time_ns int64,
+    source str array, lines list[bytes])`` (no line terminators; ``time_ns`` the receive
+    time, as :func:`iter_blocks`)."""
     ts, srcs, lines = [], [], []
-    for t, src, blob in iter_blocks(frames, roles, form="bare", newline=b"\n"):
+    blocks = iter_blocks(
+        frames, roles, form="bare", newline=b"\n", order=order, date_shifts=date_shifts
+    )
+    for t, src, blob in blocks:
         ts.append(t)
         srcs.append(src)
         lines.extend(blob.split(b"\n")[:-1])
@@ -628,18 +672,28 @@ def write_nmea(
     tag_time: str = "s",
     roles: dict[str, str] | None = None,
     newline: bytes = b"\r\n",
+    order: str | None = None,
+    date_shifts: DateShifts | None = None,
 ) -> None:
     """Write a simulated voyage (or canonical frames) as an NMEA 0183 text log, atomically.
 
     ``form``: 'tag' (IEC 61162-450 TAG block with ``s:`` source and ``c:`` time), 'prefix'
     (ISO 8601 UTC timestamp, a space, the sentence) or 'bare'.  Lines end in CR LF.
+    ``order`` (default: 'line' for a voyage, its logger's order; 'time' for frames) and
+    ``date_shifts`` (default: the voyage's) as for :func:`iter_blocks`.
     """
-    _check_form(form, tag_time)
     if isinstance(voyage_or_frames, dict):
         frames = voyage_or_frames
+        shifts: DateShifts = ()
     else:
         frames = voyage_or_frames.frames
         roles = roles if roles is not None else voyage_or_frames.roles
+        shifts = voyage_or_frames.date_shifts
+    order = order or ("time" if isinstance(voyage_or_frames, dict) else "line")
+    shifts = shifts if date_shifts is None else date_shifts
+    _check_form(form, tag_time, order)
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        for _, _, blob in iter_blocks(frames, roles, form=form, tag_time=tag_time, newline=newline):
+        for _, _, blob in iter_blocks(
+            frames, roles, form, tag_time, newline, order=order, date_shifts=shifts
+        ):
             fh.write(blob)

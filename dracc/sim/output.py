@@ -2,8 +2,9 @@
 :data:`FORMATS`), truth.csv, errors.csv and params.json, from the command's options.
 
 :func:`simulate_to_folder` checks the options, builds the :class:`SimParams` (the seeded
-faults resolved), simulates (NMEA in segments, so memory does not grow with the hours),
-writes every file atomically and returns what the command reports.
+faults resolved, the sources' clocks), simulates (NMEA in segments, so memory does not grow
+with the hours), writes every file atomically and returns what the command reports.
+params.json holds the clock truth per source (``clocks``, :func:`merge_clocks`).
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import json
 import math
 import time
 from collections import Counter
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -24,7 +25,7 @@ from dracc.core.atomic import atomic_path, write_text
 from dracc.core.errors import ConfigError, DraccError
 from dracc.sim.faults import SimFault, fault_table, parse_fault, resolve_faults
 from dracc.sim.model import SimVoyage, simulate, simulate_segments
-from dracc.sim.params import SimParams
+from dracc.sim.params import SimParams, random_clocks
 from dracc.sim.truth import generated_legs, start_ns
 
 FORMATS = ("nmea", "csv-long", "csv-wide", "mcap-json", "mcap-ros2", "mcap-protobuf", "mcap-nmea")
@@ -52,13 +53,22 @@ def write_log(
             from dracc.sim.csv_out import write_csv
         except ImportError as e:
             raise DraccError(f"CSV output is not available in this build ({e})") from e
-        write_csv(voyage.frames, path, form=fmt[4:])
+        write_csv(voyage.frames, path, form=fmt[4:], date_shifts=voyage.date_shifts)
     elif fmt.startswith("mcap-"):
         try:
             from dracc.sim.mcap_out import write_mcap
         except ImportError as e:
             raise DraccError(f"MCAP output is not available in this build ({e})") from e
-        write_mcap(voyage.frames, voyage.roles, path, encoding=fmt[5:])
+        # a loop or a clock step is written as the logger wrote it, back in log time
+        stepped = any(f.kind in ("loop", "clockstep") for f in voyage.params.faults)
+        write_mcap(
+            voyage.frames,
+            voyage.roles,
+            path,
+            encoding=fmt[5:],
+            order="line" if stepped else "time",
+            date_shifts=voyage.date_shifts,
+        )
     else:
         raise ConfigError(f"--format must be one of {', '.join(FORMATS)}, got {fmt!r}")
 
@@ -96,6 +106,8 @@ class SimulationWritten:
     log_path: Path
     seconds: float
     faults: tuple[SimFault, ...]
+    #: source -> its clock truth over the whole voyage (params.json ``clocks``)
+    clocks: dict[str, dict[str, float]] = field(default_factory=dict)
 
 
 def _unit_scales(text: str) -> tuple[float, float, float]:
@@ -110,6 +122,75 @@ def _unit_scales(text: str) -> tuple[float, float, float]:
             f"--ins-unit-scales must be three factors >= 0 such as 1,3,1, got {text!r}"
         )
     return (k[0], k[1], k[2])
+
+
+def _clock_pairs(items: list[str], option: str) -> tuple[tuple[str, float], ...]:
+    """``--phase``/``--latency`` values ``SRC=S`` as (SRC, seconds) pairs."""
+    out = []
+    for item in items:
+        src, sep, value = str(item).partition("=")
+        try:
+            sec = float(value)
+        except ValueError:
+            sep = ""
+        if not sep or not src.strip():
+            raise ConfigError(f"{option} {item!r}: expected SRC=SECONDS, e.g. INS2=0.3")
+        out.append((src.strip().upper(), sec))
+    return tuple(out)
+
+
+def with_clocks(
+    params: SimParams,
+    clocks: str = "none",
+    latency_max: float = 2.0,
+    phase: list[str] | None = None,
+    latency: list[str] | None = None,
+) -> SimParams:
+    """``params`` with the sources' clocks of ``dracc simulate``'s options: ``clocks``
+    'random' (:func:`random_clocks` from the voyage's seed) or 'none'; then each
+    ``--phase``/``--latency SRC=S`` replaces its source's value."""
+    if clocks not in ("none", "random"):
+        raise ConfigError(f"--clocks must be none or random, got {clocks!r}")
+    if clocks == "random":
+        params = random_clocks(params, params.seed, latency_max)
+    phases = _clock_pairs(phase or [], "--phase")
+    lags = _clock_pairs(latency or [], "--latency")
+
+    def over(old: tuple[tuple[str, float], ...], new: tuple[tuple[str, float], ...]) -> Any:
+        named = {s for s, _ in new}
+        return tuple((s, v) for s, v in old if s not in named) + new
+
+    params = replace(
+        params, phases_s=over(params.phases_s, phases), latency_s=over(params.latency_s, lags)
+    )
+    params.clock_steps()  # a source the voyage lacks, a phase beyond the period: now
+    return params
+
+
+def merge_clocks(
+    total: dict[str, dict[str, float]], part: dict[str, dict[str, float]]
+) -> dict[str, dict[str, float]]:
+    """The clock truth of two stretches of a voyage: the offsets' means weighted by records."""
+    out = {k: dict(v) for k, v in total.items()}
+    for src, c in part.items():
+        if src not in out:
+            out[src] = dict(c)
+            continue
+        n0, n1 = out[src]["records"], c["records"]
+        for key in ("offset_s", "offset_whole_s_stamps"):
+            if n1:
+                a = out[src][key] if n0 else 0.0
+                out[src][key] = round((a * n0 + c[key] * n1) / (n0 + n1), 9)  # to the ns
+        out[src]["records"] = n0 + n1
+    return out
+
+
+def _json_clocks(clocks: dict[str, dict[str, float]]) -> dict[str, dict[str, Any]]:
+    """NaN as null, records as an integer."""
+    return {
+        src: {k: (int(v) if k == "records" else None if math.isnan(v) else v) for k, v in c.items()}
+        for src, c in clocks.items()
+    }
 
 
 def simulate_to_folder(
@@ -145,12 +226,16 @@ def simulate_to_folder(
     name: str,
     segment_hours: float,
     fault: list[str],
+    clocks: str = "none",
+    latency_max: float = 2.0,
+    phase: list[str] | None = None,
+    latency: list[str] | None = None,
 ) -> SimulationWritten:
     """Simulate a voyage and write it to ``out_dir``: ``<name>.<ext>`` (the log in ``fmt``),
     truth.csv, errors.csv and params.json.  The arguments are ``dracc simulate``'s options
     by name (``legs`` as for :func:`parse_legs`, ``fault`` as for
-    :func:`dracc.sim.faults.parse_fault`); a value it cannot use is a ConfigError naming
-    the option."""
+    :func:`dracc.sim.faults.parse_fault`, the clocks as for :func:`with_clocks`); a value
+    it cannot use is a ConfigError naming the option."""
     if fmt not in FORMATS:
         raise ConfigError(f"--format must be one of {', '.join(FORMATS)}, got {fmt!r}")
     if not (hours > 0 and math.isfinite(hours)):
@@ -194,7 +279,9 @@ def simulate_to_folder(
     if tag_time == "auto":
         # whole seconds would give every sub-second sentence its neighbour's time
         tag_time = "ms" if max(compass_hz, log_hz, ins_hz, gnss_hz, aux_hz) > 1.0 else "s"
-    params = replace(params, legs=generated_legs(params))
+    params = with_clocks(
+        replace(params, legs=generated_legs(params)), clocks, latency_max, phase, latency
+    )
     specs = list(fault or [])
     params = replace(
         params,
@@ -240,6 +327,7 @@ def write_voyage(
     sq = {u: {"lat_m": 0.0, "lon_m": 0.0, "course_deg": 0.0} for u in ("ins1", "ins2", "ins3")}
     count = dict.fromkeys(sq, 0)
     roles: dict[str, str] = {}
+    clocks: dict[str, dict[str, float]] = {}
     with (
         atomic_path(out_dir / "truth.csv") as tt,
         atomic_path(out_dir / "errors.csv") as te,
@@ -250,16 +338,21 @@ def write_voyage(
             from dracc.sim.nmea_out import iter_blocks
 
             with atomic_path(log_path) as tl, open(tl, "wb") as fl:
+                log = _ReceivedOrder(fl, hold=bool(params.latency_s))
                 for i, v in enumerate(simulate_segments(params, segment_hours * 3600.0)):
-                    for _, _, blob in iter_blocks(v.frames, v.roles, form=form, tag_time=tag_time):
-                        fl.write(blob)
+                    blocks = iter_blocks(
+                        v.frames, v.roles, form, tag_time, order="line", date_shifts=v.date_shifts
+                    )
+                    log.segment(blocks, int(v.truth["time_ns"].iloc[-1]))
                     _tables_and_tallies(v, i, ft, fe, truth_hz, base_hz, t0_ns, records, sq, count)
                     roles = v.roles
+                    clocks = merge_clocks(clocks, v.clocks)
+                log.close()
         else:
             v = simulate(params)
             write_log(v, log_path, fmt)
             _tables_and_tallies(v, 0, ft, fe, truth_hz, base_hz, t0_ns, records, sq, count)
-            roles = v.roles
+            roles, clocks = v.roles, v.clocks
     t1 = time.perf_counter()
     unit_rms = {
         u: {ch: math.sqrt(s / count[u]) if count[u] else float("nan") for ch, s in sq[u].items()}
@@ -275,10 +368,60 @@ def write_voyage(
         "unit_rms": unit_rms,
         "records": dict(records),
         "faults": fault_table(params.faults, t0_ns, params.duration_s, roles),
+        "clocks": _json_clocks(clocks),
         "params": params.to_dict(),
     }
     write_text(out_dir / "params.json", json.dumps(info, indent=2) + "\n")
-    return SimulationWritten(log_path, t1 - t0, tuple(params.faults))
+    return SimulationWritten(log_path, t1 - t0, tuple(params.faults), clocks)
+
+
+class _ReceivedOrder:
+    """Writes the segments' lines to ``fh`` in the order they are received: with ``hold``
+    (the sources have latencies) lines of a segment received after its last sample are
+    held back and merged by receive time into the next segment's first lines."""
+
+    def __init__(self, fh: Any, hold: bool, newline: bytes = b"\r\n") -> None:
+        self.fh, self.nl, self.hold = fh, newline, hold
+        self.held_t = np.zeros(0, np.int64)
+        self.held: list[bytes] = []
+
+    def segment(self, blocks: Any, end_ns: int) -> None:
+        if not self.hold:
+            for _, _, blob in blocks:
+                self.fh.write(blob)
+            return
+        last = None
+        for t, _, blob in blocks:
+            if last is not None:
+                self._write(*last)
+            last = (t, blob)
+        if last is None:
+            return
+        t, blob = last
+        early = np.flatnonzero(t <= end_ns)
+        k = int(early[-1]) + 1 if len(early) else 0
+        lines = blob.split(self.nl)[:-1]
+        if k < len(t):  # received after the segment's end: held for the next one
+            self._write(t[:k], b"".join(ln + self.nl for ln in lines[:k]))
+            self.held_t, self.held = t[k:], lines[k:]
+        else:
+            self._write(t, blob)
+
+    def _write(self, t: np.ndarray, blob: bytes) -> None:
+        if not len(self.held):
+            self.fh.write(blob)
+            return
+        lines = blob.split(self.nl)[:-1]
+        k = int(np.searchsorted(t, self.held_t[-1], side="right"))
+        both = self.held + lines[:k]
+        o = np.argsort(np.concatenate([self.held_t, t[:k]]), kind="stable")
+        self.fh.write(b"".join(both[i] + self.nl for i in o))
+        self.fh.write(b"".join(ln + self.nl for ln in lines[k:]))
+        self.held_t, self.held = np.zeros(0, np.int64), []
+
+    def close(self) -> None:
+        self.fh.write(b"".join(ln + self.nl for ln in self.held))
+        self.held_t, self.held = np.zeros(0, np.int64), []
 
 
 def _tables_and_tallies(

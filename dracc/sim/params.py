@@ -4,6 +4,9 @@ process description :class:`GM`.
 
 Degrees and knots at this edge only; :func:`dracc.sim.model.simulate` turns the parameters
 into SI.  Errors are *measured minus true* (see :mod:`dracc.sim.model`).
+
+Clocks: ``phases_s`` and ``latency_s`` give a source its sample phase and its delay to the
+logger (:meth:`SimParams.clock_steps`); :func:`random_clocks` draws both from a seed.
 """
 
 from __future__ import annotations
@@ -13,7 +16,13 @@ from dataclasses import dataclass, field, fields, replace
 from datetime import datetime
 from typing import Any, cast
 
-from dracc.sim.faults import SimFault
+import numpy as np
+
+from dracc.core.errors import ConfigError
+from dracc.sim.faults import ALL_SOURCES, SimFault
+
+RNG_CLOCKS = 70  #: random stream of :func:`random_clocks` (see dracc.sim.processes.component_rng)
+GNSS_LATENCY_MAX_S = 0.5  #: a GNSS receiver's fixes reach the logger within half a second
 
 
 @dataclass(frozen=True)
@@ -171,6 +180,12 @@ class SimParams:
     #: seeded sensor faults (:mod:`dracc.sim.faults`); unresolved fields take the kind's
     #: defaults, drawn from the seed over the whole voyage
     faults: tuple[SimFault, ...] = ()
+    #: (source key, seconds): the sample phase within the source's period; the source
+    #: samples at grid + phase, on the truth's grid (``round(phase * base rate)`` samples)
+    phases_s: tuple[tuple[str, float], ...] = ()
+    #: (source key, seconds): the delay from sampling to the logger (to the millisecond);
+    #: records without a time of fix are timed by it, the others get it as ``recv_ns``
+    latency_s: tuple[tuple[str, float], ...] = ()
     # segments of a long voyage (see dracc.sim.model.simulate_segments)
     t0_s: float = 0.0  #: time of this segment's first sample from the voyage start
     segment: int = 0  #: segment number (its own random streams; phases are shared)
@@ -223,6 +238,59 @@ class SimParams:
             self, ins=cast("tuple[InsErrorParams, InsErrorParams, InsErrorParams]", scaled)
         )
 
+    def base_hz(self) -> float:
+        """The truth's rate: the fastest sensor rate."""
+        return float(max(self.compass_hz, self.log_hz, self.ins_hz, self.gnss_hz, self.aux_hz))
+
+    def source_rates_hz(self) -> dict[str, tuple[float, ...]]:
+        """Each fitted source key -> the rates of its sentences (Hz)."""
+        gyro: tuple[float, ...] = (
+            (self.compass_hz, self.aux_hz) if self.aux_hz > 0 else (self.compass_hz,)
+        )
+        rates: dict[str, tuple[float, ...]] = {
+            "GYRO": gyro,
+            "MAG": (self.compass_hz,),
+            "LOG": (self.log_hz,),
+        }
+        rates.update({f"INS{j}": (self.ins_hz,) for j in (1, 2, 3)})
+        rates["GNSS"] = (self.gnss_hz,)
+        if self.compass == "gyro":
+            del rates["MAG"]
+        elif self.compass == "magnetic":
+            del rates["GYRO"]
+        return rates
+
+    def clock_steps(self) -> tuple[dict[str, int], dict[str, int]]:
+        """(source -> phase in truth samples, source -> latency in ns) of the sources named
+        in ``phases_s`` and ``latency_s``; the latency rounded to the millisecond.  Raises
+        :class:`ConfigError` for a source the voyage does not have, a source named twice, a
+        phase outside ``[0, period)`` of the source's slowest sentence or a latency < 0."""
+        rates, base = self.source_rates_hz(), self.base_hz()
+        steps: dict[str, int] = {}
+        lat: dict[str, int] = {}
+        for what, pairs, out in (("phase", self.phases_s, steps), ("latency", self.latency_s, lat)):
+            for src, value in pairs:
+                if src not in rates:
+                    raise ConfigError(
+                        f"{what} {src}={value}: the voyage has no source {src!r}; "
+                        f"expected one of {', '.join(rates)}"
+                    )
+                if src in out:
+                    raise ConfigError(f"{what} of {src} given twice")
+                period = 1.0 / min(rates[src])
+                v = float(value)
+                hi = period if what == "phase" else math.inf
+                if not (math.isfinite(v) and 0.0 <= v < hi):
+                    raise ConfigError(
+                        f"{what} {src}={value}: expected seconds in [0, {hi:g})"
+                        if what == "phase"
+                        else f"latency {src}={value}: expected finite seconds >= 0"
+                    )
+                out[src] = (
+                    int(round(v * base)) if what == "phase" else int(round(v * 1e3)) * 1_000_000
+                )
+        return steps, lat
+
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict (GM as {"sigma", "tau_s"}, inf as the string "inf")."""
 
@@ -240,3 +308,27 @@ class SimParams:
             return v
 
         return {f.name: conv(getattr(self, f.name)) for f in fields(self) if f.name != "state"}
+
+
+def random_clocks(
+    params: SimParams, rng: np.random.Generator | int, latency_max_s: float = 2.0
+) -> SimParams:
+    """``params`` with a random clock per fitted source: a phase drawn uniformly from the
+    truth's grid within the period of the source's slowest sentence, a latency uniform in
+    ``[0, latency_max_s]`` (GNSS: ``[0, min(0.5, latency_max_s)]``), to the millisecond.
+    ``rng``: a generator, or a seed (its own stream: the voyage's other draws are kept)."""
+    if not (math.isfinite(latency_max_s) and latency_max_s >= 0):
+        raise ConfigError(f"latency maximum {latency_max_s} s: expected finite seconds >= 0")
+    if not isinstance(rng, np.random.Generator):
+        rng = np.random.default_rng([int(rng) & 0xFFFFFFFF, RNG_CLOCKS])
+    rates, base = params.source_rates_hz(), params.base_hz()
+    phases, lats = [], []
+    for src in ALL_SOURCES:  # every key draws, fitted or not: stable streams
+        u_phase, u_lat = rng.uniform(0.0, 1.0, 2)
+        if src not in rates:
+            continue
+        n = max(int(round(base / min(rates[src]))), 1)
+        phases.append((src, round(int(u_phase * n) / base, 9)))
+        top = min(GNSS_LATENCY_MAX_S, latency_max_s) if src == "GNSS" else latency_max_s
+        lats.append((src, round(float(u_lat) * top, 3)))
+    return replace(params, phases_s=tuple(phases), latency_s=tuple(lats))

@@ -7,6 +7,13 @@ latitude/longitude minutes 6 decimals (1.9 mm), headings and courses 3 decimals 
 speeds 3 decimals of a knot (and km/h), rate of turn 2 decimals of deg/min, distances
 3 decimals of a nautical mile, altitude and HDOP 1 decimal; times to the nanosecond in the
 frames (the written log carries them to its form's resolution).
+
+Clocks (``SimParams.phases_s``, ``latency_s``): a source samples the truth at its grid
+shifted by its phase; a record with its own time of fix (GGA, RMC, ZDA) has ``time_ns``
+the sample instant and, for a source with a latency, ``recv_ns`` the instant plus the
+latency; a record without one (HDT, THS, HDG, ROT, VHW, VBW, VLW, VTG) is timed by its
+receipt, ``time_ns`` the instant plus the latency.  Lines are numbered in the order the
+logger receives the sentences (by receive instant, then the plan's order).
 """
 
 from __future__ import annotations
@@ -20,7 +27,8 @@ from pandas.api.types import union_categoricals
 
 from dracc.core.geodesy import add_offset_ne, angdiff, k_lambda, k_phi, wrap_2pi
 from dracc.core.units import DEG_RAD, KN_MPS, NMI_M
-from dracc.frames import KINDS, empty_frame, make_frame
+from dracc.frames import KINDS, MISSING_NS, empty_frame, make_frame
+from dracc.sim.faults import OWN_TIME_SENTENCES
 from dracc.sim.params import SimParams
 from dracc.sim.truth import deviation_curve_rad
 
@@ -72,15 +80,16 @@ def q_latlon_rad(a_rad: Any) -> np.ndarray:
 class SentencePlan:
     """Which sentences each source writes at which samples, and their line numbers."""
 
-    compass: np.ndarray  #: sample indices of the compass rate
-    log: np.ndarray
-    ins: np.ndarray
-    gnss: np.ndarray
-    aux: np.ndarray  #: the gyro's THS and ROT (empty when aux_hz is 0)
     #: (source, sentence, sample indices) in emission order within an epoch
     order: list[tuple[str, str, np.ndarray]]
     #: (source, sentence) -> line number of each of its sentences
     lines: dict[tuple[str, str], np.ndarray]
+    #: source -> its latency in ns (sources with a latency only)
+    latency_ns: dict[str, int]
+
+    def idx(self, source: str, sentence: str) -> np.ndarray:
+        """The sample indices of ``source``'s ``sentence``."""
+        return next(k for s, t, k in self.order if (s, t) == (source, sentence))
 
 
 @dataclass(frozen=True)
@@ -92,37 +101,54 @@ class Readings:
     zda: pd.DataFrame  #: (time_ns, source, line) of each GNSS ZDA sentence
     unit_rms: dict[str, dict[str, float]]  #: INS unit -> RMS of its written errors
     trip_m: float  #: the VLW trip at the last sample (the next segment continues from it)
+    clocks: dict[str, dict[str, float]]  #: source -> its clock truth (:func:`clock_truth`)
 
 
-def sentence_plan(p: SimParams, n: int, base_hz: float) -> SentencePlan:
-    """The sentences of ``n`` samples at ``base_hz``, numbered by (sample, order in plan)."""
+def sentence_plan(p: SimParams, time_ns: np.ndarray, base_hz: float) -> SentencePlan:
+    """The sentences of the samples at ``time_ns`` (``base_hz``), each source on its grid
+    shifted by its phase (the grid of the whole voyage: ``p.t0_s`` on), numbered by
+    (receive instant, order in plan)."""
+    n = len(time_ns)
+    k0 = int(round(p.t0_s * base_hz))  # this segment's first sample in the voyage's grid
+    phase, latency_ns = p.clock_steps()
 
-    def idx(hz: float) -> np.ndarray:
+    def idx(hz: float, src: str) -> np.ndarray:
+        if hz <= 0:
+            return np.zeros(0, np.int64)
         step = int(round(base_hz / hz))
-        return np.arange(step if p.skip_first else 0, n, step, dtype=np.int64)
+        first = (phase.get(src, 0) - k0) % step
+        if p.skip_first and first == 0:
+            first = step
+        return np.arange(first, n, step, dtype=np.int64)
 
-    ic, il, ii, ig = idx(p.compass_hz), idx(p.log_hz), idx(p.ins_hz), idx(p.gnss_hz)
-    ia = idx(p.aux_hz) if p.aux_hz > 0 else np.zeros(0, np.int64)
     plan: list[tuple[str, str, np.ndarray]] = []
     if p.compass in ("gyro", "both"):
-        plan += [("GYRO", "HDT", ic), ("GYRO", "THS", ia), ("GYRO", "ROT", ia)]
+        ia = idx(p.aux_hz, "GYRO")
+        plan += [
+            ("GYRO", "HDT", idx(p.compass_hz, "GYRO")),
+            ("GYRO", "THS", ia),
+            ("GYRO", "ROT", ia),
+        ]
     if p.compass in ("magnetic", "both"):
-        plan += [("MAG", "HDG", ic)]
+        plan += [("MAG", "HDG", idx(p.compass_hz, "MAG"))]
+    il = idx(p.log_hz, "LOG")
     plan += [("LOG", "VHW", il), ("LOG", "VBW", il), ("LOG", "VLW", il)]
     for j in (1, 2, 3):
+        ii = idx(p.ins_hz, f"INS{j}")
         plan += [(f"INS{j}", "GGA", ii), (f"INS{j}", "HDT", ii), (f"INS{j}", "VTG", ii)]
+    ig = idx(p.gnss_hz, "GNSS")
     plan += [("GNSS", "GGA", ig), ("GNSS", "RMC", ig), ("GNSS", "ZDA", ig)]
 
-    # line numbers: sort every sentence by (sample, order in plan)
+    # line numbers: sort every sentence by (receive instant, order in plan)
     sizes = [len(s[2]) for s in plan]
-    all_k = np.concatenate([s[2] for s in plan])
+    recv = np.concatenate([time_ns[k] + latency_ns.get(s, 0) for s, _, k in plan])
     all_o = np.repeat(np.arange(len(plan)), sizes)
-    order = np.lexsort((all_o, all_k))
+    order = np.lexsort((all_o, recv))
     line_all = np.empty(len(order), np.int64)
     line_all[order] = np.arange(1, len(order) + 1)
     offs = np.concatenate(([0], np.cumsum(sizes)))
     lines = {(s[0], s[1]): line_all[offs[i] : offs[i + 1]] for i, s in enumerate(plan)}
-    return SentencePlan(ic, il, ii, ig, ia, plan, lines)
+    return SentencePlan(plan, lines, latency_ns)
 
 
 def _const(m: int, value: str) -> pd.Categorical:
@@ -141,16 +167,21 @@ class _Recorder:
         self.talkers = {k: v[1] for k, v in SOURCES.items()}
         self.talkers.update({f"INS{j}": t for j, t in enumerate(p.ins_talkers, start=1)})
         self.lines = plan.lines
+        self.latency_ns = plan.latency_ns
         self.time_ns = time_ns
 
     def __call__(self, kind: str, src: str, sent: str, kidx: np.ndarray, **cols: Any) -> None:
         m = len(kidx)
+        instant = self.time_ns[kidx]
+        lag = self.latency_ns.get(src)
+        own = sent in OWN_TIME_SENTENCES
         d = {
-            "time_ns": self.time_ns[kidx],
+            "time_ns": instant if own or lag is None else instant + lag,
             "source": _const(m, src),
             "talker": _const(m, self.talkers[src]),
             "sentence": _const(m, sent),
             "line": self.lines[(src, sent)],
+            "recv_ns": instant + lag if own and lag is not None else np.full(m, MISSING_NS),
         }
         d.update(cols)
         self.parts[kind].append(d)
@@ -187,9 +218,9 @@ def _compass_readings(
     plan: SentencePlan,
 ) -> None:
     psi, kk = track["heading_rad"], track["compass_course_rad"]
-    ic, ia = plan.compass, plan.aux
     gyro_hdg = psi + errors["gyro_err_rad"]
     if p.compass in ("gyro", "both"):
+        ic, ia = plan.idx("GYRO", "HDT"), plan.idx("GYRO", "THS")
         true_ref = np.full(len(ic), "T", dtype=object)
         rec("heading", "GYRO", "HDT", ic, heading_rad=q_angle_rad(gyro_hdg[ic]), reference=true_ref)
         rec(
@@ -204,6 +235,7 @@ def _compass_readings(
         rot_w = q_signed(rot[ia] + rot_noise[ia], DEG_RAD / 60.0, ROT_DEC)
         rec("rot", "GYRO", "ROT", ia, rot_radps=rot_w)
     if p.compass in ("magnetic", "both"):
+        ic = plan.idx("MAG", "HDG")
         coeffs = tuple(c * DEG_RAD for c in p.deviation_deg)
         var_rad = p.variation_deg * DEG_RAD
         kk_meas = q_angle_rad(kk[ic] + errors["mag_err_rad"][ic])
@@ -234,7 +266,7 @@ def _log_readings(
     trip0_m: float,
 ) -> float:
     """Records VHW, VBW and VLW; returns the trip at the last sample."""
-    il = plan.log
+    il = plan.idx("LOG", "VHW")
     s1 = 1.0 + p.log_scale
     b = p.log_bias_kn * KN_MPS
     m_long = s1 * track["stw_long_mps"] + b + errors["log_noise_long_mps"]
@@ -274,10 +306,10 @@ def _ins_readings(
     """Records each INS unit's GGA, HDT and VTG; returns the RMS of its written errors."""
     lat, lon, psi = track["lat_rad"], track["lon_rad"], track["heading_rad"]
     vn, ve = track["vn_mps"], track["ve_mps"]
-    ii = plan.ins
     unit_rms: dict[str, dict[str, float]] = {}
     for j in (1, 2, 3):
         src = f"INS{j}"
+        ii = plan.idx(src, "GGA")
         la, lo = add_offset_ne(
             lat[ii], lon[ii], errors[f"ins{j}_north_m"][ii], errors[f"ins{j}_east_m"][ii]
         )
@@ -326,7 +358,7 @@ def _gnss_readings(
     plan: SentencePlan,
 ) -> None:
     lat, lon = track["lat_rad"], track["lon_rad"]
-    ig = plan.gnss
+    ig = plan.idx("GNSS", "GGA")
     la, lo = add_offset_ne(lat[ig], lon[ig], errors["gnss_north_m"][ig], errors["gnss_east_m"][ig])
     qla, qlo = q_latlon_rad(la), q_latlon_rad(lo)
     for sent in ("GGA", "RMC"):
@@ -371,7 +403,7 @@ def sensor_readings(
     """What every source writes: the true ``track`` plus its ``errors`` at the sentences'
     samples, quantised to the written precision; the VLW trip continues from ``trip0_m``."""
     time_ns = track["time_ns"]
-    plan = sentence_plan(p, len(time_ns), base_hz)
+    plan = sentence_plan(p, time_ns, base_hz)
     rec = _Recorder(p, plan, time_ns)
     _compass_readings(rec, p, track, errors, rot_noise, plan)
     trip_m = _log_readings(rec, p, track, errors, plan, 1.0 / base_hz, trip0_m)
@@ -381,12 +413,39 @@ def sensor_readings(
     roles = {s: SOURCES[s][0] for s, _, _ in plan.order if not (s == "MAG" and p.compass == "both")}
     zda = pd.DataFrame(
         {
-            "time_ns": time_ns[plan.gnss],
-            "source": np.full(len(plan.gnss), "GNSS", dtype=object),
+            "time_ns": time_ns[plan.idx("GNSS", "ZDA")],
+            "source": np.full(len(plan.idx("GNSS", "ZDA")), "GNSS", dtype=object),
             "line": plan.lines[("GNSS", "ZDA")],
         }
     )
-    return Readings(rec.frames(), roles, zda, unit_rms, trip_m)
+    clocks = clock_truth(p, plan, time_ns, base_hz)
+    return Readings(rec.frames(), roles, zda, unit_rms, trip_m, clocks)
+
+
+def clock_truth(
+    p: SimParams, plan: SentencePlan, time_ns: np.ndarray, base_hz: float
+) -> dict[str, dict[str, float]]:
+    """Per source its clock as simulated: ``phase_s`` and ``latency_s`` (as applied: on
+    the truth's grid, to the millisecond), ``offset_s`` -- the mean of ``time_ns`` minus
+    the true sample instant over its records without a time of fix (what a time base
+    has to learn; NaN for a source without such records, the GNSS) -- and
+    ``offset_whole_s_stamps``, the same for stamps floored to whole seconds (TAG ``c:``
+    in seconds), and ``records``, how many records the means are over."""
+    phase, _ = p.clock_steps()
+    out: dict[str, dict[str, float]] = {}
+    for src in dict.fromkeys(s for s, _, _ in plan.order):
+        lag = plan.latency_ns.get(src, 0)
+        inst = [time_ns[k] for s, t, k in plan.order if s == src and t not in OWN_TIME_SENTENCES]
+        t = np.concatenate(inst) if inst else np.zeros(0, np.int64)
+        whole = (t + lag) // 1_000_000_000 * 1_000_000_000 - t
+        out[src] = {
+            "phase_s": phase.get(src, 0) / base_hz,
+            "latency_s": lag / 1e9,
+            "offset_s": lag / 1e9 if len(t) else float("nan"),
+            "offset_whole_s_stamps": float(whole.mean()) / 1e9 if len(t) else float("nan"),
+            "records": float(len(t)),
+        }
+    return out
 
 
 def unit_rms_from_frames(
@@ -395,18 +454,25 @@ def unit_rms_from_frames(
     lat: np.ndarray,
     lon: np.ndarray,
     psi: np.ndarray,
+    latency_ns: dict[str, int] | None = None,
 ) -> dict[str, dict[str, float]]:
     """RMS of each INS unit's written errors, from the frames (as :func:`sensor_readings`
-    computes it from the readings; used when faults changed the frames)."""
+    computes it from the readings; used when faults changed the frames).  ``latency_ns``:
+    the sources' latencies (a heading is timed by its receipt)."""
     out = {}
     pos, hd = frames["position"], frames["heading"]
+    lags = latency_ns or {}
     for j in (1, 2, 3):
         f = pos[(pos["source"] == f"INS{j}").to_numpy(bool)]
-        k = np.searchsorted(time_ns, f["time_ns"].to_numpy(np.int64))
-        en = (f["lat_rad"].to_numpy(float) - lat[k]) / k_phi(lat[k])
-        ee = angdiff(f["lon_rad"].to_numpy(float), lon[k]) / k_lambda(lat[k])
+        t = f["time_ns"].to_numpy(np.int64)
+        keep = np.isin(t, time_ns)
+        k = np.searchsorted(time_ns, t[keep])
+        en = (f["lat_rad"].to_numpy(float)[keep] - lat[k]) / k_phi(lat[k])
+        ee = angdiff(f["lon_rad"].to_numpy(float)[keep], lon[k]) / k_lambda(lat[k])
         h = hd[(hd["source"] == f"INS{j}").to_numpy(bool)]
-        kh = np.searchsorted(time_ns, h["time_ns"].to_numpy(np.int64))
-        eh = angdiff(h["heading_rad"].to_numpy(float), psi[kh])
+        th = h["time_ns"].to_numpy(np.int64) - lags.get(f"INS{j}", 0)
+        keep = np.isin(th, time_ns)
+        kh = np.searchsorted(time_ns, th[keep])
+        eh = angdiff(h["heading_rad"].to_numpy(float)[keep], psi[kh])
         out[f"ins{j}"] = {"lat_m": _rms(en), "lon_m": _rms(ee), "course_deg": _rms(eh) / DEG_RAD}
     return out
