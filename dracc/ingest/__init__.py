@@ -43,6 +43,7 @@ from dracc.ingest.sources import (
     separate_files,
     summarize,
 )
+from dracc.ingest.timebase import count_events, merge_events
 
 if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
     from dracc.core.config import IngestConfig
@@ -192,7 +193,10 @@ def _read_plain(
 
         r = read_nmea(path, cfg, progress)
         return add_embedded(path, r, cfg) if has_embedded(r) else r
-    return reader(path, cfg, progress)
+    r = reader(path, cfg, progress)
+    if fmt in ("csv", "mcap"):  # read whole: their time events counted on the frames
+        count_events(r, cfg.gap_s, cfg.backstep_tolerance_s)
+    return r
 
 
 def scaled(
@@ -340,12 +344,7 @@ def read_logs(
         rejects.merge(r.rejects)
         ignored.update(r.ignored)
         e = r.time_events
-        te.duplicates += e.duplicates
-        te.backsteps += e.backsteps
-        te.gaps += e.gaps
-        te.rollovers += e.rollovers
-        te.implausible_dates += e.implausible_dates
-        te.assumed_date = te.assumed_date or e.assumed_date
+        merge_events(te, e, renames.get(r.path))  # back-steps named as the sources are
         te.decisions.extend(f"{Path(r.path).name}: {d}" for d in e.decisions)
         te.decisions.extend(f"{Path(r.path).name}: {n}" for n in r.notes)
         te.examples.extend(e.examples[:10])

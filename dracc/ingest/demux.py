@@ -17,12 +17,14 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from dracc.core.errors import IngestError
 from dracc.frames import FileResult, Rejects
+from dracc.ingest.timebase import STEPS_KEPT, CountedTimeEvents, merge_events
 
 
 def line_bounds(buf: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -106,6 +108,7 @@ def relabel(r: FileResult, copy: str, original: str) -> FileResult:
     r.notes = [name(n) for n in r.notes]
     r.time_events.decisions = [name(d) for d in r.time_events.decisions]
     r.time_events.examples = [(name(f), line, text) for f, line, text in r.time_events.examples]
+    r.time_events.steps = [replace(s, file=name(s.file)) for s in r.time_events.steps]
     return r
 
 
@@ -125,12 +128,12 @@ def merge_results(
 ) -> FileResult:
     """One :class:`FileResult` of ``path`` from the results of its parts (frames by kind
     in time order, rejects, ignored and their examples, time events, notes)."""
-    from dracc.frames import TimeEvents, concat_blocks
+    from dracc.frames import concat_blocks
 
     rejects = Rejects()
     ignored: Counter[str] = Counter()
     ignored_examples: dict[str, list[tuple[str, int, str]]] = {}
-    te = TimeEvents()
+    te = CountedTimeEvents()  # the figures per source where every part has them
     out_notes = list(notes)
     for r in parts:
         rejects.merge(r.rejects)
@@ -138,16 +141,11 @@ def merge_results(
         for k, ex in r.ignored_examples.items():
             mine = ignored_examples.setdefault(k, [])
             mine.extend(ex[: max(0, 5 - len(mine))])
-        e = r.time_events
-        te.duplicates += e.duplicates
-        te.backsteps += e.backsteps
-        te.gaps += e.gaps
-        te.rollovers += e.rollovers
-        te.implausible_dates += e.implausible_dates
-        te.assumed_date = te.assumed_date or e.assumed_date
-        te.decisions.extend(e.decisions)
-        te.examples.extend(e.examples)
+        merge_events(te, r.time_events)
+        te.decisions.extend(r.time_events.decisions)
+        te.examples.extend(r.time_events.examples)
         out_notes.extend(r.notes)
+    del te.steps[STEPS_KEPT:]
     frames = concat_blocks([r.frames for r in parts])
     return FileResult(
         path=path,

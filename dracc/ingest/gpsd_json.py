@@ -59,7 +59,7 @@ from dracc.ingest.demux import (
 )
 from dracc.ingest.nmea.sentences import MAX_LINE_BYTES
 from dracc.ingest.signalk_delta import JSON_ERRORS, loads
-from dracc.ingest.timebase import EventCounter
+from dracc.ingest.timebase import count_events
 
 if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
     from dracc.core.config import IngestConfig
@@ -215,9 +215,6 @@ class GpsdDecoder:
     def finish(self, cfg: IngestConfig | None = None) -> FileResult:
         """The frames, rejects and ignored counts (called once: it takes the columns)."""
         frames: dict[str, pd.DataFrame] = {}
-        events = EventCounter()
-        if cfg is not None:
-            events.gap_s, events.tolerance_s = cfg.gap_s, cfg.backstep_tolerance_s
         bad_time = 0
         self.flush()
         names = np.array(list(self._devices), dtype=object)
@@ -242,27 +239,17 @@ class GpsdDecoder:
                 build(t, names[dev], line, vals, q, frames)
         if bad_time:
             self.rejects.counts["bad_time"] += bad_time
-        for kind, df in frames.items():
-            events.add(
-                kind,
-                df["source"].to_numpy(dtype=object),
-                df["time_ns"].to_numpy(),
-                np.ones(len(df), dtype=bool),
-                df["line"].to_numpy(),
-                self.file,
-                df["sentence"].to_numpy(dtype=object),
-            )
-        te = events.time_events()
-        return FileResult(
+        res = FileResult(
             path=self.file,
             format="gpsd-json",
             frames=concat_blocks([frames]),
             lines=self.lines,
             rejects=self.rejects,
-            time_events=te,
             ignored=self.ignored,
             ignored_examples=self.ignored_examples,
         )
+        count_events(res, *((cfg.gap_s, cfg.backstep_tolerance_s) if cfg is not None else ()))
+        return res
 
     def _tpv_frames(
         self,

@@ -23,24 +23,22 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from dracc.core.config import IngestConfig
 from dracc.core.timefmt import iso_utc
-from dracc.frames import FileResult, Rejects, RoleChoice, SourceInfo, TimeEvents
+from dracc.frames import ClockStep, FileResult, Rejects, RoleChoice, SourceInfo, TimeEvents
 from dracc.ingest import detect_format, read_file, relabelled, scaled, summarize_frames
 from dracc.ingest.compressed import STDIN, needs_copy, plain_copy
 from dracc.ingest.nmea import StreamState, iter_nmea_blocks
 from dracc.ingest.role_evidence import choice_note
 from dracc.ingest.sources import assign_roles, merge_infos, separate_files
-from dracc.ingest.timebase import EventCounter
+from dracc.ingest.timebase import CountedTimeEvents, merge_events
 
 _EXAMPLES = 5  #: examples kept per ignored type over all files (as per reject reason)
-_NO_EVENTS = {"duplicates": 0, "backsteps": 0, "gaps": 0, "max_gap_s": 0.0}
+_NO_EVENTS = {"duplicates": 0, "backsteps": 0, "gaps": 0, "max_gap_s": 0.0, "shared_stamps": 0}
 
 
 @dataclass
@@ -52,7 +50,8 @@ class _FileRead:
     rejects: Rejects
     time_events: TimeEvents
     notes: list[str]
-    events: dict[str, dict[str, Any]]  #: source -> duplicates, backsteps, gaps, max_gap_s
+    #: source -> duplicates, backsteps, gaps, max_gap_s, shared_stamps
+    events: dict[str, dict[str, Any]]
     ignored: Counter[str]
     ignored_examples: dict[str, list[tuple[str, int, str]]]
     records: int | None = None  #: frame rows (None: the sum over the file's sources)
@@ -120,7 +119,7 @@ def _read_packed(
             r = read_file(plain or p, cfg)
             if plain is not None:
                 r = relabelled(r, str(plain), str(p), said)
-            return _whole(r, cfg, sources, p, advance)
+            return _whole(r, sources, p, advance)
         f = _read_nmea(plain, cfg, sources, scaled(advance, p, plain), name=str(p))
     f.notes = said + f.notes
     return f
@@ -132,31 +131,21 @@ def _read_whole(
     sources: dict[str, SourceInfo],
     advance: Callable[[int], object] | None,
 ) -> _FileRead:
-    """Read a CSV or MCAP file whole; count its time events."""
-    return _whole(read_file(p, cfg), cfg, sources, p, advance)
+    """Read a file whole (CSV, MCAP, NMEA 2000 ...) with its reader."""
+    return _whole(read_file(p, cfg), sources, p, advance)
 
 
 def _whole(
     r: FileResult,
-    cfg: IngestConfig,
     sources: dict[str, SourceInfo],
     p: Path,
     advance: Callable[[int], object] | None,
 ) -> _FileRead:
-    """A file read whole (``r``): its summary into ``sources``, its time events."""
+    """A file read whole (``r``): its summary into ``sources``; its time events as its
+    reader counted them for ``analyze`` (:func:`~dracc.ingest.timebase.feed_frames`),
+    with their figures per source."""
     summarize_frames(r.frames, r.path, into=sources)
-    ec = EventCounter(gap_s=cfg.gap_s, tolerance_s=cfg.backstep_tolerance_s)
-    for kind, df in r.frames.items():
-        if len(df):
-            t = df["time_ns"].to_numpy()
-            # categorical columns are counted on their codes (EventCounter takes them as they are)
-            own = np.ones(len(t), bool)
-            ec.add(kind, df["source"], t, own, df["line"].to_numpy(), r.path, df["sentence"])
     tev = r.time_events
-    tot = ec.totals()
-    tev.duplicates = tev.duplicates or tot["duplicates"]
-    tev.backsteps = tev.backsteps or tot["backsteps"]
-    tev.gaps = tev.gaps or tot["gaps"]
     if advance is not None and str(p) != STDIN:
         advance(p.stat().st_size)
     return _FileRead(
@@ -165,7 +154,7 @@ def _whole(
         r.rejects,
         tev,
         r.notes,
-        ec.per_source,
+        tev.per_source if isinstance(tev, CountedTimeEvents) else {},
         r.ignored,
         r.ignored_examples,
         records=r.records,
@@ -209,6 +198,7 @@ def inspect_logs(
     # each file's sources: a key two files share is one source only if separate_files says so
     per_file: list[tuple[str, dict[str, SourceInfo]]] = []
     per_file_events: list[tuple[str, dict[str, Any]]] = []
+    per_file_steps: list[tuple[str, list[ClockStep]]] = []
     clockless_files: set[str] = set()
     rejects = Rejects()
     te = TimeEvents()
@@ -234,8 +224,8 @@ def inspect_logs(
             kept = ignored_examples.setdefault(k, [])
             kept.extend(ex[: max(0, _EXAMPLES - len(kept))])
         tev = f.time_events
-        for k in ("duplicates", "backsteps", "gaps", "rollovers", "implausible_dates"):
-            setattr(te, k, getattr(te, k) + getattr(tev, k))
+        per_file_steps.append((str(p), tev.steps))
+        merge_events(te, tev)  # the back-steps named as the sources are, below
         te.decisions.extend(f"{p.name}: {d}" for d in tev.decisions)
         te.examples.extend(tev.examples[:6])
         notes.extend(f"{p.name}: {n}" for n in f.notes)
@@ -268,9 +258,14 @@ def inspect_logs(
     for fname, per_src in per_file_events:
         for key, ev in per_src.items():
             agg = events.setdefault(renames.get(fname, {}).get(key, key), dict(_NO_EVENTS))
-            for k in ("duplicates", "backsteps", "gaps"):
+            for k in ("duplicates", "backsteps", "gaps", "shared_stamps"):
                 agg[k] += ev[k]
             agg["max_gap_s"] = max(agg["max_gap_s"], ev["max_gap_s"])
+    te.steps = [
+        replace(s, source=renames.get(fname, {}).get(s.source, s.source))
+        for fname, steps in per_file_steps
+        for s in steps
+    ]
     te.decisions.extend(identity_notes)
     candidates: dict[str, list[str]] = {}
     role_notes = assign_roles(merged, dict(cfg.sources), candidates)
@@ -300,8 +295,10 @@ def inspect_logs(
             "gaps": te.gaps,
             "rollovers": te.rollovers,
             "implausible_dates": te.implausible_dates,
+            "shared_stamps": sum(ev["shared_stamps"] for ev in events.values()),
             "decisions": te.decisions,
             "examples": [{"file": f, "line": ln, "what": w} for f, ln, w in te.examples],
+            "steps": [_step_out(s) for s in te.steps],
         },
         "roles": role_notes,
         "choices": [
@@ -348,6 +345,19 @@ def _total_accounting(parts: list[dict[str, int] | None]) -> dict[str, int] | No
     return {k: sum(a[k] for a in have) for k in have[0]} if have else None
 
 
+def _step_out(s: ClockStep) -> dict[str, Any]:
+    """One back-step of a source's clock in the report."""
+    return {
+        "file": s.file,
+        "line": s.line,
+        "source": s.source,
+        "sentence": s.sentence,
+        "from_utc": iso_utc(s.from_ns, "ms"),
+        "to_utc": iso_utc(s.to_ns, "ms"),
+        "step_s": (s.to_ns - s.from_ns) / 1e9,
+    }
+
+
 def _source_out(s: SourceInfo, ev: dict[str, Any], clockless: bool = False) -> dict[str, Any]:
     """One source's entry of the report (no rate where its file has no clock: the times
     are only the records' order)."""
@@ -369,6 +379,7 @@ def _source_out(s: SourceInfo, ev: dict[str, Any], clockless: bool = False) -> d
         "gaps": ev["gaps"],
         "max_gap_s": ev["max_gap_s"],
         "duplicates": ev["duplicates"],
+        "shared_stamps": ev["shared_stamps"],
         "backsteps": ev["backsteps"],
         "files": sorted(s.files),
     }

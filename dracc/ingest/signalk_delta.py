@@ -51,7 +51,7 @@ from dracc.frames import MISSING_NS, FileResult, Rejects, concat_blocks, make_fr
 from dracc.ingest.chunks import iter_line_chunks
 from dracc.ingest.demux import check_strict
 from dracc.ingest.nmea.sentences import MAX_LINE_BYTES
-from dracc.ingest.timebase import EventCounter
+from dracc.ingest.timebase import count_events
 
 if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
     from dracc.core.config import IngestConfig
@@ -453,9 +453,6 @@ class DeltaDecoder:
         recv = np.concatenate([b[2] for b in ub]) if ub else np.zeros(0, np.int64)
         ub.clear()
         frames: dict[str, pd.DataFrame] = {}
-        events = EventCounter()
-        if cfg is not None:
-            events.gap_s, events.tolerance_s = cfg.gap_s, cfg.backstep_tolerance_s
         no_time = 0
         for kind, rows in self.rows.items():
             if not rows.blocks and not rows.line:
@@ -487,32 +484,22 @@ class DeltaDecoder:
                 data["quality"] = extra.astype(np.int8)
             elif kind == "heading":
                 data["reference"] = extra
-            df = make_frame(kind, data)
-            frames[kind] = df
-            events.add(
-                kind,
-                data["source"],
-                data["time_ns"],
-                np.ones(len(idx), dtype=bool),
-                data["line"],
-                self.file,
-                data["sentence"],
-            )
+            frames[kind] = make_frame(kind, data)
         if no_time:
             self.rejects.counts["no_time"] += no_time
             notes.append(f"{no_time} Signal K values without a timestamp or receive time not used")
-        te = events.time_events()
-        return FileResult(
+        res = FileResult(
             path=self.file,
             format="signalk-delta",
             frames=concat_blocks([frames]),
             lines=self.lines,
             rejects=self.rejects,
-            time_events=te,
             notes=notes,
             ignored=self.ignored,
             ignored_examples=self.ignored_examples,
         )
+        count_events(res, *((cfg.gap_s, cfg.backstep_tolerance_s) if cfg is not None else ()))
+        return res
 
 
 def _times(stamps: list[Any], recv: list[int]) -> np.ndarray:

@@ -107,10 +107,12 @@ def inspection_page(
         text = "ignored (valid, not used): " + " ".join(f"{k}:{v}" for k, v in ignored.items())
         page.wrapped(text, hang=2)
     tm = rep["time"]
+    shared = tm.get("shared_stamps") or 0  # samples of a source faster than its stamps
     page.wrapped(
         f"time base: {tm['duplicates']} duplicates, {tm['backsteps']} back-steps, "
         f"{tm['gaps']} gaps, {tm['rollovers']} midnight rollovers, "
-        f"{tm['implausible_dates']} implausible dates",
+        f"{tm['implausible_dates']} implausible dates"
+        + (f", {shared} records sharing a stamp (not duplicates)" if shared else ""),
         hang=2,
     )
     for d in tm["decisions"] + rep["notes"] + rep["roles"]:

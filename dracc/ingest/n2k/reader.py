@@ -36,6 +36,7 @@ from dracc.frames import (
     REFERENCE_DTYPE,
     FileResult,
     Rejects,
+    TimeEvents,
     concat_blocks,
     make_frame,
 )
@@ -48,7 +49,7 @@ from dracc.ingest.timebase import (
     ASSUMED_DATE,
     ASSUMED_DATE_DAYS,
     ASSUMED_DATE_NOTE,
-    EventCounter,
+    count_events,
     days_from_civil,
     drop_implausible_ext,
     valid_civil,
@@ -198,19 +199,9 @@ def n2k_result(
     frames = concat_blocks([frames])
     for df in frames.values():
         df["source"] = df["source"].cat.remove_unused_categories()
-    ev = EventCounter(gap_s=cfg.gap_s, tolerance_s=cfg.backstep_tolerance_s)
-    for kind, df in frames.items():
-        if len(df):
-            ev.add(
-                kind,
-                df["source"].array,
-                df["time_ns"].to_numpy(),
-                np.ones(len(df), dtype=bool),
-                df["line"].to_numpy(),
-                file,
-                df["sentence"].array,
-            )
-    events = ev.time_events(notes)
+    # the time events are counted by the caller on the frames (read_n2k: count_events);
+    # NMEA 2000 inside NMEA 0183 takes derived times (rule 3), never counted
+    events = TimeEvents(decisions=list(notes))
     events.assumed_date = ASSUMED_DATE if any("assumed date" in n for n in notes) else None
     res = FileResult(
         path=file,
@@ -229,7 +220,6 @@ def n2k_result(
         res.ignored[key] = cnt
         r = dec.ignored_first[key]
         res.ignored_examples[key] = [(file, int(msgs.line[r]), _hex(msgs, r))]
-    res.notes.extend(f"{k}: {v}" for k, v in ev.per_source.items() if v["backsteps"] or v["gaps"])
     return res
 
 
@@ -254,6 +244,8 @@ def read_n2k(
     if len(msgs) > 1 and msgs.time_kind != TIME_NONE and msgs.time_ns.min() == msgs.time_ns.max():
         msgs.time_kind = TIME_NONE  # times that never advance are no clock
     res = n2k_result(msgs, str(path), fmt, cfg, _line_count(data))
+    ev = count_events(res, cfg.gap_s, cfg.backstep_tolerance_s)
+    res.notes.extend(f"{k}: {v}" for k, v in ev.per_source.items() if v["backsteps"] or v["gaps"])
     if progress is not None:
         progress(len(data))
     return res

@@ -13,7 +13,7 @@ import pandas as pd
 from dracc.frames import KINDS, MISSING_NS, REFERENCE_DTYPE, make_frame
 from dracc.ingest.nmea.parsed import ParsedBlock
 from dracc.ingest.nmea.sentences import SENTENCES
-from dracc.ingest.timebase import drop_implausible_ext
+from dracc.ingest.timebase import drop_implausible_ext, feed_frames
 
 if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
     from dracc.core.config import IngestConfig
@@ -108,6 +108,8 @@ def assemble(
     (:func:`fill_heading_quality`), own-ship AIS records their UTC second
     (:func:`ais_time`)."""
     frames = {}
+    own_by_kind: dict[str, np.ndarray] = {}  # the records with a time of their own
+    fix_by_kind: dict[str, np.ndarray] = {}  # those whose time is their own time of fix
     order_kinds = [k for k in KINDS if k in pb.kinds]
     filled = fill_heading_quality(pb, state.psxn_quality)
     vdo_seen = np.zeros(0, dtype=np.int64)  # a VDO is one line: its no_date counted once
@@ -144,9 +146,8 @@ def assemble(
         src, tal = _source_categorical(cols, pb.source_names, state.split_talkers, kind)
         us, sinv = _small_unique(cols["sentence"].astype(np.int64), len(SENTENCES))
         sent = _cat(sinv, [SENTENCES[i] for i in us])
+        # an RMC's position and ground records are one record of its stream (one line)
         own = (cols["tod_ns"] >= 0) | (cols["ext_ns"] != MISSING_NS)
-        if kind == "ground":  # an RMC is counted once, in its position record
-            own &= cols["sentence"] != SENTENCES.index("RMC")
         data = {
             c: v
             for c, v in cols.items()
@@ -172,9 +173,9 @@ def assemble(
         )
         if "reference" in data:
             data["reference"] = _reference_categorical(data["reference"])
-        df = make_frame(kind, data)
-        state.events.add(kind, src, t, own, line, file, sent)
-        frames[kind] = df
+        frames[kind] = make_frame(kind, data)
+        own_by_kind[kind], fix_by_kind[kind] = own, cols["tod_ns"] >= 0
+    feed_frames(state.events, frames, file, own_by_kind, fix_by_kind)
     return frames
 
 

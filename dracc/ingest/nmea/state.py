@@ -11,11 +11,11 @@ from dataclasses import dataclass, field
 import pandas as pd
 
 from dracc.core.errors import IngestError
-from dracc.frames import Rejects, TimeEvents
+from dracc.frames import Rejects
 from dracc.ingest.nmea.groups import GroupCarry
 from dracc.ingest.nmea.parsed import ParsedBlock
 from dracc.ingest.nmea.sentences import IGNORED_EXAMPLES, REASONS
-from dracc.ingest.timebase import EventCounter, TimeBase
+from dracc.ingest.timebase import CountedTimeEvents, EventCounter, TimeBase
 
 
 @dataclass
@@ -63,38 +63,34 @@ class StreamState:
     #: the TAG line groups (``g:``) still open, carried from block to block
     line_groups: GroupCarry = field(default_factory=GroupCarry)
 
-    def time_events(self) -> TimeEvents:
+    def time_events(self) -> CountedTimeEvents:
+        """What the time base decided and the events counted (with the figures per
+        source); the notes on the events last."""
         tb = self.timebase
-        tot = self.events.totals()
-        te = TimeEvents(
-            duplicates=tot["duplicates"],
-            backsteps=tot["backsteps"],
-            gaps=tot["gaps"],
-            rollovers=tb.rollovers,
-            implausible_dates=tb.week_rollovers + tb.implausible,
-            assumed_date=tb.assumed_date,
-        )
-        te.decisions = list(dict.fromkeys(tb.decisions))
+        decisions = list(dict.fromkeys(tb.decisions))
         if tb.derived:
-            te.decisions.append(
+            decisions.append(
                 f"{tb.derived} records without a time field took the time of the "
                 "preceding timed record (or the logger/TAG time)"
             )
         if tb.backward_midnight:
-            te.decisions.append(
+            decisions.append(
                 f"{tb.backward_midnight} steps back over midnight between interleaved clocks"
             )
         if tb.week_rollovers:
-            te.decisions.append(
+            decisions.append(
                 f"{tb.week_rollovers} dates corrected for the GPS week rollover (+1024 weeks)"
             )
         if tb.implausible:
-            te.decisions.append(
+            decisions.append(
                 f"{tb.implausible} implausible dates (before 2000 or in the future) not used"
             )
         if tb.date_changes:
-            te.decisions.append(f"the date changed {tb.date_changes} times other than at midnight")
-        te.examples = list(self.events.examples)
+            decisions.append(f"the date changed {tb.date_changes} times other than at midnight")
+        te = self.events.time_events(decisions)
+        te.rollovers = tb.rollovers
+        te.implausible_dates = tb.week_rollovers + tb.implausible
+        te.assumed_date = tb.assumed_date
         return te
 
     def count_block(
