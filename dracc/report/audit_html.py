@@ -342,7 +342,7 @@ def night_html(doc: dict, analysis_body: str = "", analysis_css: str = "") -> st
                     else "not checked"
                 )
             )
-        kinds = ("validity", "plausibility", "latency", "availability", "consistency")
+        kinds = ("validity", "plausibility", "latency", "availability", "consistency", "time")
         parts.append(
             "<section id='sources'><h2>Integrity per source</h2><table><tr><th>source</th>"
             "<th>role</th>"

@@ -36,6 +36,8 @@ def _finding_line(f) -> str:
         if name and msg.startswith(f"{name}: "):
             msg = msg[len(name) + 2 :]
             break
+    if not who and not role:  # a finding of the whole log (a logger's clock stepping back)
+        return f"  - [{f.check}] {msg}"
     return f"  - [{f.check}] {who}{role}: {msg}"
 
 

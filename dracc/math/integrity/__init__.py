@@ -1,5 +1,6 @@
 """Integrity checks of every source over one night: validity, plausibility, latency,
-availability and consistency (IMO MSC.252(83) section 5.3-5.4; IEC 61924-2 tests them).
+availability, consistency (IMO MSC.252(83) section 5.3-5.4; IEC 61924-2 tests them) and
+time (the logger's clock and the receivers' own times of fix).
 
 Pure functions over the canonical frames (:mod:`dracc.frames`); no I/O.  Each
 check of each source gives one :class:`Check`: ``pass``, ``fail`` (with its evidence) or
@@ -60,11 +61,11 @@ plausibility / ``frozen``, ``stuck``, ``out_of_range``
 latency
     receive time (TAG ``c:``, logger prefix, MCAP log time) minus the record's own time
     of fix, per source, as a distribution (p50, p95, p99, max); spells of at least
-    ``spell_min_s`` with ``|latency| > latency_max_s`` fail, worded by which clock leads
-    (a negative latency is a time of fix ahead of the logger clock: a clock offset,
-    never old data).  A source of a log without a clock (``Voyage.clockless``) is
-    ``not_checked`` here and under availability, with no cadence, availability or
-    latency figures.
+    ``spell_min_s`` with ``latency > latency_max_s`` (the time of fix behind the logger
+    clock) fail.  A negative latency is a time of fix ahead of the logger clock: a clock
+    offset, never old data, judged by ``time/leap_second`` (below), not here too.  A
+    source of a log without a clock (``Voyage.clockless``) is ``not_checked`` here and
+    under availability, with no cadence, availability or latency figures.
 availability / ``dropout``
     gaps in a source's records longer than ``dropout_cadences`` of its own median
     interval and at least ``dropout_min_s`` (also a late start or an early end within the
@@ -98,6 +99,14 @@ consistency / ``compass_witness``, ``log_witness``
     evidence, its varying part fails beyond ``max(floor, z s)``; a witness the choice
     found failed (a log at 0.0 kn while the ship moves) fails with that evidence.
 
+time / ``backstep``, ``loop``, ``leap_second``, ``week_rollover``, ``clock_drift``, ``no_clock``
+    the logger's times going back (a clock set back; a replayed recording, the values
+    repeating), a time of fix ahead of the logger clock (named by its whole seconds: a
+    leap-second count, GPS time without the UTC offset), dates 1024 weeks early (repaired
+    by the ingest, said), a receiver's time of fix drifting against the logger clock
+    (significant and more than ``clock_drift_max_s`` over the night), a log without a
+    clock (``not_checked``): :mod:`.time_checks` and :mod:`.clock_steps`.
+
 The modules
 -----------
 - :mod:`.results`        :class:`Check`, :class:`SourceSummary`, :class:`IntegrityResult`
@@ -109,6 +118,8 @@ The modules
 - :mod:`.latency`        ``latency``
 - :mod:`.availability`   ``dropout``
 - :mod:`.consistency`    ``velocity``, ``heading``, ``speed``
+- :mod:`.time_checks`    ``leap_second``, ``week_rollover``, ``clock_drift``, ``no_clock``
+- :mod:`.clock_steps`    ``backstep``, ``loop``
 - this package           :func:`check_night`, :func:`dr_innovation_check` (``dr_2m``),
   :func:`with_dr_check`
 """
@@ -143,6 +154,7 @@ from dracc.math.integrity.latency import latency_checks
 from dracc.math.integrity.plausibility import plausibility_checks
 from dracc.math.integrity.results import CHECK_KINDS, Check, IntegrityResult, SourceSummary
 from dracc.math.integrity.role_witnesses import witness_checks
+from dracc.math.integrity.time_checks import time_checks
 from dracc.math.integrity.validity import contradiction_checks, validity_checks
 
 __all__ = [
@@ -259,6 +271,7 @@ def check_night(
     checks += heading_consistency(voyage, cfg, start_ns, end_ns)
     checks += speed_consistency(voyage, cfg, start_ns, end_ns)
     checks += witness_checks(voyage, cfg, start_ns, end_ns)
+    checks += time_checks(voyage, cfg, start_ns, end_ns)
     sources = tuple(
         SourceSummary(
             key,

@@ -1,11 +1,12 @@
 """latency: receive time minus the record's own time of fix, per source, as a
-distribution (p50, p95, p99, max, min); spells of at least ``spell_min_s`` beyond
-``latency_max_s`` fail.
+distribution (p50, p95, p99, max, min); spells of at least ``spell_min_s`` with the time
+of fix more than ``latency_max_s`` behind the logger clock fail.
 
 The sign says which clock leads: a positive latency is a time of fix behind the logger's
-clock (data that old on receipt, or the clocks apart); a negative one a time of fix ahead
-of it, which no delay makes: a clock offset, never "old" data.  A source of a log
-without a clock (:attr:`dracc.frames.Voyage.clockless`: its times are only the order of
+clock (data that old on receipt, or the clocks apart), judged here; a negative one a time
+of fix ahead of it, which no delay makes: a clock offset, never "old" data, judged by the
+time checks (:mod:`.time_checks`, ``time/leap_second``) and not failed here too.  A source
+of a log without a clock (:attr:`dracc.frames.Voyage.clockless`: its times are only the order of
 its records) is ``not_checked``."""
 
 from __future__ import annotations
@@ -72,7 +73,10 @@ def latency_checks(
             )
     max_ns = cfg.latency_max_s * NS_PER_S
     spell_ns = int(cfg.spell_min_s * NS_PER_S)
-    rule = f"|receive time - time of fix| above this for at least {cfg.spell_min_s:g} s"
+    rule = (
+        f"receive time - time of fix above this for at least {cfg.spell_min_s:g} s (a time "
+        "of fix ahead of the logger clock: time/leap_second)"
+    )
     for key in sorted(voyage.clockless & _present_keys(voyage)):
         checks.append(
             not_checked(
@@ -104,7 +108,7 @@ def latency_checks(
             "max": float(lat_s.max()),
             "min": float(lat_s.min()),
         }
-        bad = np.abs(r - t) > max_ns
+        bad = (r - t) > max_ns  # behind the logger clock; ahead of it: time/leap_second
         evidence: list[dict[str, Any]] = []
         longest = 0.0
         for a, b in runs(bad):
@@ -126,12 +130,17 @@ def latency_checks(
         worst = max((e["median_latency_s"] for e in evidence), key=abs, default=0.0)
         msg = (
             f"{key}: {clock_lead_words(worst)} for {longest:.0f} s at the longest "
-            f"(limit {cfg.latency_max_s:g} s either way; latency p50 {q[0]:.2f} s, "
+            f"(limit {cfg.latency_max_s:g} s; latency p50 {q[0]:.2f} s, "
             f"p95 {q[1]:.2f} s)"
             if failed
             else f"{key}: latency p50 {q[0]:.2f} s, p95 {q[1]:.2f} s, max "
             f"{lat_s.max():.2f} s over {len(lat_s)} records"
         )
+        if q[0] < -cfg.latency_max_s:
+            msg += (
+                f"; the time of fix is {-q[0]:.2f} s ahead of the logger clock (median): a "
+                "clock offset, judged by time/leap_second"
+            )
         checks.append(
             Check(
                 "latency",

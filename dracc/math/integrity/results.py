@@ -15,6 +15,7 @@ CHECK_KINDS = (
     "latency",
     "availability",
     "consistency",
+    "time",
     "accuracy",
     "input",
 )
@@ -24,6 +25,8 @@ CLAUSES = {
     "latency": "IMO MSC.252(83) 5.3: latency and age of the data",
     "availability": "IMO MSC.252(83) 5.1.2: availability of the source",
     "consistency": "IMO MSC.252(83) 5.4: consistency between independent sources",
+    "time": "IMO MSC.252(83) 5.3: latency and age of the data -- the time stamps themselves "
+    "(the logger clock against the receivers' times of fix)",
 }
 
 
@@ -31,7 +34,7 @@ CLAUSES = {
 class Check:
     """One check of one source over the night."""
 
-    check: str  #: validity | plausibility | latency | availability | consistency
+    check: str  #: validity | plausibility | latency | availability | consistency | time
     name: str  #: e.g. 'jump', 'invalid_flag', 'dropout', 'velocity'
     source: str | None
     role: str | None
