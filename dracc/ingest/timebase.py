@@ -343,8 +343,9 @@ class _Stream:
     backsteps: int = 0
     gaps: int = 0
     max_gap_ns: int = 0
-    lo_ns: int | None = None
-    hi_ns: int | None = None
+    #: the steps forward (not gaps) in ns and their number: the stamps' cadence
+    advance_ns: int = 0
+    advances: int = 0
     last_ns: int | None = None
     last_sig: int | None = None
     #: index into _RESOLUTIONS of the coarsest resolution all stamps are multiples of
@@ -371,8 +372,7 @@ class _Stream:
         if not shared or not self.faster():
             return None
         per = self.records / max(self.stamps, 1)
-        span_s = ((self.hi_ns or 0) - (self.lo_ns or 0)) / 1e9
-        every_s = span_s / (self.stamps - 1) if self.stamps > 1 else 0.0
+        every_s = self.advance_ns / self.advances / 1e9 if self.advances else 0.0
         what = f"{key} {stype}: {round(per, 1):g} records per stamp"
         if self.resolution < len(_RESOLUTIONS):
             res_ns, name = _RESOLUTIONS[self.resolution]
@@ -380,7 +380,7 @@ class _Stream:
             if 0 < every_s <= 2 * res_s:
                 what = (
                     f"{key} {stype}: {round(per, 1):g} records per {res_s:g} s stamp (a "
-                    f"{round((self.records - 1) / span_s, 1):g} Hz source behind {name} stamps)"
+                    f"{round(per / every_s, 1):g} Hz source behind {name} stamps)"
                 )
         if what.endswith("per stamp") and every_s > 0:
             what += f", a stamp every {every_s:.3g} s (several records of one instant)"
@@ -529,8 +529,9 @@ class EventCounter:
             "gaps": per(gap),
         }
         max_d = np.maximum.reduceat(np.where(has_prev, d, 0), firsts).tolist()
-        lo = np.minimum.reduceat(t, firsts).tolist()
-        hi = np.maximum.reduceat(t, firsts).tolist()
+        ahead = has_prev & (d > 0) & ~gap
+        advance = np.bincount(sid[ahead], d[ahead] / 1e9, minlength=len(firsts)).tolist()
+        totals["advances"] = per(ahead)
         for j, s in enumerate(streams):
             s.records += totals["records"][j]
             s.stamps += totals["stamps"][j]
@@ -539,8 +540,8 @@ class EventCounter:
             s.backsteps += totals["backsteps"][j]
             s.gaps += totals["gaps"][j]
             s.max_gap_ns = max(s.max_gap_ns, int(max_d[j]))
-            s.lo_ns = lo[j] if s.lo_ns is None else min(s.lo_ns, lo[j])
-            s.hi_ns = hi[j] if s.hi_ns is None else max(s.hi_ns, hi[j])
+            s.advance_ns += round(advance[j] * 1e9)
+            s.advances += totals["advances"][j]
             s.last_ns = int(t[lasts[j]])
             s.last_sig = int(sig[lasts[j]]) if signature is not None else None
         self._resolution(streams, t, sid)
