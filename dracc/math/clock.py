@@ -3,7 +3,9 @@ stamped with and the instant it describes, its σ, and the drift of a source's o
 
 Sign: ``offset_s > 0`` means the data are stamped *after* the instant they describe (a
 sensor's latency, a logger that stamps on receipt).  A record stamped ``s`` describes the
-instant ``s - offset_s``.
+instant ``s - offset_s``.  For a source faster than its stamps the offset is against the
+times reconstructed inside the stamp (its latency); the stamps' own offset is
+``offset_s - spread_mean_s``.
 
 Three measurements, each a pure function over arrays:
 
@@ -81,6 +83,9 @@ class SourceClock:
     basis: str | None = None  #: what it was measured against (a source key, 'GNSS course')
     samples: int = 0  #: records or windows the estimate rests on
     spread: int = 0  #: records placed inside a shared stamp by the source's cadence
+    #: how far those records moved on average (s): their stamps' offset is
+    #: ``offset_s - spread_mean_s``
+    spread_mean_s: float = 0.0
     stamp_s: float | None = None  #: the resolution of the stamps its records carry
 
     @property
@@ -105,8 +110,9 @@ def spread_shared_stamps(time_ns: IntArray, value: FloatArray) -> tuple[IntArray
 
     Only a stream whose typical run of equal stamps is two or more (a source faster than
     its stamps) is spread, and only where the records of a run are different samples
-    (``value`` changes between most neighbours in a run): two sentences of one fix with
-    one stamp (GGA and RMC) describe one instant and stay together."""
+    (``value`` changes inside at least 1 % of the runs: a steady heading repeats, a
+    turning one does not): two records of one fix with one stamp (a CSV row's position
+    twice) never change inside a run and stay together."""
     t = np.asarray(time_ns, np.int64)
     if len(t) < 3:
         return t, 0
@@ -114,9 +120,10 @@ def spread_shared_stamps(time_ns: IntArray, value: FloatArray) -> tuple[IntArray
     sizes = np.diff(np.r_[starts, len(t)])
     if len(starts) < 2 or np.median(sizes) < 2:
         return t, 0
-    same_stamp = t[1:] == t[:-1]
     v = np.asarray(value, float)
-    if np.mean(v[1:][same_stamp] != v[:-1][same_stamp]) < 0.5:
+    changes = (t[1:] == t[:-1]) & (v[1:] != v[:-1])  # a new value under the same stamp
+    runs_changing = np.unique(np.searchsorted(starts, np.flatnonzero(changes) + 1, "right"))
+    if len(runs_changing) < 0.01 * np.sum(sizes > 1):
         return t, 0
     q_ns = float(np.median(np.diff(t[starts])))
     j = np.arange(len(t)) - np.repeat(starts, sizes)

@@ -74,7 +74,7 @@ def learn_clocks(voyage: Voyage, cfg: Config) -> tuple[Voyage, dict[str, SourceC
     keys = sorted(voyage.sources)
     if not keys:
         return voyage, {}
-    frames, spread, stamp = _spread(voyage)
+    frames, spread, stamp, spread_mean = _spread(voyage)
     configured = source_latencies(cfg.extra.get("sources"))
     clocks: dict[str, SourceClock] = {}
     for key in keys:
@@ -82,7 +82,10 @@ def learn_clocks(voyage: Voyage, cfg: Config) -> tuple[Voyage, dict[str, SourceC
     _learn_headings(voyage, frames, clocks)
     _learn_logs(voyage, frames, clocks)
     clocks = {
-        k: replace(c, spread=spread.get(k, 0), stamp_s=stamp.get(k)) for k, c in clocks.items()
+        k: replace(
+            c, spread=spread.get(k, 0), spread_mean_s=spread_mean.get(k, 0.0), stamp_s=stamp.get(k)
+        )
+        for k, c in clocks.items()
     }
     return replace(voyage, frames=_apply(frames, clocks)), clocks
 
@@ -102,10 +105,12 @@ def _stamped(df: pd.DataFrame) -> np.ndarray:
 
 def _spread(
     voyage: Voyage,
-) -> tuple[dict[str, pd.DataFrame], dict[str, int], dict[str, float | None]]:
-    """Frames with shared stamps spread (step 1); records moved and stamp resolution per key."""
+) -> tuple[dict[str, pd.DataFrame], dict[str, int], dict[str, float | None], dict[str, float]]:
+    """Frames with shared stamps spread (step 1); per key the records moved, the stamp
+    resolution and the mean move (s)."""
     frames: dict[str, pd.DataFrame] = {}
     moved: dict[str, int] = {}
+    shift: dict[str, float] = {}
     stamp: dict[str, float | None] = {}
     for kind, df in voyage.frames.items():
         if len(df) == 0:
@@ -126,7 +131,13 @@ def _spread(
             moved[str(key)] = moved.get(str(key), 0) + n
             changed = changed or n > 0
         frames[kind] = df.assign(time_ns=t) if changed else df
-    return frames, moved, stamp
+        if changed:
+            d = (t - df["time_ns"].to_numpy(np.int64)) / NS_PER_S
+            for key, rows in groups.items():
+                if d[rows].any():
+                    shift[str(key[0])] = shift.get(str(key[0]), 0.0) + float(d[rows].sum())
+    mean = {k: shift[k] / moved[k] for k in shift if moved.get(k)}
+    return frames, moved, stamp, mean
 
 
 def _own_clock(

@@ -257,6 +257,7 @@ def clock_dict(c: SourceClock | None) -> dict[str, Any] | None:
         "basis": c.basis,
         "samples": int(c.samples),
         "spread_records": int(c.spread),
+        "spread_mean_s": _num(c.spread_mean_s),
         "stamp_resolution_s": c.stamp_s,
     }
 

@@ -89,6 +89,8 @@ class SimVoyage:
 def _check(p: SimParams) -> float:
     if not p.duration_s > 0:
         raise ConfigError(f"duration must be positive, got {p.duration_s} s")
+    if not p.accel_mps2 > 0 or any(not v > 0 for _, v in p.speed_changes):
+        raise ConfigError("speed changes need a positive acceleration and positive speeds")
     if p.compass not in ("gyro", "magnetic", "both"):
         raise ConfigError(f"compass must be gyro, magnetic or both, got {p.compass!r}")
     if not -89.0 < p.start_lat_deg < 89.0:

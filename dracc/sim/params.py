@@ -130,6 +130,10 @@ class SimParams:
     start_lat_deg: float = 54.60
     start_lon_deg: float = 18.80
     speed_kn: float = 12.0
+    #: speed changes ``((time_s, speed_kn), ...)``: the speed through the water set from
+    #: ``time_s`` on, reached at ``accel_mps2`` (empty: ``speed_kn`` throughout)
+    speed_changes: tuple[tuple[float, float], ...] = ()
+    accel_mps2: float = 0.01
     legs: tuple[tuple[float, float], ...] | None = None
     initial_heading_deg: float = 60.0
     turn_rate_deg_s: float = 0.5

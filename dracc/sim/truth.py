@@ -126,6 +126,35 @@ def integrate_track(
     return lat, wrap_pi(lon)
 
 
+def speed_profile_mps(
+    t_s: np.ndarray,
+    v0_mps: float,
+    changes: Iterable[tuple[float, float]],
+    accel_mps2: float,
+) -> np.ndarray:
+    """The speed through the water at voyage times ``t_s``: ``v0_mps``, then each change
+    ``(time_s, speed_kn)`` approached from the speed of that moment at ``accel_mps2`` (an
+    engine order: the speed ramps, it does not jump).  Absolute times: a segment of a
+    long voyage gets the same speeds as the whole."""
+    v = np.full(len(t_s), v0_mps, dtype=float)
+    start = v0_mps
+    prev: tuple[float, float, float] | None = None  # (time, start speed, target)
+    for t0, speed_kn in sorted(changes):
+        if prev is not None:  # the speed at this change: the previous ramp at t0
+            start = _ramp(np.array([t0]), *prev, accel_mps2)[0]
+        prev = (t0, start, speed_kn * KN_MPS)
+        v = np.where(t_s >= t0, _ramp(t_s, *prev, accel_mps2), v)
+    return v
+
+
+def _ramp(t_s: np.ndarray, t0: float, start: float, target: float, accel: float) -> np.ndarray:
+    step = accel * np.maximum(t_s - t0, 0.0)
+    out: np.ndarray = (
+        np.minimum(start + step, target) if target >= start else np.maximum(start - step, target)
+    )
+    return out
+
+
 def true_track(
     p: SimParams,
     legs: Iterable[tuple[float, float]],
@@ -150,7 +179,7 @@ def true_track(
     alpha = p.leeway_deg * DEG_RAD + DEG_RAD * gm(
         "leeway", p.leeway_noise_deg.sigma, p.leeway_noise_deg.tau_s, rng_env
     )
-    v_mps = np.full(n, p.speed_kn * KN_MPS)
+    v_mps = speed_profile_mps(t_s, p.speed_kn * KN_MPS, p.speed_changes, p.accel_mps2)
     vx = v_mps * np.cos(alpha)  # (B5): alpha = atan(Vy/Vx)
     vy = v_mps * np.sin(alpha)
     kdw = psi + alpha  # course through the water (B3, B4 with beta = 0 here)
