@@ -447,6 +447,39 @@ def test_a_clockless_log_is_named_and_gets_no_time_finding():
         assert "no clock" in c.why_not and c.source in c.message
 
 
+# ------------------------------------------------- the simulator's time faults
+
+
+@pytest.mark.parametrize(
+    "fault,fmt,found",
+    [
+        ("leap:GNSS@20min+30min=18s", "nmea", {("leap_second", "GNSS")}),
+        ("leap:GNSS@20min+30min=2s", "mcap-json", {("leap_second", "GNSS")}),
+        ("loop:ALL@50min=22min", "nmea", {("loop", None)}),
+        ("clockstep:ALL@20min+20min=-10min", "nmea", {("backstep", None)}),
+        ("rollover:GNSS@30min", "mcap-json", {("week_rollover", None)}),
+    ],
+)
+def test_the_simulators_time_faults_are_found(tmp_path, fault, fmt, found):
+    """``dracc simulate``'s own writers (independent of the lines written here): each
+    time fault is its one time finding; a lead that ends steps the receiver's time back
+    (that lead, not a clock set back); a rollover's step back is the rollover's."""
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-m", "dracc", "simulate", "--out", str(tmp_path), "--hours", "1.2"]
+    subprocess.run([*cmd, "--seed", "5", "--format", fmt, "--fault", fault], check=True)
+    v = read(next(tmp_path.glob("voyage.*")))
+    c = time_of(v)
+    assert {k for k in failed(c) if c[k].check == "time"} == found, failed(c)
+    if "leap" in fault:
+        leap = c[("leap_second", "GNSS")]
+        assert leap.evidence[0]["whole_s"] == int(fault.split("=")[1][:-1]), leap.evidence
+    if "rollover" in fault:  # latency leaves the 1024 weeks to the time check
+        assert c[("latency", "GNSS")].status == "pass"
+        assert "judged by time/week_rollover" in c[("latency", "GNSS")].message
+
+
 # ------------------------------------------------------- what the reports carry
 
 

@@ -42,6 +42,8 @@ from dracc.math.integrity.results import Check
 
 __all__ = [
     "GROUP_NS",
+    "WEEK_ROLLOVER_NS",
+    "WEEK_ROLLOVER_TOL_NS",
     "StepEvent",
     "StepVerdict",
     "judge_step",
@@ -56,6 +58,10 @@ GROUP_NS = 60 * NS_PER_S
 LOOP_EQUAL = 0.9
 #: records after a step compared with those before it, at most
 LOOP_COMPARE = 5000
+#: a GPS week-number rollover: dates (times) 1024 weeks early
+WEEK_ROLLOVER_NS = 1024 * 7 * 86400 * NS_PER_S
+#: a step or an offset this close to 1024 weeks is a rollover (time/week_rollover)
+WEEK_ROLLOVER_TOL_NS = 86400 * NS_PER_S
 
 
 def present_keys(voyage: Voyage) -> set[str]:
@@ -86,7 +92,7 @@ class StepVerdict:
 class StepEvent:
     """Back-steps of one logger at once: one finding."""
 
-    kind: str  #: 'loop' or 'backstep'
+    kind: str  #: 'loop', 'backstep', or the check whose finding it is ('week_rollover', 'leap_second')
     verdicts: tuple[StepVerdict, ...]
 
     @property
@@ -236,6 +242,10 @@ def step_events(voyage: Voyage, cfg: IntegrityConfig) -> tuple[list[StepEvent], 
         key = _step_source(voyage, step, present)
         if key is None:
             continue
+        back_ns = step.from_ns - step.to_ns
+        if abs(back_ns - WEEK_ROLLOVER_NS) <= WEEK_ROLLOVER_TOL_NS:  # a rollover's: no loop
+            verdicts.append(StepVerdict(step, key, back_ns / NS_PER_S))
+            continue
         v = judge_step(voyage, step, key, cache, int(min_ns))
         if isinstance(v, str):
             displaced += 1
@@ -261,7 +271,10 @@ def step_events(voyage: Voyage, cfg: IntegrityConfig) -> tuple[list[StepEvent], 
         rep = sum(v.repeated for v in g)
         eq = sum(v.equal for v in g)
         loop = rep >= 2 and not any(v.constant for v in g) and eq >= LOOP_EQUAL * rep
-        events.append(StepEvent("loop" if loop else "backstep", tuple(g)))
+        kind = "loop" if loop else "backstep"
+        if abs(g[0].back_s * NS_PER_S - WEEK_ROLLOVER_NS) <= WEEK_ROLLOVER_TOL_NS:
+            kind = "week_rollover"  # the receiver's dates rolled over: not the logger's clock
+        events.append(StepEvent(kind, tuple(g)))
     return events, displaced
 
 
@@ -280,6 +293,12 @@ def step_checks(
         if displaced
         else ""
     )
+    other = [e for e in events if e.kind not in ("backstep", "loop")]
+    if other:  # steps another finding explains (a leap-second spell ending, a rollover)
+        aside += "; " + ", ".join(
+            f"{sum(e.kind == k for e in other)} step(s) back, the finding of time/{k}"
+            for k in sorted({e.kind for e in other})
+        )
     out = []
     for name, what, how in (
         (

@@ -21,6 +21,7 @@ from dracc.core.config import IntegrityConfig
 from dracc.core.timefmt import iso_utc
 from dracc.core.units import NS_PER_S
 from dracc.frames import MISSING_NS, Voyage
+from dracc.math.integrity.clock_steps import WEEK_ROLLOVER_NS, WEEK_ROLLOVER_TOL_NS
 from dracc.math.integrity.helpers import (
     MAX_EVIDENCE,
     NO_CLOCK,
@@ -108,7 +109,10 @@ def latency_checks(
             "max": float(lat_s.max()),
             "min": float(lat_s.min()),
         }
-        bad = (r - t) > max_ns  # behind the logger clock; ahead of it: time/leap_second
+        # behind the logger clock; ahead of it: time/leap_second; 1024 weeks behind (a GPS
+        # week rollover): time/week_rollover
+        rolled = np.abs((r - t) - WEEK_ROLLOVER_NS) <= WEEK_ROLLOVER_TOL_NS
+        bad = ((r - t) > max_ns) & ~rolled
         evidence: list[dict[str, Any]] = []
         longest = 0.0
         for a, b in runs(bad):
@@ -136,6 +140,11 @@ def latency_checks(
             else f"{key}: latency p50 {q[0]:.2f} s, p95 {q[1]:.2f} s, max "
             f"{lat_s.max():.2f} s over {len(lat_s)} records"
         )
+        if rolled.any():
+            msg += (
+                f"; {int(rolled.sum())} records 1024 weeks behind the logger clock: a GPS week "
+                "rollover, judged by time/week_rollover"
+            )
         if q[0] < -cfg.latency_max_s:
             msg += (
                 f"; the time of fix is {-q[0]:.2f} s ahead of the logger clock (median): a "

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -55,6 +56,8 @@ from dracc.core.units import NS_PER_S
 from dracc.frames import MISSING_NS, Voyage
 from dracc.math.integrity.clock_steps import (
     GROUP_NS,
+    WEEK_ROLLOVER_NS,
+    WEEK_ROLLOVER_TOL_NS,
     StepEvent,
     present_keys,
     step_checks,
@@ -106,12 +109,28 @@ def time_checks(voyage: Voyage, cfg: IntegrityConfig, start_ns: int, end_ns: int
     if not clocked:
         return checks
     events, displaced = step_events(voyage, cfg)
-    checks += step_checks(events, displaced, cfg, win)
-    checks.append(week_rollover_check(voyage, win))
     series = offset_series(voyage)
     drift = [clock_drift_check(voyage, cfg, s) for s in series.values()]
     drifting = {str(c.source) for c in drift if c.status == "fail"}
-    return checks + leap_second_checks(voyage, cfg, series, events, drifting) + drift
+    ends: list[tuple[str, int, float]] = []
+    leap = leap_second_checks(voyage, cfg, series, events, drifting, ends)
+    # a receiver's own time stepping back where its lead ended is that lead, said once
+    events = [replace(e, kind="leap_second") if _leap_end(e, ends) else e for e in events]
+    checks += step_checks(events, displaced, cfg, win)
+    checks.append(week_rollover_check(voyage, win, events, series))
+    return checks + leap + drift
+
+
+def _leap_end(e: StepEvent, ends: list[tuple[str, int, float]]) -> bool:
+    """A back-step event of the sources whose time of fix was ahead of the logger clock,
+    where that lead ended and by about as much."""
+    srcs = {v.source for v in e.verdicts}
+    return e.kind == "backstep" and any(
+        all(src == k for k in srcs)
+        and abs(e.from_ns - end_ns) <= GROUP_NS
+        and abs(e.back_s - ahead) <= max(2.0, 0.1 * ahead)
+        for src, end_ns, ahead in ends
+    )
 
 
 # ----------------------------------------------------------------------- no clock
@@ -142,8 +161,15 @@ def no_clock_checks(voyage: Voyage) -> list[Check]:
 # ---------------------------------------------------------------------- week rollover
 
 
-def week_rollover_check(voyage: Voyage, win: dict[str, int]) -> Check:
-    """``week_rollover``: dates 1024 weeks early, repaired by the ingest."""
+def week_rollover_check(
+    voyage: Voyage,
+    win: dict[str, int],
+    events: Sequence[StepEvent] = (),
+    series: dict[str, OffsetSeries] | None = None,
+) -> Check:
+    """``week_rollover``: dates 1024 weeks early -- repaired by the ingest (its decision
+    note per file), or not: a source's own times 1024 weeks behind the logger clock
+    (receive stamps of that day), or stepping back 1024 weeks."""
     ev: list[dict[str, Any]] = []
     for d in voyage.time_events.decisions:
         m = _ROLLOVER.match(d)
@@ -157,30 +183,62 @@ def week_rollover_check(voyage: Voyage, win: dict[str, int]) -> Check:
             and any(x in s.sentences for x in ("RMC", "ZDA"))
         )
         ev.append({"file": name, "records": int(m.group("n")), "senders": senders, "note": d})
-    n = sum(e["records"] for e in ev)
-    rule = "dates 1024 GPS weeks (19.6 years) early, found and repaired by the ingest"
-    msg = (
-        f"GPS week rollover: {n} date(s) 1024 weeks early found and repaired (+1024 weeks) in "
-        + "; ".join(
-            f"{e['file']} ({e['records']}, sent by {', '.join(e['senders']) or 'an unknown source'})"
-            for e in ev
+    repaired = sum(e["records"] for e in ev)
+    unrepaired: list[dict[str, Any]] = []
+    for key, s in sorted((series or {}).items()):
+        behind = np.abs((s.recv_ns - s.time_ns) - WEEK_ROLLOVER_NS) <= WEEK_ROLLOVER_TOL_NS
+        if behind.any():
+            i = np.flatnonzero(behind)
+            unrepaired.append(
+                {
+                    "source": key,
+                    "records": int(len(i)),
+                    "first_line": int(s.line[i[0]]),
+                    "start": iso_utc(unit="ms", time_ns=s.time_ns[i[0]]),
+                    "end": iso_utc(unit="ms", time_ns=s.time_ns[i[-1]]),
+                    "behind_logger_clock": "1024 weeks",
+                }
+            )
+    seen = {u["source"] for u in unrepaired}
+    for e in events:
+        if e.kind == "week_rollover" and not {v.source for v in e.verdicts} <= seen:
+            unrepaired.append({**e.evidence(), "records": None})
+    parts = [
+        f"{e['file']} ({e['records']}, sent by {', '.join(e['senders']) or 'an unknown source'})"
+        for e in ev
+    ]
+    msg = "no date 1024 weeks early"
+    if ev:
+        msg = (
+            f"GPS week rollover: {repaired} date(s) 1024 weeks early found and repaired (+1024 "
+            f"weeks) in {'; '.join(parts)}: the receiver's week number has rolled over, its "
+            "dates are wrong until it is updated"
         )
-        + ": the receiver's week number has rolled over, its dates are wrong until updated"
-        if ev
-        else "no date 1024 weeks early"
-    )
+    if unrepaired:
+        u = unrepaired[0]
+        who = u.get("source") or ", ".join(u.get("sources", []))
+        msg = (msg + "; " if ev else "GPS week rollover: ") + (
+            f"{who}'s own times are 1024 weeks early (first at line "
+            f"{u.get('first_line', u.get('line'))}, {u.get('start', u.get('to'))}), not "
+            "repaired: its records stand 19.6 years early"
+        )
     return Check(
         "time",
         "week_rollover",
         None,
         None,
-        "fail" if ev else "pass",
-        statistic("rollover_dates", float(n), "records"),
-        threshold(0.0, "records", rule),
+        "fail" if ev or unrepaired else "pass",
+        statistic(
+            "rollover_dates",
+            float(repaired + sum(u["records"] or 0 for u in unrepaired)),
+            "records",
+        ),
+        threshold(0.0, "records", "dates 1024 GPS weeks (19.6 years) early"),
         dict(win),
         0.0,
         msg,
-        tuple(ev[:MAX_EVIDENCE]),
+        tuple([*ev, *unrepaired][:MAX_EVIDENCE]),
+        detail={"repaired": repaired, "unrepaired_sources": len(unrepaired)},
     )
 
 
@@ -247,8 +305,10 @@ def _explained(t0_ns: int, ahead_s: float, events: list[StepEvent]) -> StepEvent
     """The back-step event a spell of the time of fix ahead of the logger clock starts
     at (the logger clock set back: its stamps behind the receivers' times of fix)."""
     for e in events:
-        if abs(t0_ns - e.from_ns) <= GROUP_NS and abs(ahead_s - e.back_s) <= max(
-            10.0, 0.1 * e.back_s
+        if (
+            e.kind == "backstep"
+            and abs(t0_ns - e.from_ns) <= GROUP_NS
+            and abs(ahead_s - e.back_s) <= max(10.0, 0.1 * e.back_s)
         ):
             return e
     return None
@@ -275,11 +335,12 @@ def leap_second_checks(
     series: dict[str, OffsetSeries],
     events: list[StepEvent],
     drifting: set[str] | frozenset[str] = frozenset(),
+    ends: list[tuple[str, int, float]] | None = None,
 ) -> list[Check]:
     """``leap_second``: per source, spells of its time of fix ahead of the logger clock
     (those at a back-step of the logger's clock, or of a source whose clock drifts, are
     that finding's); then the sources' times of fix against each other at the same
-    receive times."""
+    receive times.  ``ends`` gets (source, end, lead in s) of each spell found."""
     spell_ns = int(cfg.spell_min_s * NS_PER_S)
     checks: dict[str, Check] = {}
     for key, s in sorted(series.items()):
@@ -310,6 +371,8 @@ def leap_second_checks(
                 explained.append({**item, "explained_by": "time/clock_drift"})
             else:
                 spells.append(item)
+                if ends is not None:
+                    ends.append((key, int(s.time_ns[j - 1]), ahead))
         worst = max(spells, key=lambda x: x["ahead_s"], default=None)
         p50 = float(np.median(s.ahead_s))
         if worst is not None:
