@@ -60,8 +60,11 @@ def inspect_cmd(
         )
     paths_exist(logs)
     rep = inspect_logs(logs, cfg.ingest)
-    clocks = source_clocks(logs, cfg) if rep["sources"] else {}
+    once = any(str(p) == "-" for p in logs)  # standard input is read once
+    clocks = source_clocks(logs, cfg) if rep["sources"] and not once else {}
     rep = with_clocks(rep, clocks)
+    if once:
+        rep["notes"].append("clocks not learned: standard input can be read only once")
     if json_path == STDOUT:
         emit_json(rep, STDOUT)
         return

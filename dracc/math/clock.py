@@ -41,6 +41,7 @@ __all__ = [
     "LagEstimate",
     "SourceClock",
     "combine",
+    "hermite",
     "rate_lag",
     "spread_shared_stamps",
     "time_of_fix_offset",
@@ -274,4 +275,44 @@ def _unwrap_nan(a: FloatArray) -> FloatArray:
     out = np.array(a, float)
     ok = np.isfinite(out)
     out[ok] = np.unwrap(out[ok])
+    return out
+
+
+def _slopes(t: FloatArray, x: FloatArray) -> FloatArray:
+    """dx/dt at each node from the Lagrange polynomial through it and two neighbours on
+    each side (fourth order: a 15 s yaw sampled at 1 Hz keeps 99.9 % of its rate where a
+    central difference keeps 97 %); three points at the ends, two at a lone pair."""
+    n = len(t)
+    if n < 5:
+        return np.gradient(x, t) if n > 1 else np.zeros(n)
+    i = np.arange(2, n - 2)
+    nodes = [i + k for k in (-2, -1, 1, 2)]
+    ti = t[i]
+    out = np.gradient(x, t, edge_order=2)
+    deriv = np.zeros(len(i))
+    for j in nodes:  # weight of x_j: (1/(t_j - t_i)) prod_{m != i,j} (t_i - t_m)/(t_j - t_m)
+        w = 1.0 / (t[j] - ti)
+        for m in nodes:
+            if m is not j:
+                w = w * (ti - t[m]) / (t[j] - t[m])
+        deriv += w * x[j]
+    self_w = sum(1.0 / (ti - t[m]) for m in nodes)
+    out[2:-2] = deriv + self_w * x[i]
+    return out
+
+
+def hermite(t: FloatArray, x: FloatArray, at: FloatArray) -> FloatArray:
+    """``x(t)`` (``t`` increasing) at the points ``at`` by cubic Hermite interpolation with
+    fourth-order slopes (:func:`_slopes`); constant beyond the ends."""
+    d = _slopes(t, x)
+    k = np.clip(np.searchsorted(t, at, side="right") - 1, 0, len(t) - 2)
+    h = t[k + 1] - t[k]
+    u = np.clip((at - t[k]) / h, 0.0, 1.0)
+    u2, u3 = u * u, u * u * u
+    out: FloatArray = (
+        (2 * u3 - 3 * u2 + 1) * x[k]
+        + (u3 - 2 * u2 + u) * h * d[k]
+        + (-2 * u3 + 3 * u2) * x[k + 1]
+        + (u3 - u2) * h * d[k + 1]
+    )
     return out

@@ -24,7 +24,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy.interpolate import CubicSpline
 
 from dracc.core.config import Config
 from dracc.core.source_config import source_latencies
@@ -33,6 +32,7 @@ from dracc.frames import MISSING_NS, Voyage, own_time
 from dracc.math.clock import (
     LagEstimate,
     SourceClock,
+    hermite,
     rate_lag,
     spread_shared_stamps,
     stamp_resolution_s,
@@ -196,16 +196,17 @@ def _series(
 
 
 def _on_grid(t_ns: np.ndarray, v: np.ndarray, grid_ns: np.ndarray, angle: bool) -> np.ndarray:
-    """``v`` interpolated onto the grid by a cubic spline (angles unwrapped first: a
-    straight line between 1 Hz samples would blunt a yaw's rate by a few per cent and
-    bias the lag as much); NaN away from data.  Records of one instant count once."""
+    """``v`` interpolated onto the grid by cubic Hermite pieces with fourth-order slopes
+    (angles unwrapped first: a straight line between 1 Hz samples would blunt a yaw's
+    rate by a few per cent and bias the lag as much); NaN away from data.  Records of one
+    instant count once."""
     t, first = np.unique(t_ns, return_index=True)
     if len(t) < 4:
         return np.full(len(grid_ns), np.nan)
     x = v[first]
     if angle:
         x = np.unwrap(x)
-    out = CubicSpline((t - t[0]) / NS_PER_S, x)((grid_ns - t[0]) / NS_PER_S)
+    out = hermite((t - t[0]) / NS_PER_S, x, (grid_ns - t[0]) / NS_PER_S)
     i = np.clip(np.searchsorted(t, grid_ns), 1, len(t) - 1)
     near = np.minimum(np.abs(grid_ns - t[i - 1]), np.abs(t[i] - grid_ns))
     out[near > HOLD_S * NS_PER_S] = np.nan

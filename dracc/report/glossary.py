@@ -153,6 +153,14 @@ GLOSSARY: dict[str, tuple[str, str]] = {
     "sentences": ("Records per NMEA sentence type or message type.", ""),
     "first": ("The time (UTC) of the source's first record.", ""),
     "last": ("The time (UTC) of the source's last record.", ""),
+    "clock": (
+        "The source's clock, learned from the log: how long after the instant they describe "
+        "its records are stamped ('late'), with its 1-sigma, and how it was measured (its own "
+        "time of fix beside the receive stamp, its heading against another in the yaw and "
+        "the turns, its speed against the GNSS in speed changes). Its records without a time "
+        "of fix are moved back by it before any analysis.",
+        "",
+    ),
     # ------------------------------------------------------------------------ faults
     "kind": (
         "The sensor fault: jump (a position step the ship cannot make), frozen (a "
