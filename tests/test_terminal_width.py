@@ -26,10 +26,11 @@ from dracc.core.config import load_config
 from dracc.ingest.inspect import inspect_logs
 from dracc.pipeline.analysis import analyse
 from dracc.pipeline.audit import open_state
+from dracc.pipeline.clock_stage import source_clocks
 from dracc.pipeline.fleet import discover, run_fleet
 from dracc.report import audit_json, json_report, rows, terminal
 from dracc.report.audit_text import print_history
-from dracc.report.inspect_report import render_inspection
+from dracc.report.inspect_report import render_inspection, with_clocks
 from dracc.report.textout import Layout, fit, table, wrap
 
 GOLDEN = Path(__file__).parent / "golden" / "terminal"
@@ -51,6 +52,8 @@ def made(tmp_path_factory):
         cfg = load_config(None)
         a = analyse([LOG], cfg)
         rep = inspect_logs([LOG], cfg.ingest)
+        clocks = source_clocks([LOG], cfg)
+        rep = with_clocks(rep, clocks)
     finally:
         os.chdir(cwd)
     root = tmp_path_factory.mktemp("term")
@@ -67,13 +70,19 @@ def made(tmp_path_factory):
     assert code in (0, 1)
     with open_state(cfg, db) as store:
         history = audit_json.history_document(store, None, None, None)
-    return {"analysis": a, "inspection": rep, "fleet": fleet, "history": history}
+    return {
+        "analysis": a,
+        "inspection": rep,
+        "clocks": clocks,
+        "fleet": fleet,
+        "history": history,
+    }
 
 
 def _printer(made, command):
     return {
         "analyze": lambda c: terminal.print_summary(made["analysis"], c),
-        "inspect": lambda c: render_inspection(made["inspection"], c),
+        "inspect": lambda c: render_inspection(made["inspection"], c, made["clocks"]),
         "fleet": lambda c: terminal.print_fleet(made["fleet"], c),
         "audit_history": lambda c: print_history(made["history"], c),
     }[command]

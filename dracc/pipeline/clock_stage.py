@@ -266,6 +266,8 @@ def _learn_headings(
         if best is not None:
             clocks[key] = _learned(best[0], "heading_rate", best[1])
             continue
+        if anchors:  # say what was tried before the course
+            clocks[key] = _learned(LagEstimate(math.nan, math.nan, 0), "", ", ".join(anchors))
         course = _gnss_course(voyage, frames)
         if course is not None:
             tc, cog = course
@@ -281,7 +283,8 @@ def _learn_headings(
                     heading_rad=hg,
                     min_rate=MIN_TURN_RATE,
                 )
-                clocks[key] = _learned(est, "course_rate", "GNSS course over ground")
+                if est.usable or not anchors:
+                    clocks[key] = _learned(est, "course_rate", "GNSS course over ground")
 
 
 def _hyp(est: LagEstimate, anchor: SourceClock) -> float:
@@ -292,7 +295,7 @@ def _learned(est: LagEstimate, method: str, basis: str) -> SourceClock:
     """A learned offset, or not_determinable where it is too uncertain or implausible."""
     if not est.usable or est.sigma_s > MAX_SIGMA_S or abs(est.lag_s) > MAX_LEARNED_S:
         why = f"{basis}: " + (
-            "too little motion"
+            "no turn, yaw or speed change with records close enough to time it"
             if not est.usable
             else f"{est.lag_s:+.2f} ± {est.sigma_s:.2f} s, not applied"
         )
