@@ -16,9 +16,14 @@ Rules (documented for users in ``docs/ingest.md``):
 3. A record without a time field takes its external time, or else the time of the
    preceding timed record of the file (the next one for leading records).  Such
    derived times are not counted as duplicates.
-4. A date earlier than 2000-01-01 that becomes plausible when 1024 GPS weeks are added
-   is a GPS week-number rollover: corrected, counted (``implausible_dates``) and
-   noted.  Other dates outside 2000-01-01 .. today+1 are counted and noted, not used.
+4. A GPS week-number rollover (a receiver dating its fixes 1024·k weeks early, k = 1, 2):
+   an RMC/ZDA date that far behind its record's external time (within a day: a midnight
+   between them), whatever its year, is counted (``implausible_dates``) and noted with the
+   first one's receive time; its time keeps the external time's day (rule 1).  Without an
+   external time, a date before 2000-01-01 made plausible by adding 1024 weeks is
+   corrected, counted and noted; a later one (2006 for 2026) cannot be told from a real
+   log of that year by the date alone, and is used as it reads.  Other dates outside
+   2000-01-01 .. today+1 are counted and noted, not used.
 
 Time events (:class:`EventCounter`, one code path for every reader, ``dracc inspect`` and
 ``dracc analyze`` alike: :func:`feed_frames`).  A *stream* is one source's records of one
@@ -64,12 +69,14 @@ import numpy as np
 import pandas as pd
 
 from dracc.core.arrays import ArrayLike
+from dracc.core.timefmt import iso_utc
 from dracc.frames import MISSING_NS as MISSING_NS  # the "no time" marker (re-exported)
 from dracc.frames import ClockStep, FileResult, TimeEvents
 
 DAY_NS = 86_400 * 1_000_000_000
 HALF_DAY_NS = DAY_NS // 2
 GPS_WEEK_ROLLOVER_DAYS = 1024 * 7
+WEEK_ROLLOVER_NS = GPS_WEEK_ROLLOVER_DAYS * DAY_NS
 _EPOCH_2000_DAYS = 10957  # 2000-01-01 in days since 1970-01-01
 #: the date a log with no date anywhere (and no ``--date``) is placed on: plainly not a
 #: real one, so nobody takes it for the day of the voyage
@@ -135,6 +142,14 @@ def fix_dates(date_days: np.ndarray, latest_days: int | None = None) -> tuple[np
     return d, int(fixable.sum()), int(unusable.sum())
 
 
+def rollover_weeks(behind_ns: np.ndarray) -> np.ndarray:
+    """k (1 or 2) where ``behind_ns`` (a receive time minus a record's own time) is 1024·k
+    GPS weeks within a day (the latency check's tolerance; a midnight between), else 0."""
+    k = np.rint(behind_ns / WEEK_ROLLOVER_NS).astype(np.int64)
+    ok = (k >= 1) & (k <= 2) & (np.abs(behind_ns - k * WEEK_ROLLOVER_NS) <= DAY_NS)
+    return np.where(ok, k, 0)
+
+
 def drop_implausible_ext(
     ext_ns: np.ndarray, latest_days: int | None = None
 ) -> tuple[np.ndarray, int]:
@@ -187,26 +202,31 @@ class TimeBase:
     ) -> list[np.ndarray]:
         """Feed one block (arrays in stream order); return a list of finished
         (block_id, time_ns) pairs in order (possibly empty, possibly several)."""
-        date_days, nfix, nbad = fix_dates(date_days)
-        self.week_rollovers += nfix
-        self.implausible += nbad
         ext_ns, nbad = drop_implausible_ext(ext_ns)
         self.implausible += nbad
         has_ext = ext_ns != MISSING_NS
         has_tod = tod_ns >= 0
+        # rule 4: a date 1024·k weeks behind its record's external time (which places it)
+        dated = np.flatnonzero(has_ext & has_tod & (date_days >= 0))
+        k = rollover_weeks(ext_ns[dated] - date_days[dated] * DAY_NS - tod_ns[dated])
+        if k.any():
+            i, date_days = dated[k > 0], date_days.copy()
+            date_days[i] += k[k > 0] * GPS_WEEK_ROLLOVER_DAYS
+            self.week_rollovers += len(i)
+            if not any(d.startswith("GPS week rollover") for d in self.decisions):
+                self.decisions.append(
+                    f"GPS week rollover: RMC/ZDA dates {1024 * int(k[k > 0][0])} weeks behind "
+                    f"their receive times, the first received {iso_utc(int(ext_ns[i[0]]))}: "
+                    "the day taken from the receive times"
+                )
+        date_days, nfix, nbad = fix_dates(date_days)
+        self.week_rollovers += nfix
+        self.implausible += nbad
         seq = has_tod & ~has_ext
         tods = tod_ns[seq]
         # rule 2: running day index over the time-of-day sequence
-        prev = np.concatenate(
-            (
-                [
-                    self.last_tod_ns
-                    if self.last_tod_ns is not None
-                    else (tods[0] if len(tods) else 0)
-                ],
-                tods[:-1],
-            )
-        )
+        last = self.last_tod_ns if self.last_tod_ns is not None else (tods[0] if len(tods) else 0)
+        prev = np.concatenate(([last], tods[:-1]))
         jump = tods - prev
         step = (jump < -HALF_DAY_NS).astype(np.int64) - (jump > HALF_DAY_NS)
         self.rollovers += int((step > 0).sum())

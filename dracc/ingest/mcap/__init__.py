@@ -55,7 +55,11 @@ Times
     timed by its own stamp has the log time as ``recv_ns`` (its receive time; none where
     the log time is implausible, e.g. 0); one timed by its log time has ``MISSING_NS``.
     Raw sentences are anchored to the message's stamp (else its log time) and have the
-    log time as ``recv_ns`` where they carry a time of fix (the NMEA rule).
+    log time as ``recv_ns`` where they carry a time of fix (the NMEA rule).  A stamp
+    1024·k GPS weeks (k = 1, 2; within a day) behind its log time is a receiver's
+    week-number rollover: the record's time is repaired (+1024·k weeks), counted in
+    ``implausible_dates`` and said in a decision naming the first message
+    (:meth:`~dracc.ingest.mcap.assembly.FrameAssembly.add_part`).
 Source keys
     The topic without its leading '/' and without a trailing standard leaf (``fix``,
     ``position``, ``heading``, ``velocity``, ``water``, ``distance``, ``rot``, ``nmea``,

@@ -16,12 +16,13 @@ import numpy as np
 import pandas as pd
 
 from dracc.core.config import IngestConfig
-from dracc.frames import Rejects
+from dracc.core.timefmt import iso_utc
+from dracc.frames import MISSING_NS, Rejects
 from dracc.ingest.csv_quantities import build_frames
 from dracc.ingest.mcap.channels import _Channel
 from dracc.ingest.mcap.columns import _const_cat, _KindStore
 from dracc.ingest.memory import trim_heap
-from dracc.ingest.timebase import drop_implausible_ext
+from dracc.ingest.timebase import WEEK_ROLLOVER_NS, drop_implausible_ext, rollover_weeks
 
 _TRIM_RECORDS = 200_000  #: records moved into the stores between two trims of the C heap
 _NMEA_CHUNK = 100_000  #: raw NMEA sentences gathered before they are parsed
@@ -55,6 +56,10 @@ class FrameAssembly:
         self.stores: dict[str, _KindStore] = {}  #: kind -> its records so far, in sorted runs
         self.pending = 0  #: decoded records of all channels not yet in the stores
         self.untrimmed = 0  #: records moved into the stores since the C heap was last trimmed
+        #: records whose own time stood 1024·k GPS weeks behind their log time (repaired),
+        #: and the first: (message number, source key, its own time, its log time)
+        self.rollovers = 0
+        self.first_rollover: tuple[int, str, int, int] | None = None
 
     # ---------------------------------------------------------------- raw NMEA
     def nmea_text(self, ch: _Channel, text: bytes, t: int, k: int, log_time: int) -> None:
@@ -111,7 +116,18 @@ class FrameAssembly:
     ) -> None:
         """Keep decoded columns of a channel (``recv``: the receive time of records timed
         by their own stamp, MISSING_NS elsewhere); turn them into compact frame pieces once
-        enough have gathered, so the pending columns stay bounded."""
+        enough have gathered, so the pending columns stay bounded.  A record's own time
+        1024·k GPS weeks behind its log time (a receiver's week-number rollover) is
+        repaired: 1024·k weeks added, counted and the first kept (:meth:`rollover_note`)."""
+        log = drop_implausible_ext(recv)[0]
+        k = rollover_weeks(np.where(log != MISSING_NS, log, t) - t)
+        if k.any():
+            i = np.flatnonzero(k)
+            if self.first_rollover is None:
+                j = int(i[0])
+                self.first_rollover = (int(nums[j]), ch.key, int(t[j]), int(recv[j]))
+            t = t + k * WEEK_ROLLOVER_NS
+            self.rollovers += len(i)
         ch.parts.append((t, nums, qs, recv))
         ch.state["pending"] = ch.state.get("pending", 0) + len(t)
         self.pending += len(t)
@@ -119,6 +135,18 @@ class FrameAssembly:
             self.to_pieces(ch)
         elif self.pending >= _PENDING_RECORDS:
             self.to_pieces(max(self.channels.values(), key=lambda c: c.state.get("pending", 0)))
+
+    def rollover_note(self) -> str | None:
+        """The decision on the records repaired for a week rollover (None: none were)."""
+        if self.first_rollover is None:
+            return None
+        no, key, own, log = self.first_rollover
+        weeks = 1024 * round((log - own) / WEEK_ROLLOVER_NS)
+        return (
+            f"{self.rollovers} dates corrected for the GPS week rollover (+1024 weeks): "
+            f"message stamps {weeks} weeks behind their log times, the first at message {no} "
+            f"({key}, stamped {iso_utc(own)}, logged {iso_utc(log)})"
+        )
 
     def to_pieces(self, ch: _Channel) -> None:
         """Turn the channel's pending columns into frame pieces in the stores."""

@@ -65,6 +65,10 @@ def _result(walk: ContainerWalk, decoding: ChannelDecoding) -> FileResult:
         res.ignored_examples.update(nres.ignored_examples)
         res.time_events = nres.time_events
         res.notes.extend(nres.notes)
+    rolled = frames.rollover_note()
+    if rolled is not None:  # counted like the NMEA time base's (implausible_dates)
+        res.time_events.implausible_dates += frames.rollovers
+        res.time_events.decisions.append(rolled)
     for kind in list(frames.stores):
         store = frames.stores.pop(kind)
         if store.total:

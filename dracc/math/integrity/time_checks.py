@@ -98,6 +98,7 @@ GPS_UTC_S = 18  #: GPS time - UTC since 2017-01-01
 #: a logger clock a little behind lengthens it by up to 1 - this)
 LATENCY_ALLOWANCE_S = 0.6
 _ROLLOVER = re.compile(r"^(?P<file>.*?): (?P<n>\d+) dates corrected for the GPS week rollover")
+_ROLLOVER_SOURCE = re.compile(r"the first at message \d+ \((?P<key>[^,]+),")
 _STAMP_QUANTA_NS = (NS_PER_S, NS_PER_S // 10, NS_PER_S // 100, NS_PER_S // 1000)
 
 
@@ -168,21 +169,39 @@ def week_rollover_check(
     series: dict[str, OffsetSeries] | None = None,
 ) -> Check:
     """``week_rollover``: dates 1024 weeks early -- repaired by the ingest (its decision
-    note per file), or not: a source's own times 1024 weeks behind the logger clock
-    (receive stamps of that day), or stepping back 1024 weeks."""
+    note per file: the RMC/ZDA dates of an NMEA log, before 2000 or behind their receive
+    times, with a note on the first; the stamps of an MCAP log's messages behind their
+    log times, naming the first message and its source), or not: a source's own times
+    1024 weeks behind the logger clock (receive stamps of that day), or stepping back
+    1024 weeks."""
     ev: list[dict[str, Any]] = []
-    for d in voyage.time_events.decisions:
+    decisions = voyage.time_events.decisions
+    for d in decisions:
         m = _ROLLOVER.match(d)
         if m is None:
             continue
         name = m.group("file")
+        named = _ROLLOVER_SOURCE.search(d)
         senders = sorted(
             k
             for k, s in voyage.sources.items()
             if any(Path(f).name == name for f in s.files)
-            and any(x in s.sentences for x in ("RMC", "ZDA"))
+            and (
+                any(x in s.sentences for x in ("RMC", "ZDA"))
+                or (named is not None and k == named.group("key"))
+            )
         )
-        ev.append({"file": name, "records": int(m.group("n")), "senders": senders, "note": d})
+        head = f"{name}: GPS week rollover: "  # the NMEA time base's note on the first
+        first = next((x.removeprefix(head) for x in decisions if x.startswith(head)), None)
+        ev.append(
+            {
+                "file": name,
+                "records": int(m.group("n")),
+                "senders": senders,
+                "note": d,
+                "first": first,
+            }
+        )
     repaired = sum(e["records"] for e in ev)
     unrepaired: list[dict[str, Any]] = []
     for key, s in sorted((series or {}).items()):
