@@ -121,6 +121,9 @@ def resolve_times(
             f"NMEA 2000 {kind.replace('_', ' ')} times put on UTC by {int(ok.sum())} "
             f"PGN126992/129029 times (offset {offset / 1e9:.3f} s, 95 % within {spread:.3f} s)"
         )
+        if kind == "relative":  # a device's timer (iKonvert, candump): its rate too
+            t, note = _timer_rate(t, t[dec.clock_row[ok]], off - offset)
+            notes.extend(note)
         return t + offset, notes
     days = date_days
     if days is None:
@@ -137,6 +140,31 @@ def resolve_times(
     if kind != TIME_OF_DAY:
         t = t - t.min()
     return t + days * DAY_NS, notes
+
+
+def _timer_rate(
+    t: np.ndarray, at: np.ndarray, resid_ns: np.ndarray
+) -> tuple[np.ndarray, list[str]]:
+    """A relative timer's rate against the UTC anchors: ``resid = UTC - (t + offset)``
+    fitted as a line in ``t`` (least squares over the anchors within 5 s of the median);
+    applied where it moves a time by more than 50 ms over the log (a device's RC
+    oscillator runs a few per mille off: 4 s an hour), said in a note."""
+    keep = np.abs(resid_ns - np.median(resid_ns)) < 5e9
+    if keep.sum() < 10:
+        return t, []
+    x = (at[keep] - at[0]) / 1e9
+    if x.max() - x.min() < 60.0:
+        return t, []
+    slope, icpt = np.polyfit(x, resid_ns[keep] / 1e9, 1)
+    span_s = (t.max() - t.min()) / 1e9
+    if abs(slope) * span_s < 0.05:
+        return t, []
+    fixed = t + np.rint((icpt + slope * (t - at[0]) / 1e9) * 1e9).astype(np.int64)
+    fast = "fast" if slope < 0 else "slow"
+    return fixed, [
+        f"the log's timer runs {abs(slope) * 1e6:.0f} ppm {fast} against the "
+        f"PGN126992/129029 times ({abs(slope) * span_s:.2f} s over the log): its times rescaled"
+    ]
 
 
 def _hex(msgs: Messages, row: int) -> str:
