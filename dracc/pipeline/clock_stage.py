@@ -60,6 +60,8 @@ HOLD_S = 3.0  #: a grid point further than this from a record of a series is mis
 MIN_HEADING_RATE = 0.02 * DEG_RAD
 #: turns only against the course (yaw and the hull's response to it are smoothed away)
 MIN_TURN_RATE = 0.05 * DEG_RAD
+#: against the GNSS course or speed: the yaw and the hull's response to it smoothed away
+SLOW_SMOOTH_S = 31.0
 HIGHPASS_S = 61.0  #: heading against heading: the yaw's seconds, not the slow errors
 MIN_ACCEL_MPS2 = 0.002  #: a speed change (RMS acceleration in a window) worth timing
 #: an offset learned beyond this is not a clock: it is not applied (the time checks speak)
@@ -302,21 +304,9 @@ def _learn_headings(
             clocks[key] = _learned(LagEstimate(math.nan, math.nan, 0), "", ", ".join(anchors))
         course = _gnss_course(voyage, frames)
         if course is not None:
-            tc, cog = course
-            g = _grid(t, tc)
-            if len(g):
-                hg = _on_grid(t, h, g, True)
-                est = rate_lag(
-                    hg,
-                    _on_grid(tc, cog, g, True),
-                    GRID_S,
-                    angle=True,
-                    smooth_s=31.0,
-                    heading_rad=hg,
-                    min_rate=MIN_TURN_RATE,
-                )
-                if est.usable or not anchors:
-                    clocks[key] = _learned(est, "course_rate", "GNSS course over ground")
+            slow = _slow_lag((t, h), course, True, MIN_TURN_RATE, (t, h))
+            if slow is not None and (slow.usable or not anchors):
+                clocks[key] = _learned(slow, "course_rate", "GNSS course over ground")
 
 
 def _hyp(est: LagEstimate, anchor: SourceClock) -> float:
@@ -372,20 +362,34 @@ def _learn_logs(
         t, v = _series(frames, "water", key, "stw_mps", True)
         if len(t) < 10 or len(tg) < 10:
             continue
-        g = _grid(t, tg)
-        if len(g) == 0:
-            continue
-        psi = _on_grid(th, hdg, g, True) if hdg is not None else None
-        est = rate_lag(
-            _on_grid(t, v, g, False),
-            _on_grid(tg, sog, g, False),
-            GRID_S,
-            angle=False,
-            smooth_s=31.0,
-            heading_rad=psi,
-            min_rate=MIN_ACCEL_MPS2,
-        )
-        clocks[key] = _learned(est, "speed_rate", f"{gnss} speed over ground")
+        heading = (th, hdg) if hdg is not None else None
+        est = _slow_lag((t, v), (tg, sog), False, MIN_ACCEL_MPS2, heading)
+        if est is not None:
+            clocks[key] = _learned(est, "speed_rate", f"{gnss} speed over ground")
+
+
+def _slow_lag(
+    x: tuple[np.ndarray, np.ndarray],
+    ref: tuple[np.ndarray, np.ndarray],
+    angle: bool,
+    min_rate: float,
+    heading: tuple[np.ndarray, np.ndarray] | None,
+) -> LagEstimate | None:
+    """A series (times, values) timed against the GNSS's (course or speed) on the 1 s
+    grid, smoothed over SLOW_SMOOTH_S, with the current's sin/cos of ``heading``; None
+    where they do not overlap."""
+    g = _grid(x[0], ref[0])
+    if len(g) == 0:
+        return None
+    return rate_lag(
+        _on_grid(*x, g, angle),
+        _on_grid(*ref, g, angle),
+        GRID_S,
+        angle=angle,
+        smooth_s=SLOW_SMOOTH_S,
+        heading_rad=_on_grid(*heading, g, True) if heading is not None else None,
+        min_rate=min_rate,
+    )
 
 
 def _apply(
