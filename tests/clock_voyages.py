@@ -67,6 +67,8 @@ class ClockRun:
     #: NMEA analysis's deviation samples, RMS of the true deviations at those instants)
     m_u: dict[str, dict[str, tuple[float, float, float, float]]]
     ep_max_error_m: float  #: the learned DR's largest distance from the truth at its epochs
+    #: the same from the MCAP of exact times (what the clocks cannot be blamed for)
+    ep_exact_max_error_m: float = math.nan
 
 
 def _m_u(result, unit: str, channel: str) -> float:
@@ -86,8 +88,7 @@ def _true_deviations(sv, times_ns: np.ndarray) -> dict[str, dict[str, np.ndarray
         per[f"ins{j}"] = {
             "lat": np.interp(times_ns, ts, err[f"ins{j}_north_m"].to_numpy()[idx]),
             "lon": np.interp(times_ns, ts, err[f"ins{j}_east_m"].to_numpy()[idx]),
-            "course": np.interp(times_ns, ts, err[f"ins{j}_heading_rad"].to_numpy()[idx])
-            / DEG_RAD,
+            "course": np.interp(times_ns, ts, err[f"ins{j}_heading_rad"].to_numpy()[idx]) / DEG_RAD,
         }
     out: dict[str, dict[str, np.ndarray]] = {u: {} for u in per}
     for ch in CHANNELS:
@@ -151,7 +152,7 @@ def run_voyage(seed: int, hours: float = 12.0, noiseless: bool = False) -> Clock
                 )
                 for ch in CHANNELS
             }
-    return ClockRun(p, offsets, m_u, _ep_max_error(sv, a_nmea))
+    return ClockRun(p, offsets, m_u, _ep_max_error(sv, a_nmea), _ep_max_error(exact, a_mcap))
 
 
 def wrap_deg(x: float) -> float:
