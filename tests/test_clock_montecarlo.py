@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from clock_voyages import CHANNELS, run_voyage
 
-SEEDS = (11, 12, 13)
+SEEDS = (11, 12)
 
 
 @pytest.fixture(scope="module", params=SEEDS)
 def run(request):
-    return run_voyage(request.param, hours=4.0)
+    return run_voyage(request.param, hours=3.0)
 
 
 def test_the_deviation_statistics_do_not_see_the_clocks(run):
@@ -50,5 +50,5 @@ def test_on_a_noiseless_voyage_the_clocks_add_nothing_to_the_estimated_position(
     distance is not bounded here: with exact times a 1 Hz compass through a large turn
     still kicks the learned current by tens of metres -- sample-and-hold integration
     through the turn, not time; measured in benchmarks/bench_clock.py.)"""
-    r = run_voyage(seed, hours=4.0, noiseless=True)
+    r = run_voyage(seed, hours=3.0, noiseless=True)
     assert r.ep_max_error_m <= r.ep_exact_max_error_m + 5.0, (r.ep_max_error_m, r)

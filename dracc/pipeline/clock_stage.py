@@ -77,6 +77,9 @@ def learn_clocks(voyage: Voyage, cfg: Config) -> tuple[Voyage, dict[str, SourceC
     if not keys:
         return voyage, {}
     frames, spread, stamp, spread_mean, slot = _spread(voyage)
+    frames = {
+        k: df.assign(**{STAMPED: _stamped(df)}) if len(df) else df for k, df in frames.items()
+    }
     configured = source_latencies(cfg.extra.get("sources"))
     clocks: dict[str, SourceClock] = {}
     for key in keys:
@@ -111,8 +114,14 @@ def _with_slot(c: SourceClock, slot_s: float) -> float:
     return math.hypot(c.offset_sigma_s, slot_s)
 
 
+STAMPED = "_stamped"  #: the stage's own column: the row's time is a stamp
+
+
 def _stamped(df: pd.DataFrame) -> np.ndarray:
     """Rows without a time of fix of their own (their time is a stamp)."""
+    if STAMPED in df:
+        mask: np.ndarray = df[STAMPED].to_numpy(bool)
+        return mask
     return ~own_time(df)
 
 
@@ -223,9 +232,8 @@ def _series(
     rows &= np.isfinite(v)
     if rows.any():  # one sentence, the most frequent: a 1 Hz THS beside a 10 Hz HDT is
         # stamped on its own terms, and mixing the two would make the series jagged
-        sent = df["sentence"].to_numpy()[rows]
-        names, counts = np.unique(sent.astype(str), return_counts=True)
-        rows[rows] = sent.astype(str) == names[np.argmax(counts)]
+        codes = pd.Categorical(df["sentence"]).codes[rows]
+        rows[rows] = codes == np.argmax(np.bincount(codes - codes.min())) + codes.min()
     return df["time_ns"].to_numpy(np.int64)[rows], v[rows]
 
 
@@ -405,6 +413,7 @@ def _apply(
         if shift:
             by = _per_row(df["source"], shift)
             df = df.assign(time_ns=df["time_ns"].to_numpy(np.int64) - np.where(_stamped(df), by, 0))
+        df = df.drop(columns=STAMPED, errors="ignore")
         t = df["time_ns"].to_numpy(np.int64)
         if (t[1:] < t[:-1]).any():
             df = df.iloc[np.argsort(t, kind="stable")].reset_index(drop=True)
