@@ -37,7 +37,7 @@ from dracc.core.config import IntegrityConfig
 from dracc.core.timefmt import iso_utc
 from dracc.core.units import NS_PER_S
 from dracc.frames import KIND_COLUMNS, ClockStep, Voyage
-from dracc.math.integrity.helpers import MAX_EVIDENCE, statistic, threshold
+from dracc.math.integrity.helpers import MAX_EVIDENCE, present_keys, statistic, threshold
 from dracc.math.integrity.results import Check
 
 __all__ = [
@@ -47,7 +47,6 @@ __all__ = [
     "StepEvent",
     "StepVerdict",
     "judge_step",
-    "present_keys",
     "step_checks",
     "step_events",
 ]
@@ -62,14 +61,6 @@ LOOP_COMPARE = 5000
 WEEK_ROLLOVER_NS = 1024 * 7 * 86400 * NS_PER_S
 #: a step or an offset this close to 1024 weeks is a rollover (time/week_rollover)
 WEEK_ROLLOVER_TOL_NS = 86400 * NS_PER_S
-
-
-def present_keys(voyage: Voyage) -> set[str]:
-    keys: set[str] = set()
-    for df in voyage.frames.values():
-        if len(df):
-            keys.update(str(k) for k in df["source"].unique())
-    return keys
 
 
 @dataclass(frozen=True)

@@ -167,3 +167,12 @@ def shifted_index(instants: IntArray, shift_ns: int) -> tuple[IntArray, NDArray[
 
 #: why a source of a log without a clock gets no latency, rate or time check
 NO_CLOCK = "no clock: the log carries no time (its times are only the order of its records)"
+
+
+def present_keys(voyage: Voyage) -> set[str]:
+    """Source keys with at least one record in any frame."""
+    keys: set[str] = set()
+    for df in voyage.frames.values():
+        if len(df):
+            keys.update(str(k) for k in df["source"].unique())
+    return keys

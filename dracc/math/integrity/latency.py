@@ -27,6 +27,7 @@ from dracc.math.integrity.helpers import (
     NO_CLOCK,
     by_source,
     not_checked,
+    present_keys,
     role_of,
     runs,
     statistic,
@@ -78,7 +79,7 @@ def latency_checks(
         f"receive time - time of fix above this for at least {cfg.spell_min_s:g} s (a time "
         "of fix ahead of the logger clock: time/leap_second)"
     )
-    for key in sorted(voyage.clockless & _present_keys(voyage)):
+    for key in sorted(voyage.clockless & present_keys(voyage)):
         checks.append(
             not_checked(
                 "latency",
@@ -167,12 +168,3 @@ def latency_checks(
             )
         )
     return checks, dists
-
-
-def _present_keys(voyage: Voyage) -> set[str]:
-    """Source keys with at least one record in any frame."""
-    keys: set[str] = set()
-    for df in voyage.frames.values():
-        if len(df):
-            keys.update(str(k) for k in df["source"].unique())
-    return keys

@@ -59,7 +59,6 @@ from dracc.math.integrity.clock_steps import (
     WEEK_ROLLOVER_NS,
     WEEK_ROLLOVER_TOL_NS,
     StepEvent,
-    present_keys,
     step_checks,
     step_events,
 )
@@ -67,6 +66,7 @@ from dracc.math.integrity.helpers import (
     MAX_EVIDENCE,
     NO_CLOCK,
     by_source,
+    present_keys,
     robust_sigma,
     role_of,
     runs,
