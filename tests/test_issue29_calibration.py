@@ -30,9 +30,31 @@ def test_calibration_at_rest_not_determinable_and_angles_wrapped(run_cli, tmp_pa
         ]
     )  # fmt: skip
     assert code == 0
+    # learn = true (the default): the learned model's errors (issue 31), not determinable
     code, out, err = run_cli("analyze", tmp_path / "still.nmea", "--json", tmp_path / "a.json")
     assert code == 0, err
     cal = json.loads((tmp_path / "a.json").read_text())["calibration"]
+    assert cal["method"] == "learned"
+    assert cal["compass_error_deg"] is None and cal["log_scale"] is None
+    nd = cal["not_determinable"]
+    for key in ("compass_error_deg", "log_scale"):
+        assert nd[key].startswith("the fixes did not constrain it: σ"), nd[key]
+        assert "the ship did not move through the water" in nd[key]
+    assert "no log-offset state" in nd["log_offset_kn"]
+    assert "compass error NOT DETERMINABLE; log scale NOT DETERMINABLE" in " ".join(out.split())
+    # learn = false: the least-squares fit says the same in its words
+    (tmp_path / "ls.toml").write_text("[dead_reckoning]\nlearn = false\n")
+    code, out, err = run_cli(
+        "analyze",
+        tmp_path / "still.nmea",
+        "-c",
+        tmp_path / "ls.toml",
+        "--json",
+        tmp_path / "b.json",
+    )
+    assert code == 0, err
+    cal = json.loads((tmp_path / "b.json").read_text())["calibration"]
+    assert cal["method"] == "least_squares"
     assert cal["compass_error_deg"] is None and cal["log_scale"] is None
     nd = cal["not_determinable"]
     assert nd["compass_error_deg"].startswith("compass error not observable: the ship did not move")

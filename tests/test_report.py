@@ -116,10 +116,6 @@ LEARNED = {
     "current_drift_kn": 0.49,
     "current_variation_kn": 0.15,
     "current_tau_s": 1800.0,
-    "heading_correction_deg": 0.31,
-    "heading_correction_sigma_deg": 0.12,
-    "log_scale_correction": -0.0171,
-    "log_scale_correction_sigma": 0.0023,
     "noise_kn": 0.1,
     "noise_tau_s": 600.0,
     "fix_sigma_m": 3.0,
@@ -134,6 +130,26 @@ LEARNED = {
         "current_kn = { sigma = 0.397, tau_s = 1800 }\nfix_sigma_m = 3.0\n"
     ),
 }
+
+
+#: why a learned calibration has no log offset (dracc.pipeline.calibration_stage)
+LEARNED_NO_OFFSET = (
+    "the estimated position's filter has no log-offset state: an offset is folded into the "
+    "log scale at this voyage's speeds (b / V; median 12.0 kn through the water)"
+)
+
+#: the least-squares calibration of the same voyage (learn = false)
+LEAST_SQUARES = CalibrationSection(
+    reference_role="gnss",
+    compass_error_deg=Estimate(0.31, 0.04),
+    log_scale=Estimate(0.029, 0.002),
+    log_offset_kn=Estimate(0.05, 0.02),
+    n=140,
+    segment_s=600.0,
+    residual_rms_kn=0.08,
+    method="least_squares",
+    n_fixes=1500,
+)
 
 
 def _leg_checks() -> tuple[LegConsistency, ...]:
@@ -314,14 +330,18 @@ def make_analysis(kind: str = "full") -> Analysis:
         reference_sigma_m=3.0,
         scored_out_of_sample=True,
     )
+    # learn = true: the compass and log errors are the learned model's (issue 31)
     cal = CalibrationSection(
         reference_role="gnss",
         compass_error_deg=Estimate(0.31, 0.04),
         log_scale=Estimate(0.029, 0.002),
-        log_offset_kn=Estimate(0.05, 0.02),
-        n=140,
-        segment_s=600.0,
-        residual_rms_kn=0.08,
+        log_offset_kn=None,
+        n=288,
+        segment_s=300.0,
+        residual_rms_kn=math.nan,
+        not_determinable={"log_offset_kn": LEARNED_NO_OFFSET},
+        method="learned",
+        n_fixes=288,
     )
     ct = T0_NS + np.arange(0, 25 * 3600, 600, dtype="int64") * 10**9
     cur = CurrentSection(
@@ -533,6 +553,11 @@ def test_json_content_and_units():
     assert dr["learned_model"]["config_block"].startswith("[dead_reckoning]\nlearn = false\n")
     assert isinstance(dr["learned_model"]["n_models"], int)
     assert doc["calibration"]["compass_error_deg"] == {"value": 0.31, "sigma": 0.04}
+    assert doc["calibration"]["method"] == "learned" and doc["calibration"]["n_fixes"] == 288
+    assert doc["calibration"]["log_offset_kn"] is None
+    assert doc["calibration"]["not_determinable"] == {"log_offset_kn": LEARNED_NO_OFFSET}
+    # the learned model keeps no second, correction-signed copy of the sensor errors
+    assert not {k for k in dr["learned_model"] if "correction" in k}
     cur = doc["current"]
     assert cur["set_deg"]["value"] == 168.0
     assert cur["series"][0]["drift_kn"] == pytest.approx(0.2 * 3600 / 1852)
@@ -572,6 +597,7 @@ def _not_learned(a: Analysis) -> Analysis:
             nees_upper=math.nan,
             reference_sigma_m=0.0,
         ),
+        calibration=LEAST_SQUARES,
     )
 
 
@@ -587,6 +613,9 @@ def test_json_without_a_learned_model(validator):
     assert all(leg["mean_nees"] is None for leg in dr["legs"])
     e1 = dr["epochs"][1]
     assert e1["water_lat_deg"] == e1["lat_deg"] and e1["scored"] is True
+    cal = doc["calibration"]
+    assert cal["method"] == "least_squares" and cal["n"] == 140 and cal["n_fixes"] == 1500
+    assert cal["log_offset_kn"] == {"value": 0.05, "sigma": 0.02}
 
 
 def test_json_bare_says_what_is_missing():
@@ -621,14 +650,16 @@ def test_terminal_summary_content():
         "scored   120 epochs out of sample",
         "5 prior-only epochs unscored",
         "NEES     36.0 over 24 legs (chi² 26.5-77.0)",
-        "learned  current set 45 ° drift 0.49 kn; corrections: heading +0.31 ± 0.12 °, "
-        "log scale -1.71 ± 0.23 %",
+        "learned  current set 45 ° drift 0.49 kn; noise 0.10 kn; compass and log errors: "
+        "see Calibration",
+        "against gnss (learned by the estimated position's filter from 288 fixes)",
+        "log offset NOT DETERMINABLE",
         "excess",
         "neg. var.",
         "1.76 -",
         "exceeds→178.6",
         "compass error 0.31 ± 0.04 °",
-        "log scale 2.90 ± 0.20 %",
+        "log scale 2.90 ±",
         "set 168 ± 12 ° (towards), drift 0.40 ± 0.10 kn",
     ):
         assert needle in text, needle

@@ -175,8 +175,14 @@ def test_html_dead_reckoning_shows_nees_and_the_learned_model():
         "<td>largest part of the 2M</td><td>the change of the current (prior: [dead_reckoning] "
         "current_kn)</td>" in dr_part
     )
-    assert "<td>heading correction</td><td>+0.31 ± 0.12°" in dr_part
-    assert "<td>log scale correction</td><td>-1.71 ± 0.23 %" in dr_part
+    # the compass and log errors once, in the calibration section (issue 31)
+    assert "heading correction" not in dr_part and "log scale correction" not in dr_part
+    assert '<td>compass and log errors</td><td><a href="#calibration">Calibration</a>' in dr_part
+    cal_part = text.split('<section id="calibration">', 1)[1].split("</section>", 1)[0]
+    assert (
+        "<td>against</td><td>gnss (learned by the estimated position&#x27;s filter from 288 "
+        "fixes)</td>" in cal_part
+    )
     assert "set 45° (towards), drift 0.49 kn" in dr_part
     # the config block verbatim (escaped) in a <pre>
     block = html_lib.escape(a.dead_reckoning.learned["config_block"], quote=True)

@@ -14,7 +14,7 @@ This module only orchestrates; the work is in
 - :mod:`.faults_stage`       sensor faults
 - :mod:`.dr_stage`           dead reckoning and its consistency (:mod:`.dr_model`, :mod:`.notes`)
 - :mod:`.current_stage`      set and drift
-- :mod:`.calibration_stage`  compass error, log scale and offset
+- :mod:`.calibration_stage`  compass error, log scale and offset (learned or least squares)
 - :mod:`.deviation_stage`    INS deviation statistics
 
 What a log lacks (no INS triple, no heading, no speed log, no reference) is not an
@@ -39,6 +39,7 @@ from dracc.frames import Voyage
 from dracc.math.integrity import check_night, dr_innovation_check, with_dr_check
 from dracc.pipeline import overview, selection
 from dracc.pipeline.calibration_stage import calibration as calibration_section
+from dracc.pipeline.calibration_stage import log_measures_transverse
 from dracc.pipeline.clock_stage import learn_clocks
 from dracc.pipeline.current_stage import current as current_section
 from dracc.pipeline.current_stage import estimated_position
@@ -154,7 +155,9 @@ def analyse_voyage(
     report("calibration", 0.0)
     calibration = None
     if dr_inputs is not None and fixes is not None:
-        calibration = calibration_section(dr_inputs, fixes, missing)
+        calibration = calibration_section(
+            dr_inputs, fixes, missing, log_measures_transverse(voyage)
+        )
     report("calibration", 1.0)
 
     return Analysis(

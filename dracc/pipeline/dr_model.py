@@ -13,7 +13,7 @@ from dracc.core.config import DeadReckoningConfig
 from dracc.core.geodesy import wrap_2pi
 from dracc.core.units import DEG_RAD, KN_MPS
 from dracc.math.deadreckoning import Consistency, DRTrack
-from dracc.math.ep import ErrorPrior, EstimatedPosition, heading_prior_rad
+from dracc.math.ep import ErrorPrior, EstimatedPosition, LearnedModel, heading_prior_rad
 
 #: what each part of the EP covariance is, and the key that sets its prior
 SOURCE_KEYS = {
@@ -41,17 +41,26 @@ def dominant_source(
     return SOURCE_KEYS[name]
 
 
+def final_posterior(m: LearnedModel) -> tuple[np.ndarray, np.ndarray]:
+    """The filter's state at the end of the data mixed over the grid weights: the mean
+    (N,) and the covariance (N, N), the spread between grid points included."""
+    w = m.final_weights
+    x = w @ m.final_x
+    dx = m.final_x - x
+    return x, np.einsum("m,mij->ij", w, m.final_P + dx[:, :, None] * dx[:, None, :])
+
+
 def learned_summary(est: EstimatedPosition, cfg: DeadReckoningConfig) -> dict[str, object]:
     """The model learned over the whole voyage (final grid weights) and a ready
-    [dead_reckoning] block that reuses it where there is no reference (learn = false)."""
+    [dead_reckoning] block that reuses it where there is no reference (learn = false).
+
+    The compass and log errors it learned are the calibration section's
+    (:mod:`dracc.pipeline.calibration_stage`, in the error convention), not repeated here."""
     m = est.model
     hp = m.hyper
     w = m.final_weights
     j = int(np.argmax(w))
-    x = w @ m.final_x
-    Pm = np.einsum(
-        "m,mij->ij", w, m.final_P + (m.final_x - x)[:, :, None] * (m.final_x - x)[:, None, :]
-    )
+    x, Pm = final_posterior(m)
     cbar = x[2:4]
     drift = float(np.hypot(*cbar))
     eps, s = float(x[8]), float(x[9])
@@ -84,10 +93,6 @@ def learned_summary(est: EstimatedPosition, cfg: DeadReckoningConfig) -> dict[st
         "current_drift_kn": drift / KN_MPS,
         "current_variation_kn": sig_c / KN_MPS,
         "current_tau_s": tau_c,
-        "heading_correction_deg": math.degrees(eps),
-        "heading_correction_sigma_deg": math.degrees(s_eps),
-        "log_scale_correction": s,
-        "log_scale_correction_sigma": s_s,
         "noise_kn": noise_kn,
         "noise_tau_s": noise_tau,
         "fix_sigma_m": fix_m,

@@ -216,20 +216,27 @@ class Estimate:
 
 @dataclass(frozen=True)
 class CalibrationSection:
-    """Sensor calibration against the reference."""
+    """The compass and log errors against the reference: one estimate each, in the error
+    convention (compass error = compass - true; V_log = (1 + s) V_true + b).
+
+    ``method`` "learned": the estimated position's learned model (``learn = true``,
+    :mod:`dracc.pipeline.calibration_stage`; n = fixes used, segment_s = the filter step, no
+    offset); "least_squares": :mod:`dracc.math.calibration` (n = segments)."""
 
     reference_role: str
-    #: eps = (course-made-good heading used by the DR) - true heading; the correction is -eps
+    #: e = (course-made-good heading used by the DR) - true heading; the correction is -e
     compass_error_deg: Estimate | None
     log_scale: Estimate | None  #: s in V_log = (1 + s) V_true + b (a fraction)
     log_offset_kn: Estimate | None  #: b; None where speed changes were too small to fit it
-    n: int  #: segments used
-    segment_s: float
-    residual_rms_kn: float  #: RMS of the segment velocity residuals per axis
+    n: int  #: segments (least squares) or fixes (learned) used
+    segment_s: float  #: the segment (least squares) or the filter step (learned)
+    residual_rms_kn: float  #: RMS of the segment velocity residuals per axis (NaN: learned)
     notes: tuple[str, ...] = ()
     #: the quantities the data cannot determine (their Estimate None), and why: keys
     #: "compass_error_deg", "log_scale", "log_offset_kn" (issue 29)
     not_determinable: dict[str, str] = field(default_factory=dict)
+    method: str = "least_squares"  #: "learned" or "least_squares" (issue 31)
+    n_fixes: int = 0  #: reference fixes the estimate used
 
 
 @dataclass(frozen=True)

@@ -146,6 +146,27 @@ GLOSSARY: dict[str, tuple[str, str]] = {
         "below it too large (conservative).",
         "METHODS §7",
     ),
+    # ------------------------------------------------------------------ calibration
+    "compass error": (
+        "Heading error = compass - true (in degrees): the course the DR used (heading, "
+        "variation, deviation and the leeway from the log's transverse speed) minus the "
+        "true course; correct the compass by subtracting it.  With a log that gives no "
+        "transverse speed it is the compass and leeway error: the compass error minus "
+        "the leeway (starboard +).",
+        "METHODS §3",
+    ),
+    "log scale error": (
+        "s in V_log = (1 + s) V_true (+ offset b): positive when the log reads high.  "
+        "Learned by the estimated position's filter, an offset is folded into the scale "
+        "at the voyage's speeds (s ~ scale + b / V).",
+        "METHODS §3",
+    ),
+    "not determinable": (
+        "A sensor error the fixes did not constrain: its σ after the voyage is more than "
+        "half its prior σ (learned), or the fit cannot separate it (least squares).  Its "
+        "value is left out, never printed as a number, and the reason is said.",
+        "METHODS §3",
+    ),
     # ----------------------------------------------------------------------- sources
     "source": ("The source key: the TAG source, talker or topic the records came from.", ""),
     "roles": ("The part the source plays: compass, log, ins1-ins3 or gnss.", "METHODS §1"),

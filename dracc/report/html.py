@@ -18,10 +18,17 @@ from dracc.core import atomic
 from dracc.core.timefmt import iso_utc
 from dracc.core.vocabulary import CHANNELS
 from dracc.pipeline.results import Analysis, DRLeg, DRSection, Estimate
-from dracc.report import fmt, fmt_duration, fmt_pct, fmt_signed, short_utc
+from dracc.report import fmt, fmt_duration, fmt_pct, short_utc
 from dracc.report.glossary import GLOSSARY, anchor
 from dracc.report.page import CSP, data_uri  # one policy and one data URI for every page
-from dracc.report.rows import EXCEEDS, WITHIN, channel_rows, clock_text, unit_rows
+from dracc.report.rows import (
+    EXCEEDS,
+    WITHIN,
+    calibration_method,
+    channel_rows,
+    clock_text,
+    unit_rows,
+)
 from dracc.report.verdict import FAULTS_FOUND, Finding, Verdict, verdict
 
 #: a column header: the glossary term (shown as it is), or (term, header html)
@@ -290,10 +297,6 @@ def _learned(m: Mapping[str, Any] | None) -> str:
         v = m.get(key)
         return fmt(None if v is None else scale * v, digits)
 
-    def sg(key: str, digits: int, scale: float = 1.0) -> str:
-        v = m.get(key)
-        return fmt_signed(None if v is None else scale * v, digits)
-
     rows = [
         (
             "current (persistent)",
@@ -305,15 +308,8 @@ def _learned(m: Mapping[str, Any] | None) -> str:
             f"{fmt_duration(m.get('current_tau_s') or math.nan)}",
         ),
         (
-            "heading correction",
-            f"{sg('heading_correction_deg', 2)} ± "
-            f"{g('heading_correction_sigma_deg', 2)}° (add to the DR course)",
-        ),
-        (
-            "log scale correction",
-            f"{sg('log_scale_correction', 2, 100.0)} ± "
-            f"{g('log_scale_correction_sigma', 2, 100.0)} % "
-            "(V<sub>true</sub> = (1 + s) V<sub>log</sub>)",
+            "compass and log errors",
+            '<a href="#calibration">Calibration</a> (learned here, given once there)',
         ),
         (
             "short-term noise",
@@ -431,7 +427,10 @@ def _calibration_current(a: Analysis) -> str:
     else:
         nd = c.not_determinable  # said in words, and why (issue 29)
         rows = [
-            ("against", f"{_e(c.reference_role)} ({c.n} segments of {c.segment_s:g} s)"),
+            (
+                "against",
+                f"{_e(c.reference_role)} ({_e(calibration_method(c.method, c.n, c.segment_s))})",
+            ),
             ("compass error", _est(c.compass_error_deg, "°")),
             ("log scale error", _est(c.log_scale, "%", scale=100.0)),
             ("log offset", _est(c.log_offset_kn, "kn")),

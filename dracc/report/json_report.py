@@ -162,6 +162,8 @@ def _dead_reckoning(dr: DRSection) -> dict[str, Any]:
 def _calibration(c: CalibrationSection) -> dict[str, Any]:
     return {
         "reference_source": c.reference_role,
+        "method": c.method,
+        "n_fixes": int(c.n_fixes),
         "compass_error_deg": _estimate(c.compass_error_deg),
         "log_scale": _estimate(c.log_scale),
         "log_offset_kn": _estimate(c.log_offset_kn),

@@ -140,3 +140,11 @@ def clock_text(c: SourceClock | None) -> str:
         return f"on time ({how})"
     way = "late" if c.offset_s >= 0 else "early"
     return f"{abs(c.offset_s):.2f} ± {c.offset_sigma_s:.2f} s {way} ({how})"
+
+
+def calibration_method(method: str, n: int, segment_s: float) -> str:
+    """How the calibration's numbers were found (CalibrationSection.method, n, segment_s),
+    in a few words: the learned filter's fixes or the least-squares segments."""
+    if method == "learned":
+        return f"learned by the estimated position's filter from {n} fixes"
+    return f"least squares, {n} segments of {segment_s:g} s"

@@ -31,8 +31,8 @@ from dracc.pipeline.results import (
     Estimate,
     EstimatedPositionSection,
 )
-from dracc.report import fmt, fmt_duration, fmt_pct, fmt_signed, short_utc
-from dracc.report.rows import EXCEEDS, clock_text, unit_rows
+from dracc.report import fmt, fmt_duration, fmt_pct, short_utc
+from dracc.report.rows import EXCEEDS, calibration_method, clock_text, unit_rows
 from dracc.report.textout import Layout, Page, bullet, labelled, layout
 from dracc.report.verdict import verdict
 
@@ -178,15 +178,12 @@ def _verdict_word(dr: DRSection) -> str:
 
 
 def _learned_text(m: Mapping[str, Any]) -> str:
-    """The learned current and corrections in one line (DRSection.learned)."""
-    scale, scale_sigma = m.get("log_scale_correction"), m.get("log_scale_correction_sigma")
+    """The learned current and noise in one line (DRSection.learned); the compass and log
+    errors it learned are the calibration's."""
     return (
         f"current set {fmt(m.get('current_set_deg'), 0)} ° drift "
-        f"{fmt(m.get('current_drift_kn'), 2)} kn; corrections: heading "
-        f"{fmt_signed(m.get('heading_correction_deg'), 2)} ± "
-        f"{fmt(m.get('heading_correction_sigma_deg'), 2)} °, log scale "
-        f"{fmt_signed(None if scale is None else 100.0 * scale, 2)} ± "
-        f"{fmt(None if scale_sigma is None else 100.0 * scale_sigma, 2)} %"
+        f"{fmt(m.get('current_drift_kn'), 2)} kn; noise {fmt(m.get('noise_kn'), 2)} kn; "
+        "compass and log errors: see Calibration"
     )
 
 
@@ -266,7 +263,8 @@ def _calibration_body(page: _Page, c: CalibrationSection) -> None:
 
     page.add(
         wrap_text(
-            f"against {c.reference_role} ({c.n} segments of {c.segment_s:g} s): compass error "
+            f"against {c.reference_role} ({calibration_method(c.method, c.n, c.segment_s)}): "
+            "compass error "
             f"{est('compass_error_deg', c.compass_error_deg, '°')}; log scale "
             f"{est('log_scale', scale, '%')}; log offset "
             f"{est('log_offset_kn', c.log_offset_kn, 'kn')}",
