@@ -28,6 +28,7 @@ from dracc.math.ep.aided import (
     run_aided,
     thinned_fixes,
 )
+from dracc.math.ep.interval import StudyModel, learned_interval_study
 from dracc.math.fix import library_observation
 from dracc.math.fusion import PositionFix
 from dracc.pipeline.results import CurrentSection, Estimate, EstimatedPositionSection
@@ -203,6 +204,32 @@ def _stretches(dr: DRInputs) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarra
             yield t[a:b], np.arctan2(ve[a:b], vn[a:b]), np.hypot(vn[a:b], ve[a:b])
 
 
+def _study_note(learned: StudyModel | None) -> str:
+    """What the fix-interval study ran on, and what its containment is to be compared with."""
+    if learned is None:
+        return (
+            "fix-interval study: on the configured model ([dead_reckoning] current_kn, "
+            "log_noise_kn, compass_noise_deg, fix_sigma_m; learn = false); a fix counts as "
+            "inside when its innovation lies in the 95 % ellipse (a correct model gives 95 %)"
+        )
+    top = int(np.argmax(learned.weights))
+    hp = learned.hyper
+    return (
+        "fix-interval study: on the learned model (the current's variation, the short-term "
+        "noise and the fix noise of the "
+        f"{learned.weights.size} grid model(s) holding the weight, the best "
+        f"{learned.weights[top]:.3f}: σ_c {hp.current_sigma_mps[top] / KN_MPS:.2f} kn, "
+        f"τ_c {hp.current_tau_s[top] / 3600:g} h, σ_n {hp.noise_sigma_mps[top] / KN_MPS:.2f} kn, "
+        f"fix {hp.fix_sigma_m[top]:.1f} m; the learned heading and log-scale corrections "
+        "applied, their uncertainty kept); the current estimated by the study's filter from "
+        "its own fixes; runs start every 15 min (one per interval when longer); the "
+        "prediction's covariance scaled by a factor learned from the study's earlier fixes "
+        "(covariance matching, as the estimated position's); a fix counts as inside when its "
+        "innovation lies in the 95 % ellipse of that prediction, and 'a correct model' is "
+        "the probability the model puts there"
+    )
+
+
 def estimated_position(
     dr: DRInputs,
     fixes: Fixes,
@@ -224,6 +251,8 @@ def estimated_position(
     ft, flat, flon, fdesc = fixes
     fix_s = (ft - dr.t0_ns) / 1e9
     model = CurrentModel.from_config(cfg)
+    # the study on the learned model where there is one (learn = true), else the configured
+    learned = StudyModel.from_learned(dr.estimated.model) if dr.estimated is not None else None
     obs = [
         ((o.time_ns - dr.t0_ns) / 1e9, library_observation(o.spec, []).obs, o.spec.label)
         for o in observations
@@ -232,12 +261,19 @@ def estimated_position(
     kinds: list[str] = []
     used: set[int] = set()
     n_fix = n_lop = 0
-    study: list[list[tuple[np.ndarray, np.ndarray]]] = []
+    study: list[list[tuple[np.ndarray, ...]]] = []
     for ts, course, speed in _stretches(dr):
-        if intervals_s:
+        if intervals_s and learned is not None:
+            vn, ve = speed * np.cos(course), speed * np.sin(course)
             study.append(
-                interval_study(
-                    ts, course, speed, fix_s, flat, flon, cfg.fix_sigma_m, model, intervals_s
+                list(learned_interval_study(ts, vn, ve, fix_s, flat, flon, learned, intervals_s))
+            )
+        elif intervals_s:
+            study.append(
+                list(
+                    interval_study(
+                        ts, course, speed, fix_s, flat, flon, cfg.fix_sigma_m, model, intervals_s
+                    )
                 )
             )
         pick = thinned_fixes(fix_s, ts[0], ts[-1], dr.epoch_interval_s)
@@ -283,6 +319,8 @@ def estimated_position(
         notes.append(
             f"{outside} observation(s) of the file lie outside the dead reckoning: not used"
         )
+    if intervals_s:
+        notes.append(_study_note(learned))
     for o in observations:  # datums (seeds/004 §2): say what moved each charted position
         rec = o.spec.datum
         if rec is not None:
@@ -312,12 +350,10 @@ def estimated_position(
             interval_rows(
                 intervals_s,
                 [
-                    (
-                        np.concatenate([s[i][0] for s in study]),
-                        np.concatenate([s[i][1] for s in study]),
-                    )
+                    tuple(np.concatenate([s[i][j] for s in study]) for j in range(len(study[0][i])))
                     for i in range(len(intervals_s))
                 ],
+                "configured" if learned is None else "learned",
             )
             if study
             else ()

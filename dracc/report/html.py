@@ -477,6 +477,7 @@ def _aided_ep(a: Analysis) -> str:
                 f"{r.mean_2m_before_m:.0f} m",
                 f"{r.max_2m_before_m:.0f} m",
                 f"{100 * r.containment:.1f} %",
+                f"{100 * r.expected_containment:.1f} %",
             ]
             for r in e.interval_study
         ]
@@ -486,6 +487,7 @@ def _aided_ep(a: Analysis) -> str:
             "mean 2M before",
             "max 2M before",
             "inside 95 %",
+            "a correct model",
         ]
         out.append(_table(head, rows))
     return "".join(out)

@@ -225,6 +225,8 @@ def _estimated_position(e: EstimatedPositionSection) -> dict[str, Any]:
                 "mean_2m_before_m": _num(r.mean_2m_before_m),
                 "max_2m_before_m": _num(r.max_2m_before_m),
                 "containment": _num(r.containment),
+                "expected_containment": _num(r.expected_containment),
+                "model": r.model,
             }
             for r in e.interval_study
         ],

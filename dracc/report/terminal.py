@@ -292,6 +292,7 @@ _STUDY_COLUMNS: tuple[tuple[str, bool, int], ...] = (
     ("mean 2M before", True, 0),
     ("max 2M before", True, 1),
     ("inside 95 %", True, 0),
+    ("a correct model", True, 1),
 )
 
 
@@ -321,6 +322,7 @@ def _aided_ep_body(page: _Page, e: EstimatedPositionSection) -> None:
                 _metres(r.mean_2m_before_m),
                 _metres(r.max_2m_before_m),
                 fmt_pct(r.containment),
+                fmt_pct(r.expected_containment),
             )
             for r in e.interval_study
         ]

@@ -112,6 +112,12 @@ class IntervalRow:
     mean_2m_before_m: float  #: 2M just before an update, mean over the updates
     max_2m_before_m: float
     containment: float  #: fraction of the fixes, before use, inside their 95 % innovation ellipse
+    #: the probability the model gives a fix of being inside (a correct model's containment):
+    #: 0.95 for one Gaussian model, the mixture's for the learned grid (dracc.math.ep.interval)
+    expected_containment: float = 0.95
+    #: the error model the filter ran on: "configured" (``CurrentModel.from_config``) or
+    #: "learned" (the voyage's learned model, dracc.math.ep.interval)
+    model: str = "configured"
 
 
 def interval_study(
@@ -164,12 +170,17 @@ def interval_study(
 
 
 def interval_rows(
-    intervals_s: Sequence[float], study: Sequence[tuple[FloatArray, FloatArray]]
+    intervals_s: Sequence[float],
+    study: Sequence[tuple[FloatArray, ...]],
+    model: str = "configured",
 ) -> tuple[IntervalRow, ...]:
-    """The table from :func:`interval_study` results (several stretches' pooled per interval)."""
+    """The table from :func:`interval_study` results (several stretches' pooled per interval):
+    (2M before, NIS) per update, or (2M before, NIS, the model's probability of the fix
+    inside) as :func:`dracc.math.ep.interval.learned_interval_study` gives them."""
     rows = []
-    for interval, (before, nis) in zip(intervals_s, study, strict=True):
+    for interval, (before, nis, *p_in) in zip(intervals_s, study, strict=True):
         n = int(nis.size)
+        expected = float(np.mean(p_in[0])) if p_in and n else 0.95 if n else math.nan
         rows.append(
             IntervalRow(
                 float(interval),
@@ -177,6 +188,8 @@ def interval_rows(
                 float(before.mean()) if n else math.nan,
                 float(before.max()) if n else math.nan,
                 float(np.mean(nis <= NIS_95_2DOF)) if n else math.nan,
+                expected,
+                model,
             )
         )
     return tuple(rows)
