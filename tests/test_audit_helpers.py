@@ -63,7 +63,7 @@ def _deviation(units: dict[str, dict[str, ChannelStats]], start: int, end: int) 
 
 def _dr_section(containment, verdict, consistent, nees, dominant) -> DRSection:
     arr = np.array([])
-    track = DRTrackResult(*([arr] * 13))
+    track = DRTrackResult(*([arr] * 16))
     stat, lower, upper = nees if nees is not None else (nan, nan, nan)
     source, key = dominant if dominant is not None else (None, None)
     return DRSection(

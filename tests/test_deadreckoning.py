@@ -34,7 +34,6 @@ from dracc.math.deadreckoning import (
     interp_deviation_rad,
     leeway_from_log_rad,
     mean_error_m,
-    prob_inside_2m,
     sigma_course_rad,
     speed_covariance_rad2,
     speed_from_components_mps,
@@ -44,6 +43,7 @@ from dracc.math.deadreckoning import (
     velocity_water_ne_mps,
 )
 from dracc.math.ellipse import error_ellipse
+from dracc.math.uncertainty import prob_inside_2m
 
 geographiclib = pytest.importorskip("geographiclib.geodesic")
 GEOD = geographiclib.Geodesic.WGS84

@@ -17,7 +17,8 @@ from scipy.signal import lfilter
 from dracc.core.config import DeadReckoningConfig, ErrorSource
 from dracc.core.geodesy import add_offset_ne, offset_ne_m
 from dracc.core.units import DEG_RAD, KN_MPS
-from dracc.math.deadreckoning import dead_reckon, dr_consistency, integrate_ne, prob_inside_2m
+from dracc.math.deadreckoning import dead_reckon, dr_consistency, integrate_ne
+from dracc.math.uncertainty import prob_inside_2m
 
 DT_S = 5.0
 HOURS = 6

@@ -17,7 +17,7 @@ from dracc.core.config import Config
 from dracc.core.geodesy import offset_ne_m
 from dracc.core.vocabulary import INS_ROLES
 from dracc.frames import KINDS, Rejects, TimeEvents, Voyage, empty_frame
-from dracc.ingest.sources import summarize
+from dracc.ingest import summarize_frames
 from dracc.pipeline.analysis import analyse, analyse_voyage
 from dracc.pipeline.results import SCHEMA
 from dracc.sim import GM, SimParams, simulate
@@ -33,7 +33,7 @@ def voyage_from_sim(sv, drop_kinds=(), drop_roles=()) -> Voyage:
         if k in drop_kinds:
             df = empty_frame(k)
         frames[k] = df[~df["source"].astype(str).isin(drop_keys)].reset_index(drop=True)
-    sources = summarize(frames, "sim.nmea")
+    sources = summarize_frames(frames, "sim.nmea")
     for key, info in sources.items():
         if key in sv.roles:
             info.roles = [sv.roles[key]]

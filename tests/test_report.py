@@ -107,6 +107,9 @@ def _dr_track(n: int, step_s: float, with_ref: bool) -> DRTrackResult:
         water_lon_rad=water_lon,
         # leg 0 has only the prior (no earlier fix to learn from): not scored
         scored=(leg >= 1) & (since > 0),
+        inside=np.where((leg >= 1) & (since > 0) & with_ref, 1.0, np.nan),
+        p_inside=np.where((leg >= 1) & (since > 0) & with_ref, 0.97, np.nan),
+        pit=np.where((leg >= 1) & (since > 0) & with_ref, 0.4, np.nan),
     )
 
 

@@ -110,7 +110,7 @@ def test_dead_reckoning_reasons_against_its_bounds(sample):
     inside = dr.nees_lower <= dr.nees_statistic <= dr.nees_upper
     assert dr.consistent and inside and v.level == OK and v.headline.startswith("DR honest")
     assert f"{100 * dr.containment_2m:.1f} %" in v.reasons[0]
-    assert f"a correct model: {100 * dr.expected_inside:.1f} %" in v.reasons[0]
+    assert f"stated: {100 * dr.expected_inside:.1f} %" in v.reasons[0]
     assert f"NEES {dr.nees_statistic:.1f} over {len(dr.leg_checks)} legs: within" in v.reasons[1]
     assert f"RMS error/M {dr.error_over_m_rms:.2f}" in v.reasons[2]
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -25,7 +26,14 @@ from dracc.math.deadreckoning import (
     speed_from_components_mps,
 )
 from dracc.math.ep import estimate_position
-from dracc.pipeline.dr_model import dominant_source, error_prior, fix_innovations, learned_summary
+from dracc.math.uncertainty import GAUSSIAN
+from dracc.pipeline.dr_honesty import honesty
+from dracc.pipeline.dr_model import (
+    dominant_source,
+    error_prior,
+    fix_innovations,
+    learned_summary,
+)
 from dracc.pipeline.notes import dr_notes, dr_verdict
 from dracc.pipeline.results import DRLeg, DRSection, DRTrackResult
 from dracc.pipeline.selection import (
@@ -108,12 +116,14 @@ def dead_reckoning(
         flon,
         max_ref_gap_s=gap_s,
         ref_sigma_m=est.reference_sigma_m if est is not None else 0.0,
+        shape=est.forecast.sample_shape if est is not None else GAUSSIAN,
     )
     # the actual error at every sample (for the growth plot and the tables)
     rlat, rlon = interp_position(ft, flat, flon, grid, gap_s * 1e9)
     dn, de = offset_ne_m(tr.lat_rad, tr.lon_rad, rlat, rlon)
     ref_err = np.hypot(dn, de)
     scored_row = learned_row & (tr.since_fix_s > 0)
+    judged = _per_sample(tr.time_s, cons)
 
     def rows(idx: np.ndarray) -> DRTrackResult:
         return DRTrackResult(
@@ -130,6 +140,9 @@ def dead_reckoning(
             water_lat_rad=water.lat_rad[idx],
             water_lon_rad=water.lon_rad[idx],
             scored=scored_row[idx],
+            inside=judged.inside[idx],
+            p_inside=judged.p_inside[idx],
+            pit=judged.pit[idx],
         )
 
     n_prior = int(np.sum((tr.since_fix_s[ei] > 0) & ~learned_row[ei])) if est is not None else 0
@@ -165,6 +178,7 @@ def dead_reckoning(
         scored_out_of_sample=est is not None,
         fix_innovations=fix_innovations(est, grid[0]),
         fix_source_key=fix_source_key(voyage, fdesc),
+        honesty=honesty(cons, est),
     )
     # course and speed through the water for the calibration: leeway (B5) and speed (B1)
     # from a two-component log, as the DR used them
@@ -186,6 +200,25 @@ def dead_reckoning(
         estimated=est,
     )
     return section, fixes, inputs
+
+
+class _Judged(NamedTuple):
+    """Per DR sample (NaN where not scored): the reference inside the drawn 2M (1/0), the
+    stated probability of that, and the PIT of the error."""
+
+    inside: np.ndarray
+    p_inside: np.ndarray
+    pit: np.ndarray
+
+
+def _per_sample(time_s: np.ndarray, cons: Consistency) -> _Judged:
+    """The consistency's per-epoch judgement spread onto the DR samples."""
+    out = _Judged(*(np.full(time_s.size, np.nan) for _ in range(3)))
+    k = np.searchsorted(time_s, cons.time_s)
+    out.inside[k] = cons.inside
+    out.p_inside[k] = cons.p_inside_expected
+    out.pit[k] = cons.pit
+    return out
 
 
 def _legs(tr: DRTrack, cons: Consistency, grid: np.ndarray, fdesc: str) -> tuple[DRLeg, ...]:

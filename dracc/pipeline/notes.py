@@ -80,7 +80,7 @@ def dr_verdict(
         )
     verdict = (
         f"{cons.verdict}: reference inside 2M at {100 * cons.inside_fraction:.1f} % of "
-        f"{cons.n_epochs} epochs in {cons.n_legs} legs (a correct model gives "
+        f"{cons.n_epochs} epochs in {cons.n_legs} legs (stated: "
         f"{100 * cons.expected_inside_fraction:.1f} %); RMS error/M "
         f"{cons.rms_error_over_m:.2f} (1 expected); NEES {cons.nees_statistic:.1f} "
         f"(chi^2 {cons.nees_lower:.1f}-{cons.nees_upper:.1f})"

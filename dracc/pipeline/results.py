@@ -145,6 +145,11 @@ class DRTrackResult:
     water_lon_rad: np.ndarray
     #: bool: the row's model was learned from fixes before its leg (scored out of sample)
     scored: np.ndarray
+    #: the reference inside the drawn 2M (1.0, 0.0); NaN where not scored (at the fix,
+    #: before anything was learned, no reference): the one "inside" every output shows
+    inside: np.ndarray
+    p_inside: np.ndarray  #: the stated probability of the reference inside 2M; NaN unscored
+    pit: np.ndarray  #: the predictive's P(error below the observed one); NaN unscored
 
 
 @dataclass(frozen=True)
@@ -158,6 +163,25 @@ class DRLeg:
     containment_2m: float  #: fraction of scored epochs with the reference inside 2M (NaN if none)
     n_scored: int
     max_error_m: float
+
+
+@dataclass(frozen=True)
+class DRHonesty:
+    """Is the probability stated beside 2M achieved?  (dracc.pipeline.dr_honesty)"""
+
+    predictive: str  #: 'student-t' (learned model) or 'gaussian' (configured model)
+    method: str  #: what set the circle's size, one sentence
+    inflation_min: float  #: the factor on the model's covariance, over the scored legs
+    inflation_max: float
+    shape_min: float  #: the Student-t shape (heavier tails when small); NaN for a Gaussian
+    n_scored: int
+    n_misleading: int  #: scored epochs with the error beyond 2M (a Stanford diagram's)
+    stated_inside: float  #: mean stated probability of the reference inside 2M
+    n_beyond_99: int  #: scored epochs beyond the predictive's 99 % radius (PIT > 0.99)
+    expected_beyond_99: float  #: 1 % of the scored epochs
+    pit_counts: tuple[int, ...]  #: PIT histogram, equal bins over [0, 1]: flat when honest
+    first_leg_inside: float  #: containment over the first scored leg
+    first_leg_stated: float  #: its stated probability
 
 
 @dataclass(frozen=True)
@@ -201,6 +225,7 @@ class DRSection:
     #: filter): (time_ns, NIS chi^2_2, gate in m) at each fix epoch, NaN while re-anchoring
     fix_innovations: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     fix_source_key: str | None = None  #: the source the reference fixes came from
+    honesty: DRHonesty | None = None  #: stated against achieved (None without a reference)
 
 
 # ----------------------------------------------------------- calibration and current

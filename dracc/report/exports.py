@@ -19,9 +19,9 @@ of each leg (a row is kept where the whole number of steps since the leg's first
 grows), plus each leg's first and last row; the reference is the source's positions as
 the plots have them (``Analysis.tracks``: at most 4000 a source), a fix logged twice at
 one instant written once.  Misses are the reporting epochs after a fix where the reference
-lies outside 2M.  ``inside`` counts as the consistency check does: the reference within
-2M widened by the reference's own noise, sqrt(2M^2 + 8 sigma_ref^2), so that the
-fraction inside over the scored epochs is the report's containment.
+lies outside 2M.  ``inside`` is the analysis's one judgement (``DRTrackResult.inside``):
+the reference within the drawn 2M at a scored epoch, null where the epoch is not scored;
+the fraction inside over the scored epochs is the report's containment.
 
 GPX 1.1 (OpenCPN, chart plotters): ``trk`` per track, ``trkseg`` per leg, ``time`` per
 point; the schema's own elements only, in its order, and dracc's values in
@@ -246,26 +246,19 @@ def _lines(a: Analysis) -> list[_Line]:
     return lines
 
 
-def compared_radius_m(dr: DRSection) -> np.ndarray:
-    """The 2M the reference is compared with at each reporting epoch: the DR's covariance
-    plus the reference's own noise (sigma per axis), 2 sqrt(tr P + 2 sigma^2)."""
-    r = np.asarray(dr.epochs.radius_2m_m, float)
-    return np.sqrt(r**2 + 8.0 * float(dr.reference_sigma_m) ** 2)
-
-
 def inside_flags(dr: DRSection) -> tuple[np.ndarray, np.ndarray]:
-    """(has a reference, the reference inside 2M) at each reporting epoch."""
-    err = np.asarray(dr.epochs.ref_error_m, float)
-    has = np.isfinite(err)
-    with np.errstate(invalid="ignore"):
-        inside = has & (err <= compared_radius_m(dr))
-    return has, inside
+    """(judged, inside) at each reporting epoch: the section's one judgement of the
+    reference against the drawn 2M (``DRTrackResult.inside``); not judged where the epoch
+    is not scored (at the fix, before anything was learned, no reference)."""
+    v = np.asarray(dr.epochs.inside, float)
+    judged = np.isfinite(v)
+    return judged, judged & (v == 1.0)
 
 
 def misses(dr: DRSection) -> np.ndarray:
-    """Indices of the reporting epochs after a fix with the reference outside 2M."""
-    has, inside = inside_flags(dr)
-    return np.flatnonzero(has & ~inside & (np.asarray(dr.epochs.since_fix_s) > 0))
+    """Indices of the scored reporting epochs with the reference outside 2M."""
+    judged, inside = inside_flags(dr)
+    return np.flatnonzero(judged & ~inside)
 
 
 def _miss_text(dr: DRSection, i: int) -> str:
@@ -573,7 +566,7 @@ def kml_document(a: Analysis) -> bytes:
             span = _sub(pm, f"{{{k}}}TimeSpan")
             _sub(span, f"{{{k}}}begin", iso_utc(int(t[i])))
             _sub(span, f"{{{k}}}end", iso_utc(end))
-            miss = bool(has[i] and not inside[i] and ep.since_fix_s[i] > 0)
+            miss = bool(has[i] and not inside[i])
             _sub(pm, f"{{{k}}}styleUrl", "#circle_miss" if miss else "#circle")
             ext = _sub(pm, f"{{{k}}}ExtendedData")
             for name, value in (

@@ -113,7 +113,10 @@ GLOSSARY: dict[str, tuple[str, str]] = {
     ),
     "inside 2M": (
         "Fraction of the scored epochs with the reference position inside the 2M circle "
-        "(to compare with the 95.4-98.2 % a correct model gives).",
+        "drawn, to compare with the probability stated for it: 95.4-98.2 % for a Gaussian "
+        "error (the configured model), less for the learned model's Student-t predictive, "
+        "whose tails are heavier while few legs were learned from.  Every export shows the "
+        "same judgement per epoch.",
         "(B31)",
     ),
     "scored": (

@@ -29,7 +29,14 @@ from dracc.report.rows import (
     clock_text,
     unit_rows,
 )
-from dracc.report.verdict import FAULTS_FOUND, Finding, Verdict, verdict
+from dracc.report.verdict import (
+    FAULTS_FOUND,
+    Finding,
+    Verdict,
+    containment_text,
+    honesty_text,
+    verdict,
+)
 
 #: a column header: the glossary term (shown as it is), or (term, header html)
 Header = str | tuple[str, str]
@@ -361,14 +368,15 @@ def _dr(a: Analysis) -> str:
         ("scored", _e(scored)),
         (
             "2M containment",
-            f"{fmt_pct(dr.containment_2m)} of {dr.n_scored} epochs after a fix "
-            f"(a correct model: {fmt_pct(dr.expected_inside)})",
+            containment_text(dr),
         ),
+        ("stated against achieved", _e(honesty_text(dr.honesty)) if dr.honesty else "-"),
         ("RMS error / M", fmt(dr.error_over_m_rms, 2)),
         ("NEES", _nees(dr)),
         (
             "reference σ",
-            f"{fmt(dr.reference_sigma_m, 1)} m per axis (added to P for the comparison)",
+            f"{fmt(dr.reference_sigma_m, 1)} m per axis (in the stated probability and the tests; "
+            "the circle judged is the one drawn)",
         ),
     ]
     if dr.dominant_source:

@@ -24,6 +24,7 @@ from dracc.pipeline.results import (
     Analysis,
     CalibrationSection,
     CurrentSection,
+    DRHonesty,
     DRSection,
     DRTrackResult,
     Estimate,
@@ -81,9 +82,34 @@ def _epochs(t: DRTrackResult) -> list[dict[str, Any]]:
                 "water_lat_deg": _num(water_lat_deg[i]),
                 "water_lon_deg": _num(water_lon_deg[i]),
                 "scored": bool(t.scored[i]),
+                "inside": _flag(t.inside[i]),
+                "p_inside": _num(t.p_inside[i]),
+                "pit": _num(t.pit[i]),
             }
         )
     return out
+
+
+def _flag(x: float) -> bool | None:
+    """1.0/0.0 -> true/false, NaN (not judged) -> null."""
+    return None if not math.isfinite(x) else bool(x)
+
+
+def _honesty(h: DRHonesty | None) -> dict[str, Any] | None:
+    if h is None:
+        return None
+    return {
+        "predictive": h.predictive,
+        "method": h.method,
+        "inflation": {"min": _num(h.inflation_min), "max": _num(h.inflation_max)},
+        "shape_min": _num(h.shape_min),
+        "n_scored": h.n_scored,
+        "n_misleading": h.n_misleading,
+        "stated_inside": _num(h.stated_inside),
+        "beyond_99": {"n": h.n_beyond_99, "expected": _num(h.expected_beyond_99)},
+        "pit_counts": list(h.pit_counts),
+        "first_leg": {"inside": _num(h.first_leg_inside), "stated": _num(h.first_leg_stated)},
+    }
 
 
 def _learned(learned: dict[str, object] | None) -> dict[str, Any] | None:
@@ -156,6 +182,7 @@ def _dead_reckoning(dr: DRSection) -> dict[str, Any]:
         "learned_model": _learned(dr.learned),
         "reference_sigma_m": _num(dr.reference_sigma_m),
         "scored_out_of_sample": bool(dr.scored_out_of_sample),
+        "honesty": _honesty(dr.honesty),
     }
 
 

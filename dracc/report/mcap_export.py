@@ -91,6 +91,7 @@ from dracc.core.timefmt import iso_utc
 from dracc.core.units import KN_MPS
 from dracc.core.vocabulary import CHANNEL_KEYS, CHANNELS
 from dracc.pipeline.results import Analysis, DRSection, DRTrackResult, EstimatedPositionSection
+from dracc.report.exports import inside_flags
 
 __all__ = [
     "EXPORT_STEP_S",
@@ -425,16 +426,10 @@ def _dr_streams(dr: DRSection) -> list[Stream]:
 
 
 def inside_2m(dr: DRSection) -> list[bool | None]:
-    """Per reporting epoch: the reference within 2M widened by the reference's noise,
-    sqrt(2M^2 + 8 sigma_ref^2) (P + sigma_ref^2 I, as the consistency check counts); None
-    where the epoch is not scored (at the fix, before anything was learned, no reference)."""
-    ep = dr.epochs
-    limit = np.sqrt(ep.radius_2m_m**2 + 8.0 * dr.reference_sigma_m**2)
-    out: list[bool | None] = []
-    for i in range(ep.time_ns.size):
-        scored = bool(ep.scored[i]) and ep.since_fix_s[i] > 0 and math.isfinite(ep.ref_error_m[i])
-        out.append(bool(ep.ref_error_m[i] <= limit[i]) if scored else None)
-    return out
+    """Per reporting epoch: the analysis's one judgement of the reference against the
+    drawn 2M (``DRTrackResult.inside``, as the GeoJSON has it); None where not scored."""
+    judged, inside = inside_flags(dr)
+    return [bool(i) if j else None for j, i in zip(judged.tolist(), inside.tolist(), strict=True)]
 
 
 def _polygons(dr: DRSection) -> Stream:

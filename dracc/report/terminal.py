@@ -34,7 +34,7 @@ from dracc.pipeline.results import (
 from dracc.report import fmt, fmt_duration, fmt_pct, short_utc
 from dracc.report.rows import EXCEEDS, calibration_method, clock_text, unit_rows
 from dracc.report.textout import Layout, Page, bullet, labelled, layout
-from dracc.report.verdict import verdict
+from dracc.report.verdict import honesty_text, verdict
 
 if TYPE_CHECKING:
     from dracc.pipeline.fleet import FleetResult
@@ -212,8 +212,10 @@ def _dr_body(page: _Page, dr: DRSection) -> None:
         page.line(
             "2M",
             f"{of}: reference ({dr.reference_role}) inside 2M at "
-            f"{fmt_pct(dr.containment_2m)} (model: {fmt_pct(dr.expected_inside)})",
+            f"{fmt_pct(dr.containment_2m)} (stated: {fmt_pct(dr.expected_inside)})",
         )
+        if dr.honesty is not None:
+            page.line("honesty", honesty_text(dr.honesty))
         if dr.scored_out_of_sample:
             ep = dr.epochs
             prior = int(np.sum((ep.since_fix_s > 0) & ~np.asarray(ep.scored, dtype=bool)))

@@ -12,9 +12,8 @@ at the reference position.  The scale of a leg panel is chosen from the page wid
 (the report's ``max-width``); circles smaller than :data:`MIN_CIRCLE_PX` there are drawn
 as dots and counted in the caption.
 
-Nothing is estimated: "outside" is the consistency test's own comparison
-(:func:`dracc.math.deadreckoning.dr_consistency`: the error against 2 sqrt(tr P + 2
-sigma_ref^2)) on the epochs the analysis scored.
+Nothing is estimated: "outside" is the analysis's one judgement
+(``DRTrackResult.inside``: the reference beyond the drawn 2M at a scored epoch).
 """
 
 from __future__ import annotations
@@ -177,12 +176,10 @@ def _epochs(dr: DRSection, ref: _Ref | None, lat0: float, lon0: float) -> _Epoch
         rn, re_ = offset_ne_m(rlat, rlon, lat0, lon0)
     else:  # no reference track to show: the cross goes on the DR epoch
         rn, re_ = n, e
-    # the consistency test's comparison: 2M of P plus the reference's noise on each axis
-    m_cmp = np.sqrt((ep.radius_2m_m / 2.0) ** 2 + 2.0 * dr.reference_sigma_m**2)
     shown = (ep.since_fix_s > 0) & np.isfinite(ep.radius_2m_m) & np.isfinite(n)
-    scored = shown & ep.scored.astype(bool) & np.isfinite(ep.ref_error_m)
+    scored = shown & np.isfinite(ep.inside)
     with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = np.where(scored, ep.ref_error_m / m_cmp, np.nan)
+        ratio = np.where(scored, 2.0 * ep.ref_error_m / ep.radius_2m_m, np.nan)
     return _Epochs(
         time_ns=np.asarray(ep.time_ns),
         x=e / 1e3,
@@ -196,7 +193,7 @@ def _epochs(dr: DRSection, ref: _Ref | None, lat0: float, lon0: float) -> _Epoch
         angle_deg=90.0 - np.degrees(ep.orientation_rad),
         shown=shown,
         scored=scored,
-        outside=scored & (ep.ref_error_m > 2.0 * m_cmp),
+        outside=scored & (ep.inside == 0.0),
         error_over_m=ratio,
         error_km=ep.ref_error_m / 1e3,
         ref_on_track=ref is not None,

@@ -10,7 +10,7 @@ Modules, in the order a DR runs through them
     aided_speed       the acceleration-aided speed between log readings (B15)
     legs              the restart rules: where each leg starts and ends
     error_processes   the honest covariance from Gauss-Markov error sources
-    paper_covariance  the paper's covariance (B23-B31), M, 2M and its containment probability
+    paper_covariance  the paper's covariance (B23-B31) and M (2M: dracc.math.uncertainty)
     schedule          the reset interval and the reporting epochs
     track             the result, DRTrack, and the Gap it reports
     reckon            dead_reckon, the entry point tying these together
@@ -65,7 +65,6 @@ from dracc.math.deadreckoning.paper_covariance import (
     covariance_b23_rad2,
     covariance_m2_from_rad2,
     mean_error_m,
-    prob_inside_2m,
     sigma_course_rad,
     speed_covariance_rad2,
 )
@@ -105,7 +104,6 @@ __all__ = [
     "leeway_from_log_rad",
     "log_frame_rate_mps2",
     "mean_error_m",
-    "prob_inside_2m",
     "sigma_course_rad",
     "speed_covariance_rad2",
     "speed_from_components_mps",

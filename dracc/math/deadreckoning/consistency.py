@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -16,8 +16,8 @@ from numpy.typing import ArrayLike
 from dracc.core import distributions as dist
 from dracc.core.arrays import BoolArray, FloatArray, IntArray
 from dracc.core.geodesy import interp_position, offset_ne_m
-from dracc.math.deadreckoning.paper_covariance import prob_inside_2m
 from dracc.math.deadreckoning.track import DRTrack
+from dracc.math.uncertainty import GAUSSIAN, drms_m, inside_circle, predictive_cdf, prob_inside
 
 __all__ = ["Consistency", "LegConsistency", "dr_consistency"]
 
@@ -42,10 +42,11 @@ class LegConsistency:
 class Consistency:
     """DR against a reference, per epoch (after a fix, not at it), per leg and overall.
 
-    Per epoch: error d (DR minus reference, metres north/east), 2M, inside (d <= 2M),
-    d/M, NEES = d^T P^-1 d (expected 2), and the probability that a correct Gaussian
-    error lies inside 2M for that ellipse shape (0.954-0.982).  Verdict: see
-    :func:`dr_consistency`.
+    Per epoch: error d (DR minus reference, metres north/east), the drawn 2M, inside
+    (d <= 2M), d/M, NEES = d^T P^-1 d (expected 2), the probability that the predictive
+    puts the reference inside the drawn 2M (0.954-0.982 for a Gaussian, less for a
+    Student-t) and the PIT of d (uniform when the stated probabilities are achieved).
+    Verdict: see :func:`dr_consistency`.
     """
 
     time_s: FloatArray
@@ -76,6 +77,10 @@ class Consistency:
     nees_lower: float = math.nan  #: chi^2_{alpha/2}(2 n_legs)
     nees_upper: float = math.nan  #: chi^2_{1-alpha/2}(2 n_legs)
     reference_sigma_m: float = 0.0  #: the reference's own noise, added to P for the test
+    #: per epoch: the predictive's probability of an error below d (the PIT)
+    pit: FloatArray = field(default_factory=lambda: np.zeros(0))
+    #: epochs with the error beyond the predictive's 99 % radius (PIT > 0.99)
+    n_beyond_99: int = 0
 
 
 def _leg_summaries(
@@ -158,6 +163,7 @@ def dr_consistency(
     max_ref_gap_s: float = 5.0,
     alpha: float = 0.01,
     ref_sigma_m: float = 0.0,
+    shape: ArrayLike = GAUSSIAN,
 ) -> Consistency:
     """Does the reference (GNSS, INS mean) lie inside the DR's 2M circle as often as it should?
 
@@ -166,8 +172,8 @@ def dr_consistency(
     ``max_ref_gap_s`` apart.
 
     The binomial reasoning.  For a correct Gaussian error, 2M (2 drms) contains it with
-    probability p between 0.954 (degenerate ellipse) and 0.982 (circle), see
-    :func:`prob_inside_2m`.  Epochs of one leg share the same sensor-error realisation
+    probability p between 0.954 (degenerate ellipse) and 0.982 (circle); a learned model
+    predicts a Student-t of ``shape`` (per track sample, dracc.math.uncertainty), less.  Epochs of one leg share the same sensor-error realisation
     and are strongly correlated, so each leg (not each epoch) is one trial: n = number of
     legs with epochs, k = round(sum of the legs' inside fractions).  The DR is
     "inconsistent (circle too small)" when P(K <= k | n, p_min) < alpha (one-sided
@@ -178,8 +184,9 @@ def dr_consistency(
     freedom) exceeds its two-sided 1 - alpha/2 quantile.
     It is "conservative" when every epoch is inside and that mean, or the NEES sum, is
     below its lower quantile (the circle much larger than the errors).  ``ref_sigma_m``:
-    the reference's own noise per axis, added to P where DR and reference are compared.  Otherwise "consistent";
-    "undetermined" when no epoch has a reference.
+    the reference's own noise per axis, added to P in the statistics and the stated
+    probability; "inside" is against the drawn 2M of P itself, the circle a user sees.
+    Otherwise "consistent"; "undetermined" when no epoch has a reference.
     """
     ei = np.asarray(track.epoch_index, dtype=np.int64)
     ei = ei[track.since_fix_s[ei] > 0]
@@ -191,15 +198,16 @@ def dr_consistency(
     ei, t_e, rlat, rlon = ei[has], t_e[has], rlat[has], rlon[has]
     dn, de = offset_ne_m(track.lat_rad[ei], track.lon_rad[ei], rlat, rlon)
     d = np.hypot(dn, de)
+    radius = track.radius_2m_m[ei]  # the drawn circle
+    inside = inside_circle(d, radius)
     P = track.P_m2[ei] + float(ref_sigma_m) ** 2 * np.eye(2)
-    m_err = np.sqrt(P[:, 0, 0] + P[:, 1, 1])  # (B30) in metres
-    radius = 2.0 * m_err  # (B31)
-    inside = d <= radius
-    ratio = d / m_err
+    ratio = d / drms_m(P)
     det = P[:, 0, 0] * P[:, 1, 1] - P[:, 0, 1] ** 2
     with np.errstate(divide="ignore", invalid="ignore"):
         nees = (P[:, 1, 1] * dn**2 - 2 * P[:, 0, 1] * dn * de + P[:, 0, 0] * de**2) / det
-    p_exp = prob_inside_2m(P) if ei.size else np.zeros(0)
+    shape_e = np.broadcast_to(np.asarray(shape, float), track.time_s.shape)[ei]
+    p_exp = prob_inside(P, radius, shape_e) if ei.size else np.zeros(0)
+    pit = predictive_cdf(P, d, shape_e) if ei.size else np.zeros(0)
     legs_e = track.leg[ei]
 
     legs = _leg_summaries(track, legs_e, inside, ratio, d, nees, alpha)
@@ -234,4 +242,6 @@ def dr_consistency(
         nees_lower=tests.nees_lower,
         nees_upper=tests.nees_upper,
         reference_sigma_m=float(ref_sigma_m),
+        pit=pit,
+        n_beyond_99=int(np.sum(pit > 0.99)),
     )

@@ -2,8 +2,8 @@
 
 (B23) treats the errors as independent per step, which averages correlated errors away
 at high data rates (METHODS section 2); :mod:`dracc.math.deadreckoning.error_processes`
-holds the rate-independent ("honest") form.  :func:`prob_inside_2m` is how often a
-correct Gaussian error lies inside 2M for a given ellipse shape.
+holds the rate-independent ("honest") form.  2M and how often it holds the error live
+in :mod:`dracc.math.uncertainty`.
 """
 
 from __future__ import annotations
@@ -11,16 +11,13 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from dracc.core import distributions as dist
 from dracc.core.arrays import FloatArray
 from dracc.core.geodesy import k_lambda, k_phi
-from dracc.math.ellipse import error_ellipse
 
 __all__ = [
     "covariance_b23_rad2",
     "covariance_m2_from_rad2",
     "mean_error_m",
-    "prob_inside_2m",
     "sigma_course_rad",
     "speed_covariance_rad2",
 ]
@@ -109,28 +106,3 @@ def mean_error_m(P_rad2: ArrayLike, lat_rad: ArrayLike) -> FloatArray:
     return np.sqrt(
         P[..., 0, 0] / k_phi(lat_rad) ** 2 + P[..., 1, 1] / k_lambda(lat_rad) ** 2
     )  # (B30)
-
-
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(64)
-
-
-def prob_inside_2m(P_m2: ArrayLike) -> FloatArray:
-    """Probability that a zero-mean Gaussian error with covariance P (..., 2, 2) lies inside 2M.
-
-    P(X1^2 + X2^2 <= 4 (s1^2 + s2^2)) over the principal axes; 1 - exp(-4) = 0.9817 for
-    a circular distribution, 2 Phi(2) - 1 = 0.9545 for a degenerate (line) one
-    (METHODS section 2: "2M covers about 95.4-98.2 %").  64-point Gauss-Legendre over the
-    major-axis coordinate x1 = R sin(theta).
-    """
-    s1, s2, _ = error_ellipse(P_m2)
-    s1 = np.asarray(s1)[..., None]
-    s2 = np.asarray(s2)[..., None]
-    r = 2.0 * np.sqrt(s1**2 + s2**2)
-    theta = 0.5 * np.pi * _GL_X
-    x1 = r * np.sin(theta)
-    rem = r * np.cos(theta)  # sqrt(R^2 - x1^2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inner = np.where(s2 > 0, 2 * dist.norm_cdf(rem / np.where(s2 > 0, s2, 1.0)) - 1, 1.0)
-        dens = dist.norm_pdf(x1 / s1) / s1
-    val = np.sum(_GL_W * dens * inner * r * np.cos(theta), axis=-1) * 0.5 * np.pi
-    return np.where(s1[..., 0] > 0, val, 1.0)

@@ -28,6 +28,7 @@ from dracc.math.deadreckoning.propagation import (
 from dracc.math.deadreckoning.schedule import covered_span_s, dr_schedule
 from dracc.math.deadreckoning.track import DRTrack
 from dracc.math.ellipse import error_ellipse
+from dracc.math.uncertainty import radius_2m_m
 
 __all__ = ["dead_reckon"]
 
@@ -185,7 +186,7 @@ def _assemble_track(
     """The track: 2M (B30, B31), the 1-sigma ellipse, the epochs and the leg summary."""
     P = run.P_m2
     trace = P[:, 0, 0] + P[:, 1, 1]
-    radius = 2.0 * np.sqrt(trace)  # (B30), (B31): 2M = 2 sqrt(tr P), P in metres
+    radius = radius_2m_m(P)
     smaj, smin, orient = error_ellipse(np.nan_to_num(P))
     nan = ~np.isfinite(trace)
     smaj, smin, orient = (np.where(nan, np.nan, x) for x in (smaj, smin, orient))

@@ -78,7 +78,6 @@ from dracc.math.ep.estimate import (
 )
 from dracc.math.ep.forecast import (
     INFLATION_BINS,
-    INFLATION_BOUNDS,
     INFLATION_FORGET,
     INFLATION_LEG_CAP,
     INFLATION_PRIOR_LEGS,
@@ -92,7 +91,6 @@ __all__ = [
     "DELTA",
     "EPS",
     "INFLATION_BINS",
-    "INFLATION_BOUNDS",
     "INFLATION_FORGET",
     "INFLATION_LEG_CAP",
     "INFLATION_PRIOR_LEGS",

@@ -20,6 +20,7 @@ from dracc.math.ellipse import error_ellipse
 from dracc.math.ep.error_model import ErrorPrior, Hyperparameters
 from dracc.math.ep.forecast import LegForecast, forecast_legs
 from dracc.math.ep.kalman import LearnedModel, learn_error_model
+from dracc.math.uncertainty import radius_2m_m
 
 #: a leg is scored out of sample when its start's posterior has seen at least this span of
 #: reference data (or one reset interval, if shorter) and MIN_LEARNED_UPDATES fixes
@@ -97,7 +98,7 @@ def estimate_position(
         track.lat_rad[on], track.lon_rad[on], fc.offset_ne_m[on, 0], fc.offset_ne_m[on, 1]
     )
     P = fc.P_m2
-    radius = 2.0 * np.sqrt(P[:, 0, 0] + P[:, 1, 1])  # (B30), (B31)
+    radius = radius_2m_m(P)
     smaj, smin, orient = error_ellipse(np.nan_to_num(P))
     nan = ~np.isfinite(radius)
     smaj, smin, orient = (np.where(nan, np.nan, a) for a in (smaj, smin, orient))

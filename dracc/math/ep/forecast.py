@@ -34,6 +34,12 @@ class LegForecast:
     offset_ne_m: FloatArray  #: (n, 2) mu: add to the water track
     P_m2: FloatArray  #: (n, 2, 2) covariance of the EP error, metres north/east
     inflation: FloatArray  #: (L, 3) the factor on each leg's covariance, in thirds of its horizon
+    #: (L,) the shape of the factor's inverse-gamma posterior at each leg start: the
+    #: predictive is Student-t of this shape (dracc.math.uncertainty)
+    shape: FloatArray
+    #: (n,) per DR sample: the factor applied and the predictive's shape (NaN off the legs)
+    sample_inflation: FloatArray
+    sample_shape: FloatArray
     leg_nees: (
         FloatArray  #: (L, 3) mean NEES/2 of each leg against the reference, per third (raw model)
     )
@@ -43,11 +49,12 @@ class LegForecast:
 
 
 #: covariance matching over earlier legs: prior weight (in legs) of an inflation of 1, the
-#: forgetting factor per leg, the cap on one leg's mean NEES/2, and the factor's bounds
+#: forgetting factor per leg and the cap on one leg's mean NEES/2.  The factor needs no
+#: bounds: with these it stays within 0.14-23 by construction (the shape tends to
+#: PRIOR + 1 / (1 - FORGET) = 23); it is reported, not clipped
 INFLATION_PRIOR_LEGS = 3.0
 INFLATION_FORGET = 0.95
 INFLATION_LEG_CAP = 25.0
-INFLATION_BOUNDS = (0.25, 25.0)
 #: the factor is learned in this many equal parts of the reset interval
 INFLATION_BINS = 3
 
@@ -107,6 +114,9 @@ def forecast_legs(
     n_legs = model.start_s.size
     nb = INFLATION_BINS
     inflation = np.ones((n_legs, nb))
+    shape = np.full(n_legs, INFLATION_PRIOR_LEGS)
+    s_infl = np.full(n, np.nan)
+    s_shape = np.full(n, np.nan)
     leg_nees = np.full((n_legs, nb), np.nan)
     leg_end = model.start_s.astype(float).copy()  # a leg without samples ends at its start
     acc_num = np.full(nb, INFLATION_PRIOR_LEGS)
@@ -131,7 +141,8 @@ def forecast_legs(
         # the factor has an inverse-gamma posterior (shape acc_den: one per leg, whose mean
         # NEES/2 is Exp(1) when the model is right; scale acc_num); the position's
         # predictive is then Student-t with the variance acc_num / (acc_den - 1)
-        inflation[leg] = np.clip(acc_num / (acc_den - 1.0), *INFLATION_BOUNDS)
+        inflation[leg] = acc_num / (acc_den - 1.0)
+        shape[leg] = float(acc_den.min())
         if sel.size == 0:
             continue
         k0, k1 = sel[0], sel[-1]
@@ -213,6 +224,8 @@ def forecast_legs(
                         leg_nees[leg, q] = float(np.mean(nees[b == q])) / 2.0
         lam = _inflation_at(th, inflation[leg], model)
         S_mix = S_mix * lam[:, None, None]
+        s_infl[sel] = np.interp(ts, th, lam)
+        s_shape[sel] = shape[leg]
         for j in range(2):
             off[sel, j] = np.interp(ts, th, mu_mix[:, j])
             for k in range(2):
@@ -220,5 +233,12 @@ def forecast_legs(
         for name, v in contrib.items():
             comp[name][sel] = np.interp(ts, th, v * lam)
     return LegForecast(
-        offset_ne_m=off, P_m2=Pout, components_m2=comp, inflation=inflation, leg_nees=leg_nees
+        offset_ne_m=off,
+        P_m2=Pout,
+        components_m2=comp,
+        inflation=inflation,
+        leg_nees=leg_nees,
+        shape=shape,
+        sample_inflation=s_infl,
+        sample_shape=s_shape,
     )
