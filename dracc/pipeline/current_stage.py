@@ -226,7 +226,8 @@ def _study_note(learned: StudyModel | None) -> str:
         "prediction's covariance scaled by a factor learned from the study's earlier fixes "
         "(covariance matching, as the estimated position's); a fix counts as inside when its "
         "innovation lies in the 95 % ellipse of that prediction, and 'a correct model' is "
-        "the probability the model puts there"
+        "the probability the study states: the share of its earlier fixes inside their "
+        "ellipses, shrunk to the probability the model puts there (worth one fix)"
     )
 
 
