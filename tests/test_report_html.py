@@ -255,7 +255,7 @@ def test_html_bare_shows_missing_and_only_the_track():
     text = render_html(make_analysis("bare"))
     assert text.count("<img ") == 1 and 'alt="track plot"' in text
     assert "no INS triple" in text and "no heading" in text
-    assert text.count("nothing to plot (see Missing)") == 3
+    assert text.count("nothing to plot (see Missing)") == 4
 
 
 def test_html_screenshot_is_not_blank(tmp_path):

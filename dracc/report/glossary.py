@@ -119,6 +119,24 @@ GLOSSARY: dict[str, tuple[str, str]] = {
         "same judgement per epoch.",
         "(B31)",
     ),
+    "stated": (
+        "The probability the model states for the reference lying inside the 2M drawn: its "
+        "predictive, Gaussian for the configured model, Student-t for the learned one "
+        "(the covariance times a factor learned from the earlier legs, whose uncertainty "
+        "gives the heavier tails), with the reference's own noise.",
+        "issue 31",
+    ),
+    "PIT": (
+        "Probability integral transform: at each scored epoch the stated probability of an "
+        "error below the one observed.  Its histogram is flat when the stated "
+        "probabilities are achieved; heavy on the right when the circles are too small.",
+        "",
+    ),
+    "misleading": (
+        "A scored epoch whose error against the reference exceeds the 2M drawn: below the "
+        "diagonal of the Stanford diagram (error against 2M).",
+        "",
+    ),
     "scored": (
         "Epochs after the fix that have a reference position and a model learned only "
         "from earlier fixes (out of sample): the epochs the 2M is judged on.",

@@ -495,7 +495,7 @@ def _aided_ep(a: Analysis) -> str:
             "mean 2M before",
             "max 2M before",
             "inside 95 %",
-            "a correct model",
+            "stated",
         ]
         out.append(_table(head, rows))
     return "".join(out)
@@ -625,6 +625,14 @@ def render_html(a: Analysis) -> str:
                 "2M growth plot",
                 "2M since the last fix against the actual DR error",
                 "fig-growth",
+            ),
+            _figure(
+                plots.honesty_plot(a),
+                "stated against achieved",
+                "Stated against achieved: a Stanford diagram of the scored epochs (the error "
+                "against the 2M drawn; red crosses beyond it) and the PIT histogram (flat "
+                "when the probability stated beside 2M is the one achieved)",
+                "fig-honesty",
             ),
             _figure(
                 plots.current_plot(a),

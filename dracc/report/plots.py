@@ -217,3 +217,48 @@ def current_plot(a: Analysis) -> bytes | None:
     ax1.set_title("Estimated current")
     _utc_axis(fig, ax2)
     return png_bytes(fig)
+
+
+def honesty_plot(a: Analysis) -> bytes | None:
+    """Is the stated probability achieved?  Left, a Stanford diagram of the scored epochs:
+    the error against the reference over the 2M drawn (above the diagonal: inside; below:
+    misleading).  Right, the PIT histogram: flat when the stated probabilities are the
+    achieved ones, heavy on the right when the circles are too small, on the left when
+    too large.  Nothing is computed here: every value is the analysis's."""
+    dr = a.dead_reckoning
+    if dr is None or dr.honesty is None or not dr.honesty.n_scored:
+        return None
+    ep = dr.epochs
+    judged = np.isfinite(ep.inside)
+    err, r2m, inside = ep.ref_error_m[judged], ep.radius_2m_m[judged], ep.inside[judged] == 1.0
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 4.5))
+    top = float(np.nanmax(np.concatenate([err, r2m]))) * 1.1
+    ax.plot([0, top], [0, top], color="grey", lw=0.8)
+    ax.scatter(err[inside], r2m[inside], s=10, color="#1f77b4", label="inside 2M")
+    ax.scatter(
+        err[~inside],
+        r2m[~inside],
+        s=18,
+        marker="x",
+        color="#d62728",
+        label=f"misleading: {dr.honesty.n_misleading} of {dr.honesty.n_scored}",
+    )
+    ax.set_xlim(0, top)
+    ax.set_ylim(0, top)
+    ax.set_xlabel(f"error against {dr.reference_role} [m]")
+    ax.set_ylabel("2M drawn [m]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title("Stanford diagram of the scored epochs")
+    counts = np.asarray(dr.honesty.pit_counts, float)
+    edges = np.linspace(0.0, 1.0, counts.size + 1)
+    bx.bar(edges[:-1], counts, width=np.diff(edges), align="edge", color="#9ecae1", ec="white")
+    bx.axhline(counts.sum() / counts.size, color="black", lw=1.0, label="honest (flat)")
+    return _finish(
+        fig,
+        bx,
+        "P(error below the one observed), as stated",
+        "epochs",
+        "PIT histogram",
+        "upper left",
+    )

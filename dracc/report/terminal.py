@@ -294,7 +294,7 @@ _STUDY_COLUMNS: tuple[tuple[str, bool, int], ...] = (
     ("mean 2M before", True, 0),
     ("max 2M before", True, 1),
     ("inside 95 %", True, 0),
-    ("a correct model", True, 1),
+    ("stated", True, 1),
 )
 
 

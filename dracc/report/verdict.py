@@ -4,7 +4,7 @@
 a level and the reasons behind it:
 
 - whether the dead reckoning is honest: the reference inside the 2M circle as often as
-  a correct model promises (B31), the summed NEES inside its chi-square bounds, the RMS
+  the model states (B31; issue 31), the summed NEES inside its chi-square bounds, the RMS
   of error/M (B30) near 1;
 - which INS unit and channel is worst, against its a priori RMS where one is configured
   (or against the limits given), else against the other units, and whether any is out
