@@ -99,8 +99,13 @@ def velocity_consistency(
     for r in roles:
         s = sample_unit(unit_series_from_voyage(voyage, r), instants, cfg.consistency_max_gap_s)
         pos[r] = (s.lat_rad, s.lon_rad)
-    lat0 = np.nanmedian(np.concatenate([pos[r][0] for r in ins]))
-    lon0 = np.nanmedian(np.concatenate([pos[r][1] for r in ins]))
+    # the local origin: the units' median position (none sampled: every figure below is
+    # NaN and the checks say "not checked")
+    lat_all = np.concatenate([pos[r][0] for r in ins])
+    lon_all = np.concatenate([pos[r][1] for r in ins])
+    seen = np.isfinite(lat_all) & np.isfinite(lon_all)
+    lat0 = float(np.median(lat_all[seen])) if seen.any() else 0.0
+    lon0 = float(np.median(lon_all[seen])) if seen.any() else 0.0
     ne = {r: np.vstack(offset_ne_m(pos[r][0], pos[r][1], lat0, lon0)) for r in roles}
 
     def drift(r: str, refs: list[str]) -> FloatArray:
