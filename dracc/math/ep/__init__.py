@@ -81,6 +81,7 @@ from dracc.math.ep.forecast import (
     INFLATION_FORGET,
     INFLATION_LEG_CAP,
     INFLATION_PRIOR_LEGS,
+    INFLATION_PRIOR_MEAN,
     LegForecast,
     forecast_legs,
 )
@@ -94,6 +95,7 @@ __all__ = [
     "INFLATION_FORGET",
     "INFLATION_LEG_CAP",
     "INFLATION_PRIOR_LEGS",
+    "INFLATION_PRIOR_MEAN",
     "MIN_LEARNED_S",
     "MIN_LEARNED_UPDATES",
     "N_STATE",
