@@ -86,11 +86,12 @@ def test_sample_log_every_report(run_cli, tmp_path, validator):
     assert doc["calibration"]["compass_error_deg"]["value"] is not None
     assert doc["current"]["set_deg"]["value"] is not None
     html = page.read_text(encoding="utf-8")
-    # the track overview, one panel per leg (at most 8), deviations, 2M growth, current,
-    # and the aided-DR estimated position's map where there is one (a water log)
+    # the track overview, one panel per leg (at most 8), deviations, 2M growth, stated
+    # against achieved, current, and the aided-DR estimated position's map where there is
+    # one (a water log)
     n_png = html.count('src="data:image/png;base64,')
     n_legs = html.count('class="track-panel"') - 1
-    assert 1 <= n_legs <= 8 and n_png == 4 + n_legs + ('id="fig-aided-ep"' in html)
+    assert 1 <= n_legs <= 8 and n_png == 5 + n_legs + ('id="fig-aided-ep"' in html)
     track = pd.read_parquet(tables / "dr_track.parquet")
     assert len(track) == len(pd.read_csv(tables / "dr_track.csv")) > 3 * 3000
     stats = pd.read_parquet(tables / "unit_stats.parquet")
@@ -246,11 +247,12 @@ def test_shipped_sample_report_shows_every_section(validator):
         "Plots",
     ):
         assert f">{heading}</h" in html, heading
-    # the track overview, one panel per leg (at most 8), deviations, 2M growth, current,
-    # and the aided-DR estimated position's map where there is one (a water log)
+    # the track overview, one panel per leg (at most 8), deviations, 2M growth, stated
+    # against achieved, current, and the aided-DR estimated position's map where there is
+    # one (a water log)
     n_png = html.count('src="data:image/png;base64,')
     n_legs = html.count('class="track-panel"') - 1
-    assert 1 <= n_legs <= 8 and n_png == 4 + n_legs + ('id="fig-aided-ep"' in html)
+    assert 1 <= n_legs <= 8 and n_png == 5 + n_legs + ('id="fig-aided-ep"' in html)
     summary = (folder / "summary.txt").read_text(encoding="utf-8")
     assert "not computed" not in summary
 

@@ -30,7 +30,6 @@ import math
 from functools import cache
 
 import numpy as np
-from scipy import special
 
 from dracc.core import distributions as dist
 from dracc.core.arrays import ArrayLike, BoolArray, FloatArray
@@ -86,9 +85,21 @@ def _gaussian_inside(s1: FloatArray, s2: FloatArray, r: FloatArray) -> FloatArra
 
 @cache
 def _scale_rule(shape: float) -> tuple[FloatArray, FloatArray]:
-    """(lam / E[lam], weights) at the nodes of the Gamma(shape) rule (module doc)."""
-    g, w = special.roots_genlaguerre(_N_SCALE, shape - 1.0)
-    return (shape - 1.0) / g, w / w.sum()
+    """(lam / E[lam], weights) at the nodes of the Gamma(shape) rule (module doc): the
+    generalised Gauss-Laguerre rule of alpha = shape - 1 by Golub-Welsch, the eigenvalues
+    of its Jacobi matrix (diagonal 2k + alpha + 1, off-diagonal sqrt(k (k + alpha))) and
+    the first components of its eigenvectors squared (numpy only: scipy.linalg is not
+    loaded for it)."""
+    alpha = shape - 1.0
+    k = np.arange(_N_SCALE, dtype=float)
+    off = np.sqrt(k[1:] * (k[1:] + alpha))
+    jacobi = np.diag(2.0 * k + alpha + 1.0) + np.diag(off, 1) + np.diag(off, -1)
+    g, vec = np.linalg.eigh(jacobi)
+    w = vec[0] ** 2 / np.sum(vec[0] ** 2)
+    lam = (shape - 1.0) / g
+    # 1/G is steep near 0 for a small shape: the rule's mean is 0.998 at shape 3; scaled to
+    # exactly 1 so that the mixture's covariance is the P drawn
+    return lam / float(lam @ w), w
 
 
 def prob_inside(P_m2: ArrayLike, radius_m: ArrayLike, shape: ArrayLike = GAUSSIAN) -> FloatArray:

@@ -11,6 +11,8 @@ diagram (error beyond 2M).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -43,9 +45,9 @@ def honesty(cons: Consistency, est: EstimatedPosition | None) -> DRHonesty:
     return DRHonesty(
         predictive="student-t" if est is not None else "gaussian",
         method=method,
-        inflation_min=float(np.nanmin(infl)) if infl.size else math.nan,
-        inflation_max=float(np.nanmax(infl)) if infl.size else math.nan,
-        shape_min=float(np.nanmin(shape)) if shape.size else math.nan,
+        inflation_min=_extreme(np.min, infl),
+        inflation_max=_extreme(np.max, infl),
+        shape_min=_extreme(np.min, shape),
         n_scored=n,
         n_misleading=n - cons.n_inside,
         stated_inside=cons.expected_inside_fraction,
@@ -55,3 +57,9 @@ def honesty(cons: Consistency, est: EstimatedPosition | None) -> DRHonesty:
         first_leg_inside=float(cons.inside[first].mean()) if first.any() else math.nan,
         first_leg_stated=float(cons.p_inside_expected[first].mean()) if first.any() else math.nan,
     )
+
+
+def _extreme(pick: Callable[[np.ndarray], Any], x: np.ndarray) -> float:
+    """min or max over the finite values of x; NaN where there is none."""
+    finite = x[np.isfinite(x)]
+    return float(pick(finite)) if finite.size else math.nan
