@@ -14,6 +14,7 @@ from pathlib import Path
 import typer
 from typer.core import TyperGroup
 
+from dracc.cli import SIGNALLED
 from dracc.cli.app import app, out, progress
 from dracc.cli.options import (
     ConfigFile,
@@ -29,6 +30,7 @@ from dracc.core.safetext import printable
 from dracc.core.vocabulary import CHANNELS
 from dracc.pipeline.audit import UNITS, open_state, run_audit
 from dracc.report import audit_json
+from dracc.report.audit_failed import reports_on_failure
 from dracc.report.audit_html import audit_page, history_html
 from dracc.report.audit_text import format_summary, print_history
 from dracc.report.output import STDOUT, emit_json
@@ -106,6 +108,13 @@ def audit_run(
     (dracc.audit/1: verdict, findings, not checked, and the analysis it rests on); with
     '--json -' it is printed on stdout instead of the summary.
     """
+    asked = {"date": date, "vessel": vessel, "config": config, "db": db}
+    reports = {"summary_out": summary_out, "json_out": json_out, "html_out": html_out}
+    with reports_on_failure(logs, **asked, **reports, signalled=SIGNALLED):  # exit 2-5, 130
+        return _run(logs, pattern, brief, **asked, **reports)
+
+
+def _run(logs, pattern, brief, *, date, vessel, config, db, summary_out, json_out, html_out):
     pattern = check_pattern(pattern, "--pattern")
     cfg = build_config(config)  # as analyze takes it: one validation path
     with progress("audit: analysing", total=100.0) as advance:
