@@ -26,6 +26,8 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from dracc.pipeline.audit import AuditOutcome
+    from dracc.pipeline.results import Analysis
+    from dracc.report.verdict import Finding as VerdictPart
 
 _DPI = 90
 
@@ -228,6 +230,27 @@ def history_html(doc: dict) -> str:
 
 # ------------------------------------------------------------------ one audited night
 
+#: the audit page's tables at any window width: text columns (``t``) wrap, long tokens
+#: too; number columns (``n``) stay on one line; the embedded analysis' cells wrap at
+#: spaces (its own stylesheet keeps every cell on one line, for the wide report)
+WRAP_CSS = (
+    " th.t,td.t{text-align:left;white-space:normal;overflow-wrap:anywhere}"
+    " th.n,td.n{white-space:nowrap} td.message{min-width:14em}"
+    " #analysis td,#analysis th{white-space:normal} #analysis td.l{overflow-wrap:anywhere}"
+    " img{max-width:100%;height:auto}"
+)
+
+#: what each verdict on the audit page judges (shown under the INS table)
+RULES_TEXT = (
+    "How INS accuracy is judged on this page: the audit judges each unit channel's "
+    "limiting error (K8), pooled over [audit] accuracy_window_h, against [audit.limits] "
+    "(above it: a finding); the a priori RMS follows the monitoring rule a = max(a priori, "
+    "m_y), seeded by [deviation.apriori] and carried over the stored nights: 'raised' when "
+    "tonight's m_y is above it (recorded; a finding only with [audit] "
+    "apriori_raise_is_finding), 'within' otherwise, 'established' where none was "
+    "configured. The analysis below shows these a priori values and this judgement."
+)
+
 _VERDICT_TEXT = {
     "ok": "all checks passed",
     "findings": "findings",
@@ -251,6 +274,124 @@ def _evidence_text(ev: list) -> str:
     return "; ".join(parts) + more
 
 
+def window_text(w: Mapping[str, Any] | None) -> str:
+    """A finding's window or the logs' period: 'start to end' in UTC, 'from start' or
+    'until end' where one is known, the accuracy window's nights and hours, or 'no data'
+    (never 'None')."""
+    w = w or {}
+    start, end = w.get("start_utc"), w.get("end_utc")
+    if start and end:
+        return f"{start} to {end}"
+    if start or end:
+        return f"from {start}" if start else f"until {end}"
+    rest = []
+    if w.get("nights"):
+        rest.append(", ".join(str(n) for n in w["nights"]))
+    if w.get("hours") is not None:
+        rest.append(f"{fmt_value(w['hours'], 1)} h")
+    rest += [
+        f"{k} {v}"
+        for k, v in w.items()
+        if k not in ("start_utc", "end_utc", "nights", "hours") and v not in (None, "", [])
+    ]
+    return "; ".join(rest) or "no data"
+
+
+def _rule_text(ins: Sequence[Mapping[str, Any]]) -> str:
+    """The monitoring rule's verdicts tonight, e.g. 'a priori rule max(a priori, m_y):
+    within for 8 unit channels; raised for ins2 course (0.123 to 0.140 deg)'."""
+    by: dict[str, list[str]] = {}
+    for c in ins:
+        v = c["verdict"] or "no data"
+        d = measure_digits(c["measure"])
+        what = f"{c['unit']} {c['channel']}"
+        if v == "raised":
+            what += (
+                f" ({fmt_value(c['apriori_before'], d)} to "
+                f"{fmt_value(c['apriori_after'], d, c['measure'])})"
+            )
+        by.setdefault(v, []).append(what)
+    parts = [
+        f"{v} for {len(names)} unit channels" if v == "within" else f"{v} for {', '.join(names)}"
+        for v, names in by.items()
+    ]
+    return "a priori rule max(a priori, m_y): " + "; ".join(parts)
+
+
+def ins_judgement(doc: dict) -> VerdictPart:
+    """The INS accuracy part of the page's verdict, from the audit's own judgement (its
+    accuracy findings, its accuracy checks not made, the a priori rule's verdicts):
+    the embedded analysis shows this instead of its judgement against the configuration."""
+    from dracc.report.verdict import FAIL, NOT_CHECKED, OK
+    from dracc.report.verdict import Finding as Part
+
+    topic = "INS accuracy"
+    if not doc["ins"]:
+        return Part(topic, NOT_CHECKED, "INS accuracy not computed: no INS statistics tonight")
+    rule = _rule_text(doc["ins"])
+    found = [f for f in doc["findings"] if f["check"] == "accuracy"]
+    if found:
+        return Part(
+            topic,
+            FAIL,
+            f"{len(found)} audit finding{'s' if len(found) != 1 else ''} on accuracy "
+            "(see Findings above)",
+            tuple(f["message"] for f in found) + (rule,),
+        )
+    skipped = [n for n in doc["not_checked"] if n["check"] == "accuracy"]
+    if skipped:
+        return Part(
+            topic,
+            NOT_CHECKED,
+            "limits not checked: " + "; ".join(f"{n['name']}: {n['why']}" for n in skipped),
+            (rule,),
+        )
+    return Part(
+        topic,
+        OK,
+        "every unit's limiting error within its [audit.limits] limit over the accuracy window",
+        (rule,),
+    )
+
+
+_RULE_WORDS = {
+    "raised": "exceeds",
+    "within": "within",
+    "established": "no a priori: the deviation estimate is mandatory",
+    "no data": "no estimate",
+}
+
+
+def audit_analysis(a: Analysis, ins: Sequence[Mapping[str, Any]]) -> Analysis:
+    """``a`` with each unit channel's a priori RMS the one the audit judged it against
+    (the monitoring rule's value before tonight, ``apriori_before``; the configured one
+    on the first night), so the embedded tables and verdict use the audit's yardstick."""
+    from dataclasses import replace
+
+    d = a.deviation
+    if d is None or not ins:
+        return a
+    units = {name: dict(u.channels) for name, u in d.whole.units.items()}
+    for c in ins:
+        chans = units.get(c["unit"])
+        old = None if chans is None else chans.get(c["channel"])
+        if old is None:
+            continue
+        before = c["apriori_before"]
+        chans[c["channel"]] = replace(
+            old,
+            apriori=before,
+            exceeds_apriori=None if before is None else c["verdict"] == "raised",
+            new_apriori=old.m_y if c["apriori_after"] is None else c["apriori_after"],
+            verdict=_RULE_WORDS.get(c["verdict"], c["verdict"] or "no estimate"),
+        )
+    whole = replace(
+        d.whole,
+        units={n: replace(u, channels=units[n]) for n, u in d.whole.units.items()},
+    )
+    return replace(a, deviation=replace(d, whole=whole))
+
+
 def night_html(doc: dict, analysis_body: str = "", analysis_css: str = "") -> str:
     """The audit page of one night (schema ``dracc.audit/1``): the verdict and the findings
     first, then what was not checked, the sources' integrity, the INS table, and the
@@ -259,7 +400,7 @@ def night_html(doc: dict, analysis_body: str = "", analysis_css: str = "") -> st
     css = (
         "td:first-child,th:first-child{text-align:left} .verdict{font-size:1.3em;padding:.4em;"
         "border:2px solid #444} .ok{background:#e6f4e6} .findings{background:#fde8e8} "
-        ".nodata{background:#fff3d6} td{vertical-align:top}" + analysis_css
+        ".nodata{background:#fff3d6} td{vertical-align:top}" + analysis_css + WRAP_CSS
     )
     title = f"dracc audit {doc['vessel']} {doc['night']}"
     parts = [page_head(title, css)]
@@ -285,22 +426,23 @@ def night_html(doc: dict, analysis_body: str = "", analysis_css: str = "") -> st
     parts.append("<section id='findings'><h2>Findings</h2>")
     if doc["findings"]:
         parts.append(
-            "<table><tr><th>check</th><th>source</th><th>role</th><th>finding</th>"
-            "<th>statistic</th><th>threshold</th><th>window</th><th>evidence</th>"
-            "<th>clause</th></tr>"
+            "<table class='findings-table'><tr><th class='t'>check</th><th class='t'>source</th>"
+            "<th class='t'>role</th><th class='t message'>finding</th><th class='t'>statistic</th>"
+            "<th class='n'>threshold</th><th class='t'>window</th><th class='t'>evidence</th>"
+            "<th class='t'>clause</th></tr>"
         )
         for f in doc["findings"]:
             st, th, w = f["statistic"], f["threshold"], f["window"]
             stat = f"{e(str(st.get('name', '')))} {fmt_value(st.get('value'), 3)} {e(str(st.get('unit', '')))}"
             thr = f"{fmt_value(th.get('value'), 3)} {e(str(th.get('unit', '')))}"
-            win = " to ".join(str(w[k]) for k in ("start_utc", "end_utc") if w.get(k)) or ", ".join(
-                f"{k} {v}" for k, v in w.items()
-            )
             parts.append(
-                f"<tr><td>{e(f['check'])}</td><td>{e(f['source'] or '-')}</td>"
-                f"<td>{e(f['role'] or '-')}</td><td>{e(f['message'])}</td><td>{stat}</td>"
-                f"<td title='{e(str(th.get('rule', '')))}'>{thr}</td><td>{e(win)}</td>"
-                f"<td>{e(_evidence_text(f['evidence']))}</td><td>{e(f['clause'])}</td></tr>"
+                f"<tr><td class='t'>{e(f['check'])}</td><td class='t'>{e(f['source'] or '-')}</td>"
+                f"<td class='t'>{e(f['role'] or '-')}</td><td class='t message'>{e(f['message'])}"
+                f"</td><td class='t'>{stat}</td>"
+                f"<td class='n' title='{e(str(th.get('rule', '')))}'>{thr}</td>"
+                f"<td class='t window'>{e(window_text(w))}</td>"
+                f"<td class='t'>{e(_evidence_text(f['evidence']))}</td>"
+                f"<td class='t'>{e(f['clause'])}</td></tr>"
             )
         parts.append("</table>")
     else:
@@ -325,7 +467,7 @@ def night_html(doc: dict, analysis_body: str = "", analysis_css: str = "") -> st
         f"<section id='logs'><h2>Logs</h2><p>{len(logs['files'])} file(s), "
         f"{fmt_value(logs['lines'], 0)} lines, {fmt_value(logs['rejected'], 0)} damaged "
         f"(rejected); valid but unused (ignored): {e(ignored)}. Period "
-        f"{e(str(logs['period']['start_utc']))} to {e(str(logs['period']['end_utc']))}.</p>"
+        f"{e(window_text(logs['period']))}.</p>"
         "</section>"
     )
     integ = (doc.get("analysis") or {}).get("integrity") or {}
@@ -344,8 +486,8 @@ def night_html(doc: dict, analysis_body: str = "", analysis_css: str = "") -> st
             )
         kinds = ("validity", "plausibility", "latency", "availability", "consistency", "time")
         parts.append(
-            "<section id='sources'><h2>Integrity per source</h2><table><tr><th>source</th>"
-            "<th>role</th>"
+            "<section id='sources'><h2>Integrity per source</h2><table><tr><th class='t'>source</th>"
+            "<th class='t'>role</th>"
             + "".join(f"<th>{k}</th>" for k in kinds)
             + "<th>cadence</th><th>available</th><th>latency p50 / p95</th></tr>"
         )
@@ -354,8 +496,8 @@ def night_html(doc: dict, analysis_body: str = "", analysis_css: str = "") -> st
             lat = info.get("latency_s") or {}
             av = info.get("availability")
             parts.append(
-                f"<tr><td>{e(src)}</td><td>{e(row['role'] or '-')}</td>"
-                + "".join(f"<td>{e(row.get(k, '-'))}</td>" for k in kinds)
+                f"<tr><td class='t'>{e(src)}</td><td class='t'>{e(row['role'] or '-')}</td>"
+                + "".join(f"<td class='t'>{e(row.get(k, '-'))}</td>" for k in kinds)
                 + f"<td>{fmt_value(info.get('cadence_s'), 2, 's')}</td>"
                 f"<td>{'-' if av is None else f'{100 * av:.1f} %'}</td>"
                 f"<td>{fmt_value(lat.get('p50'), 2)} / {fmt_value(lat.get('p95'), 2, 's')}</td></tr>"
@@ -388,7 +530,7 @@ def night_html(doc: dict, analysis_body: str = "", analysis_css: str = "") -> st
                 f"{fmt_value(acc.get('hours'), 1)} h over {len(acc.get('nights', []))} "
                 f"night(s) so far.</p>"
             )
-        parts.append("</section>")
+        parts.append(f"<p class='rules'>{e(RULES_TEXT)}</p></section>")
     if analysis_body:
         parts.append(f"<section id='analysis'><h2>The analysis</h2>{analysis_body}</section>")
     parts.append(PAGE_END)
@@ -401,5 +543,10 @@ def audit_page(o: AuditOutcome, doc: dict | None = None) -> str:
     from dracc.report import audit_json
     from dracc.report import html as html_report
 
-    body, css = ("", "") if o.analysis is None else html_report.render_sections(o.analysis)
-    return night_html(audit_json.to_dict(o) if doc is None else doc, body, css)
+    doc = audit_json.to_dict(o) if doc is None else doc
+    body, css = (
+        ("", "")
+        if o.analysis is None
+        else html_report.render_sections(audit_analysis(o.analysis, doc["ins"]), ins_judgement(doc))
+    )
+    return night_html(doc, body, css)

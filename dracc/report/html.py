@@ -36,6 +36,7 @@ from dracc.report.verdict import (
     containment_text,
     honesty_text,
     verdict,
+    with_ins,
 )
 
 #: a column header: the glossary term (shown as it is), or (term, header html)
@@ -587,8 +588,10 @@ def _faults(a: Analysis, v: Verdict) -> str:
     )
 
 
-def render_html(a: Analysis) -> str:
-    """The whole report as one HTML document (a string)."""
+def render_html(a: Analysis, ins: Finding | None = None) -> str:
+    """The whole report as one HTML document (a string).  ``ins``: the INS accuracy
+    part of the verdict judged elsewhere (the audit page's own judgement), else the
+    analysis' own."""
     title = "dracc voyage analysis"
     if a.start_ns is not None:
         title += f" {short_utc(a.start_ns)}"
@@ -599,7 +602,7 @@ def render_html(a: Analysis) -> str:
             + "".join(f"<li>{_e(m)}</li>" for m in a.missing)
             + "</ul></div></section>"
         )
-    v = verdict(a)
+    v = verdict(a) if ins is None else with_ins(verdict(a), ins)
     faults = _faults(a, v)
     notes = ""
     if a.notes:
@@ -670,9 +673,10 @@ def render_html(a: Analysis) -> str:
 """
 
 
-def render_sections(a: Analysis) -> tuple[str, str]:
-    """(body, css) of the report without its page: for the audit page to embed."""
-    page = render_html(a)
+def render_sections(a: Analysis, ins: Finding | None = None) -> tuple[str, str]:
+    """(body, css) of the report without its page: for the audit page to embed, with
+    the audit's INS accuracy judgement as ``ins`` (:func:`render_html`)."""
+    page = render_html(a, ins)
     body = page.split("<body>", 1)[1].rsplit("</body>", 1)[0]
     body = body.split("</h1>", 1)[1] if "</h1>" in body else body
     return body, _CSS

@@ -456,11 +456,27 @@ def verdict(a: Analysis, limits: Mapping[str, Mapping[str, float]] | None = None
     configured.  Without either, the worst unit is the one furthest above the median of
     the units in its channel, and the limits are "not checked".
     """
-    dr = _dead_reckoning(a)
     ins, worst = _ins(a, limits)
-    integ = _integrity(a)
     faults, state = _faults(a)
-    miss = _missing(a)
+    return _whole(_dead_reckoning(a), ins, worst, _integrity(a), faults, state, _missing(a))
+
+
+def with_ins(v: Verdict, ins: Finding) -> Verdict:
+    """``v`` with its INS accuracy part replaced by ``ins`` (the audit page's own
+    judgement), the overall level and headline recomputed from the parts."""
+    return _whole(v.dead_reckoning, ins, v.worst, v.integrity, v.faults, v.faults_state, v.missing)
+
+
+def _whole(
+    dr: Finding,
+    ins: Finding,
+    worst: WorstUnit | None,
+    integ: Finding,
+    faults: Finding,
+    state: str,
+    miss: Finding,
+) -> Verdict:
+    """The overall level (the worst part's) and headline of the parts."""
     parts = (dr, ins, integ, faults, miss)
     level = max((p.level for p in parts), key=_RANK.__getitem__)
     bad = [p.topic for p in parts if p.level == FAIL]
