@@ -237,7 +237,7 @@ WRAP_CSS = (
     " th.t,td.t{text-align:left;white-space:normal;overflow-wrap:anywhere}"
     " th.n,td.n{white-space:nowrap} td.message{min-width:14em}"
     " #analysis td,#analysis th{white-space:normal} #analysis td.l{overflow-wrap:anywhere}"
-    " img{max-width:100%;height:auto}"
+    " img{max-width:100%;height:auto} body{overflow-wrap:break-word}"
 )
 
 #: what each verdict on the audit page judges (shown under the INS table)
