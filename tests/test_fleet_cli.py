@@ -77,11 +77,10 @@ def local_run(fleet, tmp_path_factory):
 
 def test_local_pool_tables_failures_and_pages(local_run):
     code, out, tables = local_run
-    assert code == ExitCode.INPUT  # one file failed; the rest is in the tables
+    assert code == ExitCode.OK  # notes.txt is no log: skipped and listed, not failed
     t = tables["fleet"]
     assert sorted(t["vessel"].unique()) == ["Aurora", "Nordlys ★"]
-    failed = t[t["status"] == "failed"]
-    assert failed["log"].tolist() == ["notes.txt"] and failed["error"].str.len().min() > 10
+    assert (t["status"] == "ok").all() and "notes.txt" not in set(t["log"])
     ok = t[t["status"] == "ok"]
     assert len(ok) == 4 * 9 and set(ok["ins_unit"]) == {"ins1", "ins2", "ins3"}
     assert (
@@ -102,7 +101,8 @@ def test_local_pool_tables_failures_and_pages(local_run):
     csv = pd.read_csv(out / "fleet.csv")
     assert len(csv) == len(t) and list(csv.columns) == list(t.columns)
     summary = json.loads((out / "fleet.json").read_text())
-    assert summary["failures"][0]["log"] == "notes.txt" and summary["analysed"] == 5
+    assert summary["skipped_files"][0]["log"] == "notes.txt" and not summary["failures"]
+    assert (summary["logs"], summary["analysed"], summary["skipped"]) == (4, 4, 1)
     assert (out / "vessels" / "Nordlys ★" / "fleet.csv").exists()  # Unicode kept
     page = (out / "fleet.html").read_text()
     pngs = re.findall(r"src='data:image/png;base64,([A-Za-z0-9+/=]+)'", page)
@@ -111,7 +111,7 @@ def test_local_pool_tables_failures_and_pages(local_run):
         "notes.txt" in page
         and "http://" not in page
         and "https://" not in page
-        and "5 logs of 2 vessels" in page
+        and "4 logs of 2 vessels" in page
     )
     assert pd.read_parquet(out / "trends.parquet")["day"].nunique() == 2
 
@@ -122,8 +122,9 @@ def test_rerun_skips_done_logs(local_run, fleet, run_cli):
     code, stdout, err = run_cli(
         "fleet", fleet / "Aurora", fleet / "Nordlys ★", "--workers", "2", "--out", out
     )
-    assert code == ExitCode.INPUT
-    assert "1 analysed, 4 from the cache, 1 failed" in err
+    assert code == ExitCode.OK
+    assert "fleet: 4 logs: 0 analysed, 4 from the cache, 0 failed; 1 file skipped" in err
+    assert "skipped: Nordlys ★/notes.txt — not a log: text with no NMEA sentence" in err
     pd.testing.assert_frame_equal(pd.read_parquet(out / "fleet.parquet"), before)
     assert "Aurora" in stdout  # the terminal table (--force is covered in test_fleet.py)
 
@@ -205,7 +206,7 @@ def test_dask_scheduler_gives_the_local_table(local_run, fleet, tmp_path):
         )
     finally:
         _stop(procs)
-    assert code == ExitCode.INPUT
+    assert code == ExitCode.OK  # notes.txt skipped, not failed
     _, _, local = local_run
     pd.testing.assert_frame_equal(pd.read_parquet(out / "fleet.parquet"), local["fleet"])
     pd.testing.assert_frame_equal(pd.read_parquet(out / "trends.parquet"), local["trends"])

@@ -162,7 +162,7 @@ def test_fleet_from_documents_alone(tmp_path):
     r = res.ranking
     # the log scale is 2.1 % on every ship every night: not ranked; E's INS1 heads the list
     assert set(r.quantity) == {"lat_m_y"} and len(r) == 5
-    assert (r.iloc[0].vessel, r.iloc[0].unit) == ("E", "ins1") and r.iloc[0].score > 5
+    assert (r.iloc[0].vessel, r.iloc[0].ins_unit) == ("E", "ins1") and r.iloc[0].score > 5
 
 
 def test_a_damaged_document_is_one_failure_and_the_rest_goes_on(tmp_path):

@@ -120,7 +120,7 @@ def raw(fleet, tmp_path_factory):
 
 def _row(ranking: pd.DataFrame, vessel: str, unit: str, quantity: str) -> pd.Series:
     r = ranking[
-        (ranking.vessel == vessel) & (ranking.unit == unit) & (ranking.quantity == quantity)
+        (ranking.vessel == vessel) & (ranking.ins_unit == unit) & (ranking.quantity == quantity)
     ]
     assert len(r) == 1, (vessel, unit, quantity)
     return r.iloc[0]
@@ -134,14 +134,16 @@ def test_ranking_finds_the_bad_units_and_only_them(raw):
     bad = {("V1", "ins2"), ("V2", "log"), ("V3", "ins1")}
     found = r[r.q_value < 0.05]
     # every discovery is a seeded fault
-    assert set(zip(found.vessel, found.unit, strict=True)) <= bad, found.drop(columns="evidence")
+    assert set(zip(found.vessel, found.ins_unit, strict=True)) <= bad, found.drop(
+        columns="evidence"
+    )
     # the two standing faults head the list
-    head = set(zip(r.vessel.head(len(found)), r.unit.head(len(found)), strict=True))
+    head = set(zip(r.vessel.head(len(found)), r.ins_unit.head(len(found)), strict=True))
     assert {("V1", "ins2"), ("V2", "log")} <= head
     assert _row(r, "V1", "ins2", "lat_m_y").q_value < 0.05
     assert _row(r, "V2", "log", "log_scale").q_value < 0.05
     # the change: found two nights after it began, since naming its first night
-    ins1 = r[(r.vessel == "V3") & (r.unit == "ins1") & (r.q_value < 0.05)]
+    ins1 = r[(r.vessel == "V3") & (r.ins_unit == "ins1") & (r.q_value < 0.05)]
     assert len(ins1) >= 1
     change_night = START + dt.timedelta(days=CHANGE_NIGHT)
     assert (ins1.since == change_night).any(), ins1.drop(columns="evidence")

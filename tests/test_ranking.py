@@ -201,7 +201,7 @@ def test_ranking_finds_the_seeded_faults_and_names_the_change():
     r = rank_fleet(synthetic_fleet(1, vessels=8, nights=7, faults=True))
     assert list(r.columns) == list(RANKING_COLUMNS)
     found = r[r.q_value < 0.05]
-    assert set(zip(found.vessel, found.unit, strict=True)) == {
+    assert set(zip(found.vessel, found.ins_unit, strict=True)) == {
         ("V0", "ins2"),
         ("V1", "ins1"),
         ("V2", "log"),
@@ -241,12 +241,12 @@ def test_peer_groups_follow_the_configured_models():
     f = synthetic_fleet(4, vessels=6, nights=3, faults=False)
     f.loc[(f.vessel == "V5") & (f.unit == "ins1"), "value"] *= 2.6  # a worse model fitted...
     r = rank_fleet(f)
-    assert (r[(r.vessel == "V5") & (r.unit == "ins1")].q_value < 0.05).any()
+    assert (r[(r.vessel == "V5") & (r.ins_unit == "ins1")].q_value < 0.05).any()
     # ...unless V5's INS1 is said to be another model: then it has no peers to fail against
     cfg = Config()
     cfg.extra["fleet"] = {"ranking": {"models": {"V5/ins1": "other"}}}
     r = rank_fleet(f, ranking_config(cfg))
-    row = r[(r.vessel == "V5") & (r.unit == "ins1")]
+    row = r[(r.vessel == "V5") & (r.ins_unit == "ins1")]
     assert set(row.peer_group) == {"other"} and row.peer_p.isna().all()
 
 

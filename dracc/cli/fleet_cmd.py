@@ -21,7 +21,13 @@ from dracc.core.config import load_config
 from dracc.core.errors import ConfigError, ExitCode, Interrupted, OptionError
 from dracc.pipeline.fleet import check_scheduler, discover, fleet_config, run_fleet
 from dracc.report.fleet_html import fleet_html
-from dracc.report.fleet_tables import csv_text, json_lines, result_text, write_tables
+from dracc.report.fleet_tables import (
+    counts_text,
+    csv_text,
+    json_lines,
+    result_text,
+    write_tables,
+)
 from dracc.report.terminal import print_fleet
 from dracc.report.textout import Layout, layout, print_lines, wrap
 from dracc.report.write import writing
@@ -84,8 +90,9 @@ def fleet_cmd(
 
     Same as 'dracc fleet INPUT…' (a vessel folder named run or query: write ./run,
     ./query).  A re-run skips logs already analysed (same bytes, same settings) unless
-    --force; a log that fails is listed and the batch goes on (exit 3 when any failed,
-    else 0).  The tables are also written Hive-partitioned under DIR/tables/ for SQL.
+    --force; a log that fails is listed and the batch goes on (exit 3 when any failed
+    or none was found, else 0); a file that is no log (a README, a photo) is skipped and
+    listed, not failed.  The tables are also written Hive-partitioned under DIR/tables/ for SQL.
     """
     if scheduler and workers:
         raise OptionError(
@@ -130,16 +137,19 @@ def fleet_cmd(
         print_fleet(res, out)
         lay = layout(err)  # a terminal: wrap on spaces; a pipe or journald: a line each
         width = lay.width if lay.tty else 1 << 30
+        for f in res.skipped:
+            print_lines(
+                err,
+                wrap(f"skipped: {f['vessel']}/{f['log']} — not a log: {f['why']}", width, hang=2),
+            )
         for f in res.failures:
             print_lines(err, wrap(f"failed: {f['vessel']}/{f['log']}: {f['error']}", width, hang=2))
-        said = (
-            f"fleet: {len(tasks)} logs, {res.analysed} analysed, {res.cached} from the cache, "
-            f"{len(res.failures)} failed; tables and fleet.html in {target}"
+        print_lines(
+            err, wrap(f"{counts_text(res)}; tables and fleet.html in {target}", width, hang=2)
         )
-        print_lines(err, wrap(said, width, hang=2))
     except KeyboardInterrupt:
         raise Interrupted(done) from None
-    return int(ExitCode.INPUT if res.failures else ExitCode.OK)
+    return int(ExitCode.INPUT if res.failures or not res.logs else ExitCode.OK)
 
 
 FORMATS = ("table", "csv", "json")

@@ -50,7 +50,7 @@ if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 
-__all__ = ["MCAP_MAGIC", "assign_roles", "detect_format", "read_file", "read_logs"]
+__all__ = ["MCAP_MAGIC", "assign_roles", "detect_format", "not_a_log", "read_file", "read_logs"]
 
 #: what a transfer that treats a binary file as text does to the MCAP magic
 #: ``\x89MCAP0\r\n``: the bytes at the start of ``MCAP0`` and after it -> what happened
@@ -149,6 +149,57 @@ def detect_format(path: str | Path) -> str:
     if what is not None:
         raise IngestError(f"{p}: not a log dracc reads: looks like {what}")
     return "nmea"
+
+
+#: the formats :func:`not_a_log` names as what dracc reads
+_READS = "NMEA 0183, NMEA 2000, Signal K, gpsd JSON, CSV and MCAP logs"
+#: NMEA 0183 sentences (and AIS) anywhere in a text: what the NMEA reader takes
+_ANY_SENTENCE = re.compile(rb"[$!][A-Z0-9]{2}[A-Z0-9]{2,4},")
+
+
+def not_a_log(path: str | Path) -> str | None:
+    """What the file at ``path`` is when it is no log at all (a photo, a document, an
+    archive, a README: text with no record of a format dracc reads), or None for a log,
+    including one dracc may fail to read (empty, damaged in transfer, compressed: its
+    reading says why).  A batch over folders (``dracc fleet``) skips and lists these
+    instead of counting them as failed logs.  Never raises: a file it cannot open is
+    None (the reading says why)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(65536)
+            size = fh.seek(0, 2)
+            fh.seek(max(0, size - 16))
+            tail = fh.read(16)
+    except OSError:
+        return None
+    if not head or head.startswith(MCAP_MAGIC) or _damaged_container(head, tail) is not None:
+        return None
+    from dracc.ingest.compressed import compression_of
+
+    if compression_of(head) is not None:
+        return None
+    what = unsupported.container(head)
+    if what is not None:
+        return what
+    try:
+        fmt = detect_format(path)
+    except IngestError as err:  # unsupported.text_form named it (a CAN trace, a table, ...)
+        said = str(err)
+        return said.split(": looks like ", 1)[1] if ": looks like " in said else said
+    if fmt != "nmea" or _has_sentence(path):
+        return None
+    return f"text with no NMEA sentence and no record of another format dracc reads ({_READS})"
+
+
+def _has_sentence(path: str | Path, chunk: int = 1 << 20) -> bool:
+    """True when an NMEA 0183 sentence is anywhere in the file (read in pieces)."""
+    keep = b""
+    with open(path, "rb") as fh:
+        while piece := fh.read(chunk):
+            if _ANY_SENTENCE.search(keep + piece):
+                return True
+            keep = piece[-16:]
+    return False
 
 
 def read_file(

@@ -92,10 +92,13 @@ class PeerScores:
 
     z: FloatArray
     p: FloatArray
-    center: FloatArray  #: median of the peers
+    center: FloatArray  #: c: the mean of the peers compared with (the score's centre)
     spread: FloatArray  #: tau: the between-unit spread beyond the units' own errors
     peers: NDArray[np.int64]  #: peers compared with
     df: FloatArray  #: degrees of freedom of the t law
+    #: n x n, row i: the peers unit i was compared with (after the trim; ``peers`` counts them)
+    compared: NDArray[np.bool_] | None = None
+    median: FloatArray | None = None  #: the median of the peers compared with
 
 
 def peer_scores(
@@ -118,8 +121,9 @@ def peer_scores(
         peers_of = g[:, None] == g[None, :]
     mask = np.asarray(peers_of, dtype=bool) & np.isfinite(x)[None, :]
     np.fill_diagonal(mask, False)
-    z, p, center, spread, df = (np.full(n, np.nan) for _ in range(5))
+    z, p, center, spread, df, median = (np.full(n, np.nan) for _ in range(6))
     peers = np.zeros(n, dtype=np.int64)
+    compared = np.zeros((n, n), dtype=bool)
     r2 = float(resolution) ** 2
     for i in np.flatnonzero(np.isfinite(x)):
         xo, so = x[mask[i]], se[mask[i]]
@@ -136,6 +140,8 @@ def peer_scores(
         peers[i] = m
         if m < min_peers:
             continue
+        compared[i, np.flatnonzero(mask[i])[keep]] = True
+        median[i] = float(np.median(xo))
         c = float(np.mean(xo))
         s2_own = float(np.mean(so * so))
         s2 = float(np.var(xo, ddof=1))
@@ -150,7 +156,7 @@ def peer_scores(
         z[i] = (x[i] - c) / math.sqrt(v)
     ok = np.isfinite(z)
     p[ok] = tail_p(z[ok], direction, df[ok])
-    return PeerScores(z, p, center, spread, peers, df)
+    return PeerScores(z, p, center, spread, peers, df, compared, median)
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ import math
 import pandas as pd
 
 from dracc.core.vocabulary import CHANNELS
-from dracc.pipeline.fleet import FleetResult, count_logs
+from dracc.pipeline.fleet import FleetResult
 from dracc.report.audit_html import column_header, m_y_history_plot
 from dracc.report.page import PAGE_END, img_tag, page_head
 
@@ -151,7 +151,7 @@ def ranking_section(ranking: pd.DataFrame) -> list[str]:
                 "unit",
                 "quantity",
                 "value",
-                "peers' mean",
+                "peers' median",
                 "score",
                 "p",
                 "q",
@@ -166,7 +166,7 @@ def ranking_section(ranking: pd.DataFrame) -> list[str]:
         cls = " class='bad'" if bool(r["discovery"]) else ""
         parts.append(
             f"<tr{cls}><td>{r['rank']}</td><td>{e(cell_text(r['vessel']))}</td>"
-            f"<td>{e(cell_text(r['unit']))}</td>"
+            f"<td>{e(cell_text(r['ins_unit']))}</td>"
             f"<td>{e(_QUANTITY_TEXT.get(str(r['quantity']), str(r['quantity'])))}</td>"
             f"<td>{e(_value(r['value'], unit))}</td><td>{e(_value(r['peer_median'], unit))}</td>"
             f"<td>{fmt_num(r['score'], 1)}</td><td>{_p(r['p_value'])}</td>"
@@ -184,12 +184,13 @@ def ranking_section(ranking: pd.DataFrame) -> list[str]:
         )
         parts.append(
             f"<details id='ev-{r['rank']}'{' open' if bool(r['discovery']) else ''}><summary>"
-            f"#{r['rank']} {e(cell_text(r['vessel']))} {e(cell_text(r['unit']))} "
+            f"#{r['rank']} {e(cell_text(r['vessel']))} {e(cell_text(r['ins_unit']))} "
             f"{e(_QUANTITY_TEXT.get(str(r['quantity']), str(r['quantity'])))} "
             f"({e(str(ev.get('method')))})</summary>"
             f"<p>Peers ({e(str(ev.get('peer_group')))}, {peer.get('peers')} units): the last "
             f"{peer.get('window_nights')} nights give {e(_value(peer.get('value'), unit))} "
-            f"against the peers' {e(_value(peer.get('median'), unit))}; z "
+            f"against the peers' median {e(_value(peer.get('median'), unit))} (mean "
+            f"{e(_value(peer.get('mean'), unit))}, the score's centre); z "
             f"{fmt_num(peer.get('z'), 2)}, p {_p(peer.get('p'))}. Own history: the most "
             f"likely change at {e(str(change.get('night') or '-'))}, "
             f"{e(_value(change.get('before'), unit))} before and "
@@ -209,9 +210,12 @@ def fleet_html(res: FleetResult) -> str:
             "dracc fleet report",
             "td:nth-child(-n+3),th:nth-child(-n+3){text-align:left}.bad{color:#b00}",
         ),
-        f"<p>{count_logs(res.table)} logs of {res.table['vessel'].nunique()} vessels; "
+        f"<p>{res.logs} logs of {res.table['vessel'].nunique()} vessels; "
         f"{res.analysed} analysed in this run, {res.cached} from the cache, "
-        f"{len(res.failures)} failed.</p>",
+        + (f"{res.documents} from audit documents, " if res.documents else "")
+        + f"{len(res.failures)} failed"
+        + (f"; {len(res.skipped)} files skipped (not a log)" if res.skipped else "")
+        + ".</p>",
         *ranking_section(res.ranking),
     ]
     lt = latest(res.table)
@@ -264,6 +268,10 @@ def fleet_html(res: FleetResult) -> str:
         parts += [
             f"<li>{e(f['vessel'])} / {e(f['log'])}: {e(f['error'])}</li>" for f in res.failures
         ]
+        parts.append("</ul>")
+    if res.skipped:
+        parts.append("<h2>Skipped: not a log</h2><ul>")
+        parts += [f"<li>{e(f['vessel'])} / {e(f['log'])}: {e(f['why'])}</li>" for f in res.skipped]
         parts.append("</ul>")
     parts.append(PAGE_END)
     return "\n".join(parts)

@@ -25,7 +25,7 @@ from dracc.core.errors import FleetError
 from dracc.core.numbers import jsonable
 from dracc.core.timefmt import iso_utc
 from dracc.pipeline.fleet.query import COLUMNS_KEY, PART_FILE, PARTITIONS, TABLES, hive_value
-from dracc.pipeline.fleet.tables import FleetResult, count_logs
+from dracc.pipeline.fleet.tables import FleetResult
 from dracc.pipeline.fleet.tasks import inside
 from dracc.report.output import json_text
 from dracc.report.tables import csv_ready
@@ -137,19 +137,39 @@ def write_tables(
                 result.trends[result.trends["vessel"] == vessel],
             )
         summary = {
-            "schema": "dracc.fleet/1",
+            "schema": "dracc.fleet/2",
             "dracc_version": __version__,
-            "logs": count_logs(result.table),
+            # analysed + cached + documents + failed = logs; skipped files are no logs
+            "logs": result.logs,
             "vessels": sorted(result.table["vessel"].dropna().unique().tolist()),
             "analysed": result.analysed,
             "cached": result.cached,
+            "documents": result.documents,
+            "failed": len(result.failures),
+            "skipped": len(result.skipped),
             "failures": list(result.failures),
+            "skipped_files": list(result.skipped),
         }
         put(Path("fleet.json"), json.dumps(summary, indent=1, ensure_ascii=False) + "\n")
         for name, text in (extra or {}).items():
             put(Path(name), text)
     root = out.resolve()
     return [root / r for r in rels]
+
+
+def counts_text(res: FleetResult) -> str:
+    """'fleet: 52 logs: 50 analysed, 0 from the cache, 2 failed; 1 file skipped (not a
+    log)': the terms add up to the logs; the skipped files are apart."""
+    docs = f"{res.documents} from audit documents, " if res.documents else ""
+    skipped = (
+        f"; {len(res.skipped)} file{'s' if len(res.skipped) != 1 else ''} skipped (not a log)"
+        if res.skipped
+        else ""
+    )
+    return (
+        f"fleet: {res.logs} log{'s' if res.logs != 1 else ''}: {res.analysed} analysed, "
+        f"{res.cached} from the cache, {docs}{len(res.failures)} failed{skipped}"
+    )
 
 
 # ------------------------------------------------------------- dracc fleet query results

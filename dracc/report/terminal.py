@@ -446,7 +446,7 @@ _RANKING_COLUMNS = (
     ("unit", False, 0),
     ("quantity", False, 0),
     ("value", True, 0),
-    ("peers", True, 2),
+    ("peer median", True, 2),
     ("q", True, 0),
     ("since", False, 1),
 )
@@ -481,7 +481,7 @@ def _ranking_lines(page: Page, ranking) -> None:
             (
                 str(r["rank"]),
                 cell_text(r["vessel"]),
-                cell_text(r["unit"]),
+                cell_text(r["ins_unit"]),
                 cell_text(r["quantity"]),
                 fmt_num_unit(r["value"], digits, unit),
                 fmt_num_unit(r["peer_median"], digits, unit),

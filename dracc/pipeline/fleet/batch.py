@@ -6,7 +6,10 @@ epochs).  The parent caches every summary under ``OUT/cache/`` keyed by the SHA-
 the log's bytes and of the analysis settings (``dracc.fleet.cache/2``, written
 atomically; entries written by another dracc version are analysed again), so a re-run
 skips what was done unless ``force``; a failing log becomes a row with
-``status='failed'`` and an entry in ``failures``, never the end of the batch.
+``status='failed'`` and an entry in ``failures``, never the end of the batch.  A file
+that is no log at all (:func:`dracc.ingest.not_a_log`: a README, a photo, an archive)
+is not analysed: it is listed in ``skipped`` with what it is, and counted apart, so
+that ``analysed + cached + documents + failed = logs``.
 
 Engines: a local :class:`concurrent.futures.ProcessPoolExecutor` (``workers``), or an
 existing Dask distributed scheduler (``scheduler='tcp://host:port'``, through
@@ -27,6 +30,7 @@ from dracc import __version__
 from dracc.core import atomic
 from dracc.core.config import Config
 from dracc.core.errors import DraccError
+from dracc.ingest import not_a_log
 from dracc.pipeline.audit.facts import facts_from_analysis
 from dracc.pipeline.audit.limits import apriori_seeds, settings_sha256
 from dracc.pipeline.audit.run import analyse_voyage
@@ -74,11 +78,16 @@ def summarise(analysis: Analysis) -> dict:
 
 
 def analyse_log(path: str, cfg: Config) -> dict:
-    """Worker: analyse one log; ``{"ok": True, "summary": …}`` or ``{"ok": False, "error": …}``.
+    """Worker: analyse one log; ``{"ok": True, "summary": …}``, ``{"ok": False, "error": …}``,
+    or ``{"ok": False, "skipped": what it is}`` for a file that is no log at all
+    (:func:`dracc.ingest.not_a_log`: a README, a photo), which is not analysed.
 
     Never raises for a bad log: the batch goes on.
     """
     try:
+        what = not_a_log(path)
+        if what is not None:
+            return {"ok": False, "skipped": what}
         return {"ok": True, "summary": summarise(analyse_voyage([Path(path)], cfg))}
     except DraccError as err:
         return {"ok": False, "error": str(err)}
@@ -132,6 +141,7 @@ def run_fleet(
     if progress and n_documents:
         progress(n_documents)
     todo: list[LogTask] = []
+    skipped: dict[str, str] = {}  # path -> what the file is: no log, not analysed, listed
     for t in tasks:
         if t.path in summaries:
             continue
@@ -172,6 +182,8 @@ def run_fleet(
                     allow_nan=False,
                 ),
             )
+        elif result.get("skipped"):  # no log at all: listed apart, not failed
+            skipped[task.path] = str(result["skipped"])
         else:
             failures[task.path] = str(result.get("error"))
         if progress:
@@ -184,6 +196,7 @@ def run_fleet(
             _run_dask(todo, cfg, scheduler, connect_timeout_s, analyser, done)
         else:
             _run_local(todo, cfg, workers or os.cpu_count() or 1, analyser, done)
+    analysed = len(summaries) - from_documents - cached  # this run's, that succeeded
     table = fleet_table(tasks, summaries, failures, seeds)
     ranking = rank_fleet(
         measures_frame(
@@ -200,7 +213,21 @@ def run_fleet(
         for t in tasks
         if t.path in failures
     )
-    return FleetResult(table, fleet_trends(table), failed, len(todo), cached, ranking)
+    passed = tuple(
+        {"vessel": t.vessel, "log": t.log, "path": t.path, "why": skipped[t.path]}
+        for t in tasks
+        if t.path in skipped
+    )
+    return FleetResult(
+        table,
+        fleet_trends(table),
+        failed,
+        analysed,
+        cached,
+        ranking,
+        skipped=passed,
+        documents=from_documents,
+    )
 
 
 def _size(path: str) -> int:

@@ -52,7 +52,7 @@ from dracc.math.ranking import (
 RANKING_COLUMNS = (
     "rank",
     "vessel",
-    "unit",
+    "ins_unit",  # the INS unit, or the sensor of the quantity (log, compass, dr, a source)
     "quantity",
     "measure_unit",
     "value",
@@ -392,7 +392,9 @@ def rank_fleet(measures: pd.DataFrame, rc: RankingConfig | None = None) -> pd.Da
             min_peers=rc.min_peers,
             peers_of=peers_of,
         )
+        natural = np.array([_natural(p[0], spec) for p in pooled], dtype=np.float64)
         for i, s in enumerate(series):
+            peer_median = _peer_median(natural, ps, i)
             cp = change_point(
                 s.x,
                 se_list[i],
@@ -418,7 +420,8 @@ def rank_fleet(measures: pd.DataFrame, rc: RankingConfig | None = None) -> pd.Da
                 "peer": {
                     "window_nights": min(k, len(s.nights)),
                     "value": _f(_natural(pooled[i][0], spec)),
-                    "median": _f(_natural(ps.center[i], spec)),
+                    "median": _f(peer_median),
+                    "mean": _f(_natural(ps.center[i], spec)),  # the score's centre
                     "spread": _f(ps.spread[i]),
                     "peers": int(ps.peers[i]),
                     "z": _f(z),
@@ -437,11 +440,11 @@ def rank_fleet(measures: pd.DataFrame, rc: RankingConfig | None = None) -> pd.Da
             rows.append(
                 {
                     "vessel": s.vessel,
-                    "unit": s.unit,
+                    "ins_unit": s.unit,
                     "quantity": quantity,
                     "measure_unit": s.measure_unit,
                     "value": _natural(pooled[i][0], spec),
-                    "peer_median": _natural(ps.center[i], spec),
+                    "peer_median": peer_median,
                     "score": score,
                     "peer_p": ps.p[i],
                     "change_p": cp.p,
@@ -456,6 +459,14 @@ def rank_fleet(measures: pd.DataFrame, rc: RankingConfig | None = None) -> pd.Da
                 }
             )
     return _controlled(rows, rc)
+
+
+def _peer_median(natural: np.ndarray, ps, i: int) -> float:
+    """The median of the values (in their own unit: an RMS, not its log) of the peers
+    unit ``i`` was compared with; NaN where it had too few."""
+    if ps.compared is None or not np.isfinite(ps.z[i]):
+        return math.nan
+    return float(np.median(natural[ps.compared[i]]))
 
 
 def _controlled(rows: list[dict], rc: RankingConfig) -> pd.DataFrame:
@@ -480,7 +491,7 @@ def _controlled(rows: list[dict], rc: RankingConfig) -> pd.DataFrame:
         df.at[i, "evidence"] = json.dumps(jsonable(ev), ensure_ascii=False, allow_nan=False)
     df["_absscore"] = -df["score"].abs().fillna(0.0)
     df = df.sort_values(
-        ["q_value", "p_value", "_absscore", "vessel", "unit", "quantity"],
+        ["q_value", "p_value", "_absscore", "vessel", "ins_unit", "quantity"],
         na_position="last",
         kind="mergesort",
     ).reset_index(drop=True)
@@ -497,6 +508,6 @@ def _typed(df: pd.DataFrame) -> pd.DataFrame:
     for c in ("first_night", "last_night", "since"):
         df[c] = pd.to_datetime(df[c], format="%Y-%m-%d", errors="coerce").dt.date
         df[c] = df[c].astype("date32[pyarrow]")
-    for c in ("vessel", "unit", "quantity", "measure_unit", "peer_group", "method", "evidence"):
+    for c in ("vessel", "ins_unit", "quantity", "measure_unit", "peer_group", "method", "evidence"):
         df[c] = df[c].astype("string")
     return df

@@ -87,10 +87,19 @@ class FleetResult:
     table: pd.DataFrame
     trends: pd.DataFrame
     failures: tuple[dict, ...]  #: {"vessel", "log", "path", "error"}
-    analysed: int  #: logs analysed in this run
+    analysed: int  #: logs analysed in this run, successfully (a failed one is in failures)
     cached: int  #: logs taken from the cache
     #: the ranked list (:data:`dracc.pipeline.fleet.ranking.RANKING_COLUMNS`), best first
     ranking: pd.DataFrame = field(default_factory=pd.DataFrame)
+    #: files that are no log (a README, a photo): {"vessel", "log", "path", "why"}; not
+    #: analysed, not in the tables, not counted among the logs
+    skipped: tuple[dict, ...] = ()
+    documents: int = 0  #: nights read from audit documents and databases (not analysed)
+
+    @property
+    def logs(self) -> int:
+        """The logs of the run: analysed + cached + documents + failed (skipped files apart)."""
+        return self.analysed + self.cached + self.documents + len(self.failures)
 
 
 #: the dtype of a UTC date column (``day``): pyarrow ``date32`` (Parquet DATE)
