@@ -207,9 +207,16 @@ def test_a_database_of_another_schema_is_a_clear_failure(tmp_path):
     assert next(iter(failures.values())).endswith("is not 1 to 3")
 
 
-@pytest.mark.parametrize("verdict", ["no data"])
-def test_a_night_without_data_adds_no_row(tmp_path, verdict):
-    doc = {**_document("A", "2026-05-01"), "verdict": verdict}
+@pytest.mark.parametrize(
+    "fields",
+    [
+        {"verdict": "no data"},
+        # a run that ended without a verdict (dracc.report.audit_failed): night may be null
+        {"verdict": "failed", "status": "failed", "night": None},
+    ],
+)
+def test_a_night_without_data_adds_no_row(tmp_path, fields):
+    doc = {**_document("A", "2026-05-01"), **fields}
     (tmp_path / "n.json").write_text(json.dumps(doc))
     tasks, summaries, failures = expand_documents(discover([str(tmp_path / "n.json")]))
     assert tasks == [] and summaries == {} and failures == {}

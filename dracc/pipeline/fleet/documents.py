@@ -150,8 +150,8 @@ def _nights(task: LogTask, kind: str) -> list[tuple[str, str, dict]]:
             raise StateError(f"{task.path}: not a readable audit document: {err}") from None
         if not isinstance(doc, dict) or doc.get("schema") != AUDIT_SCHEMA:
             raise StateError(f"{task.path}: not an audit document ({AUDIT_SCHEMA})")
-        if doc.get("verdict") == "no data":
-            return []
+        if doc.get("verdict") == "no data" or doc.get("status") == "failed":
+            return []  # a night without data, or a run that ended without a verdict
         return [
             (str(doc.get("vessel") or task.vessel), str(doc["night"]), summary_from_document(doc))
         ]
