@@ -259,7 +259,8 @@ def _nights(db: Path) -> list[str]:
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_audit_interrupted_inside_its_transaction(night_logs, tmp_path, sig):
     """The audit's test hook holds it inside the recording transaction; the signal rolls
-    it back: no half-recorded night, no summary file; a re-run records the night."""
+    it back: no half-recorded night; tonight's summary says the run was interrupted and
+    nothing recorded (issue 32: never last night's); a re-run records the night."""
     db = tmp_path / "state.sqlite"
     summary = tmp_path / "summary.txt"
     assert _main(
@@ -307,7 +308,7 @@ def test_audit_interrupted_inside_its_transaction(night_logs, tmp_path, sig):
             p.wait()
     _assert_interrupted(code, err)
     assert _nights(db) == ["2026-11-20"]
-    assert not summary.exists()
+    assert summary.read_text().startswith(f"dracc audit: FAILED, exit {code} (")
     _no_leftovers(tmp_path)
     code = _main(
         "audit", night_logs["2026-11-19"], "--db", db, "--vessel", "Aurora", "--summary", summary
