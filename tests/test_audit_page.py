@@ -9,7 +9,6 @@ and at a 1280x800 window the page does not scroll sideways (a real browser measu
 from __future__ import annotations
 
 import html
-import json
 import re
 from dataclasses import replace
 
@@ -111,12 +110,17 @@ def test_the_page_and_its_analysis_agree_on_the_a_priori_verdicts(tmp_path):
     assert "How INS accuracy is judged on this page" in _text(page)
 
 
-def test_accuracy_findings_are_the_embedded_ins_verdict(tmp_path):
-    acfg = replace(
+def _tight_limits() -> AuditConfig:
+    """Limits every unit channel exceeds, judged over a 6 h accuracy window."""
+    return replace(
         AuditConfig(),
         accuracy_window_h=6.0,
         limits={"all": {"lat_m": 1.0, "lon_m": 1.0, "course_deg": 0.0001}},
     )
+
+
+def test_accuracy_findings_are_the_embedded_ins_verdict(tmp_path):
+    acfg = _tight_limits()
     o = _second_night(tmp_path, acfg)
     doc = audit_json.to_dict(o)
     found = [f for f in doc["findings"] if f["check"] == "accuracy"]
@@ -182,13 +186,9 @@ window.addEventListener('load', function () {
 def test_the_page_fits_a_1280_px_window_in_a_real_browser(tmp_path):
     """Long finding messages (and a long unbroken token) wrap: the page is no wider than
     the 1280x800 window and every finding's message cell lies inside it."""
-    from test_report_html import _run
+    from test_report_html import probe_result
 
-    acfg = replace(
-        AuditConfig(),
-        accuracy_window_h=6.0,
-        limits={"all": {"lat_m": 1.0, "lon_m": 1.0, "course_deg": 0.0001}},
-    )
+    acfg = _tight_limits()
     o = _second_night(tmp_path, acfg)
     doc = audit_json.to_dict(o)
     long = " ".join(["the limiting error of this unit channel is above its limit"] * 8)
@@ -197,12 +197,7 @@ def test_the_page_fits_a_1280_px_window_in_a_real_browser(tmp_path):
     assert len(doc["findings"]) == 9
     page = tmp_path / "page.html"
     page.write_text(audit_page(o, doc), encoding="utf-8")
-    probe = tmp_path / "probe.html"
-    probe.write_text(PROBE.replace("PAGE", page.name), encoding="utf-8")
-    res = _run(tmp_path, page, "--allow-file-access-from-files", "--dump-dom", probe.as_uri())
-    m = re.search(r'<pre id="result">(.*?)</pre>', res.stdout, re.S)
-    assert m, f"no probe result; chromium said: {res.stderr[-2000:]}"
-    data = json.loads(html.unescape(m.group(1)))
+    data = probe_result(tmp_path, page, PROBE.replace("PAGE", page.name))
     assert data["inner"] == 1280
     assert data["scroll"] <= 1280, data
     assert len(data["cells"]) == 9

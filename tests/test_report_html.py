@@ -17,6 +17,7 @@ import re
 import shutil
 import subprocess
 from pathlib import Path
+from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -91,23 +92,26 @@ def _run(tmp_path: Path, report: Path, *extra: str) -> subprocess.CompletedProce
     return subprocess.run(cmd, capture_output=True, text=True, timeout=120, check=False)
 
 
-def _probe(tmp_path: Path, report: Path) -> tuple[dict, list[str]]:
-    probe = report.parent / "probe.html"
-    probe.write_text(PROBE.replace("REPORT", report.name), encoding="utf-8")
-    netlog = tmp_path / "net.json"
+def probe_result(tmp_path: Path, page: Path, probe_html: str, *extra: str) -> Any:
+    """Open ``probe_html`` (written beside ``page``, which it loads) in the real browser and
+    return the JSON its ``<pre id="result">`` holds."""
+    import html as _html
+
+    probe = page.parent / "probe.html"
+    probe.write_text(probe_html, encoding="utf-8")
     res = _run(
-        tmp_path,
-        report,
-        "--allow-file-access-from-files",
-        f"--log-net-log={netlog}",
-        "--dump-dom",
-        probe.as_uri(),
+        tmp_path, page, "--allow-file-access-from-files", *extra, "--dump-dom", probe.as_uri()
     )
     m = re.search(r'<pre id="result">(.*?)</pre>', res.stdout, re.S)
     assert m, f"no probe result; chromium said: {res.stderr[-2000:]}"
-    import html as _html
+    return json.loads(_html.unescape(m.group(1)))
 
-    data = json.loads(_html.unescape(m.group(1)))
+
+def _probe(tmp_path: Path, report: Path) -> tuple[dict, list[str]]:
+    netlog = tmp_path / "net.json"
+    data = probe_result(
+        tmp_path, report, PROBE.replace("REPORT", report.name), f"--log-net-log={netlog}"
+    )
     urls = re.findall(r'"url":"([^"]*)"', netlog.read_text(encoding="utf-8", errors="replace"))
     return data, urls
 

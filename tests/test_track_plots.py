@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import functools
 import io
-import json
 import math
 import operator
 import re
@@ -23,7 +22,7 @@ import numpy as np
 import pytest
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Ellipse
-from test_report_html import _run
+from test_report_html import probe_result
 
 from dracc.core.config import Config, DeadReckoningConfig
 from dracc.pipeline.analysis import analyse
@@ -299,14 +298,7 @@ window.addEventListener('load', function () {
 def test_browser_shows_leg_circles_large_enough(tmp_path, day):
     report = tmp_path / "report.html"
     write_html(day, report)
-    probe = tmp_path / "probe.html"
-    probe.write_text(PROBE.replace("REPORT", report.name), encoding="utf-8")
-    res = _run(tmp_path, report, "--allow-file-access-from-files", "--dump-dom", probe.as_uri())
-    m = re.search(r'<pre id="result">(.*?)</pre>', res.stdout, re.S)
-    assert m, f"no probe result; chromium said: {res.stderr[-2000:]}"
-    import html as html_lib
-
-    figs = json.loads(html_lib.unescape(m.group(1)))
+    figs = probe_result(tmp_path, report, PROBE.replace("REPORT", report.name))
     assert figs[0]["alt"] == "track plot" and len(figs) == 1 + tp.MAX_LEG_PANELS
     for f in figs[1:]:
         assert f["complete"] and f["natural"] > 700, f
