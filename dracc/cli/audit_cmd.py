@@ -108,10 +108,29 @@ def audit_run(
     (dracc.audit/1: verdict, findings, not checked, and the analysis it rests on); with
     '--json -' it is printed on stdout instead of the summary.
     """
-    asked = {"date": date, "vessel": vessel, "config": config, "db": db}
-    reports = {"summary_out": summary_out, "json_out": json_out, "html_out": html_out}
-    with reports_on_failure(logs, **asked, **reports, signalled=SIGNALLED):  # exit 2-5, 130
-        return _run(logs, pattern, brief, **asked, **reports)
+    with reports_on_failure(  # exit 2-5, 130
+        logs,
+        date=date,
+        vessel=vessel,
+        config=config,
+        db=db,
+        summary_out=summary_out,
+        json_out=json_out,
+        html_out=html_out,
+        signalled=SIGNALLED,
+    ):
+        return _run(
+            logs,
+            pattern,
+            brief,
+            date=date,
+            vessel=vessel,
+            config=config,
+            db=db,
+            summary_out=summary_out,
+            json_out=json_out,
+            html_out=html_out,
+        )
 
 
 def _run(logs, pattern, brief, *, date, vessel, config, db, summary_out, json_out, html_out):

@@ -375,7 +375,7 @@ def audit_analysis(a: Analysis, ins: Sequence[Mapping[str, Any]]) -> Analysis:
     for c in ins:
         chans = units.get(c["unit"])
         old = None if chans is None else chans.get(c["channel"])
-        if old is None:
+        if chans is None or old is None:
             continue
         before = c["apriori_before"]
         chans[c["channel"]] = replace(
