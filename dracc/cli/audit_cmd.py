@@ -30,7 +30,7 @@ from dracc.core.safetext import printable
 from dracc.core.vocabulary import CHANNELS
 from dracc.pipeline.audit import UNITS, open_state, run_audit
 from dracc.report import audit_json
-from dracc.report.audit_failed import reports_on_failure
+from dracc.report.audit_failed import AuditRequest, reports_on_failure
 from dracc.report.audit_html import audit_page, history_html
 from dracc.report.audit_text import format_summary, print_history
 from dracc.report.output import STDOUT, emit_json
@@ -108,34 +108,14 @@ def audit_run(
     (dracc.audit/1: verdict, findings, not checked, and the analysis it rests on); with
     '--json -' it is printed on stdout instead of the summary.
     """
-    with reports_on_failure(  # exit 2-5, 130
-        logs,
-        date=date,
-        vessel=vessel,
-        config=config,
-        db=db,
-        summary_out=summary_out,
-        json_out=json_out,
-        html_out=html_out,
-        signalled=SIGNALLED,
-    ):
-        return _run(
-            logs,
-            pattern,
-            brief,
-            date=date,
-            vessel=vessel,
-            config=config,
-            db=db,
-            summary_out=summary_out,
-            json_out=json_out,
-            html_out=html_out,
-        )
+    request = AuditRequest(logs, date, vessel, config, db, summary_out, json_out, html_out)
+    with reports_on_failure(request, signalled=SIGNALLED):  # exit 2-5, 130
+        return _run(request, pattern, brief)
 
 
-def _run(logs, pattern, brief, *, date, vessel, config, db, summary_out, json_out, html_out):
+def _run(request: AuditRequest, pattern: str | None, brief: bool) -> int:
     pattern = check_pattern(pattern, "--pattern")
-    cfg = build_config(config)  # as analyze takes it: one validation path
+    cfg = build_config(request.config)  # as analyze takes it: one validation path
     with progress("audit: analysing", total=100.0) as advance:
         last = [0.0]
 
@@ -145,8 +125,15 @@ def _run(logs, pattern, brief, *, date, vessel, config, db, summary_out, json_ou
             advance(step)
 
         outcome = run_audit(
-            logs, cfg, db=db, vessel=vessel, night=date, pattern=pattern, progress=report
+            request.logs,
+            cfg,
+            db=request.db,
+            vessel=request.vessel,
+            night=request.date,
+            pattern=pattern,
+            progress=report,
         )
+    json_out, html_out, summary_out = request.json_out, request.html_out, request.summary_out
     doc = audit_json.to_dict(outcome) if (json_out or html_out) else None
     if json_out is not None:
         emit_json(audit_json.brief(doc) if brief and doc else doc, json_out)

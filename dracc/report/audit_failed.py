@@ -20,6 +20,7 @@ import html
 import os
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager, suppress
+from dataclasses import dataclass
 from pathlib import Path
 
 from dracc import __version__
@@ -138,19 +139,23 @@ def write_failed_reports(
             _write_or_remove(html_out, lambda: failed_page(f))
 
 
+@dataclass(frozen=True)
+class AuditRequest:
+    """What ``dracc audit run`` was asked: the inputs and where tonight's reports go
+    (``json_out`` may be ``-``, stdout).  One object for the run and its failure path."""
+
+    logs: Sequence[Path]
+    date: str | None = None
+    vessel: str | None = None
+    config: Path | None = None
+    db: Path | None = None
+    summary_out: Path | None = None
+    json_out: str | Path | None = None
+    html_out: Path | None = None
+
+
 @contextmanager
-def reports_on_failure(
-    logs: Sequence[Path],
-    *,
-    date: str | None,
-    vessel: str | None,
-    config: Path | None,
-    db: Path | None,
-    summary_out: Path | None,
-    json_out: str | Path | None,
-    html_out: Path | None,
-    signalled: dict | None = None,
-) -> Iterator[None]:
+def reports_on_failure(request: AuditRequest, signalled: dict | None = None) -> Iterator[None]:
     """Run the block; when it raises, write the failure's reports, then re-raise.
     ``signalled``: the CLI's flag that a signal asked the run to stop (an exception raised
     while unwinding from it is the interrupt)."""
@@ -159,12 +164,14 @@ def reports_on_failure(
     except (Exception, KeyboardInterrupt) as error:
         f = failed_night(
             error,
-            logs=logs,
-            date=date,
-            vessel=vessel,
-            config=config,
-            db=db,
+            logs=request.logs,
+            date=request.date,
+            vessel=request.vessel,
+            config=request.config,
+            db=request.db,
             signalled=bool(signalled and signalled.get("on")),
         )
-        write_failed_reports(f, summary=summary_out, json_out=json_out, html_out=html_out)
+        write_failed_reports(
+            f, summary=request.summary_out, json_out=request.json_out, html_out=request.html_out
+        )
         raise
