@@ -501,6 +501,13 @@ def _kml_styles(doc: ET.Element) -> None:
     _sub(ic, f"{{{k}}}color", "ff2827d6")
     icon = _sub(ic, f"{{{k}}}Icon")
     _sub(icon, f"{{{k}}}href", "http://maps.google.com/mapfiles/kml/shapes/caution.png")
+
+
+def _kml_schema(doc: ET.Element) -> None:
+    """The per-point arrays' schema.  OGC KML 2.2 puts a Document's ``Schema`` after its
+    styles (a feature's ``StyleSelector``) and before its features; each
+    ``gx:SimpleArrayField`` stands in the schema's ``kml:SchemaExtension`` slot."""
+    k = NS_KML
     schema = _sub(doc, f"{{{k}}}Schema", id="uncertainty", name="uncertainty")
     for name in KML_ARRAYS:
         f = _sub(schema, f"{{{NS_GX}}}SimpleArrayField", name=name, type="float")
@@ -546,6 +553,7 @@ def kml_document(a: Analysis) -> bytes:
     _kml_styles(doc)
     if a.estimated_position is not None and a.dead_reckoning is not None:
         ep_exports.kml_styles(doc)
+    _kml_schema(doc)  # after every style, before the folders (the OGC schema's order)
     dr = a.dead_reckoning
     if dr is not None:
         ep = dr.epochs
