@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from dracc.core.config import IngestConfig
-from dracc.core.errors import ConfigError, ExitCode
+from dracc.core.errors import ExitCode, OptionError
 from dracc.frames import SourceInfo
 from dracc.ingest import read_logs
 from dracc.ingest.sources import assign_roles, file_ids, keys_must_match, separate_files
@@ -165,7 +165,7 @@ def test_role_key_matching_nothing_is_an_error_naming_the_keys():
     s = {"GYRO": src("GYRO", "HE", HDT=5), "GNSS": src("GNSS", "GP", GGA=5)}
     with (
         keys_must_match({"GYR0"}),
-        pytest.raises(ConfigError, match=r"GYR0.*the sources are GNSS, GYRO"),
+        pytest.raises(OptionError, match=r"GYR0.*the sources are GNSS, GYRO"),
     ):
         assign_roles(s, {"GYR0": "compass"})
     notes = assign_roles(s, {"GYR0": "compass"})  # from a config file: a note, as before
@@ -174,11 +174,16 @@ def test_role_key_matching_nothing_is_an_error_naming_the_keys():
         assign_roles(dict(s), {"HE": "compass"})
 
 
-def test_cli_role_key_matching_nothing_exits_with_the_config_code(run_cli, tmp_path):
+def test_cli_role_key_matching_nothing_is_a_bad_option_value(run_cli, tmp_path):
+    """Exit 2, as the README's exit codes say of a bad option value (issue 32: it was 4,
+    the configuration file's code); records takes --role the same way."""
     p = tmp_path / "g.log"
     gga_log(p, 0, 60, "30.000")
+    code, _out, err = run_cli("records", p, "--out", tmp_path / "r.csv", "--role", "GPS1=gnss")
+    assert code == ExitCode.USAGE and "no source has the key 'GPS1'" in err
+    assert not (tmp_path / "r.csv").exists()
     code, _out, err = run_cli("analyze", p, "--role", "GPS1=gnss")
-    assert code == ExitCode.CONFIG
+    assert code == ExitCode.USAGE
     lines = [ln for ln in err.strip().splitlines() if ln.strip()]
     assert (
         lines[-1].startswith("error: --role GPS1=gnss: no source has the key 'GPS1'")

@@ -47,7 +47,7 @@ from typing import cast
 import numpy as np
 import pandas as pd
 
-from dracc.core.errors import AmbiguousSourceError, ConfigError
+from dracc.core.errors import AmbiguousSourceError, ConfigError, OptionError
 from dracc.core.vocabulary import INS_ROLES, ROLES
 from dracc.frames import SourceInfo
 
@@ -121,8 +121,8 @@ def summarize(
 
 
 #: mapping keys that must match a source (``--role KEY=ROLE`` on the command line: a key
-#: that matches nothing is a mistake there, while a fleet's [ingest.sources] may name
-#: units a given log lacks)
+#: that matches nothing is a bad option value there, exit 2, while a fleet's
+#: [ingest.sources] may name units a given log lacks)
 _MUST_MATCH: ContextVar[frozenset[str]] = ContextVar(
     "dracc_role_keys_must_match", default=frozenset()
 )
@@ -130,8 +130,9 @@ _MUST_MATCH: ContextVar[frozenset[str]] = ContextVar(
 
 @contextmanager
 def keys_must_match(keys: Iterable[str]) -> Iterator[None]:
-    """Within the block, :func:`assign_roles` raises :class:`ConfigError` for a mapping key
-    in ``keys`` that matches no source (naming the keys that exist)."""
+    """Within the block, :func:`assign_roles` raises :class:`OptionError` (exit 2, a bad
+    ``--role`` value) for a mapping key in ``keys`` that matches no source (naming the
+    keys that exist)."""
     token = _MUST_MATCH.set(frozenset(keys))
     try:
         yield
@@ -195,7 +196,7 @@ def assign_roles(
             if key in _MUST_MATCH.get():
                 known = ", ".join(sorted(sources)) or "none"
                 talkers = sorted({t for x in sources.values() for t in x.talkers} - set(sources))
-                raise ConfigError(
+                raise OptionError(
                     f"--role {key}={role}: no source has the key {key!r}; the sources are "
                     f"{known}" + (f" (talkers {', '.join(talkers)})" if talkers else "")
                 )
