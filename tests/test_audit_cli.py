@@ -771,3 +771,48 @@ def test_brief_json_is_small_valid_and_carries_the_measures(run_cli, ship, tmp_p
     assert doc["dead_reckoning"]["n_scored"] > 0
     with StateStore(tmp_path / "s.sqlite") as store:  # the database holds the same measures
         assert store.nights()[0].measures == doc["measures"]
+
+
+def test_history_has_a_row_for_a_night_without_data(run_cli, tmp_path):
+    """Issue 32: the terminal history showed nothing for a night recorded without logs;
+    it has a row saying so, in time order among the nights with statistics."""
+    from dracc.report.audit_text import history_text
+
+    db = tmp_path / "s.sqlite"
+    code, _, _ = run_cli("audit", tmp_path, "--date", "2026-11-20", "--db", db, "--vessel", "V")
+    assert code == ExitCode.INPUT  # no logs: recorded as a night without data
+    code, out, _ = run_cli("audit", "history", "--db", db)
+    assert code == ExitCode.OK
+    assert "no INS statistics recorded for this selection" in out
+    (row,) = [ln for ln in out.splitlines() if ln.startswith("2026-11-20")]
+    assert row.endswith("no data: no logs for the night")
+
+    def night(n: str, m_y: float | None = None) -> dict:
+        return {"night": n, "n": 9, "m_u": m_y, "m_y": m_y, "kurtosis": 0.1,
+                "limit_error": m_y, "apriori_before": m_y, "apriori_after": m_y,
+                "verdict": "within"}  # fmt: skip
+
+    doc = {
+        "series": [
+            {
+                "vessel": "V",
+                "unit": "ins1",
+                "channel": "lat",
+                "measure": "m",
+                "nights": [night("2026-11-19", 300.0), night("2026-11-21", 310.0)],
+            },
+        ],
+        "nights": [
+            {"vessel": "V", "night": "2026-11-19", "findings": []},
+            {"vessel": "V", "night": "2026-11-20", "findings": [{"kind": "no_logs"}]},
+            {"vessel": "V", "night": "2026-11-21", "findings": []},
+            {"vessel": "W", "night": "2026-11-20", "findings": []},  # another vessel
+        ],
+        "apriori_events": [],
+    }
+    rows = [ln for ln in history_text(doc).splitlines() if ln.startswith("2026-")]
+    assert [r[:10] for r in rows] == ["2026-11-19", "2026-11-20", "2026-11-21"]
+    assert rows[1].split()[1:] == ["-"] * 6 + ["no", "data:", "no", "logs", "for", "the", "night"]
+    doc["nights"][1]["findings"] = []  # a night with logs but none of this unit's statistics
+    rows = [ln for ln in history_text(doc).splitlines() if ln.startswith("2026-11-20")]
+    assert rows[0].split()[1:] == ["-"] * 6 + ["no", "data"]

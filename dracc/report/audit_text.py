@@ -191,20 +191,47 @@ _HISTORY_COLUMNS = (
 
 def history_text(doc: dict, lay: Layout = Layout()) -> str:
     """The history document as text laid out for ``lay``: one table per vessel, unit and
-    channel (m_u, m_y, kurtosis, limit, a priori, verdict per night), a blank line between
-    them; a sentence when the selection holds no night."""
+    channel (m_u, m_y, kurtosis, limit, a priori, verdict per night, and a 'no data' row
+    for a recorded night without statistics), a blank line between them; a sentence when
+    the selection holds no statistics, with the nights recorded."""
     return _history_page(doc, lay).text()
+
+
+def _no_data_rows(doc: dict, vessel: str, have: set[str]) -> list[tuple[str, ...]]:
+    """A row for each recorded night of ``vessel`` not in ``have`` (a series' nights):
+    a night without logs (its ``no_logs`` finding), or one whose logs gave this unit and
+    channel no statistics.  The a priori is unchanged on such a night (the rule's 'no
+    data' step)."""
+    rows: list[tuple[str, ...]] = []
+    for n in doc["nights"]:
+        if n["vessel"] != vessel or n["night"] in have:
+            continue
+        no_logs = any(f.get("kind") == "no_logs" for f in n["findings"])
+        why = "no data: no logs for the night" if no_logs else "no data"
+        rows.append((n["night"], "-", "-", "-", "-", "-", "-", why))
+    return rows
 
 
 def _history_page(doc: dict, lay: Layout) -> Page:
     page = Page(lay)
-    if not doc["series"]:
-        page.add("no nights recorded for this selection")
-        return page
     headers, right, prio = zip(*_HISTORY_COLUMNS, strict=True)
+    if not doc["series"]:
+        vessels = list(dict.fromkeys(n["vessel"] for n in doc["nights"]))
+        what = "INS statistics" if vessels else "nights"
+        page.add(f"no {what} recorded for this selection")
+        for v in vessels:  # the nights that were recorded, and why they have none
+            page.blank()
+            page.table(
+                headers,
+                _no_data_rows(doc, v, set()),
+                right=right,
+                priorities=prio,
+                title=f"{v} (nights)",
+            )
+        return page
     for k, s in enumerate(doc["series"]):
         d = _digits(s["measure"])
-        rows = [
+        rows: list[tuple[str, ...]] = [
             (
                 n["night"],
                 str(n["n"]),
@@ -217,6 +244,8 @@ def _history_page(doc: dict, lay: Layout) -> Page:
             )
             for n in s["nights"]
         ]
+        rows += _no_data_rows(doc, s["vessel"], {n["night"] for n in s["nights"]})
+        rows.sort(key=lambda row: row[0])  # YYYY-MM-DD: in time order
         if k:
             page.blank()
         title = f"{s['vessel']} {s['unit']} {s['channel']} ({s['measure']})"
