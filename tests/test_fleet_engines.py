@@ -5,14 +5,17 @@ scheduler with a worker on loopback (subprocesses, bounded waits, always torn do
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pandas as pd
 import pytest
 from test_fleet import CFG, _fleet, fake_analyser
 from test_fleet_cli import _free_port, _stop
+from test_interrupt import _children, _gone
 
 from dracc.pipeline.fleet import LogTask, discover, engines, run_fleet
 from dracc.pipeline.fleet.engines import plan_batches, run_local
@@ -168,3 +171,68 @@ def test_dask_batched_equals_local_and_preloads_the_workers(mixed, tmp_path):
     # the worker imported the pipeline before it ran its first batch
     assert len(states) == 1 and states[0]["preloaded"] and states[0]["first_batch_preloaded"]
     assert states[0]["preload_s"] > 0
+
+
+def sleeping_analyser(path: str, cfg) -> dict:
+    """A long log's analysis: says it started (``<log>.started``), then takes ten minutes."""
+    Path(path + ".started").touch()
+    time.sleep(600)
+    return fake_analyser(path, cfg)
+
+
+_INTERRUPTED_RUN = """
+import sys
+sys.path.insert(0, {tests!r})
+from test_fleet import CFG
+from test_fleet_engines import sleeping_analyser
+from dracc.pipeline.fleet import discover, run_fleet
+try:
+    run_fleet(discover({inputs!r}), CFG, {out!r}, workers=2, analyser=sleeping_analyser)
+except KeyboardInterrupt:
+    sys.stderr.write("interrupted\\n")
+    sys.exit(130)
+"""
+
+
+def _catches(pid: int, sig: int) -> bool:
+    """The process catches ``sig`` (/proc/PID/status SigCgt): its handler is installed."""
+    try:
+        lines = Path(f"/proc/{pid}/status").read_text().splitlines()
+    except OSError:
+        return False
+    caught = next((ln.split()[1] for ln in lines if ln.startswith("SigCgt:")), "0")
+    return bool(int(caught, 16) & (1 << (sig - 1)))
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_sigint_to_the_main_process_stops_the_run_within_seconds(tmp_path):
+    """Issue 32: SIGINT to the fleet's main process alone, its two workers each ten
+    minutes into a log: the run ends within seconds (the workers are killed, not waited
+    for: a pool's shutdown, and the interpreter's exit, wait for the running calls) and
+    no worker outlives it."""
+    root = _fleet(tmp_path)
+    inputs = [str(root / "Aurora"), str(root / "Borealis")]
+    script = _INTERRUPTED_RUN.format(
+        tests=str(Path(__file__).parent), inputs=inputs, out=str(tmp_path / "out")
+    )
+    p = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE)
+    workers: list[int] = []
+    try:
+        deadline = time.monotonic() + 120  # a loaded CI: the start alone may take seconds
+        while len(list(root.rglob("*.started"))) < 2 or not _catches(p.pid, signal.SIGINT):
+            if time.monotonic() > deadline or p.poll() is not None:
+                pytest.fail("the workers never started their logs")
+            time.sleep(0.05)
+        workers = _children(p.pid)
+        assert len(workers) == 2
+        t0 = time.monotonic()
+        p.send_signal(signal.SIGINT)
+        _, err = p.communicate(timeout=60)
+        took_s = time.monotonic() - t0
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    assert p.returncode == 130 and err.decode().strip().endswith("interrupted"), err
+    assert took_s < 10.0, f"{took_s:.1f} s from SIGINT to the end of the run"
+    assert _gone(workers, timeout_s=10.0), "worker processes outlived the interrupted run"

@@ -3,8 +3,9 @@
 Both run :func:`analyse_batch` (several logs per task) and call ``done(task, result)`` in
 the parent once per log, as each batch comes back.  A log that fails, or whose analyser
 raises, is a failed result of its own; a batch that cannot run at all (its Dask worker
-lost, the local pool broken by a dying process) fails the logs it held; Ctrl-C cancels
-what is left.
+lost, the local pool broken by a dying process) fails the logs it held; Ctrl-C (or
+SIGTERM) cancels what is left at once: the local workers are killed (:func:`stop_pool`),
+the Dask tasks cancelled.
 
 Batching (issue 20): a small log is a fraction of a second of work, about what Dask
 spends scheduling, sending and collecting a task, so :func:`plan_batches` packs the logs
@@ -202,9 +203,30 @@ def run_local(
                         _failed(batch, f"worker failed ({type(err).__name__}: {err})", done)
                         continue
                     _deliver(batch, results, done)
-        except BaseException:
-            pool.shutdown(wait=False, cancel_futures=True)
+        except BaseException:  # Ctrl-C, SIGTERM: stop now, not after the running batches
+            stop_pool(pool)
             raise
+
+
+def stop_pool(pool: ProcessPoolExecutor) -> None:
+    """Cancel what has not started and kill the worker processes.  A shutdown alone waits
+    for the batches the workers run and for those already queued to them (and so does
+    the interpreter's exit, joining the pool's thread): after Ctrl-C, as long as a few
+    analyses of long logs.  Nothing is lost: a worker writes nothing, the parent has
+    cached every result that came back."""
+    # the pool forgets its processes at shutdown: take them first
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in procs:
+        try:
+            proc.kill()
+        except (OSError, ValueError):  # already gone, or closed
+            pass
+
+
+#: at most this long to close the Dask client after an interrupt (default: twice the
+#: connect timeout, for a scheduler that does not answer)
+_CLOSE_AFTER_INTERRUPT_S = 5.0
 
 
 def _threads(client: Any) -> int:
@@ -270,6 +292,6 @@ def run_dask(
                 client.cancel(futures)
             except Exception:  # pragma: no cover - closing the client releases them anyway
                 pass
+        client.close(timeout=min(timeout_s, _CLOSE_AFTER_INTERRUPT_S))
         raise
-    finally:
-        client.close()
+    client.close()
