@@ -300,6 +300,13 @@ def test_the_exit_code_tables_are_the_codes_of_the_cli():
 #: (the page, what it says, the command, the exit code it says)
 EXITS = [
     ("README.md", "bad option value", ["analyze", "LOG", "--role", "GPS1=gnss"], 2),
+    ("docs/ingest.md", "matches no source key or talker is a bad option value (exit 2",
+     ["records", "LOG", "--out", "r.csv", "--role", "GPS1=gnss"], 2),
+    ("docs/fix.md", "Also: no observations", ["fix"], 2),
+    ("docs/fix.md", "or the `--file` does not exist", ["fix", "--file", "missing.toml"], 3),
+    ("docs/fix.md", "4 | the `--file` is invalid", ["fix", "--file", "BAD"], 4),
+    ("docs/simulate.md", "A bad spec stops the command before anything is written (exit code 2)",
+     ["simulate", "--out", "sim", "--fault", "jump:GNSS@2h=670mi"], 2),
     ("README.md", "Another suffix is a usage error (exit 2)", ["records", "LOG", "--out", "x.xlsx"], 2),
     ("README.md", "logs without a single record exit 3", ["records", "JUNK", "--out", "r.csv"], 3),
     ("README.md", "missing file", ["inspect", "missing.nmea"], 3),
@@ -332,6 +339,7 @@ def test_documented_exit_codes(run_cli, tmp_path, monkeypatch, page, says, argv,
     got, _out, err = run_cli(*argv)
     assert got == code, f"{page}: {says!r}: dracc {' '.join(argv)} exited {got}: {err}"
     assert "Traceback" not in err
+    assert not (tmp_path / "sim").exists()  # simulate's bad spec: nothing written
 
 
 def _checksum(sentence: str) -> int:
