@@ -118,12 +118,12 @@ def test_exit_0_writes_tonights_reports(capsys, night_log, tmp_path):
     )  # fmt: skip
     assert code == ExitCode.OK, err
     text = paths["summary"].read_text()
-    assert text.startswith(f"dracc audit: Aurora, night {NIGHT}: all checks passed")
+    assert text.startswith(f"dracc audit: Aurora, night {NIGHT}: all checks made passed")
     doc = json.loads(paths["json"].read_text())
     jsonschema.validate(doc, load_schema())
     assert (doc["verdict"], doc["night"], doc["exit_code"]) == ("ok", NIGHT, 0)
     assert "status" not in doc and "error" not in doc  # an audited night: as before
-    assert "all checks passed" in paths["html"].read_text()
+    assert "all checks made passed" in paths["html"].read_text()
 
 
 def test_exit_1_writes_tonights_reports(capsys, night_log, tmp_path):

@@ -652,7 +652,7 @@ def test_terminal_summary_content():
         "2M       of the estimated position, largest 80 m: reference (gnss) inside 2M at 96.0 %",
         "scored   120 epochs out of sample",
         "5 prior-only epochs unscored",
-        "NEES     36.0 over 24 legs (chi² 26.5-77.0)",
+        "NEES     36.0 over 24 scored legs (chi² 26.5-77.0)",
         "learned  current set 45 ° drift 0.49 kn; noise 0.10 kn; compass and log errors: "
         "see Calibration",
         "against gnss (learned by the estimated position's filter from 288 fixes)",

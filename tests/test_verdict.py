@@ -111,7 +111,10 @@ def test_dead_reckoning_reasons_against_its_bounds(sample):
     assert dr.consistent and inside and v.level == OK and v.headline.startswith("DR honest")
     assert f"{100 * dr.containment_2m:.1f} %" in v.reasons[0]
     assert f"stated: {100 * dr.expected_inside:.1f} %" in v.reasons[0]
-    assert f"NEES {dr.nees_statistic:.1f} over {len(dr.leg_checks)} legs: within" in v.reasons[1]
+    assert (
+        f"NEES {dr.nees_statistic:.1f} over {len(dr.leg_checks)} scored legs: within"
+        in v.reasons[1]
+    )
     assert f"RMS error/M {dr.error_over_m_rms:.2f}" in v.reasons[2]
 
 

@@ -1,7 +1,9 @@
-"""Numbers at the edges: NaN and infinities where JSON and plots need them.
+"""Numbers at the edges: NaN and infinities where JSON and plots need them, and a count
+said in words.
 
 Inside dracc a missing value is NaN in float arrays; JSON has no NaN, so serialisers
-write None (``null``), and plots take None back as NaN.
+write None (``null``), and plots take None back as NaN.  :func:`counted` says a count
+with its noun in the right number ("1 segment", "3 segments") in every message.
 """
 
 from __future__ import annotations
@@ -45,3 +47,10 @@ def jsonable(x: Any) -> Any:
 def none_to_nan(values: Iterable[float | None]) -> list[float]:
     """A JSON series back to floats for plotting: None becomes NaN."""
     return [math.nan if v is None else float(v) for v in values]
+
+
+def counted(n: int, noun: str, plural: str | None = None) -> str:
+    """``n`` and ``noun`` in the number ``n`` asks for: '1 segment', '0 segments',
+    '3 checks'; ``plural`` where adding 's' is wrong ('1 fix', '2 fixes')."""
+    word = noun if n == 1 else (plural if plural is not None else noun + "s")
+    return f"{n:,} {word}"

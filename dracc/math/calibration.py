@@ -58,6 +58,7 @@ from dracc.core import distributions as dist
 from dracc.core.arrays import ArrayLike, BoolArray, FloatArray, IntArray
 from dracc.core.errors import InsufficientDataError
 from dracc.core.geodesy import angdiff, offset_ne_m, wrap_pi
+from dracc.core.numbers import counted
 from dracc.core.units import KN_MPS
 from dracc.math.identifiability import (
     DETERMINABLE_Z,
@@ -583,8 +584,9 @@ def calibrate_from_track(
     m = seg_ids.size
     if m < 4:
         raise InsufficientDataError(
-            f"log calibration: only {m} segments of {segment_s:g} s have both log data and "
-            "reference positions at their ends (need at least 4)"
+            f"log calibration: only {counted(m, 'segment')} of {segment_s:g} s "
+            f"{'has' if m == 1 else 'have'} both log data and reference positions at their "
+            "ends (need at least 4)"
         )
     # per-sample arrays restricted to used segments, with a compact segment index
     hs, vs, ws = h[sample_use], v[sample_use], dt[sample_use]
@@ -670,8 +672,8 @@ def calibrate_from_track(
     n_par = n_h + 1 + n_b + 2 * nk
     if 2 * m <= n_par:
         raise InsufficientDataError(
-            f"log calibration: {m} segments cannot determine {n_par} parameters; use a longer "
-            "log, shorter segments or a longer current_knot_s"
+            f"log calibration: {counted(m, 'segment')} cannot determine {n_par} parameters; "
+            "use a longer log, shorter segments or a longer current_knot_s"
         )
     sol = levenberg_marquardt(resid, jac, _start(hs, vs, wn, si, B, u_ref[seg_ids], Hd, n_b))
     J = sol.jac

@@ -53,6 +53,10 @@ LEAST_SQUARES = "least_squares"
 CAL_SEGMENT_S = 600.0
 CAL_KNOT_S = 2 * 3600.0
 
+#: how the Missing list starts the reason a calibration was not computed (the audit
+#: quotes it where it checks the compass and the log: dracc.pipeline.audit.facts)
+NOT_COMPUTED = "calibration not computed"
+
 #: the section's names of the quantities dracc.math.calibration names
 _QUANTITY = {
     "compass_error": "compass_error_deg",
@@ -90,7 +94,7 @@ def calibration(
             fit_log_offset=True,  # dropped by the fit where it cannot tell it from the scale
         )
     except InsufficientDataError as err:
-        missing.append(f"calibration not computed: {err}")
+        missing.append(f"{NOT_COMPUTED}: {err}")
         return None
     unknown = {_QUANTITY[k]: why for k, why in cal.not_determinable.items()}
     eps = float(cal.heading_error_rad[0])

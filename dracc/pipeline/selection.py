@@ -250,8 +250,11 @@ def speed_series(voyage: Voyage, missing: list[str]) -> SpeedSeries | None:
             use["time_ns"].to_numpy(np.int64), use[col].to_numpy(float), use[col_y].to_numpy(float)
         )
         sent = sentence_types(use)
-        who = ("log " if voyage.role_sources("log") else "speed source ") + "+".join(logs)
-        return t, v, vy, f"{who} ({sent}, {what})", mode
+        # read after 'speed' in every report: 'log LOG (VHW, ...)', never 'speed speed ...'
+        if voyage.role_sources("log"):
+            return t, v, vy, f"log {'+'.join(logs)} ({sent}, {what})", mode
+        why = "chosen by evidence: no source has the log role"
+        return t, v, vy, f"{'+'.join(logs)} ({sent}, {what}; {why})", mode
     missing.append(
         "no log speed: the log sentences carry no speed value, through the water or "
         "over the ground; dead reckoning not computed"

@@ -17,7 +17,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
-from dracc.core.numbers import none_to_nan
+from dracc.core.numbers import counted, none_to_nan
 from dracc.core.vocabulary import CHANNEL_UNITS, CHANNELS, TABLE_COLUMNS
 from dracc.report.page import PAGE_END, img_tag, page_head
 
@@ -251,11 +251,19 @@ RULES_TEXT = (
     "configured. The analysis below shows these a priori values and this judgement."
 )
 
-_VERDICT_TEXT = {
-    "ok": "all checks passed",
-    "findings": "findings",
-    "no data": "no logs for the night",
-}
+
+def verdict_head(verdict: str, findings: int, not_checked: int) -> str:
+    """The night's verdict in a few words, one wording for the summary and the page (the
+    shape of the analysis' integrity count): 'all checks passed' only when every check
+    was made, 'all checks made passed; 1 not checked (listed below)', '8 findings; 3 not
+    checked (listed below)', 'no logs for the night'."""
+    if verdict == "no data":
+        return "no logs for the night"
+    if not findings:
+        head = "all checks made passed" if not_checked else "all checks passed"
+    else:
+        head = counted(findings, "finding")
+    return head + (f"; {not_checked} not checked (listed below)" if not_checked else "")
 
 
 def _evidence_text(ev: list) -> str:
@@ -405,13 +413,8 @@ def night_html(doc: dict, analysis_body: str = "", analysis_css: str = "") -> st
     title = f"dracc audit {doc['vessel']} {doc['night']}"
     parts = [page_head(title, css)]
     verdict = doc["verdict"]
-    n = len(doc["findings"])
     klass = {"ok": "ok", "findings": "findings"}.get(verdict, "nodata")
-    head = (
-        _VERDICT_TEXT.get(verdict, verdict)
-        if verdict != "findings"
-        else f"{n} finding{'s' if n != 1 else ''}"
-    )
+    head = verdict_head(verdict, len(doc["findings"]), len(doc["not_checked"]))
     parts.append(
         f"<p id='verdict' class='verdict {klass}'>Verdict: <b>{e(head)}</b> (exit "
         f"{doc['exit_code']}); state {e(doc['state'])}</p>"

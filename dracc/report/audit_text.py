@@ -17,6 +17,7 @@ from dracc.core.vocabulary import CHANNEL_KEYS
 from dracc.pipeline.audit import AuditOutcome
 from dracc.report.audit_html import fmt_value as _f
 from dracc.report.audit_html import measure_digits as _digits
+from dracc.report.audit_html import verdict_head
 from dracc.report.textout import Layout, Page, layout, table, wrap
 
 _STATUS = {
@@ -28,14 +29,21 @@ _STATUS = {
 }
 
 
+def _own_label(msg: str, names: set[str]) -> int:
+    """The length of ``msg``'s leading label ('INS2: ', 'ins2 (INS2): ', 'log (LOG):
+    ') when it names only ``names`` (the line's source, role and subject); else 0."""
+    head, sep, _ = msg.partition(": ")
+    words = head.replace("(", " ").replace(")", " ").replace(",", " ").split()
+    named = head in names or (bool(words) and set(words) <= names)
+    return len(head) + len(sep) if sep and named else 0
+
+
 def _finding_line(f) -> str:
     who = f.source or f.subject
     role = f" ({f.role})" if f.role and f.role != who else ""
-    msg = f.message
-    for name in dict.fromkeys((who, f.subject)):  # messages name their source: said once
-        if name and msg.startswith(f"{name}: "):
-            msg = msg[len(name) + 2 :]
-            break
+    # messages name their source (some as 'role (source)'): said once, before them
+    names = {n for n in (who, f.subject, f.role, *(f.source or "").split(",")) if n}
+    msg = f.message[_own_label(f.message, names) :]
     if not who and not role:  # a finding of the whole log (a logger's clock stepping back)
         return f"  - [{f.check}] {msg}"
     return f"  - [{f.check}] {who}{role}: {msg}"
@@ -58,10 +66,7 @@ def format_summary(
         ]
         lines.append(f"exit {int(o.exit_code)} (no logs)")
         return _joined(lines, width)
-    head = "all checks passed" if n == 0 else f"{n} finding{'s' if n > 1 else ''}"
-    if o.not_checked:
-        k = len(o.not_checked)
-        head += f" ({k} check{'s' if k > 1 else ''} could not be made: see 'not checked')"
+    head = verdict_head(o.verdict, n, len(o.not_checked))
     lines = [f"dracc audit: {r.vessel}, night {r.night}: {head}"]
     if o.findings:
         lines.append("findings:")

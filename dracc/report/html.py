@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from dracc.core import atomic
+from dracc.core.numbers import counted
 from dracc.core.timefmt import iso_utc
 from dracc.core.vocabulary import CHANNELS
 from dracc.pipeline.results import Analysis, DRLeg, DRSection, Estimate
@@ -35,6 +36,8 @@ from dracc.report.verdict import (
     Verdict,
     containment_text,
     honesty_text,
+    integrity_count,
+    scored_legs,
     verdict,
     with_ins,
 )
@@ -157,11 +160,12 @@ def _summary(a: Analysis) -> str:
     ]
     if a.integrity is not None:
         failed = a.integrity.failed
+        count = _e(integrity_count(a.integrity))
         text = (
-            f'<span class="bad">{len(failed)} of {len(a.integrity.checks)} checks failed</span>: '
+            f'<span class="bad">{count}</span>: '
             + "; ".join(_e(f"[{c.check}] {c.message}") for c in failed)
             if failed
-            else f'<span class="ok">all {len(a.integrity.checks)} checks passed</span>'
+            else f'<span class="ok">{count}</span>'
         )
         rows.append(("integrity", text))
     te = a.time
@@ -290,7 +294,7 @@ def _nees(dr: DRSection) -> str:
     if dr.nees_statistic is None or not math.isfinite(dr.nees_statistic):
         return "-"
     return (
-        f"{fmt(dr.nees_statistic, 1)} over {len(dr.leg_checks)} legs (χ² bounds "
+        f"{fmt(dr.nees_statistic, 1)} over {counted(len(dr.leg_checks), 'scored leg')} (χ² bounds "
         f"{fmt(dr.nees_lower, 1)}–{fmt(dr.nees_upper, 1)}); mean per epoch "
         f"{fmt(dr.mean_nees, 2)} (2 expected)"
     )
@@ -363,7 +367,7 @@ def _dr(a: Analysis) -> str:
         ("heading", _e(dr.heading_source)),
         ("speed", _e(dr.speed_source)),
         ("restart", _e(dr.reset)),
-        ("legs", str(len(dr.legs))),
+        ("legs", scored_legs(dr)),
         ("reference", _e(dr.reference_role or "none")),
         ("position and 2M", _e(position)),
         ("scored", _e(scored)),

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from rich.console import Console
 
+from dracc.core.numbers import counted
 from dracc.core.safetext import printable
 from dracc.core.vocabulary import CHANNELS
 from dracc.math.deviation import DeviationResult
@@ -34,7 +35,7 @@ from dracc.pipeline.results import (
 from dracc.report import fmt, fmt_duration, fmt_pct, short_utc
 from dracc.report.rows import EXCEEDS, calibration_method, clock_text, unit_rows
 from dracc.report.textout import Layout, Page, bullet, labelled, layout
-from dracc.report.verdict import honesty_text, verdict
+from dracc.report.verdict import honesty_text, integrity_count, scored_legs, verdict
 
 if TYPE_CHECKING:
     from dracc.pipeline.fleet import FleetResult
@@ -190,8 +191,7 @@ def _learned_text(m: Mapping[str, Any]) -> str:
 def _dr_body(page: _Page, dr: DRSection) -> None:
     page.line(
         "heading",
-        f"{dr.heading_source}; speed {dr.speed_source}; "
-        f"restart {dr.reset}; {len(dr.legs)} leg{'s' if len(dr.legs) != 1 else ''}",
+        f"{dr.heading_source}; speed {dr.speed_source}; restart {dr.reset}; {scored_legs(dr)}",
     )
     # the 2M is of the estimated position (water track + what was learned), or, with
     # learn = false, of the water track itself
@@ -227,9 +227,8 @@ def _dr_body(page: _Page, dr: DRSection) -> None:
         page.line("scored", scored)
         nees = "-"
         if np.isfinite(dr.nees_statistic):
-            n_legs = len(dr.leg_checks)
             nees = (
-                f"{fmt(dr.nees_statistic, 1)} over {n_legs} leg{'s' if n_legs != 1 else ''} "
+                f"{fmt(dr.nees_statistic, 1)} over {counted(len(dr.leg_checks), 'scored leg')} "
                 f"(chi² {fmt(dr.nees_lower, 1)}-{fmt(dr.nees_upper, 1)}), mean per epoch "
                 f"{fmt(dr.mean_nees, 2)} (2 expected)"
             )
@@ -405,7 +404,7 @@ def _page(a: Analysis, lay: Layout) -> _Page:
         failed = a.integrity.failed
         _bullets(
             page,
-            f"Integrity: {len(failed)} of {len(a.integrity.checks)} checks failed",
+            f"Integrity: {integrity_count(a.integrity)}",
             [f"[{c.check}] {c.message}" for c in failed],
         )
     _bullets(page, "Missing", a.missing)

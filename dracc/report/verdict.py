@@ -28,8 +28,10 @@ import statistics
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+from dracc.core.numbers import counted
 from dracc.core.vocabulary import CHANNEL_KEYS, CHANNEL_UNITS, CHANNELS
 from dracc.math.deviation import DeviationResult
+from dracc.math.integrity import IntegrityResult
 from dracc.pipeline.results import Analysis, DRHonesty, DRSection
 from dracc.report import fmt, fmt_pct
 from dracc.report.rows import channel_digits
@@ -46,6 +48,7 @@ __all__ = [
     "Finding",
     "Verdict",
     "WorstUnit",
+    "integrity_count",
     "verdict",
 ]
 
@@ -160,7 +163,7 @@ def _nees_reason(dr: DRSection) -> tuple[str, bool | None]:
         return "NEES not computed (no leg scored against the reference)", None
     where = "above" if s > hi else ("below" if s < lo else "within")
     return (
-        f"NEES {fmt(s, 1)} over {len(dr.leg_checks)} legs: {where} the χ² bounds "
+        f"NEES {fmt(s, 1)} over {counted(len(dr.leg_checks), 'scored leg')}: {where} the χ² bounds "
         f"{fmt(lo, 1)}-{fmt(hi, 1)}",
         s > hi,
     )
@@ -349,7 +352,7 @@ def _integrity(a: Analysis) -> Finding:
     ig = a.integrity
     if ig is None:
         return Finding(topic, NOT_CHECKED, "integrity checks not run")
-    skipped = [c for c in ig.checks if c.status == "not_checked"]
+    skipped = ig.not_checked
     why: dict[tuple[str, str], list[str]] = {}
     for c in skipped:
         why.setdefault((f"{c.check}/{c.name}", c.why_not or "no reason given"), []).append(
@@ -364,13 +367,29 @@ def _integrity(a: Analysis) -> Finding:
         return Finding(
             topic,
             FAIL,
-            f"{len(failed)} of {len(ig.checks)} integrity checks failed",
+            integrity_count(ig),
             tuple(f"{c.check}/{c.name}: {c.message}" for c in failed) + tuple(notes),
         )
-    made = len(ig.checks) - len(skipped)
+    if not ig.made:
+        return Finding(topic, NOT_CHECKED, integrity_count(ig), tuple(notes))
+    return Finding(topic, OK, integrity_count(ig), tuple(notes))
+
+
+def integrity_count(ig: IntegrityResult) -> str:
+    """The integrity checks counted, one wording for every report: 'all 42 integrity
+    checks passed', 'all 38 integrity checks made passed; 4 not checked', '2 of 38
+    integrity checks made failed; 4 not checked' (the not checked never among the made)."""
+    made, skipped, failed = len(ig.made), len(ig.not_checked), len(ig.failed)
     if made == 0:
-        return Finding(topic, NOT_CHECKED, "no integrity check could be made", tuple(notes))
-    return Finding(topic, OK, f"all {made} integrity checks made passed", tuple(notes))
+        return "no integrity check could be made" + (f"; {skipped} not checked" if skipped else "")
+    checks = "integrity checks made" if skipped else "integrity checks"
+    if failed:
+        head = f"{failed} of {made} {checks} failed"
+    elif made == 1:
+        head = f"the one {checks.replace('checks', 'check')} passed"
+    else:
+        head = f"all {made} {checks} passed"
+    return head + (f"; {skipped} not checked" if skipped else "")
 
 
 def _fault_coverage(a: Analysis) -> tuple[list[str], list[str]]:
@@ -493,6 +512,13 @@ def _whole(
     if worst is not None:
         headline += f"; worst INS unit {worst.unit} ({worst.channel})"
     return Verdict(level, headline, dr, ins, worst, integ, faults, state, miss)
+
+
+def scored_legs(dr: DRSection) -> str:
+    """'10 legs, 8 of them scored': the legs drawn and the legs the NEES and the verdict
+    count (those with epochs scored against the reference), one wording for the two."""
+    n, k = len(dr.legs), len(dr.leg_checks)
+    return counted(n, "leg") + ("" if k == n else f", {k} of them scored")
 
 
 def containment_text(dr: DRSection) -> str:

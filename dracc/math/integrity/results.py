@@ -80,6 +80,16 @@ class IntegrityResult:
         return tuple(c for c in self.checks if c.status == "fail")
 
     @property
+    def made(self) -> tuple[Check, ...]:
+        """The checks made (passed or failed): the count every report states."""
+        return tuple(c for c in self.checks if c.status != "not_checked")
+
+    @property
+    def not_checked(self) -> tuple[Check, ...]:
+        """The checks that could not be made, each with its ``why_not``."""
+        return tuple(c for c in self.checks if c.status == "not_checked")
+
+    @property
     def false_alarm_per_night(self) -> float:
         """Union (Bonferroni) bound of the checks made: P(any healthy check fails)."""
         return float(min(1.0, sum(c.false_alarm for c in self.checks if c.status != "not_checked")))

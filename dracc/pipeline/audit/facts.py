@@ -23,7 +23,7 @@ from dracc.pipeline.state import ChannelRow
 if TYPE_CHECKING:
     from dracc.math.deviation import DeviationResult
     from dracc.math.integrity import Check
-    from dracc.pipeline.results import Analysis, DRSection, Estimate
+    from dracc.pipeline.results import Analysis, CalibrationSection, DRSection, Estimate
 
 
 @dataclass(frozen=True)
@@ -64,6 +64,8 @@ class NightFacts:
     measures: Mapping[str, Any] = field(default_factory=dict)
     #: calibrated quantities the data could not determine, and why (issue 29)
     calibration_not_determinable: Mapping[str, str] = field(default_factory=dict)
+    #: why the analysis has no calibration at all (its Missing entry), None where it has one
+    calibration_why_not: str | None = None
 
 
 #: reject reasons of older analyses that were valid input dracc does not use
@@ -198,9 +200,31 @@ def facts_from_analysis(a: Analysis) -> NightFacts:
             finite_or_none(integ.false_alarm_per_night) if integ is not None else None
         ),
         measures=night_measures(a),
-        calibration_not_determinable=dict(cal.not_determinable) if cal is not None else {},
+        calibration_not_determinable=_not_determinable(cal),
+        calibration_why_not=None if cal is not None else _calibration_why_not(a),
         **_dr_facts(a.dead_reckoning),
     )
+
+
+def _not_determinable(cal: CalibrationSection | None) -> dict[str, str]:
+    """The calibration's quantities it could not determine, with why; one it gives no
+    finite estimate of is among them (said so), never left to read as 'not estimated'."""
+    if cal is None:
+        return {}
+    out = dict(cal.not_determinable)
+    for key, e in (("compass_error_deg", cal.compass_error_deg), ("log_scale", cal.log_scale)):
+        if e is None or finite_or_none(e.value) is None:
+            got = "no estimate" if e is None else f"an estimate of {e.value}"
+            out.setdefault(key, f"the calibration gives {got} and no reason")
+    return out
+
+
+def _calibration_why_not(a: Analysis) -> str | None:
+    """Why the analysis has no calibration where its fit ran and failed (the fit's own
+    reason, from the Missing list); None where the dead reckoning it rests on did not run."""
+    from dracc.pipeline.calibration_stage import NOT_COMPUTED
+
+    return next((str(m) for m in a.missing if str(m).startswith(NOT_COMPUTED)), None)
 
 
 def night_of(facts: NightFacts) -> str:

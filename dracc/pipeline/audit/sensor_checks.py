@@ -47,7 +47,7 @@ class _Quantity:
     unit: str
     key: str  #: its key in the calibration's ``not_determinable``
     rule: str  #: the configuration key of its limit
-    absent: str  #: why there is no estimate at all
+    absent: str  #: why there is no estimate: no calibration ran (else its own why is said)
 
 
 _COMPASS = _Quantity(
@@ -58,7 +58,8 @@ _COMPASS = _Quantity(
     "deg",
     "compass_error_deg",
     "[audit] compass_error_max_deg",
-    "compass error not estimated (no heading or no reference)",
+    "compass error not estimated: no dead reckoning to calibrate (it needs a heading, a "
+    "speed log and a reference; see missing)",
 )
 _LOG = _Quantity(
     "log_scale",
@@ -68,7 +69,8 @@ _LOG = _Quantity(
     "%",
     "log_scale",
     "[audit] log_scale_max_pct",
-    "log scale not estimated (no speed log or no reference)",
+    "log scale not estimated: no dead reckoning to calibrate (it needs a heading, a "
+    "speed log and a reference; see missing)",
 )
 
 
@@ -129,7 +131,7 @@ def sensor_error_checks(
             skip(q, f"not determinable from tonight's calibration: {nd[q.key]}")
             continue
         if value is None:
-            skip(q, q.absent)
+            skip(q, facts.calibration_why_not or q.absent)
             continue
         if sigma is None or not sigma >= 0:
             skip(

@@ -1,0 +1,201 @@
+"""Issue 32, counts: every count in one report agrees with the others and no figure
+misleads (a named regression test for each)."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+
+from test_report import make_analysis
+
+from dracc.core.numbers import counted
+from dracc.math.integrity import Check, IntegrityResult
+from dracc.report import html, terminal
+from dracc.report.verdict import integrity_count, verdict
+
+
+def _check(status: str, source: str = "GNSS", name: str = "jump") -> Check:
+    return Check(
+        "plausibility",
+        name,
+        source,
+        "gnss",
+        status,
+        {"name": "x", "value": 1.0, "unit": "m"},
+        {"value": 2.0, "unit": "m", "rule": "r"},
+        {},
+        0.001,
+        f"{source}: {name} {status}",
+        why_not="no clock" if status == "not_checked" else None,
+    )
+
+
+def _integrity(passed: int, skipped: int, failed: int = 0) -> IntegrityResult:
+    checks = (
+        [_check("pass") for _ in range(passed)]
+        + [_check("not_checked", "MAG", "latency") for _ in range(skipped)]
+        + [_check("fail") for _ in range(failed)]
+    )
+    return IntegrityResult(tuple(checks), (), 0, 1, 0.001)
+
+
+def test_counted_says_one_and_many():
+    assert counted(1, "segment") == "1 segment"
+    assert counted(0, "segment") == "0 segments"
+    assert counted(3, "fix", "fixes") == "3 fixes"
+    assert counted(12_000, "line") == "12,000 lines"
+
+
+def test_integrity_count_never_counts_the_checks_not_made_as_passed():
+    # issue 32: "all 38 integrity checks made passed" above "all 42 checks passed"
+    assert (
+        integrity_count(_integrity(38, 4)) == "all 38 integrity checks made passed; 4 not checked"
+    )
+    assert integrity_count(_integrity(42, 0)) == "all 42 integrity checks passed"
+    assert (
+        integrity_count(_integrity(36, 4, 2))
+        == "2 of 38 integrity checks made failed; 4 not checked"
+    )
+    assert integrity_count(_integrity(0, 3)) == "no integrity check could be made; 3 not checked"
+
+
+def test_terminal_verdict_and_html_summary_state_one_integrity_count():
+    a = dataclasses.replace(make_analysis("full"), integrity=_integrity(38, 4))
+    count = "all 38 integrity checks made passed; 4 not checked"
+    assert verdict(a).integrity.headline == count
+    text = terminal.render_text(a, width=200)
+    page = html.render_html(a)
+    assert count in text and count in page
+    # no other count of the integrity checks anywhere
+    for doc in (text, page):
+        assert not re.search(r"all 42\b|\b42 (integrity )?checks", doc), doc
+    failed = dataclasses.replace(a, integrity=_integrity(36, 4, 2))
+    text = terminal.render_text(failed, width=200)
+    page = html.render_html(failed)
+    count = "2 of 38 integrity checks made failed; 4 not checked"
+    assert count in text and count in page and "of 42" not in text + page
+
+
+def _audited(tmp_path, integrity: IntegrityResult | None = None):
+    from test_audit_helpers import make_analysis as audit_analysis
+
+    from dracc.pipeline.audit import AuditConfig, audit_night, facts_from_analysis
+    from dracc.pipeline.state import StateStore
+
+    a = audit_analysis("2026-11-19", m_y={"ins1": {"lat": 100.0, "course": 0.1}})
+    if integrity is not None:
+        a = dataclasses.replace(a, integrity=integrity)
+    with StateStore(tmp_path / "s.sqlite") as store:
+        return audit_night(
+            facts_from_analysis(a),
+            store=store,
+            acfg=AuditConfig(required_sources=("ins1",)),
+            seeds={},
+            vessel="Aurora",
+            night=None,
+            content_hash="h",
+            settings_hash="s",
+        )
+
+
+def test_audit_head_says_all_checks_passed_only_when_every_check_was_made(tmp_path):
+    from dracc.report.audit_html import verdict_head
+    from dracc.report.audit_text import format_summary
+
+    assert verdict_head("ok", 0, 0) == "all checks passed"
+    assert verdict_head("ok", 0, 1) == "all checks made passed; 1 not checked (listed below)"
+    assert verdict_head("findings", 1, 3) == "1 finding; 3 not checked (listed below)"
+    o = _audited(tmp_path)  # the first night: the accuracy window is not full
+    head = format_summary(o).splitlines()[0]
+    assert head.endswith(": all checks made passed; 1 not checked (listed below)")
+    assert sum(ln.startswith("not checked: ") for ln in format_summary(o).splitlines()) == 1
+
+
+def test_audit_finding_names_its_source_once(tmp_path):
+    # issue 32: "[consistency] INS2 (ins2): ins2 (INS2): starts drifting ..."
+    from dracc.report.audit_text import format_summary
+
+    drift = dataclasses.replace(
+        _check("fail", "INS2", "velocity"),
+        check="consistency",
+        role="ins2",
+        message="ins2 (INS2): starts drifting from the mean of the other INS units",
+    )
+    o = _audited(tmp_path, IntegrityResult((drift,), (), 0, 1, 0.001))
+    (line,) = [ln for ln in format_summary(o).splitlines() if "starts drifting" in ln]
+    assert (
+        line
+        == "  - [consistency] INS2 (ins2): starts drifting from the mean of the other INS units"
+    )
+
+
+def test_audit_names_why_the_calibration_did_not_run(tmp_path):
+    # issue 32: "Compass error not estimated (no heading or no reference)" on a night with
+    # both: the fit itself failed, and its reason is in the analysis' Missing list
+    from test_audit_helpers import make_analysis as audit_analysis
+
+    from dracc.pipeline.audit import AuditConfig, evaluate, facts_from_analysis
+
+    why = (
+        "calibration not computed: log calibration: only 1 segment of 600 s have both log "
+        "data and reference positions at their ends (need at least 4)"
+    )
+    a = audit_analysis("2026-11-19")
+    a = dataclasses.replace(a, calibration=None, missing=(why,))
+    _, skipped = evaluate(facts_from_analysis(a), AuditConfig())
+    by_name = {s["name"]: s["why"] for s in skipped}
+    assert by_name["compass_error"] == why and by_name["log_scale"] == why
+    # no calibration because no dead reckoning ran: said as such, never 'no heading'
+    a = dataclasses.replace(a, dead_reckoning=None, missing=("no speed log: ...",))
+    _, skipped = evaluate(facts_from_analysis(a), AuditConfig())
+    by_name = {s["name"]: s["why"] for s in skipped}
+    assert "no dead reckoning to calibrate" in by_name["compass_error"]
+    assert "no heading or no reference" not in by_name["compass_error"]
+
+
+def _nmea(body: str) -> str:
+    x = 0
+    for b in body.encode():
+        x ^= b
+    return f"${body}*{x:02X}"
+
+
+def test_a_speed_source_without_the_log_role_reads_once_after_speed(tmp_path):
+    # issue 32: "speed speed source VW (...)" in the DR section
+    from dracc.core.config import IngestConfig
+    from dracc.ingest import read_logs
+    from dracc.pipeline.selection import speed_series
+
+    p = tmp_path / "vhw.log"
+    p.write_text(
+        "".join(
+            f"2026-03-01T00:00:{k:02d}.000Z {_nmea('VWVHW,,T,,M,12.0,N,22.2,K')}\n"
+            for k in range(10)
+        )
+    )
+    v = read_logs([p], IngestConfig())
+    for s in v.sources.values():
+        s.roles = []
+    got = speed_series(v, [])
+    assert got is not None
+    desc = got[3]
+    assert desc.startswith("VW (VHW, through the water; chosen by evidence"), desc
+    assert "speed source" not in desc
+
+
+def test_one_calibration_segment_is_said_in_the_singular():
+    # issue 32: "only 1 segments"
+    import numpy as np
+    import pytest
+
+    from dracc.core.errors import InsufficientDataError
+    from dracc.math.calibration import calibrate_from_track
+
+    t = np.arange(0, 700, 1.0)
+    rt = np.arange(0, 700, 10.0)
+    lat = np.radians(54) + 6 * rt / 6378137.0
+    with pytest.raises(InsufficientDataError, match="only 1 segment of 600 s has both"):
+        calibrate_from_track(
+            t, np.zeros_like(t), np.full_like(t, 6.0), rt, lat, np.full_like(rt, 0.3),
+            max_ref_gap_s=60,
+        )  # fmt: skip
