@@ -199,3 +199,51 @@ def test_one_calibration_segment_is_said_in_the_singular():
             t, np.zeros_like(t), np.full_like(t, 6.0), rt, lat, np.full_like(rt, 0.3),
             max_ref_gap_s=60,
         )  # fmt: skip
+
+
+def test_inspect_rate_is_the_epoch_rate_not_sentences_a_second(tmp_path):
+    # issue 32: "3.01 Hz" for a 1 Hz INS that sends GGA, HDT and VTG each second
+    from dracc.core.config import IngestConfig
+    from dracc.ingest.inspect import inspect_logs
+    from dracc.report.inspect_report import render_inspection_text
+
+    lines = []
+    for k in range(120):
+        ts = f"2026-03-01T00:{k // 60:02d}:{k % 60:02d}.000Z"
+        hms = f"00{k // 60:02d}{k % 60:02d}.00"
+        lines += [
+            f"{ts} {_nmea(f'INGGA,{hms},5436.0,N,01847.0,E,1,12,0.8,10.0,M,30.0,M,,')}",
+            f"{ts} {_nmea('INHDT,60.0,T')}",
+            f"{ts} {_nmea('INVTG,60.0,T,,M,12.0,N,22.2,K,A')}",
+        ]
+    p = tmp_path / "ins.nmea"
+    p.write_text("\n".join(lines) + "\n")
+    rep = inspect_logs([p], IngestConfig())
+    (s,) = rep["sources"].values()
+    assert sum(s["sentences"].values()) == 360
+    assert abs(s["rate_hz"] - 1.0) < 1e-9 and s["rate_sentence"] in ("GGA", "HDT", "VTG")
+    text = render_inspection_text(rep, width=200)
+    assert " 1.00 " in text and "3.0" not in text
+    assert "most frequent sentence type" in text  # the table says what its rate is
+
+
+def test_watch_counts_lines_a_second_never_calls_them_hz():
+    # issue 32: watch showed "rate Hz 3.01" for a 1 Hz INS sending three sentence types
+    from rich.console import Console
+
+    from dracc.pipeline.watch import SourceState, Watch
+    from dracc.report.watch_view import status_view
+
+    now = [1_772_323_200 * 10**9]
+    w = Watch([], clock=lambda: now[0])
+    st = w.state["INS1"] = SourceState()
+    for k in range(60):
+        for _ in range(3):  # GGA, HDT, VTG in one second
+            st.add(now[0] + k * 10**9, None)
+    now[0] += 60 * 10**9
+    s = w.status()["sources"]["INS1"]
+    assert "rate_hz" not in s and abs(s["lines_per_s"] - 3.0) < 0.1
+    console = Console(width=160, record=True)
+    console.print(status_view(w.status()))
+    text = console.export_text()
+    assert "lines/s" in text and "Hz" not in text

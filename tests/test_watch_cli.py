@@ -127,7 +127,7 @@ def test_status_counts_every_source_while_running(run):
     assert set(st["sources"]) == {"GYRO", "MAG", "LOG", "INS1", "INS2", "INS3", "GNSS"}
     for key, s in st["sources"].items():
         assert s["role"] is None and s["records"] == run["want"][key]
-        assert s["rate_hz"] > 0 and s["age_s"] >= 0 and s["last_utc"].endswith("Z")
+        assert s["lines_per_s"] > 0 and s["age_s"] >= 0 and s["last_utc"].endswith("Z")
         # latency = receive time - c: of the source's last line (whole seconds in the sample)
         last = [ln for ln in run["sent"][:2000] if _source(ln) == key][-1]
         c_s = int(last[last.index(b",c:") + 3 : last.index(b"*")])

@@ -308,7 +308,7 @@ def test_status_counts_every_source_while_running(voyage):
             assert before.get(key, 0) < s["records"] <= sent_by_key[key], (
                 f"{v['tag']}: {key} {before.get(key)} -> {s['records']} of {sent_by_key[key]}"
             )
-            assert s["rate_hz"] > 0 and s["age_s"] >= 0, v["tag"]
+            assert s["lines_per_s"] > 0 and s["age_s"] >= 0, v["tag"]
         before = {k: s["records"] for k, s in st["sources"].items()}
 
 

@@ -358,13 +358,24 @@ def _step_out(s: ClockStep) -> dict[str, Any]:
     }
 
 
+def rate_of_source(sentences: dict[str, int], span_s: float) -> tuple[float | None, str | None]:
+    """(rate in Hz, its sentence type): the rate of the source's most frequent sentence
+    type over its span, the epoch rate of a source that sends each type once an epoch (an
+    INS at 1 Hz sending GGA, HDT and VTG: 1 Hz, never the 3 sentences a second of them
+    all); (None, None) without a span."""
+    if span_s <= 0 or not sentences:
+        return None, None
+    kind, n = max(sorted(sentences.items()), key=lambda kv: kv[1])
+    return (n - 1) / span_s, kind
+
+
 def _source_out(s: SourceInfo, ev: dict[str, Any], clockless: bool = False) -> dict[str, Any]:
     """One source's entry of the report (no rate where its file has no clock: the times
     are only the records' order)."""
     span_s = (
         (s.last_ns - s.first_ns) / 1e9 if s.first_ns is not None and s.last_ns is not None else 0.0
     )
-    nsent = sum(s.sentences.values())
+    rate_hz, rate_of = rate_of_source(s.sentences, 0.0 if clockless else span_s)
     return {
         "role": s.role,
         "roles": list(s.roles),
@@ -374,7 +385,8 @@ def _source_out(s: SourceInfo, ev: dict[str, Any], clockless: bool = False) -> d
         "first_utc": iso_utc(s.first_ns),
         "last_utc": iso_utc(s.last_ns),
         "span_s": span_s,
-        "rate_hz": (nsent - 1) / span_s if span_s > 0 and not clockless else None,
+        "rate_hz": rate_hz,
+        "rate_sentence": rate_of,
         "clockless": clockless,
         "gaps": ev["gaps"],
         "max_gap_s": ev["max_gap_s"],

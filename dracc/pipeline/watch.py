@@ -12,8 +12,10 @@ look at its bytes: for NMEA 0183 the key dracc's reader gives it (the TAG block'
 where there is one, else the talker of ``$TTSSS``; a proprietary ``$P...`` sentence: its
 address, ``PASHR``), ``n2k:addr<src>`` for a NMEA 2000 text line, ``signalk:<source>`` for
 a Signal K delta.  ``records`` counts the lines heard (a line the reader will reject for
-its checksum is heard all the same).  Per key: the records, the rate over the
-last minute (60 one-second buckets), the last receive time and its age, and the
+its checksum is heard all the same).  Per key: the records, the lines a second over the
+last minute (60 one-second buckets; ``lines_per_s``: every sentence type counted, so an
+INS sending GGA, HDT and VTG at 1 Hz hears 3 lines a second, never called 3 Hz;
+``dracc inspect`` gives the epoch rate in Hz), the last receive time and its age, and the
 latency (receive time minus the TAG ``c:`` time, where the line has one; ``c:`` in
 seconds up to 10 digits, else milliseconds, as :mod:`dracc.ingest.tagblock` reads it).
 
@@ -79,9 +81,9 @@ class SourceState:
         if c_ns is not None:
             self.latency_s = round((recv_ns - c_ns) / 1e9, 3)
 
-    def rate_hz(self, now_ns: int) -> float:
-        """Lines per second over the last :data:`RATE_WINDOW_S` seconds (fewer at the
-        start: since the first line)."""
+    def lines_per_s(self, now_ns: int) -> float:
+        """Lines per second (of every sentence type: not a rate in Hz) over the last
+        :data:`RATE_WINDOW_S` seconds (fewer at the start: since the first line)."""
         now_s = now_ns // 1_000_000_000
         n = sum(c for s, c in self.buckets if s > now_s - RATE_WINDOW_S)
         if not n or not self.buckets:
@@ -230,7 +232,7 @@ class Watch:
             key: {
                 "role": ",".join(roles[key]) if roles.get(key) else None,
                 "records": st.records,
-                "rate_hz": st.rate_hz(now),
+                "lines_per_s": st.lines_per_s(now),
                 "last_utc": utc(st.last_ns),
                 "age_s": round((now - st.last_ns) / 1e9, 3),
                 "latency_s": st.latency_s,

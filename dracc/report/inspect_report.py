@@ -35,6 +35,14 @@ _COLUMNS = (
 )
 
 
+#: what the sources table's rate is (dracc.ingest.inspect.rate_of_source)
+RATE_NOTE = (
+    "rate Hz: of each source's most frequent sentence type (rate_sentence in the JSON), "
+    "its epoch rate where it sends each type once an epoch; not its sentences of all "
+    "types a second"
+)
+
+
 def with_clocks(rep: dict[str, Any], clocks: Mapping[str, SourceClock]) -> dict[str, Any]:
     """The report with ``sources[KEY].clock`` (as in the analysis JSON) for every source."""
     for key, s in rep["sources"].items():
@@ -85,6 +93,8 @@ def inspection_page(
     page.table(
         headers, rows, right=right, priorities=prio, title=f"sources ({rep['lines']} lines read)"
     )
+    if any(s["rate_hz"] for s in rep["sources"].values()):
+        page.wrapped(RATE_NOTE, hang=2)
     sent = rep.get("sentences") or {}
     if sent:
         page.wrapped("sentences read: " + " ".join(f"{k}:{v}" for k, v in sent.items()), hang=2)

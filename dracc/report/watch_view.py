@@ -69,7 +69,7 @@ def _sources(st: dict[str, Any]) -> Table:
         ("source", False),
         ("role", False),
         ("records", True),
-        ("rate Hz", True),
+        ("lines/s", True),
         ("age s", True),
         ("latency s", True),
     ):
@@ -80,7 +80,7 @@ def _sources(st: dict[str, Any]) -> Table:
             printable(key),
             s.get("role") or "-",
             f"{s['records']:,}",
-            _num(s["rate_hz"], 2),
+            _num(s["lines_per_s"], 2),
             _num(s["age_s"], 1),
             _num(s.get("latency_s"), 3),
             style="red" if key in stale else None,
