@@ -26,11 +26,12 @@ from geographiclib.geodesic import Geodesic
 from shapely.geometry import Point, Polygon
 
 from dracc.core.errors import ExitCode
+from dracc.core.vocabulary import FIX_UPDATED_EP
 from dracc.report import terminal
 
 SAMPLE = SAMPLES / "voyage_tag.nmea"
 NS = "https://dracc.example/gpx/1"
-KML_FOLDER = "aided-DR EP (seeds/003)"
+KML_FOLDER = FIX_UPDATED_EP
 WGS84 = Geodesic.WGS84
 
 pytestmark = pytest.mark.skipif(not SAMPLE.exists(), reason="sample_logs not generated")
@@ -231,7 +232,7 @@ def test_ep_panel_draws_the_visible_ellipses_and_insets(run):
 def test_terminal_has_the_ep_line_and_the_study_table(run, width, tty):
     text = terminal.render_text(run.analysis, width, tty)
     lines = text.splitlines()
-    at = lines.index("Aided-DR estimated position")
+    at = lines.index("Fix-updated EP")
     body = "\n".join(lines[at : at + 12])
     ep = run.ep
     r2m = [e["radius_2m_m"] for e in ep["epochs"]]

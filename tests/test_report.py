@@ -137,7 +137,7 @@ LEARNED = {
 
 #: why a learned calibration has no log offset (dracc.pipeline.calibration_stage)
 LEARNED_NO_OFFSET = (
-    "the estimated position's filter has no log-offset state: an offset is folded into the "
+    "the filter of the DR over the ground has no log-offset state: an offset is folded into the "
     "log scale at this voyage's speeds (b / V; median 12.0 kn through the water)"
 )
 
@@ -649,13 +649,13 @@ def test_terminal_summary_content():
     for needle in (
         "2026-03-01 00:00Z → 2026-03-02 01:00Z (25 h 00 min)",
         "rejected 12 lines: checksum 10",
-        "2M       of the estimated position, largest 80 m: reference (gnss) inside 2M at 96.0 %",
+        "2M       of the DR over the ground, largest 80 m: reference (gnss) inside 2M at 96.0 %",
         "scored   120 epochs out of sample",
         "5 prior-only epochs unscored",
         "NEES     36.0 over 24 scored legs (chi² 26.5-77.0)",
         "learned  current set 45 ° drift 0.49 kn; noise 0.10 kn; compass and log errors: "
         "see Calibration",
-        "against gnss (learned by the estimated position's filter from 288 fixes)",
+        "against gnss (learned with the DR over the ground from 288 fixes)",
         "log offset NOT DETERMINABLE",
         "excess",
         "neg. var.",
@@ -689,10 +689,10 @@ def test_terminal_dominant_source_only_when_not_consistent():
 
 def test_terminal_without_a_learned_model():
     text = terminal.render_text(_not_learned(make_analysis("full")))
-    assert "2M       of the DR water track, largest 80 m" in text
+    assert "2M       of the water track, largest 80 m" in text
     assert "scored   120 epochs after a fix, error model as configured (learn = false)" in text
     assert "NEES     -; RMS error/M 0.71" in text
-    assert "learned " not in text and "estimated position" not in text
+    assert "learned " not in text and "DR over the ground" not in text
 
 
 def test_terminal_does_not_interpret_markup():

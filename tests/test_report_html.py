@@ -161,7 +161,7 @@ def test_html_in_real_browser(tmp_path):
     body = data["body"]
     assert "NEES\t36.0 over 24 legs" in body
     assert "[dead_reckoning]\nlearn = false\n" in body
-    assert "water track (heading and log only, thin dashed)" in body
+    assert "water track (heading and log only), thin dashed" in body
 
 
 def test_html_dead_reckoning_shows_nees_and_the_learned_model():
@@ -184,7 +184,7 @@ def test_html_dead_reckoning_shows_nees_and_the_learned_model():
     assert '<td>compass and log errors</td><td><a href="#calibration">Calibration</a>' in dr_part
     cal_part = text.split('<section id="calibration">', 1)[1].split("</section>", 1)[0]
     assert (
-        "<td>against</td><td>gnss (learned by the estimated position&#x27;s filter from 288 "
+        "<td>against</td><td>gnss (learned with the DR over the ground from 288 "
         "fixes)</td>" in cal_part
     )
     assert "set 45° (towards), drift 0.49 kn" in dr_part

@@ -28,6 +28,7 @@ from dracc.core.config import Config, DeadReckoningConfig
 from dracc.pipeline.analysis import analyse
 from dracc.report import track_plots as tp
 from dracc.report.html import write_html
+from dracc.report.plots import EP_LABEL
 
 SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
 T_WRONG_S = 1772344800 + 3600  # 07:00 UTC
@@ -217,7 +218,7 @@ def test_misses_are_marked_and_counted(which, request):
 def test_reference_is_drawn_above_the_dr(day_panels):
     for p in day_panels:
         ref = _line(p.ax, "reference (")
-        dr = _line(p.ax, "estimated position")
+        dr = _line(p.ax, EP_LABEL)
         circles = [c.get_zorder() for c in p.ax.patches if isinstance(c, Circle)]
         assert ref.get_zorder() > dr.get_zorder() > max(circles, default=-1)
         assert ref.get_color() != dr.get_color()

@@ -108,7 +108,12 @@ def test_dead_reckoning_reasons_against_its_bounds(sample):
     dr = sample.dead_reckoning
     v = verdict(sample).dead_reckoning
     inside = dr.nees_lower <= dr.nees_statistic <= dr.nees_upper
-    assert dr.consistent and inside and v.level == OK and v.headline.startswith("DR honest")
+    assert (
+        dr.consistent
+        and inside
+        and v.level == OK
+        and v.headline.startswith("DR over the ground honest")
+    )
     assert f"{100 * dr.containment_2m:.1f} %" in v.reasons[0]
     assert f"stated: {100 * dr.expected_inside:.1f} %" in v.reasons[0]
     assert (

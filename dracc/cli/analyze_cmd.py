@@ -107,12 +107,12 @@ def analyze(
         None,
         "--observations",
         help="TOML file of timed fixes, ranges, bearings and lines: "
-        "each updates the estimated position.",
+        "each updates the fix-updated EP.",
     ),
     fix_interval: str | None = typer.Option(
         None,
         "--fix-interval",
-        help="Update-interval study of the estimated position: "
+        help="Update-interval study of the fix-updated EP: "
         "GNSS fix intervals, e.g. 300,600,1200,1800,3600 (or 5min,1h).",
     ),
 ) -> None:

@@ -90,8 +90,8 @@ def fix_cmd(
     gyro_vector: list[str] = _repeated(
         "--gyro-vector",
         "UX,UY,UZ,TIME_S,NADIR_DEG[,SIGMA_DEG[,SIGMA_U_DEG[,SIGMA_T_S]]]",
-        "Free-gyro spin-axis unit vector (inertial frame), time and nadir angle (seeds/002 "
-        "(1)); sigmas of the nadir angle (default 1'), the vector and the clock; the "
+        "Free-gyro spin-axis unit vector (inertial frame), time and nadir angle (Jeong's "
+        "free-gyro paper (1)); sigmas of the nadir angle (default 1'), the vector and the clock; the "
         "report adds the paper's error model and FDOP (docs/free-gyro.md).",
     ),
     prior: str | None = typer.Option(

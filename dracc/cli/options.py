@@ -55,8 +55,8 @@ GpxOut = Annotated[
     typer.Option(
         "--gpx",
         metavar="PATH",
-        help="Write GPX 1.1 (OpenCPN, chart plotters): DR, EP and reference tracks, "
-        "a segment per leg, the 2M per point, waypoints at the misses.",
+        help="Write GPX 1.1 (OpenCPN, chart plotters): water track, DR over the ground, fix-"
+        "updated EP, reference; a segment per leg, the 2M per point, waypoints at the misses.",
     ),
 ]
 KmlOut = Annotated[
@@ -82,8 +82,8 @@ McapOut = Annotated[
     typer.Option(
         "--mcap",
         metavar="PATH",
-        help="Write an MCAP for Foxglove: the inputs' positions and headings, the DR and "
-        "EP with their covariance, the 2M as GeoJSON (layout: docs/).",
+        help="Write an MCAP for Foxglove: the inputs' positions and headings, the DR over the "
+        "ground and fix-updated EP with their covariance, the 2M as GeoJSON (layout: docs/).",
     ),
 ]
 

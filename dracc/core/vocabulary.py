@@ -17,6 +17,35 @@ CHANNEL_KEYS = {"lat": "lat_m", "lon": "lon_m", "course": "course_deg"}
 #: each channel's unit, as reports print it
 CHANNEL_UNITS = {"lat": "m", "lon": "m", "course": "deg"}
 
+# ---------------------------------------------------------------- the positions' names
+#
+# The three positions the reports draw, one name each in every renderer and export
+# (terminal, HTML, GPX, KML, GeoJSON, MCAP, notes, glossary; tests/test_terms.py).  JSON
+# keys and MCAP topics keep theirs (``water_lat_deg``, ``lat_deg``, ``estimated_position``).
+
+#: the DR from heading and speed through the water alone: no current, nothing learned
+WATER_TRACK = "water track"
+#: the water track plus the current and the compass and log corrections learned from the
+#: fixes before each leg (dracc.math.ep): the DR section's track and its 2M
+DR_OVER_GROUND = "DR over the ground"
+#: the DR updated at each GNSS fix and line of position (dracc.math.ep.aided)
+FIX_UPDATED_EP = "fix-updated EP"
+#: the paper the fix-updated EP and the current filter come from, as users read it
+AIDED_DR_PAPER = "the aided dead-reckoning paper of Gebre-Egziabher, Powell and Enge"
+
+
+def dr_name(learned: bool) -> str:
+    """The name of the track the DR section scores: the DR over the ground where the
+    current and corrections were learned, the water track itself where not (learn = false)."""
+    return DR_OVER_GROUND if learned else WATER_TRACK
+
+
+def as_heading(name: str) -> str:
+    """A name at the start of a heading or sentence: 'Fix-updated EP' (not str.capitalize,
+    which would lower the 'EP')."""
+    return name[:1].upper() + name[1:]
+
+
 # ---------------------------------------------------------------- the tables' columns
 #
 # One name for one thing in every table dracc writes (``analyze --out``, ``fleet``,

@@ -35,6 +35,7 @@ import numpy as np
 
 from dracc.core.errors import InsufficientDataError
 from dracc.core.units import KN_MPS
+from dracc.core.vocabulary import DR_OVER_GROUND
 from dracc.frames import Voyage
 from dracc.math.ep.error_model import EPS, PRIOR_WIDENING, SCALE
 from dracc.pipeline.dr_model import final_posterior
@@ -213,7 +214,7 @@ def learned_calibration(dr: DRInputs, reference: str, leeway_from_log: bool) -> 
 
     def judge(key: str, sig: float, prior: float, shown: str) -> None:
         if n_fixes == 0:
-            unknown[key] = "the estimated position's filter used no fix"
+            unknown[key] = f"the filter of the {DR_OVER_GROUND} used no fix"
         elif not (math.isfinite(sig) and math.isfinite(prior) and prior > 0):
             unknown[key] = f"the learned posterior is not finite ({shown})"
         elif sig > DETERMINABLE_RATIO * prior:
@@ -226,7 +227,7 @@ def learned_calibration(dr: DRInputs, reference: str, leeway_from_log: bool) -> 
     judge("compass_error_deg", sig_eps, prior_eps, f"{math.degrees(sig_eps):.2f}°")
     judge("log_scale", sig_s, prior_s, f"{100 * sig_s:.2f} %")
     unknown["log_offset_kn"] = (
-        "the estimated position's filter has no log-offset state: an offset is folded into "
+        f"the filter of the {DR_OVER_GROUND} has no log-offset state: an offset is folded into "
         f"the log scale at this voyage's speeds (b / V; median {speed_kn:.1f} kn {through})"
     )
     e_rad, s_e = correction_to_error(eps, s)
@@ -245,7 +246,7 @@ def learned_calibration(dr: DRInputs, reference: str, leeway_from_log: bool) -> 
             f"true course: the compass error minus the {angle} (starboard +)"
         )
     notes = (
-        f"learned by the estimated position's filter (dracc.math.ep) from {n_fixes} "
+        f"learned with the {DR_OVER_GROUND} (dracc.math.ep) from {n_fixes} "
         f"{reference} fixes: its final posterior mixed over {int(m.hyper.size)} grid models "
         "(the spread between them in the σ), in the error convention: "
         f"{what} (correct by -error, within +-180°); log: V_log = (1 + s) V_true "

@@ -17,6 +17,7 @@ from dracc.core.arrays import unique_sorted
 from dracc.core.config import DeadReckoningConfig
 from dracc.core.geodesy import wrap_2pi
 from dracc.core.units import KN_MPS
+from dracc.core.vocabulary import AIDED_DR_PAPER, DR_OVER_GROUND, FIX_UPDATED_EP
 from dracc.ingest.timed_observations import TimedObservation
 from dracc.math.current import CurrentModel, estimate_current
 from dracc.math.ellipse import error_ellipse
@@ -86,7 +87,7 @@ def current_learned(dr: DRInputs, fixes: Fixes) -> CurrentSection | None:
     keep = slice(int(upd[0]) + 1, None)
     cn, ce = h.current_ne_mps[keep, 0], h.current_ne_mps[keep, 1]
     note = (
-        f"the current the estimated position uses: a persistent current plus its "
+        f"the current the {DR_OVER_GROUND} uses: a persistent current plus its "
         f"Gauss-Markov variation, filtered causally from the {fixes[3]} fixes every "
         f"{m.step_s:g} s ({upd.size} updates) with the compass and log corrections beside "
         "it; voyage figures: the persistent current learned from every fix, with its "
@@ -224,7 +225,7 @@ def _study_note(learned: StudyModel | None) -> str:
         "applied, their uncertainty kept); the current estimated by the study's filter from "
         "its own fixes; runs start every 15 min (one per interval when longer); the "
         "prediction's covariance scaled by a factor learned from the study's earlier fixes "
-        "(covariance matching, as the estimated position's); a fix counts as inside when its "
+        f"(covariance matching, as for the {DR_OVER_GROUND}); a fix counts as inside when its "
         "innovation lies in the 95 % ellipse of that prediction, and 'a correct model' is "
         "the probability the study states: the share of its earlier fixes inside their "
         "ellipses, shrunk to the probability the model puts there (worth one fix)"
@@ -245,8 +246,8 @@ def estimated_position(
     if dr.mode != "water":
         if observations or intervals_s:
             missing.append(
-                "estimated position not computed: the log measures over the ground, so there "
-                "is no current for the aided-DR filter to learn"
+                f"{FIX_UPDATED_EP} not computed: the log measures over the ground, so there "
+                "is no current for its filter to learn"
             )
         return None
     ft, flat, flon, fdesc = fixes
@@ -306,13 +307,14 @@ def estimated_position(
         cols[4].append(rows.since_update_s)
         kinds += rows.update_kind
     if not kinds:
-        missing.append("estimated position not computed: no fix starts a stretch of dead reckoning")
+        missing.append(f"{FIX_UPDATED_EP} not computed: no fix starts a stretch of dead reckoning")
         return None
     t, lat, lon, P, since = (np.concatenate(c) for c in cols)
     smaj, smin, orient = error_ellipse(P)
     outside = len(obs) - len(used)
     notes = [
-        f"the aided-DR filter (seeds/003): a Gauss-Markov current estimated from a {fdesc} fix "
+        f"{FIX_UPDATED_EP}: the filter of {AIDED_DR_PAPER}, a Gauss-Markov current estimated "
+        f"from a {fdesc} fix "
         f"every {dr.epoch_interval_s:g} s"
         + (f" and {n_lop} lines of position or fixes from the observation file" if obs else "")
     ]

@@ -7,6 +7,7 @@ Pure text: every figure comes in from :mod:`dracc.pipeline.dr_stage`.
 from __future__ import annotations
 
 from dracc.core.config import DeadReckoningConfig
+from dracc.core.vocabulary import DR_OVER_GROUND, WATER_TRACK
 from dracc.math.deadreckoning import Consistency, DRTrack
 from dracc.math.ep import MIN_LEARNED_S, OUTLIER_NIS, EstimatedPosition
 from dracc.pipeline.selection import DR_STEP_S
@@ -35,7 +36,7 @@ def dr_notes(
         notes.append(f"{n_bridged} short heading/speed gap(s) bridged by holding the last value")
     if est is not None:
         notes.append(
-            f"estimated position: the water track plus the current and the compass and log "
+            f"{DR_OVER_GROUND}: the {WATER_TRACK} plus the current and the compass and log "
             f"corrections learned from the {fdesc} fixes before each leg's start fix (never later "
             f"ones); scored out of sample: {cons.n_epochs} epochs of legs whose model had learned "
             f"from at least {min(MIN_LEARNED_S, reset_s) / 60:g} min of fixes; {n_prior} epochs "
@@ -48,8 +49,9 @@ def dr_notes(
             )
     else:
         notes.append(
-            f"heading and speed held onto a {DR_STEP_S:g} s grid; error sources as "
-            "configured (learn = false; Gauss-Markov, see docs/dead-reckoning.md)"
+            f"{WATER_TRACK}, nothing learned: heading and speed held onto a {DR_STEP_S:g} s "
+            "grid; error sources as configured (learn = false; Gauss-Markov, see "
+            "docs/dead-reckoning.md)"
         )
     if 0 < cons.n_epochs < 10:
         notes.append(

@@ -1,4 +1,4 @@
-"""The aided-DR estimated position (seeds/003, :class:`EstimatedPositionSection`) in the GPX,
+"""The fix-updated EP (seeds/003's aided DR, :class:`EstimatedPositionSection`) in the GPX,
 KML and GeoJSON exports, and the drawing primitives every export shares.
 
 :mod:`dracc.report.exports` calls it: the EP is its own track, ``aided_ep``, beside the DR's
@@ -32,6 +32,7 @@ import numpy as np
 from dracc.core.geodesy import add_offset_ne
 from dracc.core.safetext import printable
 from dracc.core.timefmt import iso_utc
+from dracc.core.vocabulary import AIDED_DR_PAPER, FIX_UPDATED_EP, WATER_TRACK
 from dracc.pipeline.results import EstimatedPositionSection
 
 __all__ = [
@@ -59,10 +60,11 @@ CIRCLE_VERTICES = 72
 ELLIPSE_SCALE = 2.0
 #: the aided EP's track key ('type' in GPX, 'track' in GeoJSON, the KML style)
 AIDED_KEY = "aided_ep"
-AIDED_NAME = "aided-DR EP (seeds/003)"
+#: its name in every export (the track, the KML folder) and in the plots' legends
+AIDED_NAME = FIX_UPDATED_EP
 AIDED_WHAT = (
-    "aided-DR estimated position (seeds/003): the DR updated by the GNSS fixes and the "
-    "observation file's lines of position through the Gauss-Markov current filter"
+    f"{FIX_UPDATED_EP}: the {WATER_TRACK} plus a Gauss-Markov current, updated at each GNSS "
+    f"fix and the observation file's lines of position (the filter of {AIDED_DR_PAPER})"
 )
 #: the per-point values of the aided EP, in the order written
 AIDED_VALUES = ("radius_2m_m", "semi_major_m", "semi_minor_m", "orientation_deg", "since_update_s")
@@ -311,7 +313,7 @@ def kml_parts(doc: ET.Element, e: EstimatedPositionSection) -> None:
     for i, rlat, rlon in _ellipse_rings(e):
         when = iso_utc(int(t[i]))
         pm = sub_element(folder, f"{{{k}}}Placemark")
-        sub_element(pm, f"{{{k}}}name", f"EP {when[11:16]} 2-sigma ellipse")
+        sub_element(pm, f"{{{k}}}name", f"{AIDED_NAME} {when[11:16]} 2-sigma ellipse")
         span = sub_element(pm, f"{{{k}}}TimeSpan")
         sub_element(span, f"{{{k}}}begin", when)
         end = int(t[i]) + int(e.fix_interval_s * 1e9) if last[i] else int(t[i + 1])

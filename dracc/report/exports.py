@@ -67,6 +67,7 @@ from dracc.core import atomic
 from dracc.core.geodesy import offset_ne_m
 from dracc.core.safetext import printable
 from dracc.core.timefmt import iso_utc
+from dracc.core.vocabulary import DR_OVER_GROUND, WATER_TRACK
 from dracc.pipeline.results import Analysis, DRSection, DRTrackResult, Track
 from dracc.report import ep_exports
 from dracc.report.ep_exports import (
@@ -108,8 +109,9 @@ UNCERTAINTY = ("radius_2m_m", "semi_major_m", "semi_minor_m", "orientation_deg",
 KML_ARRAYS = ("radius_2m_m", "semi_major_m", "semi_minor_m")
 
 _WHAT = {
-    "ep": "estimated position: the DR with the learned corrections and current",
-    "dr": "dead reckoning: the water track, heading and log alone",
+    "ep": f"{DR_OVER_GROUND}: the {WATER_TRACK} plus the current and the compass and log "
+    "corrections learned from earlier fixes",
+    "dr": f"{WATER_TRACK}: the dead reckoning from heading and log alone, no current",
     "reference": "the reference the DR is scored against",
 }
 
@@ -166,7 +168,8 @@ def _values(tr: DRTrackResult, idx: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def water_differs(tr: DRTrackResult) -> bool:
-    """Whether the water track is a track of its own (more than 0.5 m from the EP)."""
+    """Whether the water track is a track of its own (more than 0.5 m from the DR over the
+    ground)."""
     if not len(tr.time_ns):
         return False
     n, e = offset_ne_m(tr.water_lat_rad, tr.water_lon_rad, tr.lat_rad, tr.lon_rad)
@@ -218,10 +221,10 @@ def _lines(a: Analysis) -> list[_Line]:
             return tuple(out)
 
         if both:
-            lines.append(_Line("dr", "DR water track", parts(water=True, values=False)))
-            lines.append(_Line("ep", "EP (estimated position)", parts(water=False, values=True)))
+            lines.append(_Line("dr", WATER_TRACK, parts(water=True, values=False)))
+            lines.append(_Line("ep", DR_OVER_GROUND, parts(water=False, values=True)))
         else:
-            lines.append(_Line("dr", "DR (dead reckoning)", parts(water=False, values=True)))
+            lines.append(_Line("dr", WATER_TRACK, parts(water=False, values=True)))
     ref = reference_track(a)
     if ref is not None and len(ref.time_ns):
         t = np.asarray(ref.time_ns, dtype=np.int64)
@@ -265,7 +268,7 @@ def _miss_text(dr: DRSection, i: int) -> str:
     ep = dr.epochs
     return (
         f"reference ({dr.reference_role}) {float(ep.ref_error_m[i]):,.0f} m from the "
-        f"{'estimated position' if water_differs(dr.track) else 'DR'}, "
+        f"{DR_OVER_GROUND if water_differs(dr.track) else WATER_TRACK}, "
         f"outside its 2M of {float(ep.radius_2m_m[i]):,.0f} m "
         f"(leg {int(ep.leg[i])}, {float(ep.since_fix_s[i]) / 60:.0f} min after the fix)"
     )

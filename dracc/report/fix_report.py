@@ -362,7 +362,7 @@ def fix_page(
             ],
             right=(False, False, False, True, True),
             priorities=(0, 1, 0, 1, 0),
-            title="positions brought to WGS-84 before fusion (seeds/004)",
+            title="positions brought to WGS-84 before fusion",
         )
         for note in sorted({_fallback_note(d) for d in datums if d.transformation.fallback}):
             page.wrapped(note, hang=2)
@@ -450,7 +450,7 @@ def free_gyro_lines(m: FreeGyroModel) -> list[tuple[str, str]]:
         return [("free-gyro model", f"{n} gyro vector(s): {m.reason}")]
     d, c = m.dop, m.cov_m2
     return [
-        ("free-gyro model", f"{n} gyro vectors, seeds/002 (30)-(38) (docs/free-gyro.md)"),
+        ("free-gyro model", f"{n} gyro vectors, Jeong's error model (30)-(38) (docs/free-gyro.md)"),
         ("FDOP (37) printed", f"{d.fdop_printed:.4g} (rad², as the paper prints it)"),
         ("DOP, trace form", f"{d.dop:.3f} (dracc, METHODS §5)"),
         ("DOP, (34) one σ", f"{d.dop_paper:.3f} (equal σθ: {d.dop_model:.3f} exact)"),

@@ -12,7 +12,27 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["GLOSSARY", "anchor"]
+from dracc.core.vocabulary import AIDED_DR_PAPER, DR_OVER_GROUND, FIX_UPDATED_EP, WATER_TRACK
+
+__all__ = ["GLOSSARY", "JSON_KEYS", "anchor"]
+
+#: the keys of ``analyze --json`` (dotted paths, ``[]`` a list's items) that hold each of
+#: the three positions, by the name every report gives it (:mod:`dracc.core.vocabulary`)
+JSON_KEYS: dict[str, tuple[str, ...]] = {
+    WATER_TRACK: ("dead_reckoning.epochs[].water_lat_deg", "dead_reckoning.epochs[].water_lon_deg"),
+    DR_OVER_GROUND: (
+        "dead_reckoning.epochs[].lat_deg",
+        "dead_reckoning.epochs[].lon_deg",
+        "dead_reckoning.epochs[].radius_2m_m",
+    ),
+    FIX_UPDATED_EP: ("estimated_position",),
+}
+
+
+def _keys(term: str) -> str:
+    """' JSON: a, b.' for a position's glossary entry."""
+    return f"  JSON: {', '.join(JSON_KEYS[term])}."
+
 
 GLOSSARY: dict[str, tuple[str, str]] = {
     # ------------------------------------------------------------------ INS accuracy
@@ -92,6 +112,26 @@ GLOSSARY: dict[str, tuple[str, str]] = {
     ),
     "window": ("The day (or window) the statistics are taken over.", "METHODS §4"),
     # ---------------------------------------------------------------- dead reckoning
+    WATER_TRACK: (
+        "The dead reckoning from the heading and the speed through the water alone: no "
+        "current, nothing learned (the GPX, KML and GeoJSON track 'dr').  Where nothing is "
+        "learned (learn = false) it is the DR the 2M is drawn around." + _keys(WATER_TRACK),
+        "METHODS §2",
+    ),
+    DR_OVER_GROUND: (
+        f"The {WATER_TRACK} plus the current and the compass and log corrections learned "
+        "from the fixes before each leg's start (never later ones): the DR of the Dead "
+        "reckoning section, whose 2M is scored against the reference (the exports' track "
+        "'ep')." + _keys(DR_OVER_GROUND),
+        "METHODS §3",
+    ),
+    FIX_UPDATED_EP: (
+        f"The {WATER_TRACK} plus a Gauss-Markov current, updated at each GNSS fix and each "
+        "line of position of --observations by the filter of "
+        f"{AIDED_DR_PAPER}: its 2M grows between updates and shrinks at each (the exports' "
+        "track 'aided_ep')." + _keys(FIX_UPDATED_EP),
+        "METHODS §3",
+    ),
     "leg": ("One dead-reckoning leg: from a restart at a fix to the next restart.", "METHODS §2"),
     "start": ("The first time (UTC) of the leg, fault or record span.", ""),
     "end": ("The last time (UTC) of the leg, fault or record span.", ""),
@@ -178,7 +218,7 @@ GLOSSARY: dict[str, tuple[str, str]] = {
     ),
     "log scale error": (
         "s in V_log = (1 + s) V_true (+ offset b): positive when the log reads high.  "
-        "Learned by the estimated position's filter, an offset is folded into the scale "
+        f"Learned with the {DR_OVER_GROUND}, an offset is folded into the scale "
         "at the voyage's speeds (s ~ scale + b / V).",
         "METHODS §3",
     ),

@@ -25,8 +25,8 @@ Channels (topic: schema, fields; units in every dracc field name)
 ``/input/<name>/heading``  dracc.Heading ``{heading_deg, reference}`` ('true', 'magnetic'
                            or null): each heading source, thinned to one record per 10 s
                            (``overview.HEADING_STEP_S``)
-``/dracc/ep``              foxglove.LocationFix: the estimated position (the DR with the
-                           learned corrections and current) with ``position_covariance``
+``/dracc/ep``              foxglove.LocationFix: the DR over the ground (the water track
+                           with the learned corrections and current) with ``position_covariance``
                            its propagated covariance, ENU in m^2, row-major 3 x 3,
                            type KNOWN (3); the vertical is not estimated: its row and
                            column are 0, altitude 0 (sea level)
@@ -47,7 +47,7 @@ Channels (topic: schema, fields; units in every dracc field name)
                            ``radius_2m_m``, ``ref_error_m``, ``inside`` (the reference within
                            2M widened by its own noise, as the consistency check counts;
                            null where the epoch is not scored), ``scored``
-``/dracc/aided_ep``        foxglove.LocationFix: the aided-DR estimated position (seeds/003,
+``/dracc/aided_ep``        foxglove.LocationFix: the fix-updated EP (seeds/003's aided DR,
                            ``Analysis.estimated_position``) at its epochs, covariance KNOWN
                            (3) from its 1-sigma ellipse (ENU m^2, as ``/dracc/ep``)
 ``/dracc/aided_ep_error``  dracc.AidedEPError at the same epochs: ``radius_2m_m``,
@@ -67,8 +67,10 @@ Channels (topic: schema, fields; units in every dracc field name)
 
 Rows of the DR and EP: the full-rate rows thinned to one every :data:`EXPORT_STEP_S`
 seconds of each leg, plus each leg's first and last row and every reporting epoch (so a
-2M polygon always has its fix).  A ``dracc.export`` metadata record names the version,
-the inputs and these choices.  The Foxglove layout ``docs/foxglove/dracc-layout.json``
+2M polygon always has its fix).  The channels of the three positions carry their names
+as the reports use them in the channel metadata ``name`` (:mod:`dracc.core.vocabulary`:
+water track, DR over the ground, fix-updated EP).  A ``dracc.export`` metadata record
+names the version, the inputs and these choices.  The Foxglove layout ``docs/foxglove/dracc-layout.json``
 names these channels.
 """
 
@@ -89,7 +91,13 @@ from dracc.core.atomic import atomic_path
 from dracc.core.geodesy import add_offset_ne, wrap_pi
 from dracc.core.timefmt import iso_utc
 from dracc.core.units import KN_MPS
-from dracc.core.vocabulary import CHANNEL_KEYS, CHANNELS
+from dracc.core.vocabulary import (
+    CHANNEL_KEYS,
+    CHANNELS,
+    DR_OVER_GROUND,
+    FIX_UPDATED_EP,
+    WATER_TRACK,
+)
 from dracc.pipeline.results import Analysis, DRSection, DRTrackResult, EstimatedPositionSection
 from dracc.report.exports import inside_flags
 
@@ -225,10 +233,12 @@ _AIDED_STYLE = {"color": "#2ca02c", "weight": 1, "fillOpacity": 0.1}
 
 @dataclass
 class Stream:
-    """One channel: its topic, schema and messages (log times, JSON bytes)."""
+    """One channel: its topic, schema and messages (log times, JSON bytes); ``name``: the
+    position it carries as the reports name it (the channel's metadata ``name``)."""
 
     topic: str
     schema: dict[str, Any]
+    name: str = ""
     times: list[int] = field(default_factory=list)
     messages: list[bytes] = field(default_factory=list)
 
@@ -393,9 +403,13 @@ def _dr_streams(dr: DRSection) -> list[Stream]:
     cov = enu_covariance(tr.semi_major_m[idx], tr.semi_minor_m[idx], tr.orientation_rad[idx])
     ok = np.isfinite(cov).all(axis=1)
     learned = dr.learned is not None
-    main = Stream("/dracc/ep" if learned else "/dracc/dr", LOCATION_FIX_SCHEMA)
+    main = Stream(
+        "/dracc/ep" if learned else "/dracc/dr",
+        LOCATION_FIX_SCHEMA,
+        DR_OVER_GROUND if learned else WATER_TRACK,
+    )
     err = Stream("/dracc/dr_error", DR_ERROR_SCHEMA)
-    water = Stream("/dracc/dr", LOCATION_FIX_SCHEMA) if learned else None
+    water = Stream("/dracc/dr", LOCATION_FIX_SCHEMA, WATER_TRACK) if learned else None
     zero = [0.0] * 9
     frame = "ep" if learned else "dr"
     for j, i in enumerate(idx.tolist()):
@@ -496,7 +510,7 @@ def _polygons(dr: DRSection) -> Stream:
 
 def _aided_streams(e: EstimatedPositionSection) -> list[Stream]:
     """/dracc/aided_ep with its covariance, its error beside it and its 2M polygons."""
-    fix = Stream("/dracc/aided_ep", LOCATION_FIX_SCHEMA)
+    fix = Stream("/dracc/aided_ep", LOCATION_FIX_SCHEMA, FIX_UPDATED_EP)
     err = Stream("/dracc/aided_ep_error", AIDED_EP_ERROR_SCHEMA)
     poly = Stream("/dracc/aided_ep_2m", GEOJSON_SCHEMA)
     cov = enu_covariance(e.semi_major_m, e.semi_minor_m, e.orientation_rad)
@@ -522,10 +536,14 @@ def _aided_streams(e: EstimatedPositionSection) -> list[Stream]:
             continue
         when = iso_utc(tn)
         rings = (
-            ("circle", f"EP 2M {when[11:16]}Z {r:,.0f} m", ring_lonlat_deg(lat, lon, r, r, 0.0)),
+            (
+                "circle",
+                f"{FIX_UPDATED_EP} 2M {when[11:16]}Z {r:,.0f} m",
+                ring_lonlat_deg(lat, lon, r, r, 0.0),
+            ),
             (
                 "ellipse",
-                f"EP {ELLIPSE_SIGMA:g}-sigma ellipse {when[11:16]}Z",
+                f"{FIX_UPDATED_EP} {ELLIPSE_SIGMA:g}-sigma ellipse {when[11:16]}Z",
                 ring_lonlat_deg(
                     lat,
                     lon,
@@ -663,7 +681,10 @@ def write_mcap_export(a: Analysis, path: str | Path) -> None:
                 )
             ids.append(
                 w.register_channel(
-                    topic=s.topic, message_encoding="json", schema_id=schema_ids[title]
+                    topic=s.topic,
+                    message_encoding="json",
+                    schema_id=schema_ids[title],
+                    metadata={"name": s.name} if s.name else {},
                 )
             )
         seq = [0] * len(streams)

@@ -22,7 +22,13 @@ from matplotlib.typing import LegendLocType  # noqa: E402
 from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar  # noqa: E402
 
 from dracc.core.arrays import ArrayLike, FloatArray  # noqa: E402
-from dracc.core.vocabulary import CHANNEL_KEYS, CHANNEL_UNITS, CHANNELS
+from dracc.core.vocabulary import (
+    CHANNEL_KEYS,
+    CHANNEL_UNITS,
+    CHANNELS,
+    DR_OVER_GROUND,
+    WATER_TRACK,
+)
 from dracc.pipeline.results import Analysis
 
 _DPI = 96
@@ -117,10 +123,11 @@ def _origin(a: Analysis) -> tuple[float, float] | None:
     return None
 
 
-#: legend labels of the track plot (tests find the lines by them)
-EP_LABEL = "estimated position (EP)"
-DR_LABEL = "DR (water track)"
-WATER_LABEL = "water track (heading and log only)"
+#: legend labels of the track plot (tests find the lines by them): the DR over the ground
+#: (learned), the water track as the DR (learn = false) and beside the learned DR
+EP_LABEL = DR_OVER_GROUND
+DR_LABEL = WATER_TRACK
+WATER_LABEL = f"{WATER_TRACK} (heading and log only)"
 
 
 def _by_leg(n_m: FloatArray, e_m: FloatArray, leg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

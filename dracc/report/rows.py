@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from dracc.core.vocabulary import CHANNEL_UNITS, CHANNELS
+from dracc.core.vocabulary import CHANNEL_UNITS, CHANNELS, DR_OVER_GROUND
 from dracc.math.clock import SourceClock
 from dracc.math.deviation import DeviationResult, UnitStats
 from dracc.report import fmt
@@ -146,5 +146,5 @@ def calibration_method(method: str, n: int, segment_s: float) -> str:
     """How the calibration's numbers were found (CalibrationSection.method, n, segment_s),
     in a few words: the learned filter's fixes or the least-squares segments."""
     if method == "learned":
-        return f"learned by the estimated position's filter from {n} fixes"
+        return f"learned with the {DR_OVER_GROUND} from {n} fixes"
     return f"least squares, {n} segments of {segment_s:g} s"

@@ -1,5 +1,5 @@
 """Track plots that show where the dead reckoning left its circle: an overview of the
-voyage, one panel per leg (the worst legs when there are many) and the aided-DR EP's.
+voyage, one panel per leg (the worst legs when there are many) and the fix-updated EP's.
 
 Every panel is north up with an equal metric aspect (kilometres north/east of the first
 DR fix, the local tangent plane of :func:`dracc.core.geodesy.offset_ne_m`, where the 2M
@@ -29,6 +29,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Ellipse, Rectangle
 
 from dracc.core.geodesy import add_offset_ne, circmean, interp_position, offset_ne_m, wrap_pi
+from dracc.core.vocabulary import FIX_UPDATED_EP, as_heading, dr_name
 from dracc.pipeline.results import Analysis, DRSection
 from dracc.report.ep_exports import stretch_starts
 from dracc.report.page import data_uri
@@ -517,7 +518,7 @@ def _overview(
                 zorder=Z_OTHER,
                 label=WATER_LABEL,
             )
-            water_note = "; the water track (heading and log only, thin dashed)"
+            water_note = f"; the {WATER_LABEL}, thin dashed"
         est = dr.scored_out_of_sample or differs
         ax.plot(
             *_by_leg(n, e, tr.leg),
@@ -578,9 +579,9 @@ def _overview(
     ax.legend(loc="best", fontsize=8, framealpha=0.85)
     ax.set_title("Whole voyage", fontsize=10)
     subject = (
-        "the estimated position (black)"
+        f"the {EP_LABEL} (black)"
         if dr is not None and dr.scored_out_of_sample
-        else "the dead-reckoning track (the water track: heading and log only; black)"
+        else f"the dead-reckoning track (the {WATER_LABEL}; black)"
     )
     caption = (
         f"Whole voyage: the track of every source, {subject} and the reference "
@@ -615,7 +616,7 @@ def _leg_panel(
         lw=1.4,
         color=DR_COLOUR,
         zorder=Z_DR,
-        label="estimated position (EP)" if dr.scored_out_of_sample else "DR",
+        label=EP_LABEL if dr.scored_out_of_sample else DR_LABEL,
     )
     ax.plot(
         e[:1] / 1e3,
@@ -643,7 +644,8 @@ def _leg_panel(
     caption = (
         f"Leg {k}, {_utc(t0)}–{_utc(t1)} UTC"
         + (f" (fix: {leg.fix_source})" if leg is not None else "")
-        + f": the DR with its 2M circle (orange) and 95 % error ellipse (blue, dashed) at each "
+        + f": the {dr_name(dr.scored_out_of_sample)} with its 2M circle (orange) and 95 % error "
+        f"ellipse (blue, dashed) at each "
         f"{interval} epoch, the reference ({dr.reference_role}) in magenta above it; "
         f"{n_miss} of {int((sel & ep.scored).sum())} scored epochs outside 2M (red ×)"
         + (f"; smallest circle {min_px:.0f} px" if np.isfinite(min_px) else "")
@@ -679,13 +681,13 @@ def draw_track_panels(a: Analysis) -> Iterator[DrawnPanel]:
         yield _leg_panel(a, la, lo, ref, _epochs(dr, ref, la, lo), k)
 
 
-#: legend label of the aided-DR EP (seeds/003) in its panel
-AIDED_LABEL = "aided-DR EP (seeds/003)"
+#: legend label of the fix-updated EP (seeds/003's aided DR) in its panel
+AIDED_LABEL = FIX_UPDATED_EP
 AIDED_COLOUR = "#2ca02c"
 
 
 def aided_ep_panel(a: Analysis) -> DrawnPanel | None:
-    """The aided-DR estimated position over the DR, with its 95 % ellipse at each epoch
+    """The fix-updated EP over the DR, with its 95 % ellipse at each epoch
     (1-sigma semi-axes times sqrt(chi2_2(0.95))) where that is at least MIN_CIRCLE_PX."""
     e, dr, origin = a.estimated_position, a.dead_reckoning, _origin(a)
     if e is None or dr is None or origin is None or not len(e.time_ns):
@@ -722,7 +724,7 @@ def aided_ep_panel(a: Analysis) -> DrawnPanel | None:
                 lw=0.9,
                 ls="--",
                 zorder=Z_CIRCLE,
-                label=f"{ELLIPSE_LABEL} of the aided EP" if j == 0 else None,
+                label=f"{ELLIPSE_LABEL} of the {AIDED_LABEL}" if j == 0 else None,
             )
         )
     scale_bar(ax)
@@ -739,23 +741,25 @@ def aided_ep_panel(a: Analysis) -> DrawnPanel | None:
         )  # fmt: skip
         ref_xy = np.column_stack([re_, rn]) / 1e3 if ref is not None else np.zeros((0, 2))
         _insets(fig, ep, np.sort(worst), np.column_stack([x, y]), ref_xy)
-    ax.set_title(f"{AIDED_LABEL}: {_utc(t0)} – {_utc(t1)} UTC", fontsize=10)
+    ax.set_title(f"{as_heading(AIDED_LABEL)}: {_utc(t0)} – {_utc(t1)} UTC", fontsize=10)
     r2m = e.radius_2m_m[np.isfinite(e.radius_2m_m)]
     caption = (
         f"The {AIDED_LABEL} (green; dots: the epochs after an update: {e.n_fix_updates} GNSS "
-        f"fixes, {e.n_lop_updates} from the observation file) over the DR (black) and the "
+        f"fixes, {e.n_lop_updates} from the observation file) over the "
+        f"{dr_name(dr.scored_out_of_sample)} (black) and the "
         f"reference (magenta); 2M up to {float(r2m.max()) if r2m.size else math.nan:,.0f} m; "
         f"its 95 % error ellipse (green, dashed) at {big.size} of {len(e.time_ns)} epochs "
         f"(the others under {MIN_CIRCLE_PX:g} px at this scale)"
         + (
             f"; below, the {worst.size} epochs of largest 2M, each at the scale of its 2M "
-            f"circle (orange) with the 95 % ellipse (blue, dashed), centred on the EP (+)"
+            f"circle (orange) with the 95 % ellipse (blue, dashed), centred on the "
+            f"{AIDED_LABEL} (+)"
             if worst.size
             else ""
         )
         + "."
     )
-    return DrawnPanel(fig, ax, "aided EP track plot", caption, math.nan, None, 0)
+    return DrawnPanel(fig, ax, f"{AIDED_LABEL} track plot", caption, math.nan, None, 0)
 
 
 def aided_ep_html(a: Analysis) -> str:

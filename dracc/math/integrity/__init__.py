@@ -191,7 +191,7 @@ def dr_innovation_check(
     win = time_window(t)
     rule = (
         f"innovation chi-square(2) beyond {DR_GATE_NIS:g} against the DR propagated from the "
-        "earlier fixes with its covariance (the estimated position's filter)"
+        "earlier fixes with its covariance (the filter of the DR over the ground)"
     )
     if len(t) == 0:
         return not_checked(
