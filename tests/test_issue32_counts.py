@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
+from html import escape as html_escape
 
 from test_report import make_analysis
 
@@ -247,3 +248,24 @@ def test_watch_counts_lines_a_second_never_calls_them_hz():
     console.print(status_view(w.status()))
     text = console.export_text()
     assert "lines/s" in text and "Hz" not in text
+
+
+def test_k_star_direction_is_a_word_and_dash_only_no_value():
+    # issue 32: "1.61 -" (k underestimates) beside "-" (no reference) in the k* column
+    from dracc.report.glossary import GLOSSARY
+    from dracc.report.rows import K_STAR_NOTE, k_star_text, unit_rows
+
+    assert k_star_text(0.53, "+") == "0.53 k ok"
+    assert k_star_text(1.61, "-") == "1.61 k low"
+    assert k_star_text(float("nan"), "") == "-"
+    a = make_analysis("full")
+    cells = [r.k_star for _, rs in unit_rows(a.deviation) for r in rs or ()]
+    assert "-" in cells  # a channel without a reference
+    assert all(c == "-" or re.fullmatch(r"[0-9.]+ k (ok|low)", c) for c in cells), cells
+    assert any(c.endswith("k low") for c in cells) and any(c.endswith("k ok") for c in cells)
+    text = terminal.render_text(a, width=200)
+    assert not re.search(r"\d \+$|\d -$", text, re.MULTILINE)
+    page = html.render_html(a)
+    assert K_STAR_NOTE in " ".join(text.split())  # the note under the table
+    assert html_escape(K_STAR_NOTE) in page
+    assert GLOSSARY["k*"][0].startswith(K_STAR_NOTE)

@@ -659,7 +659,7 @@ def test_terminal_summary_content():
         "log offset NOT DETERMINABLE",
         "excess",
         "neg. var.",
-        "1.76 -",
+        "1.76 k low",
         "exceeds→178.6",
         "compass error 0.31 ± 0.04 °",
         "log scale 2.90 ±",

@@ -13,6 +13,7 @@ from __future__ import annotations
 import re
 
 from dracc.core.vocabulary import AIDED_DR_PAPER, DR_OVER_GROUND, FIX_UPDATED_EP, WATER_TRACK
+from dracc.report.rows import K_STAR_NOTE
 
 __all__ = ["GLOSSARY", "JSON_KEYS", "anchor"]
 
@@ -105,11 +106,7 @@ GLOSSARY: dict[str, tuple[str, str]] = {
         "measurable only where a reference exists.",
         "Table 1",
     ),
-    "k*": (
-        "k* = m_x / m_u: the factor the reference measured (error RMS over deviation "
-        "RMS); '+' where k* <= k (the factor did not underestimate), '-' otherwise.",
-        "Table 1",
-    ),
+    "k*": (K_STAR_NOTE + ".", "Table 1"),
     "window": ("The day (or window) the statistics are taken over.", "METHODS §4"),
     # ---------------------------------------------------------------- dead reckoning
     WATER_TRACK: (

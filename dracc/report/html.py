@@ -24,10 +24,12 @@ from dracc.report.glossary import GLOSSARY, anchor
 from dracc.report.page import CSP, data_uri  # one policy and one data URI for every page
 from dracc.report.rows import (
     EXCEEDS,
+    K_STAR_NOTE,
     WITHIN,
     calibration_method,
     channel_rows,
     clock_text,
+    has_k_star,
     unit_rows,
 )
 from dracc.report.verdict import (
@@ -248,6 +250,7 @@ def _units(a: Analysis) -> str:
         f"<em>excess</em> kurtosis (0 for a normal distribution); limits at P = {p}.</p>"
     )
     notes = "".join(f"<p>{_e(n)}</p>" for n in d.messages)
+    notes += f"<p>{_e(K_STAR_NOTE)}.</p>" if has_k_star(d) else ""
     table = _table(
         [
             "unit",

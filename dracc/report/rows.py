@@ -21,6 +21,30 @@ from dracc.report import fmt
 #: the verdict against the a priori RMS
 NO_APRIORI, EXCEEDS, WITHIN = "no a priori", "exceeds", "within"
 
+#: the k* column's words for Table 1's mark ('+', '-'): a sign after a number would read
+#: as the '-' that means no value
+K_STAR_WORDS = {"+": "k ok", "-": "k low"}
+#: what the k* column says, under every table that has one (and in the glossary)
+K_STAR_NOTE = (
+    "k* = m_x / m_u, the factor the reference measured: 'k ok' where k* <= k' (the factor "
+    "k in use does not understate the limiting error; Table 1's '+'), 'k low' where k* > k' "
+    "(it does; Table 1's '-'); k' is k, 1.5 for the paper's 1.49; '-' alone: no value (no "
+    "reference for that unit and channel)"
+)
+
+
+def has_k_star(d: DeviationResult) -> bool:
+    """Whether the table has a k* figure (a unit with a reference): its note is then said."""
+    return any(u.reference for u in d.whole.units.values())
+
+
+def k_star_text(k_star: float, mark: str) -> str:
+    """A k* cell: '0.53 k ok', '1.61 k low'; '-' where there is no k*."""
+    if not math.isfinite(k_star):
+        return "-"
+    word = K_STAR_WORDS.get(mark)
+    return f"{fmt(k_star, 2)} {word}" if word else fmt(k_star, 2)
+
 
 def channel_digits(channel: str) -> int:
     """Decimals of a channel's figures: 3 in degrees (course), 1 in metres (lat, lon)."""
@@ -55,7 +79,7 @@ class UnitRow:
     hat_lower: str  #: bootstrap bounds as sigmas (see :func:`sigma_bound`)
     hat_upper: str
     ref_rms: str  #: RMS error against the reference, '-' without one
-    k_star: str  #: k* and its mark, e.g. '0.53 +'; '-' without a reference
+    k_star: str  #: k* and its mark in words, e.g. '0.53 k ok' (:func:`k_star_text`)
 
     @property
     def channel_text(self) -> str:
@@ -98,7 +122,7 @@ def channel_rows(name: str, u: UnitStats) -> list[UnitRow]:
                 hat_lower="-" if h is None else sigma_bound(h.var_lower, digits),
                 hat_upper="-" if h is None else sigma_bound(h.var_upper, digits),
                 ref_rms="-" if r is None else fmt(r.rmse, digits),
-                k_star="-" if r is None else f"{fmt(r.k_star, 2)} {r.mark}",
+                k_star="-" if r is None else k_star_text(r.k_star, r.mark),
             )
         )
     return rows

@@ -33,7 +33,14 @@ from dracc.pipeline.results import (
     EstimatedPositionSection,
 )
 from dracc.report import fmt, fmt_duration, fmt_pct, short_utc
-from dracc.report.rows import EXCEEDS, calibration_method, clock_text, unit_rows
+from dracc.report.rows import (
+    EXCEEDS,
+    K_STAR_NOTE,
+    calibration_method,
+    clock_text,
+    has_k_star,
+    unit_rows,
+)
 from dracc.report.textout import Layout, Page, bullet, labelled, layout
 from dracc.report.verdict import honesty_text, integrity_count, scored_legs, verdict
 
@@ -249,6 +256,8 @@ def _deviation_body(page: _Page, d: DeviationResult) -> None:
         )
     )
     _unit_table(page, d)
+    if has_k_star(d):
+        page.note(K_STAR_NOTE)
     _notes(page, d.messages)
 
 
