@@ -77,7 +77,8 @@ BAD = [
     (["simulate", "--out", "OUT", "--fault", "jmp"], ["--fault", "jmp"]),
     (["simulate", "--out", "OUT", "--fault", "jump:GNSS@5h"], ["--fault"]),
     # watch (a bad value before any socket is opened)
-    (["watch", "udp://127.0.0.1:0", "--stale", "0"], ["--stale", "positive"]),
+    (["watch", "udp://127.0.0.1:0", "--dropout", "0"], ["--dropout", "positive"]),
+    (["watch", "udp://127.0.0.1:0", "--stale", "0"], ["--dropout", "positive"]),  # its old name
 ]
 
 

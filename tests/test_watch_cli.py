@@ -1,6 +1,6 @@
 """``dracc watch`` as a process: lines of the sample voyage sent as UDP datagrams to
 127.0.0.1, counted per source in the status while it runs; one source silenced then
-resumed (``stale`` raised and cleared); a bad datagram counted; SIGTERM ends it with
+resumed (``availability/dropout`` raised and cleared); a bad datagram counted; SIGTERM ends it with
 exit 0 and a recording that reads back to the same records as the lines sent."""
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from dracc.ingest.nmea import read_nmea
 
 REPO = Path(__file__).resolve().parents[1]
 SAMPLE = REPO / "sample_logs" / "voyage_tag.nmea"
-SILENT = "GYRO"  #: the source silenced for longer than --stale, then resumed
+SILENT = "GYRO"  #: the source silenced for longer than --dropout, then resumed
 
 
 def _source(line: bytes) -> str:  # the TAG s: of a sample line, parsed here by hand
@@ -64,7 +64,7 @@ def run(tmp_path_factory):
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     proc = subprocess.Popen(
         [sys.executable, "-m", "dracc", "watch", f"udp://127.0.0.1:{port}", "--record", str(rec)]
-        + ["--status", str(status), "--status-every", "0.2s", "--stale", "1s"],
+        + ["--status", str(status), "--status-every", "0.2s", "--dropout", "1s"],
         stderr=subprocess.PIPE,
         env=env,
     )
@@ -81,7 +81,7 @@ def run(tmp_path_factory):
         during = _wait(
             status, lambda st: {k: v["records"] for k, v in st["sources"].items()} == want
         )
-        # the others go on every 0.1 s; SILENT says nothing for 1.6 s (> --stale), then resumes
+        # the others go on every 0.1 s; SILENT says nothing for 1.6 s (> --dropout), then resumes
         others = iter(ln for ln in rest if _source(ln) != SILENT)
         t_end = time.monotonic() + 1.6
         while time.monotonic() < t_end:
@@ -137,14 +137,15 @@ def test_status_counts_every_source_while_running(run):
     assert st["analysis"]["window_s"] == 3600.0 and st["analysis"]["every_s"] == 30.0
 
 
-def test_stale_raised_then_cleared_with_evidence(run):
+def test_dropout_raised_then_cleared_with_evidence(run):
     open_ = [f for f in run["raised"]["findings"] if f["source"] == SILENT]
-    assert open_ and open_[0]["check"] == "stale" and open_[0]["cleared_utc"] is None
+    assert open_ and (open_[0]["check"], open_[0]["name"]) == ("availability", "dropout")
+    assert open_[0]["cleared_utc"] is None
     assert open_[0]["evidence"]["age_s"] > 1.0
     done = [f for f in run["final"]["findings"] if f["source"] == SILENT]
     assert len(done) == 1 and done[0]["cleared_utc"] >= done[0]["raised_utc"]
-    assert f"stale raised: {SILENT}:" in run["stderr"]
-    assert f"stale cleared: {SILENT}:" in run["stderr"]
+    assert f"availability/dropout raised: {SILENT}:" in run["stderr"]
+    assert f"availability/dropout cleared: {SILENT}:" in run["stderr"]
 
 
 def test_bad_datagram_counted_never_fatal(run):

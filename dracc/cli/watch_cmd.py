@@ -33,7 +33,9 @@ def watch(
     record: Path | None = typer.Option(None, help="Record what is heard in daily files here."),
     status: Path | None = typer.Option(None, help="Rewrite this JSON status (dracc.watch/1)."),
     status_every: str = typer.Option("2s", help="How often the status is rewritten."),
-    stale: str = typer.Option("10s", help="A source silent this long raises 'stale'."),
+    dropout: str = typer.Option(
+        "10s", "--dropout", "--stale", help="A source silent this long raises 'dropout'."
+    ),
     duration: str | None = typer.Option(None, help="Stop after this long (default: never)."),
     window: str = typer.Option("1h", help="The DR and integrity statistics are over this span."),
     analyse_every: str = typer.Option("30s", help="How often the window is analysed."),
@@ -56,7 +58,7 @@ def watch(
     cfg = load_config(config)
     with option_values():
         every_s = parse_duration_s(status_every, "--status-every", "2s or 0.5s")
-        stale_s = parse_duration_s(stale, "--stale", "10s or 1min")
+        dropout_s = parse_duration_s(dropout, "--dropout", "10s or 1min")
         run_s = parse_duration_s(duration, "--duration", "1h or 30s") if duration else None
         window_s = parse_duration_s(window, "--window", "1h or 6h")
         analyse_s = parse_duration_s(analyse_every, "--analyse-every", "30s or 1min")
@@ -73,7 +75,7 @@ def watch(
         LiveAnalyser(cfg, window_s, analyse_s, int(window_mb * 2**20), pool) if analysis else None
     )
     recorder = Recorder(record) if record else None
-    loop = Watch(opened, recorder, stale_s=stale_s, analyser=analyser)
+    loop = Watch(opened, recorder, dropout_s=dropout_s, analyser=analyser)
     stop: list[int] = []
     view = LiveView() if sys.stdout.isatty() else None
 

@@ -37,6 +37,7 @@ from dracc import __version__
 from dracc.core.config import Config
 from dracc.frames import Voyage
 from dracc.math.integrity import check_night, dr_innovation_check, with_dr_check
+from dracc.math.integrity.causes import jump_spans
 from dracc.pipeline import overview, selection
 from dracc.pipeline.calibration_stage import calibration as calibration_section
 from dracc.pipeline.calibration_stage import log_measures_transverse
@@ -128,7 +129,9 @@ def analyse_voyage(
     report("sensor faults", 1.0)
 
     report("dead reckoning", 0.0)
-    dr, fixes, dr_inputs = dead_reckoning(voyage, cfg.dead_reckoning, missing, notes)
+    dr, fixes, dr_inputs = dead_reckoning(
+        voyage, cfg.dead_reckoning, missing, notes, jump_spans(integrity)
+    )
     report("dead reckoning", 1.0)
     if integrity is not None and dr is not None and dr.fix_innovations is not None:
         integrity = with_dr_check(

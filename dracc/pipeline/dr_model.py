@@ -6,14 +6,16 @@ logs without a reference), the part that dominates its 2M, and the fixes it weig
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
 from dracc.core.config import DeadReckoningConfig
 from dracc.core.geodesy import wrap_2pi
 from dracc.core.units import DEG_RAD, KN_MPS
-from dracc.math.deadreckoning import Consistency, DRTrack
+from dracc.math.deadreckoning import Consistency, DRTrack, LegConsistency
 from dracc.math.ep import ErrorPrior, EstimatedPosition, LearnedModel, heading_prior_rad
+from dracc.math.integrity.causes import Span, overlaps
 
 #: what each part of the EP covariance is, and the key that sets its prior
 SOURCE_KEYS = {
@@ -133,3 +135,27 @@ def fix_innovations(
     assert h.gate_m is not None  # filled with the NIS
     ok = np.isfinite(h.nis)
     return (t0_ns + np.round(h.time_s[ok] * 1e9).astype(np.int64), h.nis[ok], h.gate_m[ok])
+
+
+def legs_touched(tr: DRTrack, t0_ns: int, spans_s: Sequence[Span]) -> np.ndarray:
+    """Per leg of ``tr`` (n_legs,): does it overlap one of ``spans_s`` (Unix s, a jump of
+    the reference: :func:`dracc.math.integrity.causes.jump_spans`)?"""
+    touched = np.zeros(tr.n_legs, bool)
+    if not spans_s:
+        return touched
+    t_s = t0_ns / 1e9 + tr.time_s
+    for k in np.unique(tr.leg[tr.leg >= 0]):
+        t = t_s[tr.leg == k]
+        touched[k] = overlaps((float(t[0]), float(t[-1])), spans_s)
+    return touched
+
+
+def jump_sentence(source: str, legs: Sequence[LegConsistency], n_legs: int, without: str) -> str:
+    """What the DR verdict adds where a jump of its reference touched scored ``legs``:
+    the test's verdict without them says whether the jump or the DR's model is the cause."""
+    said = f"; the reference {source} jumped in {len(legs)} of {n_legs} scored legs"
+    if without in ("consistent", "conservative"):
+        return f"{said}: without them the DR is {without}, so the jump is the cause, not its model"
+    if without == "undetermined":
+        return f"{said}: no leg is left to score without them"
+    return f"{said}; without them it is still {without}"

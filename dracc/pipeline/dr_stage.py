@@ -6,6 +6,7 @@ earlier fixes where ``learn = true``; scored out of sample against the reference
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import NamedTuple
 
@@ -26,13 +27,16 @@ from dracc.math.deadreckoning import (
     speed_from_components_mps,
 )
 from dracc.math.ep import estimate_position
+from dracc.math.integrity.causes import Span
 from dracc.math.uncertainty import GAUSSIAN
 from dracc.pipeline.dr_honesty import honesty
 from dracc.pipeline.dr_model import (
     dominant_source,
     error_prior,
     fix_innovations,
+    jump_sentence,
     learned_summary,
+    legs_touched,
 )
 from dracc.pipeline.notes import dr_notes, dr_verdict
 from dracc.pipeline.results import DRLeg, DRSection, DRTrackResult
@@ -49,11 +53,18 @@ from dracc.pipeline.selection import (
 
 
 def dead_reckoning(
-    voyage: Voyage, cfg: DeadReckoningConfig, missing: list[str], notes: list[str]
+    voyage: Voyage,
+    cfg: DeadReckoningConfig,
+    missing: list[str],
+    notes: list[str],
+    jumps: Mapping[str, Sequence[Span]] | None = None,
 ) -> tuple[DRSection | None, Fixes | None, DRInputs | None]:
     """Run the DR on a DR_STEP_S grid from the compass and the log; score it against the
     reference.  Returns (section, fixes, what the DR ran on); None where it could not run,
-    said in ``missing``."""
+    said in ``missing``.  ``jumps``: per source, the spans of its failed jump check
+    (:func:`dracc.math.integrity.causes.jump_spans`): a DR found inconsistent is scored
+    again without the legs a jump of its reference touched, and names no part of its 2M
+    as the cause where it passes without them."""
     heading = heading_series(voyage, cfg, missing, notes)
     speed = speed_series(voyage, missing)
     fixes = reference_fixes(voyage, cfg, missing, notes)
@@ -109,15 +120,26 @@ def dead_reckoning(
     learned_leg = est.learned_leg if est is not None else np.ones(tr.n_legs, bool)
     learned_row = (tr.leg >= 0) & learned_leg[np.maximum(tr.leg, 0)]
     ei = np.asarray(tr.epoch_index, dtype=np.int64)
-    cons = dr_consistency(
-        replace(tr, epoch_index=ei[learned_row[ei]]),
-        fix_s,
-        flat,
-        flon,
-        max_ref_gap_s=gap_s,
-        ref_sigma_m=est.reference_sigma_m if est is not None else 0.0,
-        shape=est.forecast.sample_shape if est is not None else GAUSSIAN,
-    )
+
+    def score(rows: np.ndarray) -> Consistency:
+        return dr_consistency(
+            replace(tr, epoch_index=ei[rows[ei]]),
+            fix_s,
+            flat,
+            flon,
+            max_ref_gap_s=gap_s,
+            ref_sigma_m=est.reference_sigma_m if est is not None else 0.0,
+            shape=est.forecast.sample_shape if est is not None else GAUSSIAN,
+        )
+
+    cons = score(learned_row)
+    fkey = fix_source_key(voyage, fdesc)
+    touched = legs_touched(tr, int(grid[0]), (jumps or {}).get(fkey or "", ()))
+    jump_legs = [lc for lc in cons.legs if touched[lc.leg]]
+    rest, without = cons, None
+    if jump_legs and cons.verdict.startswith("inconsistent"):
+        rest = score(learned_row & ~touched[np.maximum(tr.leg, 0)])
+        without = rest.verdict.partition(" (")[0]
     # the actual error at every sample (for the growth plot and the tables)
     rlat, rlon = interp_position(ft, flat, flon, grid, gap_s * 1e9)
     dn, de = offset_ne_m(tr.lat_rad, tr.lon_rad, rlat, rlon)
@@ -146,8 +168,13 @@ def dead_reckoning(
         )
 
     n_prior = int(np.sum((tr.since_fix_s[ei] > 0) & ~learned_row[ei])) if est is not None else 0
-    dominant = dominant_source(est, cons, tr, fix_s) if est is not None else None
+    # where the DR passes without the legs its reference's jump touched, the jump is the
+    # cause: no part of the 2M is named for it
+    blame = est is not None and without in (None, "inconsistent")
+    dominant = dominant_source(est, rest, tr, fix_s) if blame and est is not None else None
     consistent, verdict = dr_verdict(cons, est is not None, dominant)
+    if without is not None:
+        verdict += jump_sentence(str(fkey), jump_legs, cons.n_legs, without)
     section = DRSection(
         heading_source=hdg_desc,
         speed_source=spd_desc,
@@ -177,8 +204,10 @@ def dead_reckoning(
         reference_sigma_m=cons.reference_sigma_m,
         scored_out_of_sample=est is not None,
         fix_innovations=fix_innovations(est, grid[0]),
-        fix_source_key=fix_source_key(voyage, fdesc),
+        fix_source_key=fkey,
         honesty=honesty(cons, est),
+        reference_jump_legs=tuple(lc.leg for lc in jump_legs) if without else (),
+        verdict_without_jump_legs=without,
     )
     # course and speed through the water for the calibration: leeway (B5) and speed (B1)
     # from a two-component log, as the DR used them

@@ -226,6 +226,10 @@ class DRSection:
     fix_innovations: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     fix_source_key: str | None = None  #: the source the reference fixes came from
     honesty: DRHonesty | None = None  #: stated against achieved (None without a reference)
+    #: the scored legs a jump of the reference touched (dracc.math.integrity.causes) where
+    #: the DR was called inconsistent, and the verdict word of its test without them
+    reference_jump_legs: tuple[int, ...] = ()
+    verdict_without_jump_legs: str | None = None
 
 
 # ----------------------------------------------------------- calibration and current

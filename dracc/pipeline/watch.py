@@ -19,15 +19,21 @@ INS sending GGA, HDT and VTG at 1 Hz hears 3 lines a second, never called 3 Hz;
 latency (receive time minus the TAG ``c:`` time, where the line has one; ``c:`` in
 seconds up to 10 digits, else milliseconds, as :mod:`dracc.ingest.tagblock` reads it).
 
-Findings: ``stale`` is raised for a source whose age exceeds ``stale_s`` and cleared at
-its next line, each with its evidence (``last_utc``, ``age_s``).  With a
+Findings: ``availability/dropout`` is raised for a source silent longer than
+``dropout_s`` and cleared at its next line, each with its evidence (``last_utc``,
+``age_s``): no data.  (Data that keeps arriving but does not change is the window's
+``frozen`` and ``stuck``.)  One silence is one alarm: the window's own ``dropout`` check
+of a source (below) is not raised again for a gap the live alarm already covers
+(:func:`dracc.math.integrity.causes.overlaps`); only a gap it did not see is.  With a
 :class:`~dracc.pipeline.watch_analysis.LiveAnalyser`, every line also goes into its
 rolling window, and each finished analysis of the window (the library's
 ``analyse_voyage``: the audit's integrity checks) raises a finding for every check that
 fails (check, name, source: its message, statistic, threshold and evidence) and clears
 an open one when the same check passes again -- at most a window after the fault ended,
-when the window no longer holds it.  Open findings are all kept; of the cleared ones the
-last :data:`KEEP_CLEARED`.
+when the window no longer holds it.  One cause is one alarm: a failed check the window's
+analysis finds caused by another (``cause``; :mod:`dracc.math.integrity.causes`) is
+listed under that one's ``consequences``, not raised.  Open findings are all kept; of
+the cleared ones the last :data:`KEEP_CLEARED`.
 
 The recording (``Recorder``) writes each line with its receive time; a line with a TAG
 block keeps it (its ``s:``), a line without one is recorded with ``c:`` only, so that
@@ -46,11 +52,13 @@ from typing import Any
 from dracc.ingest.live import LiveSource, Recorder, classify, poll_all
 from dracc.ingest.live.forms import NMEA_FORMS
 from dracc.ingest.live.record import tag_line
+from dracc.math.integrity.causes import event_span, overlaps
 from dracc.pipeline.watch_analysis import LiveAnalyser, WindowResult
 
 SCHEMA = "dracc.watch/1"
 RATE_WINDOW_S = 60  #: the rate is over this many seconds (one bucket per second)
 KEEP_CLEARED = 200  #: cleared findings kept in the status, the latest
+KEEP_SILENCES = 50  #: per source, the silences alarmed live that a window can still hold
 MAX_SOURCES = 1000  #: source keys tracked at most (bounded memory against garbage keys)
 
 
@@ -68,7 +76,11 @@ class SourceState:
     last_ns: int = 0
     latency_s: float | None = None
     buckets: deque[list[int]] = field(default_factory=lambda: deque(maxlen=RATE_WINDOW_S))
-    stale: dict[str, Any] | None = None  #: the open stale finding
+    silent: dict[str, Any] | None = None  #: the open dropout finding (nothing received)
+    #: the silences alarmed live, (last line, next line or None while open) in ns
+    silences: deque[tuple[int, int | None]] = field(
+        default_factory=lambda: deque(maxlen=KEEP_SILENCES)
+    )
 
     def add(self, recv_ns: int, c_ns: int | None) -> None:
         self.records += 1
@@ -94,19 +106,19 @@ class SourceState:
 
 class Watch:
     """The live loop over ``sources`` (see the module docstring).  ``clock`` gives the
-    time in ns (injected by tests); ``stale_s`` the age that raises ``stale``."""
+    time in ns (injected by tests); ``dropout_s`` the silence that raises ``dropout``."""
 
     def __init__(
         self,
         sources: Sequence[LiveSource],
         recorder: Recorder | None = None,
-        stale_s: float = 10.0,
+        dropout_s: float = 10.0,
         clock: Callable[[], int] = time.time_ns,
         analyser: LiveAnalyser | None = None,
     ) -> None:
         self.sources = list(sources)
         self.recorder = recorder
-        self.stale_ns = int(stale_s * 1e9)
+        self.dropout_ns = int(dropout_s * 1e9)
         self.clock = clock
         self.started_ns = clock()
         self.received = 0
@@ -147,7 +159,7 @@ class Watch:
                     continue
                 st = self.state[key] = SourceState()
             st.add(recv_ns, c_ns)
-            if st.stale is not None:
+            if st.silent is not None:
                 events.append(self._clear(st, recv_ns))
         if self.recorder is not None:
             self.recorder.tick()
@@ -157,27 +169,30 @@ class Watch:
             if result is not None:
                 events += self._integrity(result, now)
         for key, st in self.state.items():
-            if st.stale is None and now - st.last_ns > self.stale_ns:
+            if st.silent is None and now - st.last_ns > self.dropout_ns:
                 events.append(self._raise(key, st, now))
         return events
 
     def _raise(self, key: str, st: SourceState, now: int) -> dict[str, Any]:
         age = round((now - st.last_ns) / 1e9, 3)
-        st.stale = {
-            "check": "stale",
+        st.silent = {
+            "check": "availability",
+            "name": "dropout",
             "source": key,
             "raised_utc": utc(now),
             "cleared_utc": None,
             "message": f"{key}: nothing received for {age:.1f} s "
-            f"(more than {self.stale_ns / 1e9:g} s)",
+            f"(more than {self.dropout_ns / 1e9:g} s)",
             "evidence": {"last_utc": utc(st.last_ns), "age_s": age},
         }
-        return {"event": "raised", **st.stale}
+        st.silences.append((st.last_ns, None))
+        return {"event": "raised", **st.silent}
 
     def _clear(self, st: SourceState, recv_ns: int) -> dict[str, Any]:
-        assert st.stale is not None
-        done = {**st.stale, "cleared_utc": utc(recv_ns)}
-        st.stale = None
+        assert st.silent is not None
+        done = {**st.silent, "cleared_utc": utc(recv_ns)}
+        st.silent = None
+        st.silences[-1] = (st.silences[-1][0], recv_ns)
         self.cleared.append(done)
         return {"event": "cleared", **done}
 
@@ -188,7 +203,8 @@ class Watch:
         made = {(c["check"], c["name"], c["source"]): c for c in result.checks}
         for key, c in made.items():
             found = self.open_checks.get(key)
-            if c["status"] != "fail":
+            # a failed check another caused is listed under it, no alarm of its own
+            if c["status"] != "fail" or c.get("cause") or self._alarmed_live(c, now):
                 continue
             if found is None:
                 found = self.open_checks[key] = {
@@ -200,10 +216,15 @@ class Watch:
                     "cleared_utc": None,
                     "message": c["message"],
                     "evidence": c["evidence"],
+                    "consequences": c.get("consequences", []),
                 }
                 events.append({"event": "raised", **found})
             else:
-                found.update(message=c["message"], evidence=c["evidence"])
+                found.update(
+                    message=c["message"],
+                    evidence=c["evidence"],
+                    consequences=c.get("consequences", []),
+                )
         for key in list(self.open_checks):
             now_made = made.get(key)
             # cleared: the check passed, or it was not reported while its source was
@@ -215,6 +236,16 @@ class Watch:
                 self.cleared.append(done)
                 events.append({"event": "cleared", **done})
         return events
+
+    def _alarmed_live(self, c: dict[str, Any], now: int) -> bool:
+        """A window's failed ``dropout`` check whose every gap the live dropout of its
+        source already alarmed (open or cleared): the same silence, not a new alarm."""
+        st = self.state.get(str(c["source"]))
+        if c["name"] != "dropout" or st is None or not st.silences:
+            return False
+        heard = [(a / 1e9, (now if b is None else b) / 1e9) for a, b in st.silences]
+        gaps = [event_span(g) for g in c["evidence"]["items"]]
+        return bool(gaps) and all(g is not None and overlaps(g, heard) for g in gaps)
 
     def dropped(self) -> dict[str, int]:
         """Input the sources dropped, by reason (summed over the sources)."""
@@ -239,7 +270,7 @@ class Watch:
             }
             for key, st in sorted(self.state.items())
         }
-        open_ = [st.stale for st in self.state.values() if st.stale is not None]
+        open_ = [st.silent for st in self.state.values() if st.silent is not None]
         open_ += list(self.open_checks.values())
         findings = sorted([*self.cleared, *open_], key=lambda f: f["raised_utc"])
         return {

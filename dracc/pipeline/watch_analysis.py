@@ -29,7 +29,7 @@ import shutil
 import tempfile
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, Future
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -43,6 +43,8 @@ from dracc.core.numbers import finite_or_none
 from dracc.core.vocabulary import INS_ROLES
 from dracc.ingest.live.record import form_suffix
 from dracc.math.deviation import UnitSeries, analyse_deviations, unit_series_from_voyage
+from dracc.math.integrity import IntegrityResult
+from dracc.math.integrity.causes import failed_with_consequences
 from dracc.pipeline.audit.facts import channel_rows
 
 #: the roles whose readings the deviation store keeps
@@ -248,7 +250,10 @@ def _dr_summary(a: Any) -> dict[str, Any] | None:
     }
 
 
-def _check_dict(c: Any) -> dict[str, Any]:
+def _check_dict(c: Any, cause: Any = None, consequences: Sequence[Any] = ()) -> dict[str, Any]:
+    """One check of the window as the watch raises it: a failed check another caused
+    (``cause``: its check, name, source) is no alarm of its own; it is listed under its
+    cause's ``consequences`` (:func:`dracc.math.integrity.causes.failed_with_consequences`)."""
     return {
         "check": c.check,
         "name": c.name,
@@ -262,7 +267,20 @@ def _check_dict(c: Any) -> dict[str, Any]:
             "items": list(c.evidence[:MAX_EVIDENCE]),
             "items_total": len(c.evidence),
         },
+        "cause": None if cause is None else [cause.check, cause.name, cause.source],
+        "consequences": [
+            {"check": k.check, "name": k.name, "source": k.source, "message": k.message}
+            for k in consequences
+        ],
     }
+
+
+def _check_dicts(ig: IntegrityResult) -> list[dict[str, Any]]:
+    """Every check of the window, each failed one with its cause or its consequences."""
+    grouped = failed_with_consequences(ig)
+    under = {id(c): caused for c, caused in grouped}
+    cause = {id(k): c for c, caused in grouped for k in caused}
+    return [_check_dict(c, cause.get(id(c)), under.get(id(c), ())) for c in ig.checks]
 
 
 def analyse_window(paths: list[str], cfg: Config, store: DeviationStore) -> WindowResult:
@@ -281,7 +299,7 @@ def analyse_window(paths: list[str], cfg: Config, store: DeviationStore) -> Wind
     new = {r: unit_series_from_voyage(voyage, r) for r in DEVIATION_ROLES if voyage.role_sources(r)}
     store = store.merged(new, cfg, int(a.end_ns))
     roles = {str(s.key): [str(r) for r in s.roles] for s in a.sources}
-    checks = [] if a.integrity is None else [_check_dict(c) for c in a.integrity.checks]
+    checks = [] if a.integrity is None else _check_dicts(a.integrity)
     return WindowResult(
         span_utc_ns=(int(a.start_ns), int(a.end_ns)),
         lines=int(a.lines),

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 from dracc.core.numbers import counted, none_to_nan
 from dracc.core.vocabulary import CHANNEL_UNITS, CHANNELS, TABLE_COLUMNS
-from dracc.report.page import PAGE_END, img_tag, page_head
+from dracc.report.page import PAGE_END, consequences_html, img_tag, page_head
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -441,7 +441,11 @@ def night_html(doc: dict, analysis_body: str = "", analysis_css: str = "") -> st
             parts.append(
                 f"<tr><td class='t'>{e(f['check'])}</td><td class='t'>{e(f['source'] or '-')}</td>"
                 f"<td class='t'>{e(f['role'] or '-')}</td><td class='t message'>{e(f['message'])}"
-                f"</td><td class='t'>{stat}</td>"
+                + consequences_html(
+                    (str(c.get("check") or ""), str(c.get("message")))
+                    for c in f.get("consequences") or ()
+                )
+                + f"</td><td class='t'>{stat}</td>"
                 f"<td class='n' title='{e(str(th.get('rule', '')))}'>{thr}</td>"
                 f"<td class='t window'>{e(window_text(w))}</td>"
                 f"<td class='t'>{e(_evidence_text(f['evidence']))}</td>"

@@ -31,7 +31,7 @@ def load_schema() -> dict:
 
 def finding_dict(f: Finding) -> dict:
     """One finding with the contract keys first (check, source, role, clause, statistic,
-    threshold, window, evidence, message)."""
+    threshold, window, evidence, message), then the findings it caused (``consequences``)."""
     d = asdict(f)
     head = {
         k: d.pop(k)
@@ -50,7 +50,13 @@ def finding_dict(f: Finding) -> dict:
     head["kind"] = d.pop("kind")
     head["subject"] = d.pop("subject")
     head["false_alarm"] = d.pop("false_alarm")
+    head["consequences"] = [consequence_dict(c) for c in f.consequences]
     return jsonable(head)
+
+
+def consequence_dict(c: Finding) -> dict:
+    """A finding listed under its cause: its check, name, source and message."""
+    return {"check": c.check, "name": c.kind, "source": c.source, "message": c.message}
 
 
 def to_dict(o: AuditOutcome) -> dict:

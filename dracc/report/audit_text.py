@@ -38,6 +38,10 @@ def _own_label(msg: str, names: set[str]) -> int:
     return len(head) + len(sep) if sep and named else 0
 
 
+#: a finding's consequence, under it
+_UNDER = "      - consequence: "
+
+
 def _finding_line(f) -> str:
     who = f.source or f.subject
     role = f" ({f.role})" if f.role and f.role != who else ""
@@ -70,7 +74,9 @@ def format_summary(
     lines = [f"dracc audit: {r.vessel}, night {r.night}: {head}"]
     if o.findings:
         lines.append("findings:")
-        lines += [_finding_line(f) for f in o.findings]
+        for f in o.findings:  # one per cause, the findings it caused under it
+            lines.append(_finding_line(f))
+            lines += [_finding_line(c).replace("  - ", _UNDER, 1) for c in f.consequences]
     lines.append(f"state: {_STATUS[o.status]}")
     rate = "-" if r.rejected_rate is None else f"{100 * r.rejected_rate:.2f} %"
     lines.append(
@@ -174,7 +180,11 @@ def _joined(lines: list[str], width: int | None) -> str:
     one entry, as it is)."""
     if width is not None:
         lines = [
-            ln if "\n" in ln else wrap(ln, width, hang=4 if ln.startswith("  - ") else 2)
+            ln
+            if "\n" in ln
+            else wrap(
+                ln, width, hang=8 if ln.startswith(_UNDER) else 4 if ln.startswith("  - ") else 2
+            )
             for ln in lines
         ]
     return "\n".join(lines) + "\n"

@@ -17,19 +17,23 @@ from typing import Any
 from dracc.core import atomic
 from dracc.core.numbers import counted
 from dracc.core.timefmt import iso_utc
-from dracc.core.vocabulary import CHANNELS, DR_OVER_GROUND, FIX_UPDATED_EP, WATER_TRACK, as_heading
+from dracc.core.vocabulary import CHANNELS
+from dracc.math.integrity import IntegrityResult
+from dracc.math.integrity.causes import failed_with_consequences
 from dracc.pipeline.results import Analysis, DRLeg, DRSection, Estimate
 from dracc.report import fmt, fmt_duration, fmt_pct, short_utc
 from dracc.report.glossary import GLOSSARY, anchor
-from dracc.report.page import CSP, data_uri  # one policy and one data URI for every page
+from dracc.report.page import (  # one policy and one data URI for every page
+    CSP,
+    consequences_html,
+    data_uri,
+)
 from dracc.report.rows import (
     EXCEEDS,
-    K_STAR_NOTE,
     WITHIN,
     calibration_method,
     channel_rows,
     clock_text,
-    has_k_star,
     unit_rows,
 )
 from dracc.report.verdict import (
@@ -164,8 +168,7 @@ def _summary(a: Analysis) -> str:
         failed = a.integrity.failed
         count = _e(integrity_count(a.integrity))
         text = (
-            f'<span class="bad">{count}</span>: '
-            + "; ".join(_e(f"[{c.check}] {c.message}") for c in failed)
+            f'<span class="bad">{count}</span>: ' + _causes_html(a.integrity)
             if failed
             else f'<span class="ok">{count}</span>'
         )
@@ -201,6 +204,20 @@ def _summary(a: Analysis) -> str:
         left=2,
     )
     return f'<table class="kv">{kv}</table><h3>Sources</h3>{src}'
+
+
+def _causes_html(ig: IntegrityResult) -> str:
+    """The failed checks, one finding per cause with the checks it caused under it
+    (:func:`dracc.math.integrity.causes.failed_with_consequences`)."""
+    grouped = failed_with_consequences(ig)
+    items = "".join(
+        f"<li>{_e(f'[{c.check}] {c.message}')}"
+        + consequences_html((k.check, k.message) for k in under)
+        + "</li>"
+        for c, under in grouped
+    )
+    n = len(grouped)
+    return f"{n} finding{'s' if n != 1 else ''}<ul class='findings'>{items}</ul>"
 
 
 def _units(a: Analysis) -> str:
@@ -250,7 +267,6 @@ def _units(a: Analysis) -> str:
         f"<em>excess</em> kurtosis (0 for a normal distribution); limits at P = {p}.</p>"
     )
     notes = "".join(f"<p>{_e(n)}</p>" for n in d.messages)
-    notes += f"<p>{_e(K_STAR_NOTE)}.</p>" if has_k_star(d) else ""
     table = _table(
         [
             "unit",
@@ -355,10 +371,10 @@ def _dr(a: Analysis) -> str:
     if dr is None:
         return '<p class="missing">Dead reckoning not computed (see Missing).</p>'
     position = (
-        f"{DR_OVER_GROUND}: the {WATER_TRACK} plus the current and the compass and log "
+        "estimated position: the water track plus the current and the compass and log "
         "corrections learned from earlier fixes"
         if dr.scored_out_of_sample
-        else f"the {WATER_TRACK} (heading and log; error model as configured, nothing learned)"
+        else "the water track (heading and log; error model as configured, nothing learned)"
     )
     scored = f"{dr.n_scored} epochs after a fix"
     if dr.scored_out_of_sample:
@@ -474,14 +490,13 @@ def _calibration_current(a: Analysis) -> str:
 
 
 def _aided_ep(a: Analysis) -> str:
-    """The fix-updated EP (seeds/003's aided DR): its updates and the fix-interval table."""
+    """The aided-DR estimated position (seeds/003): its updates and the fix-interval table."""
     e = a.estimated_position
     if e is None:
         return ""
     r2m = [float(x) for x in e.radius_2m_m if math.isfinite(x)]
     out = [
-        f'<h3 id="fix-updated-ep">{as_heading(FIX_UPDATED_EP)}</h3>'
-        f"<p>{e.n_fix_updates} GNSS updates, {e.n_lop_updates} "
+        f"<p>Aided-DR estimated position: {e.n_fix_updates} GNSS updates, {e.n_lop_updates} "
         f"from the observation file; 2M up to {max(r2m, default=math.nan):.0f} m "
         f"over {len(e.time_ns)} epochs.</p>"
     ]
@@ -624,7 +639,7 @@ def render_html(a: Analysis, ins: Finding | None = None) -> str:
     figures = "".join(
         [
             track_plots.figures_html(a),  # the overview and the leg panels
-            track_plots.aided_ep_html(a),  # the fix-updated EP (seeds/003) over the DR
+            track_plots.aided_ep_html(a),  # the aided-DR EP of seeds/003 over the DR
             _figure(
                 plots.deviation_plot(a),
                 "deviation plot",

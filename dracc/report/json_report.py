@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, cast
 
@@ -20,6 +21,7 @@ from dracc.core.timefmt import iso_utc
 from dracc.core.units import mps_to_kn
 from dracc.math.clock import SourceClock
 from dracc.math.integrity import Check, IntegrityResult
+from dracc.math.integrity.causes import failed_with_consequences
 from dracc.pipeline.results import (
     Analysis,
     CalibrationSection,
@@ -365,8 +367,9 @@ def to_dict(a: Analysis) -> dict[str, Any]:
     }
 
 
-def check_dict(c: Check) -> dict[str, Any]:
-    """One integrity check (dracc.math.integrity) as plain JSON types."""
+def check_dict(c: Check, consequences: Sequence[Check] = ()) -> dict[str, Any]:
+    """One integrity check (dracc.math.integrity) as plain JSON types; ``consequences``:
+    the failed checks it caused (:func:`dracc.math.integrity.causes.failed_with_consequences`)."""
     window = {
         "start_utc": iso_utc(c.window.get("start_ns")),
         "end_utc": iso_utc(c.window.get("end_ns")),
@@ -386,16 +389,21 @@ def check_dict(c: Check) -> dict[str, Any]:
         "evidence": [_plain(e) for e in c.evidence],
         "why_not": c.why_not,
         "detail": _plain(c.detail),
+        "consequences": [
+            {"check": k.check, "name": k.name, "source": k.source, "message": k.message}
+            for k in consequences
+        ],
     }
 
 
 def integrity_dict(r: IntegrityResult) -> dict[str, Any]:
     """The integrity section: every check of every source, and the per-source figures."""
+    under = {id(cause): caused for cause, caused in failed_with_consequences(r)}
     return {
         "false_alarm_per_check": _num(r.alpha),
         "false_alarm_per_night": _num(r.false_alarm_per_night),
         "period": {"start_utc": iso_utc(r.start_ns), "end_utc": iso_utc(r.end_ns)},
-        "checks": [check_dict(c) for c in r.checks],
+        "checks": [check_dict(c, under.get(id(c), ())) for c in r.checks],
         "sources": {
             s.source: {
                 "role": s.role,

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import base64
 import html
+from collections.abc import Iterable
 
 #: the look the audit-history and fleet pages share; each page adds its column alignment
 BASE_CSS = (
@@ -41,3 +42,13 @@ def page_head(title: str, css: str = "") -> str:
         f"<meta http-equiv='Content-Security-Policy' content=\"{CSP}\"><title>{t}</title>\n"
         f"<style>{BASE_CSS}{css}</style></head><body>\n<h1>{t}</h1>"
     )
+
+
+def consequences_html(under: Iterable[tuple[str, str]]) -> str:
+    """The findings a finding caused, (check, message) each, as a list under its message
+    ('' without any; the messages name their source)."""
+    items = "".join(
+        f"<li>consequence: [{html.escape(check)}] {html.escape(message)}</li>"
+        for check, message in under
+    )
+    return f"<ul class='consequences'>{items}</ul>" if items else ""

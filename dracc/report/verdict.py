@@ -25,13 +25,15 @@ from __future__ import annotations
 
 import math
 import statistics
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from dracc.core.numbers import counted
-from dracc.core.vocabulary import CHANNEL_KEYS, CHANNEL_UNITS, CHANNELS, as_heading, dr_name
+from dracc.core.vocabulary import CHANNEL_KEYS, CHANNEL_UNITS, CHANNELS
 from dracc.math.deviation import DeviationResult
 from dracc.math.integrity import IntegrityResult
+from dracc.math.integrity.causes import failed_with_consequences
+from dracc.math.integrity.results import Check
 from dracc.pipeline.results import Analysis, DRHonesty, DRSection
 from dracc.report import fmt, fmt_pct
 from dracc.report.rows import channel_digits
@@ -182,31 +184,37 @@ def _dead_reckoning(a: Analysis) -> Finding:
             "DR honesty not checked: nothing to compare the 2M circle with",
             (dr.verdict,),
         )
-    track = as_heading(dr_name(dr.scored_out_of_sample))  # the track the 2M is drawn around
     reasons = [
         f"reference inside 2M at {containment_text(dr)}",
         _nees_reason(dr)[0],
         f"RMS error/M {fmt(dr.error_over_m_rms, 2)} (1 expected)",
     ]
+    if dr.consistent is False and dr.verdict_without_jump_legs in ("consistent", "conservative"):
+        # the cause is the reference's jump (an integrity finding), not the DR's model
+        n = len(dr.reference_jump_legs)
+        return Finding(
+            topic,
+            ATTENTION,
+            f"scored against a reference that jumped: {dr.verdict_without_jump_legs} without "
+            f"the {counted(n, 'leg')} the jump touched",
+            (*reasons, f"the reference {dr.fix_source_key} jumped: see integrity"),
+        )
     if dr.consistent is False:
         if dr.dominant_source:
             key = f" ([dead_reckoning] {dr.dominant_key})" if dr.dominant_key else ""
             reasons.append(f"the 2M is mostly made of {dr.dominant_source}{key}")
         return Finding(
-            topic, FAIL, f"{track} not honest: its 2M is too small for its errors", tuple(reasons)
+            topic, FAIL, "DR not honest: the 2M circle is too small for its errors", tuple(reasons)
         )
     if dr.verdict.startswith("conservative"):
         return Finding(
             topic,
             ATTENTION,
-            f"{track} honest but conservative: its 2M is much larger than its errors",
+            "DR honest but conservative: the 2M circle is much larger than its errors",
             tuple(reasons),
         )
     return Finding(
-        topic,
-        OK,
-        f"{track} honest: the reference stays inside its 2M as often as it should",
-        tuple(reasons),
+        topic, OK, "DR honest: the reference stays inside 2M as often as it should", tuple(reasons)
     )
 
 
@@ -351,6 +359,12 @@ def _ins_notes(d: DeviationResult) -> list[str]:
 # ---------------------------------------------------------------- integrity, faults
 
 
+def _cause(c: Check, under: Sequence[Check]) -> str:
+    """A failed check that is a cause, with the checks it caused (one finding per cause)."""
+    said = "; ".join(f"{k.check}/{k.name} {k.source or ''}".rstrip() for k in under)
+    return f"{c.check}/{c.name}: {c.message}" + (f" (consequences: {said})" if said else "")
+
+
 def _integrity(a: Analysis) -> Finding:
     topic = "integrity"
     ig = a.integrity
@@ -372,7 +386,7 @@ def _integrity(a: Analysis) -> Finding:
             topic,
             FAIL,
             integrity_count(ig),
-            tuple(f"{c.check}/{c.name}: {c.message}" for c in failed) + tuple(notes),
+            tuple(_cause(c, under) for c, under in failed_with_consequences(ig)) + tuple(notes),
         )
     if not ig.made:
         return Finding(topic, NOT_CHECKED, integrity_count(ig), tuple(notes))

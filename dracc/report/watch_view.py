@@ -3,7 +3,7 @@
 
 One screen, read at a glance: a head line (since when, lines heard, dropped, the file
 being recorded), the open findings first (a bridge wants the bad news on top), the
-sources (role, records, rate, age, latency; a stale one marked), the DR from the last fix
+sources (role, records, rate, age, latency; a silent one marked), the DR from the last fix
 with its 2M against GNSS, and the worst INS unit per channel of the deviation statistics.
 Only the status dict is read: the view has no state of its own.
 """
@@ -57,10 +57,17 @@ def _findings(st: dict[str, Any]) -> RenderableType:
             f["raised_utc"][11:19],
             check,
             printable(str(f.get("source") or "-")),
-            printable(f["message"]),
+            printable(f["message"] + _consequences(f)),
             style="red",
         )
     return table
+
+
+def _consequences(f: dict[str, Any]) -> str:
+    """The checks a finding caused, named after its message ('' without any)."""
+    under = f.get("consequences") or ()
+    said = "; ".join(f"{c['check']}/{c['name']} {c.get('source') or ''}".rstrip() for c in under)
+    return f" (consequences: {said})" if said else ""
 
 
 def _sources(st: dict[str, Any]) -> Table:
@@ -74,7 +81,9 @@ def _sources(st: dict[str, Any]) -> Table:
         ("latency s", True),
     ):
         table.add_column(col, justify="right" if right else "left")
-    stale = {f["source"] for f in st["findings"] if f["check"] == "stale" and not f["cleared_utc"]}
+    silent = {
+        f["source"] for f in st["findings"] if f.get("name") == "dropout" and not f["cleared_utc"]
+    }
     for key, s in st["sources"].items():
         table.add_row(
             printable(key),
@@ -83,7 +92,7 @@ def _sources(st: dict[str, Any]) -> Table:
             _num(s["lines_per_s"], 2),
             _num(s["age_s"], 1),
             _num(s.get("latency_s"), 3),
-            style="red" if key in stale else None,
+            style="red" if key in silent else None,
         )
     return table
 
@@ -133,7 +142,7 @@ def finding_line(f: dict[str, Any]) -> str:
     """One line for a finding raised or cleared (stderr: journald, a pipe)."""
     name = f"/{f['name']}" if f.get("name") else ""
     when = f["cleared_utc"] or f["raised_utc"]
-    return printable(f"{when} {f['check']}{name} {f['event']}: {f['message']}")
+    return printable(f"{when} {f['check']}{name} {f['event']}: {f['message']}{_consequences(f)}")
 
 
 class LiveView:

@@ -225,6 +225,9 @@ def jump_check(
                 "step_m": float(math.hypot(dn[k], de[k])),
                 "expected_step_m": float(math.hypot(pn[k], pe[k])),
                 "innovation_m": float(math.hypot(dn[k] - pn[k], de[k] - pe[k])),
+                # its direction: a fix off and back cancels (dracc.math.integrity.causes)
+                "innovation_north_m": float(dn[k] - pn[k]),
+                "innovation_east_m": float(de[k] - pe[k]),
                 "unseen_s": float(unseen_s[k]),
                 "allowance_m": float(allow_m[k]),
                 "dt_s": float(dt[k]),

@@ -55,6 +55,11 @@ class NightFacts:
     dr_nees_upper: float | None = None
     dr_dominant_source: str | None = None  #: what the 2M is mostly made of where it fails
     dr_dominant_key: str | None = None  #: the [dead_reckoning] key that sets its prior
+    dr_reference_source: str | None = None  #: the source of the DR's reference fixes
+    #: the scored legs ({"start", "end"} UTC) a jump of the reference touched where the DR
+    #: was called inconsistent, and the verdict word of its test without them
+    dr_jump_legs: tuple[dict[str, str | None], ...] = ()
+    dr_verdict_without_jump_legs: str | None = None
     duration_s: float | None = None  #: the period the logs cover
     ignored: Mapping[str, int] = field(default_factory=dict)  #: valid unused input, by type
     #: the analysis' integrity checks (:class:`dracc.math.integrity.Check`)
@@ -151,6 +156,13 @@ def _dr_facts(dr: DRSection | None) -> dict[str, Any]:
         "dr_nees_upper": finite_or_none(dr.nees_upper),
         "dr_dominant_source": _text(dr.dominant_source),
         "dr_dominant_key": _text(dr.dominant_key),
+        "dr_reference_source": _text(dr.fix_source_key),
+        "dr_jump_legs": tuple(
+            {"start": iso_utc(leg.start_ns), "end": iso_utc(leg.end_ns)}
+            for leg in dr.legs
+            if leg.index in dr.reference_jump_legs
+        ),
+        "dr_verdict_without_jump_legs": dr.verdict_without_jump_legs,
     }
 
 

@@ -9,11 +9,12 @@ judged over several nights (:mod:`dracc.pipeline.audit.accuracy`), not here.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 from dracc.core.numbers import finite_or_none, jsonable
 from dracc.core.timefmt import iso_utc
+from dracc.math.integrity.causes import Trace, group, trace
 from dracc.pipeline.audit.facts import NightFacts
 from dracc.pipeline.audit.limits import AuditConfig
 from dracc.pipeline.audit.sensor_checks import missing_source_args, sensor_error_checks
@@ -24,8 +25,8 @@ if TYPE_CHECKING:
 
 #: the clause each audit-level check cites (the integrity checks carry their own)
 AUDIT_CLAUSES = {
-    "accuracy": "IMO MSC.252(83) 5.3 accuracy; INS deviations from the mean of three (Boykov, "
-    "Mikhalskiy and Ivantsov, K3b-K8): limiting error at the probability, over the accuracy window",
+    "accuracy": "IMO MSC.252(83) 5.3 accuracy; INS deviations from the mean of three (seed 001, "
+    "K3b-K8): limiting error at the probability, over the accuracy window",
     "input": "IEC 61162-1: sentences that fail their checksum or structure are damaged input",
     "availability": "IMO MSC.252(83) 5.1.2: availability of the required sources",
     "consistency": "IMO MSC.252(83) 5.4: consistency of the DR and its 2M with the position fixes",
@@ -53,6 +54,8 @@ class Finding:
     window: Mapping[str, Any] = field(default_factory=dict)  #: {"start_utc", "end_utc", ...}
     evidence: tuple[Any, ...] = ()
     false_alarm: float | None = None  #: probability per night that a healthy source fails it
+    #: the failed checks this one caused (:func:`with_consequences`), listed under it
+    consequences: tuple[Finding, ...] = ()
 
 
 def make_finding(
@@ -199,7 +202,22 @@ def evaluate(
                 false_alarm=0.0,
             )
         )
-    return tuple(found), tuple(skipped)
+    return with_consequences(found), tuple(skipped)
+
+
+def finding_trace(f: Finding) -> Trace:
+    """What a finding's evidence says about where and when (:mod:`dracc.math.integrity.causes`)."""
+    return trace(f.check, f.kind, f.source, f.evidence)
+
+
+def with_consequences(found: Sequence[Finding]) -> tuple[Finding, ...]:
+    """One finding per cause: each finding another explains (a contradiction, the fixes
+    outside the DR's 2M or the DR's verdict under a GNSS jump, a velocity disagreement
+    under a frozen unit) listed under its cause (:func:`dracc.math.integrity.causes.cause_of`)."""
+    return tuple(
+        replace(cause, consequences=cause.consequences + tuple(under))
+        for cause, under in group(found, finding_trace)
+    )
 
 
 def dr_inconsistent_finding(facts: NightFacts, acfg: AuditConfig, below: bool) -> Finding:
@@ -214,6 +232,15 @@ def dr_inconsistent_finding(facts: NightFacts, acfg: AuditConfig, below: bool) -
             f"; {100 * facts.dr_containment_2m:.1f} % inside 2M is below the audit's minimum "
             f"of {100 * acfg.dr_containment_min:.1f} %"
         )
+    # the legs a jump of the reference touched, and the test without them: the evidence
+    # that attaches this finding to the jump (dracc.math.integrity.causes)
+    jumped = (
+        {
+            "reference_source": facts.dr_reference_source,
+            "reference_jump_legs": [dict(leg) for leg in facts.dr_jump_legs],
+            "verdict_without_them": facts.dr_verdict_without_jump_legs,
+        },
+    )
     return make_finding(
         "consistency",
         "dr_inconsistent",
@@ -225,6 +252,7 @@ def dr_inconsistent_finding(facts: NightFacts, acfg: AuditConfig, below: bool) -
         statistic_name="nees",
         rule="chi-square bounds of the NEES over the scored legs (alpha 0.01)",
         window={"start_utc": facts.period_start_utc, "end_utc": facts.period_end_utc},
+        evidence=jumped if facts.dr_jump_legs else (),
         false_alarm=DR_FALSE_ALARM,
     )
 
