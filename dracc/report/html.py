@@ -17,7 +17,7 @@ from typing import Any
 from dracc.core import atomic
 from dracc.core.numbers import counted
 from dracc.core.timefmt import iso_utc
-from dracc.core.vocabulary import CHANNELS
+from dracc.core.vocabulary import CHANNELS, DR_OVER_GROUND, FIX_UPDATED_EP, WATER_TRACK, as_heading
 from dracc.math.integrity import IntegrityResult
 from dracc.math.integrity.causes import failed_with_consequences
 from dracc.pipeline.results import Analysis, DRLeg, DRSection, Estimate
@@ -30,10 +30,12 @@ from dracc.report.page import (  # one policy and one data URI for every page
 )
 from dracc.report.rows import (
     EXCEEDS,
+    K_STAR_NOTE,
     WITHIN,
     calibration_method,
     channel_rows,
     clock_text,
+    has_k_star,
     unit_rows,
 )
 from dracc.report.verdict import (
@@ -267,6 +269,7 @@ def _units(a: Analysis) -> str:
         f"<em>excess</em> kurtosis (0 for a normal distribution); limits at P = {p}.</p>"
     )
     notes = "".join(f"<p>{_e(n)}</p>" for n in d.messages)
+    notes += f"<p>{_e(K_STAR_NOTE)}.</p>" if has_k_star(d) else ""
     table = _table(
         [
             "unit",
@@ -371,10 +374,10 @@ def _dr(a: Analysis) -> str:
     if dr is None:
         return '<p class="missing">Dead reckoning not computed (see Missing).</p>'
     position = (
-        "estimated position: the water track plus the current and the compass and log "
+        f"{DR_OVER_GROUND}: the {WATER_TRACK} plus the current and the compass and log "
         "corrections learned from earlier fixes"
         if dr.scored_out_of_sample
-        else "the water track (heading and log; error model as configured, nothing learned)"
+        else f"the {WATER_TRACK} (heading and log; error model as configured, nothing learned)"
     )
     scored = f"{dr.n_scored} epochs after a fix"
     if dr.scored_out_of_sample:
@@ -490,13 +493,14 @@ def _calibration_current(a: Analysis) -> str:
 
 
 def _aided_ep(a: Analysis) -> str:
-    """The aided-DR estimated position (seeds/003): its updates and the fix-interval table."""
+    """The fix-updated EP (seeds/003's aided DR): its updates and the fix-interval table."""
     e = a.estimated_position
     if e is None:
         return ""
     r2m = [float(x) for x in e.radius_2m_m if math.isfinite(x)]
     out = [
-        f"<p>Aided-DR estimated position: {e.n_fix_updates} GNSS updates, {e.n_lop_updates} "
+        f'<h3 id="fix-updated-ep">{as_heading(FIX_UPDATED_EP)}</h3>'
+        f"<p>{e.n_fix_updates} GNSS updates, {e.n_lop_updates} "
         f"from the observation file; 2M up to {max(r2m, default=math.nan):.0f} m "
         f"over {len(e.time_ns)} epochs.</p>"
     ]
@@ -639,7 +643,7 @@ def render_html(a: Analysis, ins: Finding | None = None) -> str:
     figures = "".join(
         [
             track_plots.figures_html(a),  # the overview and the leg panels
-            track_plots.aided_ep_html(a),  # the aided-DR EP of seeds/003 over the DR
+            track_plots.aided_ep_html(a),  # the fix-updated EP (seeds/003) over the DR
             _figure(
                 plots.deviation_plot(a),
                 "deviation plot",

@@ -22,7 +22,7 @@ from rich.console import Console
 
 from dracc.core.numbers import counted
 from dracc.core.safetext import printable
-from dracc.core.vocabulary import CHANNELS
+from dracc.core.vocabulary import CHANNELS, FIX_UPDATED_EP, as_heading, dr_name
 from dracc.math.deviation import DeviationResult
 from dracc.math.integrity import IntegrityResult
 from dracc.math.integrity.causes import failed_with_consequences
@@ -35,7 +35,14 @@ from dracc.pipeline.results import (
     EstimatedPositionSection,
 )
 from dracc.report import fmt, fmt_duration, fmt_pct, short_utc
-from dracc.report.rows import EXCEEDS, calibration_method, clock_text, unit_rows
+from dracc.report.rows import (
+    EXCEEDS,
+    K_STAR_NOTE,
+    calibration_method,
+    clock_text,
+    has_k_star,
+    unit_rows,
+)
 from dracc.report.textout import Layout, Page, bullet, labelled, layout
 from dracc.report.verdict import honesty_text, integrity_count, scored_legs, verdict
 
@@ -195,14 +202,11 @@ def _dr_body(page: _Page, dr: DRSection) -> None:
         "heading",
         f"{dr.heading_source}; speed {dr.speed_source}; restart {dr.reset}; {scored_legs(dr)}",
     )
-    # the 2M is of the estimated position (water track + what was learned), or, with
+    # the 2M is of the DR over the ground (water track + what was learned), or, with
     # learn = false, of the water track itself
     r2m = dr.epochs.radius_2m_m
     max2m = fmt(float(np.nanmax(r2m)) if np.isfinite(r2m).any() else None, 0)
-    of = (
-        f"of the {'estimated position' if dr.scored_out_of_sample else 'DR water track'}, "
-        f"largest {max2m} m"
-    )
+    of = f"of the {dr_name(dr.scored_out_of_sample)}, largest {max2m} m"
     if not dr.n_scored:
         why = (
             "no reference: consistency not scored"
@@ -254,6 +258,8 @@ def _deviation_body(page: _Page, d: DeviationResult) -> None:
         )
     )
     _unit_table(page, d)
+    if has_k_star(d):
+        page.note(K_STAR_NOTE)
     _notes(page, d.messages)
 
 
@@ -306,7 +312,7 @@ def _metres(x: float | None) -> str:
 
 
 def _aided_ep_body(page: _Page, e: EstimatedPositionSection) -> None:
-    """The aided-DR EP (seeds/003) in one line; with --fix-interval, the study's table."""
+    """The fix-updated EP (seeds/003) in one line; with --fix-interval, the study's table."""
     r2m = np.asarray(e.radius_2m_m, float)
     ok = np.isfinite(r2m)
     mean2m = fmt(float(r2m[ok].mean()) if ok.any() else None, 0)
@@ -416,7 +422,7 @@ def _page(a: Analysis, lay: Layout) -> _Page:
     _section(page, "Calibration", _calibration_body, a.calibration)
     _section(page, "Current", _current_body, a.current)
     if a.estimated_position is not None:  # seeds/003; the Missing list says why not
-        _section(page, "Aided-DR estimated position", _aided_ep_body, a.estimated_position)
+        _section(page, as_heading(FIX_UPDATED_EP), _aided_ep_body, a.estimated_position)
     # dracc.math.faults: shown whenever found, excluded or not
     _bullets(page, f"Sensor faults ({len(a.faults)})", [f"{f.kind}: {f.message}" for f in a.faults])
     if a.integrity is not None and a.integrity.failed:
@@ -537,9 +543,36 @@ def _fleet_page(res: FleetResult, lay: Layout) -> Page:
     page = Page(lay)
     _ranking_lines(page, res.ranking)
     headers, right, prio = zip(*_FLEET_COLUMNS, strict=True)
-    title = "fleet: latest log per vessel, unit and channel"
+    title = (
+        "fleet: latest night per vessel, unit and channel (RMS error: the ranking's figure "
+        "of that night; m_y, a priori, verdict: the mean of three's rule)"
+    )
     page.table(headers, rows, right=right, priorities=prio, title=title)
     return page
+
+
+#: findings named on the terminal (findings.csv and fleet.html list them all)
+_FINDINGS_SHOWN = 12
+
+
+def _findings_lines(page: Page, findings) -> None:
+    """The run's findings in one paragraph under the table: vessel, night, name, source."""
+    failed = findings[findings["status"] == "fail"] if len(findings) else findings
+    if not len(failed):
+        return
+    named = [
+        f"{r['vessel']} {r['night']} {r['name']} {r['source']}"
+        for _, r in failed.head(_FINDINGS_SHOWN).iterrows()
+    ]
+    more = len(failed) - len(named)
+    nights = len(failed.drop_duplicates(["vessel", "night"]))
+    page.blank()
+    page.wrapped(
+        f"findings: {len(failed)} on {nights} night{'s' if nights != 1 else ''}: "
+        + "; ".join(named)
+        + (f"; {more} more in findings.csv and fleet.html" if more else ""),
+        hang=2,
+    )
 
 
 def fleet_text(res: FleetResult, width: int = 100, tty: bool = False) -> str:

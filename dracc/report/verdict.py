@@ -29,7 +29,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from dracc.core.numbers import counted
-from dracc.core.vocabulary import CHANNEL_KEYS, CHANNEL_UNITS, CHANNELS
+from dracc.core.vocabulary import CHANNEL_KEYS, CHANNEL_UNITS, CHANNELS, as_heading, dr_name
 from dracc.math.deviation import DeviationResult
 from dracc.math.integrity import IntegrityResult
 from dracc.math.integrity.causes import failed_with_consequences
@@ -184,6 +184,7 @@ def _dead_reckoning(a: Analysis) -> Finding:
             "DR honesty not checked: nothing to compare the 2M circle with",
             (dr.verdict,),
         )
+    track = as_heading(dr_name(dr.scored_out_of_sample))  # the track the 2M is drawn around
     reasons = [
         f"reference inside 2M at {containment_text(dr)}",
         _nees_reason(dr)[0],
@@ -204,17 +205,20 @@ def _dead_reckoning(a: Analysis) -> Finding:
             key = f" ([dead_reckoning] {dr.dominant_key})" if dr.dominant_key else ""
             reasons.append(f"the 2M is mostly made of {dr.dominant_source}{key}")
         return Finding(
-            topic, FAIL, "DR not honest: the 2M circle is too small for its errors", tuple(reasons)
+            topic, FAIL, f"{track} not honest: its 2M is too small for its errors", tuple(reasons)
         )
     if dr.verdict.startswith("conservative"):
         return Finding(
             topic,
             ATTENTION,
-            "DR honest but conservative: the 2M circle is much larger than its errors",
+            f"{track} honest but conservative: its 2M is much larger than its errors",
             tuple(reasons),
         )
     return Finding(
-        topic, OK, "DR honest: the reference stays inside 2M as often as it should", tuple(reasons)
+        topic,
+        OK,
+        f"{track} honest: the reference stays inside its 2M as often as it should",
+        tuple(reasons),
     )
 
 

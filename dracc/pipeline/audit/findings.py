@@ -25,8 +25,8 @@ if TYPE_CHECKING:
 
 #: the clause each audit-level check cites (the integrity checks carry their own)
 AUDIT_CLAUSES = {
-    "accuracy": "IMO MSC.252(83) 5.3 accuracy; INS deviations from the mean of three (seed 001, "
-    "K3b-K8): limiting error at the probability, over the accuracy window",
+    "accuracy": "IMO MSC.252(83) 5.3 accuracy; INS deviations from the mean of three (Boykov, "
+    "Mikhalskiy and Ivantsov, K3b-K8): limiting error at the probability, over the accuracy window",
     "input": "IEC 61162-1: sentences that fail their checksum or structure are damaged input",
     "availability": "IMO MSC.252(83) 5.1.2: availability of the required sources",
     "consistency": "IMO MSC.252(83) 5.4: consistency of the DR and its 2M with the position fixes",
