@@ -66,7 +66,10 @@ TABLE_COLUMNS: dict[str, tuple[str, str]] = {
     # times
     "time_utc": ("timestamp", "the row's time, UTC (a record's time of fix where it has one)"),
     "recv_utc": ("timestamp", "a record's receive time where distinct from its time of fix"),
-    "window_start_utc": ("timestamp", "the start of the statistics window, UTC"),
+    "window_start_utc": (
+        "timestamp",
+        "the start of the statistics window (a check's: of the records it looked at), UTC",
+    ),
     "period_start_utc": ("timestamp", "the first record of the log, UTC"),
     "period_end_utc": ("timestamp", "the last record of the log, UTC"),
     "day": ("date", "the UTC date (of the middle of a log's period)"),
@@ -74,7 +77,7 @@ TABLE_COLUMNS: dict[str, tuple[str, str]] = {
     "vessel": ("text", "the vessel (its folder's name)"),
     "log": ("text", "the log file, its path within the vessel folder"),
     "sha256": ("text", "SHA-256 of the log's bytes"),
-    "status": ("text", "ok or failed"),
+    "status": ("text", "a log: ok or failed; a check: fail or not_checked"),
     "error": ("text", "why a log failed"),
     "lines": ("int", "lines (records) read from the log"),
     "ins_unit": ("text", "the INS unit: ins1, ins2, ins3, or the name the configuration gives"),
@@ -86,6 +89,12 @@ TABLE_COLUMNS: dict[str, tuple[str, str]] = {
     "m_u": ("float", "RMS of the unit's deviations from the mean of the units (K3b)"),
     "k": ("float", "the factor of m_y = k m_u (K5a, K5b)"),
     "m_y": ("float", "the unit's estimated RMS error, m_y = k m_u (K5b)"),
+    "rms_error": (
+        "float",
+        "the unit's RMS error of the night as the ranking reads it: against the reference, "
+        "else the three-cornered hat, else m_y (rms_error_method)",
+    ),
+    "rms_error_method": ("text", "how rms_error was found: reference, hat or factor"),
     "kurtosis_excess": ("float", "excess kurtosis of the deviations, 0 for a normal law (K6)"),
     "k_pie": ("float", "K_PIE(P, E) of the limiting error (K8)"),
     "k_hm": ("float", "K_hm(P) of the limiting error (K8)"),
@@ -130,7 +139,11 @@ TABLE_COLUMNS: dict[str, tuple[str, str]] = {
     "log_scale_sigma_pct": ("float", "its standard error, %"),
     "rejected_rate_pct": ("float", "damaged lines, % of the lines"),
     # records (``dracc records``; their meanings in full in dracc.pipeline.records.COLUMNS)
-    "source": ("text", "the source key (TAG s:, talker, MCAP topic, CSV source)"),
+    "source": (
+        "text",
+        "the source key (TAG s:, talker, MCAP topic, CSV source); a finding's: else its "
+        "subject (DR, compass, inputs)",
+    ),
     "role": ("text", "the role(s) of the source, '+'-joined"),
     "talker": ("text", "the NMEA talker ID"),
     "sentence": ("text", "the sentence, PGN or MCAP message"),
@@ -158,7 +171,23 @@ TABLE_COLUMNS: dict[str, tuple[str, str]] = {
     "rot_degpmin": ("float", "rate of turn, degrees per minute"),
     # the audit history page (the history document's figures of a night)
     "night": ("date", "the audited night (UTC date)"),
+    "first_night": ("date", "the first night of the logs or nights the row covers"),
+    "last_night": ("date", "the last night of the logs or nights the row covers"),
     "findings": ("text", "the night's findings"),
+    # the fleet's findings and integrity tables (dracc.pipeline.fleet.findings)
+    "check": (
+        "text",
+        "the check's family: validity, plausibility, latency, availability, consistency, "
+        "time, accuracy or input",
+    ),
+    "name": ("text", "the check, e.g. jump, frozen, dropout, dr_inconsistent"),
+    "message": ("text", "what the check found, or why it could not be made"),
+    "window_end_utc": ("timestamp", "the end of the window the check looked at, UTC"),
+    "consequences": ("text", "the failed checks this finding caused, listed under it"),
+    "checks_made": ("int", "integrity checks made (passed + failed)"),
+    "checks_passed": ("int", "integrity checks passed"),
+    "checks_failed": ("int", "integrity checks failed"),
+    "checks_not_checked": ("int", "integrity checks that could not be made"),
 }
 
 #: a wide column per INS unit: ``<ins_unit>_<channel key>`` (``ins1_lat_m``) -> (kind, meaning)

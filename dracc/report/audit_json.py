@@ -100,6 +100,7 @@ def to_dict(o: AuditOutcome) -> dict:
         "sources": dict(r.sources),
         "findings": [finding_dict(f) for f in o.findings],
         "not_checked": [dict(n) for n in o.not_checked],
+        "integrity": _integrity_counts(o),
         "false_alarm_per_night": o.false_alarm_per_night,
         "accuracy": dict(o.accuracy),
         "ins": channels,
@@ -132,6 +133,15 @@ def to_dict(o: AuditOutcome) -> dict:
         "analysis": None if o.analysis is None else json_report.to_dict(o.analysis),
     }
     return jsonable(doc)
+
+
+def _integrity_counts(o: AuditOutcome) -> dict | None:
+    """The night's integrity checks made, passed, failed and not checked (a brief
+    document keeps them: the fleet's integrity table reads them); None without them."""
+    from dracc.pipeline.fleet.findings import integrity_counts
+
+    ig = None if o.analysis is None else o.analysis.integrity
+    return None if ig is None else integrity_counts(ig)
 
 
 def brief(doc: dict) -> dict:

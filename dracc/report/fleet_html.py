@@ -19,6 +19,7 @@ import pandas as pd
 
 from dracc.core.vocabulary import CHANNELS
 from dracc.pipeline.fleet import FleetResult
+from dracc.pipeline.fleet.findings import CONSEQUENCES_SEP, INTEGRITY_COLUMNS
 from dracc.report.audit_html import column_header, m_y_history_plot
 from dracc.report.page import PAGE_END, img_tag, page_head
 
@@ -44,8 +45,9 @@ def cell_text(x) -> str:
 
 
 def latest(table: pd.DataFrame) -> pd.DataFrame:
-    """Per vessel, INS unit and channel: the latest log's row, with the vessel's log count
-    and period (``first_day``, ``last_day``, ``logs``)."""
+    """Per vessel, INS unit and channel: the latest log's row (its night in ``day``), with
+    the vessel's log count and the nights they span in this run (``logs``, ``first_day``,
+    ``last_day``: the vessel's, not the row's)."""
     ok = table[table["status"] == "ok"]
     if ok.empty:
         return ok
@@ -142,7 +144,10 @@ def ranking_section(ranking: pd.DataFrame) -> list[str]:
         "discovery rate of 5 % (q &lt; 0.05, Benjamini-Hochberg over the fleet); the "
         f"next {min(_NEXT_ROWS, len(ranking) - len(found))} rows follow for context. "
         "p combines the comparison with peers and the unit's own change point "
-        "(Bonferroni over the two).</p><table><tr>"
+        "(Bonferroni over the two).  The value is the unit's figure pooled over its last "
+        "nights (up to the ranking's peer_nights; how many: its evidence); each night's "
+        "own figure is under its evidence (for an INS unit, the same number as the RMS "
+        "error of that night in the tables below).</p><table><tr>"
         + "".join(
             f"<th>{h}</th>"
             for h in (
@@ -150,7 +155,7 @@ def ranking_section(ranking: pd.DataFrame) -> list[str]:
                 "vessel",
                 "unit",
                 "quantity",
-                "value",
+                "value, last nights pooled",
                 "peers' median",
                 "score",
                 "p",
@@ -196,9 +201,176 @@ def ranking_section(ranking: pd.DataFrame) -> list[str]:
             f"{e(_value(change.get('before'), unit))} before and "
             f"{e(_value(change.get('after'), unit))} after; z {fmt_num(change.get('z'), 2)}, "
             f"p {_p(change.get('p'))} over {change.get('splits')} splits.</p>"
-            f"<table><tr><th>night</th><th>value</th></tr>{nights}</table></details>"
+            f"<table><tr><th>night</th><th>the night's value</th></tr>{nights}</table>"
+            "</details>"
         )
     return parts
+
+
+def _rms(r: pd.Series, digits: int) -> str:
+    """'305.7 m (reference)': the night's RMS error and how it was found; '-' without one."""
+    text = fmt_num_unit(r["rms_error"], digits, " " + cell_text(r["measure_unit"]))
+    method = r["rms_error_method"]
+    return text if text == "-" or pd.isna(method) else f"{text} ({method})"
+
+
+def latest_section(table: pd.DataFrame) -> list[str]:
+    """The latest night of each vessel, INS unit and channel: every figure is that
+    night's; the nights each vessel's logs span are a table of their own above it."""
+    lt = latest(table)
+    if lt.empty:
+        return []
+    e, _f, _fu, _s = html.escape, fmt_num, fmt_num_unit, cell_text
+    span = lt.drop_duplicates("vessel")
+    parts = [
+        "<h2>Logs per vessel in this run</h2><table><tr>"
+        + column_header("vessel", "vessel")
+        + column_header("logs", "logs")
+        + column_header("first night", "first_night")
+        + column_header("last night", "last_night")
+        + "</tr>",
+        *(
+            f"<tr><td>{e(_s(r['vessel']))}</td><td>{r['logs']}</td>"
+            f"<td>{e(_s(r['first_day']))}</td><td>{e(_s(r['last_day']))}</td></tr>"
+            for _, r in span.iterrows()
+        ),
+        "</table>",
+        "<h2>Latest night per vessel, INS unit and channel</h2>"
+        "<p>Each row is the vessel's latest log: every figure is of that log's night. RMS "
+        "error is the unit's own figure the ranking reads (against the reference, else "
+        "the three-cornered hat, else m_y); m_y is the mean of three's (K5b: one bad unit "
+        "raises the other two's), which the a priori rule applies to.</p><table><tr>"
+        + "".join(
+            column_header(label, column)
+            for label, column in (
+                ("vessel", "vessel"),
+                ("INS unit", "ins_unit"),
+                ("channel", "channel"),
+                ("night", "day"),
+                ("RMS error", "rms_error"),
+                ("m_y", "m_y"),
+                ("excess kurtosis", "kurtosis_excess"),
+                ("limiting error", "limit"),
+                ("a priori after (rule on m_y)", "apriori_after"),
+                ("verdict", "apriori_verdict"),
+                ("DR in 2M", "dr_containment_2m"),
+                ("compass error", "compass_error_deg"),
+                ("log scale", "log_scale_pct"),
+            )
+        )
+        + "</tr>",
+    ]
+    for _, r in lt.iterrows():
+        d = 3 if _s(r["measure_unit"]) == "deg" else 1
+        c = r["dr_containment_2m"]
+        parts.append(
+            f"<tr><td>{e(_s(r['vessel']))}</td><td>{e(_s(r['ins_unit']))}</td>"
+            f"<td>{e(_s(r['channel']))}</td><td>{e(_s(r['day']))}</td>"
+            f"<td>{e(_rms(r, d))}</td>"
+            f"<td>{e(_fu(r['m_y'], d, ' ' + _s(r['measure_unit'])))}</td>"
+            f"<td>{_f(r['kurtosis_excess'], 2)}</td>"
+            f"<td>{_f(r['limit'], d)}</td><td>{_f(r['apriori_after'], d)}</td>"
+            f"<td>{e(_s(r['apriori_verdict']))}</td>"
+            f"<td>{'-' if pd.isna(c) else f'{100 * c:.1f} %'}</td>"
+            f"<td>{_fu(r['compass_error_deg'], 2, '°')}</td>"
+            f"<td>{_fu(r['log_scale_pct'], 2, ' %')}</td></tr>"
+        )
+    parts.append("</table>")
+    return parts
+
+
+def _utc(t) -> str:
+    return "-" if t is None or pd.isna(t) else f"{t:%Y-%m-%d %H:%M:%S}"
+
+
+def findings_section(res: FleetResult) -> list[str]:
+    """Per vessel and night: the integrity checks made, passed, failed and not checked;
+    the findings, each with the failed checks it caused; the checks that could not be made."""
+    ig, fd = res.integrity, res.findings
+    if ig.empty and fd.empty:
+        return []
+    e, _s = html.escape, cell_text
+    failed = fd[fd["status"] == "fail"] if not fd.empty else fd
+    per_log = failed.groupby(["vessel", "log"]).size() if not failed.empty else pd.Series()
+    parts = [
+        "<h2>Findings and integrity per vessel and night</h2>"
+        "<p>The checks the nightly audit makes, per log (a night of an audit document): "
+        "the integrity checks of the analysis (made = passed + failed; '-' where the "
+        "input does not say), and the night's findings below: one per cause, with the "
+        "failed checks it caused as its consequences (so a night may have fewer findings "
+        "than failed checks).</p><table><tr>"
+        + "".join(
+            column_header(label, column)
+            for label, column in (
+                ("vessel", "vessel"),
+                ("night", "night"),
+                ("log", "log"),
+                ("checks made", "checks_made"),
+                ("passed", "checks_passed"),
+                ("failed", "checks_failed"),
+                ("not checked", "checks_not_checked"),
+                ("findings", "findings"),
+            )
+        )
+        + "</tr>"
+    ]
+    for _, r in ig.iterrows():
+        n = int(per_log.get((r["vessel"], r["log"]), 0))
+        counts = "".join(f"<td>{_s(r[c])}</td>" for c in INTEGRITY_COLUMNS[3:])
+        bad = " class='bad'"
+        parts.append(
+            f"<tr{bad if n else ''}><td class='t'>{e(_s(r['vessel']))}</td>"
+            f"<td class='t'>{e(_s(r['night']))}</td><td class='t'>{e(_s(r['log']))}</td>"
+            f"{counts}<td>{n}</td></tr>"
+        )
+    parts.append("</table>")
+    if not failed.empty:
+        parts.append(_findings_table(failed, "Findings", "message"))
+    skipped = fd[fd["status"] == "not_checked"] if not fd.empty else fd
+    if not skipped.empty:
+        parts.append(
+            f"<details><summary>{len(skipped)} checks could not be made</summary>"
+            + _findings_table(skipped, "", "why")
+            + "</details>"
+        )
+    return parts
+
+
+def _findings_table(rows: pd.DataFrame, title: str, says: str) -> str:
+    """Rows of the findings table: who, which check, the message (or why not), when."""
+    e, _s = html.escape, cell_text
+    head = (
+        (f"<h3>{e(title)}</h3>" if title else "")
+        + "<table><tr>"
+        + "".join(
+            column_header(label, column)
+            for label, column in (
+                ("vessel", "vessel"),
+                ("night", "night"),
+                ("source", "source"),
+                ("check", "check"),
+                ("name", "name"),
+                (says, "message"),
+                ("from (UTC)", "window_start_utc"),
+                ("to (UTC)", "window_end_utc"),
+                ("consequences", "consequences"),
+            )
+        )
+        + "</tr>"
+    )
+    body = "".join(
+        "<tr>"
+        + "".join(
+            f"<td class='t'>{e(_s(r[c]))}</td>"
+            for c in ("vessel", "night", "source", "check", "name", "message")
+        )
+        + f"<td>{_utc(r['window_start_utc'])}</td><td>{_utc(r['window_end_utc'])}</td>"
+        + "<td class='t'>"
+        + "<br>".join(e(c) for c in _s(r["consequences"]).split(CONSEQUENCES_SEP))
+        + "</td></tr>"
+        for _, r in rows.iterrows()
+    )
+    return head + body + "</table>"
 
 
 def fleet_html(res: FleetResult) -> str:
@@ -208,7 +380,8 @@ def fleet_html(res: FleetResult) -> str:
     parts = [
         page_head(
             "dracc fleet report",
-            "td:nth-child(-n+3),th:nth-child(-n+3){text-align:left}.bad{color:#b00}",
+            "td:nth-child(-n+3),th:nth-child(-n+3){text-align:left}.bad{color:#b00}"
+            "td{white-space:nowrap}td.t{text-align:left;white-space:normal}",
         ),
         f"<p>{res.logs} logs of {res.table['vessel'].nunique()} vessels; "
         f"{res.analysed} analysed in this run, {res.cached} from the cache, "
@@ -218,44 +391,8 @@ def fleet_html(res: FleetResult) -> str:
         + ".</p>",
         *ranking_section(res.ranking),
     ]
-    lt = latest(res.table)
-    if not lt.empty:
-        parts.append(
-            "<h2>Latest figures per vessel, INS unit and channel</h2><table><tr>"
-            + "".join(
-                column_header(label, column)
-                for label, column in (
-                    ("vessel", "vessel"),
-                    ("INS unit", "ins_unit"),
-                    ("channel", "channel"),
-                    ("days", "day"),
-                    ("logs", "logs"),
-                    ("m_y", "m_y"),
-                    ("excess kurtosis", "kurtosis_excess"),
-                    ("limiting error", "limit"),
-                    ("a priori", "apriori_after"),
-                    ("verdict", "apriori_verdict"),
-                    ("DR in 2M", "dr_containment_2m"),
-                    ("compass error", "compass_error_deg"),
-                    ("log scale", "log_scale_pct"),
-                )
-            )
-            + "</tr>"
-        )
-        for _, r in lt.iterrows():
-            d = 3 if _s(r["measure_unit"]) == "deg" else 1
-            c = r["dr_containment_2m"]
-            parts.append(
-                f"<tr><td>{e(_s(r['vessel']))}</td><td>{e(_s(r['ins_unit']))}</td>"
-                f"<td>{e(_s(r['channel']))}</td><td>{e(_s(r['first_day']))} to "
-                f"{e(_s(r['last_day']))}</td><td>{r['logs']}</td>"
-                f"<td>{e(_fu(r['m_y'], d, ' ' + _s(r['measure_unit'])))}</td><td>{_f(r['kurtosis_excess'], 2)}</td>"
-                f"<td>{_f(r['limit'], d)}</td><td>{_f(r['apriori_after'], d)}</td>"
-                f"<td>{e(_s(r['apriori_verdict']))}</td>"
-                f"<td>{'-' if pd.isna(c) else f'{100 * c:.1f} %'}</td>"
-                f"<td>{_fu(r['compass_error_deg'], 2, '°')}</td><td>{_fu(r['log_scale_pct'], 2, ' %')}</td></tr>"
-            )
-        parts.append("</table>")
+    parts += latest_section(res.table)
+    parts += findings_section(res)
     png = containment_plot(res.table)
     if png:
         parts.append("<h2>Dead reckoning</h2>" + img_tag(png, "DR containment per vessel"))

@@ -1,8 +1,9 @@
-"""The fleet's outputs: fleet, trend and ranking tables (Parquet and CSV), the same as a
-Hive-partitioned dataset under ``tables/`` (the layout of :mod:`dracc.pipeline.fleet.query`),
-per vessel CSVs and ``fleet.json``, published together so that a reader never sees a mix of
-two runs; and the forms of a ``dracc fleet query`` result (table, CSV, JSON lines).
-The tables themselves are computed in :mod:`dracc.pipeline.fleet.tables`."""
+"""The fleet's outputs: fleet, trend, ranking, findings and integrity tables (Parquet and
+CSV), the same as a Hive-partitioned dataset under ``tables/`` (the layout of
+:mod:`dracc.pipeline.fleet.query`), per vessel CSVs and ``fleet.json``, published together
+so that a reader never sees a mix of two runs; and the forms of a ``dracc fleet query``
+result (table, CSV, JSON lines).  The tables themselves are computed in
+:mod:`dracc.pipeline.fleet.tables` and :mod:`dracc.pipeline.fleet.findings`."""
 
 from __future__ import annotations
 
@@ -86,9 +87,9 @@ def write_tables(
     extra: Mapping[str, str] | None = None,
     published: list | None = None,
 ) -> list[Path]:
-    """fleet, trends and ranking .parquet/.csv, the same tables Hive-partitioned under
-    ``tables/`` (:func:`hive_parts`), failures in fleet.json, per vessel
-    ``vessels/<safe name>/fleet.csv`` and ``trends.csv``, and the ``extra`` files
+    """fleet, trends, ranking, findings and integrity .parquet/.csv, the same tables
+    Hive-partitioned under ``tables/`` (:func:`hive_parts`), failures in fleet.json, per
+    vessel ``vessels/<safe name>/fleet.csv``, ``trends.csv`` and ``findings.csv``, and the ``extra`` files
     (name -> text, e.g. ``fleet.html``), published together (:func:`dracc.core.atomic.file_set`):
     a reader, an interrupt or a kill at any moment finds the previous complete set in
     ``out`` or the new complete set, never a mix (``published``: see
@@ -114,7 +115,13 @@ def write_tables(
                 path.write_text(csv_text(data), encoding="utf-8")
             rels.append(path.relative_to(stage.resolve()))
 
-        tables = (("fleet", result.table), ("trends", result.trends), ("ranking", result.ranking))
+        tables = (
+            ("fleet", result.table),
+            ("trends", result.trends),
+            ("ranking", result.ranking),
+            ("findings", result.findings),
+            ("integrity", result.integrity),
+        )
         for name, df in tables:
             put(Path(f"{name}.parquet"), df)
             put(Path(f"{name}.csv"), df)
@@ -136,6 +143,11 @@ def write_tables(
                 Path("vessels", vessel, "trends.csv"),
                 result.trends[result.trends["vessel"] == vessel],
             )
+            if len(result.findings):
+                put(
+                    Path("vessels", vessel, "findings.csv"),
+                    result.findings[result.findings["vessel"] == vessel],
+                )
         summary = {
             "schema": "dracc.fleet/2",
             "dracc_version": __version__,

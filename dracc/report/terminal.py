@@ -448,7 +448,9 @@ def print_summary(a: Analysis, console: Console) -> None:
 _FLEET_COLUMNS = (
     ("vessel", False, 0),
     ("unit", False, 0),
-    ("m_y", True, 0),
+    ("night", False, 2),
+    ("RMS error", True, 0),
+    ("m_y", True, 1),
     ("kurt", True, 2),
     ("limit", True, 1),
     ("a priori", True, 1),
@@ -464,7 +466,7 @@ _RANKING_COLUMNS = (
     ("vessel", False, 0),
     ("unit", False, 0),
     ("quantity", False, 0),
-    ("value", True, 0),
+    ("pooled value", True, 0),
     ("peer median", True, 2),
     ("q", True, 0),
     ("since", False, 1),
@@ -530,6 +532,8 @@ def _fleet_page(res: FleetResult, lay: Layout) -> Page:
             (
                 cell_text(r["vessel"]),
                 unit,
+                cell_text(r["day"]),
+                fmt_num_unit(r["rms_error"], d, measure),
                 fmt_num_unit(r["m_y"], d, measure),
                 fmt_num(r["kurtosis_excess"], 1),
                 fmt_num(r["limit"], d),
@@ -548,6 +552,7 @@ def _fleet_page(res: FleetResult, lay: Layout) -> Page:
         "of that night; m_y, a priori, verdict: the mean of three's rule)"
     )
     page.table(headers, rows, right=right, priorities=prio, title=title)
+    _findings_lines(page, res.findings)
     return page
 
 

@@ -55,6 +55,11 @@ QUANTITY_UNITS = {
 _P_2M = 0.95
 
 
+def channel_quantity(channel: str) -> str:
+    """The quantity of an INS channel's RMS error: 'lat' -> 'lat_m_y'."""
+    return f"{channel}_m_y"
+
+
 def _measure(
     unit: str,
     quantity: str,
@@ -98,7 +103,7 @@ def _ins_measures(a: Analysis) -> list[dict[str, Any] | None]:
     rows: list[dict[str, Any] | None] = []
     for unit, per in sorted(dev.whole.units.items()):
         for ch in CHANNELS:
-            quantity = f"{ch}_m_y"
+            quantity = channel_quantity(ch)
             ref = per.reference.get(ch)
             hat = per.hat.get(ch)
             st = per.channels.get(ch)

@@ -2,9 +2,11 @@
 
 Workers run :func:`analyse_log` (the pipeline) on each log file and send back
 :func:`summarise`: a small JSON-ready summary of the analysis (no samples, no DR
-epochs).  The parent caches every summary under ``OUT/cache/`` keyed by the SHA-256 of
-the log's bytes and of the analysis settings (``dracc.fleet.cache/2``, written
-atomically; entries written by another dracc version are analysed again), so a re-run
+epochs), with the night's findings and integrity counts
+(:mod:`dracc.pipeline.fleet.findings`).  The parent caches every summary under
+``OUT/cache/`` keyed by the SHA-256 of the log's bytes and of the settings
+(:func:`fleet_settings_sha256`; ``dracc.fleet.cache/4``, written atomically; entries
+written by another dracc version are analysed again), so a re-run
 skips what was done unless ``force``; a failing log becomes a row with
 ``status='failed'`` and an entry in ``failures``, never the end of the batch.  A file
 that is no log at all (:func:`dracc.ingest.not_a_log`: a README, a photo, an archive)
@@ -19,6 +21,7 @@ one folder several to a task).  The workers must see the log paths (a shared dis
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from collections.abc import Callable, Sequence
@@ -30,13 +33,21 @@ from dracc import __version__
 from dracc.core import atomic
 from dracc.core.config import Config
 from dracc.core.errors import DraccError
+from dracc.core.numbers import jsonable
 from dracc.ingest import not_a_log
 from dracc.pipeline.audit.facts import facts_from_analysis
-from dracc.pipeline.audit.limits import apriori_seeds, settings_sha256
+from dracc.pipeline.audit.findings import evaluate
+from dracc.pipeline.audit.limits import AuditConfig, apriori_seeds, audit_config, settings_sha256
 from dracc.pipeline.audit.run import analyse_voyage
 from dracc.pipeline.fleet.documents import expand_documents
 from dracc.pipeline.fleet.engines import run_dask as _run_dask
 from dracc.pipeline.fleet.engines import run_local as _run_local
+from dracc.pipeline.fleet.findings import (
+    findings_table,
+    integrity_counts,
+    integrity_table,
+    night_findings,
+)
 from dracc.pipeline.fleet.ranking import measures_frame, rank_fleet, ranking_config
 from dracc.pipeline.fleet.tables import FleetResult, fleet_table, fleet_trends, night_of_summary
 from dracc.pipeline.fleet.tasks import LogTask
@@ -45,13 +56,18 @@ if TYPE_CHECKING:
     from dracc.pipeline.results import Analysis
 
 #: /2: the summary's "dr" carries the verdict word and the NEES statistic; /3: the
-#: ranking's "measures" (an older entry is analysed again)
-CACHE_SCHEMA = "dracc.fleet.cache/3"
+#: ranking's "measures"; /4: the night's "findings" and "integrity" counts (an older
+#: entry is analysed again)
+CACHE_SCHEMA = "dracc.fleet.cache/4"
 
 
-def summarise(analysis: Analysis) -> dict:
-    """The part of an analysis the fleet keeps and caches (small: no samples, no epochs)."""
+def summarise(analysis: Analysis, acfg: AuditConfig | None = None) -> dict:
+    """The part of an analysis the fleet keeps and caches (small: no samples, no epochs),
+    with the night's findings as the audit would make them under ``acfg`` (``[audit]``;
+    default: its defaults) and the counts of the analysis' integrity checks
+    (:mod:`dracc.pipeline.fleet.findings`)."""
     facts = facts_from_analysis(analysis)
+    found, not_checked = evaluate(facts, acfg or AuditConfig())
     return {
         "schema": analysis.schema,
         "period": {"start_utc": facts.period_start_utc, "end_utc": facts.period_end_utc},
@@ -74,6 +90,8 @@ def summarise(analysis: Analysis) -> dict:
         },
         "missing": list(facts.missing),
         "measures": dict(facts.measures),
+        "findings": night_findings([jsonable(asdict(f)) for f in found], not_checked),
+        "integrity": None if analysis.integrity is None else integrity_counts(analysis.integrity),
     }
 
 
@@ -88,11 +106,26 @@ def analyse_log(path: str, cfg: Config) -> dict:
         what = not_a_log(path)
         if what is not None:
             return {"ok": False, "skipped": what}
-        return {"ok": True, "summary": summarise(analyse_voyage([Path(path)], cfg))}
+        acfg = audit_config(cfg)  # before the analysis: a bad [audit] fails at once
+        return {"ok": True, "summary": summarise(analyse_voyage([Path(path)], cfg), acfg)}
     except DraccError as err:
         return {"ok": False, "error": str(err)}
     except Exception as err:  # a dracc bug on one log must not stop the fleet
         return {"ok": False, "error": f"internal error ({type(err).__name__}: {err})"}
+
+
+def fleet_settings_sha256(cfg: Config) -> str:
+    """SHA-256 of the settings a cached summary depends on: those of the analysis
+    (:func:`dracc.pipeline.audit.settings_sha256`), the integrity checks and the sensor
+    faults, and the ``[audit]`` limits its findings are judged by (ConfigError for a bad
+    ``[audit]``: the run stops before any log)."""
+    doc = {
+        "analysis": settings_sha256(cfg),
+        "integrity": asdict(cfg.integrity),
+        "faults": asdict(cfg.faults),
+        "audit": asdict(audit_config(cfg)),
+    }
+    return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
 
 
 def cache_path(out: Path, task: LogTask, settings: str) -> Path:
@@ -130,7 +163,7 @@ def run_fleet(
     ``analyser`` must be a picklable module-level function (tests replace it).
     """
     out = Path(out)
-    settings = settings_sha256(cfg)
+    settings = fleet_settings_sha256(cfg)
     seeds = apriori_seeds(cfg)
     rc = ranking_config(cfg)
     # audit documents and databases: their nights are read, not analysed
@@ -227,6 +260,8 @@ def run_fleet(
         ranking,
         skipped=passed,
         documents=from_documents,
+        findings=findings_table(tasks, summaries),
+        integrity=integrity_table(tasks, summaries),
     )
 
 

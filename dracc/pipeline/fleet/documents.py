@@ -18,6 +18,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from dracc.core.errors import StateError
+from dracc.pipeline.fleet.findings import COUNT_KEYS, document_counts, night_findings
 from dracc.pipeline.fleet.tasks import LogTask
 from dracc.pipeline.state import NightRecord, StateStore
 
@@ -91,7 +92,22 @@ def summary_from_document(doc: dict) -> dict:
         },
         "missing": list(doc.get("missing") or []),
         "measures": doc.get("measures") or {},
+        "findings": night_findings(doc.get("findings") or [], doc.get("not_checked") or []),
+        "integrity": _document_integrity(doc),
     }
+
+
+def _document_integrity(doc: dict) -> dict | None:
+    """The counts of the night's integrity checks: the document's own, else counted from
+    the analysis it embeds (a document written before it carried them); None for a
+    brief document without them."""
+    own = doc.get("integrity")
+    if isinstance(own, dict):
+        return {k: own.get(k) for k in COUNT_KEYS}
+    checks = ((doc.get("analysis") or {}).get("integrity") or {}).get("checks")
+    if not isinstance(checks, list):
+        return None
+    return document_counts(c for c in checks if isinstance(c, dict))
 
 
 def summary_from_record(r: NightRecord) -> dict:
@@ -132,6 +148,8 @@ def summary_from_record(r: NightRecord) -> dict:
         },
         "missing": list(r.missing),
         "measures": r.measures or {},
+        "findings": night_findings(r.findings),  # the database keeps no checks not made
+        "integrity": None,  # nor the counts
     }
 
 

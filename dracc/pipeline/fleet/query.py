@@ -6,17 +6,21 @@ rows as a Hive-partitioned dataset (:func:`dracc.report.fleet_tables.write_table
     DIR/tables/fleet/vessel=<v>/night=<YYYY-MM-DD>/part-0.parquet
     DIR/tables/trends/vessel=<v>/night=<YYYY-MM-DD>/part-0.parquet
     DIR/tables/ranking/vessel=<v>/part-0.parquet
+    DIR/tables/findings/vessel=<v>/night=<YYYY-MM-DD>/part-0.parquet
+    DIR/tables/integrity/vessel=<v>/night=<YYYY-MM-DD>/part-0.parquet
 
 A partition value is escaped as Hive does (``FileUtils.escapePathName``: ``%``, ``/``,
 ``=``, control characters and a few more become ``%XX``; Unicode stays; Spark and DuckDB >= 1.1 decode
 it); a missing value is ``__HIVE_DEFAULT_PARTITION__`` (read back as NULL).  ``night`` is
-the table's ``day`` column (the UTC night); timestamps are stored in microseconds with
+the fleet and trend tables' ``day`` column (the UTC night), the findings and integrity
+tables' ``night``; timestamps are stored in microseconds with
 time zone UTC (Parquet TIMESTAMP(isAdjustedToUTC, MICROS): DuckDB's TIMESTAMPTZ, Spark's
 TIMESTAMP).  Each file keeps the table's column order in its key-value metadata
 (:data:`COLUMNS_KEY`), so the views show the columns of fleet.parquet, in its order.
 
 :func:`run_query` opens DuckDB in memory (nothing is written in DIR), makes the views
-``fleet``, ``trends`` and ``ranking`` (those whose files exist) and returns the result.
+``fleet``, ``trends``, ``ranking``, ``findings`` and ``integrity`` (those whose files
+exist) and returns the result.
 """
 
 from __future__ import annotations
@@ -41,6 +45,8 @@ PARTITIONS: dict[str, tuple[tuple[str, str, str], ...]] = {
     "fleet": (("vessel", "vessel", "VARCHAR"), ("night", "day", "DATE")),
     "trends": (("vessel", "vessel", "VARCHAR"), ("night", "day", "DATE")),
     "ranking": (("vessel", "vessel", "VARCHAR"),),
+    "findings": (("vessel", "vessel", "VARCHAR"), ("night", "night", "DATE")),
+    "integrity": (("vessel", "vessel", "VARCHAR"), ("night", "night", "DATE")),
 }
 #: the file name inside a partition
 PART_FILE = "part-0.parquet"
@@ -196,7 +202,8 @@ def _plain(table: pa.Table) -> pd.DataFrame:
 
 def run_query(out_dir: str | Path, sql: str) -> pd.DataFrame:
     """Run ``sql`` (DuckDB's dialect; several statements: the last one's rows) over the
-    views ``fleet``, ``trends`` and ``ranking`` of the fleet outputs in ``out_dir``.  A
+    views ``fleet``, ``trends``, ``ranking``, ``findings`` and ``integrity`` of the fleet
+    outputs in ``out_dir``.  A
     statement without rows gives an empty frame.  A bad query is an :class:`OptionError`
     with DuckDB's message; a folder without tables a :class:`FleetError`."""
     duckdb = _duckdb()

@@ -16,7 +16,11 @@ formula get a leading single quote.
 Column names and kinds are those of :data:`dracc.core.vocabulary.TABLE_COLUMNS`:
 ``period_start_utc`` and ``period_end_utc`` are UTC timestamps, ``day`` a date (pyarrow
 ``date32``), ``ins_unit`` the INS unit and ``measure_unit`` the unit of the channel's
-figures (m or deg).
+figures (m or deg).  ``rms_error`` is the unit's RMS error of the log's night as the
+ranking reads it (:func:`night_figures`; how it was found in ``rms_error_method``:
+``reference``, ``hat`` or ``factor``), the figure the pages show; ``m_y`` is the mean of
+three's K5b figure, which the a priori rule applies to (one bad unit raises the other
+two's m_y: it blames all three).
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ import pandas as pd
 import pyarrow as pa
 
 from dracc.core.vocabulary import CHANNEL_UNITS
+from dracc.pipeline.audit.measures import channel_quantity
 from dracc.pipeline.audit.rule import apriori_chain
 from dracc.pipeline.fleet.tasks import LogTask
 
@@ -49,6 +54,8 @@ TABLE_COLUMNS = (
     "n",
     "m_u",
     "m_y",
+    "rms_error",
+    "rms_error_method",
     "kurtosis_excess",
     "limit",
     "apriori_before",
@@ -95,6 +102,12 @@ class FleetResult:
     #: analysed, not in the tables, not counted among the logs
     skipped: tuple[dict, ...] = ()
     documents: int = 0  #: nights read from audit documents and databases (not analysed)
+    #: each night's findings and checks not made
+    #: (:data:`dracc.pipeline.fleet.findings.FINDING_COLUMNS`)
+    findings: pd.DataFrame = field(default_factory=pd.DataFrame)
+    #: each night's integrity checks made, passed, failed, not checked
+    #: (:data:`dracc.pipeline.fleet.findings.INTEGRITY_COLUMNS`)
+    integrity: pd.DataFrame = field(default_factory=pd.DataFrame)
 
     @property
     def logs(self) -> int:
@@ -130,6 +143,20 @@ def night_of_summary(s: Mapping) -> str | None:
     per = s.get("period") or {}
     d = _night(s.get("night")) or _day(per.get("start_utc"), per.get("end_utc"))
     return None if d is None else d.isoformat()
+
+
+def night_figures(s: Mapping) -> dict[tuple[str, str], tuple[float, str]]:
+    """(INS unit, channel) -> (RMS error, method) of one summary: the night's figure the
+    ranking reads (:func:`dracc.pipeline.audit.measures.night_measures`: against the
+    reference, else the three-cornered hat, else m_y), so that the fleet table and the
+    ranking show one number for one unit and night."""
+    by_quantity = {channel_quantity(ch): ch for ch in CHANNEL_UNITS}
+    out = {}
+    for r in (s.get("measures") or {}).get("rows", ()):
+        ch = by_quantity.get(r.get("quantity"))
+        if ch is not None and r.get("value") is not None:
+            out[(str(r.get("unit")), ch)] = (float(r["value"]), str(r.get("method") or ""))
+    return out
 
 
 def _pct(x):
@@ -177,7 +204,9 @@ def fleet_table(
         }
         if not s["channels"]:
             rows.append(common)
+        figures = night_figures(s)
         for c in s["channels"]:
+            rms, method = figures.get((c["unit"], c["channel"]), (None, None))
             rows.append(
                 {
                     **common,
@@ -187,6 +216,8 @@ def fleet_table(
                     "n": c["n"],
                     "m_u": c["m_u"],
                     "m_y": c["m_y"],
+                    "rms_error": rms,
+                    "rms_error_method": method,
                     "kurtosis_excess": c["kurtosis"],
                     "limit": c["limit_error"],
                 }
@@ -206,6 +237,7 @@ def _typed(df: pd.DataFrame) -> pd.DataFrame:
     floats = [
         "m_u",
         "m_y",
+        "rms_error",
         "kurtosis_excess",
         "limit",
         "apriori_before",
