@@ -157,7 +157,9 @@ FORMATS = ("table", "csv", "json")
 
 @fleet_app.command("query")
 def fleet_query(
-    sql: str = typer.Argument(..., help="The query (DuckDB SQL) over fleet, trends, ranking."),
+    sql: str = typer.Argument(
+        ..., help="The query (DuckDB SQL) over fleet, trends, ranking, findings, integrity."
+    ),
     out_dir: Path | None = OutDir,
     form: str = typer.Option("table", "--format", help="table, csv or json (JSON lines)."),
     output: Path | None = typer.Option(
@@ -165,11 +167,12 @@ def fleet_query(
     ),
     config: ConfigFile = None,
 ) -> int:
-    """SQL over the tables of a fleet run: views fleet, trends and ranking (DuckDB).
+    """SQL over the tables of a fleet run: views fleet, trends, ranking, findings and
+    integrity (DuckDB).
 
     The views read DIR/tables/ (Hive-partitioned Parquet: vessel=…/night=…) and have the
-    columns of fleet.parquet, trends.parquet and ranking.parquet; nothing is written in
-    DIR.  Example: dracc fleet query "SELECT vessel, avg(m_y) FROM fleet WHERE channel =
+    columns of fleet.parquet, trends.parquet, ranking.parquet, findings.parquet and
+    integrity.parquet; nothing is written in DIR.  Example: dracc fleet query "SELECT vessel, avg(m_y) FROM fleet WHERE channel =
     'lat' GROUP BY vessel ORDER BY 2" --out fleet-report
     """
     from dracc.pipeline.fleet.query import run_query

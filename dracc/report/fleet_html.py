@@ -1,5 +1,6 @@
-"""The ``dracc fleet`` page: the ranked list first, then the latest figures per vessel,
-DR containment and trend plots.
+"""The ``dracc fleet`` page: the ranked list first, then the logs per vessel, the latest
+night's figures per vessel, unit and channel, the findings and integrity counts per vessel
+and night, DR containment and trend plots.
 
 Renders a :class:`~dracc.pipeline.fleet.FleetResult`; nothing is estimated here.  The page is one
 self-contained file (:mod:`dracc.report.page`); matplotlib loads only when a plot is drawn.

@@ -5,6 +5,7 @@ The modules, in reading order:
 ``tasks``   the ``[fleet]`` settings, safe output names, :func:`discover` (one task per log)
 ``batch``   :func:`run_fleet`: analyse every log on a local pool or on Dask, with a cache
 ``tables``  the fleet table, the a priori rule per vessel, the per-day trends, publication
+``findings`` each night's findings and integrity counts (raw logs, audit documents alike)
 ``query``   the Hive-partitioned layout of ``--out/tables`` and :func:`run_query` (DuckDB SQL)
 
 The names below are the package's API, importable from ``dracc.pipeline.fleet``.
