@@ -7,6 +7,7 @@ import dataclasses
 import re
 from html import escape as html_escape
 
+import pytest
 from test_report import make_analysis
 
 from dracc.core.numbers import counted
@@ -269,3 +270,74 @@ def test_k_star_direction_is_a_word_and_dash_only_no_value():
     assert K_STAR_NOTE in " ".join(text.split())  # the note under the table
     assert html_escape(K_STAR_NOTE) in page
     assert GLOSSARY["k*"][0].startswith(K_STAR_NOTE)
+
+
+def _nights(tmp_path, ends: list[str], acfg):
+    """Audit one night per end time (each from its midnight), ins1 lat m_y 100, 120, ..."""
+    from test_audit_helpers import make_analysis as audit_analysis
+
+    from dracc.pipeline.audit import audit_night, facts_from_analysis
+    from dracc.pipeline.state import StateStore
+
+    outs = []
+    with StateStore(tmp_path / "w.sqlite") as store:
+        for i, end in enumerate(ends):
+            night = f"2026-11-{17 + i}"
+            a = audit_analysis(
+                night, m_y={"ins1": {"lat": 100.0 + 20 * i}}, period=(f"{night}T00:00:00Z", end)
+            )
+            outs.append(
+                audit_night(
+                    facts_from_analysis(a),
+                    store=store,
+                    acfg=acfg,
+                    seeds={},
+                    vessel="Aurora",
+                    night=None,
+                    content_hash=night,
+                    settings_hash="s",
+                )
+            )
+    return outs
+
+
+def test_accuracy_window_is_never_longer_than_configured(tmp_path):
+    # issue 32: "accuracy window: 96.0 h of 72 h": three logs of 00:00:00-23:59:59 fell
+    # 3 s short of 72 h and took a whole fourth night
+    from dracc.pipeline.audit import AuditConfig
+    from dracc.report.audit_text import format_summary
+
+    ends = [f"2026-11-{17 + i}T23:59:59Z" for i in range(4)]
+    last = _nights(tmp_path, ends, AuditConfig())[-1]
+    acc = last.accuracy
+    assert acc["complete"] and len(acc["nights"]) == 3 and acc["partial"] is None
+    assert acc["hours"] == pytest.approx(72.0, abs=0.01)
+    line = next(ln for ln in format_summary(last).splitlines() if ln.startswith("accuracy window"))
+    assert line == "accuracy window: 72.0 h of 72 h over 3 nights"
+
+
+def test_accuracy_window_takes_the_part_of_the_oldest_night_it_needs(tmp_path):
+    # 26 h logs: 26 + 26 h and 20 h of the oldest night, its statistics weighted 20/26
+    import math
+
+    from dracc.core.config import DeviationConfig
+    from dracc.math.deviation import stats
+    from dracc.pipeline.audit import AuditConfig
+    from dracc.report.audit_text import format_summary
+
+    ends = [f"2026-11-{18 + i}T02:00:00Z" for i in range(3)]
+    last = _nights(tmp_path, ends, AuditConfig())[-1]
+    acc = last.accuracy
+    assert acc["complete"] and acc["hours"] == pytest.approx(72.0)
+    assert acc["partial"] == {"night": "2026-11-17", "hours": pytest.approx(20.0), "of_hours": 26.0}
+    line = next(ln for ln in format_summary(last).splitlines() if ln.startswith("accuracy window"))
+    assert line == (
+        "accuracy window: 72.0 h of 72 h over 3 nights (2026-11-17 in part: 20.0 h of its 26.0 h)"
+    )
+    (row,) = [c for c in acc["channels"] if (c["unit"], c["channel"]) == ("ins1", "lat")]
+    w, n, k, d = (20 / 26, 1, 1), 24, 1.32, DeviationConfig()
+    m_y = (100.0, 120.0, 140.0)
+    m_u = math.sqrt(sum(wi * n * (v / k) ** 2 for wi, v in zip(w, m_y, strict=True)) / (n * sum(w)))
+    n_eff = sum(w) * float(stats.effective_samples(n, d.interval_s, d.correlation_time_s))
+    want = float(stats.limiting_error(k * m_u, d.probability, -0.3, d.confidence, n_eff)[0])
+    assert row["limit_error"] == pytest.approx(want, rel=1e-9)

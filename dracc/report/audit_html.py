@@ -282,6 +282,22 @@ def _evidence_text(ev: list) -> str:
     return "; ".join(parts) + more
 
 
+def accuracy_window_text(acc: Mapping[str, Any]) -> str:
+    """The accuracy window in one line, for the summary and the page: '72.0 h of 72 h over
+    4 nights (2026-11-17 in part: 0.1 h of its 24.0 h)', '8.0 h of 72 h over 1 night so
+    far (limits judged once the window is full)'."""
+    text = (
+        f"{fmt_value(acc.get('hours'), 1)} h of {acc.get('window_h', 0):g} h over "
+        f"{counted(len(acc.get('nights') or ()), 'night')}"
+    )
+    part = acc.get("partial")
+    if part:
+        text += f" ({part['night']} in part: {part['hours']:.1f} h of its {part['of_hours']:.1f} h)"
+    if not acc.get("complete"):
+        text += " so far (limits judged once the window is full)"
+    return text
+
+
 def window_text(w: Mapping[str, Any] | None) -> str:
     """A finding's window or the logs' period: 'start to end' in UTC, 'from start' or
     'until end' where one is known, the accuracy window's nights and hours, or 'no data'
@@ -532,11 +548,7 @@ def night_html(doc: dict, analysis_body: str = "", analysis_css: str = "") -> st
             )
         parts.append("</table>")
         if acc:
-            parts.append(
-                f"<p>Limiting errors judged over {fmt_value(acc.get('window_h'), 0)} h: "
-                f"{fmt_value(acc.get('hours'), 1)} h over {len(acc.get('nights', []))} "
-                f"night(s) so far.</p>"
-            )
+            parts.append(f"<p>Accuracy window: {e(accuracy_window_text(acc))}.</p>")
         parts.append(f"<p class='rules'>{e(RULES_TEXT)}</p></section>")
     if analysis_body:
         parts.append(f"<section id='analysis'><h2>The analysis</h2>{analysis_body}</section>")

@@ -15,9 +15,9 @@ from rich.console import Console
 from dracc.core.errors import ExitCode
 from dracc.core.vocabulary import CHANNEL_KEYS
 from dracc.pipeline.audit import AuditOutcome
+from dracc.report.audit_html import accuracy_window_text, verdict_head
 from dracc.report.audit_html import fmt_value as _f
 from dracc.report.audit_html import measure_digits as _digits
-from dracc.report.audit_html import verdict_head
 from dracc.report.textout import Layout, Page, layout, table, wrap
 
 _STATUS = {
@@ -126,11 +126,7 @@ def format_summary(
         )
     acc = o.accuracy or {}
     if acc.get("channels"):
-        lines.append(
-            f"accuracy window: {acc['hours']:.1f} h of {acc['window_h']:g} h over "
-            f"{len(acc['nights'])} night(s)"
-            + ("" if acc.get("complete") else " (limits judged once the window is full)")
-        )
+        lines.append(f"accuracy window: {accuracy_window_text(acc)}")
     established = [e for e in o.apriori_events if e.reason == "established"]
     if established:
         lines.append(

@@ -4,6 +4,13 @@ A single night is too short for a kurtosis that means something (seed 001 asks 7
 so the (K8) limiting error of each unit and channel is computed over the newest stored
 nights that together cover ``[audit] accuracy_window_h``, and judged against
 ``[audit.limits]`` once the window is full.
+
+The window holds that many hours, never more: the newest nights whole, and of the oldest
+one it needs only the part that completes the window (its statistics weighted by that
+part of its hours, ``partial`` in the window's document), so that a window of 72 h is
+72 h and never "96.0 h of 72 h" (three nights of 23.99 h and a fourth whole one).  A
+part shorter than :data:`HOURS_SHOWN` (what "72.0 h" rounds away) is not taken: the
+window is full then.
 """
 
 from __future__ import annotations
@@ -13,11 +20,14 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from dracc.core.numbers import finite_or_none
+from dracc.core.numbers import counted, finite_or_none
 from dracc.core.timefmt import parse_utc
 from dracc.pipeline.audit.findings import Finding, make_finding, not_checked
 from dracc.pipeline.audit.limits import AuditConfig
 from dracc.pipeline.state import ChannelRow, NightRecord, StateStore
+
+#: the window's hours are said to 0.1 h: a window short by less than half of that is full
+HOURS_SHOWN = 0.05
 
 
 @dataclass(frozen=True)
@@ -43,15 +53,19 @@ def _usable(c: ChannelRow) -> bool:
 
 
 def pool_channels(
-    nights: Sequence[tuple[str, float, Sequence[ChannelRow]]], dev_cfg
+    nights: Sequence[tuple[str, float, Sequence[ChannelRow]]],
+    dev_cfg,
+    weights: Sequence[float] | None = None,
 ) -> list[PooledChannel]:
     """Pool (night, hours, channel rows) per unit and channel: m_u^2 weighted by n (K3b over
     the union of the nights' deviations), kurtosis weighted by n, independent samples
-    summed; the limiting error (K8) from those."""
+    summed; the limiting error (K8) from those.  ``weights`` (default 1 each): the part of
+    each night in the window (the oldest one's may be less than 1): its hours, samples and
+    independent samples count by that part."""
     from dracc.math.deviation import stats
 
     acc: dict[tuple[str, str], dict] = {}
-    for night, hours, rows in nights:
+    for (night, hours, rows), w in zip(nights, weights or [1.0] * len(nights), strict=True):
         for c in rows:
             if not _usable(c):
                 continue
@@ -69,13 +83,13 @@ def pool_channels(
                 },
             )
             a["nights"].append(night)
-            a["hours"] += hours
-            a["n"] += c.n
+            a["hours"] += w * hours
+            a["n"] += w * c.n
             assert c.m_u is not None  # _usable
-            a["ss"] += c.n * c.m_u**2
+            a["ss"] += w * c.n * c.m_u**2
             if c.kurtosis is not None and math.isfinite(c.kurtosis):
-                a["kn"] += c.n * c.kurtosis
-            a["neff"] += float(
+                a["kn"] += w * c.n * c.kurtosis
+            a["neff"] += w * float(
                 stats.effective_samples(c.n, dev_cfg.interval_s, dev_cfg.correlation_time_s)
             )
             if c.m_y is not None and c.m_u and math.isfinite(c.m_y):
@@ -94,7 +108,7 @@ def pool_channels(
                 channel,
                 tuple(a["nights"]),
                 a["hours"],
-                a["n"],
+                round(a["n"]),
                 m_u,
                 m_y,
                 e,
@@ -116,7 +130,8 @@ def accuracy_findings(
     tonight: tuple[float, Sequence[ChannelRow]] | None = None,
 ) -> tuple[tuple[Finding, ...], tuple[dict, ...], dict]:
     """The limiting errors over the accuracy window ending with ``night``: the stored
-    nights up to it, newest first, until they cover ``accuracy_window_h``.  Findings
+    nights up to it, newest first, until they cover ``accuracy_window_h`` (the oldest in
+    part, see the module docstring).  Findings
     where a pooled limiting error exceeds its limit; not checked while the window is short.
     ``tonight``: (hours, channel rows) of ``night`` not yet stored (it replaces a stored one).
     Returns (findings, not_checked, the window as a JSON-ready dict)."""
@@ -127,18 +142,25 @@ def accuracy_findings(
     ]
     if tonight is not None:
         candidates.append((night, float(tonight[0]), tuple(tonight[1])))
-    chosen, hours = [], 0.0
+    chosen, weights, hours = [], [], 0.0
     for n, h, rows in sorted(candidates, key=lambda c: c[0], reverse=True):
+        need = acfg.accuracy_window_h - hours
+        if need < HOURS_SHOWN:
+            break
         if h <= 0 or not any(_usable(c) for c in rows):  # no INS statistics: no hours to add
             continue
         chosen.append((n, h, rows))
-        hours += h
-        if hours >= acfg.accuracy_window_h:
-            break
+        weights.append(min(1.0, need / h))
+        hours += weights[-1] * h
+    partial = None
+    if chosen and weights[-1] < 1.0:  # the oldest night, in part
+        n, h, _ = chosen[-1]
+        partial = {"night": n, "hours": weights[-1] * h, "of_hours": h}
     doc: dict[str, Any] = {
         "window_h": acfg.accuracy_window_h,
         "hours": hours,
         "nights": [n for n, _, _ in reversed(chosen)],
+        "partial": partial,
         "channels": [],
     }
     if not chosen:
@@ -147,9 +169,9 @@ def accuracy_findings(
             (not_checked("accuracy", "limit", "no INS deviation statistics in the stored nights"),),
             doc,
         )
-    pooled = pool_channels(list(reversed(chosen)), dev_cfg)
+    pooled = pool_channels(list(reversed(chosen)), dev_cfg, list(reversed(weights)))
     found, skipped = [], []
-    complete = hours >= acfg.accuracy_window_h
+    complete = acfg.accuracy_window_h - hours < HOURS_SHOWN
     for p in pooled:
         lim = acfg.limit_for(p.unit, p.channel)
         doc["channels"].append(
@@ -190,7 +212,7 @@ def accuracy_findings(
                     lim,
                     p.measure,
                     f"{p.unit} {p.channel}: limiting error {p.limit_error:.4g} {p.measure} over "
-                    f"{hours:.0f} h ({len(p.nights)} nights) > {lim:.4g} {p.measure}",
+                    f"{hours:.0f} h ({counted(len(p.nights), 'night')}) > {lim:.4g} {p.measure}",
                     role=p.unit,
                     statistic_name="limiting_error",
                     rule="[audit.limits]: K8 limiting error at the "
@@ -214,7 +236,7 @@ def accuracy_findings(
                 "limit",
                 f"the limiting errors are judged over "
                 f"{acfg.accuracy_window_h:g} h of logs; {hours:.1f} h over "
-                f"{len(chosen)} night(s) so far ([audit] accuracy_window_h)",
+                f"{counted(len(chosen), 'night')} so far ([audit] accuracy_window_h)",
             )
         )
     doc["complete"] = complete
