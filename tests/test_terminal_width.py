@@ -259,6 +259,17 @@ def test_wrap_breaks_on_spaces_only():
     assert wrap("short", 20) == "short" and wrap("a\nb", 20) == "a\nb"
 
 
+def test_wrap_keeps_a_number_with_its_unit():
+    text = "first scored leg 100.0 % (stated 96.6 %) the largest 6,101 m at 0.55 kn, 12 s."
+    for width in range(20, 80):
+        lines = wrap(text, width, hang=2).splitlines()
+        assert " ".join(ln.strip() for ln in lines) == text  # the same text, spaces kept
+        heads = [ln.strip().split()[0] for ln in lines]
+        assert not {"%", "%)", "m", "kn,", "s."} & set(heads), (width, lines)
+    # only after a number: "of m" breaks as any two words do
+    assert wrap("a long column header of m values", 24).splitlines()[1] == "m values"
+
+
 def test_audit_summary_wrapped_at_a_width_keeps_its_words_and_table(tmp_path):
     from test_audit_helpers import make_analysis
 

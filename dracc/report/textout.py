@@ -24,6 +24,7 @@ are shown as escapes, never sent to the terminal, and nothing is read as rich ma
 from __future__ import annotations
 
 import os
+import re
 import textwrap
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -176,20 +177,25 @@ def table(
     return "\n".join(out)
 
 
+#: a number and its unit ("96.6 %", "6,101 m", "0.55 kn"): one word for the wrapping
+_NUMBER_UNIT = re.compile(r"(?<=\d) (?=(?:%|°|kn|km|m|NM|h|min|s|Hz)(?:[\s,;:.)\]]|$))")
+_GLUE = "\ue000"  #: a private-use character standing for the space kept (never in text shown)
+
+
 def wrap(text: object, width: int, *, hang: int | str = 0, indent: str = "") -> str:
     """``text`` wrapped at ``width`` on spaces only: a word (a number, a source key, a
-    path, ``2026-03-01``) is never split, a word longer than the width stands alone on
-    its line.  Each line of ``text`` is wrapped on its own; its continuation lines are
-    indented by ``hang`` (a number of spaces, or the text itself).  Control characters
-    are escaped (line breaks kept)."""
+    path, ``2026-03-01``) is never split, nor a number from its unit, a word longer than
+    the width stands alone on its line.  Each line of ``text`` is wrapped on its own; its
+    continuation lines are indented by ``hang`` (a number of spaces, or the text itself).
+    Control characters are escaped (line breaks kept)."""
     cont = hang if isinstance(hang, str) else " " * hang
     out: list[str] = []
     for line in printable(text, keep="\n").split("\n"):
         if width_of(indent + line) <= width or not line.strip():
             out.append((indent + line).rstrip())
             continue
-        out += textwrap.wrap(
-            line,
+        glued = textwrap.wrap(
+            _NUMBER_UNIT.sub(_GLUE, line.replace(_GLUE, " ")),
             width=max(width, MIN_WIDTH),
             initial_indent=indent,
             subsequent_indent=indent + cont,
@@ -198,6 +204,7 @@ def wrap(text: object, width: int, *, hang: int | str = 0, indent: str = "") -> 
             replace_whitespace=False,
             drop_whitespace=True,
         )
+        out += [part.replace(_GLUE, " ") for part in glued]
     return "\n".join(out)
 
 
