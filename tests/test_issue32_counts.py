@@ -341,3 +341,80 @@ def test_accuracy_window_takes_the_part_of_the_oldest_night_it_needs(tmp_path):
     n_eff = sum(w) * float(stats.effective_samples(n, d.interval_s, d.correlation_time_s))
     want = float(stats.limiting_error(k * m_u, d.probability, -0.3, d.confidence, n_eff)[0])
     assert row["limit_error"] == pytest.approx(want, rel=1e-9)
+
+
+def _with_apriori(a, apriori: dict[tuple[str, str], float]):
+    """``a`` with the a priori RMS of the given (unit, channel)s (the others: none)."""
+    d = a.deviation
+    units = {}
+    for name, u in d.whole.units.items():
+        chans = {}
+        for ch, c in u.channels.items():
+            ap = apriori.get((name, ch))
+            chans[ch] = dataclasses.replace(
+                c, apriori=ap, exceeds_apriori=None if ap is None else c.m_y > ap
+            )
+        units[name] = dataclasses.replace(u, channels=chans)
+    whole = dataclasses.replace(d.whole, units=units)
+    return dataclasses.replace(a, deviation=dataclasses.replace(d, whole=whole))
+
+
+def test_the_unit_that_stands_out_says_by_which_rule_in_every_report():
+    # issue 32: "Worst INS unit" was the largest m_y against the median without an a
+    # priori and the largest ratio to its own a priori with one: it named a good unit
+    import jsonschema
+
+    from dracc.report import json_report
+
+    base = make_analysis("full")
+    m = {
+        (n, ch): c.m_y
+        for n, u in base.deviation.whole.units.items()
+        for ch, c in u.channels.items()
+    }
+    # every unit within its a priori: the one closest to it is named as such, not "worst"
+    a = _with_apriori(
+        base, {k: 2 * v for k, v in m.items()} | {("ins1", "lat"): m["ins1", "lat"] / 0.9}
+    )
+    v = verdict(a)
+    assert v.worst.label == "INS unit closest to its a priori RMS"
+    assert (v.worst.unit, v.worst.channel) == ("ins1", "lat") and not v.worst.out_of_limits
+    assert v.headline.endswith("; INS unit closest to its a priori RMS: ins1 (lat)")
+    assert "worst" not in v.headline.lower() and "worst" not in v.ins.headline.lower()
+    page = html.render_html(a)
+    assert "INS unit closest to its a priori RMS: <strong>ins1</strong>" in page
+    doc = json_report.to_dict(a)
+    jsonschema.validate(doc, json_report.load_schema())
+    assert doc["worst_ins_unit"]["rule"] == v.worst.label
+    assert (doc["worst_ins_unit"]["ins_unit"], doc["worst_ins_unit"]["channel"]) == ("ins1", "lat")
+    # one above its a priori: the furthest over it
+    a = _with_apriori(
+        base, {k: 2 * v for k, v in m.items()} | {("ins3", "lon"): m["ins3", "lon"] / 1.5}
+    )
+    v = verdict(a)
+    assert v.worst.label == "INS unit furthest over its a priori RMS"
+    assert (v.worst.unit, v.worst.channel) == ("ins3", "lon")
+    assert json_report.to_dict(a)["worst_ins_unit"]["rule"] == v.worst.label
+    # nothing configured: the largest m_y against the others, in the terminal too
+    a = _with_apriori(base, {})
+    v = verdict(a)
+    assert v.worst.label == "INS unit with the largest m_y against the others"
+    assert f"{v.worst.label}: {v.worst.unit} ({v.worst.channel})" in terminal.render_text(a, 200)
+    assert json_report.to_dict(a)["worst_ins_unit"]["basis"] == "other units"
+
+
+def test_the_audit_page_and_document_name_the_same_unit_by_the_same_rule(tmp_path):
+    # the audit judges against its own a priori (raised on the first night): within every
+    # one, where the configured a priori are all exceeded; page and JSON say the same
+    from test_audit_page import _second_night
+
+    from dracc.report import audit_json
+    from dracc.report.audit_html import audit_page
+
+    o = _second_night(tmp_path)
+    doc = audit_json.to_dict(o)
+    w = doc["analysis"]["worst_ins_unit"]
+    assert w["rule"] == "INS unit closest to its a priori RMS" and not w["out_of_limits"]
+    page = audit_page(o, doc)
+    assert f"{w['rule']}: <strong>{w['ins_unit']}</strong> {w['channel']}" in page
+    assert "furthest over" not in page

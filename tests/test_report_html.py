@@ -327,7 +327,7 @@ def test_verdict_block_and_glossary_in_a_real_browser(tmp_path, sample_reports):
     worst = max(truth, key=lambda u: truth[u]["lat_m"] ** 2 + truth[u]["lon_m"] ** 2).lower()
     data, _ = _probe(tmp_path, sample_reports[0])
     assert data["sections"][0] == "verdict-block" and data["heads"][1] == "Verdict"
-    assert f"Worst INS unit: {worst}" in data["verdict"]
+    assert f"INS unit with the largest m_y against the others: {worst}" in data["verdict"]
     for label in ("OK", "NOT CHECKED"):  # levels in words, not colour only
         assert label in data["verdict"]
     assert data["ths"] and all(h and h[1:] in data["terms"] for h in data["ths"]), data["ths"]
@@ -339,4 +339,4 @@ def test_verdict_block_and_glossary_in_a_real_browser(tmp_path, sample_reports):
     assert unchecked["cls"] == "not-checked"
     assert unchecked["text"].startswith("NOT CHECKED sensor faults not checked")
     assert found["border"] != unchecked["border"] and found["font"] != unchecked["font"]
-    assert "NOT CHECKED" in data2["verdict"] and "Worst INS unit" not in data2["verdict"]
+    assert "NOT CHECKED" in data2["verdict"] and "INS unit with" not in data2["verdict"]

@@ -26,7 +26,6 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from dracc.pipeline.audit import AuditOutcome
-    from dracc.pipeline.results import Analysis
     from dracc.report.verdict import Finding as VerdictPart
 
 _DPI = 90
@@ -378,44 +377,6 @@ def ins_judgement(doc: dict) -> VerdictPart:
     )
 
 
-_RULE_WORDS = {
-    "raised": "exceeds",
-    "within": "within",
-    "established": "no a priori: the deviation estimate is mandatory",
-    "no data": "no estimate",
-}
-
-
-def audit_analysis(a: Analysis, ins: Sequence[Mapping[str, Any]]) -> Analysis:
-    """``a`` with each unit channel's a priori RMS the one the audit judged it against
-    (the monitoring rule's value before tonight, ``apriori_before``; the configured one
-    on the first night), so the embedded tables and verdict use the audit's yardstick."""
-    from dataclasses import replace
-
-    d = a.deviation
-    if d is None or not ins:
-        return a
-    units = {name: dict(u.channels) for name, u in d.whole.units.items()}
-    for c in ins:
-        chans = units.get(c["unit"])
-        old = None if chans is None else chans.get(c["channel"])
-        if chans is None or old is None:
-            continue
-        before = c["apriori_before"]
-        chans[c["channel"]] = replace(
-            old,
-            apriori=before,
-            exceeds_apriori=None if before is None else c["verdict"] == "raised",
-            new_apriori=old.m_y if c["apriori_after"] is None else c["apriori_after"],
-            verdict=_RULE_WORDS.get(c["verdict"], c["verdict"] or "no estimate"),
-        )
-    whole = replace(
-        d.whole,
-        units={n: replace(u, channels=units[n]) for n, u in d.whole.units.items()},
-    )
-    return replace(a, deviation=replace(d, whole=whole))
-
-
 def night_html(doc: dict, analysis_body: str = "", analysis_css: str = "") -> str:
     """The audit page of one night (schema ``dracc.audit/1``): the verdict and the findings
     first, then what was not checked, the sources' integrity, the INS table, and the
@@ -566,6 +527,8 @@ def audit_page(o: AuditOutcome, doc: dict | None = None) -> str:
     body, css = (
         ("", "")
         if o.analysis is None
-        else html_report.render_sections(audit_analysis(o.analysis, doc["ins"]), ins_judgement(doc))
+        else html_report.render_sections(
+            audit_json.audit_analysis(o.analysis, doc["ins"]), ins_judgement(doc)
+        )
     )
     return night_html(doc, body, css)

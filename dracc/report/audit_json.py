@@ -12,12 +12,15 @@ the trend per vessel, unit and channel, the nights and the a priori events.
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 from dracc import __version__
 from dracc.core.numbers import jsonable
 from dracc.pipeline.audit import AuditOutcome, Finding
+from dracc.pipeline.results import Analysis
 from dracc.pipeline.state import StateStore
 from dracc.report.output import emit_json
 
@@ -59,10 +62,55 @@ def consequence_dict(c: Finding) -> dict:
     return {"check": c.check, "name": c.kind, "source": c.source, "message": c.message}
 
 
+#: the monitoring rule's verdicts in the words of the analysis' a priori column
+_RULE_WORDS = {
+    "raised": "exceeds",
+    "within": "within",
+    "established": "no a priori: the deviation estimate is mandatory",
+    "no data": "no estimate",
+}
+
+
+def audit_analysis(a: Analysis, ins: Sequence[Mapping[str, Any]]) -> Analysis:
+    """``a`` with each unit channel's a priori RMS the one the audit judged it against
+    (the monitoring rule's value before tonight, ``apriori_before``; the configured one
+    on the first night), so the embedded tables and verdict use the audit's yardstick."""
+    from dataclasses import replace
+
+    d = a.deviation
+    if d is None or not ins:
+        return a
+    units = {name: dict(u.channels) for name, u in d.whole.units.items()}
+    for c in ins:
+        chans = units.get(c["unit"])
+        old = None if chans is None else chans.get(c["channel"])
+        if chans is None or old is None:
+            continue
+        before = c["apriori_before"]
+        chans[c["channel"]] = replace(
+            old,
+            apriori=before,
+            exceeds_apriori=None if before is None else c["verdict"] == "raised",
+            new_apriori=old.m_y if c["apriori_after"] is None else c["apriori_after"],
+            verdict=_RULE_WORDS.get(c["verdict"], c["verdict"] or "no estimate"),
+        )
+    whole = replace(
+        d.whole,
+        units={n: replace(u, channels=units[n]) for n, u in d.whole.units.items()},
+    )
+    return replace(a, deviation=replace(d, whole=whole))
+
+
+def _analysis(a: Analysis, ins: list[dict]) -> dict:
+    """The analysis document the night rests on; its worst_ins_unit judged against the
+    audit's a priori values, as the audit page's verdict is (one rule, one answer)."""
+    from dracc.report import json_report
+
+    return json_report.to_dict(a, judged=audit_analysis(a, ins))
+
+
 def to_dict(o: AuditOutcome) -> dict:
     """The audit document of one night, with the analysis document it rests on."""
-    from dracc.report import json_report  # the analysis' renderer: loaded when one is given
-
     r = o.record
     channels = [
         {
@@ -130,7 +178,7 @@ def to_dict(o: AuditOutcome) -> dict:
         },
         "missing": list(r.missing),
         "measures": r.measures,
-        "analysis": None if o.analysis is None else json_report.to_dict(o.analysis),
+        "analysis": None if o.analysis is None else _analysis(o.analysis, channels),
     }
     return jsonable(doc)
 

@@ -544,7 +544,7 @@ def _verdict(v: Verdict) -> str:
     worst = (
         ""
         if v.worst is None
-        else f'<p class="worst">Worst INS unit: <strong>{_e(v.worst.unit)}</strong> '
+        else f'<p class="worst">{_e(v.worst.label)}: <strong>{_e(v.worst.unit)}</strong> '
         f"{_e(v.worst.channel)}: {_e(v.worst.detail)}.</p>"
     )
     return (

@@ -295,8 +295,14 @@ def clock_dict(c: SourceClock | None) -> dict[str, Any] | None:
     }
 
 
-def to_dict(a: Analysis) -> dict[str, Any]:
-    """The report as plain JSON types (validates against ``analysis.schema.json``)."""
+def to_dict(a: Analysis, judged: Analysis | None = None) -> dict[str, Any]:
+    """The report as plain JSON types (validates against ``analysis.schema.json``).
+    ``judged``: the analysis whose a priori values pick ``worst_ins_unit`` (the audit's
+    yardstick, :func:`dracc.report.audit_json.audit_analysis`, as its page does); ``a``
+    itself by default."""
+    from dracc.report.verdict import worst_unit
+
+    worst = worst_unit(a if judged is None else judged)
     by_role: dict[str, dict[str, Any]] = {}
     for s in a.sources:
         for role in s.roles:
@@ -364,6 +370,7 @@ def to_dict(a: Analysis) -> dict[str, Any]:
         "notes": list(a.notes),
         "faults": [f.to_dict() for f in a.faults],
         "integrity": None if a.integrity is None else integrity_dict(a.integrity),
+        "worst_ins_unit": None if worst is None else worst.to_dict(),
     }
 
 

@@ -6,9 +6,11 @@ a level and the reasons behind it:
 - whether the dead reckoning is honest: the reference inside the 2M circle as often as
   the model states (B31; issue 31), the summed NEES inside its chi-square bounds, the RMS
   of error/M (B30) near 1;
-- which INS unit and channel is worst, against its a priori RMS where one is configured
-  (or against the limits given), else against the other units, and whether any is out
-  of its limits;
+- which INS unit and channel stands out, by one rule said with it (:attr:`WorstUnit.label`):
+  with an a priori RMS configured, the unit furthest over its own a priori RMS (or, every
+  unit within it, the one closest to it); with limits given instead, the same against the
+  limits; with neither, the unit with the largest m_y against the median of the units in
+  its channel; and whether any is out of its limits;
 - which integrity checks failed;
 - sensor faults: found, "none found" (the checks ran and found nothing) or "not
   checked" (and why not), kept apart;
@@ -52,6 +54,7 @@ __all__ = [
     "WorstUnit",
     "integrity_count",
     "verdict",
+    "worst_unit",
 ]
 
 OK, ATTENTION, FAIL, NOT_CHECKED = "ok", "attention", "fail", "not-checked"
@@ -120,6 +123,34 @@ class WorstUnit:
     def text(self) -> str:
         """e.g. 'ins2 lon: m_y 1122.0 m, 1.81 x the median of the units (620.1 m)'."""
         return f"{self.unit} {self.channel}: {self.detail}"
+
+    @property
+    def label(self) -> str:
+        """The rule that chose it, as every report names it: 'INS unit furthest over its a
+        priori RMS', '... closest to its a priori RMS' (every unit within its own, so no bad
+        unit is implied), the same of a limit, 'INS unit with the largest m_y against the
+        others' (nothing configured), 'the only INS unit'."""
+        if self.basis in ("a priori", "limit"):
+            what = "a priori RMS" if self.basis == "a priori" else "limit"
+            where = "furthest over" if self.out_of_limits else "closest to"
+            return f"INS unit {where} its {what}"
+        if self.basis == "other units":
+            return "INS unit with the largest m_y against the others"
+        return "the only INS unit"
+
+    def to_dict(self) -> dict[str, object]:
+        """The JSON form (``worst_ins_unit`` of the analysis document)."""
+        return {
+            "ins_unit": self.unit,
+            "channel": self.channel,
+            "measure_unit": self.channel_unit,
+            "rule": self.label,
+            "basis": self.basis,
+            "m_y": self.m_y if math.isfinite(self.m_y) else None,
+            "yardstick": self.yardstick if math.isfinite(self.yardstick) else None,
+            "ratio": self.ratio if math.isfinite(self.ratio) else None,
+            "out_of_limits": self.out_of_limits,
+        }
 
 
 @dataclass(frozen=True)
@@ -279,6 +310,14 @@ def _candidates(
     return out
 
 
+def worst_unit(
+    a: Analysis, limits: Mapping[str, Mapping[str, float]] | None = None
+) -> WorstUnit | None:
+    """The INS unit and channel that stands out, by the one rule every report states
+    (:attr:`WorstUnit.label`; the module docstring); None without INS statistics."""
+    return None if a.deviation is None else _worst(_candidates(a.deviation, limits))
+
+
 def _worst(cands: list[WorstUnit]) -> WorstUnit | None:
     if not cands:
         return None
@@ -308,19 +347,19 @@ def _ins(
         if out:
             level = FAIL
             headline = (
-                f"{len(out)} of {len(cands)} judged unit channels above their {what}; the worst is "
-                f"{worst.unit} {worst.channel}"
+                f"{len(out)} of {len(cands)} judged unit channels above their {what}; furthest "
+                f"over: {worst.unit} {worst.channel}"
             )
             reasons += [w.text for w in sorted(out, key=lambda w: -w.ratio)]
         else:
             level = OK
-            headline = f"every unit within its {what}; the worst is {worst.unit} {worst.channel}"
+            headline = f"every unit within its {what}; closest to it: {worst.unit} {worst.channel}"
             reasons.append(worst.text)
     else:
         level = NOT_CHECKED
         headline = (
-            f"worst unit {worst.unit} ({worst.channel}); limits not checked: no a priori RMS "
-            "configured"
+            f"largest m_y against the other units: {worst.unit} ({worst.channel}); limits not "
+            "checked: no a priori RMS configured"
         )
         reasons.append(worst.text)
         reasons.append(
@@ -494,8 +533,8 @@ def verdict(a: Analysis, limits: Mapping[str, Mapping[str, float]] | None = None
 
     ``limits``: limiting errors (K8) per unit and channel in the ``[audit] limits`` shape
     (``{"all": {"lat_m": 1852.0, ...}, "ins2": {...}}``); used where no a priori RMS is
-    configured.  Without either, the worst unit is the one furthest above the median of
-    the units in its channel, and the limits are "not checked".
+    configured.  Without either, the unit that stands out is the one furthest above the
+    median of the units in its channel, and the limits are "not checked".
     """
     ins, worst = _ins(a, limits)
     faults, state = _faults(a)
@@ -532,7 +571,7 @@ def _whole(
     else:
         headline = "every check passed"
     if worst is not None:
-        headline += f"; worst INS unit {worst.unit} ({worst.channel})"
+        headline += f"; {worst.label}: {worst.unit} ({worst.channel})"
     return Verdict(level, headline, dr, ins, worst, integ, faults, state, miss)
 
 
