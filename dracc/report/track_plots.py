@@ -562,7 +562,8 @@ def _overview(
             )
         n_scored = int(ep.scored.sum())
         which = f"legs shown below: {', '.join(map(str, shown_legs))}" + (
-            f" (the {len(shown_legs)} worst of {n_legs}: most misses, then largest error/M)"
+            f" (the {len(shown_legs)} worst of the {n_legs} with an epoch after their fix: most "
+            "misses, then largest error/M)"
             if len(shown_legs) < n_legs
             else ""
         )
