@@ -3,8 +3,9 @@
 
 One screen, read at a glance: a head line (since when, lines heard, dropped, the file
 being recorded), the open findings first (a bridge wants the bad news on top), the
-sources (role, records, rate, age, latency; a silent one marked), the DR from the last fix
-with its 2M against GNSS, and the worst INS unit per channel of the deviation statistics.
+sources (role, records, lines a second, age, latency; a silent one marked), the DR from
+the last fix with its 2M against GNSS, and the worst INS unit per channel of the
+deviation statistics.
 Only the status dict is read: the view has no state of its own.
 """
 
