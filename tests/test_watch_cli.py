@@ -122,7 +122,7 @@ def run(tmp_path_factory):
 
 def test_status_counts_every_source_while_running(run):
     st = run["during"]
-    assert st["schema"] == "dracc.watch/1"
+    assert st["schema"] == "dracc.watch/2"
     assert st["received"] == 2000 and st["dropped"] == {}
     assert set(st["sources"]) == {"GYRO", "MAG", "LOG", "INS1", "INS2", "INS3", "GNSS"}
     for key, s in st["sources"].items():

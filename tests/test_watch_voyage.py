@@ -300,7 +300,7 @@ def test_status_counts_every_source_while_running(voyage):
     assert len(during) >= 3, f"{v['tag']}: {len(during)} status reads while sending"
     before: dict[str, int] = {}
     for n_sent, st in during:
-        assert st["schema"] == "dracc.watch/1", v["tag"]
+        assert st["schema"] == "dracc.watch/2", v["tag"]
         assert set(st["sources"]) == keys, f"{v['tag']}: {sorted(st['sources'])}"
         assert 0 < st["received"] <= n_sent, v["tag"]
         sent_by_key = Counter(_source(ln) for ln in v["sent"][:n_sent])

@@ -31,7 +31,7 @@ def watch(
         ..., help="udp://HOST:PORT, tcp://HOST:PORT, /dev/DEVICE or serial://, a growing file."
     ),
     record: Path | None = typer.Option(None, help="Record what is heard in daily files here."),
-    status: Path | None = typer.Option(None, help="Rewrite this JSON status (dracc.watch/1)."),
+    status: Path | None = typer.Option(None, help="Rewrite this JSON status (dracc.watch/2)."),
     status_every: str = typer.Option("2s", help="How often the status is rewritten."),
     dropout: str = typer.Option(
         "10s", "--dropout", "--stale", help="A source silent this long raises 'dropout'."

@@ -1,5 +1,5 @@
 """The loop of ``dracc watch``: live sources polled, every line recorded, per-source
-rolling state in bounded memory, and the ``dracc.watch/1`` status document.
+rolling state in bounded memory, and the ``dracc.watch/2`` status document.
 
 Pure orchestration, no printing: :class:`Watch` ``step(timeout_s)`` polls the sources
 once (waiting at most ``timeout_s``), hands every line to the :class:`Recorder` (when
@@ -55,7 +55,7 @@ from dracc.ingest.live.record import tag_line
 from dracc.math.integrity.causes import event_span, overlaps
 from dracc.pipeline.watch_analysis import LiveAnalyser, WindowResult
 
-SCHEMA = "dracc.watch/1"
+SCHEMA = "dracc.watch/2"  #: /2 (issue 32): sources[].lines_per_s replaced rate_hz
 RATE_WINDOW_S = 60  #: the rate is over this many seconds (one bucket per second)
 KEEP_CLEARED = 200  #: cleared findings kept in the status, the latest
 KEEP_SILENCES = 50  #: per source, the silences alarmed live that a window can still hold
@@ -255,7 +255,7 @@ class Watch:
         return dict(sorted(total.items()))
 
     def status(self) -> dict[str, Any]:
-        """The ``dracc.watch/1`` status document (JSON-ready)."""
+        """The ``dracc.watch/2`` status document (JSON-ready)."""
         now = self.clock()
         last = self.analyser.last if self.analyser is not None else None
         roles = last.roles if last is not None else {}

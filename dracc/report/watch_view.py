@@ -1,5 +1,5 @@
 """The live terminal view of ``dracc watch`` (when stdout is a TTY): the
-``dracc.watch/1`` status document drawn with rich, redrawn at each status period.
+``dracc.watch/2`` status document drawn with rich, redrawn at each status period.
 
 One screen, read at a glance: a head line (since when, lines heard, dropped, the file
 being recorded), the open findings first (a bridge wants the bad news on top), the
