@@ -78,6 +78,12 @@ class IngestConfig:
     max_chunk_bytes: int = 64 * 1024 * 1024
     #: the peak memory dracc aims to stay under on damaged input (documented, benchmarked)
     memory_cap_mb: int = 512
+    #: a compressed log decompressing to more than this many times its size (and more than
+    #: 256 MiB) stops the read: a decompression bomb (dracc.ingest.compressed)
+    max_inflate_ratio: float = 200.0
+    #: the disk a temporary copy of a compressed log (a format read from a file: MCAP,
+    #: CSV, Signal K ...) or of standard input may take
+    temp_cap_mb: int = 4096
 
 
 @dataclass(frozen=True)
@@ -575,6 +581,8 @@ _RULES: dict[type, dict[str, _Rule]] = {
         "max_line_bytes": _POS,
         "max_chunk_bytes": _POS,
         "memory_cap_mb": _POS,
+        "max_inflate_ratio": _POS,
+        "temp_cap_mb": _POS,
     },
     DeadReckoningConfig: {
         "learn": _TYPE_ONLY,
