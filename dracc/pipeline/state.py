@@ -54,6 +54,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+from dracc.core import jsonbound
 from dracc.core.errors import ConfigError, StateError
 
 SCHEMA_VERSION = 3
@@ -239,6 +240,47 @@ def _retry_busy(step, deadline: float):
         wait_s = min(2 * wait_s, 0.2)
 
 
+def _json_column(path: Path, r: sqlite3.Row, name: str, kind: type):
+    """The JSON document in column ``name`` of a night's row: a ``kind`` (list or dict),
+    parsed within bounds (:func:`dracc.core.jsonbound.loads`); StateError otherwise (a
+    damaged or hand-edited database)."""
+    where = f"{path}: {name} of {str(r['vessel'])[:40]!r} on {str(r['night'])[:20]}"
+    value = r[name]
+    if not isinstance(value, (str, bytes)):
+        raise StateError(f"{where} holds {type(value).__name__}, not JSON text")
+    try:
+        doc = jsonbound.loads(value)
+    except ValueError as err:
+        raise StateError(f"{where} is not readable JSON: {err}") from None
+    if not isinstance(doc, kind):
+        want = "an array" if kind is list else "an object"
+        raise StateError(f"{where} holds {type(doc).__name__}, not {want}")
+    return doc
+
+
+def schema_columns(version: int) -> dict[str, dict[str, tuple[str, bool]]]:
+    """table -> column -> (declared type, NOT NULL) of an audit database of schema
+    ``version`` (1 to :data:`SCHEMA_VERSION`), as the DDL creates them: what a database
+    read from elsewhere must hold (:mod:`dracc.pipeline.state_read`)."""
+    later = {name for name, _ in _NIGHT_COLUMNS_V2} if version < 2 else set()
+    if version < 3:
+        later.add("measures_json")
+    mem = sqlite3.connect(":memory:")
+    try:
+        mem.executescript(_DDL)
+        tables = [r[0] for r in mem.execute("SELECT name FROM sqlite_master WHERE type='table'")]
+        return {
+            t: {
+                c[1]: (str(c[2]).upper(), bool(c[3]))
+                for c in mem.execute(f"PRAGMA table_info({t})")
+                if not (t == "nights" and c[1] in later)
+            }
+            for t in tables
+        }
+    finally:
+        mem.close()
+
+
 def _none_if_nan(x):
     if x is None:
         return None
@@ -255,14 +297,11 @@ class StateStore:
     ``busy_timeout_s`` is how long a writer waits for another audit's transaction.
     """
 
-    def __init__(self, path: str | Path, busy_timeout_s: float = 60.0, read_only: bool = False):
+    def __init__(self, path: str | Path, busy_timeout_s: float = 60.0):
         self.path = Path(path)
         self.busy_timeout_s = float(busy_timeout_s)
         if self.path.is_dir():
             raise ConfigError(f"audit database path is a directory: {self.path}")
-        if read_only:
-            self._open_read_only()
-            return
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self.conn = sqlite3.connect(self.path, timeout=busy_timeout_s, isolation_level=None)
@@ -289,24 +328,16 @@ class StateStore:
             raise
         self.journal_mode = str(mode).lower()
 
-    def _open_read_only(self) -> None:
-        """Open an existing database for reading only (a ship's database read ashore):
-        nothing is created, migrated or written; schema 1 to 3 are read."""
-        try:
-            self.conn = sqlite3.connect(
-                f"{self.path.resolve().as_uri()}?mode=ro", uri=True, isolation_level=None
-            )
-            self.conn.row_factory = sqlite3.Row
-            row = self.conn.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()
-        except sqlite3.DatabaseError as err:
-            raise StateError(f"{self.path}: not a readable audit database: {err}") from err
-        if row is None or str(row[0]) not in ("1", "2", str(SCHEMA_VERSION)):
-            self.conn.close()
-            raise StateError(
-                f"{self.path}: audit database schema {row[0] if row else None} is not "
-                f"1 to {SCHEMA_VERSION}"
-            )
-        self.journal_mode = "read-only"
+    @classmethod
+    def reading(cls, path: str | Path, conn: sqlite3.Connection) -> StateStore:
+        """A store over ``conn``, a database opened for reading only elsewhere (a ship's,
+        read ashore: :func:`dracc.pipeline.state_read.read_nights`, which checks its
+        schema first); only the reads are used."""
+        store = cls.__new__(cls)
+        store.path, store.conn, store.busy_timeout_s = Path(path), conn, 0.0
+        store.journal_mode = "read-only"
+        conn.row_factory = sqlite3.Row
+        return store
 
     # -- plumbing ------------------------------------------------------------------
 
@@ -467,6 +498,9 @@ class StateStore:
         def col(name: str):
             return r[name] if name in have else None
 
+        def js(name: str, kind: type):
+            return _json_column(self.path, r, name, kind)
+
         measures = col("measures_json")
         return NightRecord(
             vessel=r["vessel"],
@@ -476,8 +510,8 @@ class StateStore:
             audited_utc=r["audited_utc"],
             period_start_utc=r["period_start_utc"],
             period_end_utc=r["period_end_utc"],
-            inputs=tuple(json.loads(r["inputs_json"])),
-            sources=json.loads(r["sources_json"]),
+            inputs=tuple(js("inputs_json", list)),
+            sources=js("sources_json", dict),
             lines=r["lines"],
             rejected=r["rejected"],
             rejected_rate=r["rejected_rate"],
@@ -487,14 +521,14 @@ class StateStore:
             compass_error_sigma_deg=r["compass_error_sigma_deg"],
             log_scale=r["log_scale"],
             log_scale_sigma=r["log_scale_sigma"],
-            findings=tuple(json.loads(r["findings_json"])),
-            missing=tuple(json.loads(r["missing_json"])),
+            findings=tuple(js("findings_json", list)),
+            missing=tuple(js("missing_json", list)),
             channels=self._channels(r["id"]),
             dr_verdict=col("dr_verdict"),
             dr_verdict_text=col("dr_verdict_text"),
             dr_consistent=None if col("dr_consistent") is None else bool(r["dr_consistent"]),
             dr_nees=col("dr_nees"),
-            measures=None if measures is None else json.loads(measures),
+            measures=None if measures is None else js("measures_json", dict),
         )
 
     # -- writes (call inside :meth:`transaction`) ------------------------------------

@@ -7,20 +7,25 @@ turns each night in them into a fleet row, without any raw log: one pseudo-log
 ``<file>#<night>`` per night, with the summary :func:`dracc.pipeline.fleet.summarise`
 would give for the night's logs (the measures the ranking reads are stored verbatim),
 so a fleet ranked from documents equals one ranked from the logs.  The vessel is the
-one the documents name.  A database is opened read-only: nothing on it changes.
+one the documents name.  Both come from outside and are checked before use (issue 33):
+a document is parsed within bounds of size and nesting and its fields checked
+(:mod:`dracc.pipeline.fleet.validate`); a database is opened immutable, its schema and
+column types checked, every query bounded in time (:mod:`dracc.pipeline.state_read`).
+A document or database that fails is one failed input, its reason said; the rest goes on.
 """
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
-from dataclasses import replace
-from pathlib import Path
+from dataclasses import asdict, replace
 
+from dracc.core import jsonbound
 from dracc.core.errors import StateError
+from dracc.pipeline.fleet import validate
 from dracc.pipeline.fleet.findings import COUNT_KEYS, document_counts, night_findings
 from dracc.pipeline.fleet.tasks import LogTask
-from dracc.pipeline.state import NightRecord, StateStore
+from dracc.pipeline.state import NightRecord
+from dracc.pipeline.state_read import read_nights
 
 AUDIT_SCHEMA = "dracc.audit/1"
 _SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -153,32 +158,86 @@ def summary_from_record(r: NightRecord) -> dict:
     }
 
 
+def _read_document(path: str) -> dict:
+    """The audit document at ``path``, parsed within bounds (:data:`MAX_DOCUMENT_BYTES`,
+    :data:`dracc.core.jsonbound.MAX_DEPTH` levels) and checked field by field
+    (:func:`dracc.pipeline.fleet.validate.check_document`); StateError otherwise."""
+    try:
+        with open(path, "rb") as f:
+            data = f.read(MAX_DOCUMENT_BYTES + 1)
+    except OSError as err:
+        raise StateError(f"{path}: not a readable audit document: {err}") from None
+    if len(data) > MAX_DOCUMENT_BYTES:  # a night's document is kB (brief) to a few MB
+        raise StateError(
+            f"{path}: more than {MAX_DOCUMENT_BYTES:,} bytes is not a nightly audit document; "
+            "not read"
+        )
+    try:
+        doc = jsonbound.loads(data)
+    except (ValueError, UnicodeDecodeError) as err:
+        raise StateError(f"{path}: not a readable audit document: {err}") from None
+    if not isinstance(doc, dict) or doc.get("schema") != AUDIT_SCHEMA:
+        raise StateError(f"{path}: not an audit document ({AUDIT_SCHEMA})")
+    return doc
+
+
+def _record_fields(r: NightRecord) -> dict:
+    """The fields of a stored night the fleet reads, as :data:`validate.RECORD` names them."""
+    return {
+        "vessel": r.vessel,
+        "night": r.night,
+        "period": {"start_utc": r.period_start_utc, "end_utc": r.period_end_utc},
+        "inputs": list(r.inputs),
+        "sources": r.sources,
+        "lines": r.lines,
+        "rejected": r.rejected,
+        "channels": [asdict(c) for c in r.channels],
+        "dr": {
+            "containment_2m": r.dr_containment_2m,
+            "n_scored": r.dr_n_scored,
+            "consistent": r.dr_consistent,
+            "verdict": r.dr_verdict,
+            "nees": r.dr_nees,
+        },
+        "calibration": {
+            "compass_error_deg": r.compass_error_deg,
+            "compass_error_sigma_deg": r.compass_error_sigma_deg,
+            "log_scale": r.log_scale,
+            "log_scale_sigma": r.log_scale_sigma,
+        },
+        "missing": list(r.missing),
+        "measures": r.measures,
+        "findings": list(r.findings),
+    }
+
+
 def _nights(task: LogTask, kind: str) -> list[tuple[str, str, dict]]:
-    """(vessel, night, summary) of every night with data in one document."""
+    """(vessel, night, summary) of every night with data in one document; StateError for
+    a document or database that cannot be read or holds a field the fleet cannot use
+    (:mod:`dracc.pipeline.fleet.validate`)."""
     if kind == "audit-json":
-        size = Path(task.path).stat().st_size
-        if size > MAX_DOCUMENT_BYTES:  # a night's document is kB (brief) to a few MB
-            raise StateError(
-                f"{task.path}: {size:,} bytes is not a nightly audit document (at most "
-                f"{MAX_DOCUMENT_BYTES:,}); not read"
-            )
-        try:
-            doc = json.loads(Path(task.path).read_text(encoding="utf-8"))
-        except (OSError, ValueError) as err:
-            raise StateError(f"{task.path}: not a readable audit document: {err}") from None
-        if not isinstance(doc, dict) or doc.get("schema") != AUDIT_SCHEMA:
-            raise StateError(f"{task.path}: not an audit document ({AUDIT_SCHEMA})")
+        doc = _read_document(task.path)
         if doc.get("verdict") == "no data" or doc.get("status") == "failed":
             return []  # a night without data, or a run that ended without a verdict
+        try:
+            validate.check_document(doc)
+        except validate.Invalid as err:
+            raise StateError(f"{task.path}: not a usable audit document: {err}") from None
         return [
             (str(doc.get("vessel") or task.vessel), str(doc["night"]), summary_from_document(doc))
         ]
-    with StateStore(task.path, read_only=True) as store:
-        return [
-            (r.vessel, r.night, summary_from_record(r))
-            for r in store.nights()
-            if r.period_start_utc is not None  # a night recorded without logs
-        ]
+    out = []
+    for r in read_nights(task.path):  # immutable, schema-checked, bounded in time
+        if r.period_start_utc is None:
+            continue  # a night recorded without logs
+        try:
+            validate.RECORD(_record_fields(r), "")
+        except validate.Invalid as err:
+            raise StateError(
+                f"{task.path}: night {r.night[:20]!r} of {r.vessel[:40]!r} is not usable: {err}"
+            ) from None
+        out.append((r.vessel, r.night, summary_from_record(r)))
+    return out
 
 
 def expand_documents(

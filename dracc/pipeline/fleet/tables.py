@@ -181,7 +181,10 @@ def fleet_table(
             continue
         per = s["period"]
         cal = s["calibration"]
-        rate = (s["rejected"] / s["lines"]) if s.get("lines") else None
+        # a night stored without its rejected count (NULL) has no rate
+        rate = (
+            s["rejected"] / s["lines"] if s.get("lines") and s.get("rejected") is not None else None
+        )
         common = {
             **base,
             "status": "ok",
