@@ -240,3 +240,112 @@ def test_a_name_too_long_for_a_folder_is_a_clear_error(tmp_path):
 def test_fleet_group_help_names_both_commands(run_cli):
     code, text, _ = run_cli("fleet", "--help")
     assert code == ExitCode.OK and "query" in text and "run" in text and "./query" in text
+
+
+# ------------------------------------- issue 33: the query reads the fleet's tables only
+
+SECRET = "private: the office's passwords"
+
+
+@pytest.fixture(scope="module")
+def shared_out(tmp_path_factory) -> Path:
+    """Published fleet outputs that no test of the module changes."""
+    out = tmp_path_factory.mktemp("shared") / "out"
+    write_tables(_result(FLEET, failed=("Borealis",)), out)
+    return out
+
+
+@pytest.mark.parametrize(
+    "sql",
+    [
+        "SELECT * FROM read_text('{secret}')",
+        "SELECT * FROM read_csv('{secret}')",
+        "SELECT * FROM glob('{tmp}/*')",
+        "COPY (SELECT 1) TO '{out}/fleet.csv'",
+        "COPY (SELECT 1) TO '{tmp}/x.csv'",
+        "COPY fleet TO '{out}/tables/fleet/x.parquet'",
+        "EXPORT DATABASE '{tmp}/exported'",
+        "ATTACH '{tmp}/new.db'",
+        "INSTALL httpfs",
+        "LOAD httpfs",
+        "SET enable_external_access = true",
+        "RESET enable_external_access",
+        "SET temp_directory = '{tmp}/spill'",
+        "SET enable_external_access = true; SELECT * FROM read_text('{secret}')",
+        "SELECT * FROM 'https://example.com/x.csv'",
+    ],
+)
+def test_a_query_beyond_the_fleet_tables_is_refused(
+    run_cli, shared_out, tmp_path, monkeypatch, sql
+):
+    """Issue 33: read_text read a private file, COPY … TO replaced the published fleet.csv,
+    ATTACH created a database, extensions installed themselves: each is refused in one
+    line (exit 2) that says what is allowed, and nothing is written anywhere."""
+    out = shared_out
+    monkeypatch.chdir(tmp_path)  # ATTACH 'new.db' and DuckDB's spill folder would land here
+    secret = tmp_path / "secret.txt"
+    secret.write_text(SECRET)
+    before = _tree(tmp_path)
+    published = (out / "fleet.csv").read_bytes()
+    query = sql.format(secret=secret, tmp=tmp_path, out=out)
+    code, text, err = run_cli("fleet", "query", query, "--out", out)
+    assert code == ExitCode.USAGE and text == "", err
+    assert err.count("\n") == 1 and err.startswith("error: the query failed:"), err
+    assert "refused; dracc fleet query only reads the views" in err, err
+    assert SECRET not in err
+    assert _tree(tmp_path) == before
+    assert (out / "fleet.csv").read_bytes() == published
+
+
+def _tree(root: Path) -> dict[str, bytes]:
+    """Every file under ``root`` (through no link) and its bytes."""
+    return {str(p): p.read_bytes() for p in root.rglob("*") if p.is_file() and not p.is_symlink()}
+
+
+def test_queries_that_stay_in_the_tables_still_work(run_cli, shared_out):
+    """Several statements, a temporary table, a macro: all in memory, all allowed."""
+    sql = (
+        "CREATE TEMP TABLE w AS SELECT vessel, max(m_y) AS worst FROM fleet GROUP BY vessel; "
+        "CREATE MACRO twice(x) AS 2 * x; SELECT vessel, twice(worst) AS w2 FROM w ORDER BY 1"
+    )
+    code, text, err = run_cli("fleet", "query", sql, "--out", shared_out, "--format", "csv")
+    assert code == ExitCode.OK, err
+    assert pd.read_csv(io.StringIO(text))["vessel"].tolist() == ["Aurora", "Borealis"]
+
+
+def test_a_tables_link_out_of_the_folder_is_not_followed(run_cli, out, tmp_path):
+    """A ``tables`` planted in DIR that leads elsewhere is not read (exit 3)."""
+    elsewhere = tmp_path / "elsewhere"
+    write_tables(_result({"Intruder": [("2026-11-20", 1.0)]}), elsewhere)
+    (out / "tables").unlink()
+    (out / "tables").symlink_to(elsewhere.resolve() / "tables")
+    code, text, err = run_cli("fleet", "query", "SELECT vessel FROM fleet", "--out", out)
+    assert code == ExitCode.INPUT and "leads out of" in err and "Intruder" not in text
+
+
+def test_a_linked_file_among_the_tables_is_not_read(run_cli, out, tmp_path):
+    secret = tmp_path / "secret.parquet"
+    secret.write_bytes((out / "fleet.parquet").read_bytes())
+    (out / "tables" / "fleet" / "vessel=Aurora" / "night=2026-11-19" / "x.parquet").symlink_to(
+        secret
+    )
+    code, _, err = run_cli("fleet", "query", "SELECT 1 FROM fleet", "--out", out)
+    assert code == ExitCode.INPUT and "not a file dracc wrote" in err
+
+
+def test_an_interrupt_stops_a_long_query_at_once(shared_out):
+    """Ctrl-C (or SIGTERM, which dracc turns into the same) during a query that would run
+    for minutes ends it within seconds: DuckDB only sees an interrupt it is told of."""
+    import _thread
+    import threading
+    import time
+
+    timer = threading.Timer(1.0, _thread.interrupt_main)
+    t0 = time.monotonic()
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            run_query(shared_out, "SELECT count(*) FROM range(1000000000000) a, range(10) b")
+    finally:
+        timer.cancel()
+    assert time.monotonic() - t0 < 10.0

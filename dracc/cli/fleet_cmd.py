@@ -172,8 +172,10 @@ def fleet_query(
 
     The views read DIR/tables/ (Hive-partitioned Parquet: vessel=…/night=…) and have the
     columns of fleet.parquet, trends.parquet, ranking.parquet, findings.parquet and
-    integrity.parquet; nothing is written in DIR.  Example: dracc fleet query "SELECT vessel, avg(m_y) FROM fleet WHERE channel =
-    'lat' GROUP BY vessel ORDER BY 2" --out fleet-report
+    integrity.parquet.  The query reads these views only: a file, ATTACH, COPY, EXPORT,
+    INSTALL, LOAD or SET is refused (exit 2); nothing is written.  Example: dracc fleet
+    query "SELECT vessel, avg(m_y) FROM fleet WHERE channel = 'lat' GROUP BY vessel ORDER
+    BY 2" --out fleet-report
     """
     from dracc.pipeline.fleet.query import run_query
 
