@@ -263,7 +263,7 @@ def test_unwritable_report_is_one_line_error(run_cli, tmp_path):
     blocker.write_text("not a folder")
     code, _, err = run_cli("analyze", SAMPLE, "--html", blocker / "r.html")
     assert (
-        code == ExitCode.INPUT and err.startswith("error: cannot write") and "Traceback" not in err
+        code == ExitCode.OUTPUT and err.startswith("error: cannot write") and "Traceback" not in err
     )
     assert len(err.strip().splitlines()) == 1
 

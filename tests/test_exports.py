@@ -418,12 +418,12 @@ def test_an_interrupted_export_leaves_the_previous_reports(run, tmp_path, monkey
 @pytest.mark.skipif(not SAMPLE.exists(), reason="sample_logs not generated")
 @pytest.mark.parametrize("option", ["--gpx", "--kml", "--geojson"])
 def test_an_unwritable_export_is_one_line_naming_it(run_cli, tmp_path, option):
-    """As --html: exit 3 and one line naming the path (nothing else written)."""
+    """As --html: exit 6 and one line naming the path (nothing else written)."""
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
     target = blocker / "r.out"
     code, _, err = run_cli("analyze", SAMPLE, "--json", tmp_path / "r.json", option, target)
-    assert code == ExitCode.INPUT and err.startswith(f"error: cannot write {target}")
+    assert code == ExitCode.OUTPUT and err.startswith(f"error: cannot write {target}")
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
     assert not (tmp_path / "r.json").exists()
 

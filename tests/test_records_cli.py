@@ -333,7 +333,7 @@ def test_a_failed_write_leaves_no_partial_file(run_cli, tmp_path, monkeypatch, n
 
     monkeypatch.setattr(records.Records, "chunks", failing)
     code, _, err = run_cli("records", SAMPLES / "voyage_tag.nmea", "--out", target)
-    assert code == ExitCode.INPUT and "cannot write" in err and "Traceback" not in err
+    assert code == ExitCode.OUTPUT and "cannot write" in err and "Traceback" not in err
     assert target.read_bytes() == b"the earlier table"
     assert [p.name for p in tmp_path.iterdir()] == [name]  # no temporary file left
 

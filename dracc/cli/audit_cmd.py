@@ -51,7 +51,7 @@ audit_app = typer.Typer(
     help="Nightly audit on board: analyse the last day's logs, check the limits, keep the "
     "state in SQLite (dracc audit LOG…|DIR), and show the trend (dracc audit history). "
     "Exit codes: 0 all checks passed, 1 findings, 2 bad option value, 3 no logs for the "
-    "night or no usable logs, 4 configuration error.",
+    "night or no usable logs, 4 configuration error, 6 a report cannot be written.",
 )
 app.add_typer(audit_app, name="audit")
 
@@ -135,14 +135,15 @@ def _run(request: AuditRequest, pattern: str | None, brief: bool) -> int:
         )
     json_out, html_out, summary_out = request.json_out, request.html_out, request.summary_out
     doc = audit_json.to_dict(outcome) if (json_out or html_out) else None
-    if json_out is not None:
-        emit_json(audit_json.brief(doc) if brief and doc else doc, json_out)
-    if html_out is not None:
-        atomic.write_text(html_out, audit_page(outcome, doc))
     text = format_summary(outcome, cfg.deviation.probability)
-    if summary_out is not None:  # mailed: a log's control characters shown, not sent
-        atomic.write_text(summary_out, printable(text, keep="\n"))
-    elif json_out != STDOUT:
+    with atomic.together():  # the night's reports appear together, or none of them does
+        if json_out is not None:
+            emit_json(audit_json.brief(doc) if brief and doc else doc, json_out)
+        if html_out is not None:
+            atomic.write_text(html_out, audit_page(outcome, doc))
+        if summary_out is not None:  # mailed: a log's control characters shown, not sent
+            atomic.write_text(summary_out, printable(text, keep="\n"))
+    if summary_out is None and json_out != STDOUT:
         out.print(text, end="", markup=False, highlight=False)
     return int(outcome.exit_code)
 
@@ -168,10 +169,11 @@ def audit_history(
             vessel, store.vessels(), "--vessel", "no vessel is recorded in this database yet"
         )
         doc = audit_json.history_document(store, vessel, unit, channel)
-    if html_out is not None:
-        atomic.write_text(html_out, history_html(doc))
-    if json_out is not None:
-        emit_json(doc, json_out)
+    with atomic.together():
+        if html_out is not None:
+            atomic.write_text(html_out, history_html(doc))
+        if json_out is not None:
+            emit_json(doc, json_out)
     if json_out != STDOUT:
         print_history(doc, out)
     return int(ExitCode.OK)

@@ -47,13 +47,13 @@ def watch(
 ) -> None:
     """Listen to live NMEA sources (listening only): record every line with its receive
     time, count and time each source, raise and clear findings; until SIGTERM/SIGINT."""
-    from dracc.core.atomic import write_text
     from dracc.core.config import load_config
     from dracc.core.durations import parse_duration_s
     from dracc.core.numbers import jsonable
     from dracc.ingest.live import Recorder, open_source
     from dracc.pipeline.watch import Watch
     from dracc.pipeline.watch_analysis import LiveAnalyser, worker_pool
+    from dracc.report.write import StatusFile
 
     cfg = load_config(config)
     with option_values():
@@ -84,10 +84,13 @@ def watch(
 
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
 
+    status_file = StatusFile(status) if status is not None else None
+
     def write_status() -> None:
         doc = jsonable(loop.status())
-        if status is not None:
-            write_text(status, json.dumps(doc, indent=1) + "\n")
+        said = status_file.write(json.dumps(doc, indent=1) + "\n") if status_file else None
+        if said is not None:  # a status the disk refuses (full) stops nothing: said once
+            err.print(f"warning: {said}", markup=False, highlight=False)
         if view is not None:
             view.show(doc)
 
@@ -104,7 +107,8 @@ def watch(
         loop.close()
         if pool is not None:
             pool.shutdown(wait=False, cancel_futures=True)
-        write_status()
+        if status_file is None or status_file.written:  # else the first write failed
+            write_status()
         if view is not None:
             view.stop()
         for signum, handler in previous.items():

@@ -13,6 +13,11 @@ previous set or the complete new one::
     OUT/vessels     -> .current/vessels
     OUT/.current    -> .runs/set-<time>-<id>    (replaced atomically to publish)
     OUT/.runs/set-<time>-<id>/fleet.csv ...     (the sets: the current and the previous one)
+
+A write that fails for a reason of the disk or the folder (full, read-only, not allowed,
+a file where a folder is to be, or the reverse) raises :class:`~dracc.core.errors.OutputError`
+(one line naming the output and why, exit 6) after the temporary files are removed;
+:func:`output_error` is that rule, for the writes made elsewhere.
 """
 
 from __future__ import annotations
@@ -33,6 +38,8 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
+from dracc.core.errors import OutputError
+
 #: (temporary, target) renames waiting for the end of the innermost ``together`` block
 _PENDING: ContextVar[list[tuple[Path, Path]] | None] = ContextVar(
     "dracc_atomic_pending", default=None
@@ -42,6 +49,89 @@ _PENDING: ContextVar[list[tuple[Path, Path]] | None] = ContextVar(
 def _discard(tmp: Path) -> None:
     with suppress(FileNotFoundError):
         os.unlink(tmp)
+
+
+# ------------------------------------------------------------------ write faults
+
+#: what a disk or a folder answers a write it refuses (not a bug; not an input's fault)
+_WRITE_ERRNOS = frozenset(
+    {
+        errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES, errno.EPERM,
+        errno.EISDIR, errno.ENOTDIR, errno.EEXIST, errno.ENAMETOOLONG, errno.ELOOP, errno.EIO,
+        errno.ENOENT, errno.EMLINK, errno.ETXTBSY,
+    }
+)  # fmt: skip
+_REASONS = {
+    errno.ENOSPC: "no space left on the device (disk full)",
+    errno.EDQUOT: "disk quota exceeded",
+    errno.EFBIG: "file too large (for the file system, or the process's size limit)",
+    errno.EROFS: "read-only file system",
+    errno.EACCES: "permission denied",
+    errno.EPERM: "operation not permitted",
+}
+
+
+def _blocker(named: Path) -> Path:
+    """The file that stands where a folder is needed on the way to ``named``."""
+    for p in (named, *named.parents):
+        if os.path.lexists(p) and not p.is_dir():
+            return p
+    return named
+
+
+def _near(named: Path, within: Path) -> bool:
+    """``named`` is ``within``, in it, or on the way to it."""
+    return named == within or within in named.parents or named in within.parents
+
+
+def output_error(target: object, err: OSError, within: Path | None = None) -> OutputError | None:
+    """The one line for ``err``, raised while writing ``target`` (a path, or words such as
+    "the reports"); None when ``err`` is not the output's fault: an errno no disk or
+    folder gives, or (``within``: the folder the output's files go to) one naming a file
+    neither in ``within`` nor on the way to it (an input read while writing)."""
+    if err.errno not in _WRITE_ERRNOS:
+        return None
+    named = Path(os.fsdecode(err.filename)) if err.filename is not None else None
+    if named is not None and within is not None and not _near(named, within):
+        return None
+    if err.errno == errno.EISDIR:
+        folder = err.filename2 if err.filename2 is not None else err.filename
+        why = _in_the_way(target, folder, "a folder, not a file")
+    elif err.errno in (errno.ENOTDIR, errno.EEXIST) and named is not None:
+        why = _in_the_way(target, _blocker(named), "a file, not a folder")
+    else:
+        why = _REASONS.get(err.errno or 0) or err.strerror or str(err)
+        if named is not None and within is not None and named in within.parents:
+            why = f"{named}: {why}"  # the folder that refused, not the output itself
+    return OutputError(f"cannot write {target}: {why}")
+
+
+def _in_the_way(target: object, where: str | bytes | Path | None, what: str) -> str:
+    if where is None or Path(os.fsdecode(where)) == Path(str(target)):
+        return f"it is {what}"
+    return f"{os.fsdecode(where)} is {what}"
+
+
+@contextmanager
+def faults_of(target: object, within: Path | None = None) -> Iterator[None]:
+    """Inside this block an ``OSError`` that :func:`output_error` calls the output's fault
+    becomes that :class:`OutputError`; any other passes unchanged."""
+    try:
+        yield
+    except OSError as err:
+        converted = output_error(target, err, within)
+        if converted is None:
+            raise
+        raise converted from err
+
+
+def make_folder(path: str | Path, target: object = None) -> Path:
+    """``mkdir -p path``; a folder that cannot be made is an :class:`OutputError` (naming
+    ``target``, the output it was for, or else ``path``)."""
+    path = Path(path)
+    with faults_of(path if target is None else target, path):
+        path.mkdir(parents=True, exist_ok=True)
+    return path
 
 
 @contextmanager
@@ -65,7 +155,8 @@ def together() -> Iterator[None]:
         _PENDING.reset(token)
     for k, (tmp, path) in enumerate(pending):
         try:
-            os.replace(tmp, path)
+            with faults_of(path, path.parent):
+                os.replace(tmp, path)
         except BaseException:
             for left, _ in pending[k:]:
                 _discard(left)
@@ -84,6 +175,9 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     ``/dev/stdout``, a FIFO) is yielded as it is and written in place: renaming a file
     onto it would replace the device itself (as root, ``--json /dev/null`` turned
     ``/dev/null`` into a regular file for every program on the machine).
+
+    A write the disk or the folder refuses is an :class:`OutputError` (:func:`output_error`),
+    raised once the temporary file is removed.
     """
     path = Path(path)
     try:
@@ -91,27 +185,29 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     except OSError:
         mode = None
     if mode is not None and not stat.S_ISREG(mode) and not stat.S_ISDIR(mode):
-        yield path
+        with faults_of(path, path.parent):
+            yield path
         return
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
-    os.close(fd)
-    # mkstemp creates 0600; a report should get the mode any new file gets (umask).
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
-    try:
-        yield Path(tmp)
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-    except BaseException:
-        _discard(Path(tmp))
-        raise
-    pending = _PENDING.get()
-    if pending is not None:  # inside ``together``: renamed at the end of the block
-        pending.append((Path(tmp), path))
-    else:
-        os.replace(tmp, path)
+    if mode is not None and stat.S_ISDIR(mode):  # found now, not after the work is done
+        raise OutputError(f"cannot write {path}: it is a folder, not a file")
+    with faults_of(path, path.parent):
+        make_folder(path.parent, path)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+        os.close(fd)
+        try:
+            # mkstemp creates 0600; a report should get the mode any new file gets (umask).
+            os.chmod(tmp, 0o666 & ~_umask())
+            yield Path(tmp)
+            with open(tmp, "rb+") as fh:
+                os.fsync(fh.fileno())
+        except BaseException:
+            _discard(Path(tmp))
+            raise
+        pending = _PENDING.get()
+        if pending is not None:  # inside ``together``: renamed at the end of the block
+            pending.append((Path(tmp), path))
+        else:
+            os.replace(tmp, path)
 
 
 def write_text(path: str | Path, text: str, encoding: str = "utf-8") -> None:
@@ -305,8 +401,15 @@ def file_set(folder: str | Path, published: list[str] | None = None) -> Iterator
     ``published``, if given, gets the new set's name appended in the same critical
     section as the publishing step: an interrupt handler that finds it empty knows that
     ``folder`` still holds the previous set, and otherwise that it holds the new one.
+
+    A write the disk or the folder refuses is an :class:`OutputError` naming ``folder``.
     """
     folder = Path(folder)
+    with faults_of(folder, folder):
+        yield from _file_set(folder, published)
+
+
+def _file_set(folder: Path, published: list[str] | None) -> Iterator[Path]:
     runs = folder / RUNS
     runs.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f"tmp-{os.getpid()}-", dir=runs))

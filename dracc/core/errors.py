@@ -18,6 +18,9 @@ class ExitCode(IntEnum):
     INPUT = 3  #: input unreadable or holding no usable data
     CONFIG = 4  #: configuration file invalid
     INTERNAL = 5  #: a bug in dracc: please report it, with --verbose output
+    OUTPUT = (
+        6  #: an output cannot be written: disk full, read-only, not allowed, a folder in the way
+    )
     INTERRUPTED = 130  #: stopped by Ctrl-C / SIGINT / SIGTERM; nothing partial written
 
 
@@ -86,6 +89,15 @@ class FixFileError(ConfigError):
     """An invalid observation file (exit 4, like an invalid configuration file)."""
 
     exit_code = ExitCode.CONFIG
+
+
+class OutputError(DraccError):
+    """An output cannot be written: the disk is full, the folder read-only or not ours, a
+    folder stands where a file is to go, or the reverse (exit 6).  Raised by
+    :mod:`dracc.core.atomic` for every report, table and recording it writes; nothing
+    partial is left (the temporary files are removed, the earlier outputs kept)."""
+
+    exit_code = ExitCode.OUTPUT
 
 
 class Interrupted(DraccError):

@@ -37,7 +37,10 @@ the cleared ones the last :data:`KEEP_CLEARED`.
 
 The recording (``Recorder``) writes each line with its receive time; a line with a TAG
 block keeps it (its ``s:``), a line without one is recorded with ``c:`` only, so that
-the recording reads back with the same source keys (talkers) as the lines heard.
+the recording reads back with the same source keys (talkers) as the lines heard.  A
+write the disk refuses (full, made read-only) stops nothing: ``recording/write_failed``
+is raised once, with the lines lost so far as its evidence, the watch goes on listening
+and analysing, and the finding is cleared when the recording writes again.
 """
 
 from __future__ import annotations
@@ -51,6 +54,7 @@ from typing import Any
 
 from dracc.ingest.live import LiveSource, Recorder, classify, poll_all
 from dracc.ingest.live.forms import NMEA_FORMS
+from dracc.ingest.live.record import RETRY_S as RECORD_RETRY_S
 from dracc.ingest.live.record import tag_line
 from dracc.math.integrity.causes import event_span, overlaps
 from dracc.pipeline.watch_analysis import LiveAnalyser, WindowResult
@@ -128,6 +132,7 @@ class Watch:
         self.analyser = analyser
         #: open integrity findings by (check, name, source)
         self.open_checks: dict[tuple[str, str, str | None], dict[str, Any]] = {}
+        self.record_fault: dict[str, Any] | None = None  #: open ``recording/write_failed``
 
     def step(self, timeout_s: float = 0.1) -> list[dict[str, Any]]:
         """Poll once; record and count the lines; return the findings raised or cleared
@@ -161,9 +166,10 @@ class Watch:
             st.add(recv_ns, c_ns)
             if st.silent is not None:
                 events.append(self._clear(st, recv_ns))
+        now = self.clock()
         if self.recorder is not None:
             self.recorder.tick()
-        now = self.clock()
+            events += self._recording(now)
         if analyser is not None:
             result = analyser.end_step()
             if result is not None:
@@ -172,6 +178,41 @@ class Watch:
             if st.silent is None and now - st.last_ns > self.dropout_ns:
                 events.append(self._raise(key, st, now))
         return events
+
+    def _recording(self, now: int) -> list[dict[str, Any]]:
+        """Raise ``recording/write_failed`` when the recorder has a fault, once; clear it
+        when the recorder writes again."""
+        assert self.recorder is not None
+        fault, open_ = self.recorder.fault, self.record_fault
+        if fault is not None and open_ is None:
+            self.record_fault = {
+                "check": "recording",
+                "name": "write_failed",
+                "source": None,
+                "raised_utc": utc(now),
+                "cleared_utc": None,
+                "message": f"{fault}; still listening, the lines heard meanwhile are lost "
+                "(counted), the recording is tried again every "
+                f"{RECORD_RETRY_S:g} s",
+                "evidence": {"lost_lines": self.recorder.lost},
+            }
+            return [{"event": "raised", **self.record_fault}]
+        if fault is None and open_ is not None:
+            lost = self._lost()
+            done = {
+                **open_,
+                "cleared_utc": utc(now),
+                "message": f"recording again; {lost['lost_lines']} lines heard while the "
+                "disk refused them were lost",
+                "evidence": lost,
+            }
+            self.record_fault = None
+            self.cleared.append(done)
+            return [{"event": "cleared", **done}]
+        return []
+
+    def _lost(self) -> dict[str, int]:
+        return {"lost_lines": self.recorder.lost if self.recorder is not None else 0}
 
     def _raise(self, key: str, st: SourceState, now: int) -> dict[str, Any]:
         age = round((now - st.last_ns) / 1e9, 3)
@@ -272,6 +313,9 @@ class Watch:
         }
         open_ = [st.silent for st in self.state.values() if st.silent is not None]
         open_ += list(self.open_checks.values())
+        if self.record_fault is not None:
+            self.record_fault["evidence"] = self._lost()
+            open_.append(self.record_fault)
         findings = sorted([*self.cleared, *open_], key=lambda f: f["raised_utc"])
         return {
             "schema": SCHEMA,
@@ -286,6 +330,7 @@ class Watch:
                 if self.recorder
                 else None
             ),
+            "recording_lost": self.recorder.lost if self.recorder else None,
             "inputs": [_input_status(src) for src in self.sources],
             "sources": sources,
             "findings": findings,

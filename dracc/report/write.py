@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 from rich.console import Console
 
 from dracc.core import atomic
-from dracc.core.errors import DraccError
+from dracc.core.errors import DraccError, OutputError
 from dracc.report.output import STDOUT, json_text
 
 if TYPE_CHECKING:  # the pipeline loads when the command runs, not when the CLI starts
@@ -21,12 +21,18 @@ if TYPE_CHECKING:  # the pipeline loads when the command runs, not when the CLI 
 
 @contextmanager
 def writing(target: object) -> Iterator[None]:
-    """OSError while writing ``target`` -> one line naming it (a closed stdout pipe passes)."""
+    """OSError while writing ``target`` -> one line naming it: an
+    :class:`~dracc.core.errors.OutputError` (exit 6) for what the disk or the folder
+    refused (:func:`dracc.core.atomic.output_error`), else a :class:`DraccError`; a closed
+    stdout pipe passes."""
     try:
         yield
     except BrokenPipeError:
         raise  # stdout closed by the reader (e.g. `| head`): not an error of ours
     except OSError as e:
+        fault = atomic.output_error(target, e)
+        if fault is not None:
+            raise fault from e
         detail = f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e)
         raise DraccError(f"cannot write {target}: {detail}") from e
 
@@ -104,3 +110,30 @@ def _exports(
 
         todo.append((mcap, write_mcap_export))
     return todo
+
+
+class StatusFile:
+    """A document rewritten now and then (``watch --status``), atomically.  The first
+    write that fails is an :class:`~dracc.core.errors.OutputError` (the command stops
+    before it listens); a later one (the disk filled up) stops nothing: :meth:`write`
+    returns one line saying so, once, and the next rewrite tries again."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.written = 0
+        self.fault: str | None = None
+
+    def write(self, text: str) -> str | None:
+        """Write ``text``; return a line to say when writing fails or works again."""
+        try:
+            atomic.write_text(self.path, text)
+        except OutputError as e:
+            if not self.written:
+                raise
+            said, self.fault = self.fault, str(e)
+            return None if said else f"{e}; still listening, tried again at the next rewrite"
+        self.written += 1
+        if self.fault is None:
+            return None
+        self.fault = None
+        return f"{self.path} written again"

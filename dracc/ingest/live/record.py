@@ -34,15 +34,15 @@ import contextlib
 import datetime as dt
 import os
 import re
+import tempfile
 import time
 from collections import Counter
 from collections.abc import Callable, Sequence
 from functools import reduce
 from operator import xor
 from pathlib import Path
-from typing import BinaryIO
 
-from dracc.core.errors import IngestError
+from dracc.core.atomic import faults_of, make_folder, output_error
 from dracc.ingest.live.forms import (
     CANDUMP,
     GPSD_JSON,
@@ -61,6 +61,9 @@ from dracc.ingest.live.forms import (
 MAX_BYTES = 256 * 1024 * 1024
 FLUSH_S = 1.0  #: the buffered files are flushed at least this often ...
 FLUSH_LINES = 10_000  #: ... and a file after this many lines
+#: after a write the disk refused, the lines of this many seconds are counted as lost
+#: without a try; then writing is tried again (the disk may have room by then)
+RETRY_S = 10.0
 NMEA_SUFFIX = ".nmea"
 #: form -> the suffix of its files (the NMEA 0183 file takes what has no form of its own)
 SUFFIXES = {
@@ -133,27 +136,62 @@ def _day(ns: int) -> str:
 
 class _Daily:
     """The file of one suffix being written: its ``.part`` path, UTC day (``lo <= t <
-    hi`` in ns), size, buffer."""
+    hi`` in ns), size, and the whole lines not yet handed to the operating system.
 
-    __slots__ = ("fh", "hi", "lo", "part", "size", "suffix", "unflushed")
+    Lines go to the file only whole: a write the disk refuses half-way (full) is cut
+    back to the last whole line (:meth:`flush`), so that a recording never holds half a
+    line, whatever happened to the disk."""
+
+    __slots__ = ("buf", "fd", "hi", "lo", "part", "size", "suffix", "unflushed", "written")
 
     def __init__(self, suffix: str, part: Path, lo: int) -> None:
         self.suffix = suffix
         self.part = part
         self.lo = lo
         self.hi = lo + DAY_NS
-        self.fh: BinaryIO = open(part, "xb", buffering=1 << 16)  # noqa: SIM115 - kept open
-        self.size = 0
+        flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
+        self.fd = os.open(part, flags, 0o666)
+        self.buf = bytearray()
+        self.size = 0  #: bytes of the file's lines, buffered ones included
+        self.written = 0  #: bytes of whole lines on the file
+        self.unflushed = 0  #: lines in ``buf``
+
+    def add(self, data: bytes) -> None:
+        self.buf += data
+        self.size += len(data)
+        self.unflushed += 1
+
+    def flush(self) -> None:
+        """Hand the buffered lines to the operating system.  When it refuses (``OSError``,
+        raised after), the file is cut back to its last whole line and the buffered
+        lines are dropped: ``unflushed`` then still says how many."""
+        data = bytes(self.buf)
+        self.buf.clear()
+        done = 0
+        try:
+            while done < len(data):
+                done += os.pwrite(self.fd, data[done:] if done else data, self.written + done)
+        except OSError:
+            with contextlib.suppress(OSError):
+                os.ftruncate(self.fd, self.written)
+            self.size = self.written
+            raise
+        self.written += done
         self.unflushed = 0
 
     def finish(self) -> Path:
         """Flush, fsync, close and rename to the final name (returned)."""
-        self.fh.flush()
-        os.fsync(self.fh.fileno())
-        self.fh.close()
+        self.flush()
+        os.fsync(self.fd)
+        self.close()
         final = self.part.with_suffix("")
         os.rename(self.part, final)
         return final
+
+    def close(self) -> None:
+        if self.fd >= 0:
+            os.close(self.fd)
+            self.fd = -1
 
 
 class Recorder:
@@ -161,7 +199,14 @@ class Recorder:
     the module docstring).  ``write(line, recv_ns=None, source=None, form=None)`` per
     line; ``tick()`` now and then (it flushes, and finishes yesterday's files at
     midnight); ``close()`` finishes the current files.  ``now_ns`` is the clock
-    (injected by tests)."""
+    (injected by tests).
+
+    A folder that cannot be used at the start is an :class:`~dracc.core.errors.OutputError`.
+    A write refused later (the disk full, the folder made read-only) stops nothing: the
+    file keeps its whole lines, ``fault`` says why (one line) and ``lost`` counts the
+    lines not recorded; writing is tried again every :data:`RETRY_S` seconds, and
+    ``fault`` is cleared once writes have worked for :data:`RETRY_S` seconds (a disk
+    with a few bytes free takes one small write, then refuses the next)."""
 
     def __init__(
         self,
@@ -171,22 +216,26 @@ class Recorder:
         flush_s: float = FLUSH_S,
         flush_lines: int = FLUSH_LINES,
     ) -> None:
-        self.folder = Path(folder)
-        try:
-            self.folder.mkdir(parents=True, exist_ok=True)
-        except OSError as err:
-            raise IngestError(f"{folder}: {err.strerror}") from err
+        self.folder = make_folder(folder)
         self.max_bytes = max_bytes
         self.now_ns = now_ns
         self.flush_ns = int(flush_s * 1e9)
         self.flush_lines = flush_lines
         self.files: list[Path] = []  #: finished files, in order
         self.recovered: list[Path] = []  #: ``.part`` files of an earlier run, finished
-        self.lines = 0  #: lines written
-        self.lines_by_form: Counter[str] = Counter()  #: lines written, by form
+        self.lines = 0  #: lines given to the recording (``lost`` of them not on a file)
+        self.lines_by_form: Counter[str] = Counter()  #: lines given, by form
+        self.lost = 0  #: lines not recorded: the disk refused them
+        self.fault: str | None = None  #: why the last write failed, until one works again
+        self._retry_ns = 0
+        self._ok_ns: int | None = None  #: since when writes work again, after a fault
         self._open: dict[str, _Daily] = {}  #: suffix -> the file being written
         self._last_flush = now_ns()
-        self._recover()
+        with faults_of(self.folder, self.folder):
+            self._recover()
+            fd, probe = tempfile.mkstemp(prefix=".dracc-probe-", dir=self.folder)
+            os.close(fd)  # a folder that takes no file is said now, not at the first line
+            os.unlink(probe)
 
     # -- files -------------------------------------------------------------------------
     def _recover(self) -> None:
@@ -231,8 +280,36 @@ class Recorder:
         out = self._open.pop(suffix, None)
         if out is None:
             return
-        self.files.append(out.finish())
+        try:
+            self.files.append(out.finish())
+        except OSError as err:  # left as .part, whole lines: finished at the next start
+            out.close()
+            self._refused(err, out.part, out.unflushed)
+            return
         self._sync_folder()
+
+    def _flush(self, out: _Daily) -> None:
+        lines = out.unflushed
+        try:
+            out.flush()
+        except OSError as err:
+            out.unflushed = 0
+            self._refused(err, out.part, lines)
+            return
+        if lines and self.fault is not None:  # cleared after RETRY_S of writes that work
+            now = self.now_ns()
+            self._ok_ns = now if self._ok_ns is None else self._ok_ns
+            if now - self._ok_ns >= int(RETRY_S * 1e9):
+                self.fault = self._ok_ns = None
+
+    def _refused(self, err: OSError, path: Path, lines: int) -> None:
+        """A write the disk refused: ``lines`` lost, the fault said, a retry later."""
+        self.lost += lines
+        self._ok_ns = None
+        if self.fault is None:
+            fault = output_error(path, err, self.folder)
+            self.fault = str(fault) if fault else f"cannot write {path}: {err}"
+        self._retry_ns = self.now_ns() + int(RETRY_S * 1e9)
 
     def _sync_folder(self) -> None:
         with contextlib.suppress(OSError):
@@ -274,6 +351,11 @@ class Recorder:
         else:
             suffix = form_suffix(form)
             recorded = line
+        self.lines += 1
+        self.lines_by_form[form or NMEA0183] += 1
+        if self.fault is not None and recv_ns < self._retry_ns:
+            self.lost += 1  # the disk refused a write moments ago: not tried again yet
+            return recorded
         data = recorded + _LINE_END.get(suffix, b"\n")
         out = self._open.get(suffix)
         if out is not None and (
@@ -282,15 +364,14 @@ class Recorder:
             self._finish(suffix)
             out = None
         if out is None:
-            out = self._begin(suffix, recv_ns)
-        out.fh.write(data)
-        out.size += len(data)
-        self.lines += 1
-        self.lines_by_form[form or NMEA0183] += 1
-        out.unflushed += 1
+            try:
+                out = self._begin(suffix, recv_ns)
+            except OSError as err:
+                self._refused(err, self.folder, 1)
+                return recorded
+        out.add(data)
         if out.unflushed >= self.flush_lines:
-            out.fh.flush()
-            out.unflushed = 0
+            self._flush(out)
         return recorded
 
     def write_many(
@@ -316,8 +397,7 @@ class Recorder:
         """Hand the buffered lines to the operating system (no fsync: that is at the end
         of each file)."""
         for out in self._open.values():
-            out.fh.flush()
-            out.unflushed = 0
+            self._flush(out)
         self._last_flush = self.now_ns()
 
     def tick(self) -> None:

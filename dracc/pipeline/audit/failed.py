@@ -3,8 +3,9 @@
 ``dracc audit`` runs from cron, whose line mails the summary file when the exit code is
 not 0.  Every exit path therefore leaves tonight's reports: a run that ends with a
 configuration error (exit 4), with logs that hold nothing usable (exit 3), a usage error
-found while running (exit 2), an internal error (exit 5) or an interrupt (SIGINT or
-SIGTERM, exit 130) is described by a :class:`FailedNight` (the error's message, the exit
+found while running (exit 2), an internal error (exit 5), a report that cannot be
+written (exit 6: the disk full, the folder read-only) or an interrupt (SIGINT or SIGTERM,
+exit 130) is described by a :class:`FailedNight` (the error's message, the exit
 code, the night and the time, the inputs named), which :mod:`dracc.report.audit_failed`
 renders as a short summary, audit document and page.
 """
@@ -26,6 +27,7 @@ KINDS = {
     ExitCode.INPUT: "no usable data",
     ExitCode.CONFIG: "configuration error",
     ExitCode.INTERNAL: "internal error",
+    ExitCode.OUTPUT: "output error",
     ExitCode.INTERRUPTED: "interrupted",
 }
 
@@ -35,7 +37,7 @@ class FailedNight:
     """Why tonight's audit ended without a verdict, and what it was asked to audit."""
 
     message: str  #: the error, as ``error: …`` on stderr says it
-    exit_code: int  #: the process's exit code (2, 3, 4, 5 or 130)
+    exit_code: int  #: the process's exit code (2, 3, 4, 5, 6 or 130)
     kind: str  #: :data:`KINDS` of the exit code
     error_type: str  #: the exception's class name (``ConfigError``, ``KeyboardInterrupt``)
     night: str | None  #: YYYY-MM-DD, None when the logs' own dates would have said it
