@@ -199,6 +199,7 @@ def _adds_up(acc: dict[str, int]) -> bool:
         acc["sentences"]
         + acc["time_only"]
         + acc["qualifiers"]
+        + acc["n2k"]
         + acc["ignored"]
         + acc["rejected"]
         - acc["shared"]
@@ -260,6 +261,7 @@ def test_every_line_accounted_for_with_shared_lines(run_cli, real_dir):
         "sentences": sum(good[t] for t in READ_TYPES) - good["ZDA"],
         "time_only": good["ZDA"],
         "qualifiers": 0,
+        "n2k": 0,
         "ignored": sum(good[t] for t in good if t not in READ_TYPES),
         "rejected": sum(bad.values()),
         "shared": shared,
@@ -298,6 +300,7 @@ def test_time_only_sentences_per_tag_source(run_cli, tmp_path):
         "sentences": 30,
         "time_only": 60,
         "qualifiers": 0,
+        "n2k": 0,
         "ignored": 2,
         "rejected": 0,
         "shared": 0,

@@ -31,7 +31,7 @@ import pandas as pd
 from dracc.core.errors import DraccError, IngestError
 from dracc.frames import KINDS, FileResult, Rejects, SourceInfo, TimeEvents, Voyage, empty_frame
 from dracc.ingest import unsupported
-from dracc.ingest.compressed import STDIN, plain_copy
+from dracc.ingest.compressed import STDIN, Packed, unpacked
 from dracc.ingest.demux import relabel, scaled_progress
 from dracc.ingest.interleaved import mark_interleaved
 from dracc.ingest.nmea import check_readable
@@ -107,11 +107,17 @@ def detect_format(path: str | Path) -> str:
     check_readable(p)
     with p.open("rb") as fh:
         head = fh.read(65536)
-        if not head:
-            raise IngestError(f"{p}: empty file")
         size = fh.seek(0, 2)
         fh.seek(max(0, size - 16))
         tail = fh.read(16)
+    return format_of(head, tail, p)
+
+
+def format_of(head: bytes, tail: bytes, p: Path) -> str:
+    """:func:`detect_format` of a log (named ``p``) whose first 64 KiB are ``head`` and
+    last 16 bytes ``tail`` (``b""`` where unknown: a log decompressed as it is read)."""
+    if not head:
+        raise IngestError(f"{p}: empty file")
     if head.startswith(MCAP_MAGIC):
         return "mcap"
     damage = _damaged_container(head, tail)
@@ -153,8 +159,6 @@ def detect_format(path: str | Path) -> str:
 
 #: the formats :func:`not_a_log` names as what dracc reads
 _READS = "NMEA 0183, NMEA 2000, Signal K, gpsd JSON, CSV and MCAP logs"
-#: NMEA 0183 sentences (and AIS) anywhere in a text: what the NMEA reader takes
-_ANY_SENTENCE = re.compile(rb"[$!][A-Z0-9]{2}[A-Z0-9]{2,4},")
 
 
 def not_a_log(path: str | Path) -> str | None:
@@ -193,10 +197,12 @@ def not_a_log(path: str | Path) -> str | None:
 
 def _has_sentence(path: str | Path, chunk: int = 1 << 20) -> bool:
     """True when an NMEA 0183 sentence is anywhere in the file (read in pieces)."""
+    from dracc.ingest.n2k.formats import ANY_SENTENCE
+
     keep = b""
     with open(path, "rb") as fh:
         while piece := fh.read(chunk):
-            if _ANY_SENTENCE.search(keep + piece):
+            if ANY_SENTENCE.search(keep + piece):
                 return True
             keep = piece[-16:]
     return False
@@ -207,29 +213,47 @@ def read_file(
 ) -> FileResult:
     """Read one log with the reader its format needs.  Every reader has this signature:
     (path, config, progress told the bytes read) -> :class:`~dracc.frames.FileResult`.
-    A compressed log (gzip, xz, bzip2, zstd) and ``-`` (standard input) are read from a
-    plain copy (:mod:`dracc.ingest.compressed`); what they say names the log as given."""
-    given = Path(path)
-    notes: list[str] = []
-    with plain_copy(given, notes) as plain:
-        if plain is None:
+    A compressed log (gzip, xz, bzip2, zstd) and ``-`` (standard input) go through
+    :mod:`dracc.ingest.compressed`: NMEA text decompressed as it is read, the other
+    formats from a plain copy; what they say names the log as given."""
+    with unpacked(Path(path), cfg) as packed:
+        if packed is None:
             return _read_plain(path, cfg, progress)
-        told = scaled(progress, given, plain)
+        return _read_packed(packed, cfg, progress)
+
+
+def _read_packed(
+    packed: Packed, cfg: IngestConfig, progress: Callable[[int], object] | None
+) -> FileResult:
+    """A compressed log or standard input (:func:`read_file`)."""
+    given = packed.given
+    if packed.kind is not None and format_of(packed.head(), b"", given) == "nmea":
+        from dracc.ingest.embedded_n2k import read_text_log
+
+        r = read_text_log(given, cfg, packed.progress(progress), opener=packed.open)
+        r.notes = packed.notes + r.notes
+        return r
+    with packed.copy() as plain:
         try:
-            result = _read_plain(plain, cfg, told)
+            result = _read_plain(plain, cfg, scaled(progress, given, plain))
         except DraccError as err:  # said of the log as given, not of its temporary copy
             raise type(err)(str(err).replace(str(plain), str(given))) from err
-        return relabelled(result, str(plain), str(given), notes)
+        return relabelled(result, str(plain), str(given), packed.notes)
 
 
 def _read_plain(
     path: str | Path, cfg: IngestConfig, progress: Callable[[int], object] | None
 ) -> FileResult:
     fmt = detect_format(path)
+    if fmt == "n2k":
+        from dracc.ingest.embedded_n2k import read_n2k_alone
+
+        alone = read_n2k_alone(path, cfg, progress)
+        if alone is not None:
+            return alone
+        fmt = "nmea"  # NMEA 2000 lines of several forms, or with NMEA 0183 ones
     if fmt == "mcap":
         from dracc.ingest.mcap import read_mcap as reader
-    elif fmt == "n2k":
-        from dracc.ingest.n2k import read_n2k as reader
     elif fmt == "signalk":
         from dracc.ingest.signalk import read_signalk as reader
     elif fmt == "signalk-delta":
@@ -239,11 +263,9 @@ def _read_plain(
     elif fmt == "csv":
         from dracc.ingest.csv import read_csv as reader
     else:
-        from dracc.ingest.embedded_n2k import add_embedded, has_embedded
-        from dracc.ingest.nmea import read_nmea
+        from dracc.ingest.embedded_n2k import read_text_log
 
-        r = read_nmea(path, cfg, progress)
-        return add_embedded(path, r, cfg) if has_embedded(r) else r
+        return read_text_log(path, cfg, progress)
     r = reader(path, cfg, progress)
     if fmt in ("csv", "mcap"):  # read whole: their time events counted on the frames
         count_events(r, cfg.gap_s, cfg.backstep_tolerance_s)

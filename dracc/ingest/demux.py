@@ -165,10 +165,18 @@ def merge_results(
 def check_strict(r: FileResult, strict: object) -> None:
     """In strict mode (``strict``: a config with ``strict`` true, or a bool), an
     IngestError naming the first rejected line of ``r``."""
+    check_strict_rejects(r.rejects, r.path, strict)
+
+
+def check_strict_rejects(rejects: Rejects, path: str, strict: object) -> None:
+    """:func:`check_strict` of the rejects of the log ``path``."""
     on = strict if isinstance(strict, bool) else bool(getattr(strict, "strict", False))
-    if not on or not r.rejects.total:
+    if not on or not rejects.total:
         return
-    rows = [(ln, f, t, why) for why, ex in r.rejects.examples.items() for f, ln, t in ex]
-    if rows:
-        ln, f, t, why = min(rows)
-        raise IngestError(f"{f}:{ln}: rejected ({why}): {t!r} (--strict)")
+    from dracc.ingest.nmea.sentences import REASONS
+
+    rows = [(ln, f, t, why) for why, ex in rejects.examples.items() for f, ln, t in ex]
+    if not rows:
+        raise IngestError(f"{path}: {rejects.total} lines rejected (--strict)")
+    ln, f, t, why = min(rows)
+    raise IngestError(f"{f}:{ln}: rejected ({REASONS.get(why, why)}): {t!r} (--strict)")

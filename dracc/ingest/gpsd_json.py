@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import math
 import re
-import tempfile
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -57,6 +56,7 @@ from dracc.ingest.demux import (
     scaled_progress,
     take_off_blanks,
 )
+from dracc.ingest.memory import pid_folder
 from dracc.ingest.nmea.sentences import MAX_LINE_BYTES
 from dracc.ingest.signalk_delta import JSON_ERRORS, loads
 from dracc.ingest.timebase import count_events
@@ -413,7 +413,7 @@ def read_gpsd_json(
     file = str(p)
     dec = GpsdDecoder(file, max_line_bytes=cfg.max_line_bytes)
     lines = blanks = n_json = n_other = json_bytes = other_bytes = 0
-    with tempfile.TemporaryDirectory(prefix="dracc-gpsd-") as tmp:
+    with pid_folder("dracc-gpsd-") as tmp:
         copy: LineCopy | None = None  # started at the first line other than JSON
         chunks = iter_line_chunks(p, cfg.max_line_bytes)
         while (ch := next(chunks, None)) is not None:  # None at the end: no chunk held on

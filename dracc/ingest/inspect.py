@@ -27,11 +27,32 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from dracc.core.config import IngestConfig
+from dracc.core.errors import DraccError
 from dracc.core.timefmt import iso_utc
 from dracc.frames import ClockStep, FileResult, Rejects, RoleChoice, SourceInfo, TimeEvents
-from dracc.ingest import detect_format, read_file, relabelled, scaled, summarize_frames
-from dracc.ingest.compressed import STDIN, needs_copy, plain_copy
+from dracc.ingest import (
+    detect_format,
+    format_of,
+    read_file,
+    relabelled,
+    scaled,
+    summarize_frames,
+)
+from dracc.ingest.compressed import STDIN, needs_copy, unpacked
+from dracc.ingest.demux import check_strict_rejects
+from dracc.ingest.embedded_n2k import (
+    Opener,
+    may_hold_n2k,
+    opener_of,
+    read_n2k_alone,
+    record_times,
+    take_n2k_lines,
+    take_off,
+    text_format,
+)
 from dracc.ingest.nmea import StreamState, iter_nmea_blocks
 from dracc.ingest.role_evidence import choice_note
 from dracc.ingest.sources import assign_roles, merge_infos, separate_files
@@ -59,6 +80,11 @@ class _FileRead:
     qualifiers: Counter[str] = field(default_factory=Counter)  #: qualifying sentences by type
     #: the file has no clock (:attr:`FileResult.clockless`): its sources get no rate
     clockless: bool = False
+    #: its NMEA 2000 lines (an NMEA text log's): how many, and the sentences (records),
+    #: ignored and rejected they gave
+    n2k: dict[str, int] = field(
+        default_factory=lambda: {"lines": 0, "sentences": 0, "ignored": 0, "rejected": 0}
+    )
 
 
 def _add_no_record(
@@ -83,14 +109,17 @@ def _read_nmea(
     sources: dict[str, SourceInfo],
     advance: Callable[[int], object] | None,
     name: str | None = None,
+    opener: Opener | None = None,
 ) -> _FileRead:
-    """Stream an NMEA text file, summarising each block's frames into ``sources``;
-    ``name``: what the file is called (the log as given, ``p`` being its plain copy)."""
+    """Stream an NMEA text file, summarising each block's frames into ``sources``, then
+    its NMEA 2000 lines (:func:`_add_n2k`); ``name``: what the file is called (the log as
+    given, ``p`` being its plain copy); ``opener``: the log is the stream it opens."""
     file = str(p) if name is None else name
     st = StreamState(file)
-    for block in iter_nmea_blocks(p, cfg, st, progress=advance, name=file):
+    loose = replace(cfg, strict=False) if cfg.strict else cfg  # judged once all is read
+    for block in iter_nmea_blocks(p, loose, st, progress=advance, name=file, opener=opener):
         summarize_frames(block.frames, file, into=sources)
-    return _FileRead(
+    f = _FileRead(
         "nmea",
         st.lines,
         st.rejects,
@@ -102,6 +131,56 @@ def _read_nmea(
         time_only=_add_no_record(sources, st.time_only, file),
         qualifiers=_add_no_record(sources, st.qualifiers, file),
     )
+    if may_hold_n2k(st.ignored, st.rejects.counts):
+        _add_n2k(f, p, loose, sources, file, opener)
+    check_strict_rejects(f.rejects, file, cfg)
+    return f
+
+
+def _add_n2k(
+    f: _FileRead,
+    p: Path,
+    cfg: IngestConfig,
+    sources: dict[str, SourceInfo],
+    file: str,
+    opener: Opener | None,
+) -> None:
+    """Add the NMEA 2000 lines of an NMEA text log to what its stream gave (``f``,
+    ``sources``), decoded as ``analyze`` decodes them
+    (:func:`~dracc.ingest.embedded_n2k.take_n2k_lines`); the times of its records, which
+    NMEA 2000 inside NMEA 0183 takes, come from reading it once more."""
+
+    def times() -> tuple[np.ndarray, np.ndarray]:
+        parts = [
+            record_times([b.frames])
+            for b in iter_nmea_blocks(p, cfg, StreamState(file), name=file, opener=opener)
+        ]
+        return np.concatenate([a for a, _ in parts]), np.concatenate([b for _, b in parts])
+
+    nmea_records = sum(s.records for s in sources.values())
+    taken = take_n2k_lines(opener or opener_of(p), file, cfg, times)
+    if taken is None:
+        return
+    take_off(taken, f.rejects, f.ignored, f.ignored_examples)
+    r = taken.result
+    own = summarize_frames(r.frames, file)
+    summarize_frames(r.frames, file, into=sources)
+    f.n2k = {
+        "lines": taken.lines,
+        "sentences": sum(sum(s.sentences.values()) for s in own.values()),
+        "ignored": sum(r.ignored.values()),
+        "rejected": r.rejects.total,
+    }
+    f.format = text_format(f.format, nmea_records, taken)
+    f.rejects.merge(r.rejects)
+    f.ignored.update(r.ignored)
+    for k, ex in r.ignored_examples.items():
+        f.ignored_examples.setdefault(k, []).extend(ex)
+    merge_events(f.time_events, r.time_events)
+    f.time_events.decisions.extend(r.time_events.decisions)
+    if isinstance(r.time_events, CountedTimeEvents):
+        f.events.update(r.time_events.per_source)
+    f.notes.extend(r.notes)
 
 
 def _read_packed(
@@ -110,29 +189,43 @@ def _read_packed(
     sources: dict[str, SourceInfo],
     advance: Callable[[int], object] | None,
 ) -> _FileRead:
-    """A compressed log or standard input, from its plain copy: NMEA text streamed (every
-    sentence type counted, as for a plain file), the others read whole (:func:`read_file`
-    says what they hold as of the log given)."""
-    said: list[str] = []
-    with plain_copy(p, said) as plain:
-        if plain is None or detect_format(plain) != "nmea":
-            r = read_file(plain or p, cfg)
-            if plain is not None:
-                r = relabelled(r, str(plain), str(p), said)
-            return _whole(r, sources, p, advance)
-        f = _read_nmea(plain, cfg, sources, scaled(advance, p, plain), name=str(p))
-    f.notes = said + f.notes
+    """A compressed log or standard input: NMEA text streamed as it is decompressed
+    (every sentence type counted, as for a plain file), the others read whole from a
+    plain copy (:func:`read_file` says what they hold as of the log given)."""
+    with unpacked(p, cfg) as packed:
+        assert packed is not None  # needs_copy(p) said so
+        if packed.kind is not None and format_of(packed.head(), b"", p) == "nmea":
+            f = _read_nmea(p, cfg, sources, packed.progress(advance), str(p), packed.open)
+        else:
+            with packed.copy() as plain:
+                try:
+                    f = _read_file(plain, cfg, sources, advance, given=p)
+                except DraccError as err:  # said of the log as given, not of its copy
+                    raise type(err)(str(err).replace(str(plain), str(p))) from err
+    f.notes = packed.notes + f.notes
     return f
 
 
-def _read_whole(
+def _read_file(
     p: Path,
     cfg: IngestConfig,
     sources: dict[str, SourceInfo],
     advance: Callable[[int], object] | None,
+    given: Path | None = None,
 ) -> _FileRead:
-    """Read a file whole (CSV, MCAP, NMEA 2000 ...) with its reader."""
-    return _whole(read_file(p, cfg), sources, p, advance)
+    """A plain file ``p`` (the plain copy of the log ``given``, where given): NMEA text
+    streamed, and so a log of NMEA 2000 lines of several forms (or with NMEA 0183 ones);
+    the others read whole by their readers (CSV, MCAP, NMEA 2000 ...)."""
+    name = str(p if given is None else given)
+    fmt = detect_format(p)
+    r = read_n2k_alone(p, cfg) if fmt == "n2k" else None
+    if fmt == "nmea" or (fmt == "n2k" and r is None):
+        told = advance if given is None else scaled(advance, given, p)
+        return _read_nmea(p, cfg, sources, told, name=name)
+    r = read_file(p, cfg) if r is None else r
+    if given is not None:
+        r = relabelled(r, str(p), name, [])
+    return _whole(r, sources, p if given is None else given, advance)
 
 
 def _whole(
@@ -170,17 +263,19 @@ def _accounting(f: _FileRead, sentences: Counter[str]) -> dict[str, int] | None:
         return None
     time_only = sum(f.time_only.values())
     qual = sum(f.qualifiers.values())
-    rec = sum(sentences.values()) - time_only - qual
-    ign = sum(f.ignored.values())
-    rej = sum(f.rejects.counts.values())
+    n2k = f.n2k
+    rec = sum(sentences.values()) - time_only - qual - n2k["sentences"]
+    ign = sum(f.ignored.values()) - n2k["ignored"]
+    rej = sum(f.rejects.counts.values()) - n2k["rejected"]
     return {
         "lines": f.lines,
         "sentences": rec,
         "time_only": time_only,
         "qualifiers": qual,
+        "n2k": n2k["lines"],
         "ignored": ign,
         "rejected": rej,
-        "shared": rec + time_only + qual + ign + rej - f.lines,
+        "shared": rec + time_only + qual + n2k["lines"] + ign + rej - f.lines,
     }
 
 
@@ -211,12 +306,10 @@ def inspect_logs(
     for p in paths:
         sources: dict[str, SourceInfo] = {}
         per_file.append((str(p), sources))
-        if needs_copy(p):  # compressed, or standard input: read from a plain copy
+        if needs_copy(p):  # compressed, or standard input
             f = _read_packed(p, cfg, sources, advance)
-        elif detect_format(p) == "nmea":
-            f = _read_nmea(p, cfg, sources, advance)
         else:
-            f = _read_whole(p, cfg, sources, advance)
+            f = _read_file(p, cfg, sources, advance)
         lines += f.lines
         rejects.merge(f.rejects)
         ignored.update(f.ignored)

@@ -101,16 +101,28 @@ def handover_dir(
     return contextlib.nullcontext(None)
 
 
-def sweep_handover(base: str) -> None:
-    """Remove hand-over folders in ``base`` of this user whose reader process is gone."""
+def pid_folder(prefix: str, base: str | None = None) -> tempfile.TemporaryDirectory[str]:
+    """A temporary folder in ``base`` (default: the temporary directory) named
+    ``<prefix><pid>-<random>``, removed on exit; the folders of that prefix left by a
+    process that is gone (killed: SIGKILL cannot be caught) are removed first
+    (:func:`sweep_handover`).  Where dracc copies a log it reads (a compressed log, a
+    Signal K or gpsd log's NMEA lines)."""
+    where = tempfile.gettempdir() if base is None else base
+    sweep_handover(where, prefix)
+    return tempfile.TemporaryDirectory(prefix=f"{prefix}{os.getpid()}-", dir=where)
+
+
+def sweep_handover(base: str, prefix: str = HANDOVER_PREFIX) -> None:
+    """Remove the folders ``<prefix><pid>-...`` in ``base`` of this user whose process
+    is gone (hand-over folders by default)."""
     import shutil
 
     try:
-        names = [n for n in os.listdir(base) if n.startswith(HANDOVER_PREFIX)]
+        names = [n for n in os.listdir(base) if n.startswith(prefix)]
     except OSError:
         return
     for name in names:
-        parts = name[len(HANDOVER_PREFIX) :].split("-", 1)
+        parts = name[len(prefix) :].split("-", 1)
         if len(parts) != 2 or not parts[0].isdigit():  # not <pid>-<random>: not ours to judge
             continue
         pid_s = parts[0]

@@ -26,7 +26,6 @@ three results become one (format ``signalk``), frames in time order.
 from __future__ import annotations
 
 import re
-import tempfile
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -45,6 +44,7 @@ from dracc.ingest.demux import (
     scaled_progress,
     take_off_blanks,
 )
+from dracc.ingest.memory import pid_folder
 from dracc.ingest.signalk_delta import DeltaDecoder, decode_lines
 
 if TYPE_CHECKING:  # config imports ingest.frames: no runtime import here
@@ -150,7 +150,7 @@ def read_signalk(
     file = str(p)
     dec = DeltaDecoder(file, max_line_bytes=cfg.max_line_bytes)
     parts: list[FileResult] = []
-    with tempfile.TemporaryDirectory(prefix="dracc-signalk-") as tmp:
+    with pid_folder("dracc-signalk-") as tmp:
         folder = Path(tmp)
         acc = _Pass()
         chunks = iter_line_chunks(p, cfg.max_line_bytes)

@@ -145,6 +145,8 @@ def _account(acc: dict[str, int], time_only: list[str]) -> str:
     )
     if acc.get("qualifiers"):
         text = text.replace(" ignored ", f" ignored + {acc['qualifiers']} qualifying others ", 1)
+    if acc.get("n2k"):
+        text = text.replace(" ignored ", f" ignored + {acc['n2k']} NMEA 2000 lines ", 1)
     if acc["shared"] > 0:
         text += f" - {acc['shared']} sentences sharing a line with another"
     elif acc["shared"] < 0:  # a reader counting a sentence nowhere: said, never hidden

@@ -45,11 +45,12 @@ Source keys (what ``dracc watch`` counts a line under):
 
 from __future__ import annotations
 
-import re
 from typing import NamedTuple
 
 from dracc.ingest.gpsd_json import _CLASS_RE
-from dracc.ingest.n2k.formats import _CANDUMP_RE, _PLAIN_RE, _YDRAW_RE
+from dracc.ingest.n2k.formats import CANDUMP as _CANDUMP_FORM
+from dracc.ingest.n2k.formats import LINE_FORMS
+from dracc.ingest.n2k.formats import YDRAW as _YDRAW_FORM
 from dracc.ingest.signalk import _LINE_RE as _SIGNALK_LINE_RE
 
 NMEA0183, OTHER, PDGY, YDWG, CANDUMP, PLAIN = (
@@ -66,9 +67,9 @@ FORMS = (NMEA0183, PDGY, YDWG, CANDUMP, PLAIN, SIGNALK_LOG, SIGNALK_DELTA, GPSD_
 #: the forms written to the NMEA 0183 recording (``.nmea``)
 NMEA_FORMS = frozenset({NMEA0183, OTHER})
 
-_PLAIN = re.compile(_PLAIN_RE.pattern.encode("ascii"))
-_YDRAW = re.compile(_YDRAW_RE.pattern.encode("ascii"))
-_CANDUMP = re.compile(_CANDUMP_RE.pattern.encode("ascii"))
+_PLAIN = LINE_FORMS["plain"]  # the forms' one home, as the file readers tell them
+_YDRAW = LINE_FORMS[_YDRAW_FORM]
+_CANDUMP = LINE_FORMS[_CANDUMP_FORM]
 _NMEA_FIRST = frozenset({b"$", b"!", b"\\"})
 _DIGITS = frozenset(b"0123456789")
 _SPACE = b" \t"

@@ -30,6 +30,7 @@ from collections import Counter
 
 import numpy as np
 
+from dracc.core.errors import IngestError
 from dracc.ingest.n2k.canframes import parse_candump, parse_ydraw
 from dracc.ingest.n2k.ebl import parse_ebl, parse_ngt1
 from dracc.ingest.n2k.encapsulated import parse_mxpgn, parse_pcdin, parse_pdgy
@@ -37,7 +38,7 @@ from dracc.ingest.n2k.fastpacket import is_fast_pgn
 from dracc.ingest.n2k.garmin import garmin_form, parse_garmin_csv
 from dracc.ingest.n2k.messages import Messages
 from dracc.ingest.n2k.plain import parse_plain
-from dracc.ingest.n2k.textscan import Lines, join_lines, split_lines
+from dracc.ingest.n2k.textscan import PAD, Lines, join_lines, split_lines
 
 PLAIN, FAST, MIX = "n2k-plain", "n2k-fast", "n2k-plain-mix-fast"
 CANDUMP, YDRAW, PDGY, EBL = "n2k-candump", "n2k-ydraw", "n2k-pdgy", "n2k-ebl"
@@ -51,16 +52,32 @@ SNIFF_BYTES = 65536
 SNIFF_LINES = 400
 
 _HEADER_FORMATS = {"PLAIN": PLAIN, "FAST": FAST, "PLAIN_OR_FAST": PLAIN, "PLAIN_MIX_FAST": MIX}
-_PLAIN_RE = re.compile(
-    r"^[^,]{1,40},[0-7],\d{1,7},\d{1,3},\d{1,3},(\d{1,4})((?:,[0-9a-fA-F]{1,2})*)\s*$"
-)
-_CANDUMP_RE = re.compile(
-    r"^\s*(?:\(\d+\.\d+\)\s+\S+\s+[0-9A-Fa-f]{3,8}#"
-    r"|(?:\(\d+\.\d+\)\s+)?\S+\s+[0-9A-Fa-f]{3,8}\s+\[\d\]"
-    r"|<0x[0-9A-Fa-f]{1,8}>\s+\[\d\])"
-)
-_YDRAW_RE = re.compile(r"^\d{2}:\d{2}:\d{2}\.\d+ [RT] [0-9A-Fa-f]{8}(?: [0-9A-Fa-f]{2}){0,8}\s*$")
-_PDGY_RE = re.compile(r"^[!$]PDGY,")
+#: one line of each line-based form dracc tells apart line by line (bytes, matched at a
+#: line's start; ``re.M`` over a buffer whose CR bytes are made LF: no pattern crosses a
+#: line end).  :func:`sniff_n2k` votes with them on a log's first lines and
+#: :func:`line_forms` gives every line of a mixed log its form: one home for both.
+LINE_FORMS: dict[str, re.Pattern[bytes]] = {
+    "plain": re.compile(
+        rb"^[^,\n]{1,40},[0-7],\d{1,7},\d{1,3},\d{1,3},(\d{1,4})((?:,[0-9a-fA-F]{1,2})*)[ \t]*$",
+        re.M,
+    ),
+    YDRAW: re.compile(
+        rb"^\d{2}:\d{2}:\d{2}\.\d+ [RT] [0-9A-Fa-f]{8}(?: [0-9A-Fa-f]{2}){0,8}[ \t]*$", re.M
+    ),
+    CANDUMP: re.compile(
+        rb"^[ \t]*(?:\(\d+\.\d+\)[ \t]+[^ \t\n]+[ \t]+[0-9A-Fa-f]{3,8}#"
+        rb"|(?:\(\d+\.\d+\)[ \t]+)?[^ \t\n]+[ \t]+[0-9A-Fa-f]{3,8}[ \t]+\[\d\]"
+        rb"|<0x[0-9A-Fa-f]{1,8}>[ \t]+\[\d\])",
+        re.M,
+    ),
+}
+#: NMEA 2000 in NMEA 0183 framing anywhere on a line (after a TAG block or a prefix):
+#: group 1 from its ``$``/``!`` to its address (``$PCDIN``, ``$MXPGN``, ``!PDGY``)
+EMBEDDED = re.compile(rb"^[^\n]*?(\$PCDIN|\$MXPGN|[!$]PDGY),", re.M)
+_EMBEDDED_FORMS = {b"PCDIN": PCDIN, b"MXPGN": MXPGN, b"PDGY": PDGY}
+#: an NMEA 0183 sentence (or AIS) anywhere in a text: what the NMEA reader takes
+ANY_SENTENCE = re.compile(rb"[$!][A-Z0-9]{2}[A-Z0-9]{2,4},")
+_SENTENCE_LINE = re.compile(rb"^[^\n]*?" + ANY_SENTENCE.pattern, re.M)
 
 
 def sniff_n2k(head: bytes) -> str | None:
@@ -97,22 +114,15 @@ def sniff_n2k(head: bytes) -> str | None:
         total += 1
         if total > SNIFF_LINES:
             break
-        pm = _PLAIN_RE.match(line)
+        raw = line.encode("latin-1")
+        pm = LINE_FORMS["plain"].match(raw)
         if pm:
             votes["plain"] += 1
             fields = line.split(",")
             b0 = int(fields[6], 16) if len(fields) > 6 else -1
             plain_rows.append((int(fields[2]), int(pm.group(1)), fields[3], b0))
-        elif _YDRAW_RE.match(line):
-            votes[YDRAW] += 1
-        elif _PDGY_RE.match(s):
-            votes[PDGY] += 1
-        elif "$PCDIN," in s:
-            votes[PCDIN] += 1
-        elif "$MXPGN," in s:
-            votes[MXPGN] += 1
-        elif _CANDUMP_RE.match(line):
-            votes[CANDUMP] += 1
+        elif (form := _line_form(raw)) is not None:
+            votes[form] += 1
     if not votes:
         return None
     best, n = votes.most_common(1)[0]
@@ -121,6 +131,89 @@ def sniff_n2k(head: bytes) -> str | None:
     if best != "plain":
         return best
     return _plain_kind(plain_rows)
+
+
+def _line_form(line: bytes) -> str | None:
+    """The form of one line other than canboat's plain one (YDWG RAW, NMEA 2000 in NMEA
+    0183, candump), None for none of them."""
+    if LINE_FORMS[YDRAW].match(line):
+        return YDRAW
+    m = EMBEDDED.match(line)
+    if m:
+        return _EMBEDDED_FORMS[m.group(1)[1:]]
+    return CANDUMP if LINE_FORMS[CANDUMP].match(line) else None
+
+
+#: the line forms :func:`line_forms` tells apart, by code (0: none of them); ``plain``
+#: is canboat's PLAIN, FAST or PLAIN_MIX_FAST (:func:`plain_kind` says which)
+FORM_CODES: tuple[str | None, ...] = (None, "sentence", PCDIN, MXPGN, PDGY, YDRAW, CANDUMP, "plain")
+_CODE = {f: i for i, f in enumerate(FORM_CODES)}
+_CR_TO_LF = bytes.maketrans(b"\r", b"\n")
+#: the forms told line by line (the others are binary, or a CSV with a header)
+_TEXT_FORMS = (PLAIN, FAST, MIX, CANDUMP, YDRAW, PDGY, PCDIN, MXPGN)
+
+
+def line_forms(
+    data: bytes, start: np.ndarray, end: np.ndarray, max_line_bytes: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The form of every line of ``data`` (lines from ``start`` to ``end``, as the NMEA
+    reader cuts them): codes into :data:`FORM_CODES`, and where each line's record starts
+    (the ``$``/``!`` of NMEA 2000 in NMEA 0183, the line's start otherwise).  One regular
+    expression pass over the buffer per form, no Python per line but per match; a line
+    longer than ``max_line_bytes`` (too long for any reader) has none.  ``sentence``: an
+    NMEA 0183 sentence somewhere on the line (NMEA 2000 ones have their own forms)."""
+    norm = data.translate(_CR_TO_LF)
+    code = np.zeros(len(start), dtype=np.int8)
+    at = start.copy()
+    if not len(start):
+        return code, at
+    short = (end - start) <= max_line_bytes
+
+    def mark(pattern: re.Pattern[bytes], form: str | None, group: int = 0) -> None:
+        found = [(m.start(), m.start(group), m.group(group)) for m in pattern.finditer(norm)]
+        if not found:
+            return
+        pos = np.fromiter((f[0] for f in found), dtype=np.int64, count=len(found))
+        i = np.minimum(np.searchsorted(start, pos), len(start) - 1)
+        ok = (start[i] == pos) & short[i] & (code[i] == 0)
+        if form is not None:
+            code[i[ok]] = _CODE[form]
+            return
+        names = np.array([_CODE[_EMBEDDED_FORMS[f[2].lstrip(b"$!")]] for f in found], np.int8)
+        code[i[ok]] = names[ok]
+        at[i[ok]] = np.fromiter((f[1] for f in found), dtype=np.int64, count=len(found))[ok]
+
+    mark(EMBEDDED, None, 1)
+    mark(_SENTENCE_LINE, "sentence")
+    mark(LINE_FORMS[YDRAW], YDRAW)
+    mark(LINE_FORMS[CANDUMP], CANDUMP)
+    mark(LINE_FORMS["plain"], "plain")
+    return code, at
+
+
+class MixedForms(IngestError):
+    """A log of NMEA 2000 lines holding lines of another form than its first ones (raised
+    by :func:`dracc.ingest.n2k.read_n2k` before it decodes anything): it is read line by
+    line (:func:`dracc.ingest.embedded_n2k.read_text_log`)."""
+
+
+def check_one_form(data: bytes, fmt: str, max_line_bytes: int) -> None:
+    """Raise :class:`MixedForms` where the text log ``data``, sniffed as ``fmt``, holds
+    lines of another form (an NMEA 0183 sentence, another NMEA 2000 form)."""
+    if fmt not in _TEXT_FORMS:
+        return
+    lines = split_lines(data)
+    code, _ = line_forms(data, lines.start - PAD, lines.end - PAD, max_line_bytes)
+    own = _CODE["plain" if fmt in (PLAIN, FAST, MIX) else fmt]
+    other = (code != 0) & (code != own)
+    if other.any():
+        forms = sorted({str(FORM_CODES[c]) for c in np.unique(code[other]).tolist()})
+        raise MixedForms(f"{fmt} log with lines of other forms ({', '.join(forms)})")
+
+
+def plain_kind(lines: list[bytes]) -> str:
+    """PLAIN, FAST or MIX for canboat plain lines (as :func:`sniff_n2k` tells them)."""
+    return sniff_n2k(b"\n".join(lines[:SNIFF_LINES])) or PLAIN
 
 
 def _plain_kind(rows: list[tuple[int, int, str, int]]) -> str:
@@ -175,3 +268,11 @@ def parse_n2k_lines(lines: list[bytes], line_numbers: np.ndarray, fmt: str) -> M
     if len(lines) != len(line_numbers):
         raise ValueError("one line number per line")
     return _parse_lines(join_lines(lines, line_numbers), fmt)
+
+
+def parse_n2k_numbered(data: bytes, numbers: np.ndarray, fmt: str) -> Messages:
+    """The messages of ``data``, lines of one form cut from a log (one a line, none blank),
+    whose line numbers in that log are ``numbers``."""
+    lines = split_lines(data)
+    lines.number = np.asarray(numbers, dtype=np.int64)[lines.number - 1]
+    return _parse_lines(lines, fmt)

@@ -40,7 +40,7 @@ from dracc.frames import (
     concat_blocks,
     make_frame,
 )
-from dracc.ingest.n2k.formats import SNIFF_BYTES, parse_n2k, sniff_n2k
+from dracc.ingest.n2k.formats import SNIFF_BYTES, check_one_form, parse_n2k, sniff_n2k
 from dracc.ingest.n2k.messages import TIME_NONE, TIME_OF_DAY, TIME_UTC, Messages
 from dracc.ingest.n2k.names import source_keys
 from dracc.ingest.n2k.pgns import DAY_NS, Decoded, decode
@@ -269,6 +269,8 @@ def read_n2k(
     if fmt is None:
         raise IngestError(f"{path}: not an NMEA 2000 log in a format dracc reads")
     msgs = parse_n2k(data, fmt)
+    if msgs.rejects:  # lines not of its form: maybe of another (MixedForms)
+        check_one_form(data, fmt, int(cfg.max_line_bytes))
     if len(msgs) > 1 and msgs.time_kind != TIME_NONE and msgs.time_ns.min() == msgs.time_ns.max():
         msgs.time_kind = TIME_NONE  # times that never advance are no clock
     res = n2k_result(msgs, str(path), fmt, cfg, _line_count(data))

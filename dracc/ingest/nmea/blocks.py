@@ -1,11 +1,13 @@
 """A file as blocks of whole lines: where its blocks are cut (:func:`block_ranges`,
 reading ahead for line ends with ``os.pread``, a line too long a block of its own) and
-the parse of one block (:func:`parse_range`)."""
+the parse of one block (:func:`parse_range`); a stream (a decompressed log) cut the same
+way as it is read (:func:`stream_pieces`, :func:`parse_piece`)."""
 
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 from dracc.ingest.nmea.engine_c import parse_buffer
@@ -114,4 +116,112 @@ def parse_range(
         data = fh.read(length)
     return parse_buffer(
         data, ignore_checksum=ignore_checksum, at_eof=at_eof, max_line_bytes=max_line_bytes
+    )
+
+
+@dataclass
+class Piece:
+    """Whole lines read from a stream (``data``), or one line too long (``long``: its
+    first bytes, the last ``max_line_bytes`` of its content, its line end), ``nbytes``
+    of the stream it stands for; ``at_eof``: the last piece."""
+
+    data: bytes
+    nbytes: int
+    at_eof: bool
+    long: tuple[bytes, bytes, bytes] | None = None
+
+
+def stream_pieces(
+    read: Callable[[int], bytes], first_bytes: int, block_bytes: int, max_line_bytes: int
+) -> Iterator[Piece]:
+    """A stream (``read(n)``: up to ``n`` bytes, ``b""`` at its end) cut as
+    :func:`block_ranges` cuts a file: pieces of whole lines, the first about
+    ``first_bytes``, the others about ``block_bytes``, each ending after a line end (the
+    bytes after it wait for the next piece); a line longer than a piece is a piece of
+    its own, flagged ``long`` and read to its end without being held.  Memory: one
+    piece, whatever the stream holds."""
+    carry, size = b"", first_bytes
+    while True:
+        want = max(size, max_line_bytes + 4)
+        size = block_bytes
+        data = carry + _fill(read, want - len(carry))
+        if len(data) < want:  # the end of the stream
+            if data:
+                yield Piece(data, len(data), True)
+            return
+        cut = _last_line_end(data)
+        if cut:
+            yield Piece(data[:cut], cut, False)
+            carry = data[cut:]
+            continue
+        piece, carry = _long_line(data, read, max_line_bytes)
+        yield piece
+        if piece.at_eof:
+            return
+
+
+def _fill(read: Callable[[int], bytes], n: int) -> bytes:
+    """Up to ``n`` bytes of the stream: fewer only at its end."""
+    parts, got = [], 0
+    while got < n:
+        b = read(n - got)
+        if not b:
+            break
+        parts.append(b)
+        got += len(b)
+    return parts[0] if len(parts) == 1 else b"".join(parts)
+
+
+def _last_line_end(data: bytes) -> int:
+    """The offset after the last line end of ``data`` whose kind its next bytes tell
+    (LF, CR LF, CR CR LF, a lone CR: as :func:`_next_line_end`), 0 for none."""
+    n = len(data)
+    k = max(data.rfind(b"\n", 0, n - 2), data.rfind(b"\r", 0, n - 2))
+    return 0 if k < 0 else k + line_end_length(data[k : k + 3])
+
+
+def _long_line(
+    data: bytes, read: Callable[[int], bytes], max_line_bytes: int
+) -> tuple[Piece, bytes]:
+    """The piece of a line longer than ``data`` (which it starts), read on to its line
+    end keeping only its first and last bytes; and the bytes after it."""
+    head, tail, buf, nbytes = data[:120], b"", data, 0
+    while True:
+        i, j = buf.find(b"\n"), buf.find(b"\r")
+        q = i if j < 0 else j if i < 0 else min(i, j)
+        if q >= 0 and q + 3 > len(buf):  # a line end to tell: its next bytes
+            more = _fill(read, 3)
+            if more:
+                buf += more
+                continue
+        if q < 0:
+            tail = (tail + buf)[-max_line_bytes:]
+            nbytes += len(buf)
+            buf = read(_SCAN_BYTES)
+            if buf:
+                continue
+            return Piece(b"", nbytes, True, (head, tail, b"")), b""
+        le = line_end_length(buf[q : q + 3])
+        rest = buf[q + le :] or _fill(read, 1)
+        piece = Piece(
+            b"",
+            nbytes + q + le,
+            not rest,
+            (head, (tail + buf[:q])[-max_line_bytes:], buf[q : q + le]),
+        )
+        return piece, rest
+
+
+def parse_piece(piece: Piece, ignore_checksum: bool, max_line_bytes: int) -> ParsedBlock:
+    """Parse one piece of :func:`stream_pieces` (as :func:`parse_range` parses a block)."""
+    if piece.long is not None:
+        head, tail, line_end = piece.long
+        return long_line_block(head, tail, line_end, ignore_checksum, piece.at_eof, max_line_bytes)[
+            0
+        ]
+    return parse_buffer(
+        piece.data,
+        ignore_checksum=ignore_checksum,
+        at_eof=piece.at_eof,
+        max_line_bytes=max_line_bytes,
     )

@@ -12,15 +12,15 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import IO, TYPE_CHECKING
 
 import numpy as np
 
 from dracc.core.errors import IngestError
 from dracc.frames import FileResult, concat_blocks
-from dracc.ingest.memory import handover_dir
+from dracc.ingest.memory import handover_dir, trim_heap
 from dracc.ingest.nmea.assemble import _source_categorical, assemble, talker_str, time_arrays
-from dracc.ingest.nmea.blocks import block_ranges, parse_range
+from dracc.ingest.nmea.blocks import block_ranges, parse_piece, parse_range, stream_pieces
 from dracc.ingest.nmea.groups import join_line_groups
 from dracc.ingest.nmea.parsed import ParsedBlock
 from dracc.ingest.nmea.pool import load_parsed, parse_range_to_file, pool_ok, worker_init
@@ -48,6 +48,7 @@ def iter_nmea_blocks(
     workers: int | None = None,
     progress: Callable[[int], object] | None = None,
     name: str | None = None,
+    opener: Callable[[], IO[bytes]] | None = None,
 ) -> Iterator[Block]:
     """Stream an NMEA text file as resolved blocks with bounded memory.
 
@@ -63,8 +64,10 @@ def iter_nmea_blocks(
     many as the workers share evenly (none waits alone at the end); a number: blocks of that
     size.  ``progress(n_bytes)`` is called as blocks finish.  ``name``: what the file is
     called in examples, events and errors (default its path; the log as given where
-    ``path`` is its decompressed copy).  Raises IngestError in ``cfg.strict`` mode at the
-    first rejected line.
+    ``path`` is its decompressed copy).  ``opener``: the log is the stream it opens (a
+    compressed log decompressed as it is read, :mod:`dracc.ingest.compressed`), read in
+    one process in pieces of the same sizes (:func:`stream_pieces`); ``path`` only names
+    it.  Raises IngestError in ``cfg.strict`` mode at the first rejected line.
     """
     path = Path(path)
     file = str(path) if name is None else name
@@ -80,12 +83,14 @@ def iter_nmea_blocks(
             raise IngestError(f"--date {cfg.date!r}: expected YYYY-MM-DD") from err
     st.events.gap_s = cfg.gap_s
     st.events.tolerance_s = cfg.backstep_tolerance_s
-    size = path.stat().st_size
+    max_line = int(getattr(cfg, "max_line_bytes", MAX_LINE_BYTES))
+    size = 0 if opener is not None else path.stat().st_size
     nworkers = (
         workers if workers is not None else (2 if size >= PARALLEL_MIN_BYTES and pool_ok() else 1)
     )
-    max_line = int(getattr(cfg, "max_line_bytes", MAX_LINE_BYTES))
-    if block_bytes is not None:
+    if opener is not None:
+        ranges = []
+    elif block_bytes is not None:
         ranges = list(block_ranges(path, block_bytes, max_line_bytes=max_line))
     else:
         first_bytes = MAIN_FIRST_BLOCK_BYTES if nworkers > 1 else FIRST_BLOCK_BYTES
@@ -142,7 +147,13 @@ def iter_nmea_blocks(
         off, ln, too_long = ranges[i]
         return parse_range(str(path), off, ln, cfg.ignore_checksum, at_eof[i], max_line, too_long)
 
-    if nworkers <= 1 or len(ranges) <= 1:
+    if opener is not None:
+        with opener() as fh:
+            first, later = block_bytes or FIRST_BLOCK_BYTES, block_bytes or BLOCK_BYTES
+            for piece in stream_pieces(fh.read, first, later, max_line):
+                yield from handle(parse_piece(piece, cfg.ignore_checksum, max_line), piece.nbytes)
+        trim_heap()  # the parse's buffers were this process's (no workers): given back
+    elif nworkers <= 1 or len(ranges) <= 1:
         for i, (_off, ln, _long) in enumerate(ranges):
             yield from handle(local(i), ln)
     else:
@@ -307,12 +318,18 @@ def read_nmea(
     cfg: IngestConfig,
     progress: Callable[[int], object] | None = None,
     workers: int | None = None,
+    opener: Callable[[], IO[bytes]] | None = None,
 ) -> FileResult:
-    """Read a whole NMEA 0183 text file into a :class:`FileResult` (frames sorted by time)."""
+    """Read a whole NMEA 0183 text file into a :class:`FileResult` (frames sorted by time);
+    ``opener``: from the stream it opens, ``path`` naming it (:func:`iter_nmea_blocks`)."""
     path = Path(path)
-    check_readable(path)
+    if opener is None:
+        check_readable(path)
     st = StreamState(str(path))
-    blocks = [b.frames for b in iter_nmea_blocks(path, cfg, st, progress=progress, workers=workers)]
+    blocks = [
+        b.frames
+        for b in iter_nmea_blocks(path, cfg, st, progress=progress, workers=workers, opener=opener)
+    ]
     frames = concat_blocks(blocks)
     res = FileResult(
         path=str(path),
