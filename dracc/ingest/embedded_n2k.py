@@ -45,10 +45,10 @@ from dracc.ingest.n2k.formats import (
 )
 from dracc.ingest.n2k.messages import TIME_UTC, Messages, concat_messages
 from dracc.ingest.n2k.reader import n2k_result
-from dracc.ingest.n2k.textscan import ramp
+from dracc.ingest.n2k.textscan import pack_lines
 from dracc.ingest.nmea.blocks import stream_pieces
 from dracc.ingest.nmea.engine_c import parse_buffer
-from dracc.ingest.nmea.lines import line_bounds
+from dracc.ingest.nmea.lines import line_spans
 from dracc.ingest.nmea.parsed import ParsedBlock
 from dracc.ingest.timebase import count_events
 
@@ -114,16 +114,6 @@ class _Found:
     whole: list[bytes] = field(default_factory=list)  #: the lines whole, for the NMEA reader
 
 
-def _pack(buf: np.ndarray, a: np.ndarray, e: np.ndarray) -> bytes:
-    """The bytes ``buf[a[i]:e[i]]`` of each line ``i``, each followed by LF."""
-    n = e - a
-    offs = np.zeros(len(n), dtype=np.int64)
-    np.cumsum(n[:-1] + 1, out=offs[1:])
-    out = np.full(int(n.sum()) + len(n), 10, dtype=np.uint8)
-    out[np.repeat(offs, n) + ramp(n)] = buf[np.repeat(a, n) + ramp(n)]
-    return out.tobytes()
-
-
 def _scan(opener: Opener, max_line: int) -> _Found:
     """The lines of NMEA 2000 forms of the log ``opener`` opens, numbered as the NMEA
     reader numbers its lines."""
@@ -135,15 +125,15 @@ def _scan(opener: Opener, max_line: int) -> _Found:
                 line0 += 1
                 continue
             buf = np.frombuffer(piece.data, dtype=np.uint8)
-            start, end, _, _ = line_bounds(buf, np.concatenate((buf, np.zeros(3, np.uint8))))
+            start, end, _ = line_spans(buf, np.concatenate((buf, np.zeros(3, np.uint8))))
             code, at = line_forms(piece.data, start, end, max_line)
             take = code >= 2  # 0: none of them, 1: an NMEA 0183 sentence
             for c in np.unique(code[take]).tolist():
                 rows = np.flatnonzero(code == c)
-                found.blobs.setdefault(c, []).append(_pack(buf, at[rows], end[rows]))
+                found.blobs.setdefault(c, []).append(pack_lines(buf, at[rows], end[rows])[0])
                 found.numbers.setdefault(c, []).append(rows + 1 + line0)
             if take.any():
-                found.whole.append(_pack(buf, start[take], end[take]))
+                found.whole.append(pack_lines(buf, start[take], end[take])[0])
             line0 += len(start)
     return found
 

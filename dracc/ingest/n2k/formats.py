@@ -38,7 +38,7 @@ from dracc.ingest.n2k.fastpacket import is_fast_pgn
 from dracc.ingest.n2k.garmin import garmin_form, parse_garmin_csv
 from dracc.ingest.n2k.messages import Messages
 from dracc.ingest.n2k.plain import parse_plain
-from dracc.ingest.n2k.textscan import PAD, Lines, join_lines, split_lines
+from dracc.ingest.n2k.textscan import PAD, Lines, join_lines, pack_lines, split_lines
 
 PLAIN, FAST, MIX = "n2k-plain", "n2k-fast", "n2k-plain-mix-fast"
 CANDUMP, YDRAW, PDGY, EBL = "n2k-candump", "n2k-ydraw", "n2k-pdgy", "n2k-ebl"
@@ -77,7 +77,6 @@ EMBEDDED = re.compile(rb"^[^\n]*?(\$PCDIN|\$MXPGN|[!$]PDGY),", re.M)
 _EMBEDDED_FORMS = {b"PCDIN": PCDIN, b"MXPGN": MXPGN, b"PDGY": PDGY}
 #: an NMEA 0183 sentence (or AIS) anywhere in a text: what the NMEA reader takes
 ANY_SENTENCE = re.compile(rb"[$!][A-Z0-9]{2}[A-Z0-9]{2,4},")
-_SENTENCE_LINE = re.compile(rb"^[^\n]*?" + ANY_SENTENCE.pattern, re.M)
 
 
 def sniff_n2k(head: bytes) -> str | None:
@@ -148,7 +147,6 @@ def _line_form(line: bytes) -> str | None:
 #: is canboat's PLAIN, FAST or PLAIN_MIX_FAST (:func:`plain_kind` says which)
 FORM_CODES: tuple[str | None, ...] = (None, "sentence", PCDIN, MXPGN, PDGY, YDRAW, CANDUMP, "plain")
 _CODE = {f: i for i, f in enumerate(FORM_CODES)}
-_CR_TO_LF = bytes.maketrans(b"\r", b"\n")
 #: the forms told line by line (the others are binary, or a CSV with a header)
 _TEXT_FORMS = (PLAIN, FAST, MIX, CANDUMP, YDRAW, PDGY, PCDIN, MXPGN)
 
@@ -158,37 +156,53 @@ def line_forms(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The form of every line of ``data`` (lines from ``start`` to ``end``, as the NMEA
     reader cuts them): codes into :data:`FORM_CODES`, and where each line's record starts
-    (the ``$``/``!`` of NMEA 2000 in NMEA 0183, the line's start otherwise).  One regular
-    expression pass over the buffer per form, no Python per line but per match; a line
-    longer than ``max_line_bytes`` (too long for any reader) has none.  ``sentence``: an
-    NMEA 0183 sentence somewhere on the line (NMEA 2000 ones have their own forms)."""
-    norm = data.translate(_CR_TO_LF)
+    (the ``$``/``!`` of NMEA 2000 in NMEA 0183, the line's start otherwise).  Vectorised:
+    NMEA 2000 in NMEA 0183 found by its address (``bytes.find``), a ``sentence`` by a
+    ``$`` or ``!`` anywhere on the line (none of the other forms holds one), and the
+    remaining lines packed together for one pass of each form's pattern
+    (:data:`LINE_FORMS`): a log of NMEA 0183 costs a few passes of numpy.  A line longer
+    than ``max_line_bytes`` (too long for any reader) has no form."""
     code = np.zeros(len(start), dtype=np.int8)
     at = start.copy()
     if not len(start):
         return code, at
     short = (end - start) <= max_line_bytes
-
-    def mark(pattern: re.Pattern[bytes], form: str | None, group: int = 0) -> None:
-        found = [(m.start(), m.start(group), m.group(group)) for m in pattern.finditer(norm)]
-        if not found:
-            return
-        pos = np.fromiter((f[0] for f in found), dtype=np.int64, count=len(found))
-        i = np.minimum(np.searchsorted(start, pos), len(start) - 1)
-        ok = (start[i] == pos) & short[i] & (code[i] == 0)
-        if form is not None:
-            code[i[ok]] = _CODE[form]
-            return
-        names = np.array([_CODE[_EMBEDDED_FORMS[f[2].lstrip(b"$!")]] for f in found], np.int8)
-        code[i[ok]] = names[ok]
-        at[i[ok]] = np.fromiter((f[1] for f in found), dtype=np.int64, count=len(found))[ok]
-
-    mark(EMBEDDED, None, 1)
-    mark(_SENTENCE_LINE, "sentence")
-    mark(LINE_FORMS[YDRAW], YDRAW)
-    mark(LINE_FORMS[CANDUMP], CANDUMP)
-    mark(LINE_FORMS["plain"], "plain")
+    pos, form = _embedded_at(data)
+    if len(pos):  # the first on its line (of a line longer than the lines around)
+        i = np.searchsorted(start, pos, side="right") - 1
+        ok = (pos < end[i]) & short[i]
+        i, pos, form = i[ok], pos[ok], form[ok]
+        _, first = np.unique(i, return_index=True)
+        code[i[first]], at[i[first]] = form[first], pos[first]
+    buf = np.frombuffer(data, dtype=np.uint8)
+    marks = np.flatnonzero((buf == 36) | (buf == 33))  # '$', '!': a sentence's start
+    code[(code == 0) & (np.searchsorted(marks, end) > np.searchsorted(marks, start))] = 1
+    rest = np.flatnonzero((code == 0) & short & (end > start))
+    if len(rest):
+        packed, offs = pack_lines(buf, start[rest], end[rest])
+        for name in (YDRAW, CANDUMP, "plain"):
+            hit = np.fromiter((m.start() for m in LINE_FORMS[name].finditer(packed)), np.int64)
+            j = np.minimum(np.searchsorted(offs, hit), len(offs) - 1)
+            rows = rest[j[offs[j] == hit]]
+            code[rows[code[rows] == 0]] = _CODE[name]
     return code, at
+
+
+def _embedded_at(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """Where NMEA 2000 sentences inside NMEA 0183 start in ``data`` (their ``$``/``!``),
+    in order, and their form codes."""
+    pos: list[int] = []
+    form: list[int] = []
+    for name, fmt in _EMBEDDED_FORMS.items():
+        key, lead = name + b",", b"$!" if name == b"PDGY" else b"$"
+        k = data.find(key, 1)
+        while k >= 0:
+            if data[k - 1] in lead:
+                pos.append(k - 1)
+                form.append(_CODE[fmt])
+            k = data.find(key, k + 1)
+    order = np.argsort(np.array(pos, dtype=np.int64), kind="stable")
+    return np.array(pos, dtype=np.int64)[order], np.array(form, dtype=np.int8)[order]
 
 
 class MixedForms(IngestError):

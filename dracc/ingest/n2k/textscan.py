@@ -104,6 +104,18 @@ def block(buf: np.ndarray, at: np.ndarray, width: int) -> np.ndarray:
     return win[np.clip(at, 0, len(buf) - width)]
 
 
+def pack_lines(buf: np.ndarray, a: np.ndarray, e: np.ndarray) -> tuple[bytes, np.ndarray]:
+    """The bytes ``buf[a[i]:e[i]]`` of each line ``i``, each followed by LF, as one
+    buffer; and where each starts in it."""
+    n = e - a
+    offs = np.zeros(len(n), dtype=np.int64)
+    if len(n) > 1:
+        np.cumsum(n[:-1] + 1, out=offs[1:])
+    out = np.full(int(n.sum()) + len(n), 10, dtype=np.uint8)
+    out[np.repeat(offs, n) + ramp(n)] = buf[np.repeat(a, n) + ramp(n)]
+    return out.tobytes(), offs
+
+
 def ramp(counts: np.ndarray) -> np.ndarray:
     """0, 1, ..., c-1 for every c in ``counts``, one after another."""
     total = int(counts.sum())

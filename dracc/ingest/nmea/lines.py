@@ -61,6 +61,19 @@ def line_bounds(buf: np.ndarray, bufp: np.ndarray) -> tuple[np.ndarray, np.ndarr
         else:
             bad = Marked(mask=np.concatenate((m, np.zeros(1, dtype=bool))))
         del m
+    start, end, ends = line_spans(buf, bufp, term)
+    return start, end, ends, bad
+
+
+def line_spans(
+    buf: np.ndarray, bufp: np.ndarray, term: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(start, content end, ends with a line end) of the lines of a buffer, cut as
+    :func:`line_bounds` cuts them; ``term``: the positions of its CR and LF bytes (found
+    here where None)."""
+    n = len(buf)
+    if term is None:
+        term = np.flatnonzero((buf == 10) | (buf == 13))
     # a CR followed by LF or by CR LF belongs to the line end at that LF
     tb = buf[term]
     nx1 = bufp[term + 1]
@@ -73,7 +86,7 @@ def line_bounds(buf: np.ndarray, bufp: np.ndarray) -> tuple[np.ndarray, np.ndarr
     ends = bool(len(last)) and int(last[-1]) == n - 1
     line_end = first if ends else np.concatenate((first, [n]))
     line_start = np.concatenate(([0], last[:-1] + 1)) if ends else np.concatenate(([0], last + 1))
-    return line_start.astype(np.int64, copy=False), line_end.astype(np.int64, copy=False), ends, bad
+    return line_start.astype(np.int64, copy=False), line_end.astype(np.int64, copy=False), ends
 
 
 def tail_start(tail: bytes) -> int:
