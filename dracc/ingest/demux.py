@@ -170,13 +170,19 @@ def check_strict(r: FileResult, strict: object) -> None:
 
 def check_strict_rejects(rejects: Rejects, path: str, strict: object) -> None:
     """:func:`check_strict` of the rejects of the log ``path``."""
-    on = strict if isinstance(strict, bool) else bool(getattr(strict, "strict", False))
-    if not on or not rejects.total:
-        return
-    from dracc.ingest.nmea.sentences import REASONS
+    from dracc.ingest.nmea.sentences import NON_FATAL, REASONS
 
-    rows = [(ln, f, t, why) for why, ex in rejects.examples.items() for f, ln, t in ex]
+    on = strict if isinstance(strict, bool) else bool(getattr(strict, "strict", False))
+    fatal = sum(n for why, n in rejects.counts.items() if why not in NON_FATAL)
+    if not on or not fatal:
+        return
+    rows = [
+        (ln, f, t, why)
+        for why, ex in rejects.examples.items()
+        if why not in NON_FATAL
+        for f, ln, t in ex
+    ]
     if not rows:
-        raise IngestError(f"{path}: {rejects.total} lines rejected (--strict)")
+        raise IngestError(f"{path}: {fatal} lines rejected (--strict)")
     ln, f, t, why = min(rows)
     raise IngestError(f"{f}:{ln}: rejected ({REASONS.get(why, why)}): {t!r} (--strict)")

@@ -299,6 +299,6 @@ def read_text_log(
 
     loose = replace(cfg, strict=False) if cfg.strict else cfg
     r = read_nmea(path, loose, progress, opener=opener)
-    r = add_n2k_lines(r, cfg, opener or opener_of(path))
+    r = add_n2k_lines(r, loose, opener or opener_of(path))
     check_strict(r, cfg)
     return r
