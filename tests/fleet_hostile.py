@@ -132,8 +132,8 @@ def _deep(doc: dict) -> str:
     return json.dumps(doc)[:-1] + ', "extra": ' + "[" * 200_000 + "]" * 200_000 + "}"
 
 
-#: the audit documents of the issue: (what to write, beside good_document(BAD)), and
-#: the reason the failed row gives
+#: the audit documents of the issue (and those the fuzzer found): what to write beside
+#: the good document, and the reason the failed row gives
 DOCUMENT_CASES: dict[str, tuple[Callable[[dict], str], str]] = {
     "logs-an-array": (_with(logs=[1, 2, 3]), "logs: expected an object or null, got an array"),
     "measures-a-text": (_with(measures="x"), "measures: expected an object or null, got a text"),
@@ -149,6 +149,11 @@ DOCUMENT_CASES: dict[str, tuple[Callable[[dict], str], str]] = {
     "vessel-name-5000-characters": (
         _with(vessel="V" * 5000),
         "vessel: a vessel name of 5,000 characters (1 to 100)",
+    ),
+    # found by the fuzzer: the page had no panel for it (matplotlib: 0 rows)
+    "ins-channel-unknown": (
+        _with(ins=[{"unit": "ins1", "channel": "9999-12-31", "n": 25, "m_y": 224.0}]),
+        "ins[0].channel: '9999-12-31' is not one of lat, lon, course",
     ),
 }
 
@@ -193,6 +198,11 @@ DATABASE_CASES: dict[str, tuple[str, str]] = {
     "view-over-an-endless-recursive-query": (
         f"DROP TABLE nights; CREATE VIEW nights AS {ENDLESS}SELECT {_NIGHT_COLUMNS} FROM r;",
         "nights is a view, not a table of the audit database",
+    ),
+    # found by the fuzzer (as its document twin)
+    "unit-stats-channel-unknown": (
+        "UPDATE unit_stats SET channel = 'heading';",
+        "channels[0].channel: 'heading' is not one of lat, lon, course",
     ),
 }
 

@@ -293,6 +293,23 @@ def test_a_night_without_its_rejected_count_is_read(tmp_path):
     assert len(bad) == 1 and bad.rejected_rate_pct.isna().all() and (bad.lines == 1000).all()
 
 
+def test_a_unit_without_some_figures_is_read_and_one_without_its_channel_is_not(tmp_path):
+    """Found by the fuzzer: an ``ins`` row without ``m_u`` ended the batch (KeyError);
+    an absent figure is read as none, like a null one.  A row without its channel
+    cannot be placed: one failed row."""
+    folder = inbox(tmp_path)
+    partial = {"unit": "ins1", "channel": "lat", "n": 25, "m_y": 224.0}
+    (folder / "partial.json").write_text(json.dumps({**good_document(BAD), "ins": [partial]}))
+    no_channel = {"unit": "ins1", "n": 25, "m_y": 224.0}
+    bad = folder / "bad.json"
+    bad.write_text(json.dumps({**good_document("Other"), "ins": [no_channel]}))
+    res, elapsed = _run(folder, tmp_path / "out")
+    assert [f["path"] for f in res.failures] == [str(bad)] and elapsed < BOUND_S
+    assert "ins[0].channel: missing" in res.failures[0]["error"]
+    row = res.table[res.table.vessel == BAD]
+    assert len(row) == 1 and row.m_u.isna().all() and (row.m_y == 224.0).all()
+
+
 def test_a_night_without_data_is_skipped_before_its_fields_are_checked(tmp_path):
     """A 'no data' document is skipped before its fields are read (a failed night's
     document may hold nulls anywhere), as before."""

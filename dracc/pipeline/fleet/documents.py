@@ -51,18 +51,9 @@ def sniff(path: str) -> str | None:
 
 
 def _channels(rows) -> list[dict]:
-    return [
-        {
-            "unit": c["unit"],
-            "channel": c["channel"],
-            "n": c["n"],
-            "m_u": c["m_u"],
-            "m_y": c["m_y"],
-            "kurtosis": c["kurtosis"],
-            "limit_error": c["limit_error"],
-        }
-        for c in rows
-    ]
+    """The fleet's keys of each unit and channel (a figure absent is None)."""
+    keys = ("unit", "channel", "n", "m_u", "m_y", "kurtosis", "limit_error")
+    return [{k: c.get(k) for k in keys} for c in rows]
 
 
 def summary_from_document(doc: dict) -> dict:

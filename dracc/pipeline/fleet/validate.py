@@ -13,9 +13,12 @@ makes the document (or database) one failed row, its reason naming the field::
     ins[0].m_y: expected a number or null, got a text
 
 The checks mirror what :mod:`dracc.pipeline.fleet.documents`, the tables and the
-ranking read, in the audit JSON Schema's own types (``dracc/report/audit.schema.json``;
-the test suite validates the documents it accepts against it), with the bounds the
-schema does not state.
+ranking read, in the audit JSON Schema's own types (``dracc/report/audit.schema.json``:
+``tests/test_fleet_hostile.py`` checks that it, too, accepts the good document and
+refuses the wrong types), with the bounds the schema does not state.  No JSON Schema
+validator runs here: ``jsonschema`` is a test dependency only, and the schema states
+none of the bounds.  A document's checks take about a millisecond (its times parsed as
+the tables parse them, :func:`pandas.to_datetime`).
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ from typing import Any
 
 import pandas as pd
 
+from dracc.core.vocabulary import CHANNELS
 from dracc.pipeline.fleet.findings import COUNT_KEYS
 from dracc.pipeline.fleet.query import hive_value
 
@@ -101,6 +105,17 @@ def boolean(x: Any, at: str) -> None:
         raise _expected(at, "true or false", x)
 
 
+def one_of(values: tuple[str, ...]) -> Check:
+    """A text that is one of ``values`` (a channel: the tables and page know three)."""
+
+    def check(x: Any, at: str) -> None:
+        text(x, at)
+        if x not in values:
+            raise Invalid(f"{at}: {x[:40]!r} is not one of {', '.join(values)}")
+
+    return check
+
+
 def night(x: Any, at: str) -> None:
     """A night: a UTC date ``YYYY-MM-DD`` between 1980 and 2099."""
     text(x, at)
@@ -118,7 +133,7 @@ def timestamp(x: Any, at: str) -> None:
     """A time: ISO 8601 with its zone (``Z`` or an offset), between 1980 and 2099."""
     text(x, at)
     try:
-        t = pd.to_datetime(x[:64], format="ISO8601") if len(x) <= 64 else None
+        t = pd.to_datetime(x, format="ISO8601") if len(x) <= 64 else None
     except (ValueError, OverflowError):  # pandas' OutOfBoundsDatetime is a ValueError
         t = None
     if t is None or pd.isna(t) or t.tzinfo is None:
@@ -153,15 +168,21 @@ def array(item: Check) -> Check:
     return check
 
 
-def obj(fields: Mapping[str, Check], values: Check | None = None) -> Check:
-    """An object whose ``fields`` (each absent, null or as its check says) are read;
-    ``values``: the check of every value (an object used as a map)."""
+def obj(
+    fields: Mapping[str, Check], values: Check | None = None, required: tuple[str, ...] = ()
+) -> Check:
+    """An object whose ``fields`` (each absent, null or as its check says; ``required``
+    ones present and not null) are read; ``values``: the check of every value (an object
+    used as a map)."""
 
     def check(x: Any, at: str) -> None:
         if not isinstance(x, Mapping):
             raise _expected(at, "an object", x)
         if len(x) > MAX_ITEMS:
             raise Invalid(f"{at}: {len(x):,} keys (at most {MAX_ITEMS:,})")
+        for k in required:
+            if x.get(k) is None:
+                raise Invalid(f"{at}.{k}: missing" if at else f"{k}: missing")
         for k, c in fields.items():
             if x.get(k) is not None:
                 c(x[k], f"{at}.{k}" if at else k)
@@ -184,13 +205,14 @@ def period(x: Any, at: str) -> None:
 CHANNEL = obj(
     {
         "unit": text,
-        "channel": text,
+        "channel": one_of(CHANNELS),
         "n": count,
         "m_u": number,
         "m_y": number,
         "kurtosis": number,
         "limit_error": number,
-    }
+    },
+    required=("unit", "channel"),
 )
 MEASURES = obj(
     {
