@@ -174,3 +174,13 @@ def test_strict_judges_each_line_by_its_own_reader(pcdin_then_nmea, tmp_path):
         read_file(p, strict)
     with pytest.raises(IngestError, match=r"bad\.log:4001: rejected \(checksum"):
         inspect_logs([p], strict)
+
+
+def test_strict_keeps_no_date_non_fatal(tmp_path):
+    """Records with no time anywhere are counted ``no_date``, never a --strict failure,
+    now that --strict judges a text log once all its lines are read."""
+    p = tmp_path / "nodate.log"
+    _write(p, [_sentence("HEHDT,59.909,T")] * 20)
+    r = read_file(p, IngestConfig(strict=True))
+    assert r.rejects.counts.get("no_date") == 20
+    assert inspect_logs([p], IngestConfig(strict=True))["rejected"] == {"no_date": 20}
