@@ -406,7 +406,7 @@ def test_apriori_monitoring_rule():
     "table, word",
     [
         ({"apriori": {"ins4": {"lat_m": 1}}}, "ins4"),
-        ({"apriori": {"ins1": {"lat": 1}}}, "unknown key 'lat'"),
+        ({"apriori": {"ins1": {"lat": 1}}}, r"unknown key\(s\): lat"),
         ({"apriori": {"ins1": {"lat_m": -3}}}, "lat_m = -3"),
         ({"confidence": 1.0}, "confidence"),
         ({"correlation_time_s": -1.0}, "correlation_time_s"),

@@ -30,6 +30,27 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
+from dracc.core.bounds import (
+    DAY_S,
+    FACTOR,
+    FINITE,
+    HALF_TO_ONE,
+    MAX_CONFIG_BYTES,
+    MAX_ITEMS,
+    NON_NEGATIVE,
+    RESET_S,
+    SIGMA_M,
+    SIGMAS,
+    SPEED_KN,
+    STEP_S,
+    TAU_S,
+    UP_TO_A_DAY,
+    UP_TO_A_YEAR,
+    YEAR_S,
+    ZERO_TO_A_DAY,
+    Range,
+    within,
+)
 from dracc.core.durations import parse_reset_s
 from dracc.core.errors import ConfigError
 from dracc.core.quantities import QUANTITIES
@@ -241,29 +262,6 @@ def _no_unknown(table: dict[Any, Any], known: Collection[str], where: str) -> No
 
 
 @dataclass(frozen=True)
-class _Range:
-    """Closed or open bounds of a number; ``text`` says them in a message."""
-
-    text: str
-    lo: float = -math.inf
-    hi: float = math.inf
-    lo_open: bool = False
-    hi_open: bool = False
-
-    def holds(self, v: float) -> bool:
-        above = v > self.lo if self.lo_open else v >= self.lo
-        below = v < self.hi if self.hi_open else v <= self.hi
-        return above and below
-
-
-_POSITIVE = _Range("positive", 0.0, lo_open=True)
-_NON_NEGATIVE = _Range(">= 0", 0.0)
-_AT_LEAST_1 = _Range(">= 1", 1.0)
-_FINITE = _Range("finite")
-_HALF_TO_ONE = _Range("in [0.5, 1)", 0.5, 1.0, hi_open=True)
-
-
-@dataclass(frozen=True)
 class _Rule:
     """What a field accepts beyond its annotated type.
 
@@ -271,13 +269,12 @@ class _Rule:
     ``check(value, section, key) -> value``: a rule on the typed value (names, forms);
     ``before(value) -> value``: a conversion of the raw TOML value before the type check."""
 
-    range: _Range | None = None
+    range: Range | None = None
     check: Callable[[Any, str, str], Any] | None = None
     before: Callable[[Any], Any] | None = None
 
 
 _TYPE_ONLY = _Rule()
-_POS = _Rule(_POSITIVE)
 
 
 def _key(k: object) -> str:
@@ -328,7 +325,7 @@ def _is_number(value: object) -> TypeGuard[int | float]:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
-def _number(value: object, section: str, key: str, rng: _Range | None) -> float:
+def _number(value: object, section: str, key: str, rng: Range | None) -> float:
     if not _is_number(value):
         raise _wrong(section, key, value, "a number")
     v = float(value)
@@ -339,7 +336,7 @@ def _number(value: object, section: str, key: str, rng: _Range | None) -> float:
     return v
 
 
-def _integer(value: object, section: str, key: str, rng: _Range | None) -> int:
+def _integer(value: object, section: str, key: str, rng: Range | None) -> int:
     if isinstance(value, float) and math.isfinite(value) and value.is_integer():
         value = int(value)  # 1e3 is an integer; 1.5 is not
     if isinstance(value, bool) or not isinstance(value, int):
@@ -355,21 +352,23 @@ def _tau(value: object, section: str, key: str) -> float:
     if not _is_number(value):
         raise _wrong(section, key, value, 'a correlation time in seconds (>= 0) or "inf"')
     v = float(value)
-    if not v >= 0:  # NaN too; inf is a bias
-        raise _fail(section, key, value, 'must be >= 0 seconds (0: white noise, "inf": a bias)')
+    if v == math.inf:
+        return v
+    if not TAU_S.holds(v):  # NaN too
+        raise _fail(section, key, value, f'must be {TAU_S.text} (0: white noise, "inf": a bias)')
     return v
 
 
 _SOURCE_FORM = 'a number (a bias) or a table {sigma = ..., tau_s = ... | "inf"}'
 
 
-def _error_source(value: object, section: str, key: str) -> ErrorSource:
-    """An ErrorSource from a number (a bias), a table {sigma, tau_s} or an ErrorSource."""
+def _error_source(value: object, section: str, key: str, rng: Range | None = None) -> ErrorSource:
+    """An ErrorSource from a number (a bias), a table {sigma, tau_s} or an ErrorSource;
+    ``rng``: the sigma's range."""
     inner = f"{section}.{_key(key)}"
+    rng = rng or NON_NEGATIVE
     if _is_number(value):
-        return ErrorSource(
-            _number(value, section, key, _Range(">= 0 (the sigma of a bias)", 0.0)), math.inf
-        )
+        return ErrorSource(_number(value, section, key, rng), math.inf)
     if isinstance(value, ErrorSource):
         sigma, tau = value.sigma, value.tau_s
     elif isinstance(value, dict):
@@ -379,7 +378,7 @@ def _error_source(value: object, section: str, key: str) -> ErrorSource:
         sigma, tau = value["sigma"], value.get("tau_s", math.inf)
     else:
         raise _wrong(section, key, value, _SOURCE_FORM)
-    return ErrorSource(_number(sigma, inner, "sigma", _NON_NEGATIVE), _tau(tau, inner, "tau_s"))
+    return ErrorSource(_number(sigma, inner, "sigma", rng), _tau(tau, inner, "tau_s"))
 
 
 def _describe(tp: Any) -> str:
@@ -401,7 +400,7 @@ def _describe(tp: Any) -> str:
     return cast(str, tp.__name__)
 
 
-def _typed(value: object, tp: Any, section: str, key: str, rng: _Range | None) -> Any:
+def _typed(value: object, tp: Any, section: str, key: str, rng: Range | None) -> Any:
     """``value`` checked against the annotation ``tp`` (and numbers against ``rng``), converted
     to it: an int where a float belongs becomes a float, an array a tuple."""
     origin, args = typing.get_origin(tp), typing.get_args(tp)
@@ -423,9 +422,15 @@ def _typed(value: object, tp: Any, section: str, key: str, rng: _Range | None) -
             raise _wrong(section, key, value, "a string")
         return value
     if tp is ErrorSource:
-        return _error_source(value, section, key)
+        return _error_source(value, section, key, rng)
     if tp is BerthConfig:
         return _berth(value, section, key)
+    if (
+        origin in (tuple, dict)
+        and isinstance(value, (list, tuple, dict))
+        and len(value) > MAX_ITEMS
+    ):
+        raise _fail(section, key, f"<{len(value):,} items>", f"at most {MAX_ITEMS:,} items")
     if origin is tuple:
         if not isinstance(value, (list, tuple)):
             raise _wrong(section, key, value, _describe(tp))
@@ -481,7 +486,7 @@ def _check_quantities(table: dict[str, str], section: str, key: str) -> dict[str
 def _check_reset(value: str, section: str, key: str) -> str:
     if value.strip().lower() != "auto":
         try:
-            parse_reset_s(value)
+            reset_s = parse_reset_s(value)
         except ConfigError:
             raise _fail(
                 section,
@@ -490,6 +495,8 @@ def _check_reset(value: str, section: str, key: str) -> str:
                 'expected "auto", "watch", "never" or a positive '
                 'duration such as "1h", "4h", "30min", "90s"',
             ) from None
+        if math.isfinite(reset_s) and not RESET_S.holds(reset_s):  # a leg every 10 ms: 8.6 M a day
+            raise _fail(section, key, value, f'must be a duration {RESET_S.text}, or "never"')
     return value
 
 
@@ -574,113 +581,97 @@ _RULES: dict[type, dict[str, _Rule]] = {
         "strict": _TYPE_ONLY,
         "ignore_checksum": _TYPE_ONLY,
         "date": _Rule(check=_check_date, before=_toml_date),
-        "gap_s": _POS,
-        "backstep_tolerance_s": _Rule(_NON_NEGATIVE),
+        "gap_s": _Rule(UP_TO_A_DAY),
+        "backstep_tolerance_s": _Rule(ZERO_TO_A_DAY),
         "sources": _Rule(check=_check_roles),
         "quantities": _Rule(check=_check_quantities),
-        "max_line_bytes": _POS,
-        "max_chunk_bytes": _POS,
-        "memory_cap_mb": _POS,
-        "max_inflate_ratio": _POS,
-        "temp_cap_mb": _POS,
+        "max_line_bytes": _Rule(within(64, 2**30, "bytes")),
+        "max_chunk_bytes": _Rule(within(1024, 2**34, "bytes")),
+        "memory_cap_mb": _Rule(within(16, 2**20, "MB")),
+        "max_inflate_ratio": _Rule(within(2, 1e6)),
+        "temp_cap_mb": _Rule(within(1, 2**24, "MB")),
     },
     DeadReckoningConfig: {
         "learn": _TYPE_ONLY,
         "reset": _Rule(check=_check_reset),
         "fix_role": _Rule(check=_one_of("gnss", "ins_mean")),
-        "max_gap_s": _POS,
-        "epoch_interval_s": _POS,
-        "variation_deg": _Rule(_Range("within +-180 degrees (east +)", -180.0, 180.0)),
+        "max_gap_s": _Rule(UP_TO_A_DAY),
+        "epoch_interval_s": _Rule(STEP_S),
+        "variation_deg": _Rule(Range("within +-180 degrees (east +)", -180.0, 180.0)),
         "deviation_table": _Rule(
-            _Range("a deviation within +-180 degrees (east +)", -180.0, 180.0),
+            Range("a deviation within +-180 degrees (east +)", -180.0, 180.0),
             check=_check_deviation_table,
         ),
-        **dict.fromkeys(
-            (
-                "compass_bias_deg",
-                "compass_noise_deg",
-                "log_scale",
-                "log_bias_kn",
-                "log_noise_kn",
-                "current_kn",
-                "leeway_deg",
-            ),
-            _TYPE_ONLY,
-        ),
-        "fix_sigma_m": _POS,
+        **{name: _Rule(rng) for name, rng in SIGMAS.items()},
+        "fix_sigma_m": _Rule(SIGMA_M),
     },
     DeviationConfig: {
-        "interval_s": _POS,
-        "offset_s": _Rule(_FINITE),
-        "window_s": _POS,
-        "kurtosis_windows_s": _POS,
-        "max_interp_gap_s": _Rule(_NON_NEGATIVE),
-        "factor_lat": _POS,
-        "factor_lon": _POS,
-        "factor_course": _POS,
-        "probability": _Rule(_HALF_TO_ONE),
-        "apriori": _Rule(_POSITIVE, check=_check_apriori),
+        "interval_s": _Rule(within(1.0, DAY_S, "seconds")),
+        "offset_s": _Rule(within(-DAY_S, DAY_S, "seconds")),
+        "window_s": _Rule(within(60.0, YEAR_S, "seconds")),
+        "kurtosis_windows_s": _Rule(within(60.0, YEAR_S, "seconds")),
+        "max_interp_gap_s": _Rule(ZERO_TO_A_DAY),
+        "factor_lat": _Rule(FACTOR),
+        "factor_lon": _Rule(FACTOR),
+        "factor_course": _Rule(FACTOR),
+        "probability": _Rule(HALF_TO_ONE),
+        "apriori": _Rule(within(0.0, 1e6, lo_open=True), check=_check_apriori),
         "first_approximation": _TYPE_ONLY,
-        "confidence": _Rule(_HALF_TO_ONE),
-        "correlation_time_s": _Rule(_NON_NEGATIVE),
-        "min_kurtosis_samples": _Rule(_AT_LEAST_1),
-        "kurtosis_tol": _Rule(_NON_NEGATIVE),
-        "hat_confidence": _Rule(_HALF_TO_ONE),
-        "hat_draws": _Rule(_Range(">= 100", 100.0)),
-        "seed": _Rule(_NON_NEGATIVE),
-        "velocity_min_gap_s": _Rule(_NON_NEGATIVE),
+        "confidence": _Rule(HALF_TO_ONE),
+        "correlation_time_s": _Rule(within(0.0, YEAR_S, "seconds")),
+        "min_kurtosis_samples": _Rule(within(1, 1e6)),
+        "kurtosis_tol": _Rule(within(0.0, 10.0)),
+        "hat_confidence": _Rule(HALF_TO_ONE),
+        "hat_draws": _Rule(within(100, 100_000)),
+        "seed": _Rule(within(0, 2**32 - 1)),
+        "velocity_min_gap_s": _Rule(ZERO_TO_A_DAY),
     },
     FaultsConfig: {
         "exclude": _TYPE_ONLY,
-        **dict.fromkeys(
-            (
-                "max_speed_kn",
-                "jump_min_m",
-                "frozen_min_s",
-                "stuck_min_s",
-                "moving_min_kn",
-                "turn_min_deg",
-                "max_rot_deg_per_min",
-            ),
-            _POS,
-        ),
-        "min_records": _Rule(_AT_LEAST_1),
+        "max_speed_kn": _Rule(within(0.0, 1000.0, "kn", lo_open=True)),
+        "jump_min_m": _Rule(within(0.0, 1e7, "m", lo_open=True)),
+        "frozen_min_s": _Rule(UP_TO_A_YEAR),
+        "stuck_min_s": _Rule(UP_TO_A_YEAR),
+        "moving_min_kn": _Rule(SPEED_KN),
+        "turn_min_deg": _Rule(within(0.0, 360.0, "degrees", lo_open=True)),
+        "max_rot_deg_per_min": _Rule(within(0.0, 1e5, "degrees a minute", lo_open=True)),
+        "min_records": _Rule(within(1, 1e9)),
     },
     IntegrityConfig: {
-        "false_alarm": _Rule(_Range("a probability in (0, 0.5)", 0.0, 0.5, True, True)),
-        **dict.fromkeys(
-            (
+        "false_alarm": _Rule(Range("a probability in (0, 0.5)", 0.0, 0.5, True, True)),
+        **{
+            name: _Rule(UP_TO_A_DAY)
+            for name in (
                 "latency_max_s",
                 "spell_min_s",
-                "dropout_cadences",
                 "dropout_min_s",
                 "frozen_min_s",
-                "jump_floor_m",
-                "consistency_interval_s",
                 "consistency_max_gap_s",
-                "heading_gate_min_deg",
-                "velocity_gate_kn",
                 "clock_ahead_min_s",
                 "clock_drift_max_s",
                 "backstep_min_s",
-            ),
-            _POS,
-        ),
+            )
+        },
+        "dropout_cadences": _Rule(within(0.0, 1e6, lo_open=True)),
+        "jump_floor_m": _Rule(within(0.0, 1e6, "m", lo_open=True)),
+        "consistency_interval_s": _Rule(STEP_S),
+        "heading_gate_min_deg": _Rule(within(0.0, 180.0, "degrees", lo_open=True)),
+        "velocity_gate_kn": _Rule(SPEED_KN),
     },
     BerthConfig: {
-        "pier": _Rule(_FINITE, check=check_pier),
+        "pier": _Rule(FINITE, check=check_pier),
         "side": _Rule(check=_one_of("port", "starboard")),
-        "half_breadth_m": _POS,
-        "heading_deg": _Rule(_Range("in [0, 360] degrees", 0.0, 360.0)),
-        "sigma_m": _POS,
-        "gap_m": _Rule(_NON_NEGATIVE),
-        "ref_stbd_m": _Rule(_FINITE),
-        "abeam": _Rule(_FINITE, check=check_abeam),
-        "abeam_sigma_m": _POS,
+        "half_breadth_m": _Rule(within(0.0, 100.0, "m", lo_open=True)),
+        "heading_deg": _Rule(Range("in [0, 360] degrees", 0.0, 360.0)),
+        "sigma_m": _Rule(SIGMA_M),
+        "gap_m": _Rule(within(0.0, 1000.0, "m")),
+        "ref_stbd_m": _Rule(within(-100.0, 100.0, "m")),
+        "abeam": _Rule(FINITE, check=check_abeam),
+        "abeam_sigma_m": _Rule(SIGMA_M),
         "start_utc": _Rule(check=check_utc, before=toml_datetime),
         "end_utc": _Rule(check=check_utc, before=toml_datetime),
-        "tolerance_m": _POS,
-        "max_speed_kn": _POS,
+        "tolerance_m": _Rule(within(0.0, 1e6, "m", lo_open=True)),
+        "max_speed_kn": _Rule(SPEED_KN),
         "datum": _TYPE_ONLY,  # the name is checked by the analysis (pyproj, dracc.ingest.datums)
     },
     ReferenceConfig: {"alongside": _Rule(check=check_alongside, before=one_or_many)},
@@ -710,6 +701,12 @@ def _section(sec: Any, name: str) -> Any:
     return cls(**values)
 
 
+def validate_section(sec: Any, name: str) -> Any:
+    """One section (a dataclass built in Python: ``DeviationConfig(...)``) checked and
+    converted as :func:`validate` checks it; ``name`` the section's, for the messages."""
+    return _section(sec, name)
+
+
 def validate(cfg: Config) -> Config:
     """Check every key of every section against its type and range (and the few rules on
     names and forms); raise ConfigError naming the key, else return the config with the
@@ -731,13 +728,21 @@ def load_config(path: str | Path | None = None) -> Config:
     p = Path(path)
     try:
         with p.open("rb") as fh:
-            data = tomllib.load(fh)
+            raw = fh.read(MAX_CONFIG_BYTES + 1)
+        if len(raw) > MAX_CONFIG_BYTES:
+            raise ConfigError(f"{p}: more than {MAX_CONFIG_BYTES:,} bytes: not a configuration")
+        data = tomllib.loads(raw.decode("utf-8"))
     except FileNotFoundError as err:
         raise ConfigError(f"config file not found: {p}") from err
     except IsADirectoryError as err:
         raise ConfigError(f"config path is a directory: {p}") from err
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{p}: invalid TOML: {err}") from err
+    except RecursionError as err:  # the parser recurses once per level of nesting
+        raise ConfigError(
+            f"{p}: invalid TOML: arrays or inline tables nested too deep "
+            "(a configuration nests 3 levels)"
+        ) from err
     except (OSError, UnicodeDecodeError) as err:
         raise ConfigError(f"{p}: cannot read config: {err}") from err
     return config_from_dict(data, str(p))

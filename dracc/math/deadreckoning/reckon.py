@@ -11,6 +11,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from dracc.core.arrays import FloatArray, IntArray, unique_sorted
+from dracc.core.bounds import check_work
 from dracc.core.config import DeadReckoningConfig
 from dracc.core.errors import ConfigError, InsufficientDataError
 from dracc.math.deadreckoning.error_processes import (
@@ -165,6 +166,7 @@ def _epoch_indices(
     """The first sample at or after each multiple of ``epoch_interval_s``, where it is at
     most ``max_gap_s`` late and on a leg."""
     epoch_dt = epoch_interval_s
+    check_work("dead_reckoning", "epoch_interval_s", epoch_dt, float(t[-1] - t[0]))
     n = t.size
     grid = np.arange(math.ceil(t[0] / epoch_dt) * epoch_dt, t[-1] + 1e-9, epoch_dt)
     ei = np.searchsorted(t, grid, side="left")

@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from dracc.core.bounds import check_work
 from dracc.core.geodesy import angdiff, k_lambda, k_phi, wrap_2pi, wrap_pi
 
 if TYPE_CHECKING:
@@ -120,6 +121,7 @@ def sampling_instants(
     """
     if interval_s <= 0:
         raise ValueError(f"interval_s must be positive, got {interval_s}")
+    check_work("deviation", "interval_s", interval_s, (last_ns - first_ns) / 1e9)
     step = int(round(interval_s * 1e9))
     off = int(round(offset_s * 1e9))
     origin = first_ns - first_ns % DAY_NS + off

@@ -92,6 +92,7 @@ def velocity_consistency(
         start_ns,
         end_ns,
         step_ns,
+        setting=True,
     )
     i1, ok1 = shifted_index(instants, lag * step_ns)  # t - T
     i2, ok2 = shifted_index(instants, 2 * lag * step_ns)  # t - 2T
@@ -234,6 +235,7 @@ def heading_consistency(
         start_ns,
         end_ns,
         int(cfg.consistency_interval_s * NS_PER_S),
+        setting=True,
     )
     c, _ = align_at(
         hd["time_ns"].to_numpy(np.int64),
@@ -381,6 +383,7 @@ def speed_consistency(
         start_ns,
         end_ns,
         step_ns,
+        setting=True,
     )
     gap = cfg.consistency_max_gap_s
     stw, _ = align_at(

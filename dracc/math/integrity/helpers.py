@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from dracc.core import distributions as dist
 from dracc.core.arrays import FloatArray, IntArray
+from dracc.core.bounds import check_work
 from dracc.frames import Voyage
 from dracc.math.integrity.results import Check
 
@@ -126,27 +127,32 @@ GRID_SILENCE_NS = 3600 * 1_000_000_000
 
 
 def covered_instants(
-    times_ns: list[IntArray], start_ns: int, end_ns: int, step_ns: int
+    times_ns: list[IntArray], start_ns: int, end_ns: int, step_ns: int, setting: bool = False
 ) -> IntArray:
     """The comparison grid start_ns + k step_ns in [start_ns, end_ns), without the
     stretches where every compared source is silent for more than an hour: a stray record
     dated years away must not make a grid of years (millions of empty instants).  Without
-    such a silence this is exactly ``arange(start_ns, end_ns, step_ns)``."""
+    such a silence this is exactly ``arange(start_ns, end_ns, step_ns)``.  ``setting``:
+    the step is ``[integrity] consistency_interval_s``, refused where it asks more
+    instants than a setting may (:func:`dracc.core.bounds.check_work`)."""
     t = np.concatenate([np.asarray(x, dtype=np.int64) for x in times_ns]) if times_ns else None
-    if t is None or t.size == 0:
-        return np.arange(start_ns, end_ns, step_ns, dtype=np.int64)
-    t = np.unique(t[(t >= start_ns) & (t < end_ns)])
+    t = t[(t >= start_ns) & (t < end_ns)] if t is not None else np.empty(0, np.int64)
     if t.size == 0:
+        lo, hi = np.array([start_ns]), np.array([end_ns])
+    else:
+        t = np.unique(t)
+        gaps = np.flatnonzero(np.diff(t) > GRID_SILENCE_NS)
+        # segments of data: [the window's start, or the first record after a silence; the
+        # last record before a silence, or the window's end); grid points keep their phase
+        first = start_ns if t[0] - start_ns <= GRID_SILENCE_NS else int(t[0])
+        last = end_ns if end_ns - t[-1] <= GRID_SILENCE_NS else int(t[-1]) + 1
+        lo = np.concatenate(([first], t[gaps + 1]))
+        hi = np.concatenate((t[gaps] + 1, [last]))
+    if setting:
+        span_s = float(np.sum(hi - lo)) / 1e9
+        check_work("integrity", "consistency_interval_s", step_ns / 1e9, span_s)
+    if lo.size == 1 and (int(lo[0]), int(hi[0])) == (start_ns, end_ns):
         return np.arange(start_ns, end_ns, step_ns, dtype=np.int64)
-    gaps = np.flatnonzero(np.diff(t) > GRID_SILENCE_NS)
-    # segments of data: [the window's start, or the first record after a silence; the last
-    # record before a silence, or the window's end); grid points keep their phase
-    first = start_ns if t[0] - start_ns <= GRID_SILENCE_NS else int(t[0])
-    last = end_ns if end_ns - t[-1] <= GRID_SILENCE_NS else int(t[-1]) + 1
-    if gaps.size == 0 and (first, last) == (start_ns, end_ns):
-        return np.arange(start_ns, end_ns, step_ns, dtype=np.int64)
-    lo = np.concatenate(([first], t[gaps + 1]))
-    hi = np.concatenate((t[gaps] + 1, [last]))
     parts = []
     for a, b in zip(lo.tolist(), hi.tolist(), strict=True):
         k0 = -(-(a - start_ns) // step_ns)
