@@ -172,3 +172,23 @@ def test_a_killed_runs_copy_is_removed_by_the_next_run(tmp_path):
     assert run.returncode == 0, run.stderr.decode()
     assert not saved[0].parent.exists()
     assert not list(tmp_path.glob(f"{INPUT_PREFIX}*"))
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_stream_parsed_by_workers_gives_the_files_records(workers):
+    """A stream cut in pieces (small, to have many) and parsed here or by two workers
+    gives the records of the file read as a file."""
+    from dracc.frames import concat_blocks
+    from dracc.ingest.nmea import StreamState, iter_nmea_blocks, read_nmea
+
+    p = SAMPLES / "voyage_tag.nmea"
+    want = read_nmea(p, IngestConfig(), workers=1)
+    st = StreamState(str(p))
+    blocks = iter_nmea_blocks(
+        p, IngestConfig(), st, block_bytes=70_000, workers=workers, opener=lambda: p.open("rb")
+    )
+    got = concat_blocks([b.frames for b in blocks])
+    assert st.lines == want.lines and st.stats.get("pool_fallback", 0) == 0
+    for kind, df in want.frames.items():
+        np.testing.assert_array_equal(df["time_ns"], got[kind]["time_ns"])
+        np.testing.assert_array_equal(df["line"], got[kind]["line"])

@@ -230,7 +230,8 @@ def _read_packed(
     if packed.kind is not None and format_of(packed.head(), b"", given) == "nmea":
         from dracc.ingest.embedded_n2k import read_text_log
 
-        r = read_text_log(given, cfg, packed.progress(progress), opener=packed.open)
+        told = packed.progress(progress)
+        r = read_text_log(given, cfg, told, opener=packed.open, size_hint=packed.size_hint)
         r.notes = packed.notes + r.notes
         return r
     with packed.copy() as plain:

@@ -52,6 +52,8 @@ INFLATE_FLOOR = 256 << 20
 #: the first bytes of a decompressed log that tell its format
 HEAD_BYTES = 65536
 INPUT_PREFIX = "dracc-input-"
+#: what NMEA text compresses to, about (gzip 5:1, xz 7:1): a compressed log's guessed size
+TYPICAL_RATIO = 5
 
 #: first bytes -> (name, suffix the decompressed copy drops)
 MAGIC: dict[bytes, tuple[str, str]] = {
@@ -172,6 +174,13 @@ class Packed:
         s = Inflating(self, self.notes if not self._streams else None)
         self._streams.append(s)
         return cast(IO[bytes], s)
+
+    @property
+    def size_hint(self) -> int | None:
+        """The size the log may decompress to, as guessed for the NMEA reader (whether
+        workers parse it, where they hand blocks over): :data:`TYPICAL_RATIO` times its
+        compressed size; None for standard input that was not compressed."""
+        return None if self.kind is None else TYPICAL_RATIO * self.source.stat().st_size
 
     def head(self) -> bytes:
         """The first :data:`HEAD_BYTES` of the log (what tells its format)."""

@@ -290,15 +290,16 @@ def read_text_log(
     cfg: IngestConfig,
     progress: Callable[[int], object] | None = None,
     opener: Opener | None = None,
+    size_hint: int | None = None,
 ) -> FileResult:
     """A text log read line by line: its NMEA 0183 lines by the NMEA reader, its NMEA
     2000 lines by their forms' (:func:`add_n2k_lines`).  ``opener``: the log is the
-    stream it opens (a compressed log), ``path`` naming it.  ``--strict`` judges the lines
-    once every line went to its reader."""
+    stream it opens (a compressed log, ``size_hint`` its guessed size), ``path`` naming
+    it.  ``--strict`` judges the lines once every line went to its reader."""
     from dracc.ingest.nmea import read_nmea
 
     loose = replace(cfg, strict=False) if cfg.strict else cfg
-    r = read_nmea(path, loose, progress, opener=opener)
+    r = read_nmea(path, loose, progress, opener=opener, size_hint=size_hint)
     r = add_n2k_lines(r, loose, opener or opener_of(path))
     check_strict(r, cfg)
     return r

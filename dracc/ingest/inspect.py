@@ -110,6 +110,7 @@ def _read_nmea(
     advance: Callable[[int], object] | None,
     name: str | None = None,
     opener: Opener | None = None,
+    size_hint: int | None = None,
 ) -> _FileRead:
     """Stream an NMEA text file, summarising each block's frames into ``sources``, then
     its NMEA 2000 lines (:func:`_add_n2k`); ``name``: what the file is called (the log as
@@ -117,7 +118,10 @@ def _read_nmea(
     file = str(p) if name is None else name
     st = StreamState(file)
     loose = replace(cfg, strict=False) if cfg.strict else cfg  # judged once all is read
-    for block in iter_nmea_blocks(p, loose, st, progress=advance, name=file, opener=opener):
+    blocks = iter_nmea_blocks(
+        p, loose, st, progress=advance, name=file, opener=opener, size_hint=size_hint
+    )
+    for block in blocks:
         summarize_frames(block.frames, file, into=sources)
     f = _FileRead(
         "nmea",
@@ -195,7 +199,8 @@ def _read_packed(
     with unpacked(p, cfg) as packed:
         assert packed is not None  # needs_copy(p) said so
         if packed.kind is not None and format_of(packed.head(), b"", p) == "nmea":
-            f = _read_nmea(p, cfg, sources, packed.progress(advance), str(p), packed.open)
+            told = packed.progress(advance)
+            f = _read_nmea(p, cfg, sources, told, str(p), packed.open, packed.size_hint)
         else:
             with packed.copy() as plain:
                 try:

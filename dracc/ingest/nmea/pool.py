@@ -9,6 +9,7 @@ import os
 
 from dracc.ingest.memory import load_handover, write_handover
 from dracc.ingest.nmea.blocks import parse_range
+from dracc.ingest.nmea.engine_c import parse_buffer
 from dracc.ingest.nmea.parsed import ParsedBlock
 from dracc.ingest.nmea.sentences import MAX_LINE_BYTES
 
@@ -69,6 +70,24 @@ def parse_range_to_file(
     arrays' sizes, the file) for :func:`load_parsed`; or the block itself where there is
     no folder or the file cannot be written (a full disk): it then goes through the pipe."""
     pb = parse_range(path, off, length, ignore_checksum, at_eof, max_line_bytes)
+    if folder is None:
+        return pb
+    handed = write_handover(pb, os.path.join(folder, f"block-{i}"))
+    return pb if handed is None else handed
+
+
+def parse_bytes_to_file(
+    folder: str | None,
+    i: int,
+    data: bytes,
+    ignore_checksum: bool,
+    at_eof: bool,
+    max_line_bytes: int = MAX_LINE_BYTES,
+) -> ParsedBlock | tuple[bytes, list[int], str]:
+    """:func:`parse_range_to_file` of a piece of a stream (its bytes sent to the worker)."""
+    pb = parse_buffer(
+        data, ignore_checksum=ignore_checksum, at_eof=at_eof, max_line_bytes=max_line_bytes
+    )
     if folder is None:
         return pb
     handed = write_handover(pb, os.path.join(folder, f"block-{i}"))

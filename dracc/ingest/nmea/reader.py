@@ -7,12 +7,15 @@ from __future__ import annotations
 
 import os
 import stat
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable, Iterator
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+from contextlib import ExitStack
+from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
-from typing import IO, TYPE_CHECKING
+from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -23,7 +26,13 @@ from dracc.ingest.nmea.assemble import _source_categorical, assemble, talker_str
 from dracc.ingest.nmea.blocks import block_ranges, parse_piece, parse_range, stream_pieces
 from dracc.ingest.nmea.groups import join_line_groups
 from dracc.ingest.nmea.parsed import ParsedBlock
-from dracc.ingest.nmea.pool import load_parsed, parse_range_to_file, pool_ok, worker_init
+from dracc.ingest.nmea.pool import (
+    load_parsed,
+    parse_bytes_to_file,
+    parse_range_to_file,
+    pool_ok,
+    worker_init,
+)
 from dracc.ingest.nmea.sentences import MAX_LINE_BYTES, SENTENCES
 from dracc.ingest.nmea.state import Block, StreamState
 from dracc.ingest.timebase import days_from_civil, valid_civil
@@ -49,6 +58,7 @@ def iter_nmea_blocks(
     progress: Callable[[int], object] | None = None,
     name: str | None = None,
     opener: Callable[[], IO[bytes]] | None = None,
+    size_hint: int | None = None,
 ) -> Iterator[Block]:
     """Stream an NMEA text file as resolved blocks with bounded memory.
 
@@ -66,8 +76,9 @@ def iter_nmea_blocks(
     called in examples, events and errors (default its path; the log as given where
     ``path`` is its decompressed copy).  ``opener``: the log is the stream it opens (a
     compressed log decompressed as it is read, :mod:`dracc.ingest.compressed`), read in
-    one process in pieces of the same sizes (:func:`stream_pieces`); ``path`` only names
-    it.  Raises IngestError in ``cfg.strict`` mode at the first rejected line.
+    pieces of the same sizes (:func:`stream_pieces`), by the workers where its
+    ``size_hint`` (its expected size) would have them; ``path`` only names it.  Raises
+    IngestError in ``cfg.strict`` mode at the first rejected line.
     """
     path = Path(path)
     file = str(path) if name is None else name
@@ -84,7 +95,7 @@ def iter_nmea_blocks(
     st.events.gap_s = cfg.gap_s
     st.events.tolerance_s = cfg.backstep_tolerance_s
     max_line = int(getattr(cfg, "max_line_bytes", MAX_LINE_BYTES))
-    size = 0 if opener is not None else path.stat().st_size
+    size = (size_hint or 0) if opener is not None else path.stat().st_size
     nworkers = (
         workers if workers is not None else (2 if size >= PARALLEL_MIN_BYTES and pool_ok() else 1)
     )
@@ -141,79 +152,113 @@ def iter_nmea_blocks(
                 progress(nbytes)
             yield Block(frames, pb.n_lines, line0, nbytes)
 
-    at_eof = [i == len(ranges) - 1 for i in range(len(ranges))]
-
-    def local(i: int) -> ParsedBlock:
-        off, ln, too_long = ranges[i]
-        return parse_range(str(path), off, ln, cfg.ignore_checksum, at_eof[i], max_line, too_long)
-
+    with ExitStack() as stack:
+        if opener is not None:
+            fh = stack.enter_context(opener())
+            first = block_bytes or (MAIN_FIRST_BLOCK_BYTES if nworkers > 1 else FIRST_BLOCK_BYTES)
+            jobs = _stream_jobs(
+                fh, first, block_bytes or BLOCK_BYTES, cfg.ignore_checksum, max_line
+            )
+        else:
+            jobs = _file_jobs(path, ranges, cfg.ignore_checksum, max_line)
+        if nworkers <= 1 or (opener is None and len(ranges) <= 1):
+            for job in jobs:
+                yield from handle(job.local(), job.nbytes)
+        else:
+            yield from _pooled(jobs, nworkers, 2 * size, handle, st)
     if opener is not None:
-        with opener() as fh:
-            first, later = block_bytes or FIRST_BLOCK_BYTES, block_bytes or BLOCK_BYTES
-            for piece in stream_pieces(fh.read, first, later, max_line):
-                yield from handle(parse_piece(piece, cfg.ignore_checksum, max_line), piece.nbytes)
-        trim_heap()  # the parse's buffers were this process's (no workers): given back
-    elif nworkers <= 1 or len(ranges) <= 1:
-        for i, (_off, ln, _long) in enumerate(ranges):
-            yield from handle(local(i), ln)
-    else:
-        # at most nworkers + 2 blocks in flight; a broken pool (a worker killed, e.g. out of
-        # memory) falls back to parsing the remaining blocks in this process
-        pending = list(range(len(ranges)))
-        broken = False
-        with (
-            handover_dir(2 * size) as folder,
-            ProcessPoolExecutor(
-                max_workers=nworkers, initializer=worker_init, initargs=(os.getpid(),)
-            ) as ex,
-        ):
-            futures = []
+        trim_heap()  # the pieces read (and parsed) here: their buffers given back
+    yield from _release(st.timebase.finish())
 
-            def submit() -> None:
-                i = pending.pop(0)
-                off, ln, too_long = ranges[i]
-                fut = (
-                    None
-                    if too_long
-                    else ex.submit(
-                        parse_range_to_file,
-                        folder,
-                        i,
-                        str(path),
-                        off,
-                        ln,
-                        cfg.ignore_checksum,
-                        at_eof[i],
-                        max_line,
-                    )
-                )
-                futures.append((fut, i))  # None: read here (a line too long: a few bytes)
 
-            # the first block is parsed here while the workers start and take the next ones
-            i0 = pending.pop(0)
-            while pending and len(futures) < nworkers + 2:
-                submit()
-            yield from handle(local(i0), ranges[i0][1])
-            while futures:
-                fut, i = futures.pop(0)
+@dataclass
+class _Job:
+    """One block to parse: here (``local``) or by a worker (``remote``: the function and
+    its arguments after the hand-over folder and the block's number; None: here only)."""
+
+    i: int
+    nbytes: int
+    local: Callable[[], ParsedBlock]
+    remote: tuple[Any, ...] | None
+
+
+def _file_jobs(
+    path: Path, ranges: list[tuple[int, int, bool]], ignore_checksum: bool, max_line: int
+) -> Iterator[_Job]:
+    """The blocks of a file (:func:`block_ranges`); a line too long is read here."""
+    for i, (off, ln, too_long) in enumerate(ranges):
+        at_eof = i == len(ranges) - 1
+        args = (str(path), off, ln, ignore_checksum, at_eof, max_line)
+        remote = None if too_long else (parse_range_to_file, *args)
+        yield _Job(i, ln, partial(parse_range, *args, too_long), remote)
+
+
+def _stream_jobs(
+    fh: IO[bytes], first: int, later: int, ignore_checksum: bool, max_line: int
+) -> Iterator[_Job]:
+    """The pieces of a stream (:func:`stream_pieces`) as they are read; a line too long
+    is read here."""
+    for i, piece in enumerate(stream_pieces(fh.read, first, later, max_line)):
+        args = (piece.data, ignore_checksum, piece.at_eof, max_line)
+        remote = None if piece.long is not None else (parse_bytes_to_file, *args)
+        yield _Job(i, piece.nbytes, partial(parse_piece, piece, ignore_checksum, max_line), remote)
+
+
+def _pooled(
+    jobs: Iterator[_Job],
+    nworkers: int,
+    room: int,
+    handle: Callable[[ParsedBlock, int], Iterator[Block]],
+    st: StreamState,
+) -> Iterator[Block]:
+    """The blocks of ``jobs`` parsed by ``nworkers`` worker processes, at most
+    ``nworkers + 2`` in flight, handed over in a folder with ``room`` bytes
+    (:func:`handover_dir`), resolved in order by ``handle``; the first is parsed here
+    while the workers start.  A broken pool (a worker killed, e.g. out of memory) falls
+    back to parsing the remaining blocks in this process."""
+    broken = False
+    with (
+        handover_dir(room) as folder,
+        ProcessPoolExecutor(
+            max_workers=nworkers, initializer=worker_init, initargs=(os.getpid(),)
+        ) as ex,
+    ):
+        futures: deque[tuple[Future[Any] | None, _Job]] = deque()
+        upcoming = next(jobs, None)
+
+        def submit() -> None:
+            nonlocal upcoming, broken
+            assert upcoming is not None
+            job, upcoming = upcoming, next(jobs, None)
+            fut = None  # None: parsed here
+            if job.remote is not None and not broken:
                 try:
-                    pb = load_parsed(fut.result()) if fut is not None and not broken else None
+                    fut = ex.submit(job.remote[0], folder, job.i, *job.remote[1:])
                 except BrokenProcessPool:
                     broken = True
-                    pb = None
-                if pb is None:
-                    pb = local(i)
-                if pending and not broken:
-                    try:
-                        submit()
-                    except BrokenProcessPool:
-                        broken = True
-                if broken and pending and not futures:
-                    futures.append((None, pending.pop(0)))
-                yield from handle(pb, ranges[i][1])
-        if broken:
-            st.stats["pool_fallback"] += 1
-    yield from _release(st.timebase.finish())
+            futures.append((fut, job))
+
+        first, upcoming = upcoming, next(jobs, None)
+        if first is None:
+            return
+        while upcoming is not None and len(futures) < nworkers + 2:
+            submit()
+        yield from handle(first.local(), first.nbytes)
+        while futures:
+            fut, job = futures.popleft()
+            pb = None
+            if fut is not None and not broken:
+                try:
+                    pb = load_parsed(fut.result())
+                except BrokenProcessPool:
+                    broken = True
+            if pb is None:
+                pb = job.local()
+            if upcoming is not None:
+                submit()
+            yield from handle(pb, job.nbytes)
+    if broken:
+        st.stats["pool_fallback"] += 1
 
 
 def _also_in_position(
@@ -319,16 +364,20 @@ def read_nmea(
     progress: Callable[[int], object] | None = None,
     workers: int | None = None,
     opener: Callable[[], IO[bytes]] | None = None,
+    size_hint: int | None = None,
 ) -> FileResult:
     """Read a whole NMEA 0183 text file into a :class:`FileResult` (frames sorted by time);
-    ``opener``: from the stream it opens, ``path`` naming it (:func:`iter_nmea_blocks`)."""
+    ``opener``, ``size_hint``: from the stream it opens, ``path`` naming it
+    (:func:`iter_nmea_blocks`)."""
     path = Path(path)
     if opener is None:
         check_readable(path)
     st = StreamState(str(path))
     blocks = [
         b.frames
-        for b in iter_nmea_blocks(path, cfg, st, progress=progress, workers=workers, opener=opener)
+        for b in iter_nmea_blocks(
+            path, cfg, st, progress=progress, workers=workers, opener=opener, size_hint=size_hint
+        )
     ]
     frames = concat_blocks(blocks)
     res = FileResult(
