@@ -19,6 +19,7 @@ from rich.table import Table
 from rich.text import Text
 
 from dracc.core.safetext import printable
+from dracc.ingest.live.sources import KERNEL_DROPPED
 
 #: channels of the deviation statistics as the view names them, with their unit
 _CHANNELS = {"lat": ("latitude", "m"), "lon": ("longitude", "m"), "course": ("course", "°")}
@@ -37,6 +38,9 @@ def _head(st: dict[str, Any]) -> Text:
     t.append(f"  since {st['started_utc']}  now {st['now_utc']}  ")
     t.append(f"{st['received']:,} lines heard")
     t.append(f", {dropped:,} dropped" if dropped else "", style="yellow")
+    kernel = st.get("dropped", {}).get(KERNEL_DROPPED, 0)
+    if kernel:  # not dracc's choice: the machine could not keep up
+        t.append(f" ({kernel:,} by the kernel: its receive buffer was full)", style="bold red")
     if st.get("recording"):
         t.append(f"  recording {printable(st['recording'])}")
     return t

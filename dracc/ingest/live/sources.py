@@ -12,7 +12,10 @@ lines dropped) and ``close()``; ``rejected`` counts what was dropped, by reason:
 * ``too_long``: a line longer than ``max_line_bytes`` (never held whole on a stream: its
   bytes are skipped up to the next line end);
 * ``truncated``: a UDP datagram larger than the receive buffer (cut by the kernel);
-* ``partial``: the unfinished last line of a TCP connection that closed.
+* ``partial``: the unfinished last line of a TCP connection that closed;
+* ``kernel_dropped``: UDP datagrams the kernel dropped before dracc could read them, its
+  receive buffer full (Linux ``SO_RXQ_OVFL``: the count comes with the next datagram
+  received, so drops after the last one are seen when another one arrives).
 
 No source ever transmits: the UDP socket is only bound (a multicast group is joined only
 where the host is a multicast address *and* ``allow_multicast=True``), the TCP client
@@ -33,6 +36,7 @@ import os
 import selectors
 import socket
 import struct
+import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -78,6 +82,15 @@ def _is_multicast(host: str) -> bool:
         return False
 
 
+#: the reason of the datagrams the kernel dropped (its receive buffer full)
+KERNEL_DROPPED = "kernel_dropped"
+#: the socket option that has Linux hand its drop count with each datagram (not in
+#: Python's socket module everywhere; 40 on Linux)
+SO_RXQ_OVFL: int | None = getattr(
+    socket, "SO_RXQ_OVFL", 40 if sys.platform.startswith("linux") else None
+)
+
+
 class UdpSource(LiveSource):
     """Datagrams received on ``HOST:PORT`` (bound; port 0 picks a free one, see
     ``address``), each one or more lines, an IEC 61162-450 ``UdPbC\\0`` header stripped."""
@@ -98,6 +111,8 @@ class UdpSource(LiveSource):
         self.clock = clock
         self.datagrams = 0  #: datagrams received
         self.iec450 = 0  #: of which IEC 61162-450 (``UdPbC\0``)
+        self._drops_seen = 0  #: the kernel's count of drops, as last received (uint32)
+        self._ancillary = 0  #: room for the drop count beside each datagram (0: not asked)
         multicast = _is_multicast(host)
         if multicast and not allow_multicast:
             raise IngestError(
@@ -114,6 +129,10 @@ class UdpSource(LiveSource):
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             with contextlib.suppress(OSError):
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RCVBUF_BYTES)
+            if SO_RXQ_OVFL is not None:  # the kernel's drops, with each datagram (Linux)
+                with contextlib.suppress(OSError):
+                    sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
+                    self._ancillary = socket.CMSG_SPACE(4)
             sock.bind(infos[0][4])
             if multicast:
                 if family == socket.AF_INET6:
@@ -154,21 +173,32 @@ class UdpSource(LiveSource):
             else:
                 out.append((recv_ns, line))
 
+    def _kernel_drops(self, anc: list[tuple[int, int, bytes]]) -> None:
+        """The kernel's running count of datagrams it dropped on this socket (uint32,
+        wrapping), counted as ``kernel_dropped``."""
+        for level, kind, data in anc:
+            if level == socket.SOL_SOCKET and kind == SO_RXQ_OVFL and len(data) >= 4:
+                (total,) = struct.unpack("=I", data[:4])
+                self.rejected[KERNEL_DROPPED] += (total - self._drops_seen) % 2**32
+                self._drops_seen = total
+
     def poll(self, timeout_s: float = 0.0) -> list[Line]:
         out: list[Line] = []
         if self.closed:
             return out
         if not self.selector.select(timeout_s):
             return out
-        recv = self.sock.recvmsg
+        recv, room = self.sock.recvmsg, self._ancillary
         while len(out) < self.max_lines:
             try:
-                data, _, flags, _ = recv(DATAGRAM_BYTES)
+                data, anc, flags, _ = recv(DATAGRAM_BYTES, room)
             except (BlockingIOError, InterruptedError):
                 break
             except OSError as err:  # e.g. ICMP errors reported on the socket: not fatal
                 self.rejected[f"error_{errno.errorcode.get(err.errno or 0, 'os')}"] += 1
                 break
+            if anc:
+                self._kernel_drops(anc)
             self._datagram(self.clock(), data, flags, out)
         self.lines += len(out)
         return out
