@@ -70,7 +70,7 @@ FORM_NAMES = {
     "n2k-candump": "candump",
     "plain": "canboat plain",
 }
-PIECE_BYTES = 32 * 1024 * 1024  #: bytes of the log looked at at a time
+PIECE_BYTES = 8 * 1024 * 1024  #: bytes of the log looked at at a time
 Opener = Callable[[], IO[bytes]]
 __all__ = ["MixedForms", "add_n2k_lines", "read_text_log", "take_n2k_lines", "take_off"]
 
