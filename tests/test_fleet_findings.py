@@ -190,22 +190,26 @@ def test_audit_documents_give_the_raw_logs_findings_and_counts(raw, fleet, tmp_p
     _audit(log, *FAULTY, tmp_path / "brief.sqlite", docs / "brief.json", "--brief")
     assert json.loads((docs / "brief.json").read_text())["analysis"] is None
     shutil.copy(tmp_path / "full.sqlite", docs / "state.sqlite")
+    # together, the three are one night given three times: the first audit document's is
+    # kept (brief.json, in the order the folder is read), the database's left out
     got = run_fleet(discover([docs]), load_config(None), tmp_path / "out", workers=1)
-    assert got.documents == 3 and not got.failures
+    assert got.documents == 1 and not got.failures and len(got.duplicates) == 2
+    assert set(got.table["log"]) == {f"brief.json#{FAULTY[1]}"}
     want = _rows(res.findings[res.findings["vessel"] == FAULTY[0]])
     want = {r for r in want if r[1] == FAULTY[1]}
     assert {(r[3], r[4]) for r in want} >= {("frozen", "INS2"), ("jump", "GNSS")}
     raw_counts = res.integrity[
         (res.integrity["vessel"] == FAULTY[0]) & (res.integrity["night"].astype(str) == FAULTY[1])
     ][list(INTEGRITY_COLUMNS[3:])].iloc[0]
-    for doc in ("full.json", "brief.json", "state.sqlite"):
+    for doc in ("full.json", "brief.json", "state.sqlite"):  # each alone
+        got = run_fleet(discover([docs / doc]), load_config(None), tmp_path / doc, workers=1)
+        assert got.documents == 1 and not got.failures
         log_name = f"{doc}#{FAULTY[1]}"
         assert _rows(got.findings[got.findings["log"] == log_name]) == want, doc
         counts = got.integrity[got.integrity["log"] == log_name][list(INTEGRITY_COLUMNS[3:])]
-        if doc == "state.sqlite":
-            assert counts.isna().all(axis=None)
+        notes = got.findings[got.findings["status"] == "not_checked"]
+        if doc == "state.sqlite":  # the database keeps no counts, nor the checks not made
+            assert counts.isna().all(axis=None) and notes.empty
         else:
             assert counts.iloc[0].tolist() == raw_counts.tolist(), doc
-    # the checks not made: the documents list them, the database keeps none
-    notes = got.findings[got.findings["status"] == "not_checked"]
-    assert set(notes["log"]) == {f"full.json#{FAULTY[1]}", f"brief.json#{FAULTY[1]}"}
+            assert set(notes["log"]) == {log_name}

@@ -349,3 +349,20 @@ def test_an_interrupt_stops_a_long_query_at_once(shared_out):
     finally:
         timer.cancel()
     assert time.monotonic() - t0 < 10.0
+
+
+def test_out_of_memory_says_nothing_spills_to_disk():
+    """No temp_directory: a query larger than memory fails in one line saying so, where
+    DuckDB's own message suggests a SET that is refused."""
+    from dracc.pipeline.fleet.query import _one_line
+
+    e = duckdb.OutOfMemoryException(
+        "Out of Memory Error: could not allocate block of size 256.0 KiB (95.2 MiB/95.3 MiB "
+        "used)\nDatabase is launched in in-memory mode and no temporary directory is "
+        "specified.\nUnused blocks cannot be offloaded to disk.\n\nLaunch the database with "
+        "a persistent storage back-end\nOr set SET temp_directory='/path"
+    )
+    msg = _one_line(duckdb, e, "out", ["fleet"])
+    assert "\n" not in msg and "temp_directory" not in msg
+    assert msg.startswith("Out of Memory Error: could not allocate block of size 256.0 KiB")
+    assert msg.endswith("it spills nothing to disk; narrow it (WHERE, fewer columns)")

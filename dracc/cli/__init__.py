@@ -87,7 +87,9 @@ def quick_exit(code: int) -> None:
     """End the process now.  The command has written, closed and renamed everything; what
     normal interpreter shutdown would add is freeing the frames of a voyage object by
     object and running exit hooks with nothing left to do: 0.1-0.3 s after a day's log
-    (benchmarks/bench_analyze.py).  Only the standard streams need flushing."""
+    (benchmarks/bench_analyze.py).  Only the standard streams need flushing; a SIGINT or
+    SIGTERM is held from here (in the shutdown it was exit 143 without a word, issue 33)."""
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()

@@ -14,7 +14,7 @@ from pathlib import Path
 import typer
 from typer.core import TyperGroup
 
-from dracc.cli.app import app, err, out, progress
+from dracc.cli.app import QUICK_EXIT, app, err, out, progress
 from dracc.cli.options import ConfigFile, check_choice, check_pattern
 from dracc.core import atomic
 from dracc.core.config import load_config
@@ -24,6 +24,7 @@ from dracc.report.fleet_html import fleet_html
 from dracc.report.fleet_tables import (
     counts_text,
     csv_text,
+    input_lines,
     json_lines,
     result_text,
     write_tables,
@@ -137,18 +138,14 @@ def fleet_cmd(
         print_fleet(res, out)
         lay = layout(err)  # a terminal: wrap on spaces; a pipe or journald: a line each
         width = lay.width if lay.tty else 1 << 30
-        for f in res.skipped:
-            print_lines(
-                err,
-                wrap(f"skipped: {f['vessel']}/{f['log']} — not a log: {f['why']}", width, hang=2),
-            )
-        for f in res.failures:
-            print_lines(err, wrap(f"failed: {f['vessel']}/{f['log']}: {f['error']}", width, hang=2))
+        for said in input_lines(res):
+            print_lines(err, wrap(said, width, hang=2))
         print_lines(
             err, wrap(f"{counts_text(res)}; tables and fleet.html in {target}", width, hang=2)
         )
     except KeyboardInterrupt:
         raise Interrupted(done) from None
+    QUICK_EXIT["on"] = True  # the exit follows at once, signals held (cli.quick_exit)
     return int(ExitCode.INPUT if res.failures or not res.logs else ExitCode.OK)
 
 

@@ -14,6 +14,9 @@ previous set or the complete new one::
     OUT/.current    -> .runs/set-<time>-<id>    (replaced atomically to publish)
     OUT/.runs/set-<time>-<id>/fleet.csv ...     (the sets: the current and the previous one)
 
+These names are dracc's own: a link planted in their place is replaced, never followed
+(``OUT/.runs`` must be a folder, :func:`own_folder`; issue 33).
+
 A write that fails for a reason of the disk or the folder (full, read-only, not allowed,
 a file where a folder is to be, or the reverse) raises :class:`~dracc.core.errors.OutputError`
 (one line naming the output and why, exit 6) after the temporary files are removed;
@@ -361,7 +364,10 @@ def _adopt(folder: Path, names: list[str]) -> None:
 
 def _collect(runs: Path, keep: set[str]) -> None:
     """Remove the sets and staging folders nobody needs: not ``keep``, and not being
-    written by a live process."""
+    written by a live process.  Nothing is removed where ``runs`` has become a link
+    meanwhile (:func:`own_folder`); a link inside it is removed, never followed."""
+    if not stat.S_ISDIR(os.lstat(runs).st_mode):
+        return
     for entry in os.listdir(runs):
         if entry in keep:
             continue
@@ -372,7 +378,10 @@ def _collect(runs: Path, keep: set[str]) -> None:
                 pid = 0
             if pid and pid != os.getpid() and _alive(pid):
                 continue
-        shutil.rmtree(runs / entry, ignore_errors=True)
+        if os.path.islink(runs / entry):
+            _discard(runs / entry)  # the link, never what it leads to
+        else:
+            shutil.rmtree(runs / entry, ignore_errors=True)
 
 
 def _alive(pid: int) -> bool:
@@ -409,9 +418,28 @@ def file_set(folder: str | Path, published: list[str] | None = None) -> Iterator
         yield from _file_set(folder, published)
 
 
+def own_folder(path: str | Path) -> Path:
+    """``path``, made if missing (``mkdir -p``), checked to be a folder of its own and not
+    a symbolic link: a link planted there (``OUT/.runs -> ~``) would take dracc's writes,
+    and its removal of old sets, out of the output folder (issue 33).  Anything else is an
+    :class:`OutputError` saying what is in the way."""
+    path = Path(path)
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        path.mkdir(parents=True, exist_ok=True)
+        mode = os.lstat(path).st_mode
+    if stat.S_ISDIR(mode):
+        return path
+    what = f"a symbolic link (to {os.readlink(path)})" if stat.S_ISLNK(mode) else "not a folder"
+    raise OutputError(
+        f"cannot write {path.parent}: {path} is {what}, not dracc's own folder; "
+        "dracc follows no link there: remove it"
+    )
+
+
 def _file_set(folder: Path, published: list[str] | None) -> Iterator[Path]:
-    runs = folder / RUNS
-    runs.mkdir(parents=True, exist_ok=True)
+    runs = own_folder(folder / RUNS)
     stage = Path(tempfile.mkdtemp(prefix=f"tmp-{os.getpid()}-", dir=runs))
     os.chmod(stage, 0o777 & ~_umask())  # mkdtemp makes 0700; outputs get the usual mode
     try:

@@ -24,6 +24,7 @@ from dracc import __version__
 from dracc.core import atomic
 from dracc.core.errors import FleetError
 from dracc.core.numbers import jsonable
+from dracc.core.safetext import printable
 from dracc.core.timefmt import iso_utc
 from dracc.pipeline.fleet.query import COLUMNS_KEY, PART_FILE, PARTITIONS, TABLES, hive_value
 from dracc.pipeline.fleet.tables import FleetResult
@@ -40,9 +41,27 @@ def csv_text(df: pd.DataFrame) -> str:
     """``df`` as CSV for a spreadsheet (:func:`dracc.report.tables.csv_ready`): times as
     ISO 8601 UTC with ``Z``, dates ``YYYY-MM-DD``, and a text cell starting with ``=``,
     ``+``, ``-``, ``@``, a tab or a CR (a vessel or file name, an error message) with a
-    leading single quote, so that no cell is read as a formula.  Numbers are left alone
+    leading single quote, so that no cell is read as a formula; every control character
+    of a text (ESC, a line break, bidi controls) escaped as on the terminal
+    (:func:`dracc.core.safetext.printable`: ``\x1b``), so that a ship's name reaches
+    no terminal, ``grep`` or line-based reader raw (issue 33).  Numbers are left alone
     (-0.5 stays a number); Parquet keeps the raw text and the typed columns."""
-    return csv_ready(df).to_csv(index=False)
+    return csv_ready(_printable_texts(df)).to_csv(index=False)
+
+
+def _printable_texts(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` with the text cells that hold a control character escaped (each distinct
+    value once: the names repeat on every row)."""
+    out = df
+    for col in df.columns:
+        c = df[col]
+        if not (pd.api.types.is_string_dtype(c) or c.dtype == object):
+            continue
+        raw = [v for v in pd.unique(c.dropna()) if isinstance(v, str) and not v.isprintable()]
+        if raw:
+            out = out.copy() if out is df else out
+            out[col] = c.replace({v: printable(v) for v in raw})
+    return out
 
 
 #: the longest file name most file systems take (bytes)
@@ -159,8 +178,10 @@ def write_tables(
             "documents": result.documents,
             "failed": len(result.failures),
             "skipped": len(result.skipped),
+            "duplicates": len(result.duplicates),
             "failures": list(result.failures),
             "skipped_files": list(result.skipped),
+            "duplicate_inputs": list(result.duplicates),
         }
         put(Path("fleet.json"), json.dumps(summary, indent=1, ensure_ascii=False) + "\n")
         for name, text in (extra or {}).items():
@@ -171,17 +192,31 @@ def write_tables(
 
 def counts_text(res: FleetResult) -> str:
     """'fleet: 52 logs: 50 analysed, 0 from the cache, 2 failed; 1 file skipped (not a
-    log)': the terms add up to the logs; the skipped files are apart."""
+    log); 1 night given twice left out': the terms add up to the logs; the skipped files
+    and the nights given twice (:func:`~dracc.pipeline.fleet.tables.drop_duplicate_nights`)
+    are apart."""
     docs = f"{res.documents} from audit documents, " if res.documents else ""
     skipped = (
         f"; {len(res.skipped)} file{'s' if len(res.skipped) != 1 else ''} skipped (not a log)"
         if res.skipped
         else ""
     )
+    n = len(res.duplicates)
+    twice = f"; {n} night{'s' if n != 1 else ''} given twice left out" if n else ""
     return (
         f"fleet: {res.logs} log{'s' if res.logs != 1 else ''}: {res.analysed} analysed, "
-        f"{res.cached} from the cache, {docs}{len(res.failures)} failed{skipped}"
+        f"{res.cached} from the cache, {docs}{len(res.failures)} failed{skipped}{twice}"
     )
+
+
+def input_lines(res: FleetResult) -> list[str]:
+    """What stderr says of the inputs after the table: one line per file skipped (no log),
+    per night given twice and left out, and per log or document that failed, each a single
+    line (a line break or ESC in a ship's name escaped, :func:`dracc.core.safetext.printable`)."""
+    said = [f"skipped: {f['vessel']}/{f['log']} — not a log: {f['why']}" for f in res.skipped]
+    said += [f"left out: {f['vessel']}/{f['log']} — {f['why']}" for f in res.duplicates]
+    said += [f"failed: {f['vessel']}/{f['log']}: {f['error']}" for f in res.failures]
+    return [printable(line) for line in said]
 
 
 # ------------------------------------------------------------- dracc fleet query results
@@ -236,7 +271,8 @@ def result_text(df: pd.DataFrame, lay: Layout) -> str:
             return "NULL"
         if isinstance(v, float):
             return f"{v:.6g}"
-        return v if isinstance(v, str) else json.dumps(v, ensure_ascii=False)
+        # one line per row: a line break in a name is escaped like any control character
+        return printable(v if isinstance(v, str) else json.dumps(v, ensure_ascii=False))
 
     rows = [[text(v) for v in row] for row in df.itertuples(index=False, name=None)]
     n = len(rows)

@@ -512,7 +512,7 @@ def _ranking_lines(page: Page, ranking) -> None:
         )
     headers, right, prio = zip(*_RANKING_COLUMNS, strict=True)
     title = f"fleet ranking: {len(found)} of {len(ranking)} stand out (q < 0.05)"
-    page.table(headers, rows, right=right, priorities=prio, title=title)
+    page.table(headers, _names_escaped(rows), right=right, priorities=prio, title=title)
     page.blank()
 
 
@@ -551,9 +551,16 @@ def _fleet_page(res: FleetResult, lay: Layout) -> Page:
         "fleet: latest night per vessel, unit and channel (RMS error: the ranking's figure "
         "of that night; m_y, a priori, verdict: the mean of three's rule)"
     )
-    page.table(headers, rows, right=right, priorities=prio, title=title)
+    page.table(headers, _names_escaped(rows), right=right, priorities=prio, title=title)
     _findings_lines(page, res.findings)
     return page
+
+
+def _names_escaped(rows: Sequence[Sequence[str]]) -> list[tuple[str, ...]]:
+    """The fleet's cells with every control character escaped, a line break too: vessel,
+    unit and source names come from ships, and a table cell may hold several lines, so
+    a name ``'X\\nall within limits'`` would print a line of its own (issue 33)."""
+    return [tuple(map(printable, row)) for row in rows]
 
 
 #: findings named on the terminal (findings.csv and fleet.html list them all)
@@ -566,7 +573,7 @@ def _findings_lines(page: Page, findings) -> None:
     if not len(failed):
         return
     named = [
-        f"{r['vessel']} {r['night']} {r['name']} {r['source']}"
+        printable(f"{r['vessel']} {r['night']} {r['name']} {r['source']}")
         for _, r in failed.head(_FINDINGS_SHOWN).iterrows()
     ]
     more = len(failed) - len(named)

@@ -49,7 +49,13 @@ from dracc.pipeline.fleet.findings import (
     night_findings,
 )
 from dracc.pipeline.fleet.ranking import measures_frame, rank_fleet, ranking_config
-from dracc.pipeline.fleet.tables import FleetResult, fleet_table, fleet_trends, night_of_summary
+from dracc.pipeline.fleet.tables import (
+    FleetResult,
+    drop_duplicate_nights,
+    fleet_table,
+    fleet_trends,
+    night_of_summary,
+)
 from dracc.pipeline.fleet.tasks import LogTask
 
 if TYPE_CHECKING:
@@ -134,6 +140,20 @@ def cache_path(out: Path, task: LogTask, settings: str) -> Path:
     return out / "cache" / sha[:2] / f"{sha}-{settings[:16]}.json"
 
 
+def check_own_folders(out: Path) -> None:
+    """``OUT/cache`` (and its folders) and ``OUT/.runs`` are dracc's own: a symbolic link
+    planted there would have summaries read from and written to elsewhere, or old sets
+    removed there; it is an OutputError before any log is read, never followed (issue 33).
+    Those not made yet are made by their first write."""
+    for name in ("cache", atomic.RUNS):
+        if os.path.lexists(out / name):
+            atomic.own_folder(out / name)
+    if os.path.isdir(out / "cache"):
+        for entry in os.scandir(out / "cache"):
+            if entry.is_symlink():
+                atomic.own_folder(entry.path)  # says what it is and where it leads
+
+
 def _read_cache(p: Path) -> dict | None:
     try:
         doc = json.loads(p.read_text(encoding="utf-8"))
@@ -163,18 +183,20 @@ def run_fleet(
     ``analyser`` must be a picklable module-level function (tests replace it).
     """
     out = Path(out)
+    check_own_folders(out)
     settings = fleet_settings_sha256(cfg)
     seeds = apriori_seeds(cfg)
     rc = ranking_config(cfg)
     # audit documents and databases: their nights are read, not analysed
     n_inputs = len(tasks)
     tasks, summaries, failures = expand_documents(tasks)
-    from_documents = len(summaries)
+    documents = frozenset(summaries)  # the nights read from documents
     n_documents = n_inputs - sum(1 for t in tasks if t.path not in summaries)
     if progress and n_documents:
         progress(n_documents)
     todo: list[LogTask] = []
     skipped: dict[str, str] = {}  # path -> what the file is: no log, not analysed, listed
+    from_cache: set[str] = set()
     for t in tasks:
         if t.path in summaries:
             continue
@@ -192,9 +214,9 @@ def run_fleet(
             todo.append(t)
         else:
             summaries[t.path] = s
+            from_cache.add(t.path)
             if progress:
                 progress(1)
-    cached = len(summaries) - from_documents
 
     def done(task: LogTask, result: dict) -> None:
         if result.get("ok"):
@@ -229,7 +251,12 @@ def run_fleet(
             _run_dask(todo, cfg, scheduler, connect_timeout_s, analyser, done)
         else:
             _run_local(todo, cfg, workers or os.cpu_count() or 1, analyser, done)
-    analysed = len(summaries) - from_documents - cached  # this run's, that succeeded
+    # a night given twice (its log and its document, a document twice) is shown once
+    tasks, duplicates = drop_duplicate_nights(tasks, summaries, documents)
+    kept = {t.path for t in tasks if t.path in summaries}
+    from_documents = len(kept & documents)
+    cached = len(kept & from_cache)
+    analysed = len(kept) - from_documents - cached  # this run's, that succeeded
     table = fleet_table(tasks, summaries, failures, seeds)
     ranking = rank_fleet(
         measures_frame(
@@ -260,6 +287,7 @@ def run_fleet(
         ranking,
         skipped=passed,
         documents=from_documents,
+        duplicates=duplicates,
         findings=findings_table(tasks, summaries),
         integrity=integrity_table(tasks, summaries),
     )

@@ -102,6 +102,9 @@ class FleetResult:
     #: analysed, not in the tables, not counted among the logs
     skipped: tuple[dict, ...] = ()
     documents: int = 0  #: nights read from audit documents and databases (not analysed)
+    #: inputs left out as a night already in the tables (:func:`drop_duplicate_nights`):
+    #: {"vessel", "log", "path", "why"}; not in the tables, not counted among the logs
+    duplicates: tuple[dict, ...] = ()
     #: each night's findings and checks not made
     #: (:data:`dracc.pipeline.fleet.findings.FINDING_COLUMNS`)
     findings: pd.DataFrame = field(default_factory=pd.DataFrame)
@@ -157,6 +160,55 @@ def night_figures(s: Mapping) -> dict[tuple[str, str], tuple[float, str]]:
         if ch is not None and r.get("value") is not None:
             out[(str(r.get("unit")), ch)] = (float(r["value"]), str(r.get("method") or ""))
     return out
+
+
+#: which of two inputs of one vessel and night is kept: a log's own analysis, then an
+#: audit document (it carries the night's integrity counts), then a database's night
+_SOURCE_RANK = {"dracc.audit/1": 1, "dracc.audit.state": 2}
+
+
+def drop_duplicate_nights(
+    tasks: Sequence[LogTask], summaries: Mapping[str, dict], documents: frozenset[str]
+) -> tuple[list[LogTask], tuple[dict, ...]]:
+    """``tasks`` without the inputs that repeat a vessel's night (issue 33: a night came
+    2-3 times into fleet.csv), and what was left out, with why.  A night is shown by the
+    logs of that night, each once (a second file with the same bytes is left out), or,
+    without a log, by one document's night (an audit document before a database's, then
+    the first given): a document of a night whose log is analysed too, or a second copy of
+    a document, is left out.  ``documents``: the task paths of document nights.  Failed
+    and unread inputs are kept (they have no night)."""
+
+    def rank(i: int) -> int:
+        path = tasks[i].path
+        return _SOURCE_RANK.get(str(summaries[path].get("schema")), 3) if path in documents else 0
+
+    groups: dict[tuple[str, str], list[int]] = {}
+    for i, t in enumerate(tasks):
+        night = night_of_summary(summaries[t.path]) if t.path in summaries else None
+        if night is not None:
+            groups.setdefault((t.vessel, night), []).append(i)
+    dropped: dict[int, str] = {}
+    for (_, night), members in groups.items():
+        members.sort(key=lambda i: (rank(i), i))
+        first = tasks[members[0]]
+        logs_seen: dict[str | None, LogTask] = {}
+        for i in members[1:] if rank(members[0]) else members:
+            t = tasks[i]
+            if rank(i) == 0 and t.sha256 not in logs_seen:
+                logs_seen[t.sha256] = t
+            elif rank(i) == 0:
+                same = logs_seen[t.sha256]
+                dropped[i] = f"the same bytes as {same.vessel}/{same.log} (night {night})"
+            elif rank(members[0]) == 0:
+                dropped[i] = f"night {night} is analysed from its log {first.vessel}/{first.log}"
+            else:
+                dropped[i] = f"night {night} is read from {first.vessel}/{first.log} already"
+    kept = [t for i, t in enumerate(tasks) if i not in dropped]
+    left = tuple(
+        {"vessel": tasks[i].vessel, "log": tasks[i].log, "path": tasks[i].path, "why": why}
+        for i, why in sorted(dropped.items())
+    )
+    return kept, left
 
 
 def _pct(x):
