@@ -166,9 +166,19 @@ def _epoch_indices(
     """The first sample at or after each multiple of ``epoch_interval_s``, where it is at
     most ``max_gap_s`` late and on a leg."""
     epoch_dt = epoch_interval_s
-    check_work("dead_reckoning", "epoch_interval_s", epoch_dt, float(t[-1] - t[0]))
+    # the grid only where a sample can follow within max_gap_s: a stray record years away
+    # asks for no grid over the silence (the same epochs as one grid over the whole span)
+    cut = np.flatnonzero(np.diff(t) > max_gap_s) + 1
+    lo = np.concatenate(([t[0]], t[cut] - max_gap_s))
+    hi = np.concatenate((t[cut - 1], [t[-1]]))
+    check_work("dead_reckoning", "epoch_interval_s", epoch_dt, float(np.sum(hi - lo)))
     n = t.size
-    grid = np.arange(math.ceil(t[0] / epoch_dt) * epoch_dt, t[-1] + 1e-9, epoch_dt)
+    grid = np.concatenate(
+        [
+            np.arange(math.ceil(a / epoch_dt) * epoch_dt, b + 1e-9, epoch_dt)
+            for a, b in zip(lo, hi, strict=True)
+        ]
+    )
     ei = np.searchsorted(t, grid, side="left")
     inside = ei < n
     ei, grid = ei[inside], grid[inside]
