@@ -61,7 +61,7 @@ def test_console_script_runs_as_module():
 
 def test_exit_codes_are_stable():
     # Documented in the README; scripts and cron depend on these numbers.
-    assert [int(c) for c in ExitCode] == [0, 1, 2, 3, 4, 5, 130]
+    assert [int(c) for c in ExitCode] == [0, 1, 2, 3, 4, 5, 6, 130]
 
 
 def test_regression_cli_runs_without_click_installed():

@@ -159,7 +159,7 @@ def test_html_in_real_browser(tmp_path):
     # the estimated position: the learned model with its config block, NEES, the water track
     assert "Learned model" in heads
     body = data["body"]
-    assert "NEES\t36.0 over 24 legs" in body
+    assert "NEES\t36.0 over 24 scored legs" in body
     assert "[dead_reckoning]\nlearn = false\n" in body
     assert "water track (heading and log only), thin dashed" in body
 
@@ -169,7 +169,7 @@ def test_html_dead_reckoning_shows_nees_and_the_learned_model():
     text = render_html(a)
     dr_part = text.split('<section id="dead-reckoning">', 1)[1].split("</section>", 1)[0]
     assert (
-        '<td><a class="g" href="#g-nees">NEES</a></td><td>36.0 over 24 legs (χ² bounds '
+        '<td><a class="g" href="#g-nees">NEES</a></td><td>36.0 over 24 scored legs (χ² bounds '
         "26.5–77.0); mean per epoch 1.65" in dr_part
     )
     assert (

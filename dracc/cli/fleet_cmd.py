@@ -105,10 +105,10 @@ def fleet_cmd(
     fc = fleet_config(cfg)
     check_scheduler(fc.scheduler, "[fleet] scheduler", ConfigError)
     target = Path(out_dir or fc.out or "fleet-report")
-    tasks = discover(inputs, pattern or fc.pattern)
     done = f"interrupted; the new fleet outputs were already complete in {target}"
     published: list[str] = []  # the new set's name, once it is out (see atomic.file_set)
-    try:
+    try:  # from the first file looked at: an interrupt always says which set is there
+        tasks = discover(inputs, pattern or fc.pattern)
         with progress(f"fleet: {len(tasks)} logs", total=len(tasks)) as advance:
             res = run_fleet(
                 tasks,

@@ -176,7 +176,8 @@ def line_forms(
         code[i[first]], at[i[first]] = form[first], pos[first]
     buf = np.frombuffer(data, dtype=np.uint8)
     marks = np.flatnonzero((buf == 36) | (buf == 33))  # '$', '!': a sentence's start
-    code[(code == 0) & (np.searchsorted(marks, end) > np.searchsorted(marks, start))] = 1
+    has_mark = np.searchsorted(marks, end) > np.searchsorted(marks, start)
+    code[(code == 0) & short & has_mark] = 1  # a line too long has no form (it is cut)
     rest = np.flatnonzero((code == 0) & short & (end > start))
     if len(rest):
         packed, offs = pack_lines(buf, start[rest], end[rest])
