@@ -106,6 +106,25 @@ def _document_integrity(doc: dict) -> dict | None:
     return document_counts(c for c in checks if isinstance(c, dict))
 
 
+def _dr_and_calibration(r: NightRecord) -> dict:
+    """A stored night's DR and calibration figures, as the audit document holds them."""
+    return {
+        "dr": {
+            "containment_2m": r.dr_containment_2m,
+            "n_scored": r.dr_n_scored,
+            "consistent": r.dr_consistent,
+            "verdict": r.dr_verdict,
+            "nees": r.dr_nees,
+        },
+        "calibration": {
+            "compass_error_deg": r.compass_error_deg,
+            "compass_error_sigma_deg": r.compass_error_sigma_deg,
+            "log_scale": r.log_scale,
+            "log_scale_sigma": r.log_scale_sigma,
+        },
+    }
+
+
 def summary_from_record(r: NightRecord) -> dict:
     """The fleet summary of one night stored in an audit database."""
     return {
@@ -129,19 +148,7 @@ def summary_from_record(r: NightRecord) -> dict:
                 for c in r.channels
             ]
         ),
-        "dr": {
-            "containment_2m": r.dr_containment_2m,
-            "n_scored": r.dr_n_scored,
-            "consistent": r.dr_consistent,
-            "verdict": r.dr_verdict,
-            "nees": r.dr_nees,
-        },
-        "calibration": {
-            "compass_error_deg": r.compass_error_deg,
-            "compass_error_sigma_deg": r.compass_error_sigma_deg,
-            "log_scale": r.log_scale,
-            "log_scale_sigma": r.log_scale_sigma,
-        },
+        **_dr_and_calibration(r),
         "missing": list(r.missing),
         "measures": r.measures or {},
         "findings": night_findings(r.findings),  # the database keeps no checks not made
@@ -183,19 +190,7 @@ def _record_fields(r: NightRecord) -> dict:
         "lines": r.lines,
         "rejected": r.rejected,
         "channels": [asdict(c) for c in r.channels],
-        "dr": {
-            "containment_2m": r.dr_containment_2m,
-            "n_scored": r.dr_n_scored,
-            "consistent": r.dr_consistent,
-            "verdict": r.dr_verdict,
-            "nees": r.dr_nees,
-        },
-        "calibration": {
-            "compass_error_deg": r.compass_error_deg,
-            "compass_error_sigma_deg": r.compass_error_sigma_deg,
-            "log_scale": r.log_scale,
-            "log_scale_sigma": r.log_scale_sigma,
-        },
+        **_dr_and_calibration(r),
         "missing": list(r.missing),
         "measures": r.measures,
         "findings": list(r.findings),
